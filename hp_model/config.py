@@ -1,0 +1,170 @@
+"""Subject and device configuration files (TOML), validated on load.
+
+A subject config holds what is measured on the person (body mass, sex, limb lengths) and
+names the radius-of-gyration table.  A device config holds AMPRO3 and iWalk parameters;
+none of them is public, so every numeric value carries ``estimate`` and ``source``.
+
+Errors are :class:`ConfigError` with one line naming the file and the field, e.g.
+``subject.toml: field 'lengths.thigh': Input should be greater than 0``.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from hp_model.anthropometry import RadiiTable, Sex
+
+SCHEMA_VERSION = 1
+
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class ConfigError(ValueError):
+    """A configuration file that cannot be used; the message is one line."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SubjectLengths(_Strict):
+    """Measured segment lengths, metres."""
+
+    thigh: Positive  # hip centre to knee centre
+    shank: Positive  # knee centre to ankle centre
+    ankle_height: Positive  # ankle centre above the sole
+    foot: Positive  # heel to toe
+    heel: NonNegative  # heel behind the ankle centre
+    trunk: Positive  # hip to shoulder: the head-arms-trunk (HAT) length
+
+
+class SubjectConfig(_Strict):
+    """A person: body mass (kg), sex (selects the table column), segment lengths."""
+
+    schema_version: Literal[1]
+    name: str
+    sex: Sex
+    body_mass: Positive
+    radii_of_gyration: RadiiTable
+    lengths: SubjectLengths
+    notes: str = ""
+
+
+class Estimate(_Strict):
+    """A device parameter with its provenance."""
+
+    value: Finite
+    estimate: bool
+    source: str
+
+
+class PositiveEstimate(Estimate):
+    value: Positive
+
+
+class NonNegativeEstimate(Estimate):
+    value: NonNegative
+
+
+class IWalkConfig(_Strict):
+    """The iWalk hands-free crutch carrying the bent shank (lumped into the right thigh)."""
+
+    mass: PositiveEstimate  # kg
+    length: PositiveEstimate  # m, knee platform to the pin connection (socket point)
+
+
+class LinkConfig(_Strict):
+    """A prosthesis link along its own -z axis from its proximal joint."""
+
+    length: PositiveEstimate  # m, proximal joint to distal joint
+    mass: PositiveEstimate  # kg
+    com: NonNegativeEstimate  # m, COM distance from the proximal joint along the link
+    inertia: PositiveEstimate  # kg m^2 about the COM
+
+
+class FootConfig(_Strict):
+    """The prosthesis foot: sole below the ankle, heel behind it."""
+
+    ankle_height: PositiveEstimate  # m
+    length: PositiveEstimate  # m, heel to toe
+    heel: NonNegativeEstimate  # m, heel behind the ankle axis
+    mass: PositiveEstimate  # kg
+    com_x: Estimate  # m, forward of the ankle axis
+    com_z: Estimate  # m, above (+) or below (-) the ankle axis
+    inertia: PositiveEstimate  # kg m^2 about the COM
+
+
+class ActuatorConfig(_Strict):
+    """One prosthesis joint drive: joint torque = gear_ratio * motor torque."""
+
+    gear_ratio: PositiveEstimate
+    torque_limit: PositiveEstimate  # N m, motor side
+
+
+class ProsthesisConfig(_Strict):
+    top: LinkConfig  # socket adapter and pylon: pin connection to knee axis
+    shin: LinkConfig  # knee axis to ankle axis
+    foot: FootConfig
+    knee: ActuatorConfig
+    ankle: ActuatorConfig
+
+
+class DeviceConfig(_Strict):
+    """AMPRO3 worn through an iWalk adapter."""
+
+    schema_version: Literal[1]
+    name: str
+    iwalk: IWalkConfig
+    prosthesis: ProsthesisConfig
+    notes: str = ""
+
+
+def _load(path: Path | str, model: type[_Strict]) -> _Strict:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+    if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
+        raise ConfigError(
+            f"{path}: field 'schema_version': version {data['schema_version']!r} is not "
+            f"supported (this hpcosim reads version {SCHEMA_VERSION})"
+        )
+    try:
+        return model.model_validate(data)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"]) or "<top>"
+        more = f" (and {len(e.errors()) - 1} more)" if len(e.errors()) > 1 else ""
+        raise ConfigError(f"{path}: field '{loc}': {err['msg']}{more}") from None
+
+
+def load_subject(path: Path | str) -> SubjectConfig:
+    """Load and validate a subject TOML file."""
+    return _load(path, SubjectConfig)  # type: ignore[return-value]
+
+
+def load_device(path: Path | str) -> DeviceConfig:
+    """Load and validate a device TOML file."""
+    return _load(path, DeviceConfig)  # type: ignore[return-value]
+
+
+def default_subject_path() -> Path:
+    """The example subject shipped with the package."""
+    return Path(str(resources.files("hp_model") / "configs" / "subject_example.toml"))
+
+
+def default_device_path() -> Path:
+    """The AMPRO3 + iWalk device estimates shipped with the package."""
+    return Path(str(resources.files("hp_model") / "configs" / "device_ampro3.toml"))

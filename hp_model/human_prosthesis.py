@@ -1,0 +1,187 @@
+"""The 12-DOF planar human-prosthesis model (paper Sec. III, Fig. 3; REFERENCE.md Sec. 1b).
+
+Coordinates, exactly as the paper:
+    q = (x_B, z_B, th_B, th_lh, th_lk, th_la, th_rh, x_f, z_f, th_f, th_pk, th_pa)
+
+- Base frame at the hip; the head-arms-trunk (HAT) body is the base body.
+- Left (human) leg: hip th_lh -> thigh -> knee th_lk -> shank -> ankle th_la -> foot.
+- Right: hip th_rh -> human thigh carrying the iWalk and the folded shank and foot (one
+  lumped body) -> fixed joint q_f = (x_f, z_f, th_f) at the pin connection (the socket),
+  held at zero in every domain -> AMPRO3 top link -> knee th_pk -> shin -> ankle th_pa -> foot.
+- Angles are pitches about +y (x forward, z up; see :mod:`hp_model.tree`): hip flexion is
+  negative, knee flexion positive, ankle plantarflexion positive.  All zero = upright, feet
+  flat.
+- Domains: ``ps`` (prosthesis stance: prosthesis foot flat + fixed joint) and ``pns``
+  (prosthesis non-stance: human left foot flat + fixed joint); 6 constraints each, wrenches
+  ordered (foot F_x, F_z, M_y in world axes; socket F_x, F_z, M_y).
+- Socket force F_s: the wrench of the human (thigh/iWalk) on the prosthesis top link at the
+  pin, in the top link's frame (which equals the thigh's frame since th_f = 0).
+- Actuators: th_lh, th_lk, th_la, th_rh (human, ratio 1, u in N m at the joint) and
+  th_pk, th_pa (AMPRO3, u = motor torque, joint torque = gear ratio * u).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from hp_model import anthropometry as anth
+from hp_model.config import DeviceConfig, SubjectConfig
+from hp_model.hybrid import Constraint, Domain, HybridModel
+from hp_model.tree import Body, Frame, PlanarTree
+
+COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
+          "x_f", "z_f", "th_f", "th_pk", "th_pa")
+ACTUATED = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
+SOCKET_COORDS = ("x_f", "z_f", "th_f")
+DOMAINS = ("ps", "pns")
+
+
+Part = tuple[float, tuple[float, float], float]
+
+
+def _lump(parts: Sequence[Part]) -> Part:
+    """Combine (mass, com, inertia-about-own-com) parts into one rigid body."""
+    m = sum(p[0] for p in parts)
+    cx = sum(p[0] * p[1][0] for p in parts) / m
+    cz = sum(p[0] * p[1][1] for p in parts) / m
+    inertia = sum(p[2] + p[0] * ((p[1][0] - cx) ** 2 + (p[1][1] - cz) ** 2) for p in parts)
+    return m, (cx, cz), inertia
+
+
+def build_tree(subject: SubjectConfig, device: DeviceConfig) -> PlanarTree:
+    """The kinematic tree with segment parameters from the subject and device configs.
+
+    The right thigh body lumps: the human thigh; the shank folded backward at 90 deg onto
+    the iWalk platform (COM behind the knee); the foot at the end of that shank (COM half an
+    ankle height past the ankle); the iWalk as a uniform rod from the knee down to the pin.
+    """
+    L = subject.lengths
+    sex, tab, M = subject.sex, subject.radii_of_gyration, subject.body_mass
+    m_hat, c_hat, I_hat = anth.segment("hat", sex, tab, M, L.trunk)
+    m_th, c_th, I_th = anth.segment("thigh", sex, tab, M, L.thigh)
+    m_sh, c_sh, I_sh = anth.segment("shank", sex, tab, M, L.shank)
+    m_ft, _, I_ft = anth.segment("foot", sex, tab, M, L.foot)
+    foot_com = (L.foot / 2 - L.heel, -L.ankle_height / 2)
+
+    iw = device.iwalk
+    m_iw, l_iw = iw.mass.value, iw.length.value
+    r_thigh = _lump([
+        (m_th, (0.0, -c_th), I_th),
+        (m_sh, (-c_sh, -L.thigh), I_sh),
+        (m_ft, (-(L.shank + L.ankle_height / 2), -L.thigh), I_ft),
+        (m_iw, (0.0, -L.thigh - l_iw / 2), m_iw * l_iw**2 / 12),
+    ])
+    p = device.prosthesis
+    pf = p.foot
+
+    def link(cfg) -> dict:
+        return dict(mass=cfg.mass.value, com=(0.0, -cfg.com.value), inertia=cfg.inertia.value)
+
+    bodies = (
+        Body("hat", None, "planar", ("x_B", "z_B", "th_B"),
+             mass=m_hat, com=(0.0, c_hat), inertia=I_hat),
+        Body("l_thigh", "hat", "revolute", ("th_lh",), mass=m_th, com=(0.0, -c_th), inertia=I_th),
+        Body("l_shank", "l_thigh", "revolute", ("th_lk",), placement=(0.0, -L.thigh),
+             mass=m_sh, com=(0.0, -c_sh), inertia=I_sh),
+        Body("l_foot", "l_shank", "revolute", ("th_la",), placement=(0.0, -L.shank),
+             mass=m_ft, com=foot_com, inertia=I_ft),
+        Body("r_thigh", "hat", "revolute", ("th_rh",),
+             mass=r_thigh[0], com=r_thigh[1], inertia=r_thigh[2]),
+        Body("p_top", "r_thigh", "planar", SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
+             **link(p.top)),
+        Body("p_shin", "p_top", "revolute", ("th_pk",), placement=(0.0, -p.top.length.value),
+             **link(p.shin)),
+        Body("p_foot", "p_shin", "revolute", ("th_pa",), placement=(0.0, -p.shin.length.value),
+             mass=pf.mass.value, com=(pf.com_x.value, pf.com_z.value), inertia=pf.inertia.value),
+    )
+    h_l, h_p = L.ankle_height, pf.ankle_height.value
+    frames = (
+        Frame("hip", "hat"),
+        Frame("l_knee", "l_shank"),
+        Frame("l_ankle", "l_foot"),
+        Frame("l_sole", "l_foot", (0.0, -h_l)),
+        Frame("l_heel", "l_foot", (-L.heel, -h_l)),
+        Frame("l_toe", "l_foot", (L.foot - L.heel, -h_l)),
+        Frame("r_knee", "r_thigh", (0.0, -L.thigh)),
+        Frame("socket", "p_top"),
+        Frame("p_knee", "p_shin"),
+        Frame("p_ankle", "p_foot"),
+        Frame("p_sole", "p_foot", (0.0, -h_p)),
+        Frame("p_heel", "p_foot", (-pf.heel.value, -h_p)),
+        Frame("p_toe", "p_foot", (pf.length.value - pf.heel.value, -h_p)),
+    )
+    tree = PlanarTree(bodies=bodies, frames=frames)
+    assert tree.coord_names == COORDS
+    return tree
+
+
+SOCKET = Constraint("socket", "coords", SOCKET_COORDS)
+DOMAIN_DEFS = (
+    Domain("ps", (Constraint("p_foot", "frame", "p_sole"), SOCKET), swing_frame="l_sole",
+           next="pns"),
+    Domain("pns", (Constraint("l_foot", "frame", "l_sole"), SOCKET), swing_frame="p_sole",
+           next="ps"),
+)
+
+
+class HumanProsthesisModel(HybridModel):
+    """The 12-DOF hybrid model.  Besides the :class:`HybridModel` functions it has
+
+        socket_<d>(q, qd, u, lam_foot) -> F_s    (paper eq. Fsocket with the stance-foot
+                                                  wrench moved to the known side)
+
+    which equals the socket rows of ``dyn_<d>``'s lam.
+    """
+
+    def __init__(self, subject: SubjectConfig, device: DeviceConfig) -> None:
+        self.subject = subject
+        self.device = device
+        tree = build_tree(subject, device)
+        p = device.prosthesis
+        ratios = (1.0, 1.0, 1.0, 1.0, p.knee.gear_ratio.value, p.ankle.gear_ratio.value)
+        self.torque_limits = np.array(
+            [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
+        self.torque_limits.setflags(write=False)
+        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12",
+                         extra_functions=None)
+        # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
+        q, qd, u = self.q, self.qd, self.u
+        lam_f = ca.SX.sym("lam_foot", 3)
+        h_s = self.constraint_expr((SOCKET,))
+        Js = ca.jacobian(h_s, q)
+        Jsdqd = ca.jtimes(Js @ qd, q, qd)
+        for d in DOMAIN_DEFS:
+            Jf = ca.jacobian(self.constraint_expr(d.constraints[:1]), q)
+            Hbar = self.H - Jf.T @ lam_f
+            X = ca.solve(self.D, ca.horzcat(Js.T, Hbar - ca.DM(self.B) @ u))
+            Fs = ca.solve(Js @ X[:, :3], Js @ X[:, 3] - Jsdqd)
+            self.functions[f"socket_{d.name}"] = ca.Function(
+                f"socket_{d.name}", [q, qd, u, lam_f], [Fs], ["q", "qd", "u", "lam_foot"], ["F_s"])
+
+    @property
+    def prosthesis_mass(self) -> float:
+        """Mass of everything below the socket (AMPRO3), kg."""
+        return sum(self.tree.body(b).mass for b in ("p_top", "p_shin", "p_foot"))
+
+    def hip_progress_coefficients(self, domain: str) -> tuple[float, float]:
+        """(c_knee, c_ankle) of the linearised hip position delta_p_hip = c_k th_k + c_a th_a.
+
+        delta_p_hip is the forward position of the hip relative to the stance ankle with the
+        stance foot flat, linearised about upright (REFERENCE.md Sec. 1b): it increases
+        during stance in this sign convention (c_k, c_a < 0: the shank rotating forward
+        over the foot is a negative ankle angle).
+        """
+        stance = {"ps": ("p_ankle", "th_rh", "th_pk", "th_pa"),
+                  "pns": ("l_ankle", "th_lh", "th_lk", "th_la")}
+        ankle, h, k, a = stance[domain]
+        tq, q = self.tree, self.q
+        ih, ik, ia = (tq.coord_index(c) for c in (h, k, a))
+        rel = self.frame_expr("hip")[0] - self.frame_expr(ankle)[0]
+        # stance foot flat (th_f = 0): th_B = -(th_hip + th_knee + th_ankle)
+        rel_flat = ca.substitute(rel, q[tq.coord_index("th_B")], -(q[ih] + q[ik] + q[ia]))
+        grad = ca.Function("g", [q], [ca.gradient(rel_flat, q)])(np.zeros(self.nq))
+        g = grad.full().ravel()
+        return float(g[ik]), float(g[ia])

@@ -1,0 +1,200 @@
+"""A planar tree with actuators and holonomic-constraint domains: the hybrid control system
+(paper Sec. III) in symbolic form, plus its compiled numeric functions.
+
+Domains hold their constraints as an ordered stack.  A ``frame`` constraint holds a frame's
+world pose (x, z, pitch) fixed (flat foot); its wrench is the ground reaction force
+(F_x, F_z) at the frame's point and the moment M_y, in world axes.  A ``coords`` constraint
+holds joint coordinates at zero (the socket's fixed joint); its wrench is the generalized
+force on those coordinates, i.e. the wrench of the parent on the child in the joint frame.
+
+Symbolic functions (CasADi, callable with SX/MX/DM) are named:
+
+    terms_<d>(q, qd)        -> D, H, J_d, Jdot_d qd
+    dyn_<d>(q, qd, u)       -> qdd, lam_d                 (KKT solve)
+    impact_<d>(q, qd_minus) -> qd_plus, impulse           (impact INTO domain d)
+    guard_<d>(q, qd)        -> height, vertical velocity of the swing frame in d
+    energy(q, qd)           -> kinetic, potential
+    frames(q, qd)           -> poses (3 x nf), velocities (3 x nf) of all named frames
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from hp_model.compiled import FunctionSet
+from hp_model.dynamics import (
+    constrained_accel,
+    constraint_terms,
+    energies,
+    impact_map,
+    mass_matrix_and_bias,
+)
+from hp_model.tree import ModelError, PlanarTree, body_poses, frame_pose
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """One block of holonomic constraints.
+
+    kind ``"frame"``: target is a frame name; h = its world pose (x, z, pitch), 3 rows.
+    kind ``"coords"``: target is a tuple of coordinate names; h = those coordinates.
+    """
+
+    name: str
+    kind: str
+    target: str | tuple[str, ...]
+
+    @property
+    def size(self) -> int:
+        return 3 if self.kind == "frame" else len(self.target)
+
+
+@dataclass(frozen=True)
+class Domain:
+    """A continuous domain: its constraint stack, the frame whose touchdown is its guard,
+    and the domain the guard leads to."""
+
+    name: str
+    constraints: tuple[Constraint, ...]
+    swing_frame: str | None = None
+    next: str | None = None
+
+    @property
+    def n_constraints(self) -> int:
+        return sum(c.size for c in self.constraints)
+
+    def wrench_slice(self, constraint: str) -> slice:
+        """Rows of lam_d holding the named constraint's wrench."""
+        o = 0
+        for c in self.constraints:
+            if c.name == constraint:
+                return slice(o, o + c.size)
+            o += c.size
+        raise ModelError(f"domain '{self.name}' has no constraint '{constraint}'")
+
+
+class HybridModel:
+    """Symbolic and numeric dynamics of an actuated planar tree with domains.
+
+    The model is immutable after construction.  ``numeric()`` compiles (once, cached on
+    disk by source hash) and returns the :class:`~hp_model.compiled.FunctionSet` of all
+    functions listed in the module docstring.
+    """
+
+    def __init__(
+        self,
+        tree: PlanarTree,
+        actuated: Sequence[str],
+        gear_ratios: Sequence[float],
+        domains: Sequence[Domain],
+        name: str,
+        extra_functions: Mapping[str, ca.Function] | None = None,
+    ) -> None:
+        if len(actuated) != len(gear_ratios):
+            raise ModelError("one gear ratio per actuated coordinate")
+        self.tree = tree
+        self.name = name
+        self.nq = tree.nq
+        self.nu = len(actuated)
+        self.coord_names = tree.coord_names
+        self.actuated = tuple(actuated)
+        B = np.zeros((self.nq, self.nu))
+        for j, (c, r) in enumerate(zip(actuated, gear_ratios, strict=True)):
+            B[tree.coord_index(c), j] = r
+        self.B = B
+        self.B.setflags(write=False)
+        self.domains = {d.name: d for d in domains}
+        for d in domains:
+            if d.next is not None and d.next not in self.domains:
+                raise ModelError(f"domain '{d.name}': next domain '{d.next}' is not defined")
+        self.frame_names = tuple(f.name for f in tree.frames)
+
+        q = ca.SX.sym("q", self.nq)
+        qd = ca.SX.sym("qd", self.nq)
+        u = ca.SX.sym("u", self.nu)
+        self.q, self.qd, self.u = q, qd, u
+        self.poses = body_poses(tree, q)
+        self.D, self.H = mass_matrix_and_bias(tree, q, qd)
+        T, V = energies(tree, q, qd)
+        Bu = ca.DM(B) @ u
+
+        fns: list[ca.Function] = [
+            ca.Function("energy", [q, qd], [T, V], ["q", "qd"], ["T", "V"]),
+        ]
+        fr = [frame_pose(tree, q, f, self.poses) for f in self.frame_names]
+        if fr:
+            P = ca.horzcat(*fr)
+            Pd = ca.jtimes(P, q, qd)
+            fns.append(ca.Function("frames", [q, qd], [P, Pd], ["q", "qd"], ["pose", "vel"]))
+
+        self.h: dict[str, ca.SX] = {}
+        for d in domains:
+            h = self.constraint_expr(d.constraints)
+            self.h[d.name] = h
+            J, Jdqd = constraint_terms(h, q, qd)
+            qdd, lam = constrained_accel(self.D, self.H, Bu, J, Jdqd)
+            qd_plus, imp = impact_map(self.D, J, qd)
+            fns += [
+                ca.Function(f"terms_{d.name}", [q, qd], [self.D, self.H, J, Jdqd],
+                            ["q", "qd"], ["D", "H", "J", "Jdqd"]),
+                ca.Function(f"dyn_{d.name}", [q, qd, u], [qdd, lam],
+                            ["q", "qd", "u"], ["qdd", "lam"]),
+                ca.Function(f"impact_{d.name}", [q, qd], [qd_plus, imp],
+                            ["q", "qd_minus"], ["qd_plus", "impulse"]),
+            ]
+            if d.swing_frame is not None:
+                pz = frame_pose(tree, q, d.swing_frame, self.poses)[1]
+                fns.append(ca.Function(f"guard_{d.name}", [q, qd], [pz, ca.jtimes(pz, q, qd)],
+                                       ["q", "qd"], ["height", "vz"]))
+        fns += list((extra_functions or {}).values())
+        self.functions: dict[str, ca.Function] = {
+            f.name(): f.expand() if f.is_a("MXFunction") else f for f in fns
+        }
+        self._numeric: dict[str, FunctionSet] = {}
+
+    # -- symbolic helpers --------------------------------------------------------------------
+    def constraint_expr(self, constraints: Sequence[Constraint], q: ca.SX | None = None) -> ca.SX:
+        """h(q) of a constraint stack (SX in ``q``, default the model's own symbol)."""
+        if q is None:
+            q, poses = self.q, self.poses
+        else:
+            poses = body_poses(self.tree, q)
+        rows = []
+        for c in constraints:
+            if c.kind == "frame":
+                rows.append(frame_pose(self.tree, q, c.target, poses))  # type: ignore[arg-type]
+            elif c.kind == "coords":
+                rows.append(ca.vertcat(*[q[self.tree.coord_index(n)] for n in c.target]))
+            else:
+                raise ModelError(f"constraint '{c.name}': unknown kind '{c.kind}'")
+        return ca.vertcat(*rows)
+
+    def frame_expr(self, frame: str, q: ca.SX | None = None) -> ca.SX:
+        """World pose (x, z, pitch) of a frame as SX."""
+        if q is None:
+            return frame_pose(self.tree, self.q, frame, self.poses)
+        return frame_pose(self.tree, q, frame)
+
+    def function(self, name: str) -> ca.Function:
+        """A symbolic function by name (see the module docstring)."""
+        try:
+            return self.functions[name]
+        except KeyError:
+            have = sorted(self.functions)
+            raise KeyError(f"{self.name}: no function '{name}'; have {have}") from None
+
+    # -- numeric ------------------------------------------------------------------------------
+    def numeric(self, backend: str = "auto") -> FunctionSet:
+        """All functions compiled to C (or interpreted) and bound to reusable buffers."""
+        if backend not in self._numeric:
+            fs = FunctionSet(list(self.functions.values()), self.name, backend)
+            self._numeric[backend] = fs
+            self._numeric[fs.backend] = fs
+        return self._numeric[backend]
+
+    def frame_index(self, name: str) -> int:
+        return self.frame_names.index(name)
