@@ -15,6 +15,7 @@ Symbolic functions (CasADi, callable with SX/MX/DM) are named:
     guard_<d>(q, qd)        -> height, vertical velocity of the swing frame in d
     energy(q, qd)           -> kinetic, potential
     frames(q, qd)           -> poses (3 x nf), velocities (3 x nf) of all named frames
+    frame_acc(q, qd, qdd)   -> accelerations (3 x nf) of all named frames
 """
 
 from __future__ import annotations
@@ -130,6 +131,9 @@ class HybridModel:
             P = ca.horzcat(*fr)
             Pd = ca.jtimes(P, q, qd)
             fns.append(ca.Function("frames", [q, qd], [P, Pd], ["q", "qd"], ["pose", "vel"]))
+            qdd = ca.SX.sym("qdd", self.nq)
+            Pdd = ca.jtimes(P, q, qdd) + ca.jtimes(Pd, q, qd)
+            fns.append(ca.Function("frame_acc", [q, qd, qdd], [Pdd], ["q", "qd", "qdd"], ["acc"]))
 
         self.h: dict[str, ca.SX] = {}
         for d in domains:

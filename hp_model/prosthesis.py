@@ -25,6 +25,7 @@ Functions (besides :class:`~hp_model.hybrid.HybridModel`'s, with the single doma
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -83,3 +84,17 @@ class ProsthesisSubsystem(HybridModel):
             "reduced", [xp], [f_p, ca.vertcat(z2, g_m), ca.vertcat(z3, g_s)],
             ["x_p"], ["f_p", "g_m", "g_s"])
         self.x_p = xp
+
+    def from_full(
+        self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Subsystem (q, qd, qdd) of a full-model motion: the socket frame's world pose and
+        its derivatives, then knee and ankle."""
+        full = self.full
+        fs = full.numeric()
+        i = full.frame_index("socket")
+        pose, vel = fs["frames"](q, qd)
+        base, based = pose[:, i].copy(), vel[:, i].copy()
+        basedd = fs["frame_acc"](q, qd, qdd)[0][:, i].copy()
+        j = [full.coord_names.index(c) for c in ("th_pk", "th_pa")]
+        return np.r_[base, q[j]], np.r_[based, qd[j]], np.r_[basedd, qdd[j]]

@@ -1,0 +1,127 @@
+"""The ``hpcosim`` command line.
+
+Every verb is a thin layer over a plain Python function.  Errors a user can cause (bad
+files, bad values) print one line ``hpcosim: error: ...`` to stderr and exit with status 2;
+a check that runs but fails exits with status 1.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+import hp_model
+from hp_model.compiled import CompileError
+from hp_model.config import ConfigError
+from hp_model.tree import ModelError
+
+app = typer.Typer(
+    name="hpcosim",
+    help="Motion capture to a model-based powered-prosthesis controller, proven in a "
+    "human-prosthesis co-simulation (Gehlhar, Chen, Ames, IROS 2020).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True)
+app.add_typer(model_app, name="model")
+
+#: exceptions that are the user's input, reported in one line
+USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
+                                               FileNotFoundError)
+
+SubjectOpt = Annotated[Path | None, typer.Option(
+    "--subject", help="Subject TOML (default: the shipped example subject).",
+    dir_okay=False)]
+DeviceOpt = Annotated[Path | None, typer.Option(
+    "--device", help="Device TOML (default: the shipped AMPRO3 + iWalk estimates).",
+    dir_okay=False)]
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"hpcosim {hp_model.__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                          help="Print the version and exit.")] = False,
+) -> None:
+    """hpcosim: from motion capture to a prosthesis controller you can trust."""
+
+
+@model_app.command("check")
+def model_check(
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+    backend: Annotated[str, typer.Option(
+        help="auto (compiled C when a compiler exists), c, or sx (CasADi interpreter).")
+    ] = "auto",
+) -> None:
+    """Build the 12-DOF model and the 5-DOF prosthesis subsystem, evaluate them, and check
+    physics that fixes the answers (static balance, impact, subsystem consistency)."""
+    from orchestrator.model_check import run_checks
+
+    console = Console()
+    with console.status("building and compiling the models (cached after the first run)"):
+        model = hp_model.load_model(
+            str(subject) if subject else None, str(device) if device else None)
+        rows, timing = run_checks(model, backend=backend)
+    s, d = model.subject, model.device
+    console.print(f"[bold]{model.name}[/]: subject '{s.name}' ({s.body_mass:g} kg, {s.sex}), "
+                  f"device '{d.name}'")
+    console.print(f"  {model.nq} coordinates: {', '.join(model.coord_names)}")
+    console.print(f"  total mass {model.tree.total_mass:.3f} kg (prosthesis "
+                  f"{model.prosthesis_mass:.3f} kg); domains "
+                  + ", ".join(f"{n} ({dm.n_constraints} constraints)"
+                              for n, dm in model.domains.items())
+                  + f"; backend {model.numeric(backend).backend}")
+    table = Table(title="model self-check")
+    table.add_column("check")
+    table.add_column("value", justify="right")
+    table.add_column("expected", justify="right")
+    table.add_column("ok", justify="center")
+    for r in rows:
+        table.add_row(r.name, r.value, r.expected, "[green]yes[/]" if r.ok else "[red]NO[/]")
+    table.add_row("D, H, J, Jdot qd (12 DOF) per call (us)", f"{timing['terms_ps_us']:.2f}", "",
+                  "")
+    table.add_row("constrained dynamics (qdd, lam) per call (us)",
+                  f"{timing['dyn_ps_us']:.2f}", "", "")
+    table.add_row("prosthesis 4-state form f_p, g_m, g_s per call (us)",
+                  f"{timing['sub_reduced_us']:.2f}", "", "")
+    console.print(table)
+    if not all(r.ok for r in rows):
+        raise typer.Exit(1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: run the app, turning user errors into one-line messages."""
+    try:
+        app(args=argv, standalone_mode=False)
+    except typer.Exit as e:
+        return e.exit_code
+    except typer.Abort:
+        print("hpcosim: aborted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as e:
+        print(f"hpcosim: error: {e}", file=sys.stderr)
+        return 2
+    except Exception as e:  # click usage errors carry their own exit code
+        import click
+
+        if isinstance(e, click.ClickException):
+            e.show()
+            return e.exit_code
+        raise
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
