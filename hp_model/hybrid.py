@@ -202,3 +202,19 @@ class HybridModel:
 
     def frame_index(self, name: str) -> int:
         return self.frame_names.index(name)
+
+    def place_stance_foot(self, q: np.ndarray, domain: str, x: float = 0.0) -> np.ndarray:
+        """A copy of ``q`` with the floating base moved so that the domain's stance frame
+        (its first ``frame`` constraint) is flat (pitch 0) on the ground at (x, 0).
+
+        Joint angles are kept; only the base pose (first three coordinates) changes.
+        """
+        frame = next(c.target for c in self.domains[domain].constraints if c.kind == "frame")
+        i = self.frame_index(frame)  # type: ignore[arg-type]
+        frames = self.numeric()["frames"]
+        out = np.array(q, dtype=float)
+        out[0:3] = 0.0
+        out[2] = -frames(out, np.zeros(self.nq))[0][2, i]
+        pos = frames(out, np.zeros(self.nq))[0][0:2, i].copy()
+        out[0:2] = np.array([x, 0.0]) - pos
+        return out

@@ -1,0 +1,35 @@
+"""Shared fixtures: the default model and subsystem are built and compiled once per session."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import hp_model
+from hp_model import HumanProsthesisModel, ProsthesisSubsystem
+
+
+@pytest.fixture(scope="session")
+def model() -> HumanProsthesisModel:
+    return hp_model.load_model()
+
+
+@pytest.fixture(scope="session")
+def subsystem(model: HumanProsthesisModel) -> ProsthesisSubsystem:
+    return ProsthesisSubsystem(model)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(20201025)
+
+
+def random_state(model, rng, on_socket: bool = True, scale: float = 0.4):
+    """A random posture about upright and random velocities; q_f = 0 if ``on_socket``."""
+    q = rng.normal(scale=scale, size=model.nq)
+    q[1] += 0.9
+    qd = rng.normal(scale=1.0, size=model.nq)
+    if on_socket:
+        q[7:10] = 0.0
+        qd[7:10] = 0.0
+    return q, qd

@@ -1,0 +1,48 @@
+"""The hpcosim command line, run as a user would (a subprocess of the installed script)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+
+import hp_model
+
+EXE = shutil.which("hpcosim") or f"{sys.executable} -m orchestrator.cli"
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    cmd = [*EXE.split(), *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+
+
+def test_help_and_version():
+    r = run("--help")
+    assert r.returncode == 0 and "model" in r.stdout
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"hpcosim {hp_model.__version__}"
+    r = run("model", "check", "--help")
+    assert r.returncode == 0 and "--subject" in r.stdout
+
+
+def test_model_check_passes_on_defaults():
+    r = run("model", "check")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "standing on prosthesis" in r.stdout and "NO" not in r.stdout
+
+
+def test_bad_subject_is_a_one_line_error(tmp_path):
+    bad = tmp_path / "subject.toml"
+    bad.write_text(hp_model.default_subject_path().read_text().replace(
+        "body_mass = 60.0", "body_mass = -1.0"))
+    r = run("model", "check", "--subject", str(bad))
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "body_mass" in lines[0] and str(bad) in lines[0]
+    assert "Traceback" not in r.stderr
+
+
+def test_missing_file_is_a_one_line_error(tmp_path):
+    r = run("model", "check", "--device", str(tmp_path / "nope.toml"))
+    assert r.returncode == 2
+    assert len(r.stderr.strip().splitlines()) == 1 and "nope.toml" in r.stderr
