@@ -1,0 +1,58 @@
+"""Bezier polynomials on s in [0, 1] (paper Sec. IV-A).
+
+    B(s) = sum_{i=0}^{m} alpha_i C(m, i) s^i (1 - s)^(m - i)
+
+Coefficients are stored as an array of shape (n_outputs, m + 1).  Every function works on
+numpy arrays and on CasADi symbols (SX/MX), so the regression, the optimizer, the simulator
+and the controllers evaluate the same curves.
+"""
+
+from __future__ import annotations
+
+from math import comb
+
+import casadi as ca
+import numpy as np
+
+
+def basis(m: int, s):
+    """Row of the m+1 Bernstein basis values at s (numpy: shape (len(s), m+1) for arrays)."""
+    if isinstance(s, ca.SX | ca.MX):
+        return ca.horzcat(*[comb(m, i) * s**i * (1 - s) ** (m - i) for i in range(m + 1)])
+    s = np.asarray(s, dtype=float)
+    i = np.arange(m + 1)
+    c = np.array([comb(m, k) for k in i], dtype=float)
+    return c * np.power.outer(s, i) * np.power.outer(1.0 - s, m - i)
+
+
+def evaluate(alpha, s):
+    """B(s) for every output: shape (n_outputs,) for scalar s, (len(s), n_outputs) for arrays
+    (numpy); an (n_outputs, 1) column for a CasADi scalar s."""
+    if isinstance(s, ca.SX | ca.MX) or isinstance(alpha, ca.SX | ca.MX):
+        m = alpha.shape[1] - 1
+        return alpha @ basis(m, s).T
+    alpha = np.asarray(alpha, dtype=float)
+    return basis(alpha.shape[1] - 1, s) @ alpha.T
+
+
+def derivative(alpha):
+    """Coefficients (degree m-1) of dB/ds; a degree-0 curve has derivative 0 (degree 0)."""
+    m = alpha.shape[1] - 1
+    if m == 0:
+        return alpha * 0
+    return m * (alpha[:, 1:] - alpha[:, :-1])
+
+
+def gram(m: int) -> np.ndarray:
+    """G_ij = integral_0^1 B_i(s) B_j(s) ds, so integral (sum e_i B_i)^2 ds = e^T G e."""
+    G = np.empty((m + 1, m + 1))
+    for i in range(m + 1):
+        for j in range(m + 1):
+            G[i, j] = comb(m, i) * comb(m, j) / (comb(2 * m, i + j) * (2 * m + 1))
+    return G
+
+
+def integral_weights(m: int) -> np.ndarray:
+    """w with integral_0^1 B(s) ds = w . alpha (every Bernstein polynomial integrates to
+    1 / (m + 1))."""
+    return np.full(m + 1, 1.0 / (m + 1))
