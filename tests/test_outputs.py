@@ -64,7 +64,7 @@ def test_phase_and_outputs_on_the_surface(model, vcs, domain):
     fs = vc.numeric()
     for tau in (0.0, 0.3, 0.8):
         q = vc.posture(tau, p)
-        y1, y2, dy2, t = fs[f"outputs_{domain}"](q, np.zeros(model.nq), p.pack())
+        y1, y2, _, t = fs[f"outputs_{domain}"](q, np.zeros(model.nq), p.pack())
         assert t[0] == pytest.approx(tau, abs=1e-12)
         np.testing.assert_allclose(y2, 0.0, atol=1e-12)
         assert y1[0] == pytest.approx(-p.v_hip)
