@@ -1,0 +1,296 @@
+"""PHZD gait optimization by direct collocation (paper Sec. IV-A; what FROST does).
+
+The cycle ps -> pns -> ps with impacts, each domain discretised by Hermite-Simpson
+collocation (separated form: midpoints carry their own variables).  At every collocation
+point the model's equations hold in inverse-dynamics form,
+
+    D qdd + H = B u + J^T lam,     J qdd + Jdot qd = 0,
+
+and the closed-loop output dynamics of the feedback-linearizing controller hold,
+
+    dy1 + eps y1 = 0,    ddy2 + kd dy2 + kp y2 = 0,
+
+with y2 = 0 and dy2 = 0 at the first point of each domain (partial hybrid zero dynamics:
+the relative-degree-2 outputs are impact invariant, y1 is not).  The trajectory is thus the
+one the controller produces; the decision variables are the gait parameters (alpha_v,
+v_hip, p_min, p_max), offsets delta_alpha and the states.  Cost exactly as the paper: the
+weighted integral of squared Bezier differences as a quadratic form (``bezier.gram``) plus
+the step-length term.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from hp_model import bezier
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import N_Y2, GaitParams, VirtualConstraints, unpack_symbolic
+
+CYCLE = ("ps", "pns")
+
+
+class GaitOptimizationError(RuntimeError):
+    """IPOPT did not converge; the message carries its status."""
+
+
+@dataclass(frozen=True)
+class PHZDOptions:
+    """Settings of the gait optimization (SI units)."""
+
+    nodes: int = 11  # collocation nodes per domain (plus the midpoints)
+    degree: int = 5  # Bezier degree of y2
+    eps: float = 10.0  # y1 gain (1/s)
+    kp: float = 100.0  # y2 gains
+    kd: float = 20.0
+    mu: float = 0.6  # friction coefficient
+    min_normal_force: float = 20.0  # N
+    clearance: float = 0.02  # m, swing sole height at mid-step
+    w_y1: float = 10.0
+    w_y2: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)
+    w_step: float = 100.0
+    duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
+    offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
+    max_iter: int = 1000
+    tol: float = 1e-6
+    print_level: int = 0
+
+
+@dataclass(frozen=True)
+class DataTargets:
+    """What the regression of the mocap data gives per domain: alpha_mc (5, m+1), the mean
+    hip velocity, and the mean phase bounds."""
+
+    alpha: dict[str, np.ndarray]
+    v_hip: dict[str, float]
+    p_min: dict[str, float]
+    p_max: dict[str, float]
+
+
+@dataclass
+class PHZDResult:
+    params: dict[str, GaitParams]
+    offsets: dict[str, np.ndarray]
+    durations: dict[str, float]
+    trajectory: dict[str, dict[str, np.ndarray]]
+    status: str
+    success: bool
+    iterations: int
+    solve_seconds: float
+    cost: float
+    stats: dict = field(default_factory=dict)
+
+
+def _point_functions(model: HumanProsthesisModel, vc: VirtualConstraints, opt: PHZDOptions):
+    """SX functions of one collocation point: equality residuals and inequalities."""
+    q, qd = model.q, model.qd
+    qdd = ca.SX.sym("qdd", model.nq)
+    u = ca.SX.sym("u", model.nu)
+    lam = ca.SX.sym("lam", 6)
+    theta = ca.SX.sym("theta", vc.n_params)
+    dom = model.domains[vc.domain]
+    h = model.h[vc.domain]
+    J = ca.jacobian(h, q)
+    Jdqd = ca.jtimes(J @ qd, q, qd)
+    dyn = model.D @ qdd + model.H - ca.DM(model.B) @ u - J.T @ lam
+    hol = J @ qdd + Jdqd
+    alpha, v_hip, p_min, p_max = unpack_symbolic(theta, vc.degree)
+    dp = p_max - p_min
+    c, S = ca.DM(vc.c_row).T, ca.DM(vc.S)
+    tau = (c @ q - p_min) / dp
+    tau_d = (c @ qd) / dp
+    tau_dd = (c @ qdd) / dp
+    dB = bezier.evaluate(bezier.derivative(alpha), tau)
+    ddB = bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau)
+    y1 = c @ qd - v_hip
+    dy1 = c @ qdd
+    y2 = S @ q - bezier.evaluate(alpha, tau)
+    dy2 = S @ qd - dB * tau_d
+    ddy2 = S @ qdd - ddB * tau_d**2 - dB * tau_dd
+    eq = ca.vertcat(dyn, hol, dy1 + opt.eps * y1, ddy2 + opt.kd * dy2 + opt.kp * y2)
+    # ground wrench (F_x, F_z, M_y) at the stance sole point: friction cone, positive
+    # normal force, centre of pressure inside the foot (d = -M_y / F_z in [-heel, toe])
+    stance_sole = dom.constraints[0].target
+    side = "l" if stance_sole.startswith("l_") else "p"
+    frames = {f.name: f for f in model.tree.frames}
+    heel = -frames[f"{side}_heel"].point[0]
+    toe = frames[f"{side}_toe"].point[0]
+    fx, fz, my = lam[0], lam[1], lam[2]
+    swing = "p" if side == "l" else "l"
+    z_heel = model.frame_expr(f"{swing}_heel")[1]
+    z_toe = model.frame_expr(f"{swing}_toe")[1]
+    ineq = ca.vertcat(opt.mu * fz - fx, opt.mu * fz + fx, fz - opt.min_normal_force,
+                      toe * fz + my, heel * fz - my, z_heel, z_toe)
+    args = [q, qd, qdd, u, lam, theta]
+    names = ["q", "qd", "qdd", "u", "lam", "theta"]
+    f_eq = ca.Function(f"colloc_eq_{vc.domain}", args, [eq], names, ["eq"])
+    f_in = ca.Function(f"colloc_ineq_{vc.domain}", args, [ineq], names, ["ineq"])
+    f_out = ca.Function(f"start_outputs_{vc.domain}", [q, qd, theta],
+                        [ca.vertcat(y2, dy2), tau], ["q", "qd", "theta"], ["y2dy2", "tau"])
+    return f_eq, f_in, f_out
+
+
+def initial_guess(model: HumanProsthesisModel, vc: VirtualConstraints, p: GaitParams,
+                  n_points: int) -> dict[str, np.ndarray]:
+    """A trajectory on the zero-dynamics surface of the data's curves at constant hip
+    velocity: postures from ``vc.posture``, derivatives by finite differences in tau,
+    (u, lam) from the square system [B J^T] [u; lam] = D qdd + H."""
+    taus = np.linspace(0.0, 1.0, n_points)
+    Q = np.array([vc.posture(t, p) for t in taus]).T
+    Q[0] -= Q[0, 0]
+    dtau = (p.p_max - p.p_min)
+    tau_dot = p.v_hip / dtau
+    dQ = np.gradient(Q, taus, axis=1) * tau_dot
+    ddQ = np.gradient(dQ, taus, axis=1) * tau_dot
+    terms = model.numeric()[f"terms_{vc.domain}"]
+    U, L = np.zeros((model.nu, n_points)), np.zeros((6, n_points))
+    for k in range(n_points):
+        D, H, J, _ = terms(Q[:, k], dQ[:, k])
+        sol, *_ = np.linalg.lstsq(np.hstack([model.B, J.T]), D @ ddQ[:, k] + H, rcond=None)
+        U[:, k], L[:, k] = sol[: model.nu], sol[model.nu:]
+    return {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(dtau / p.v_hip)}
+
+
+def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
+                  opt: PHZDOptions | None = None) -> PHZDResult:
+    """Solve the two-domain PHZD optimization with IPOPT (exact Hessian, MUMPS)."""
+    opt = opt or PHZDOptions()
+    N, P = opt.nodes, 2 * opt.nodes - 1
+    G = bezier.gram(opt.degree)
+    vcs = {d: VirtualConstraints(model, d, opt.degree) for d in CYCLE}
+    w, g, lbg, ubg, w0, lbw, ubw = [], [], [], [], [], [], []
+
+    def var(name, shape, init, lb=-np.inf, ub=np.inf):
+        v = ca.MX.sym(name, *shape)
+        w.append(ca.vec(v))
+        init = np.asarray(init, dtype=float)
+        if init.ndim == 1 and shape[1] == 1:
+            init = init[:, None]
+        w0.append(np.broadcast_to(init, shape).ravel(order="F"))
+        lbw.append(np.broadcast_to(lb, shape).ravel(order="F"))
+        ubw.append(np.broadcast_to(ub, shape).ravel(order="F"))
+        return v
+
+    def eq(expr):
+        g.append(ca.vec(expr))
+        lbg.append(np.zeros(g[-1].shape[0]))
+        ubg.append(np.zeros(g[-1].shape[0]))
+
+    def geq(expr, lo=0.0):
+        g.append(ca.vec(expr))
+        lbg.append(np.full(g[-1].shape[0], lo))
+        ubg.append(np.full(g[-1].shape[0], np.inf))
+
+    ulim = np.where(np.isfinite(model.torque_limits), model.torque_limits, 1e4)
+    dec: dict[str, dict] = {}
+    cost = 0
+    for d in CYCLE:
+        vc = vcs[d]
+        a_mc = np.asarray(targets.alpha[d])
+        p_mc = GaitParams(a_mc, targets.v_hip[d], targets.p_min[d], targets.p_max[d])
+        guess = initial_guess(model, vc, p_mc, P)
+        X = {
+            "q": var(f"q_{d}", (model.nq, P), guess["q"]),
+            "qd": var(f"qd_{d}", (model.nq, P), guess["qd"]),
+            "qdd": var(f"qdd_{d}", (model.nq, P), guess["qdd"]),
+            "u": var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
+            "lam": var(f"lam_{d}", (6, P), guess["lam"]),
+            "T": var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
+            "theta": var(f"theta_{d}", (vc.n_params, 1), p_mc.pack()),
+            "delta": var(f"delta_{d}", (N_Y2, 1), 0.0, -opt.offset_bound, opt.offset_bound),
+        }
+        dec[d] = X
+        f_eq, f_in, f_out = _point_functions(model, vc, opt)
+        th = ca.repmat(X["theta"], 1, P)
+        args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"], th]
+        eq(f_eq.map(P)(*args))
+        ineq = f_in.map(P)(*args)
+        geq(ineq[:5, :])
+        geq(ineq[5:, 1:-1])  # swing foot above ground between lift-off and touchdown
+        # Hermite-Simpson (separated): nodes at even points, midpoints at odd points
+        h = X["T"] / (N - 1)
+        q, qd, qdd = X["q"], X["qd"], X["qdd"]
+        k0, kc, k1 = slice(0, P - 2, 2), slice(1, P - 1, 2), slice(2, P, 2)
+        eq(q[:, kc] - (q[:, k0] + q[:, k1]) / 2 - h / 8 * (qd[:, k0] - qd[:, k1]))
+        eq(qd[:, kc] - (qd[:, k0] + qd[:, k1]) / 2 - h / 8 * (qdd[:, k0] - qdd[:, k1]))
+        eq(q[:, k1] - q[:, k0] - h / 6 * (qd[:, k0] + 4 * qd[:, kc] + qd[:, k1]))
+        eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
+        # start: on the PHZD surface (y2 = dy2 = 0), tau = 0, stance foot constraint
+        y2s, tau0 = f_out(q[:, 0], qd[:, 0], X["theta"])
+        eq(y2s)
+        eq(tau0)
+        _, tau1 = f_out(q[:, -1], qd[:, -1], X["theta"])
+        eq(tau1 - 1.0)
+        h_d = ca.Function("h", [model.q], [model.h[d]])
+        eq(h_d(q[:, 0])[1:])  # stance sole z = 0, pitch = 0; socket q_f = 0
+        # guard: swing sole on the ground, flat, moving down; mid-step clearance
+        swing = model.domains[d].swing_frame
+        sw = ca.Function("sw", [model.q, model.qd],
+                         [model.frame_expr(swing), ca.jtimes(model.frame_expr(swing)[1],
+                                                             model.q, model.qd)])
+        pose_e, vz_e = sw(q[:, -1], qd[:, -1])
+        eq(pose_e[1:])
+        g.append(vz_e)
+        lbg.append(np.array([-np.inf]))
+        ubg.append(np.array([-0.05]))
+        pose_m, _ = sw(q[:, P // 2], qd[:, P // 2])
+        geq(pose_m[1], opt.clearance)
+        # cost (paper): integral of squared Bezier differences + step-length term
+        alpha, v_hip, p_min, p_max = unpack_symbolic(X["theta"], opt.degree)
+        for k in range(N_Y2):
+            e = alpha[k, :].T - a_mc[k, :] - X["delta"][k]
+            cost += opt.w_y2[k] * (e.T @ G @ e)
+        cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
+        cost += opt.w_step * ((targets.p_max[d] - targets.p_min[d]) - (p_max - p_min)) ** 2
+        if d == "ps":
+            eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
+
+    # impacts: ps -> pns, pns -> ps (periodic up to a forward translation)
+    for d, nxt in (("ps", "pns"), ("pns", "ps")):
+        qe, qde = dec[d]["q"][:, -1], dec[d]["qd"][:, -1]
+        qd_plus = var(f"qdplus_{d}", (model.nq, 1), 0.0)
+        F_I = var(f"impulse_{d}", (6, 1), 0.0)
+        terms = model.function(f"terms_{nxt}")
+        D, _, E, _ = terms(qe, qde)
+        eq(D @ (qd_plus - qde) - E.T @ F_I)
+        eq(E @ qd_plus)
+        geq(F_I[1])  # the landing foot pushes on the ground, never pulls
+        q0n = dec[nxt]["q"][:, 0]
+        eq(dec[nxt]["qd"][:, 0] - qd_plus)
+        if nxt == "pns":
+            eq(q0n - qe)
+        else:
+            eq(q0n[1:] - qe[1:])  # x_B free: the ps start fixes the sole at x = 0
+
+    # initial impact-variable guesses: zero is poor; use the next domain's start velocity
+    nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
+    ipopt = {"max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
+             "linear_solver": "mumps", "mu_strategy": "adaptive"}
+    solver = ca.nlpsol("phzd", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+    x0 = np.concatenate(w0)
+    t0 = time.perf_counter()
+    sol = solver(x0=x0, lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
+                 lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    elapsed = time.perf_counter() - t0
+    stats = solver.stats()
+    xs = np.array(sol["x"]).ravel()
+    unpack = ca.Function("unpack", [ca.vertcat(*w)],
+                         [dec[d][k] for d in CYCLE for k in ("q", "qd", "qdd", "u", "lam", "T",
+                                                             "theta", "delta")])
+    vals = [np.array(v) for v in unpack(xs)]
+    params, offsets, durations, traj = {}, {}, {}, {}
+    for i, d in enumerate(CYCLE):
+        q, qd, qdd, u, lam, T, theta, delta = vals[8 * i: 8 * i + 8]
+        params[d] = GaitParams.unpack(theta.ravel(), opt.degree)
+        offsets[d] = delta.ravel()
+        durations[d] = float(T.item())
+        traj[d] = {"t": np.linspace(0, float(T.item()), P), "q": q, "qd": qd, "qdd": qdd, "u": u,
+                   "lam": lam}
+    return PHZDResult(params=params, offsets=offsets, durations=durations, trajectory=traj,
+                      status=stats["return_status"], success=bool(stats["success"]),
+                      iterations=int(stats["iter_count"]), solve_seconds=elapsed,
+                      cost=float(sol["f"]), stats={k: v for k, v in stats.items()
+                                                   if isinstance(v, int | float | str)})

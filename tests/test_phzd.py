@@ -1,0 +1,66 @@
+"""PHZD gait optimization: IPOPT converges from the regression's guess, and the result is a
+real gait of the model, checked with independent pieces (the forward KKT dynamics and the
+impact map)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from characterization.bezier_fit import fit_bezier
+from characterization.phzd import CYCLE, DataTargets, PHZDOptions, optimize_gait
+
+pytestmark = pytest.mark.slow
+
+
+def _targets() -> DataTargets:
+    """A human-like template (rad; hip flexion negative, knee flexion positive)."""
+    t = np.linspace(0, 1, 101)
+
+    def ramp(a, b, bump=0.0):
+        return a + (b - a) * t + bump * np.sin(np.pi * t)
+
+    swing = [ramp(0.25, -0.35), ramp(0.6, 0.05, 0.6), ramp(0.0, 0.3)]
+    stance_hip, stance_knee = ramp(-0.25, 0.10), ramp(0.05, 0.05, 0.05)
+    ps = np.c_[swing[0], swing[1], swing[2], stance_hip, stance_knee]
+    pns = np.c_[stance_hip, stance_knee, swing[0], swing[1], swing[2]]
+    return DataTargets(alpha={"ps": fit_bezier(t, ps, 5).alpha, "pns": fit_bezier(t, pns, 5).alpha},
+                       v_hip={"ps": 1.0, "pns": 1.0}, p_min={"ps": -0.15, "pns": -0.15},
+                       p_max={"ps": 0.15, "pns": 0.15})
+
+
+@pytest.fixture(scope="module")
+def result(model):
+    r = optimize_gait(model, _targets(), PHZDOptions(nodes=11))
+    print(f"PHZD: {r.status} in {r.iterations} iterations, {r.solve_seconds:.1f} s")
+    return r
+
+
+def test_ipopt_converges(result):
+    assert result.success, result.status
+    for d in CYCLE:
+        assert np.all(np.abs(result.offsets[d]) <= 0.15 + 1e-9)
+
+
+def test_collocation_points_satisfy_the_forward_dynamics(model, result):
+    """Our KKT forward dynamics, fed the optimizer's (q, qd, u), returns its qdd and lam."""
+    fs = model.numeric()
+    for d in CYCLE:
+        tr = result.trajectory[d]
+        for k in range(tr["q"].shape[1]):
+            qdd, lam = fs[f"dyn_{d}"](tr["q"][:, k], tr["qd"][:, k], tr["u"][:, k])
+            np.testing.assert_allclose(qdd, tr["qdd"][:, k], atol=1e-5 * max(1, np.abs(qdd).max()))
+            np.testing.assert_allclose(lam, tr["lam"][:, k], atol=1e-4 * np.abs(lam).max())
+            fx, fz = lam[0], lam[1]
+            assert fz > 0 and abs(fx) <= 0.6 * fz + 1e-6
+
+
+def test_impacts_connect_the_domains_periodically(model, result):
+    fs = model.numeric()
+    ps, pns = result.trajectory["ps"], result.trajectory["pns"]
+    qd_plus = fs["impact_pns"](ps["q"][:, -1], ps["qd"][:, -1])[0]
+    np.testing.assert_allclose(pns["qd"][:, 0], qd_plus, atol=1e-6)
+    np.testing.assert_allclose(pns["q"][:, 0], ps["q"][:, -1], atol=1e-8)
+    qd_plus = fs["impact_ps"](pns["q"][:, -1], pns["qd"][:, -1])[0]
+    np.testing.assert_allclose(ps["qd"][:, 0], qd_plus, atol=1e-6)
+    np.testing.assert_allclose(ps["q"][1:, 0], pns["q"][1:, -1], atol=1e-8)
