@@ -77,7 +77,7 @@ def fit_joint_centre(joint: str, p1: np.ndarray, th1: np.ndarray, p2: np.ndarray
     both = np.stack([e1, e2])
     cnt = np.isfinite(both).sum(axis=0)
     pos = np.where(cnt > 0, np.nansum(both, axis=0) / np.maximum(cnt, 1), np.nan)
-    well = sd >= min_rotation
+    well = bool(sd >= min_rotation)
     msg = (f"joint '{joint}': fitted on {n_ok} frames, residual {res * 1000:.2f} mm RMS, "
            f"rotation SD {np.degrees(sd):.1f} deg")
     if not well:

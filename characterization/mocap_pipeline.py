@@ -108,13 +108,17 @@ def limb_pitches(take: Take, mapping: MocapMapping, frame: SagittalFrame,
             raise MocapError(f"mapping: limb '{limb}' is not mapped")
         cfg = mapping.limbs[limb]
         rb_th = pair_th = None
-        if cfg.rigid_body is not None:
+        # a take without any rigid body (C3D) is processed from the marker pairs alone
+        if cfg.rigid_body is not None and take.rigid_bodies:
             rb = take.rigid_body(cfg.rigid_body)
             rb_th = frame.pitch_from_quaternion(rb.quaternion, cfg.rigid_body_axis)
         if cfg.markers is not None:
             p1, p2 = (frame.project(take.marker(m)) for m in cfg.markers)
             pair_th = pair_pitch(p1, p2, cfg.pair_axis)
         have = [x for x in (rb_th, pair_th) if x is not None]
+        if not have:
+            raise MocapError(f"{take.source}: limb '{limb}': the take has no rigid bodies "
+                             "and the mapping gives no marker pair")
         if not any(np.isfinite(x).any() for x in have):
             what = " and ".join(
                 ([f"rigid body '{cfg.rigid_body}'"] if cfg.rigid_body else [])

@@ -126,25 +126,28 @@ def to_dict(a: StepsArtifact) -> dict[str, object]:
     return {f.name: getattr(a, f.name) for f in fields(a)}
 
 
-def save_steps(path: str | os.PathLike[str], a: StepsArtifact) -> None:
-    """Write ``.npz`` (compressed) or ``.json`` by the file's extension, atomically."""
+def steps_bytes(path: str | os.PathLike[str], a: StepsArtifact) -> bytes:
+    """The file content for ``.npz`` (compressed) or ``.json``, by the path's extension."""
     p = Path(path)
     d = to_dict(a)
     if p.suffix == ".npz":
         buf = io.BytesIO()
         np.savez_compressed(buf, **{k: np.asarray(v) for k, v in d.items()})
-        atomic_write_bytes(p, buf.getvalue())
-    elif p.suffix == ".json":
+        return buf.getvalue()
+    if p.suffix == ".json":
         def enc(v: object) -> object:
             if isinstance(v, np.ndarray):
                 if v.dtype.kind == "f":
                     return np.where(np.isfinite(v), v, None).tolist()
                 return v.tolist()
             return v
-        atomic_write_bytes(p, json.dumps({k: enc(v) for k, v in d.items()}).encode())
-    else:
-        raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}' "
-                             "(use .npz or .json)")
+        return json.dumps({k: enc(v) for k, v in d.items()}).encode()
+    raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}' (use .npz or .json)")
+
+
+def save_steps(path: str | os.PathLike[str], a: StepsArtifact) -> None:
+    """Write ``.npz`` or ``.json`` by the file's extension, atomically."""
+    atomic_write_bytes(path, steps_bytes(path, a))
 
 
 def load_steps(path: str | os.PathLike[str]) -> StepsArtifact:

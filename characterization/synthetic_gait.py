@@ -30,10 +30,10 @@ class GaitParams:
     """Nominal gait and its stride-to-stride variability (SD, same units); SI units."""
 
     stride_time: float = 1.15  # s
-    step_length: float = 0.45  # m, ankle to ankle at contact, each side
-    double_support: float = 0.10  # fraction of the stride, each of the two
-    hip_height_ds: float = 0.820  # m, hip above the floor at double support
-    hip_height_ss: float = 0.862  # m, at mid single support
+    step_length: float = 0.42  # m, ankle to ankle at contact, each side
+    double_support: float = 0.08  # fraction of the stride, each of the two
+    hip_height_ds: float = 0.840  # m, hip above the floor at double support
+    hip_height_ss: float = 0.875  # m, at mid single support
     trunk_lean: float = 0.06  # rad, forward
     trunk_sway: float = 0.02  # rad, amplitude of the twice-per-stride oscillation
     clearance: float = 0.05  # m, sole above the floor at mid swing
