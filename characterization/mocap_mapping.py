@@ -36,7 +36,14 @@ import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 from characterization.mocap_take import MocapError
 
@@ -104,15 +111,21 @@ class MocapMapping(_Strict):
     segmentation: Segmentation | None = None
     processing: Processing = Processing()
 
-    @model_validator(mode="after")
-    def _names(self) -> MocapMapping:
-        for k in self.limbs:
+    @field_validator("limbs")
+    @classmethod
+    def _limb_names(cls, v: dict[str, LimbSource]) -> dict[str, LimbSource]:
+        for k in v:
             if k not in LIMBS:
                 raise ValueError(f"unknown limb '{k}' (limbs are {', '.join(LIMBS)})")
-        for k in self.joints:
+        return v
+
+    @field_validator("joints")
+    @classmethod
+    def _joint_names(cls, v: dict[str, JointMarkers]) -> dict[str, JointMarkers]:
+        for k in v:
             if k not in JOINTS:
                 raise ValueError(f"unknown joint '{k}' (joints are {', '.join(JOINTS)})")
-        return self
+        return v
 
 
 def load_mapping(path: str | Path) -> MocapMapping:

@@ -197,3 +197,29 @@ def test_cli_synth_then_process(tmp_path, capsys) -> None:
     b = load_steps(out2)
     assert b.n_steps >= a.n_steps - 2  # marker-only: a long pair gap may drop a step
     assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
+    from characterization.mocap_mapping import load_mapping
+    from characterization.synthetic_subject import mapping_toml
+
+    good = mapping_toml(default_mapping())
+    p = tmp_path / "mapping.toml"
+    p.write_text(good.replace('[limbs.hat]', '[limbs.head]', 1))
+    with pytest.raises(MocapError, match=r"mapping.toml: field 'limbs': .*unknown limb 'head'"):
+        load_mapping(p)
+    p.write_text(good.replace("lowpass_hz = 15.0", "lowpass_hz = -1"))
+    with pytest.raises(MocapError, match=r"field 'processing.lowpass_hz'"):
+        load_mapping(p)
+    # explicit axes give the same pitches as auto-detection (walking along lab -X)
+    p.write_text('up = "+z"\nforward = "-x"\n' + good.replace('up = "auto"\n', "")
+                 .replace('forward = "auto"\n', ""))
+    m = load_mapping(p)
+    c3d = read_c3d(files["c3d"])
+    auto = _pitches(c3d)
+    explicit = _pitches(c3d, m)
+    for limb in LIMBS:
+        np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-6)
+    # walking the other way round flips every pitch's sign
+    back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
+    np.testing.assert_allclose(back["l_shank"].theta, -auto["l_shank"].theta, atol=1e-12)
