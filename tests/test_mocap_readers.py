@@ -222,4 +222,4 @@ def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
         np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-6)
     # walking the other way round flips every pitch's sign
     back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
-    np.testing.assert_allclose(back["l_shank"].theta, -auto["l_shank"].theta, atol=1e-12)
+    np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
