@@ -16,9 +16,11 @@ from rich.console import Console
 from rich.table import Table
 
 import hp_model
+from characterization.mocap_take import MocapError
 from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
+from orchestrator.mocap_cli import mocap_app
 
 app = typer.Typer(
     name="hpcosim",
@@ -30,10 +32,11 @@ app = typer.Typer(
 )
 model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True)
 app.add_typer(model_app, name="model")
+app.add_typer(mocap_app, name="mocap")
 
 #: exceptions that are the user's input, reported in one line
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
-                                               FileNotFoundError)
+                                               FileNotFoundError, MocapError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
@@ -114,9 +117,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hpcosim: error: {e}", file=sys.stderr)
         return 2
     except Exception as e:  # click usage errors carry their own exit code
-        import click
+        try:
+            from click import ClickException
+        except ImportError:  # recent typer vendors click as typer._click
+            from typer._click.exceptions import ClickException
 
-        if isinstance(e, click.ClickException):
+        if isinstance(e, ClickException):
             e.show()
             return e.exit_code
         raise

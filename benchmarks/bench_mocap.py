@@ -1,0 +1,70 @@
+"""Benchmark: a 37-step-cycle synthetic take at 120 Hz (markers + rigid bodies), end to end.
+
+Stages timed per repeat: reading the Motive CSV, processing (limb pitches, joint centres,
+joint angles, segmentation), rendering the QA report and figures, writing the steps file.
+"Core" = read + process + steps file; "all" adds the report and figures.  The take is
+generated once (not timed).  Target (issue 3): end to end under 2 s.
+
+    PYTHONPATH=. python benchmarks/bench_mocap.py [--repeats 7]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import hp_model
+from characterization.mocap_files import process_file, read_take
+from characterization.mocap_mapping import default_mapping
+from characterization.mocap_pipeline import process_take, to_artifact
+from characterization.mocap_report import render_report
+from characterization.motive_csv import write_motive_csv
+from characterization.steps_artifact import save_steps
+from characterization.synthetic_subject import SynthOptions, synthesize
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=7)
+    args = ap.parse_args()
+    model = hp_model.load_model()
+    coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    mapping = default_mapping()
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        s = synthesize(model, SynthOptions(n_strides=37, seed=0))
+        write_motive_csv(d / "take.csv", s.take)
+        size = (d / "take.csv").stat().st_size / 1e6
+        rows: dict[str, list[float]] = {k: [] for k in ("read", "process", "report+figures",
+                                                        "write", "core", "all",
+                                                        "process_file()")}
+        process_file(d / "take.csv", d / "warm.npz", mapping=mapping)  # warm caches
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            take = read_take(d / "take.csv")
+            t1 = time.perf_counter()
+            p = process_take(take, mapping, coef)
+            t2 = time.perf_counter()
+            render_report(d / "steps.npz", p, True)
+            t3 = time.perf_counter()
+            save_steps(d / "steps.npz", to_artifact(p))
+            t4 = time.perf_counter()
+            process_file(d / "take.csv", d / "steps2.npz", mapping=mapping)
+            t5 = time.perf_counter()
+            for k, v in (("read", t1 - t0), ("process", t2 - t1), ("report+figures", t3 - t2),
+                         ("write", t4 - t3), ("core", (t2 - t0) + (t4 - t3)),
+                         ("all", t4 - t0), ("process_file()", t5 - t4)):
+                rows[k].append(v)
+    print(f"take: {take.n_frames} frames at {take.frame_rate:g} Hz, {len(take.markers)} "
+          f"markers + {len(take.rigid_bodies)} rigid bodies, CSV {size:.1f} MB; "
+          f"{len(p.steps)} steps; {args.repeats} repeats")
+    print(f"{'stage':<16}{'median (s)':>12}{'min':>9}{'max':>9}")
+    for k, v in rows.items():
+        print(f"{k:<16}{statistics.median(v):>12.3f}{min(v):>9.3f}{max(v):>9.3f}")
+
+
+if __name__ == "__main__":
+    main()

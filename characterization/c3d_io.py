@@ -1,0 +1,79 @@
+"""C3D files through ezc3d: markers only (C3D has no standard rigid-body orientations).
+
+``c3d(path)['data']['points']`` is (4, markers, frames) in POINT:UNITS (usually mm); a
+missing sample is NaN or has a negative residual.  C3D files are Z-up by convention, so the
+:class:`Take` gets ``up_axis = "+z"`` (override it in the mapping config if a lab differs).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from characterization.atomic_io import atomic_write_with
+from characterization.mocap_take import MocapError, Take
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def read_c3d(path: str | os.PathLike[str]) -> Take:
+    """Read the POINT data of a C3D file into a :class:`Take` (metres, lab axes)."""
+    import ezc3d
+
+    src = str(path)
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"{src}: no such file")
+    try:
+        c = ezc3d.c3d(src)
+    except Exception as e:  # ezc3d raises plain RuntimeError/IndexError on bad files
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise MocapError(f"{src}: not a readable C3D file ({first})") from None
+    par = c["parameters"]["POINT"]
+    labels = [str(s).strip() for s in par["LABELS"]["value"]]
+    unit = str(par["UNITS"]["value"][0]).strip().lower() if "UNITS" in par else "mm"
+    if unit not in UNITS:
+        raise MocapError(f"{src}: parameter POINT:UNITS: unknown units '{unit}' "
+                         f"(expected one of {', '.join(UNITS)})")
+    rate = float(np.ravel(par["RATE"]["value"])[0])
+    pts = np.asarray(c["data"]["points"], dtype=float)
+    if pts.ndim != 3 or pts.shape[1] != len(labels):
+        raise MocapError(f"{src}: POINT data has {pts.shape[1] if pts.ndim == 3 else '?'} "
+                         f"markers but POINT:LABELS names {len(labels)}")
+    n = pts.shape[2]
+    if n == 0:
+        raise MocapError(f"{src}: no frames")
+    res = c["data"]["meta_points"]["residuals"] if "meta_points" in c["data"] else None
+    markers: dict[str, np.ndarray] = {}
+    for i, lab in enumerate(labels):
+        if lab in markers:
+            raise MocapError(f"{src}: POINT:LABELS: duplicate marker label '{lab}'")
+        xyz = pts[:3, i, :].T * UNITS[unit]
+        lost = ~np.all(np.isfinite(xyz), axis=1)
+        if res is not None:
+            lost |= np.asarray(res)[0, i, :] < 0
+        xyz[lost] = np.nan
+        markers[lab] = xyz
+    first = int(c["header"]["points"]["first_frame"])
+    time = (first + np.arange(n)) / rate
+    return Take(source=src, frame_rate=rate, time=time, markers=markers, up_axis="+z",
+                metadata={"format": "c3d"})
+
+
+def write_c3d(path: str | os.PathLike[str], take: Take, *, units: str = "mm") -> None:
+    """Write the take's reconstructed markers to a C3D file (atomically)."""
+    import ezc3d
+
+    names = list(take.markers)
+    c = ezc3d.c3d()
+    c["parameters"]["POINT"]["RATE"]["value"] = [float(take.frame_rate)]
+    c["parameters"]["POINT"]["LABELS"]["value"] = tuple(names)
+    c.add_parameter("POINT", "UNITS", [units])
+    pts = np.ones((4, len(names), take.n_frames))
+    for i, k in enumerate(names):
+        xyz = take.markers[k] / UNITS[units]
+        pts[:3, i, :] = xyz.T
+        pts[:, i, ~np.all(np.isfinite(xyz), axis=1)] = np.nan
+    c["data"]["points"] = pts
+    atomic_write_with(path, lambda tmp: c.write(tmp), suffix=".c3d")

@@ -1,0 +1,270 @@
+"""A take -> per-step joint trajectories (paper Sec. II and the segmentation of Sec. IV-A).
+
+:func:`process_take` is a pure function of the take, the mapping and the model's
+delta_p_hip coefficients.  Joint-angle conventions (the model's, :mod:`hp_model`): each
+joint angle is the distal limb's pitch minus the proximal limb's pitch,
+
+    th_lh = l_thigh - hat     (hip flexion negative)
+    th_lk = l_shank - l_thigh (knee flexion positive)
+    th_la = l_foot - l_shank  (plantarflexion positive)
+    th_rh = r_thigh - hat,  th_pk = p_shin - r_thigh,  th_pa = p_foot - p_shin
+    th_B  = hat;  (x_B, z_B) = hip joint centre;  q_f = 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from characterization.joint_centres import JointCentreFit, fit_joint_centre
+from characterization.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
+from characterization.mocap_mapping import JOINTS, LIMBS, MocapMapping
+from characterization.mocap_take import MocapError, Take
+from characterization.sagittal import SagittalFrame, auto_forward, axis_vector
+from characterization.step_segmentation import (
+    StepBounds,
+    phase_tau,
+    segment_steps,
+    single_support,
+)
+from characterization.steps_artifact import StepsArtifact
+from hp_model import COORDS
+
+#: coordinate -> (distal limb, proximal limb or None)
+ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
+              "th_lk": ("l_shank", "l_thigh"), "th_la": ("l_foot", "l_shank"),
+              "th_rh": ("r_thigh", "hat"), "th_pk": ("p_shin", "r_thigh"),
+              "th_pa": ("p_foot", "p_shin")}
+HipCoefficients = dict[str, tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class Step:
+    """One kept step: bounds, tau over its frames, delta bounds, single-support frames."""
+
+    domain: str
+    start: int
+    end: int
+    tau: np.ndarray
+    delta_lower: float
+    delta_upper: float
+    single_support: tuple[int, int] | None
+
+
+@dataclass(frozen=True)
+class DroppedStep:
+    domain: str
+    start: int
+    end: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class ProcessedTake:
+    """Everything :func:`process_take` computed (see :mod:`steps_artifact` for fields)."""
+
+    source: str
+    frame_rate: float
+    time: np.ndarray
+    frame: SagittalFrame
+    pitches: dict[str, LimbPitch]
+    q: np.ndarray
+    joints: dict[str, JointCentreFit]
+    delta_ps: np.ndarray
+    coefficients: HipCoefficients
+    steps: tuple[Step, ...]
+    dropped: tuple[DroppedStep, ...]
+    notes: tuple[str, ...]
+
+
+def resolve_frame(take: Take, mapping: MocapMapping) -> SagittalFrame:
+    """The sagittal frame: up from the mapping (or the format's default), forward from the
+    mapping or detected from the trunk's net travel."""
+    up = axis_vector(take.up_axis if mapping.up == "auto" else mapping.up)
+    if mapping.forward != "auto":
+        return SagittalFrame(forward=axis_vector(mapping.forward), up=up)
+    hat = mapping.limbs.get("hat")
+    traj = None
+    if hat is not None and hat.rigid_body and hat.rigid_body in take.rigid_bodies:
+        traj = take.rigid_bodies[hat.rigid_body].position
+    if (traj is None or not np.isfinite(traj).any()) and hat is not None and hat.markers:
+        traj = take.marker(hat.markers[0])
+    if traj is None:
+        raise MocapError(f"{take.source}: set 'forward' in the mapping (no trunk to detect "
+                         "the walking direction from)")
+    return SagittalFrame(forward=auto_forward(traj, up, take.source, "hat"), up=up)
+
+
+def limb_pitches(take: Take, mapping: MocapMapping, frame: SagittalFrame,
+                 limbs: tuple[str, ...] = LIMBS) -> dict[str, LimbPitch]:
+    """Pitch of each limb with its per-frame source, gaps filled up to ``max_gap`` and the
+    configured low-pass applied."""
+    proc = mapping.processing
+    max_gap = round(proc.max_gap * take.frame_rate)
+    out = {}
+    for limb in limbs:
+        if limb not in mapping.limbs:
+            raise MocapError(f"mapping: limb '{limb}' is not mapped")
+        cfg = mapping.limbs[limb]
+        rb_th = pair_th = None
+        # a take without any rigid body (C3D) is processed from the marker pairs alone
+        if cfg.rigid_body is not None and take.rigid_bodies:
+            rb = take.rigid_body(cfg.rigid_body)
+            rb_th = frame.pitch_from_quaternion(rb.quaternion, cfg.rigid_body_axis)
+        if cfg.markers is not None:
+            p1, p2 = (frame.project(take.marker(m)) for m in cfg.markers)
+            pair_th = pair_pitch(p1, p2, cfg.pair_axis)
+        have = [x for x in (rb_th, pair_th) if x is not None]
+        if not have:
+            raise MocapError(f"{take.source}: limb '{limb}': the take has no rigid bodies "
+                             "and the mapping gives no marker pair")
+        if not any(np.isfinite(x).any() for x in have):
+            what = " and ".join(
+                ([f"rigid body '{cfg.rigid_body}'"] if cfg.rigid_body else [])
+                + ([f"markers '{cfg.markers[0]}', '{cfg.markers[1]}'"] if cfg.markers else []))
+            raise MocapError(f"{take.source}: limb '{limb}': {what} empty in every frame")
+        lp = limb_pitch(limb, take.time, rb_th, pair_th, max_gap)
+        if proc.lowpass_hz > 0:
+            th = lowpass(lp.theta, take.frame_rate, proc.lowpass_hz)
+            th.setflags(write=False)
+            lp = LimbPitch(lp.limb, th, lp.source, lp.pair_offset, lp.gaps)
+        out[limb] = lp
+    return out
+
+
+def joint_coordinates(pitches: dict[str, LimbPitch], hip_xz: np.ndarray) -> np.ndarray:
+    """q (n, 12) from limb pitches (conventions in the module docstring)."""
+    n = len(hip_xz)
+    q = np.zeros((n, len(COORDS)))
+    q[:, 0:2] = hip_xz
+    for c, (dist, prox) in ANGLE_DEFS.items():
+        th = pitches[dist].theta - (pitches[prox].theta if prox else 0.0)
+        q[:, COORDS.index(c)] = th
+    return q
+
+
+def fit_joints(take: Take, mapping: MocapMapping, frame: SagittalFrame,
+               pitches: dict[str, LimbPitch]) -> dict[str, JointCentreFit]:
+    """The paper's joint-centre least squares for every joint in the mapping."""
+    min_rot = np.radians(mapping.processing.min_joint_rotation_deg)
+    out = {}
+    for j, jm in mapping.joints.items():
+        a, b = JOINTS[j]
+        p1, p2 = (frame.project(take.marker(m)) for m in jm.markers)
+        out[j] = fit_joint_centre(j, p1, pitches[a].theta, p2, pitches[b].theta, min_rot)
+    return out
+
+
+def _gap_reason(pitches: dict[str, LimbPitch], s: int, e: int, rate: float,
+                max_gap: float) -> str:
+    for limb, lp in pitches.items():
+        for g in lp.gaps:
+            if not g.filled and g.start <= e and g.stop > s:
+                return (f"limb '{limb}' has no pitch source for {g.length / rate:.3f} s "
+                        f"(frames {g.start}-{g.stop - 1}) > max gap {max_gap:.3f} s")
+    return "missing hip joint centre"
+
+
+def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficients
+                 ) -> ProcessedTake:
+    """Limb pitches, joint angles, joint centres and steps of one take.
+
+    ``coefficients``: {"ps": (c_k, c_a), "pns": (c_k, c_a)} from
+    ``model.hip_progress_coefficients``.  Raises :class:`MocapError` if no complete step.
+    """
+    if mapping.segmentation is None:
+        raise MocapError("mapping: section [segmentation] is required to find steps")
+    if "hip_l" not in mapping.joints and "hip_r" not in mapping.joints:
+        raise MocapError("mapping: joint 'hip_l' or 'hip_r' is required (hip position)")
+    frame = resolve_frame(take, mapping)
+    pitches = limb_pitches(take, mapping, frame)
+    joints = fit_joints(take, mapping, frame, pitches)
+    notes = [f.message for f in joints.values()]
+    hips = np.stack([joints[j].position for j in ("hip_l", "hip_r") if j in joints])
+    cnt = np.isfinite(hips).sum(axis=0)
+    hip = np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
+    q = joint_coordinates(pitches, hip)
+    ck, ca = coefficients["ps"]
+    delta = ck * q[:, COORDS.index("th_pk")] + ca * q[:, COORDS.index("th_pa")]
+    seg = mapping.segmentation
+    bounds = segment_steps(delta, seg.min_excursion)
+    rate = take.frame_rate
+    foot_x = {"ps": frame.project(take.marker(seg.human_foot_marker))[:, 0],
+              "pns": frame.project(take.marker(seg.prosthesis_foot_marker))[:, 0]}
+    steps: list[Step] = []
+    dropped: list[DroppedStep] = []
+    for b in bounds:
+        steps_or_drop = _make_step(b, q, coefficients, foot_x[b.domain], rate,
+                                   seg.foot_speed_threshold)
+        if isinstance(steps_or_drop, Step):
+            steps.append(steps_or_drop)
+        else:
+            dropped.append(DroppedStep(b.domain, b.start, b.end, _gap_reason(
+                pitches, b.start, b.end, rate, mapping.processing.max_gap)))
+    if not steps:
+        why = (f"{len(dropped)} found but dropped: {dropped[0].reason}" if dropped else
+               "delta_p_hip(th_pk, th_pa) has fewer than two turning points")
+        raise MocapError(f"{take.source}: no complete step ({why})")
+    if bounds:
+        notes.append(f"partial portions before frame {bounds[0].start} and after frame "
+                     f"{bounds[-1].end} are not complete steps")
+    return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
+                         dict(coefficients), tuple(steps), tuple(dropped), tuple(notes))
+
+
+def _make_step(b: StepBounds, q: np.ndarray, coefficients: HipCoefficients,
+               foot_x: np.ndarray, rate: float, speed: float) -> Step | None:
+    qs = q[b.start:b.end + 1]
+    if not np.all(np.isfinite(qs)):
+        return None
+    ck, ca = coefficients[b.domain]
+    k, a = ("th_pk", "th_pa") if b.domain == "ps" else ("th_lk", "th_la")
+    d = ck * qs[:, COORDS.index(k)] + ca * qs[:, COORDS.index(a)]
+    if d[-1] == d[0]:
+        return None
+    tau, lo, hi = phase_tau(d)
+    tau.setflags(write=False)
+    ss = single_support(foot_x, rate, b.start, b.end, speed)
+    return Step(b.domain, b.start, b.end, tau, lo, hi, ss)
+
+
+def to_artifact(p: ProcessedTake) -> StepsArtifact:
+    """The steps file content of a processed take."""
+    jn = list(JOINTS)
+    n = len(p.time)
+    jpos = np.full((n, len(jn), 2), np.nan)
+    jlam = np.full((len(jn), 2, 2), np.nan)
+    jres = np.full(len(jn), np.nan)
+    jwell = np.zeros(len(jn), bool)
+    for i, j in enumerate(jn):
+        if j in p.joints:
+            f = p.joints[j]
+            jpos[:, i] = f.position
+            jlam[i] = (f.lam1, f.lam2)
+            jres[i] = f.residual_rms
+            jwell[i] = f.well_posed
+    taus = [s.tau for s in p.steps]
+    offs = np.concatenate([[0], np.cumsum([len(t) for t in taus])]).astype(np.int64)
+    ss = [s.single_support or (-1, -1) for s in p.steps]
+    return StepsArtifact(
+        source=p.source, frame_rate=p.frame_rate, coord_names=np.array(COORDS),
+        limb_names=np.array(LIMBS), joint_names=np.array(jn), time=np.asarray(p.time),
+        q=p.q, limb_pitch=np.column_stack([p.pitches[k].theta for k in LIMBS]),
+        pitch_source=np.column_stack([p.pitches[k].source for k in LIMBS]).astype(np.int64),
+        joint_position=jpos, joint_lambda=jlam, joint_residual=jres, joint_well_posed=jwell,
+        delta_ps=p.delta_ps,
+        hip_coefficients=np.array([p.coefficients["ps"], p.coefficients["pns"]]),
+        step_domain=np.array([s.domain for s in p.steps]),
+        step_start=np.array([s.start for s in p.steps], dtype=np.int64),
+        step_end=np.array([s.end for s in p.steps], dtype=np.int64),
+        step_delta_lower=np.array([s.delta_lower for s in p.steps]),
+        step_delta_upper=np.array([s.delta_upper for s in p.steps]),
+        step_ss_start=np.array([a for a, _ in ss], dtype=np.int64),
+        step_ss_end=np.array([b for _, b in ss], dtype=np.int64),
+        tau=np.concatenate(taus) if taus else np.zeros(0), tau_offsets=offs,
+        dropped_domain=np.array([d.domain for d in p.dropped], dtype=str),
+        dropped_start=np.array([d.start for d in p.dropped], dtype=np.int64),
+        dropped_end=np.array([d.end for d in p.dropped], dtype=np.int64),
+        dropped_reason=np.array([d.reason for d in p.dropped], dtype=str),
+    )

@@ -1,0 +1,106 @@
+"""A motion-capture take in memory, whatever file it came from.
+
+Positions are metres in the file's own (lab) axes; which lab axis is up and which is the
+walking direction is decided later (:mod:`characterization.sagittal`).  A lost sample is
+NaN in every coordinate.  Rigid-body orientations are unit quaternions (x, y, z, w), scalar
+last, mapping the rigid body's local axes to the lab axes; a lost rigid body is NaN.
+
+Arrays are read-only; a :class:`Take` is never modified, derive a new one with
+:meth:`Take.replace`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+
+import numpy as np
+
+
+class MocapError(ValueError):
+    """Motion-capture input that cannot be used; the message is one line naming the file
+    and the column or frame."""
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class RigidBodyTrack:
+    """One rigid body: position (n, 3) m and orientation (n, 4) quaternion x, y, z, w in lab
+    axes; ``mean_error`` (n,) m if the file has it."""
+
+    position: np.ndarray
+    quaternion: np.ndarray
+    mean_error: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _frozen(self.position))
+        object.__setattr__(self, "quaternion", _frozen(self.quaternion))
+        if self.mean_error is not None:
+            object.__setattr__(self, "mean_error", _frozen(self.mean_error))
+
+    @property
+    def tracked(self) -> np.ndarray:
+        """(n,) bool: the orientation is present in that frame."""
+        return np.all(np.isfinite(self.quaternion), axis=1)
+
+
+@dataclass(frozen=True)
+class Take:
+    """A take: frame times, markers and rigid bodies.
+
+    ``markers``: reconstructed markers, name -> (n, 3) m.  ``rigid_body_markers``: positions
+    solved from rigid bodies (Motive's "Rigid Body Marker"), name -> (n, 3) m.
+    ``up_axis`` is the file format's default up axis (``"+y"`` Motive, ``"+z"`` C3D).
+    """
+
+    source: str
+    frame_rate: float
+    time: np.ndarray
+    markers: Mapping[str, np.ndarray]
+    rigid_bodies: Mapping[str, RigidBodyTrack] = field(default_factory=dict)
+    rigid_body_markers: Mapping[str, np.ndarray] = field(default_factory=dict)
+    up_axis: str = "+y"
+    metadata: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time", _frozen(self.time))
+        n = self.time.shape[0]
+        for what, d in (("marker", self.markers), ("rigid body marker", self.rigid_body_markers)):
+            for k, v in d.items():
+                if np.shape(v) != (n, 3):
+                    raise MocapError(f"{self.source}: {what} '{k}' has shape {np.shape(v)}, "
+                                     f"expected ({n}, 3)")
+        object.__setattr__(self, "markers",
+                           MappingProxyType({k: _frozen(v) for k, v in self.markers.items()}))
+        object.__setattr__(self, "rigid_body_markers", MappingProxyType(
+            {k: _frozen(v) for k, v in self.rigid_body_markers.items()}))
+        object.__setattr__(self, "rigid_bodies", MappingProxyType(dict(self.rigid_bodies)))
+        object.__setattr__(self, "metadata", MappingProxyType(dict(self.metadata)))
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.time.shape[0])
+
+    def marker(self, name: str) -> np.ndarray:
+        """A marker by name: reconstructed markers first, then rigid-body markers."""
+        if name in self.markers:
+            return self.markers[name]
+        if name in self.rigid_body_markers:
+            return self.rigid_body_markers[name]
+        raise MocapError(f"{self.source}: no marker column '{name}'")
+
+    def rigid_body(self, name: str) -> RigidBodyTrack:
+        try:
+            return self.rigid_bodies[name]
+        except KeyError:
+            raise MocapError(f"{self.source}: no rigid body column '{name}'") from None
+
+    def replace(self, **changes: object) -> Take:
+        """A copy with some fields replaced (e.g. markers with a gap cut in)."""
+        return replace(self, **changes)

@@ -1,0 +1,225 @@
+"""Motive CSV and C3D readers, sagittal projection, bad input and the ``hpcosim mocap`` CLI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import hp_model
+from characterization.c3d_io import read_c3d, write_c3d
+from characterization.mocap_mapping import LIMBS, default_mapping
+from characterization.mocap_pipeline import limb_pitches, resolve_frame
+from characterization.mocap_take import MocapError
+from characterization.motive_csv import read_motive_csv, write_motive_csv
+from characterization.sagittal import SagittalFrame, axis_vector
+from characterization.steps_artifact import load_steps
+from characterization.synthetic_subject import SynthOptions, synthesize
+from orchestrator.cli import main
+
+
+@pytest.fixture(scope="module")
+def synth():
+    return synthesize(hp_model.load_model(), SynthOptions(n_strides=6, seed=5))
+
+
+@pytest.fixture(scope="module")
+def files(synth, tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("take")
+    write_motive_csv(d / "take.csv", synth.take)
+    write_c3d(d / "take.c3d", synth.take_c3d)
+    return {"csv": d / "take.csv", "c3d": d / "take.c3d"}
+
+
+def _pitches(take, mapping=None):
+    m = mapping or default_mapping()
+    return limb_pitches(take, m, resolve_frame(take, m))
+
+
+def test_csv_round_trip(synth, files) -> None:
+    t = read_motive_csv(files["csv"])
+    assert t.frame_rate == pytest.approx(120.0)
+    assert set(t.markers) == set(synth.take.markers)
+    assert set(t.rigid_bodies) == set(synth.take.rigid_bodies)
+    for k, v in synth.take.markers.items():
+        np.testing.assert_allclose(t.markers[k], v, atol=1e-6)  # 6 decimals in metres
+        np.testing.assert_array_equal(np.isnan(t.markers[k]), np.isnan(v))
+    for k, rb in synth.take.rigid_bodies.items():
+        np.testing.assert_allclose(t.rigid_bodies[k].quaternion, rb.quaternion, atol=1e-6)
+        np.testing.assert_allclose(t.rigid_bodies[k].position, rb.position, atol=1e-6)
+
+
+def test_units_and_euler_rotations_read_the_same(synth, tmp_path) -> None:
+    ref = _pitches(synth.take)
+    write_motive_csv(tmp_path / "mm.csv", synth.take, units="Millimeters",
+                     rotation_type="ZYX", decimals=5)
+    t = read_motive_csv(tmp_path / "mm.csv")
+    np.testing.assert_allclose(t.markers["LShank:Marker1"],
+                               synth.take.markers["LShank:Marker1"], atol=1e-7)
+    got = _pitches(t)
+    for limb in LIMBS:
+        np.testing.assert_allclose(got[limb].theta, ref[limb].theta, atol=1e-5)
+
+
+def test_c3d_and_csv_readers_give_the_same_angles(files) -> None:
+    """C3D holds markers only: the same marker-pair angles as the CSV read without rigid
+    bodies (C3D stores float32 mm; spline-filled frames amplify that to < 1e-4 rad); and within
+    noise of the CSV's rigid-body angles."""
+    csv = read_motive_csv(files["csv"])
+    c3d = read_c3d(files["c3d"])
+    assert c3d.up_axis == "+z" and csv.up_axis == "+y"
+    a = _pitches(csv.replace(rigid_bodies={}))
+    b = _pitches(c3d)
+    full = _pitches(csv)
+    for limb in LIMBS:
+        ok = np.isfinite(a[limb].theta) & np.isfinite(b[limb].theta)
+        assert ok.sum() > 0.95 * len(ok)
+        np.testing.assert_allclose(a[limb].theta[ok], b[limb].theta[ok], atol=1e-4)
+        np.testing.assert_array_equal(a[limb].source, b[limb].source)
+        ok &= np.isfinite(full[limb].theta)
+        rms = np.degrees(np.sqrt(np.mean((full[limb].theta[ok] - b[limb].theta[ok]) ** 2)))
+        assert rms < 0.3, (limb, rms)
+
+
+def test_sagittal_projection_and_quaternion_pitch() -> None:
+    """A rigid body rotated by +0.3 rad about the walker's left (lab +Z when walking along
+    lab -X with Y up) has pitch +0.3: its up axis tilts toward the walking direction."""
+    from scipy.spatial.transform import Rotation
+
+    f = SagittalFrame(forward=axis_vector("-x"), up=axis_vector("+y"))
+    np.testing.assert_allclose(f.lateral, [0, 0, 1])
+    q = Rotation.from_rotvec([[0, 0, 0.3]]).as_quat()
+    assert f.pitch_from_quaternion(q, "up")[0] == pytest.approx(0.3)
+    assert f.pitch_from_quaternion(q, "forward")[0] == pytest.approx(0.3)
+    up = Rotation.from_quat(q).apply([0, 1, 0])
+    assert f.project(up[None])[0, 0] > 0  # tilted forward
+    np.testing.assert_allclose(f.project(np.array([[2.0, 1.0, 5.0]])), [[-2.0, 1.0]])
+
+
+HEADER = ("Format Version,1.23,Take Name,t,Export Frame Rate,120.000000,Rotation Type,"
+          "Quaternion,Length Units,Meters,Coordinate Space,Global\n\n"
+          ",Type,Marker,Marker,Marker\n,Name,A,A,A\n,ID,1,1,1\n,,Position,Position,Position\n"
+          "Frame,Time (Seconds),X,Y,Z\n")
+
+
+def _bad_csv(files, tmp_path, kind: str) -> Path:
+    text = files["csv"].read_text()
+    p = tmp_path / f"{kind}.csv"
+    if kind == "truncated":
+        p.write_text(text[: len(text) - 2000])
+    elif kind == "units":
+        p.write_text(text.replace("Length Units,Meters", "Length Units,Furlongs", 1))
+    elif kind == "missing_marker":
+        p.write_text(text.replace("LShank:Marker2", "LShank:MarkerX"))
+    elif kind == "missing_rigid_body":
+        lines = text.splitlines(keepends=True)
+        lines[3] = ",".join("Shin" if c == "LShank" else c for c in lines[3].split(","))
+        p.write_text("".join(lines))
+    elif kind == "no_header":
+        lines = text.splitlines(keepends=True)
+        p.write_text(lines[0] + "".join(lines[7:]))
+    elif kind == "not_a_number":
+        lines = text.splitlines(keepends=True)
+        cells = lines[100].split(",")
+        cells[5] = "abc"
+        lines[100] = ",".join(cells)
+        p.write_text("".join(lines))
+    return p
+
+
+@pytest.mark.parametrize("kind,expect", [
+    ("truncated", "truncated"),
+    ("units", "unknown units 'Furlongs'"),
+    ("missing_marker", "no marker column 'LShank:Marker2'"),
+    ("missing_rigid_body", "no rigid body column 'LShank'"),
+    ("no_header", "no header rows"),
+    ("not_a_number", "not a number 'abc'"),
+])
+def test_bad_input_one_line_error_no_output(files, tmp_path, capsys, kind, expect) -> None:
+    bad = _bad_csv(files, tmp_path, kind)
+    out = tmp_path / "steps.npz"
+    code = main(["mocap", "process", str(bad), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("hpcosim: error: ")
+    assert str(bad) in err and expect in err
+    if kind == "truncated":
+        assert "line " in err and "frame " in err
+    if kind == "not_a_number":
+        assert "column 6" in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == [bad.name]
+
+
+def test_all_empty_limb_is_an_error(synth, tmp_path, capsys) -> None:
+    t = synth.take
+    markers = {k: (np.full_like(v, np.nan) if k.startswith("PShin:") else v)
+               for k, v in t.markers.items()}
+    bodies = {k: (type(v)(v.position, np.full_like(v.quaternion, np.nan), None)
+                  if k == "PShin" else v) for k, v in t.rigid_bodies.items()}
+    p = tmp_path / "empty.csv"
+    write_motive_csv(p, t.replace(markers=markers, rigid_bodies=bodies))
+    code = main(["mocap", "process", str(p), "--out", str(tmp_path / "s.npz")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "limb 'p_shin'" in err and "empty in every frame" in err
+    assert str(p) in err and len(err.splitlines()) == 1
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["empty.csv"]
+
+
+def test_minimal_csv_and_unknown_rotation_type(tmp_path) -> None:
+    p = tmp_path / "m.csv"
+    p.write_text(HEADER + "0,0.0,1,2,3\n1,0.008333,,,\n2,0.016667,1000,2,3\n")
+    t = read_motive_csv(p)
+    np.testing.assert_array_equal(t.markers["A"][0], [1, 2, 3])
+    assert np.all(np.isnan(t.markers["A"][1]))
+    p.write_text(HEADER.replace("Quaternion", "Matrix") + "0,0.0,1,2,3\n")
+    with pytest.raises(MocapError, match="unknown rotation type 'Matrix'"):
+        read_motive_csv(p)
+
+
+def test_cli_synth_then_process(tmp_path, capsys) -> None:
+    d = tmp_path / "syn"
+    assert main(["mocap", "synth", "--out", str(d), "--steps", "4", "--seed", "2"]) == 0
+    assert {"take.csv", "take.c3d", "truth.npz", "mapping.toml"} <= {x.name for x in
+                                                                    d.iterdir()}
+    out = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(d / "take.csv"), "--out", str(out), "--mapping",
+                 str(d / "mapping.toml")]) == 0
+    a = load_steps(out)
+    truth = np.load(d / "truth.npz")
+    assert a.step_domain.tolist() == truth["step_domain"].tolist()
+    for name in ("steps.qa.md", "steps.qa.json", "steps_joint_angles.png",
+                 "steps_phase_portraits.png"):
+        assert (tmp_path / name).stat().st_size > 0
+    out2 = tmp_path / "steps_c3d.json"
+    assert main(["mocap", "process", str(d / "take.c3d"), "--out", str(out2),
+                 "--no-figures"]) == 0
+    b = load_steps(out2)
+    assert b.n_steps >= a.n_steps - 2  # marker-only: a long pair gap may drop a step
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
+    from characterization.mocap_mapping import load_mapping
+    from characterization.synthetic_subject import mapping_toml
+
+    good = mapping_toml(default_mapping())
+    p = tmp_path / "mapping.toml"
+    p.write_text(good.replace('[limbs.hat]', '[limbs.head]', 1))
+    with pytest.raises(MocapError, match=r"mapping.toml: field 'limbs': .*unknown limb 'head'"):
+        load_mapping(p)
+    p.write_text(good.replace("lowpass_hz = 15.0", "lowpass_hz = -1"))
+    with pytest.raises(MocapError, match=r"field 'processing.lowpass_hz'"):
+        load_mapping(p)
+    # explicit axes give the same pitches as auto-detection (walking along lab -X)
+    p.write_text('up = "+z"\nforward = "-x"\n' + good.replace('up = "auto"\n', "")
+                 .replace('forward = "auto"\n', ""))
+    m = load_mapping(p)
+    c3d = read_c3d(files["c3d"])
+    auto = _pitches(c3d)
+    explicit = _pitches(c3d, m)
+    for limb in LIMBS:
+        np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-6)
+    # walking the other way round flips every pitch's sign
+    back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
+    np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
