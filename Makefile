@@ -11,8 +11,12 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/python -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# The main job, on the embedded default input (the synthetic subject): model self-check,
+# a synthetic take, and its processing into steps (outputs in out/demo/).
 demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
+	$(VENV)/bin/hpcosim mocap synth --out out/demo --seed 1
+	$(VENV)/bin/hpcosim mocap process out/demo/take.csv --out out/demo/steps.npz
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
