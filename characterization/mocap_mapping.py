@@ -114,18 +114,20 @@ class MocapMapping(_Strict):
     @field_validator("limbs")
     @classmethod
     def _limb_names(cls, v: dict[str, LimbSource]) -> dict[str, LimbSource]:
-        for k in v:
-            if k not in LIMBS:
-                raise ValueError(f"unknown limb '{k}' (limbs are {', '.join(LIMBS)})")
-        return v
+        return _known_keys(v, LIMBS, "limb")
 
     @field_validator("joints")
     @classmethod
     def _joint_names(cls, v: dict[str, JointMarkers]) -> dict[str, JointMarkers]:
-        for k in v:
-            if k not in JOINTS:
-                raise ValueError(f"unknown joint '{k}' (joints are {', '.join(JOINTS)})")
-        return v
+        return _known_keys(v, JOINTS, "joint")
+
+
+def _known_keys(v: dict, allowed, what: str) -> dict:
+    """``v`` unchanged if every key is in ``allowed``, else a ValueError naming the key."""
+    for k in v:
+        if k not in allowed:
+            raise ValueError(f"unknown {what} '{k}' ({what}s are {', '.join(allowed)})")
+    return v
 
 
 def load_mapping(path: str | Path) -> MocapMapping:

@@ -20,7 +20,7 @@ Symbolic functions (CasADi, callable with SX/MX/DM) are named:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import casadi as ca
@@ -93,7 +93,6 @@ class HybridModel:
         gear_ratios: Sequence[float],
         domains: Sequence[Domain],
         name: str,
-        extra_functions: Mapping[str, ca.Function] | None = None,
     ) -> None:
         if len(actuated) != len(gear_ratios):
             raise ModelError("one gear ratio per actuated coordinate")
@@ -154,7 +153,6 @@ class HybridModel:
                 pz = frame_pose(tree, q, d.swing_frame, self.poses)[1]
                 fns.append(ca.Function(f"guard_{d.name}", [q, qd], [pz, ca.jtimes(pz, q, qd)],
                                        ["q", "qd"], ["height", "vz"]))
-        fns += list((extra_functions or {}).values())
         self.functions: dict[str, ca.Function] = {
             f.name(): f.expand() if f.is_a("MXFunction") else f for f in fns
         }
