@@ -13,6 +13,6 @@ Motion capture (issue 3):
   (the paper's least squares), :mod:`.step_segmentation` (delta_p_hip turns, tau, double
   support), :mod:`.mocap_pipeline` (a take -> joint trajectories and steps);
 - :mod:`.steps_artifact` (the versioned steps file), :mod:`.mocap_report` (QA report and
-  figures), :mod:`.mocap_files` (file-level entry point), :mod:`.atomic_io`;
+  figures), :mod:`.mocap_files` (file-level entry point);
 - :mod:`.synthetic_gait`, :mod:`.synthetic_subject` (ground-truth subject).
 """

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.atomic_io import atomic_write_with
 from characterization.mocap_take import MocapError, Take
+from hp_model.atomic_io import atomic_write_with
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 

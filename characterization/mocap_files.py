@@ -6,7 +6,6 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from characterization.atomic_io import atomic_write_bytes
 from characterization.c3d_io import read_c3d
 from characterization.mocap_mapping import MocapMapping, default_mapping, load_mapping
 from characterization.mocap_pipeline import ProcessedTake, process_take, to_artifact
@@ -14,6 +13,7 @@ from characterization.mocap_report import render_report
 from characterization.mocap_take import MocapError, Take
 from characterization.motive_csv import read_motive_csv
 from characterization.steps_artifact import StepsFileError, steps_bytes
+from hp_model.atomic_io import atomic_write_bytes
 
 READERS = {".csv": read_motive_csv, ".c3d": read_c3d}
 

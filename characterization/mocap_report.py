@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.atomic_io import atomic_write_bytes
 from characterization.limb_angles import SOURCE_NAMES
 from characterization.mocap_pipeline import ProcessedTake
 from hp_model import COORDS
+from hp_model.atomic_io import atomic_write_bytes
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from characterization.atomic_io import atomic_write_text
 from characterization.mocap_take import MocapError, RigidBodyTrack, Take
+from hp_model.atomic_io import atomic_write_text
 
 LENGTH_UNITS = {"meters": 1.0, "centimeters": 0.01, "millimeters": 0.001}
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")

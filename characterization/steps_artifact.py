@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.atomic_io import atomic_write_bytes
 from characterization.mocap_take import MocapError
+from hp_model.atomic_io import atomic_write_bytes
 
 SCHEMA_VERSION = 1
 

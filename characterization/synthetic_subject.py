@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from characterization.atomic_io import atomic_write_bytes, atomic_write_text
 from characterization.c3d_io import write_c3d
 from characterization.mocap_mapping import JOINTS, LIMBS, default_mapping, synthetic_names
 from characterization.mocap_take import RigidBodyTrack, Take
@@ -35,6 +34,7 @@ from characterization.synthetic_gait import (
     gait_q,
 )
 from hp_model import HumanProsthesisModel
+from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 
 #: limb -> (frame giving its origin, coordinates summed for its pitch)
 LIMB_POSE = {"hat": ("hip", ("th_B",)), "l_thigh": ("hip", ("th_B", "th_lh")),

@@ -160,6 +160,13 @@ class HumanProsthesisModel(HybridModel):
             self.functions[f"socket_{d.name}"] = ca.Function(
                 f"socket_{d.name}", [q, qd, u, lam_f], [Fs], ["q", "qd", "u", "lam_foot"], ["F_s"])
 
+    def parameter_hash(self) -> str:
+        """Hash of every subject and device parameter; artifacts record the model they were
+        made for with it (``hp_model.artifacts.canonical_hash``)."""
+        from hp_model.artifacts import canonical_hash
+        return canonical_hash({"subject": self.subject.model_dump(mode="json"),
+                               "device": self.device.model_dump(mode="json")})
+
     @property
     def prosthesis_mass(self) -> float:
         """Mass of everything below the socket (AMPRO3), kg."""

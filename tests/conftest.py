@@ -33,3 +33,18 @@ def random_state(model, rng, on_socket: bool = True, scale: float = 0.4):
         q[7:10] = 0.0
         qd[7:10] = 0.0
     return q, qd
+
+
+@pytest.fixture(scope="session")
+def template_gait(model):
+    """A converged gait of the default model, optimized once per session from a human-like
+    template (about 20 s)."""
+    from characterization.gait_design import build_gait
+    from characterization.phzd import PHZDOptions, optimize_gait
+    from tests.gait_template import template_targets
+
+    opt = PHZDOptions(nodes=11)
+    targets = template_targets()
+    result = optimize_gait(model, targets, opt)
+    assert result.success, result.status
+    return build_gait(model, result, targets, opt)
