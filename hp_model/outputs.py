@@ -37,6 +37,8 @@ Y2_COORDS = {
     "pns": ("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"),
 }
 N_Y2 = 5
+#: rows of the stacked outputs (y1, y2) the human's 4 torques control in each domain
+HUMAN_OUTPUTS = {"ps": (1, 2, 3, 4), "pns": (0, 1, 2, 3)}
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,12 @@ class VirtualConstraints:
         phase_<d>(q, theta)               -> tau
         outputs_<d>(q, qd, theta)         -> y1, y2, dy2, tau
         fl_<d>(q, qd, theta, gains)       -> u, y1, y2, dy2, tau     gains = (eps, kp, kd)
+        hfl_<d>(q, qd, theta, gains, u_p) -> u                       human side only
+
+    ``hfl`` is the human's feedback linearization given the prosthesis motor torque u_p (2,)
+    it cannot choose: the 4 human torques make the 4 human outputs (``HUMAN_OUTPUTS``: in ps
+    the swing leg and stance hip angles, in pns y1 and the stance leg and prosthesis-side hip
+    angles) follow their closed-loop dynamics; u = (u_h, u_p).
     """
 
     def __init__(self, model: HumanProsthesisModel, domain: str, degree: int = 5) -> None:
@@ -132,6 +140,12 @@ class VirtualConstraints:
         Lf = ca.vertcat(cD @ a, M @ a - ddB * tau_d**2)
         v = ca.vertcat(gains[0] * y1, gains[1] * y2 + gains[2] * dy2)
         u = -ca.solve(A, Lf + v)
+        # human side: rows of its outputs, columns of its torques; u_p is given
+        u_p = ca.SX.sym("u_p", 2)
+        rows = list(HUMAN_OUTPUTS[domain])
+        A_h, A_p = A[rows, 0:4], A[rows, 4:6]
+        u_h = -ca.solve(A_h, Lf[rows] + v[rows] + A_p @ u_p)
+        u_hfl = ca.vertcat(u_h, u_p)
 
         d = domain
         self.functions = {
@@ -141,6 +155,8 @@ class VirtualConstraints:
             f"fl_{d}": ca.Function(f"fl_{d}", [q, qd, theta, gains], [u, y1, y2, dy2, tau],
                                    ["q", "qd", "theta", "gains"],
                                    ["u", "y1", "y2", "dy2", "tau"]),
+            f"hfl_{d}": ca.Function(f"hfl_{d}", [q, qd, theta, gains, u_p], [u_hfl],
+                                    ["q", "qd", "theta", "gains", "u_p"], ["u"]),
         }
         self._numeric: FunctionSet | None = None
 

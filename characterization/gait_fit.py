@@ -1,0 +1,136 @@
+"""``gait fit``: steps -> Bezier regression -> PHZD optimization -> verified gait artifact.
+
+Regression (paper Sec. IV-A): per domain, the steps of that domain are stacked; y2 (the 5
+joint angles of ``Y2_COORDS``) is fitted with Bezier curves of the chosen degree in the
+step's tau; y1's desired value, the hip velocity, is the degree-0 fit (the mean) of the
+per-frame d/dt delta_p_hip; the phase bounds are the means of the steps' initial and final
+delta_p_hip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from characterization.bezier_fit import BezierFit, FitError, fit_bezier
+from characterization.gait_design import build_gait
+from characterization.gait_verification import make_simulator, poincare, simulate_gait
+from characterization.phzd import (
+    CYCLE,
+    DataTargets,
+    GaitOptimizationError,
+    PHZDOptions,
+    optimize_gait,
+)
+from characterization.steps_artifact import StepsArtifact
+from hp_model import bezier
+from hp_model.gait_artifact import Gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import STANCE, Y2_COORDS
+
+
+@dataclass(frozen=True)
+class Regression:
+    """The data's gait: targets for the optimization and the goodness of fit."""
+
+    targets: DataTargets
+    fits: dict[str, BezierFit]  # y2 per domain
+    hip_velocity_rms: dict[str, float]  # m/s, spread of d/dt delta_p_hip about its mean
+    n_steps: dict[str, int]
+
+    def quality(self) -> dict[str, dict]:
+        return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
+                    "n": self.fits[d].n, "steps": self.n_steps[d],
+                    "hip_velocity_rms": self.hip_velocity_rms[d]} for d in CYCLE}
+
+
+def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int,
+                  src: str = "steps") -> Regression:
+    """Bezier regression of the stacked steps of each domain."""
+    names = list(steps.coord_names)
+    alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
+    for d in CYCLE:
+        idx = [i for i in range(steps.n_steps) if steps.step_domain[i] == d]
+        if not idx:
+            raise FitError(f"{src}: no '{d}' step (need at least one step of each domain)")
+        cols = [names.index(c) for c in Y2_COORDS[d]]
+        ck, ca_ = model.hip_progress_coefficients(d)
+        k, a = (names.index(c) for c in STANCE[d])
+        taus, ys, vels = [], [], []
+        for i in idx:
+            q = steps.step_q(i)
+            taus.append(steps.step_tau(i))
+            ys.append(q[:, cols])
+            delta = ck * q[:, k] + ca_ * q[:, a]
+            vels.append(np.gradient(delta) * steps.frame_rate)
+        tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
+        fit = fit_bezier(tau, y, degree)
+        vfit = fit_bezier(tau, vel, 0)
+        fits[d], alpha[d] = fit, fit.alpha
+        v_hip[d], vrms[d] = float(vfit.alpha[0, 0]), float(vfit.rms[0])
+        sel = np.array(idx)
+        p_min[d] = float(np.mean(steps.step_delta_lower[sel]))
+        p_max[d] = float(np.mean(steps.step_delta_upper[sel]))
+        counts[d] = len(idx)
+        if not v_hip[d] > 0.05:
+            raise FitError(f"{src}: mean hip velocity in '{d}' is {v_hip[d]:.3f} m/s; "
+                           "the steps do not progress forward")
+    return Regression(DataTargets(alpha, v_hip, p_min, p_max), fits, vrms, counts)
+
+
+def output_rms(gait: Gait, n: int = 201) -> dict[str, np.ndarray]:
+    """Per domain, RMS over tau of y_d(alpha*) - (y_d(alpha_mc) + delta), per output (rad)."""
+    s = np.linspace(0.0, 1.0, n)
+    out = {}
+    for d in CYCLE:
+        opt = bezier.evaluate(gait.params[d].alpha, s)
+        data = bezier.evaluate(gait.data_params[d].alpha, s) + gait.offsets[d]
+        out[d] = np.sqrt(np.mean((opt - data) ** 2, axis=0))
+    return out
+
+
+def verify_gait(model: HumanProsthesisModel, gait: Gait, steps: int = 20) -> dict:
+    """Closed-loop checks of a gait (see :mod:`characterization.gait_verification`)."""
+    sim = make_simulator(model, gait)
+    run = simulate_gait(sim, gait, steps)
+    result: dict = {"steps_simulated": run.steps, "simulation_failed": run.failed,
+                    "failure": run.reason}
+    tr = gait.trajectory["ps"]
+    ps0 = np.r_[tr["q"][3:, 0], tr["qd"][3:, 0]]
+    dev = [float(np.abs(np.r_[q[3:], qd[3:]] - ps0).max())
+           for q, qd in run.post_impact_states("ps")]
+    result["max_deviation_from_optimized_start"] = max(dev) if dev else float("nan")
+    try:
+        p = poincare(sim, gait)
+        result.update(poincare_eigenvalues_abs=np.sort(np.abs(p.eigenvalues))[::-1],
+                      spectral_radius=p.spectral_radius,
+                      fixed_point_residual=p.fixed_point_residual, stable=p.spectral_radius < 1)
+    except RuntimeError as e:
+        result.update(spectral_radius=float("nan"), stable=False, poincare_error=str(e))
+    result["output_rms_deg"] = {d: np.degrees(v) for d, v in output_rms(gait).items()}
+    result["stable_20_steps"] = bool(not run.failed and run.steps >= steps
+                                     and result.get("stable", False))
+    return result
+
+
+def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
+             src: str = "steps", verify: bool = True,
+             progress: Callable[[str], None] | None = None) -> Gait:
+    """The whole ``gait fit``: regression, optimization, verification.  Raises
+    :class:`GaitOptimizationError` (with IPOPT's status) when the optimization fails."""
+    say = progress or (lambda _m: None)
+    say("Bezier regression of the steps")
+    reg = regress_steps(model, steps, opt.degree, src)
+    say("PHZD optimization (IPOPT)")
+    res = optimize_gait(model, reg.targets, opt)
+    if not res.success:
+        raise GaitOptimizationError(
+            f"the gait optimization did not converge: IPOPT status '{res.status}' after "
+            f"{res.iterations} iterations ({res.solve_seconds:.1f} s); no gait written")
+    gait = build_gait(model, res, reg.targets, opt, reg.quality())
+    if verify:
+        say("closed-loop verification (20 steps, return map)")
+        gait = gait.with_verification(verify_gait(model, gait))
+    return gait

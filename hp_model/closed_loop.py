@@ -1,0 +1,93 @@
+"""Closed-loop vector fields and their RK4 steps, per domain (symbolic, compiled once).
+
+The plant is the domain's constrained dynamics (``dyn_<d>``); the torques come from the
+feedback linearization of the outputs (:mod:`hp_model.outputs`), evaluated continuously
+(at every RK4 stage):
+
+    mode "full":  all 6 torques from ``fl_<d>`` (gait verification, playback)
+    mode "human": the 4 human torques from ``hfl_<d>`` given the prosthesis motor torque u_p,
+                  held constant over the step (zero-order hold of a prosthesis controller)
+
+Functions, with x = (q, qd) (24,):
+
+    xdot_<mode>_<d>(x, theta, gains[, u_p])        -> xdot, u (6), lam (6)
+    rk4_<mode>_<d>(x, theta, gains[, u_p], h)      -> x_next, height (swing sole z at x_next)
+
+``rk4`` is built in MX around one call of ``xdot`` so the generated C contains the vector
+field once; the in-process simulator and the FMU's C code call these same functions, so
+the two integrate with identical arithmetic.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from hp_model.compiled import FunctionSet
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import VirtualConstraints
+
+MODES = ("full", "human")
+
+
+def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
+                          ) -> list[ca.Function]:
+    """The xdot and rk4 functions of one domain, both modes."""
+    d, nq = vc.domain, model.nq
+    x = ca.SX.sym("x", 2 * nq)
+    q, qd = x[:nq], x[nq:]
+    theta = ca.SX.sym("theta", vc.n_params)
+    gains = ca.SX.sym("gains", 3)
+    u_p = ca.SX.sym("u_p", 2)
+    dyn = model.function(f"dyn_{d}")
+    fl, hfl = vc.functions[f"fl_{d}"], vc.functions[f"hfl_{d}"]
+    swing = model.domains[d].swing_frame
+    height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
+
+    out: list[ca.Function] = []
+    u_full = fl(q, qd, theta, gains)[0]
+    u_human = hfl(q, qd, theta, gains, u_p)
+    for mode, u, extra in (("full", u_full, []), ("human", u_human, [u_p])):
+        qdd, lam = dyn(q, qd, u)
+        names = ["x", "theta", "gains"] + (["u_p"] if extra else [])
+        f = ca.Function(f"xdot_{mode}_{d}", [x, theta, gains, *extra],
+                        [ca.vertcat(qd, qdd), u, lam], names, ["xdot", "u", "lam"],
+                        {"cse": True})
+        # RK4 in MX: one xdot in the generated code, called four times
+        X = ca.MX.sym("x", 2 * nq)
+        TH = ca.MX.sym("theta", vc.n_params)
+        G = ca.MX.sym("gains", 3)
+        UP = [ca.MX.sym("u_p", 2)] if extra else []
+        H = ca.MX.sym("h")
+
+        def fx(xx, f=f, TH=TH, G=G, UP=UP):
+            return f(xx, TH, G, *UP)[0]
+
+        k1 = fx(X)
+        k2 = fx(X + H / 2 * k1)
+        k3 = fx(X + H / 2 * k2)
+        k4 = fx(X + H * k3)
+        Xn = X + H / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        rk4 = ca.Function(f"rk4_{mode}_{d}", [X, TH, G, *UP, H], [Xn, height(Xn)],
+                          [*names, "h"], ["x_next", "height"])
+        out += [f, rk4]
+    return out
+
+
+class ClosedLoop:
+    """The compiled closed-loop functions of both domains for one Bezier degree."""
+
+    def __init__(self, model: HumanProsthesisModel, degree: int) -> None:
+        self.model, self.degree = model, degree
+        self.vcs = {d: VirtualConstraints(model, d, degree) for d in model.domains}
+        fns: list[ca.Function] = []
+        for d, vc in self.vcs.items():
+            fns += closed_loop_functions(model, vc)
+            fns += [vc.functions[f"outputs_{d}"]]
+        self.functions = {f.name(): f for f in fns}
+        self._numeric: FunctionSet | None = None
+
+    def numeric(self) -> FunctionSet:
+        if self._numeric is None:
+            self._numeric = FunctionSet(list(self.functions.values()),
+                                        f"{self.model.name}_cl_m{self.degree}")
+        return self._numeric
