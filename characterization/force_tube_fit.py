@@ -492,7 +492,7 @@ def _inside_rows(data: _Data, rows: np.ndarray, coeffs: np.ndarray, c: int, side
     return bool(np.all(slack >= -rel_tol * data.scale[c]))
 
 
-def leave_one_out(data: _Data, lower: np.ndarray, upper: np.ndarray,
+def _leave_one_out(data: _Data, lower: np.ndarray, upper: np.ndarray,
                   touching: Mapping[tuple[int, str], np.ndarray],
                   rel_tol: float = REL_TOL) -> np.ndarray:
     """(N,) bool: step i lies entirely inside the tube refitted without step i.  Only the
@@ -510,7 +510,7 @@ def leave_one_out(data: _Data, lower: np.ndarray, upper: np.ndarray,
     return inside
 
 
-def credibility(data: _Data, lower: np.ndarray, upper: np.ndarray, beta: float = 0.05,
+def _credibility(data: _Data, lower: np.ndarray, upper: np.ndarray, beta: float = 0.05,
                 rel_tol: float = REL_TOL, rel_active: float = REL_ACTIVE) -> dict[str, Any]:
     """The credibility numbers of a fitted tube as plain data (module docstring)."""
     N, m = data.n_steps, data.degree
@@ -533,7 +533,7 @@ def credibility(data: _Data, lower: np.ndarray, upper: np.ndarray, beta: float =
         per_curve[f"{COMPONENTS[c]}.{side}"] = {
             "k": kc, "steps": np.flatnonzero(touch).tolist(),
             "epsilon_aposteriori": aposteriori_epsilon(kc, N, beta)}
-    loo = leave_one_out(data, lower, upper, touching, rel_tol)
+    loo = _leave_one_out(data, lower, upper, touching, rel_tol)
     eps_union = min(1.0, union_bonf)
     return {
         "N": N, "degree": m, "beta": beta, "confidence": 1.0 - beta,
@@ -576,6 +576,15 @@ def credibility(data: _Data, lower: np.ndarray, upper: np.ndarray, beta: float =
     }
 
 
+def credibility(profiles: Sequence[Profile], lower: np.ndarray, upper: np.ndarray,
+                tau_lo: float, tau_hi: float, beta: float = 0.05) -> dict[str, Any]:
+    """The credibility dict (as stored by :func:`fit_tube`) of given bounds (3, m+1) fitted
+    to ``profiles``."""
+    lower, upper = np.asarray(lower, float), np.asarray(upper, float)
+    return _credibility(_pool(profiles, tau_lo, tau_hi, lower.shape[1] - 1), lower, upper,
+                        beta)
+
+
 # ------------------------------------------------------------------------------ the fit
 
 def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: float,
@@ -608,7 +617,7 @@ def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: fl
         bad = [f"{n}.{s}" for n, v in cert["components"].items() for s in SIDES
                if not v[s]["optimal"]]
         raise TubeFitError(f"certificate failed: no optimality certificate for {', '.join(bad)}")
-    cred = credibility(data, lower, upper, beta)
+    cred = _credibility(data, lower, upper, beta)
     cred["certificate"] = {
         "inside": cert["inside"], "tight": cert["tight"], "optimal": cert["optimal"],
         "max_rel_excess": max(cert["components"][n][s]["max_excess"]
@@ -674,7 +683,7 @@ def save_tube_figure(path: str | os.PathLike[str], tube: ForceTube,
 
 
 def credibility_markdown(cred: Mapping[str, Any]) -> str:
-    """Markdown snippet of the credibility numbers of :func:`credibility`."""
+    """Markdown snippet of the credibility dict (``ForceTube.credibility``)."""
     ap, post, loo = cred["a_priori"], cred["a_posteriori"], cred["leave_one_out"]
     un = ap["union"]
     conf = f"{cred['confidence']:.0%}"

@@ -200,6 +200,8 @@ def test_credibility_numbers(tube, profiles):
     assert post["epsilon_tube"] == ftf.aposteriori_epsilon(len(touch), 20)
     assert post["compression_verified"] and post["compression_max_rel_error"] < 1e-6
     assert "not independent" in cr["independence_note"]
+    again = ftf.credibility(profiles, tube.lower, tube.upper, TAU_LO, TAU_HI)
+    assert again == {k: v for k, v in cr.items() if k != "certificate"}
 
 
 def test_leave_one_out_equals_direct_count(tube, profiles):
