@@ -15,20 +15,23 @@ message keeps the sender's ``timestamp`` as it was (seconds), so a lockstep plan
 frames with simulation time; ``stamp=True`` makes the bus stamp wall time (``time.time()``)
 at send instead.
 
-Reception: a zenoh FIFO-channel subscriber drained by one reader thread per key into a
-bounded queue that ``recv`` waits on (no work is done in zenoh callbacks). When the queue is
-full, new frames are dropped and counted in :attr:`ZenohBus.rx_overflow`, as a CAN
-controller's receive buffer would.
+Reception happens in the caller's thread, one hop from zenoh's network thread: ``recv``
+blocks in the subscriber's ring channel (no Python callback, no reader thread). zenoh's
+Python handlers have no receive timeout, so a small waker thread puts an empty sample on a
+private session-local key (``<receive key>/wake/<uuid>``, never sent to the network) when a
+``recv`` deadline passes. When the ring channel (``rx_queue_size`` frames) is full, the
+oldest frames are dropped, as an overrun CAN receive buffer would; the protocol's rolling
+counters (:class:`bus_schemas.codec.FrameChecker`) reveal such losses.
 """
 
 from __future__ import annotations
 
 import contextlib
-import logging
-import queue
 import struct
 import threading
 import time
+import uuid
+from collections import deque
 from typing import Any
 
 import can
@@ -37,8 +40,6 @@ import zenoh
 from bus_schemas import keys
 from bus_schemas.keys import Direction
 from bus_schemas.zenoh_config import make_config
-
-LOG = logging.getLogger(__name__)
 
 WIRE_VERSION = 1
 _HEADER = struct.Struct("<BdIBB")  # version, timestamp [s], arbitration id, flags, dlc
@@ -108,6 +109,84 @@ def parse_channel(channel: str) -> tuple[str, Direction | None, tuple[Direction,
     return run_id, send, recv
 
 
+class _Receiver:
+    """Blocking receive with a timeout from one zenoh subscriber, in the caller's thread.
+
+    Samples on keys outside ``accept`` (the wake-ups) make :meth:`recv` return None early;
+    python-can's ``BusABC.recv`` then calls again with the time left.
+    """
+
+    MAX_BLOCK = 0.25  # s; an indefinite wait is cut into slices so Python handles signals
+
+    def __init__(self, session: zenoh.Session, sub_key: str, accept: frozenset[str],
+                 capacity: int) -> None:
+        self._session = session
+        self._accept = accept
+        self._wake_key = f"{sub_key.removesuffix('/**')}/wake/{uuid.uuid4().hex}"
+        self._cond = threading.Condition()
+        self._deadline: float | None = None  # armed by recv
+        self._target: float | None = None  # what the waker currently waits for
+        self._stop = False
+        self._sub = session.declare_subscriber(sub_key, zenoh.handlers.RingChannel(capacity))
+        self._thread = threading.Thread(target=self._waker, daemon=True,
+                                        name=f"ZenohBus-waker {sub_key}")
+        self._thread.start()
+
+    def _waker(self) -> None:
+        cond = self._cond
+        while True:
+            with cond:
+                while True:
+                    if self._stop:
+                        return
+                    d, now = self._deadline, time.monotonic()
+                    if d is not None and d <= now:
+                        self._deadline = None
+                        break
+                    self._target = d
+                    cond.wait(None if d is None else d - now)
+            if not self.wake():
+                return
+
+    def wake(self) -> bool:
+        """Make a blocked :meth:`recv` return (False if the session is gone)."""
+        try:
+            self._session.put(self._wake_key, b"",
+                              allowed_destination=zenoh.Locality.SESSION_LOCAL)
+            return True
+        except Exception:
+            return False
+
+    def recv(self, timeout: float | None) -> zenoh.Sample | None:
+        """The next sample on an accepted key, or None (timeout or wake-up). Raises
+        ``zenoh.ZError`` once the subscriber or session is closed."""
+        handler = self._sub.handler
+        while (s := handler.try_recv()) is not None:
+            if str(s.key_expr) in self._accept:
+                return s
+        if timeout is not None and timeout <= 0:
+            return None
+        wait = self.MAX_BLOCK if timeout is None else min(timeout, 1e6)
+        deadline = time.monotonic() + wait
+        with self._cond:
+            self._deadline = deadline
+            if self._target is None or deadline < self._target:
+                self._cond.notify()
+        try:
+            s = handler.recv()
+        finally:
+            self._deadline = None
+        return s if str(s.key_expr) in self._accept else None
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        with contextlib.suppress(Exception):
+            self._sub.undeclare()
+        self._thread.join(timeout=1.0)
+
+
 class ZenohBus(can.BusABC):
     """CAN over zenoh between processes (see the module docstring).
 
@@ -120,7 +199,7 @@ class ZenohBus(can.BusABC):
     :param session: an open zenoh session to use instead of opening one; it stays open at
         :meth:`shutdown` (its owner closes it).
     :param receive_own_messages: also deliver sent frames to this bus's ``recv``.
-    :param rx_queue_size: receive queue bound (frames beyond it are dropped and counted).
+    :param rx_queue_size: receive ring size (when full, the oldest frames are dropped).
     :param declare_alive: declare the plant/ctrl liveliness token.
     :param stamp: send ``time.time()`` as the frame timestamp instead of ``msg.timestamp``.
     """
@@ -139,13 +218,11 @@ class ZenohBus(can.BusABC):
         self.receive_own_messages = receive_own_messages
         self.stamp = stamp
         self.rx_queue_size = int(rx_queue_size)
-        self.rx_overflow = 0
         self.rx_malformed = 0
-        self._queue: queue.SimpleQueue[can.Message | None] = queue.SimpleQueue()
+        self._own: deque[can.Message] = deque()
         self._owns_session = session is None
         self._pub: zenoh.Publisher | None = None
-        self._subs: list[zenoh.Subscriber] = []
-        self._threads: list[threading.Thread] = []
+        self._rx: _Receiver | None = None
         self._token: zenoh.LivelinessToken | None = None
         cfg = None
         if session is None:
@@ -163,13 +240,12 @@ class ZenohBus(can.BusABC):
                     self.send_key, congestion_control=zenoh.CongestionControl.BLOCK,
                     priority=zenoh.Priority.REAL_TIME, express=True,
                     reliability=zenoh.Reliability.RELIABLE)
-            for key in self.recv_keys:
-                sub = self._session.declare_subscriber(key, zenoh.handlers.FifoChannel(1024))
-                self._subs.append(sub)
-                th = threading.Thread(target=self._reader, args=(sub,), daemon=True,
-                                      name=f"ZenohBus-rx {key}")
-                th.start()
-                self._threads.append(th)
+            # one subscriber: the receive key (or both CAN keys for a monitor) and, below
+            # it, this bus's private wake key
+            sub_key = (f"{self.recv_keys[0]}/**" if len(self.recv_keys) == 1
+                       else f"{keys.run_prefix(run_id)}/can/**")
+            self._rx = _Receiver(self._session, sub_key, frozenset(self.recv_keys),
+                                 self.rx_queue_size)
         except Exception as e:
             self._close()
             raise can.CanInitializationError(f"ZenohBus {channel!r}: {e}") from e
@@ -181,19 +257,6 @@ class ZenohBus(can.BusABC):
     def session(self) -> zenoh.Session:
         """The zenoh session this bus uses."""
         return self._session
-
-    def _reader(self, sub: zenoh.Subscriber) -> None:
-        try:
-            for sample in sub.handler:  # ends when the subscriber or session goes away
-                msg = unpack_message(sample.payload.to_bytes(), self.channel)
-                if msg is None:
-                    self.rx_malformed += 1
-                elif self._queue.qsize() >= self.rx_queue_size:
-                    self.rx_overflow += 1
-                else:
-                    self._queue.put(msg)
-        except Exception as e:  # pragma: no cover - zenoh internals
-            LOG.debug("ZenohBus reader for %s ended: %s", sub.key_expr, e)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Publish one frame (reliable, blocking congestion control; ``timeout`` is not
@@ -207,24 +270,27 @@ class ZenohBus(can.BusABC):
             self._pub.put(payload)
         except Exception as e:
             raise can.CanOperationError(f"ZenohBus send failed: {e}") from e
-        if self.receive_own_messages:
+        if self.receive_own_messages and self._rx is not None:
             own = unpack_message(payload, self.channel)
             if own is not None:
                 own.is_rx = False
-                self._queue.put(own)
+                self._own.append(own)
+                self._rx.wake()
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
-        if self._is_shutdown:
+        if self._is_shutdown or self._rx is None:
             raise can.CanOperationError("ZenohBus is shut down")
+        if self._own:
+            return self._own.popleft(), False
         try:
-            if timeout is None:
-                msg = self._queue.get()
-            elif timeout <= 0:
-                msg = self._queue.get_nowait()
-            else:
-                msg = self._queue.get(timeout=timeout)
-        except queue.Empty:
-            return None, False
+            sample = self._rx.recv(timeout)
+        except zenoh.ZError as e:
+            raise can.CanOperationError(f"ZenohBus {self.channel!r} closed: {e}") from e
+        if sample is None:
+            return (self._own.popleft() if self._own else None), False
+        msg = unpack_message(sample.payload.to_bytes(), self.channel)
+        if msg is None:
+            self.rx_malformed += 1
         return msg, False
 
     def wait_for_peer(self, timeout: float = 5.0, *, alive: bool = True) -> bool:
@@ -255,16 +321,15 @@ class ZenohBus(can.BusABC):
         return any(r.ok is not None for r in replies)
 
     def _close(self) -> None:
-        for obj in [self._token, self._pub, *self._subs]:
+        if self._rx is not None:
+            self._rx.close()  # a recv blocked in another thread raises CanOperationError
+        for obj in (self._token, self._pub):
             if obj is not None:
                 with contextlib.suppress(Exception):
                     obj.undeclare()
         if self._owns_session and getattr(self, "_session", None) is not None:
             with contextlib.suppress(Exception):
                 self._session.close()
-        for th in self._threads:
-            th.join(timeout=1.0)
-        self._queue.put(None)  # wake a receiver blocked without timeout
 
     def shutdown(self) -> None:
         """Undeclare, close the session if this bus opened it, stop the reader threads."""

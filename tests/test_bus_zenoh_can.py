@@ -8,6 +8,7 @@ import statistics
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import tomllib
 from pathlib import Path
@@ -99,7 +100,54 @@ def test_plant_and_controller_exchange_frames(pair):
         assert t.value.knee == codec.quantize_torque(0.1 * k) and hb.value.tick == k
     assert ck_ctrl.counts["ok"] == 80 and ck_ctrl.rejected == 0
     assert ck_plant.counts["ok"] == 40 and ck_plant.rejected == 0
-    assert plant.rx_overflow == ctrl.rx_overflow == plant.rx_malformed == 0
+    assert plant.rx_malformed == ctrl.rx_malformed == 0
+
+
+def test_malformed_payloads_and_foreign_keys_are_skipped(pair):
+    plant, ctrl = pair
+    pub = plant.session.declare_publisher("hpcosim/run/t1/can/tx")
+    try:
+        pub.put(b"not a frame")
+        plant.session.put("hpcosim/run/t1/can/tx/wake/someone", b"")
+        plant.send(codec.encode_sim_time(9, 0))
+        got = []
+        while (m := ctrl.recv(0.5)) is not None:  # the three may arrive in any order
+            got.append(codec.decode(m).value.us)
+        assert got == [9] and ctrl.rx_malformed == 1
+    finally:
+        pub.undeclare()
+
+
+def test_full_receive_ring_drops_the_oldest_frames():
+    ep = loopback_endpoint()
+    with ZenohBus("t5/plant", listen=ep) as plant, \
+            ZenohBus("t5/ctrl", connect=ep, rx_queue_size=8) as ctrl:
+        assert plant.wait_for_peer(5.0)
+        for k in range(40):
+            plant.send(codec.encode_sim_time(k, k))
+        time.sleep(0.3)
+        got = []
+        while (m := ctrl.recv(0.2)) is not None:
+            got.append(codec.decode(m).value.us)
+    assert got == list(range(32, 40))
+
+
+def test_shutdown_unblocks_a_receiver_in_another_thread(pair):
+    _, ctrl = pair
+    errors: list[BaseException] = []
+
+    def blocked() -> None:
+        try:
+            ctrl.recv()  # no timeout
+        except can.CanOperationError as e:
+            errors.append(e)
+
+    th = threading.Thread(target=blocked)
+    th.start()
+    time.sleep(0.3)
+    ctrl.shutdown()
+    th.join(5.0)
+    assert not th.is_alive() and len(errors) == 1
 
 
 def test_recv_timeout_filters_and_own_messages(pair):
