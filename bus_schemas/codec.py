@@ -304,11 +304,13 @@ def decode(msg: can.Message) -> Verdict:
     if spec is None:
         return Verdict(FrameStatus.UNKNOWN_ID, fid, timestamp=ts,
                        detail="extended id" if ext else "error frame" if err else "id")
-    if remote or fd or dlc != FRAME_LENGTH or not isinstance(data, (bytes, bytearray)) \
-            or len(data) != FRAME_LENGTH:
+    if isinstance(data, memoryview):
+        data = data.tobytes()
+    n = len(data) if isinstance(data, (bytes, bytearray)) else -1
+    if remote or fd or dlc != FRAME_LENGTH or n != FRAME_LENGTH:
         return Verdict(FrameStatus.BAD_LENGTH, fid, spec.name, timestamp=ts,
-                       detail=f"dlc {dlc}, {len(data) if data is not None else 0} bytes"
-                       + (", remote" if remote else "") + (", fd" if fd else ""))
+                       detail=f"dlc {dlc}, {n} data bytes" + (", remote" if remote else "")
+                       + (", fd" if fd else ""))
     counter = None
     if spec.protected:
         crc = crc8_update(spec.crc_state, data[:7]) ^ XOROUT

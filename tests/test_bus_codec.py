@@ -294,6 +294,12 @@ def test_decode_never_raises_on_non_messages():
     for junk in (None, object(), 42, "frame"):
         v = codec.decode(junk)  # type: ignore[arg-type]
         assert v.status is FrameStatus.UNKNOWN_ID and not v.ok
+    odd = _fb(0)
+    odd.data = 12345  # type: ignore[assignment]
+    assert codec.decode(odd).status is FrameStatus.BAD_LENGTH
+    view = _fb(0)
+    view.data = memoryview(bytes(view.data))  # type: ignore[assignment]
+    assert codec.decode(view).ok
 
 
 @settings(max_examples=400, deadline=None)
