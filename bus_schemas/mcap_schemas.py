@@ -1,0 +1,419 @@
+"""MCAP channel schemas (JSON Schema, Foxglove-readable), a JSON decoder factory, and the
+:class:`Recorder` that writes a co-simulation run to MCAP.
+
+Channels (schema encoding ``jsonschema``, message encoding ``json``), see :data:`CHANNELS`:
+
+- ``/can/tx``, ``/can/rx``: ``hpcosim.CanFrame``, frames plant -> controller and back;
+- ``/prosthesis/measurements``: ``hpcosim.ProsthesisMeasurements``, decoded feedback;
+- ``/prosthesis/torque_command``: ``hpcosim.TorqueCommand``, decoded torque commands;
+- ``/ground_truth``: ``hpcosim.GroundTruth``, plant state and socket force;
+- ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status.
+
+Units: SI (s, rad, rad/s, N, N m); ``log_time`` of every message in ns (simulation time in
+lockstep runs, wall time otherwise). Non-finite floats are written as ``null`` (JSON has no
+NaN). The mcap package has no JSON decoder: pass :class:`JsonDecoderFactory` to
+``mcap.reader.make_reader(..., decoder_factories=[JsonDecoderFactory()])``.
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import json
+import math
+import os
+import signal
+import time
+from collections.abc import Iterable, Iterator, Mapping
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import can
+from mcap.decoder import DecoderFactory
+from mcap.reader import make_reader
+from mcap.records import Schema
+from mcap.writer import CompressionType, Writer
+
+SCHEMA_ENCODING = "jsonschema"
+MESSAGE_ENCODING = "json"
+#: generalized coordinates q of the 12-DOF model (= ``hp_model.COORDS``, tested)
+COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh", "x_f", "z_f", "th_f",
+          "th_pk", "th_pa")
+
+
+def _num(desc: str) -> dict[str, Any]:
+    return {"type": ["number", "null"], "description": desc}
+
+
+def _int(desc: str) -> dict[str, Any]:
+    return {"type": "integer", "description": desc}
+
+
+def _vec(n: int, desc: str) -> dict[str, Any]:
+    return {"type": "array", "items": {"type": ["number", "null"]}, "minItems": n,
+            "maxItems": n, "description": desc}
+
+
+def _schema(title: str, desc: str, props: dict[str, Any], required: Iterable[str]
+            ) -> dict[str, Any]:
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title,
+            "description": desc, "type": "object", "properties": props,
+            "required": list(required)}
+
+
+CAN_FRAME = _schema("hpcosim.CanFrame", "One CAN frame as seen by the plant side.", {
+    "timestamp": _num("frame timestamp as sent [s]"),
+    "id": _int("arbitration id"),
+    "extended": {"type": "boolean", "description": "29-bit id"},
+    "dlc": _int("data length code"),
+    "data": {"type": "array", "items": {"type": "integer", "minimum": 0, "maximum": 255},
+             "maxItems": 64, "description": "data bytes"},
+    "direction": {"enum": ["tx", "rx"], "description": "tx: plant->ctrl, rx: ctrl->plant"},
+    "name": {"type": ["string", "null"], "description": "frame name in ampro3.dbc"},
+    "status": {"type": ["string", "null"],
+               "description": "receiver's classification (ok, bad_checksum, ...)"},
+}, ["timestamp", "id", "dlc", "data", "direction"])
+
+PROSTHESIS_MEASUREMENTS = _schema(
+    "hpcosim.ProsthesisMeasurements", "What the controller senses, as decoded from CAN.", {
+        "knee_angle": _num("th_pk [rad]"), "knee_velocity": _num("d th_pk / dt [rad/s]"),
+        "ankle_angle": _num("th_pa [rad]"), "ankle_velocity": _num("d th_pa / dt [rad/s]"),
+        "foot_load": _num("foot normal load [N]"),
+        "contact": {"type": "boolean", "description": "foot in contact"},
+        "sim_time_us": _int("plant sim time [us], mod 2^32"),
+        "counter": _int("rolling counter of the frames"),
+    }, ["knee_angle", "knee_velocity", "ankle_angle", "ankle_velocity", "foot_load",
+        "contact"])
+
+TORQUE_COMMAND = _schema("hpcosim.TorqueCommand", "Torque command as decoded from CAN.", {
+    "knee": _num("knee motor torque [N m]"), "ankle": _num("ankle motor torque [N m]"),
+    "knee_joint": _num("knee joint torque = gear ratio x motor torque [N m]"),
+    "ankle_joint": _num("ankle joint torque [N m]"),
+    "enable": {"type": "boolean", "description": "torque enable"},
+    "counter": _int("rolling counter"),
+}, ["knee", "ankle", "enable"])
+
+GROUND_TRUTH = _schema("hpcosim.GroundTruth", "Plant state; recorded, never sent to the "
+                       "controller.", {
+    "t": _num("simulation time [s]"),
+    "socket_force": {"type": "object", "description": "socket force F_s on the prosthesis",
+                     "properties": {"Fx": _num("[N]"), "Fz": _num("[N]"),
+                                    "My": _num("[N m]")},
+                     "required": ["Fx", "Fz", "My"]},
+    "q": _vec(12, "generalized coordinates " + ", ".join(COORDS) + " [m, rad]"),
+    "qd": _vec(12, "generalized velocities [m/s, rad/s]"),
+    "domain": {"enum": ["ps", "pns"], "description": "prosthesis stance / non-stance"},
+    "tau": _num("phase variable tau(q) [1]"),
+    "step": _int("step count"),
+    "fallen": {"type": "boolean", "description": "fall detected"},
+}, ["t", "socket_force", "q", "qd", "domain", "tau", "step", "fallen"])
+
+CONTROLLER_DIAGNOSTICS = _schema(
+    "hpcosim.ControllerDiagnostics", "Prosthesis controller internals per control period.", {
+        "t": _num("controller time [s]"),
+        "controller": {"type": "string", "description": "clf_qp, relaxed, pd, ..."},
+        "domain": {"enum": ["ps", "pns", None], "description": "domain the controller uses"},
+        "tau": _num("phase variable [1]"),
+        "V": _num("CLF value V_eps"),
+        "rho": _num("CLF relaxation rho"),
+        "u": _vec(2, "joint torques u_p (knee, ankle) [N m]"),
+        "qp_status": {"type": "string", "description": "QpStatus name"},
+        "active_constraints": {"type": "array", "items": {"type": "string"},
+                               "description": "names of active QP constraints"},
+        "fallback_count": _int("control periods on the fallback controller"),
+        "fault_flags": _int("FaultFlag bits"),
+        "solve_time_us": _num("QP solve time [us]"),
+    }, ["t", "tau", "V", "rho", "u", "qp_status", "active_constraints", "fallback_count",
+        "fault_flags"])
+
+#: topic -> JSON schema
+CHANNELS: dict[str, dict[str, Any]] = {
+    "/can/tx": CAN_FRAME,
+    "/can/rx": CAN_FRAME,
+    "/prosthesis/measurements": PROSTHESIS_MEASUREMENTS,
+    "/prosthesis/torque_command": TORQUE_COMMAND,
+    "/ground_truth": GROUND_TRUTH,
+    "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
+}
+
+
+def can_frame_message(msg: can.Message, direction: str, *, name: str | None = None,
+                      status: str | None = None) -> dict[str, Any]:
+    """The ``hpcosim.CanFrame`` record of a python-can message."""
+    if direction not in ("tx", "rx"):
+        raise ValueError(f"direction {direction!r}: expected 'tx' or 'rx'")
+    return {"timestamp": float(msg.timestamp), "id": int(msg.arbitration_id),
+            "extended": bool(msg.is_extended_id), "dlc": int(msg.dlc),
+            "data": list(msg.data or b""), "direction": direction, "name": name,
+            "status": None if status is None else str(status)}
+
+
+# --------------------------------------------------------------------------- JSON
+
+
+def _default(o: Any) -> Any:
+    """numpy scalars and arrays, enums, bytes -> JSON values."""
+    if hasattr(o, "tolist"):
+        return o.tolist()
+    if hasattr(o, "item"):
+        return o.item()
+    if isinstance(o, bytes | bytearray):
+        return base64.b64encode(o).decode()
+    if isinstance(o, set | frozenset | tuple):
+        return list(o)
+    raise TypeError(f"{type(o).__name__} is not JSON serializable")
+
+
+def _finite(o: Any) -> Any:
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, Mapping):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_finite(v) for v in o]
+    return o
+
+
+def encode_json(obj: Any) -> bytes:
+    """Compact JSON of ``obj``; numpy values become lists/numbers, NaN/inf become null."""
+    try:
+        return json.dumps(obj, separators=(",", ":"), allow_nan=False,
+                          default=_default).encode()
+    except ValueError:
+        plain = json.loads(json.dumps(obj, default=_default))  # NaN -> float('nan')
+        return json.dumps(_finite(plain), separators=(",", ":"), allow_nan=False).encode()
+
+
+class JsonDecoderFactory(DecoderFactory):
+    """Decodes channels with message encoding ``json`` (the mcap package has none)."""
+
+    def decoder_for(self, message_encoding: str, schema: Schema | None):
+        if message_encoding != MESSAGE_ENCODING:
+            return None
+        return _decode_json
+
+
+def _decode_json(data: bytes) -> Any:
+    return json.loads(data)
+
+
+def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
+                  ) -> Iterator[tuple[str, int, Any]]:
+    """``(topic, log_time_ns, decoded message)`` of every message of an MCAP file."""
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        for _, channel, message, decoded in reader.iter_decoded_messages(
+                topics=list(topics) if topics is not None else None):
+            yield channel.topic, message.log_time, decoded
+
+
+# --------------------------------------------------------------------------- recorder
+
+
+def _compression(name: str) -> CompressionType:
+    if name == "zstd":
+        try:
+            import zstandard  # noqa: F401
+            return CompressionType.ZSTD
+        except ImportError:
+            name = "lz4"
+    if name == "lz4":
+        try:
+            import lz4.frame  # noqa: F401
+            return CompressionType.LZ4
+        except ImportError:
+            return CompressionType.NONE
+    if name == "none":
+        return CompressionType.NONE
+    raise ValueError(f"compression {name!r}: expected zstd, lz4 or none")
+
+
+class Recorder:
+    """Writes a run to MCAP: chunked, zstd-compressed (lz4 or none when zstd is missing).
+
+    The file is written as ``.<name>.part`` next to ``path`` and renamed to ``path`` by
+    :meth:`finish` (also called by ``with`` on exit, normal or not): a file under ``path``
+    is always complete, with summary and indexes. A process killed without a chance to
+    finish (SIGKILL, power loss) leaves only the ``.part`` file, whose completed chunks
+    ``mcap recover`` can usually salvage. :meth:`install_signal_handlers` makes SIGTERM and
+    SIGINT finish the file (at the next safe point if a write is in progress) before the
+    process exits. Use one thread per recorder (the main thread if handlers are installed).
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, compression: str = "zstd",
+                 chunk_size: int = 512 * 1024, metadata: Mapping[str, Any] | None = None
+                 ) -> None:
+        self.path = Path(path)
+        self.part_path = self.path.with_name(f".{self.path.name}.part")
+        self.compression = _compression(compression)
+        self._file = open(self.part_path, "wb")  # noqa: SIM115 - closed in finish()
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
+        self._writer.start(profile="", library="hpcosim bus_schemas")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sequence: dict[int, int] = {}
+        self.message_count = 0
+        self.dropped = 0  # writes after a signal finished the file (exit=False)
+        self.finished = False
+        self.interrupted: int | None = None  # the signal that finished the file
+        self._busy = False
+        self._pending: int | None = None
+        self._exit_on_signal = True
+        self._old_handlers: dict[int, Any] = {}
+        if metadata:
+            self.add_metadata("run", metadata)
+
+    # -- channels and records
+    def add_channel(self, topic: str, schema: Mapping[str, Any] | None = None,
+                    metadata: Mapping[str, str] | None = None) -> int:
+        """Register ``topic`` (idempotent) with ``schema`` (default: ``CHANNELS[topic]``)."""
+        if topic in self._channels:
+            return self._channels[topic]
+        if schema is None:
+            if topic not in CHANNELS:
+                raise KeyError(f"no schema for topic {topic!r}; pass one")
+            schema = CHANNELS[topic]
+        name = str(schema.get("title", topic))
+        if name not in self._schemas:
+            self._schemas[name] = self._writer.register_schema(
+                name=name, encoding=SCHEMA_ENCODING,
+                data=json.dumps(schema, separators=(",", ":")).encode())
+        cid = self._writer.register_channel(topic=topic, message_encoding=MESSAGE_ENCODING,
+                                            schema_id=self._schemas[name],
+                                            metadata=dict(metadata or {}))
+        self._channels[topic] = cid
+        self._sequence[cid] = 0
+        return cid
+
+    def register_all(self) -> None:
+        """Register every channel of :data:`CHANNELS` (so viewers list them all)."""
+        for topic in CHANNELS:
+            self.add_channel(topic)
+
+    def write(self, topic: str, message: Any, log_time_ns: int | None = None,
+              publish_time_ns: int | None = None) -> None:
+        """Write one message (a JSON-able object, or pre-encoded JSON bytes)."""
+        if self.finished:
+            if self.interrupted is not None:
+                self.dropped += 1
+                return
+            raise RuntimeError(f"recorder {self.path} is finished")
+        t = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        data = message if isinstance(message, bytes) else encode_json(message)
+        self._busy = True
+        try:
+            cid = self._channels[topic] if topic in self._channels else self.add_channel(topic)
+            seq = self._sequence[cid] = self._sequence[cid] + 1
+            self._writer.add_message(channel_id=cid, log_time=t, data=data,
+                                     publish_time=t if publish_time_ns is None
+                                     else int(publish_time_ns), sequence=seq)
+            self.message_count += 1
+        finally:
+            self._busy = False
+        if self._pending is not None:
+            self._handle_pending()
+
+    def write_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
+                  *, name: str | None = None, status: str | None = None) -> None:
+        """Write a frame to ``/can/tx`` or ``/can/rx``."""
+        self.write(f"/can/{direction}", can_frame_message(msg, direction, name=name,
+                                                           status=status), log_time_ns)
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """A metadata record; values are stored as strings (JSON for non-strings)."""
+        self._check_open()
+        with self._critical():
+            self._writer.add_metadata(name, {str(k): v if isinstance(v, str) else
+                                             encode_json(v).decode()
+                                             for k, v in data.items()})
+
+    def add_attachment(self, name: str, data: bytes,
+                       media_type: str = "application/octet-stream",
+                       log_time_ns: int | None = None) -> None:
+        """An attachment (e.g. the DBC, configs, the gait file)."""
+        self._check_open()
+        t = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        with self._critical():
+            self._writer.add_attachment(create_time=t, log_time=t, name=name,
+                                        media_type=media_type, data=bytes(data))
+
+    def _check_open(self) -> None:
+        if self.finished:
+            raise RuntimeError(f"recorder {self.path} is finished")
+
+    def flush(self) -> None:
+        """Push completed chunks to the OS (the open chunk stays in memory until full)."""
+        if not self.finished:
+            self._file.flush()
+
+    def finish(self) -> Path:
+        """Write summary and indexes, close, rename to :attr:`path`. Idempotent."""
+        if self.finished:
+            return self.path
+        with self._critical():
+            self.finished = True
+            try:
+                self._writer.finish()
+                self._file.flush()
+                os.fsync(self._file.fileno())
+            finally:
+                self._file.close()
+                self.restore_signal_handlers()
+            os.replace(self.part_path, self.path)
+        return self.path
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.finish()
+
+    # -- signals
+    def install_signal_handlers(self, signals: Iterable[int] = (signal.SIGTERM,
+                                                                signal.SIGINT),
+                                *, exit: bool = True) -> None:
+        """On any of ``signals``: record a ``signal`` metadata entry and finish the file,
+        then (``exit=True``) raise ``SystemExit(128 + signum)`` (``KeyboardInterrupt`` for
+        SIGINT) so the program unwinds; with ``exit=False`` set :attr:`interrupted` and
+        drop further writes, for a caller that polls it. Main thread only."""
+        self._exit_on_signal = exit
+        for s in signals:
+            self._old_handlers[s] = signal.signal(s, self._on_signal)
+
+    def restore_signal_handlers(self) -> None:
+        """Put back the handlers replaced by :meth:`install_signal_handlers`."""
+        for s, h in self._old_handlers.items():
+            signal.signal(s, h)
+        self._old_handlers.clear()
+
+    @contextlib.contextmanager
+    def _critical(self) -> Iterator[None]:
+        """Defer signal handling until the MCAP writer is in a consistent state."""
+        outer = self._busy
+        self._busy = True
+        try:
+            yield
+        finally:
+            self._busy = outer
+        if not outer and self._pending is not None:
+            self._handle_pending()
+
+    def _on_signal(self, signum: int, frame: FrameType | None) -> None:
+        self._pending = signum
+        if not self._busy:
+            self._handle_pending()
+
+    def _handle_pending(self) -> None:
+        signum, self._pending = self._pending, None
+        if signum is None:
+            return
+        if not self.finished:
+            self.interrupted = signum
+            self.add_metadata("signal", {"signal": signal.Signals(signum).name,
+                                         "messages": str(self.message_count)})
+            self.finish()
+        if self._exit_on_signal:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise SystemExit(128 + signum)

@@ -1,0 +1,339 @@
+"""A python-can interface that carries CAN frames between processes over zenoh.
+
+Registered as the ``zenoh`` interface through the ``can.interface`` entry point, so
+``can.Bus(interface="zenoh", channel="run42/ctrl", connect="tcp/127.0.0.1:7447")`` works
+once the project is installed (``ZenohBus(...)`` directly works without installing).
+
+``channel`` is ``<run_id>/<role>``: role ``plant`` sends on ``.../can/tx`` and receives
+``.../can/rx``; ``ctrl`` the reverse; ``monitor`` receives both and cannot send. The
+explicit pair forms ``<run_id>/tx:rx`` (= plant) and ``<run_id>/rx:tx`` (= ctrl) are
+accepted too. Plant and controller buses also declare the liveliness token
+``hpcosim/run/<run_id>/<plant|ctrl>/alive`` (see :mod:`bus_schemas.keys`).
+
+Frames travel as a 15-byte header plus the data bytes (:func:`pack_message`); the received
+message keeps the sender's ``timestamp`` as it was (seconds), so a lockstep plant can stamp
+frames with simulation time; ``stamp=True`` makes the bus stamp wall time (``time.time()``)
+at send instead.
+
+Reception happens in the caller's thread, one hop from zenoh's network thread: ``recv``
+blocks in the subscriber's ring channel (no Python callback, no reader thread). zenoh's
+Python handlers have no receive timeout, so a small waker thread puts an empty sample on a
+private session-local key (``<receive key>/wake/<uuid>``, never sent to the network) when a
+``recv`` deadline passes. When the ring channel (``rx_queue_size`` frames) is full, the
+oldest frames are dropped, as an overrun CAN receive buffer would; the protocol's rolling
+counters (:class:`bus_schemas.codec.FrameChecker`) reveal such losses.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import struct
+import threading
+import time
+import uuid
+from collections import deque
+from typing import Any
+
+import can
+import zenoh
+
+from bus_schemas import keys
+from bus_schemas.keys import Direction
+from bus_schemas.zenoh_config import make_config
+
+WIRE_VERSION = 1
+_HEADER = struct.Struct("<BdIBB")  # version, timestamp [s], arbitration id, flags, dlc
+_EXT, _REMOTE, _ERROR, _FD, _BRS, _ESI = 1, 2, 4, 8, 16, 32
+_MAX_DATA = 64
+ROLES: dict[str, tuple[Direction | None, tuple[Direction, ...]]] = {
+    "plant": (Direction.TX, (Direction.RX,)),
+    "ctrl": (Direction.RX, (Direction.TX,)),
+    "monitor": (None, (Direction.TX, Direction.RX)),
+}
+
+
+def pack_message(msg: can.Message, timestamp: float | None = None) -> bytes:
+    """Wire form of a frame: ``<BdIBB`` header (version, timestamp s, id, flags, dlc) and
+    the data bytes. Flags: 1 extended id, 2 remote, 4 error, 8 FD, 16 BRS, 32 ESI.
+    ``timestamp`` replaces ``msg.timestamp`` when given."""
+    flags = ((_EXT if msg.is_extended_id else 0) | (_REMOTE if msg.is_remote_frame else 0)
+             | (_ERROR if msg.is_error_frame else 0) | (_FD if msg.is_fd else 0)
+             | (_BRS if msg.bitrate_switch else 0) | (_ESI if msg.error_state_indicator else 0))
+    data = bytes(msg.data or b"")
+    if len(data) > _MAX_DATA:
+        raise ValueError(f"CAN frame with {len(data)} data bytes (max {_MAX_DATA})")
+    ts = float(msg.timestamp if timestamp is None else timestamp)
+    return _HEADER.pack(WIRE_VERSION, ts, msg.arbitration_id, flags, msg.dlc & 0xFF) + data
+
+
+def unpack_message(payload: bytes, channel: Any = None) -> can.Message | None:
+    """The frame in ``payload``, or None if it is not a valid wire form (never raises)."""
+    if len(payload) < _HEADER.size or payload[0] != WIRE_VERSION:
+        return None
+    _, ts, aid, flags, dlc = _HEADER.unpack_from(payload)
+    data = payload[_HEADER.size:]
+    if len(data) > _MAX_DATA or aid > 0x1FFFFFFF or ts != ts:
+        return None
+    return can.Message(timestamp=ts, arbitration_id=aid, is_extended_id=bool(flags & _EXT),
+                       is_remote_frame=bool(flags & _REMOTE),
+                       is_error_frame=bool(flags & _ERROR), channel=channel, dlc=dlc,
+                       data=data, is_fd=bool(flags & _FD), is_rx=True,
+                       bitrate_switch=bool(flags & _BRS),
+                       error_state_indicator=bool(flags & _ESI))
+
+
+def publisher_matched(pub: zenoh.Publisher) -> bool:
+    """True if a subscriber matches ``pub`` (zenoh 1.x returns a ``MatchingStatus`` object,
+    which is always truthy, where its stub promises a bool)."""
+    status = pub.matching_status
+    return bool(getattr(status, "matching", status))
+
+
+def parse_channel(channel: str) -> tuple[str, Direction | None, tuple[Direction, ...]]:
+    """``(run_id, send direction or None, receive directions)`` of a bus channel."""
+    run_id, sep, spec = str(channel).rpartition("/")
+    if not sep:
+        raise ValueError(f"channel {channel!r}: expected <run_id>/<plant|ctrl|monitor>")
+    keys.validate_run_id(run_id)
+    if spec in ROLES:
+        send, recv = ROLES[spec]
+    else:
+        s, colon, r = spec.partition(":")
+        try:
+            send, recv = Direction(s), (Direction(r),)
+        except ValueError:
+            raise ValueError(f"channel {channel!r}: role must be plant, ctrl, monitor, tx:rx "
+                             "or rx:tx") from None
+        if not colon or send == recv[0]:
+            raise ValueError(f"channel {channel!r}: send and receive directions must differ")
+    return run_id, send, recv
+
+
+class _Receiver:
+    """Blocking receive with a timeout from one zenoh subscriber, in the caller's thread.
+
+    Samples on keys outside ``accept`` (the wake-ups) make :meth:`recv` return None early;
+    python-can's ``BusABC.recv`` then calls again with the time left.
+    """
+
+    MAX_BLOCK = 0.25  # s; an indefinite wait is cut into slices so Python handles signals
+
+    def __init__(self, session: zenoh.Session, sub_key: str, accept: frozenset[str],
+                 capacity: int) -> None:
+        self._session = session
+        self._accept = accept
+        self._wake_key = f"{sub_key.removesuffix('/**')}/wake/{uuid.uuid4().hex}"
+        self._cond = threading.Condition()
+        self._deadline: float | None = None  # armed by recv
+        self._target: float | None = None  # what the waker currently waits for
+        self._stop = False
+        self._sub = session.declare_subscriber(sub_key, zenoh.handlers.RingChannel(capacity))
+        self._thread = threading.Thread(target=self._waker, daemon=True,
+                                        name=f"ZenohBus-waker {sub_key}")
+        self._thread.start()
+
+    def _waker(self) -> None:
+        cond = self._cond
+        while True:
+            with cond:
+                while True:
+                    if self._stop:
+                        return
+                    d, now = self._deadline, time.monotonic()
+                    if d is not None and d <= now:
+                        self._deadline = None
+                        break
+                    self._target = d
+                    cond.wait(None if d is None else d - now)
+            if not self.wake():
+                return
+
+    def wake(self) -> bool:
+        """Make a blocked :meth:`recv` return (False if the session is gone)."""
+        try:
+            self._session.put(self._wake_key, b"",
+                              allowed_destination=zenoh.Locality.SESSION_LOCAL)
+            return True
+        except Exception:
+            return False
+
+    def recv(self, timeout: float | None) -> zenoh.Sample | None:
+        """The next sample on an accepted key, or None (timeout or wake-up). Raises
+        ``zenoh.ZError`` once the subscriber or session is closed."""
+        handler = self._sub.handler
+        while (s := handler.try_recv()) is not None:
+            if str(s.key_expr) in self._accept:
+                return s
+        if timeout is not None and timeout <= 0:
+            return None
+        wait = self.MAX_BLOCK if timeout is None else min(timeout, 1e6)
+        deadline = time.monotonic() + wait
+        with self._cond:
+            self._deadline = deadline
+            if self._target is None or deadline < self._target:
+                self._cond.notify()
+        try:
+            s = handler.recv()
+        finally:
+            self._deadline = None
+        return s if str(s.key_expr) in self._accept else None
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        with contextlib.suppress(Exception):
+            self._sub.undeclare()
+        self._thread.join(timeout=1.0)
+
+
+class ZenohBus(can.BusABC):
+    """CAN over zenoh between processes (see the module docstring).
+
+    :param channel: ``<run_id>/<plant|ctrl|monitor>`` or ``<run_id>/<tx:rx|rx:tx>``.
+    :param listen: zenoh endpoints to listen on (list or comma-separated string).
+    :param connect: zenoh endpoints to connect to.
+    :param mode: zenoh mode, ``peer`` (default) or ``client``.
+    :param allow_remote: allow non-loopback endpoints (default: loopback only).
+    :param zenoh_options: further zenoh config settings (see ``make_config``).
+    :param session: an open zenoh session to use instead of opening one; it stays open at
+        :meth:`shutdown` (its owner closes it).
+    :param receive_own_messages: also deliver sent frames to this bus's ``recv``.
+    :param rx_queue_size: receive ring size (when full, the oldest frames are dropped).
+    :param declare_alive: declare the plant/ctrl liveliness token.
+    :param stamp: send ``time.time()`` as the frame timestamp instead of ``msg.timestamp``.
+    """
+
+    def __init__(self, channel: str, can_filters: Any = None, *,
+                 listen: Any = None, connect: Any = None, mode: str = "peer",
+                 allow_remote: bool = False, zenoh_options: dict[str, Any] | None = None,
+                 session: zenoh.Session | None = None, receive_own_messages: bool = False,
+                 rx_queue_size: int = 10_000, declare_alive: bool = True,
+                 stamp: bool = False, **kwargs: Any) -> None:
+        run_id, send, recv = parse_channel(channel)
+        self.run_id = run_id
+        self.channel = channel
+        self.send_key = keys.can_key(run_id, send) if send else None
+        self.recv_keys = tuple(keys.can_key(run_id, d) for d in recv)
+        self.receive_own_messages = receive_own_messages
+        self.stamp = stamp
+        self.rx_queue_size = int(rx_queue_size)
+        self.rx_malformed = 0
+        self._own: deque[can.Message] = deque()
+        self._owns_session = session is None
+        self._pub: zenoh.Publisher | None = None
+        self._rx: _Receiver | None = None
+        self._token: zenoh.LivelinessToken | None = None
+        cfg = None
+        if session is None:
+            cfg = make_config(listen=listen, connect=connect, mode=mode,
+                              allow_remote=allow_remote, options=zenoh_options)
+        self.node = None if send is None else "plant" if send is Direction.TX else "ctrl"
+        self.peer_node = {"plant": "ctrl", "ctrl": "plant"}.get(self.node or "")
+        try:
+            self._session = session if session is not None else zenoh.open(cfg)
+            if declare_alive and self.node is not None:
+                self._token = self._session.liveliness().declare_token(
+                    keys.alive_key(run_id, self.node))
+            if self.send_key:
+                self._pub = self._session.declare_publisher(
+                    self.send_key, congestion_control=zenoh.CongestionControl.BLOCK,
+                    priority=zenoh.Priority.REAL_TIME, express=True,
+                    reliability=zenoh.Reliability.RELIABLE)
+            # one subscriber: the receive key (or both CAN keys for a monitor) and, below
+            # it, this bus's private wake key
+            sub_key = (f"{self.recv_keys[0]}/**" if len(self.recv_keys) == 1
+                       else f"{keys.run_prefix(run_id)}/can/**")
+            self._rx = _Receiver(self._session, sub_key, frozenset(self.recv_keys),
+                                 self.rx_queue_size)
+        except Exception as e:
+            self._close()
+            raise can.CanInitializationError(f"ZenohBus {channel!r}: {e}") from e
+        self.channel_info = (f"zenoh send {self.send_key or '-'} "
+                             f"recv {', '.join(self.recv_keys)}")
+        super().__init__(channel=channel, can_filters=can_filters, **kwargs)
+
+    @property
+    def session(self) -> zenoh.Session:
+        """The zenoh session this bus uses."""
+        return self._session
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Publish one frame (reliable, blocking congestion control; ``timeout`` is not
+        supported by zenoh and ignored)."""
+        if self._is_shutdown:
+            raise can.CanOperationError("ZenohBus is shut down")
+        if self._pub is None:
+            raise can.CanOperationError(f"ZenohBus {self.channel!r} is a monitor: no send")
+        try:
+            payload = pack_message(msg, time.time() if self.stamp else None)
+            self._pub.put(payload)
+        except Exception as e:
+            raise can.CanOperationError(f"ZenohBus send failed: {e}") from e
+        if self.receive_own_messages and self._rx is not None:
+            own = unpack_message(payload, self.channel)
+            if own is not None:
+                own.is_rx = False
+                self._own.append(own)
+                self._rx.wake()
+
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        if self._is_shutdown or self._rx is None:
+            raise can.CanOperationError("ZenohBus is shut down")
+        if self._own:
+            return self._own.popleft(), False
+        try:
+            sample = self._rx.recv(timeout)
+        except zenoh.ZError as e:
+            raise can.CanOperationError(f"ZenohBus {self.channel!r} closed: {e}") from e
+        if sample is None:
+            return (self._own.popleft() if self._own else None), False
+        msg = unpack_message(sample.payload.to_bytes(), self.channel)
+        if msg is None:
+            self.rx_malformed += 1
+        return msg, False
+
+    def wait_for_peer(self, timeout: float = 5.0, *, alive: bool = True) -> bool:
+        """Wait until a subscriber matches what this bus sends and, if ``alive``, the other
+        node's liveliness token is visible (True), or ``timeout`` s pass (False). A
+        monitor bus returns True at once."""
+        if self._pub is None:
+            return True
+        deadline = time.monotonic() + timeout
+        while not publisher_matched(self._pub):
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.002)
+        while alive and self.peer_node is not None:
+            left = deadline - time.monotonic()
+            if self.peer_alive(self.peer_node, timeout=max(0.05, min(left, 0.5))):
+                break
+            if left <= 0:
+                return False
+            time.sleep(0.005)
+        return True
+
+    def peer_alive(self, node: str, timeout: float = 1.0) -> bool:
+        """True if the liveliness token of ``node`` (``ctrl``/``plant``) of this run exists
+        now (a liveliness query answered within ``timeout`` s)."""
+        replies = self._session.liveliness().get(keys.alive_key(self.run_id, node),
+                                                 timeout=timeout)
+        return any(r.ok is not None for r in replies)
+
+    def _close(self) -> None:
+        if self._rx is not None:
+            self._rx.close()  # a recv blocked in another thread raises CanOperationError
+        for obj in (self._token, self._pub):
+            if obj is not None:
+                with contextlib.suppress(Exception):
+                    obj.undeclare()
+        if self._owns_session and getattr(self, "_session", None) is not None:
+            with contextlib.suppress(Exception):
+                self._session.close()
+
+    def shutdown(self) -> None:
+        """Undeclare, close the session if this bus opened it, stop the reader threads."""
+        if self._is_shutdown:
+            return
+        super().shutdown()
+        self._close()

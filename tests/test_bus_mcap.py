@@ -1,0 +1,221 @@
+"""MCAP schemas, the Recorder, the JSON decoder factory, and recordings that survive
+SIGTERM/SIGINT."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import CompressionType
+
+from bus_schemas import codec
+from bus_schemas.mcap_schemas import (
+    CHANNELS,
+    COORDS,
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    JsonDecoderFactory,
+    Recorder,
+    can_frame_message,
+    encode_json,
+    read_messages,
+)
+from bus_schemas.protocol import DBC_PATH, FaultFlag, QpStatus
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def ground_truth(k: int) -> dict:
+    return {"t": k * 1e-3, "socket_force": {"Fx": 10.0 + k, "Fz": -700.5, "My": 1.25},
+            "q": np.linspace(0, 1, 12) + k, "qd": [0.1 * k] * 12, "domain": "ps",
+            "tau": k / 10, "step": 3, "fallen": False}
+
+
+def diagnostics(k: int) -> dict:
+    return {"t": k * 1e-3, "controller": "clf_qp", "domain": "ps", "tau": k / 10,
+            "V": 0.02, "rho": 0.0 if k else math.nan, "u": np.array([12.5, -40.0]),
+            "qp_status": QpStatus.SOLVED.name.lower(), "active_constraints": ["knee_torque"],
+            "fallback_count": 0, "fault_flags": int(FaultFlag.NONE), "solve_time_us": 16.0}
+
+
+def measurements(k: int) -> dict:
+    return {"knee_angle": codec.quantize_angle(0.1 * k), "knee_velocity": 0.5,
+            "ankle_angle": -0.2, "ankle_velocity": 0.0, "foot_load": 650.0, "contact": True,
+            "sim_time_us": 1000 * k, "counter": k % 16}
+
+
+def test_hp_model_coordinates_match():
+    import hp_model
+
+    assert hp_model.COORDS == COORDS
+
+
+def test_schemas_are_valid_and_examples_conform():
+    jsonschema = pytest.importorskip("jsonschema")
+    frame = codec.encode_torque(1.0, -1.0, 2)
+    examples = {
+        "/can/tx": can_frame_message(frame, "tx", name="TorqueCmd"),
+        "/can/rx": can_frame_message(frame, "rx", status=codec.FrameStatus.OK),
+        "/prosthesis/measurements": measurements(3),
+        "/prosthesis/torque_command": {"knee": 1.0, "ankle": -1.0, "knee_joint": 50.0,
+                                       "ankle_joint": -50.0, "enable": True, "counter": 2},
+        "/ground_truth": ground_truth(2),
+        "/controller/diagnostics": diagnostics(0),
+    }
+    assert examples.keys() == CHANNELS.keys()
+    for topic, schema in CHANNELS.items():
+        jsonschema.Draft202012Validator.check_schema(schema)
+        jsonschema.validate(json.loads(encode_json(examples[topic])), schema)
+    bad = ground_truth(0) | {"q": [0.0] * 11}
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(json.loads(encode_json(bad)), CHANNELS["/ground_truth"])
+    with pytest.raises(ValueError, match="direction"):
+        can_frame_message(frame, "up")
+
+
+def test_encode_json_handles_numpy_and_non_finite():
+    assert encode_json({"a": np.float64(1.5), "b": np.arange(3), "c": np.int32(4)}) == \
+        b'{"a":1.5,"b":[0,1,2],"c":4}'
+    assert json.loads(encode_json({"x": [1.0, math.nan, -math.inf], "y": {"z": math.inf}})) \
+        == {"x": [1.0, None, None], "y": {"z": None}}
+
+
+def test_recorder_round_trip_every_channel(tmp_path):
+    path = tmp_path / "run.mcap"
+    frames = codec.encode_feedback(0.25, -1.0, 0.1, 0.0, 700.0, True, 5, sim_time_us=5000)
+    with Recorder(path, metadata={"run_id": "r1", "dt": 0.001}) as rec:
+        rec.register_all()
+        assert rec.part_path.exists() and not path.exists()
+        for k in range(100):
+            t = k * 1_000_000
+            for m in frames:
+                rec.write_can(m, "tx", t, name=codec.decode(m).name)
+            rec.write_can(codec.encode_torque(0.5, -0.5, k), "rx", t + 500_000, status="ok")
+            rec.write("/prosthesis/measurements", measurements(k), t)
+            rec.write("/prosthesis/torque_command", {"knee": 0.5, "ankle": -0.5,
+                                                     "enable": True, "counter": k % 16}, t)
+            rec.write("/ground_truth", ground_truth(k), t)
+            rec.write("/controller/diagnostics", diagnostics(k), t)
+        rec.add_attachment("ampro3.dbc", DBC_PATH.read_bytes(), "text/plain", 0)
+        rec.add_metadata("result", {"steps": 3, "fallen": False})
+        assert rec.compression is CompressionType.ZSTD
+    assert path.exists() and not rec.part_path.exists() and rec.message_count == 900
+
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None
+        assert summary.statistics.message_count == 900
+        assert {c.topic for c in summary.channels.values()} == set(CHANNELS)
+        assert all(c.message_encoding == MESSAGE_ENCODING for c in summary.channels.values())
+        assert {s.encoding for s in summary.schemas.values()} == {SCHEMA_ENCODING}
+        assert all(ci.compression == "zstd" for ci in summary.chunk_indexes)
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert meta["run"] == {"run_id": "r1", "dt": "0.001"}
+        assert json.loads(meta["result"]["steps"]) == 3
+        (att,) = list(reader.iter_attachments())
+        assert att.name == "ampro3.dbc" and att.data == DBC_PATH.read_bytes()
+        decoded = list(reader.iter_decoded_messages())
+    counts = Counter(ch.topic for _, ch, _, _ in decoded)
+    assert counts == {"/can/tx": 400, "/can/rx": 100, "/prosthesis/measurements": 100,
+                      "/prosthesis/torque_command": 100, "/ground_truth": 100,
+                      "/controller/diagnostics": 100}
+
+    by_topic: dict[str, list] = {}
+    for _, ch, msg, obj in decoded:
+        by_topic.setdefault(ch.topic, []).append((msg.log_time, msg.sequence, obj))
+    tx = by_topic["/can/tx"]
+    assert [o["data"] for _, _, o in tx[:4]] == [list(m.data) for m in frames]
+    assert [o["name"] for _, _, o in tx[:4]] == ["KneeFeedback", "AnkleFeedback", "FootLoad",
+                                                 "SimTime"]
+    assert [s for _, s, _ in tx[:5]] == [1, 2, 3, 4, 5]
+    rx = by_topic["/can/rx"]
+    assert rx[7][0] == 7_500_000 and rx[7][2]["status"] == "ok"
+    assert codec.decode(codec.can.Message(arbitration_id=rx[7][2]["id"],
+                                          is_extended_id=False,
+                                          data=bytes(rx[7][2]["data"]))).value == \
+        codec.TorqueCmd(0.5, -0.5, 1)
+    gt = by_topic["/ground_truth"][42]
+    assert gt[0] == 42_000_000
+    assert gt[2]["q"] == (np.linspace(0, 1, 12) + 42).tolist()
+    assert gt[2]["socket_force"] == {"Fx": 52.0, "Fz": -700.5, "My": 1.25}
+    diag = [o for _, _, o in by_topic["/controller/diagnostics"]]
+    assert diag[0]["rho"] is None and diag[1]["rho"] == 0.0 and diag[5]["u"] == [12.5, -40.0]
+    meas = by_topic["/prosthesis/measurements"][9][2]
+    assert meas["knee_angle"] == codec.quantize_angle(0.9)
+    # the convenience reader agrees
+    assert sum(1 for _ in read_messages(path, ["/ground_truth"])) == 100
+
+
+def test_writes_after_finish_are_refused(tmp_path):
+    rec = Recorder(tmp_path / "a.mcap", compression="none")
+    rec.write("/ground_truth", ground_truth(0), 0)
+    assert rec.finish() == tmp_path / "a.mcap" and rec.finish() == tmp_path / "a.mcap"
+    with pytest.raises(RuntimeError, match="finished"):
+        rec.write("/ground_truth", ground_truth(1), 1)
+    with pytest.raises(KeyError, match="no schema"):
+        Recorder(tmp_path / "b.mcap").add_channel("/unknown")
+
+
+def test_exception_inside_with_still_leaves_a_complete_file(tmp_path):
+    path = tmp_path / "err.mcap"
+    with pytest.raises(ZeroDivisionError), Recorder(path) as rec:
+        rec.write("/ground_truth", ground_truth(0), 0)
+        1 / 0  # noqa: B018
+    assert [t for t, _, _ in read_messages(path)] == ["/ground_truth"]
+
+
+def test_signal_in_process_finishes_without_exit(tmp_path):
+    path = tmp_path / "sig.mcap"
+    before = signal.getsignal(signal.SIGTERM)
+    rec = Recorder(path)
+    rec.install_signal_handlers([signal.SIGTERM], exit=False)
+    for k in range(5):
+        rec.write("/ground_truth", ground_truth(k), k)
+    os.kill(os.getpid(), signal.SIGTERM)  # handled in this thread at the next bytecode
+    assert rec.interrupted == signal.SIGTERM and rec.finished
+    rec.write("/ground_truth", ground_truth(6), 6)  # dropped, not an error
+    assert rec.dropped == 1
+    assert signal.getsignal(signal.SIGTERM) == before  # handlers restored
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_summary().statistics.message_count == 5
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert meta["signal"] == {"signal": "SIGTERM", "messages": "5"}
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
+def test_subprocess_interrupted_mid_recording_leaves_a_complete_file(tmp_path, sig, code):
+    path = tmp_path / "killed.mcap"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_record_node.py"),
+                             str(path), "200"], stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        proc.send_signal(sig)
+        assert proc.wait(20) == code
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert path.exists() and not (tmp_path / ".killed.mcap.part").exists()
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True, decoder_factories=[JsonDecoderFactory()])
+        summary = reader.get_summary()
+        n = summary.statistics.message_count
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        msgs = list(reader.iter_decoded_messages())
+    assert n >= 200 and len(msgs) == n
+    assert meta["signal"]["signal"] == signal.Signals(sig).name
+    assert int(meta["signal"]["messages"]) == n
+    gts = [o for _, ch, _, o in msgs if ch.topic == "/ground_truth"]
+    assert [g["t"] for g in gts] == pytest.approx([k * 1e-3 for k in range(len(gts))])

@@ -1,0 +1,288 @@
+"""ZenohBus: wire format, in-process pairs of sessions over TCP loopback, the python-can
+entry point, and a real second OS process echoing frames back."""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+import tomllib
+from pathlib import Path
+
+import can
+import pytest
+import zenoh
+
+from bus_schemas import codec
+from bus_schemas.codec import FrameChecker
+from bus_schemas.keys import Direction
+from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState
+from bus_schemas.zenoh_can import ZenohBus, pack_message, parse_channel, unpack_message
+from bus_schemas.zenoh_config import loopback_endpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def pair():
+    """A plant bus listening on a free loopback port and a controller bus connected to it,
+    each with its own zenoh session."""
+    ep = loopback_endpoint()
+    plant = ZenohBus("t1/plant", listen=ep)
+    ctrl = ZenohBus("t1/ctrl", connect=ep)
+    try:
+        assert plant.wait_for_peer(5.0) and ctrl.wait_for_peer(5.0)
+        yield plant, ctrl
+    finally:
+        ctrl.shutdown()
+        plant.shutdown()
+
+
+def test_wire_format_round_trip():
+    msgs = [
+        can.Message(timestamp=12.25, arbitration_id=0x101, is_extended_id=False,
+                    data=bytes(range(8))),
+        can.Message(timestamp=1.0, arbitration_id=0x1ABCDEF0, is_extended_id=True, data=b""),
+        can.Message(timestamp=2.0, arbitration_id=0x55, is_extended_id=False,
+                    is_remote_frame=True, dlc=8),
+        can.Message(timestamp=3.0, arbitration_id=0x66, is_fd=True, bitrate_switch=True,
+                    error_state_indicator=True, data=bytes(range(64))),
+        can.Message(timestamp=4.0, is_error_frame=True),
+    ]
+    for m in msgs:
+        p = pack_message(m)
+        assert len(p) == 15 + len(m.data)
+        r = unpack_message(p, "ch")
+        assert r is not None and r.equals(m, timestamp_delta=0.0, check_channel=False)
+        assert r.timestamp == m.timestamp and r.is_rx and r.channel == "ch"
+    assert len(pack_message(msgs[0])) == 23
+    assert unpack_message(pack_message(msgs[0], 99.5)).timestamp == 99.5
+
+
+def test_wire_format_rejects_garbage():
+    good = pack_message(can.Message(arbitration_id=0x10, data=bytes(8)))
+    for bad in (b"", b"\x01" * 14, b"\x02" + good[1:], good + bytes(60),
+                good[:5] + b"\xff\xff\xff\xff" + good[9:]):
+        assert unpack_message(bad) is None
+
+
+def test_channel_roles():
+    assert parse_channel("r/plant") == ("r", Direction.TX, (Direction.RX,))
+    assert parse_channel("r/ctrl") == ("r", Direction.RX, (Direction.TX,))
+    assert parse_channel("r/rx:tx") == ("r", Direction.RX, (Direction.TX,))
+    assert parse_channel("r/monitor") == ("r", None, (Direction.TX, Direction.RX))
+    for bad in ("plant", "r/tx:tx", "r/up", "r/tx", "a*/plant"):
+        with pytest.raises(ValueError):
+            parse_channel(bad)
+
+
+def test_plant_and_controller_exchange_frames(pair):
+    plant, ctrl = pair
+    ck_ctrl, ck_plant = FrameChecker(accept=PLANT_TO_CTRL), FrameChecker(accept=CTRL_TO_PLANT)
+    for k in range(20):
+        for m in codec.encode_feedback(0.01 * k, -0.5, 0.2, 0.0, 600.0 + k, k % 2 == 0, k,
+                                       sim_time_us=1000 * k, timestamp=k * 1e-3):
+            plant.send(m)
+        got = [ctrl.recv(2.0) for _ in range(4)]
+        verdicts = [ck_ctrl.check(m) for m in got]
+        assert all(v.ok for v in verdicts), verdicts
+        assert [m.timestamp for m in got] == [k * 1e-3] * 4  # sender's time kept
+        assert verdicts[0].value.angle == codec.quantize_angle(0.01 * k)
+        assert verdicts[2].value == codec.FootLoad(codec.quantize_load(600.0 + k), 1 - k % 2)
+        assert verdicts[3].value.us == 1000 * k
+        ctrl.send(codec.encode_torque(0.1 * k, -0.1 * k, k))
+        ctrl.send(codec.encode_heartbeat(CtrlState.RUNNING, k, k))
+        t, hb = ck_plant.check(plant.recv(2.0)), ck_plant.check(plant.recv(2.0))
+        assert t.value.knee == codec.quantize_torque(0.1 * k) and hb.value.tick == k
+    assert ck_ctrl.counts["ok"] == 80 and ck_ctrl.rejected == 0
+    assert ck_plant.counts["ok"] == 40 and ck_plant.rejected == 0
+    assert plant.rx_malformed == ctrl.rx_malformed == 0
+
+
+def test_malformed_payloads_and_foreign_keys_are_skipped(pair):
+    plant, ctrl = pair
+    pub = plant.session.declare_publisher("hpcosim/run/t1/can/tx")
+    try:
+        pub.put(b"not a frame")
+        plant.session.put("hpcosim/run/t1/can/tx/wake/someone", b"")
+        plant.send(codec.encode_sim_time(9, 0))
+        got = []
+        while (m := ctrl.recv(0.5)) is not None:  # the three may arrive in any order
+            got.append(codec.decode(m).value.us)
+        assert got == [9] and ctrl.rx_malformed == 1
+    finally:
+        pub.undeclare()
+
+
+def test_full_receive_ring_drops_the_oldest_frames():
+    ep = loopback_endpoint()
+    with ZenohBus("t5/plant", listen=ep) as plant, \
+            ZenohBus("t5/ctrl", connect=ep, rx_queue_size=8) as ctrl:
+        assert plant.wait_for_peer(5.0)
+        for k in range(40):
+            plant.send(codec.encode_sim_time(k, k))
+        time.sleep(0.3)
+        got = []
+        while (m := ctrl.recv(0.2)) is not None:
+            got.append(codec.decode(m).value.us)
+    assert got == list(range(32, 40))
+
+
+def test_shutdown_unblocks_a_receiver_in_another_thread(pair):
+    _, ctrl = pair
+    errors: list[BaseException] = []
+
+    def blocked() -> None:
+        try:
+            ctrl.recv()  # no timeout
+        except can.CanOperationError as e:
+            errors.append(e)
+
+    th = threading.Thread(target=blocked)
+    th.start()
+    time.sleep(0.3)
+    ctrl.shutdown()
+    th.join(5.0)
+    assert not th.is_alive() and len(errors) == 1
+
+
+def test_recv_timeout_filters_and_own_messages(pair):
+    plant, ctrl = pair
+    t0 = time.monotonic()
+    assert ctrl.recv(0.05) is None and ctrl.recv(0) is None
+    assert 0.04 < time.monotonic() - t0 < 2.0
+    ctrl.set_filters([{"can_id": 0x110, "can_mask": 0x7FF}])
+    for m in codec.encode_feedback(0.1, 0.1, 0.1, 0.1, 100.0, True, 0):
+        plant.send(m)
+    m = ctrl.recv(2.0)
+    assert m is not None and m.arbitration_id == 0x110
+    assert ctrl.recv(0.05) is None
+    ctrl.set_filters(None)
+    own = ZenohBus("t1/monitor", session=ctrl.session)  # shares ctrl's session
+    try:
+        with pytest.raises(can.CanOperationError, match="monitor"):
+            own.send(codec.encode_torque(0, 0, 0))
+        echo = ZenohBus("t2/plant", receive_own_messages=True, stamp=True)
+        try:
+            echo.send(codec.encode_torque(1.0, 2.0, 3))
+            back = echo.recv(1.0)
+            assert back is not None and not back.is_rx
+            assert abs(back.timestamp - time.time()) < 5.0
+            assert codec.decode(back).value == codec.TorqueCmd(1.0, 2.0, 1)
+        finally:
+            echo.shutdown()
+        # the monitor sees both directions
+        plant.send(codec.encode_sim_time(5, 1))
+        ctrl.send(codec.encode_torque(0.5, 0.5, 1))
+        seen = {own.recv(2.0).arbitration_id, own.recv(2.0).arbitration_id}
+        assert seen == {0x080, 0x010}
+    finally:
+        own.shutdown()
+    assert not ctrl.session.is_closed()  # a borrowed session stays open
+
+
+def test_shutdown_closes_session_and_liveliness(pair):
+    plant, ctrl = pair
+    assert plant.peer_alive("ctrl") and ctrl.peer_alive("plant")
+    sub = plant.session.liveliness().declare_subscriber("hpcosim/run/t1/ctrl/alive",
+                                                        zenoh.handlers.FifoChannel(8))
+    ctrl.shutdown()
+    assert ctrl.session.is_closed()
+    with pytest.raises(can.CanOperationError):
+        ctrl.send(codec.encode_torque(0, 0, 0))
+    with pytest.raises(can.CanOperationError):
+        ctrl.recv(0.01)
+    ctrl.shutdown()  # idempotent
+    deadline = time.monotonic() + 5
+    sample = None
+    while sample is None and time.monotonic() < deadline:
+        sample = sub.try_recv()
+        time.sleep(0.005)
+    assert sample is not None and sample.kind == zenoh.SampleKind.DELETE
+    assert not plant.peer_alive("ctrl", timeout=0.5)
+
+
+def test_entry_point_is_declared():
+    meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    eps = meta["project"]["entry-points"]["can.interface"]
+    assert eps == {"zenoh": "bus_schemas.zenoh_can:ZenohBus"}
+    assert "*.dbc" in meta["tool"]["setuptools"]["package-data"]["bus_schemas"]
+
+
+@pytest.mark.skipif("zenoh" not in can.interfaces.BACKENDS,
+                    reason="the can.interface entry point appears after (re)installing hpcosim")
+def test_can_bus_interface_zenoh_installed():
+    ep = loopback_endpoint()
+    with can.Bus(interface="zenoh", channel="t3/plant", listen=ep) as plant, \
+            can.Bus(interface="zenoh", channel="t3/ctrl", connect=ep) as ctrl:
+        assert isinstance(plant, ZenohBus) and plant.wait_for_peer(5.0)
+        plant.send(codec.encode_sim_time(42, 0))
+        assert codec.decode(ctrl.recv(2.0)).value.us == 42
+
+
+def test_can_bus_finds_the_entry_point_in_a_fresh_process(tmp_path):
+    """python-can's real discovery path: a dist-info with the declared entry point on
+    sys.path of a fresh interpreter (what an install provides), then can.Bus(...)."""
+    eps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["entry-points"]
+    dist = tmp_path / "hpcosim_ep_probe-0.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: hpcosim-ep-probe\n"
+                                   "Version: 0.0\n")
+    (dist / "entry_points.txt").write_text(
+        "[can.interface]\n" + "".join(f"{k} = {v}\n" for k, v in
+                                      eps["can.interface"].items()))
+    code = textwrap.dedent("""
+        import can
+        from bus_schemas import codec
+        from bus_schemas.zenoh_config import loopback_endpoint
+        ep = loopback_endpoint()
+        with can.Bus(interface="zenoh", channel="t4/plant", listen=ep) as p, \\
+                can.Bus(interface="zenoh", channel="t4/ctrl", connect=ep) as c:
+            assert p.wait_for_peer(5.0)
+            p.send(codec.encode_sim_time(77, 0))
+            print(type(p).__name__, codec.decode(c.recv(2.0)).value.us)
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["ZenohBus", "77"]
+
+
+def test_cross_process_echo():
+    """A second OS process (controller role) echoes every frame back over zenoh."""
+    ep = loopback_endpoint()
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    n = 300
+    with ZenohBus("xproc/plant", listen=ep) as plant:
+        proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_echo_node.py"),
+                                 "xproc", ep], stdout=subprocess.PIPE, text=True, env=env)
+        try:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == "ready"
+            assert plant.wait_for_peer(10.0) and plant.peer_alive("ctrl")
+            checker = FrameChecker()
+            rtt = []
+            for k in range(n):
+                m = codec.encode_torque(0.01 * k, -0.01 * k, k, timestamp=k * 1e-3)
+                t0 = time.perf_counter()
+                plant.send(m)
+                back = plant.recv(5.0)
+                rtt.append(time.perf_counter() - t0)
+                assert back is not None and bytes(back.data) == bytes(m.data)
+                assert back.timestamp == k * 1e-3
+                assert checker.check(back).ok
+            plant.send(can.Message(arbitration_id=0x7FF, is_extended_id=False))
+            assert proc.stdout.readline().strip() == f"done {n}"
+            assert proc.wait(10) == 0
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert checker.counts["ok"] == n
+    med = statistics.median(rtt[20:]) * 1e6
+    print(f"\nZenohBus cross-process round trip: median {med:.0f} us over {n - 20} frames")
