@@ -42,7 +42,7 @@ def build_gait(model: HumanProsthesisModel, result: PHZDResult, targets: DataTar
               "cost": result.cost, **{k: v for k, v in result.stats.items()
                                       if k.startswith("t_wall") or k.startswith("n_call")}}
     return Gait(params=dict(result.params), model_hash=model.parameter_hash(),
-                gains=(opt.eps, opt.kp, opt.kd),
+                gains=(opt.eps, opt.track_kp, opt.track_kd),
                 socket_nominal=nominal_socket_force(model, result),
                 offsets=dict(result.offsets), durations=dict(result.durations),
                 data_params=data, fit_quality=dict(fit_quality or {}),

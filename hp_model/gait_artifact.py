@@ -4,7 +4,8 @@ Layout (``kind = "hpcosim-gait"``, ``schema_version = 1``; SI units, angles in r
 
     model_hash            hash of the model parameters the gait was made for
     degree                Bezier degree m of y2
-    gains                 {eps, kp, kd} of the feedback linearization used in the optimization
+    gains                 {eps, kp, kd} of the human-side feedback linearization (eps as in the
+                          optimization, which the orbit depends on; kp, kd for tracking)
     domains.<d>           per domain d in (ps, pns):
         alpha (5, m+1), v_hip, p_min, p_max      the optimized gait alpha*, v_hip*, phase bounds
         offsets (5,)                              delta_alpha (marker-placement offsets)

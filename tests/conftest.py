@@ -43,7 +43,7 @@ def template_gait(model):
     from characterization.phzd import PHZDOptions, optimize_gait
     from tests.gait_template import template_targets
 
-    opt = PHZDOptions(nodes=11)
+    opt = PHZDOptions()
     targets = template_targets()
     result = optimize_gait(model, targets, opt)
     assert result.success, result.status

@@ -1,0 +1,81 @@
+"""``hpcosim gait ...``: gait design (paper Sec. IV-A)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimization.",
+                       no_args_is_help=True)
+
+
+@gait_app.command("fit")
+def fit(
+    steps: Annotated[Path, typer.Argument(help="Steps file from `hpcosim mocap process`.",
+                                          dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Gait file to write (.json); the Fig. 4 "
+                                      "figure goes next to it.", dir_okay=False)],
+    subject: Annotated[Path | None, typer.Option(
+        "--subject", help="Subject TOML (default: the shipped example subject).",
+        dir_okay=False)] = None,
+    device: Annotated[Path | None, typer.Option(
+        "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).",
+        dir_okay=False)] = None,
+    degree: Annotated[int, typer.Option(help="Bezier degree of the joint outputs.",
+                                        min=1, max=9)] = 5,
+    nodes: Annotated[int, typer.Option(help="Collocation nodes per domain.",
+                                       min=5, max=101)] = 21,
+    max_iter: Annotated[int, typer.Option(help="IPOPT iteration limit.", min=1)] = 1000,
+    verify: Annotated[bool, typer.Option(help="Closed-loop verification (20 steps, "
+                                         "return map).")] = True,
+    figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
+) -> None:
+    """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
+    import hp_model
+    from characterization.gait_figures import save_gait_figure
+    from characterization.gait_fit import fit_gait
+    from characterization.phzd import PHZDOptions
+    from characterization.steps_artifact import load_steps
+    from hp_model.gait_artifact import save_gait
+
+    console = Console(stderr=True)
+    data = load_steps(steps)
+    model = hp_model.load_model(str(subject) if subject else None,
+                                str(device) if device else None)
+    opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter)
+    with console.status("gait fit") as status:
+        gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
+                        progress=lambda m: status.update(m))
+    save_gait(out, gait)
+    if figure:
+        save_gait_figure(out.with_suffix(".png"), gait, data)
+    _summary(Console(), gait, out)
+
+
+def _summary(console: Console, gait, out: Path) -> None:
+    s = gait.solver
+    console.print(f"[bold]gait[/bold] {out}  (hash {gait.hash()})")
+    console.print(f"IPOPT: {s['status']} in {s['iterations']} iterations, "
+                  f"{s['seconds']:.1f} s; cost {s['cost']:.4g}")
+    t = Table("domain", "v_hip m/s", "step m", "duration s", "fit RMS deg (data)",
+              "RMS deg (optimized vs data+offset)")
+    v = gait.verification
+    for d in ("ps", "pns"):
+        p = gait.params[d]
+        fitq = gait.fit_quality.get(d, {})
+        rms = v.get("output_rms_deg", {}).get(d)
+        t.add_row(d, f"{p.v_hip:.3f}", f"{p.p_max - p.p_min:.3f}",
+                  f"{gait.durations[d]:.3f}",
+                  " ".join(f"{x:.1f}" for x in np.degrees(fitq.get("rms", []))),
+                  " ".join(f"{x:.1f}" for x in rms) if rms is not None else "-")
+    console.print(t)
+    if v:
+        console.print(f"closed loop: {v['steps_simulated']} steps simulated"
+                      f"{' (FAILED: ' + v['failure'] + ')' if v['simulation_failed'] else ''}; "
+                      f"return-map spectral radius {v['spectral_radius']:.3g} "
+                      f"({'stable' if v.get('stable') else 'NOT stable'})")

@@ -1,0 +1,55 @@
+"""The gait artifact: round trip, hash, refusal of a gait for other parameters or edited by
+hand, one-line errors naming the field."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hp_model.artifacts import ArtifactError
+from hp_model.gait_artifact import load_gait, save_gait
+
+
+def test_round_trip_keeps_everything(tmp_path, model, template_gait):
+    p = tmp_path / "gait.json"
+    save_gait(p, template_gait)
+    g = load_gait(p, model.parameter_hash())
+    assert g.hash() == template_gait.hash()
+    for d in ("ps", "pns"):
+        np.testing.assert_allclose(g.params[d].alpha, template_gait.params[d].alpha)
+    np.testing.assert_allclose(g.socket_force(0.5), template_gait.socket_force(0.5))
+    assert g.solver["status"] == "Solve_Succeeded"
+
+
+def test_nominal_socket_force_carries_the_body_weight(model, template_gait):
+    """Mid-stance, the vertical socket force is about the weight above the socket."""
+    fz = template_gait.socket_force(0.5)[1]
+    w = (66.132 - model.prosthesis_mass) * 9.81
+    assert -1.6 * w < fz < -0.4 * w
+
+
+def test_other_model_parameters_are_refused(tmp_path, template_gait):
+    p = tmp_path / "gait.json"
+    save_gait(p, template_gait)
+    with pytest.raises(ArtifactError, match="model_hash"):
+        load_gait(p, "0123456789abcdef")
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda d: d.update(schema_version=99), "schema_version"),
+    (lambda d: d["domains"]["ps"].update(v_hip=-1.0), "domains.ps.v_hip"),
+    (lambda d: d["domains"]["pns"].update(alpha=[[0.0]]), "domains.pns.alpha"),
+    (lambda d: d["domains"]["ps"]["alpha"][0].__setitem__(0, 0.3), "gait_hash"),
+    (lambda d: d.pop("model_hash"), "model_hash"),
+])
+def test_bad_fields_are_named(tmp_path, template_gait, edit, field):
+    p = tmp_path / "gait.json"
+    save_gait(p, template_gait)
+    doc = json.loads(p.read_text())
+    edit(doc)
+    p.write_text(json.dumps(doc))
+    with pytest.raises(ArtifactError, match=field.replace(".", r"\.")) as e:
+        load_gait(p)
+    assert "\n" not in str(e.value)

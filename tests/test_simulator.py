@@ -1,0 +1,76 @@
+"""The hybrid simulator on an optimized gait: events located on the ground, impacts that
+match the optimizer's, a stable periodic orbit (issue 4 evidence)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from characterization.gait_fit import verify_gait
+from characterization.gait_verification import make_simulator, simulate_gait
+from hp_model.simulator import SimOptions
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def run20(model, template_gait):
+    sim = make_simulator(model, template_gait)
+    return sim, simulate_gait(sim, template_gait, steps=20)
+
+
+def test_twenty_steps_without_a_fall(run20):
+    _, r = run20
+    assert not r.failed, r.reason
+    assert r.steps == 20
+    assert [i.into for i in r.impacts[:2]] == ["pns", "ps"]
+
+
+def test_impacts_are_located_on_the_ground(model, run20):
+    """The swing sole is at height 0 (event_tol) at every located impact, and flat up to the
+    small residual pitch the touchdown correction removes."""
+    _, r = run20
+    fs = model.numeric()
+    for imp in r.impacts:
+        pose = fs["frames"](imp.q, imp.qd_minus)[0]
+        frame = "p_sole" if imp.into == "ps" else "l_sole"
+        assert abs(pose[1, model.frame_index(frame)]) < 1e-6
+        assert abs(pose[2, model.frame_index(frame)]) < 1e-9  # flattened
+        assert abs(imp.foot_pitch) < 0.02
+
+
+def test_first_cycle_reproduces_the_collocation(template_gait, run20):
+    """Durations within one integration step plus the collocation's discretisation error."""
+    _, r = run20
+    t = [i.t for i in r.impacts]
+    assert t[0] == pytest.approx(template_gait.durations["ps"], abs=3e-3)
+    assert t[1] - t[0] == pytest.approx(template_gait.durations["pns"], abs=3e-3)
+    end = template_gait.trajectory["ps"]
+    np.testing.assert_allclose(r.impacts[0].q[3:], end["q"][3:, -1], atol=2e-3)
+
+
+def test_periodic_and_stable(model, template_gait):
+    v = verify_gait(model, template_gait, steps=20)
+    assert v["stable_20_steps"], v
+    assert v["spectral_radius"] < 1.0
+    assert v["fixed_point_residual"] < 1e-6
+
+
+def test_event_location_does_not_depend_on_the_step_size(model, template_gait):
+    """Impact times converge as h shrinks (event location, not step-boundary detection)."""
+    times = []
+    for sub in (1, 4):
+        sim = make_simulator(model, template_gait, options=SimOptions(substeps=sub))
+        r = simulate_gait(sim, template_gait, steps=2)
+        times.append([i.t for i in r.impacts])
+    np.testing.assert_allclose(times[0], times[1], atol=1e-5)
+
+
+def test_a_policy_holds_its_torque_and_a_bad_one_falls(model, template_gait):
+    """Human-side FL with a zero prosthesis torque cannot walk: the run ends as a fall with a
+    reason, not an exception."""
+    sim = make_simulator(model, template_gait)
+    tr = template_gait.trajectory["ps"]
+    r = sim.run(tr["q"][:, 0], tr["qd"][:, 0], "ps", steps=4, policy=lambda t, s: np.zeros(2))
+    assert r.failed and r.reason
+    assert np.all(r.u[:, 4:] == 0.0)
