@@ -1,0 +1,62 @@
+"""Benchmark: the two-domain 12-DOF PHZD optimization from the regression's initial guess
+(issue 4 target: under 60 s median), on the synthetic subject's steps.
+
+Per repeat: NLP construction + IPOPT solve (wall), iterations, and the share of the solve
+spent evaluating functions and derivatives (CasADi's t_wall_nlp_* statistics); then the
+closed-loop verification (20 steps + return map).
+
+    PYTHONPATH=. python benchmarks/bench_gait.py [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import hp_model
+from characterization.gait_design import build_gait
+from characterization.gait_fit import regress_steps, verify_gait
+from characterization.mocap_mapping import default_mapping
+from characterization.mocap_pipeline import process_take, to_artifact
+from characterization.phzd import PHZDOptions, optimize_gait
+from characterization.synthetic_subject import SynthOptions, synthesize
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    model = hp_model.load_model()
+    coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    with tempfile.TemporaryDirectory():
+        s = synthesize(model, SynthOptions(n_strides=37, seed=1))
+        steps = to_artifact(process_take(s.take, default_mapping(), coef))
+    reg = regress_steps(model, steps, 5)
+    opt = PHZDOptions()
+    rows = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        r = optimize_gait(model, reg.targets, opt)
+        total = time.perf_counter() - t0
+        fe = sum(v for k, v in r.stats.items() if k.startswith("t_wall_nlp"))
+        t1 = time.perf_counter()
+        v = verify_gait(model, build_gait(model, r, reg.targets, opt))
+        rows.append((total, r.solve_seconds, r.iterations, fe / r.solve_seconds,
+                     time.perf_counter() - t1, r.status, v["spectral_radius"]))
+    med = statistics.median
+    print("| quantity | median | min | max |\n|---|---|---|---|")
+    for i, name in ((0, "build + solve (s)"), (1, "IPOPT solve (s)"), (2, "iterations"),
+                    (3, "share of solve in function/derivative evaluation"),
+                    (4, "verification: 20 steps + return map (s)")):
+        xs = [row[i] for row in rows]
+        print(f"| {name} | {med(xs):.3g} | {min(xs):.3g} | {max(xs):.3g} |")
+    print(f"\nstatus {rows[0][5]}; return-map spectral radius {rows[0][6]:.2g}; "
+          f"repeats {args.repeats}")
+
+
+if __name__ == "__main__":
+    Path(".").resolve()
+    main()
