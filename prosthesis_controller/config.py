@@ -49,7 +49,7 @@ class ClfConfig(_Strict):
     delta_u: Positive = 0.25
     limits_in_qp: bool = True
     exact_limits_in_qp: bool = False
-    solver_eps: Positive = 1e-9
+    solver_eps: Positive = 1e-10
 
     @model_validator(mode="after")
     def _shapes(self) -> ClfConfig:

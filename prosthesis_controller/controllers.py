@@ -156,7 +156,9 @@ class BaseController:
         self._clf = num["clf_qp"]
         self._clf.inputs[1][:] = ctx.clf_params
         self._clf_x = self._clf.inputs[0]
-        self._clf_out = self._clf.outputs
+        self._o = dict(zip(self._clf.function.name_out(), self._clf.outputs, strict=True))
+        self._o_tau, self._o_V, self._o_check = self._o["tau"], self._o["V"], self._o["check"]
+        self._o_Gu, self._o_hu = self._o["Gu"], self._o["hu"]
         self._sref = num["stance_ref"]
         self._sref.inputs[2][:] = ctx.stance_params
         self._swing = num["swing_ref"]
@@ -298,9 +300,9 @@ class PDController(BaseController):
 
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
-        out = self._clf_out
         uk, ua = self._pd_torque(t, qk, qa, vk, va)
-        return uk, ua, float(out[9][0]), float(out[10][0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE
+        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0,
+                MODE_STANCE)
 
 
 class PassiveController(BaseController):
@@ -315,7 +317,6 @@ class PassiveController(BaseController):
 
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
-        out = self._clf_out
         tau_h, rate = _phase(t, self._t_switch, self._T_ps)
         f = self._pas
         x = f.inputs[0]
@@ -323,51 +324,65 @@ class PassiveController(BaseController):
         f.inputs[1][0], f.inputs[2][0] = tau_h, rate
         f.call_inplace()
         uj = f.outputs[0]
-        return (uj[0] / self._gear[0], uj[1] / self._gear[1], float(out[9][0]),
-                float(out[10][0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+        return (uj[0] / self._gear[0], uj[1] / self._gear[1], float(self._o_tau[0]),
+                float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
 
 
 class ClfQpController(BaseController):
     """Robust CLF-QP, relaxed and smoothed (paper eq. robust_CLF_QP_relax) or exact (eq.
-    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick)."""
+    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick, in the whitened
+    variables of :mod:`prosthesis_controller.terms`)."""
 
     name = "clfqp"
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
         c = ctx.config.clf
-        n = 3 if relaxed else 2
-        self._n = n
         lk, la = ctx.limits
         with_limits = c.limits_in_qp if relaxed else c.exact_limits_in_qp
         self._qlim = (lk, la) if with_limits else (_INF, _INF)
         self._du = float(c.delta_u) if relaxed else _INF
+        # torque rows are needed unless both bounds are infinite
+        self._rows = 3 if (math.isfinite(self._du) or with_limits) else 1
+        n = 3 if relaxed else 2
+        self._n = n
         self._rho_max = float(c.rho_max)
-        self._xl = np.zeros(n)
+        self._xl = np.zeros(n)  # u-space bounds (u_k, u_a[, rho]) of the current tick
         self._xu = np.zeros(n)
         if relaxed:
             self._xu[2] = self._rho_max
-        self._hl = np.array([-_INF])
+        m = self._rows
+        self._hl = np.full(m, -_INF)
+        self._hu = np.zeros(m)
+        self._zl = np.full(n, -_INF)  # solver-variable bounds: only rho is boxed
+        self._zu = np.full(n, _INF)
+        if relaxed:
+            self._zl[2], self._zu[2] = 0.0, self._rho_max
+        self._G = np.zeros((m, n), order="F")
         self._solver = piqp.DenseSolver()
         st = self._solver.settings
         st.eps_abs = st.eps_rel = float(c.solver_eps)
         st.verbose = False
-        P = np.asfortranarray(np.eye(n))
-        G = np.asfortranarray(np.ones((1, n)))
-        self._xl[:2], self._xu[:2] = -1.0, 1.0
-        self._solver.setup(P=P, c=np.zeros(n), G=G, h_l=self._hl, h_u=np.zeros(1),
-                           x_l=self._xl, x_u=self._xu)
+        P = np.zeros((n, n), order="F")
+        P[0, 0] = P[1, 1] = 2.0
+        self._G[:, :2] = np.eye(m, 2)
+        self._solver.setup(P=P, c=np.zeros(n), G=self._G, h_l=self._hl, h_u=np.ones(m),
+                           x_l=self._zl, x_u=self._zu)
         self.name = "clfqp" if relaxed else "clfqp-exact"
+        self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
         super().__init__(ctx)
+        o = dict(zip(self._clf.function.name_out(), self._clf.outputs, strict=True))
+        self._o_cw, self._o_Gw, self._o_hw = o["cw"], o["Gw"], o["hw"]
+        self._o_bs, self._o_Tw = o["bs"], o["Tw"]
 
     def qp_data(self) -> tuple[np.ndarray, ...]:
-        """(P, c, G, h, x_l, x_u) of the QP of the last stance tick (copies; for tests)."""
-        o = self._clf_out
-        if self.relaxed:
-            P, c, G = o[0], o[1], o[2]
-        else:
-            P, c, G = o[4], o[5], o[6]
-        return (P.copy(), c.copy(), G.copy(), o[3].copy(), self._xl.copy(), self._xu.copy())
+        """The u-space QP of the last stance tick, z = (u_k, u_a[, rho]):
+        (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
+        (copies; for cross-checks with other solvers)."""
+        o = self._o
+        n = self._n
+        return (o["Pu"][:n, :n].copy(), o["cu"][:n].copy(), o["Gu"][:, :n].copy(),
+                o["hu"].copy(), self._xl.copy(), self._xu.copy())
 
     def _bounds(self) -> None:
         du = self._du
@@ -381,56 +396,67 @@ class ClfQpController(BaseController):
         xu[1] = la if b > la else b
 
     def _stance(self, t, qk, qa, vk, va):
+        self.qp_solution = None
         self._clf_terms(qk, qa, vk, va)
-        out = self._clf_out
-        tau, V = float(out[9][0]), float(out[10][0])
-        if not math.isfinite(out[7][0]):
+        tau, V = float(self._o_tau[0]), float(self._o_V[0])
+        if not math.isfinite(self._o_check[0]):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
         self._bounds()
-        if self.relaxed:
-            P, c, G = out[0], out[1], out[2]
-        else:
-            P, c, G = out[4], out[5], out[6]
-        h = out[3]
         xl, xu = self._xl, self._xu
-        # exact feasibility test of one row over the box: min_box G z <= h
+        # exact feasibility test of the CLF row over the box (u-space): min_box G z <= h
+        Gu, hu = self._o_Gu, self._o_hu[0]
         lo = 0.0
         for i in range(self._n):
-            gi = G[0, i]
+            gi = Gu[0, i]
             if gi > 0.0:
                 lo += gi * xl[i]
             elif gi < 0.0:
                 lo += gi * xu[i]
-        if lo > h[0] + 1e-9:
+        if lo > hu + 1e-9:
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_INFEASIBLE, 0, MODE_FALLBACK
+        n = self._n
+        G, Gw = self._G, self._o_Gw
+        hl, hu_ = self._hl, self._hu
+        G[0, :] = Gw[0, :n]
+        hu_[0] = self._o_hw[0]
+        if self._rows == 3:
+            G[1:3, :] = Gw[1:3, :n]
+            s1, s2 = self._o_bs
+            hl[1], hu_[1] = xl[0] * s1, xu[0] * s1
+            hl[2], hu_[2] = xl[1] * s2, xu[1] * s2
         s = self._solver
-        s.update(P=P, c=c, G=G, h_u=h, x_l=xl, x_u=xu)
+        s.update(c=self._o_cw[:n] if n == 2 else self._o_cw, G=G, h_l=hl, h_u=hu_)
         if s.solve() != _SOLVED:
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
         z = s.result.x
-        uk, ua = float(z[0]), float(z[1])
+        T = self._o_Tw
+        w0, w1 = float(z[0]), float(z[1])
+        uk = T[0, 0] * w0 + T[0, 1] * w1
+        ua = T[1, 0] * w0 + T[1, 1] * w1
         rho = float(z[2]) if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+        self.qp_solution = np.array((uk, ua, rho)[:n])
         active = 0
-        gz = G[0, 0] * uk + G[0, 1] * ua
-        if self.relaxed:
-            gz += G[0, 2] * rho
-            if rho >= self._rho_max - _ACTIVE_TOL:
-                active |= Active.RHO_MAX
-        if gz >= h[0] - _ACTIVE_TOL:
+        g0 = G[0, 0] * w0 + G[0, 1] * w1 + (G[0, 2] * rho if self.relaxed else 0.0)
+        if g0 >= hu_[0] - _ACTIVE_TOL:
             active |= Active.CLF
-        if uk <= xl[0] + _ACTIVE_TOL:
+        if self.relaxed and rho >= self._rho_max - _ACTIVE_TOL:
+            active |= Active.RHO_MAX
+        # torque bounds, judged in u-space against the bound scale
+        tk = _ACTIVE_TOL * (1.0 + abs(uk))
+        ta = _ACTIVE_TOL * (1.0 + abs(ua))
+        if uk <= xl[0] + tk:
             active |= Active.KNEE_LOWER
-        elif uk >= xu[0] - _ACTIVE_TOL:
+        elif uk >= xu[0] - tk:
             active |= Active.KNEE_UPPER
-        if ua <= xl[1] + _ACTIVE_TOL:
+        if ua <= xl[1] + ta:
             active |= Active.ANKLE_LOWER
-        elif ua >= xu[1] - _ACTIVE_TOL:
+        elif ua >= xu[1] - ta:
             active |= Active.ANKLE_UPPER
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 

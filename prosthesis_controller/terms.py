@@ -12,6 +12,7 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 
     tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
     eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
+             (B_pk continued linearly outside tau in [0, 1], see ``_bezier_rows``)
     nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
     V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
     robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
@@ -20,10 +21,19 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
     cost   |nu(u, F*)|^2 + c_rho rho = u^T H u + 2 b^T u + c_rho rho + const,
            H = Am^T Am, b = Am^T (Lf + As F*)
 
-  and returns the QP in solver form for z = (u_1, u_2, rho): min 1/2 z^T Pq z + cq^T z,
-  Gq z <= hq, with the cost divided by s = trace(H) and the row by its norm (both only
-  condition the problem; the minimiser is unchanged).  The exact QP (no rho) is the
-  (u, u) block, output separately as P2, c2, G2 (same hq).
+  The QP handed to the solver is the same problem in whitened variables: with
+  w = Am u / s_w (s_w = |Am|_F) the Hessian is the identity, so the solver's accuracy does
+  not suffer from cond(Am)^2 (H = Am^T Am reaches cond 5e6 on the default device):
+
+    z = (w_1, w_2, rho):  min 1/2 z^T diag(2, 2, 0) z + cw^T z,
+        cw = (2 (Lf + As F*) / s_w, c_rho / s_w^2)
+        row 0 (CLF):      (s_w LGV, -gamma/eps) z <= h                (scaled to unit norm)
+        rows 1, 2:        u_min <= s_w Am^-1 w <= u_max               (each to unit norm)
+    u = Tw w,  Tw = s_w Am^-1.
+
+  For the exact feasibility test and for cross-checks the u-space form is output too:
+  min 1/2 z^T Pu z + cu^T z, Gu z <= hu with z = (u, rho), the cost divided by trace(H) and
+  the row by its norm.  The exact QP (no rho) is the (w, w) / (u, u) block.
 
 ``stance_ref(tau, rate, p)`` -- the nominal stance joint trajectory at a phase tau moving at
 ``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
@@ -102,10 +112,16 @@ class Layout:
 
 
 def _bezier_rows(alpha: ca.SX, s: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """B, dB/ds, d2B/ds2 of the rows of alpha (n, m+1) at s."""
+    """B, dB/ds, d2B/ds2 of the rows of alpha (n, m+1) at s, continued linearly outside
+    [0, 1] (C^1: B(s_c) + B'(s_c)(s - s_c), s_c = clip(s, 0, 1)); a degree-5 polynomial
+    extrapolated far outside its interval is meaningless and ill-conditions the QP."""
     d1 = bezier.derivative(alpha)
     d2 = bezier.derivative(d1)
-    return bezier.evaluate(alpha, s), bezier.evaluate(d1, s), bezier.evaluate(d2, s)
+    sc = ca.fmin(ca.fmax(s, 0), 1)
+    inside = (s >= 0) * (s <= 1)
+    dB = bezier.evaluate(d1, sc)
+    return (bezier.evaluate(alpha, sc) + dB * (s - sc), dB,
+            bezier.evaluate(d2, sc) * inside)
 
 
 def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
@@ -227,24 +243,38 @@ class ControllerTerms:
         a_F = As.T @ LGV.T  # 3
         h = -g_over_eps * V - LFV - LGV @ Lf - a_F.T @ c_box - ca.fabs(a_F).T @ r_box
         H = Am.T @ Am
-        b = Am.T @ (Lf + As @ Fstar)
-        sc = ca.trace(H) + 1e-12
-        Pq = ca.SX.zeros(3, 3)
-        Pq[0:2, 0:2] = 2 * H / sc
-        cq = ca.vertcat(2 * b / sc, c_rho / sc)
-        row = ca.horzcat(g_u, -g_over_eps)
-        nrm = ca.norm_2(row)
-        Gq, hq = row / nrm, h / nrm
-        P2, c2, G2 = Pq[0:2, 0:2], cq[0:2], Gq[0:2]
+        b0 = Lf + As @ Fstar
+        b = Am.T @ b0
+        # u-space form (tests, feasibility test)
+        sc = ca.trace(H)
+        Pu = ca.SX.zeros(3, 3)
+        Pu[0:2, 0:2] = 2 * H / sc
+        cu = ca.vertcat(2 * b / sc, c_rho / sc)
+        row_u = ca.horzcat(g_u, -g_over_eps)
+        n_u = ca.norm_2(row_u)
+        Gu, hu = row_u / n_u, h / n_u
+        # whitened form (the solver's)
+        s_w = ca.sqrt(sc)
+        det = Am[0, 0] * Am[1, 1] - Am[0, 1] * Am[1, 0]
+        Ainv = ca.vertcat(ca.horzcat(Am[1, 1], -Am[0, 1]), ca.horzcat(-Am[1, 0], Am[0, 0])) / det
+        Tw = s_w * Ainv
+        cw = ca.vertcat(2 * b0 / s_w, c_rho / sc)
+        row0 = ca.horzcat(s_w * LGV, -g_over_eps)
+        n0 = ca.norm_2(row0)
+        n1, n2 = ca.norm_2(Tw[0, :]), ca.norm_2(Tw[1, :])
+        Gw = ca.vertcat(row0 / n0, ca.horzcat(Tw[0, :] / n1, 0), ca.horzcat(Tw[1, :] / n2, 0))
+        hw = h / n0
+        bs = ca.vertcat(1 / n1, 1 / n2)
         # one number that is non-finite iff any QP datum is (NaN and inf propagate)
-        chk = ca.sum1(ca.sum2(Pq)) + ca.sum1(cq) + ca.sum2(Gq) + hq + V
+        chk = (ca.sum1(cw) + ca.sum1(ca.sum2(Gw)) + hw + ca.sum1(bs) + ca.sum1(ca.sum2(Tw))
+               + ca.sum2(Gu) + hu + V)
         clf = ca.Function(
             "clf_qp", [x, L.symbol],
-            [Pq, cq, Gq, hq, P2, c2, G2, chk, eta, tau, V, LFV, LGV, Lf, Am, As, Fstar,
-             c_box, r_box],
+            [cw, Gw, hw, bs, Tw, chk, Pu, cu, Gu, hu, eta, tau, V, LFV, LGV, Lf, Am, As,
+             Fstar, c_box, r_box],
             ["x", "p"],
-            ["Pq", "cq", "Gq", "hq", "P2", "c2", "G2", "check", "eta", "tau", "V", "LFV",
-             "LGV", "Lf", "Am", "As", "Fstar", "c", "r"])
+            ["cw", "Gw", "hw", "bs", "Tw", "check", "Pu", "cu", "Gu", "hu", "eta", "tau", "V",
+             "LFV", "LGV", "Lf", "Am", "As", "Fstar", "c", "r"])
 
         # ---- stance_ref ----------------------------------------------------------------
         R = Layout()
