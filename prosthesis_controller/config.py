@@ -36,7 +36,9 @@ class ClfConfig(_Strict):
     - ``limits_in_qp``: put the torque limits into the relaxed QP as bounds (paper: yes).
     - ``exact_limits_in_qp``: torque limits as bounds of the exact QP too (paper eq.
       robust_CLF_QP has none: off); the output is clamped to the limits either way.
-    - ``solver_eps``: piqp absolute and relative tolerances (on the normalised QP).
+    - ``solver_eps``: piqp absolute, relative and duality-gap tolerances (normalised QP).
+    - ``polish``: re-solve exactly on the active set piqp reports (accepted only if it is
+      the verified optimum), as OSQP's polishing does.
     """
 
     eps: float = Field(0.02, gt=0, lt=1)
@@ -44,12 +46,13 @@ class ClfConfig(_Strict):
     Q: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                  (0.0, 0.0, 1.0))
     R: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0))
-    rho_max: NonNegative = 0.1
+    rho_max: NonNegative = 100.0
     c_rho: NonNegative = 1.0e3
     delta_u: Positive = 0.25
     limits_in_qp: bool = True
     exact_limits_in_qp: bool = False
     solver_eps: Positive = 1e-10
+    polish: bool = True
 
     @model_validator(mode="after")
     def _shapes(self) -> ClfConfig:

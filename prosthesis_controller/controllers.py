@@ -38,12 +38,18 @@ from prosthesis_controller.interface import (
     Diagnostics,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
+from prosthesis_controller.polish import polish
 from prosthesis_controller.terms import ControllerTerms
 
 PITCH_DEGREE = 5
 _INF = math.inf
 _SOLVED = piqp.PIQP_SOLVED
-_ACTIVE_TOL = 1e-6
+_DUAL_TOL = 1e-7  # a multiplier above this (normalised problem) marks an active constraint
+_SLACK_TOL = 1e-4  # second polishing guess: constraints this close (relative) are active
+_ACTIVE_CLF, _ACTIVE_RHO = int(Active.CLF), int(Active.RHO_MAX)
+_ACTIVE_KL, _ACTIVE_KU = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
+_ACTIVE_AL, _ACTIVE_AU = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
+_ACTIVE_CLAMP = int(Active.OUTPUT_CLAMP)
 
 
 def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITCH_DEGREE
@@ -128,6 +134,16 @@ def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
     if s >= 1.0:
         return 1.0, 0.0
     return s, 1.0 / T
+
+
+def _near(v: float, i: int, xl: np.ndarray, xu: np.ndarray, fix: int) -> int:
+    """-1 / +1 if v is within the slack tolerance of its lower / upper bound, else ``fix``."""
+    lo, hi = xl[i], xu[i]
+    if v - lo < _SLACK_TOL * (1.0 + abs(lo)):
+        return -1
+    if hi - v < _SLACK_TOL * (1.0 + abs(hi)):
+        return 1
+    return fix
 
 
 def _toward(u: float, target: float, step: float) -> float:
@@ -285,11 +301,11 @@ class BaseController:
         c0 = lk if u0 > lk else -lk if u0 < -lk else u0
         c1 = la if u1 > la else -la if u1 < -la else u1
         if c0 != u0 or c1 != u1:
-            active |= Active.OUTPUT_CLAMP
+            active |= _ACTIVE_CLAMP
         self._u0, self._u1 = c0, c1
         return ControlOutput(
             np.array((c0, c1)),
-            Diagnostics(tau, V, rho, status, int(active), self.fallback_count, int(fault),
+            Diagnostics(tau, V, rho, status, active, self.fallback_count, int(fault),
                         self._domain, mode))
 
 
@@ -330,8 +346,9 @@ class PassiveController(BaseController):
 
 class ClfQpController(BaseController):
     """Robust CLF-QP, relaxed and smoothed (paper eq. robust_CLF_QP_relax) or exact (eq.
-    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick, in the whitened
-    variables of :mod:`prosthesis_controller.terms`)."""
+    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick) over
+    z = (u_k, u_a[, rho]) with the torque and rate limits as box bounds, then polished
+    (:mod:`prosthesis_controller.polish`)."""
 
     name = "clfqp"
 
@@ -342,47 +359,42 @@ class ClfQpController(BaseController):
         with_limits = c.limits_in_qp if relaxed else c.exact_limits_in_qp
         self._qlim = (lk, la) if with_limits else (_INF, _INF)
         self._du = float(c.delta_u) if relaxed else _INF
-        # torque rows are needed unless both bounds are infinite
-        self._rows = 3 if (math.isfinite(self._du) or with_limits) else 1
         n = 3 if relaxed else 2
         self._n = n
         self._rho_max = float(c.rho_max)
-        self._xl = np.zeros(n)  # u-space bounds (u_k, u_a[, rho]) of the current tick
-        self._xu = np.zeros(n)
+        self._xl = np.full(n, -_INF)  # bounds of z for the current tick
+        self._xu = np.full(n, _INF)
         if relaxed:
-            self._xu[2] = self._rho_max
-        m = self._rows
-        self._hl = np.full(m, -_INF)
-        self._hu = np.zeros(m)
-        self._zl = np.full(n, -_INF)  # solver-variable bounds: only rho is boxed
-        self._zu = np.full(n, _INF)
-        if relaxed:
-            self._zl[2], self._zu[2] = 0.0, self._rho_max
-        self._G = np.zeros((m, n), order="F")
+            self._xl[2], self._xu[2] = 0.0, self._rho_max
         self._solver = piqp.DenseSolver()
         st = self._solver.settings
         st.eps_abs = st.eps_rel = float(c.solver_eps)
+        st.eps_duality_gap_abs = st.eps_duality_gap_rel = float(c.solver_eps)
         st.verbose = False
-        P = np.zeros((n, n), order="F")
-        P[0, 0] = P[1, 1] = 2.0
-        self._G[:, :2] = np.eye(m, 2)
-        self._solver.setup(P=P, c=np.zeros(n), G=self._G, h_l=self._hl, h_u=np.ones(m),
-                           x_l=self._zl, x_u=self._zu)
+        # (u, u) block and row of the exact QP: contiguous copies refreshed every tick
+        self._P2 = np.zeros((2, 2), order="F")
+        self._G2 = np.zeros((1, 2), order="F")
+        xl0, xu0 = self._xl.copy(), self._xu.copy()
+        xl0[:2], xu0[:2] = -1.0, 1.0
+        self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
+                           G=np.asfortranarray(np.ones((1, n))), h_l=np.array([-_INF]),
+                           h_u=np.ones(1), x_l=xl0, x_u=xu0)
         self.name = "clfqp" if relaxed else "clfqp-exact"
         self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
+        self._polish = bool(c.polish)
         super().__init__(ctx)
-        o = dict(zip(self._clf.function.name_out(), self._clf.outputs, strict=True))
-        self._o_cw, self._o_Gw, self._o_hw = o["cw"], o["Gw"], o["hw"]
-        self._o_bs, self._o_Tw = o["bs"], o["Tw"]
+        o = self._o
+        self._o_Pu, self._o_cu = o["Pu"], o["cu"]
+        self._c2 = o["cu"][:2]  # a view: contiguous
 
     def qp_data(self) -> tuple[np.ndarray, ...]:
-        """The u-space QP of the last stance tick, z = (u_k, u_a[, rho]):
+        """The QP of the last stance tick as the solver got it, z = (u_k, u_a[, rho]):
         (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
-        (copies; for cross-checks with other solvers)."""
-        o = self._o
+        (copies; for cross-checks and benchmarks)."""
         n = self._n
-        return (o["Pu"][:n, :n].copy(), o["cu"][:n].copy(), o["Gu"][:, :n].copy(),
-                o["hu"].copy(), self._xl.copy(), self._xu.copy())
+        return (np.asfortranarray(self._o_Pu[:n, :n]), self._o_cu[:n].copy(),
+                np.asfortranarray(self._o_Gu[:, :n]), self._o_hu.copy(), self._xl.copy(),
+                self._xu.copy())
 
     def _bounds(self) -> None:
         du = self._du
@@ -404,60 +416,67 @@ class ClfQpController(BaseController):
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
         self._bounds()
         xl, xu = self._xl, self._xu
-        # exact feasibility test of the CLF row over the box (u-space): min_box G z <= h
-        Gu, hu = self._o_Gu, self._o_hu[0]
+        n = self._n
+        # exact feasibility test of the CLF row over the box: min_box G z <= h
+        Gu, hu = self._o_Gu, self._o_hu
+        g = Gu[0]
         lo = 0.0
-        for i in range(self._n):
-            gi = Gu[0, i]
+        for i in range(n):
+            gi = g[i]
             if gi > 0.0:
                 lo += gi * xl[i]
             elif gi < 0.0:
                 lo += gi * xu[i]
-        if lo > hu + 1e-9:
+        h = float(hu[0])
+        if lo > h + 1e-9:
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_INFEASIBLE, 0, MODE_FALLBACK
-        n = self._n
-        G, Gw = self._G, self._o_Gw
-        hl, hu_ = self._hl, self._hu
-        G[0, :] = Gw[0, :n]
-        hu_[0] = self._o_hw[0]
-        if self._rows == 3:
-            G[1:3, :] = Gw[1:3, :n]
-            s1, s2 = self._o_bs
-            hl[1], hu_[1] = xl[0] * s1, xu[0] * s1
-            hl[2], hu_[2] = xl[1] * s2, xu[1] * s2
         s = self._solver
-        s.update(c=self._o_cw[:n] if n == 2 else self._o_cw, G=G, h_l=hl, h_u=hu_)
+        P = self._o_Pu
+        if n == 3:
+            s.update(P=P, c=self._o_cu, G=Gu, h_u=hu, x_l=xl, x_u=xu)
+        else:
+            P2, G2 = self._P2, self._G2
+            P2[0, 0], P2[0, 1], P2[1, 0], P2[1, 1] = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+            G2[0, 0], G2[0, 1] = g[0], g[1]
+            s.update(P=P2, c=self._c2, G=G2, h_u=hu, x_l=xl, x_u=xu)
         if s.solve() != _SOLVED:
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
-        z = s.result.x
-        T = self._o_Tw
-        w0, w1 = float(z[0]), float(z[1])
-        uk = T[0, 0] * w0 + T[0, 1] * w1
-        ua = T[1, 0] * w0 + T[1, 1] * w1
+        res = s.result
+        z = res.x
+        uk, ua = float(z[0]), float(z[1])
         rho = float(z[2]) if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+        # active set from the solver's multipliers
+        d = _DUAL_TOL
+        row = res.z_u[0] > d
+        zbl, zbu = res.z_bl, res.z_bu
+        fk = -1 if zbl[0] > d else 1 if zbu[0] > d else 0
+        fa = -1 if zbl[1] > d else 1 if zbu[1] > d else 0
+        fr = (-1 if zbl[2] > d else 1 if zbu[2] > d else 0) if self.relaxed else 0
+        if self._polish:
+            zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+            if zp is None:  # weakly active constraints (tiny multipliers): guess by slack
+                fk, fa, fr, row = _near(uk, 0, xl, xu, fk), _near(ua, 1, xl, xu, fa), \
+                    (_near(rho, 2, xl, xu, fr) if self.relaxed else 0), \
+                    row or h - (g[0] * uk + g[1] * ua + (g[2] * rho if n == 3 else 0.0)) \
+                    < _SLACK_TOL * (1.0 + abs(h))
+                zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+            if zp is not None:
+                uk, ua = zp[0], zp[1]
+                if self.relaxed:
+                    rho = zp[2]
+        active = _ACTIVE_CLF if row else 0
+        if fk:
+            active |= _ACTIVE_KL if fk < 0 else _ACTIVE_KU
+        if fa:
+            active |= _ACTIVE_AL if fa < 0 else _ACTIVE_AU
+        if fr > 0:
+            active |= _ACTIVE_RHO
         self.qp_solution = np.array((uk, ua, rho)[:n])
-        active = 0
-        g0 = G[0, 0] * w0 + G[0, 1] * w1 + (G[0, 2] * rho if self.relaxed else 0.0)
-        if g0 >= hu_[0] - _ACTIVE_TOL:
-            active |= Active.CLF
-        if self.relaxed and rho >= self._rho_max - _ACTIVE_TOL:
-            active |= Active.RHO_MAX
-        # torque bounds, judged in u-space against the bound scale
-        tk = _ACTIVE_TOL * (1.0 + abs(uk))
-        ta = _ACTIVE_TOL * (1.0 + abs(ua))
-        if uk <= xl[0] + tk:
-            active |= Active.KNEE_LOWER
-        elif uk >= xu[0] - tk:
-            active |= Active.KNEE_UPPER
-        if ua <= xl[1] + ta:
-            active |= Active.ANKLE_LOWER
-        elif ua >= xu[1] - ta:
-            active |= Active.ANKLE_UPPER
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 
 

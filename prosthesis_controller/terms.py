@@ -21,19 +21,9 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
     cost   |nu(u, F*)|^2 + c_rho rho = u^T H u + 2 b^T u + c_rho rho + const,
            H = Am^T Am, b = Am^T (Lf + As F*)
 
-  The QP handed to the solver is the same problem in whitened variables: with
-  w = Am u / s_w (s_w = |Am|_F) the Hessian is the identity, so the solver's accuracy does
-  not suffer from cond(Am)^2 (H = Am^T Am reaches cond 5e6 on the default device):
-
-    z = (w_1, w_2, rho):  min 1/2 z^T diag(2, 2, 0) z + cw^T z,
-        cw = (2 (Lf + As F*) / s_w, c_rho / s_w^2)
-        row 0 (CLF):      (s_w LGV, -gamma/eps) z <= h                (scaled to unit norm)
-        rows 1, 2:        u_min <= s_w Am^-1 w <= u_max               (each to unit norm)
-    u = Tw w,  Tw = s_w Am^-1.
-
-  For the exact feasibility test and for cross-checks the u-space form is output too:
-  min 1/2 z^T Pu z + cu^T z, Gu z <= hu with z = (u, rho), the cost divided by trace(H) and
-  the row by its norm.  The exact QP (no rho) is the (w, w) / (u, u) block.
+  and returns it in solver form for z = (u_k, u_a, rho): min 1/2 z^T Pu z + cu^T z,
+  Gu z <= hu, with the cost divided by trace(H) and the row by its norm (both only condition
+  the problem; the minimiser is unchanged).  The exact QP (no rho) is the (u, u) block.
 
 ``stance_ref(tau, rate, p)`` -- the nominal stance joint trajectory at a phase tau moving at
 ``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
@@ -245,7 +235,6 @@ class ControllerTerms:
         H = Am.T @ Am
         b0 = Lf + As @ Fstar
         b = Am.T @ b0
-        # u-space form (tests, feasibility test)
         sc = ca.trace(H)
         Pu = ca.SX.zeros(3, 3)
         Pu[0:2, 0:2] = 2 * H / sc
@@ -253,28 +242,14 @@ class ControllerTerms:
         row_u = ca.horzcat(g_u, -g_over_eps)
         n_u = ca.norm_2(row_u)
         Gu, hu = row_u / n_u, h / n_u
-        # whitened form (the solver's)
-        s_w = ca.sqrt(sc)
-        det = Am[0, 0] * Am[1, 1] - Am[0, 1] * Am[1, 0]
-        Ainv = ca.vertcat(ca.horzcat(Am[1, 1], -Am[0, 1]), ca.horzcat(-Am[1, 0], Am[0, 0])) / det
-        Tw = s_w * Ainv
-        cw = ca.vertcat(2 * b0 / s_w, c_rho / sc)
-        row0 = ca.horzcat(s_w * LGV, -g_over_eps)
-        n0 = ca.norm_2(row0)
-        n1, n2 = ca.norm_2(Tw[0, :]), ca.norm_2(Tw[1, :])
-        Gw = ca.vertcat(row0 / n0, ca.horzcat(Tw[0, :] / n1, 0), ca.horzcat(Tw[1, :] / n2, 0))
-        hw = h / n0
-        bs = ca.vertcat(1 / n1, 1 / n2)
         # one number that is non-finite iff any QP datum is (NaN and inf propagate)
-        chk = (ca.sum1(cw) + ca.sum1(ca.sum2(Gw)) + hw + ca.sum1(bs) + ca.sum1(ca.sum2(Tw))
-               + ca.sum2(Gu) + hu + V)
+        chk = ca.sum1(ca.sum2(Pu)) + ca.sum1(cu) + ca.sum2(Gu) + hu + V
         clf = ca.Function(
             "clf_qp", [x, L.symbol],
-            [cw, Gw, hw, bs, Tw, chk, Pu, cu, Gu, hu, eta, tau, V, LFV, LGV, Lf, Am, As,
-             Fstar, c_box, r_box],
+            [Pu, cu, Gu, hu, chk, eta, tau, V, LFV, LGV, Lf, Am, As, Fstar, c_box, r_box],
             ["x", "p"],
-            ["cw", "Gw", "hw", "bs", "Tw", "check", "Pu", "cu", "Gu", "hu", "eta", "tau", "V",
-             "LFV", "LGV", "Lf", "Am", "As", "Fstar", "c", "r"])
+            ["Pu", "cu", "Gu", "hu", "check", "eta", "tau", "V", "LFV", "LGV", "Lf", "Am", "As",
+             "Fstar", "c", "r"])
 
         # ---- stance_ref ----------------------------------------------------------------
         R = Layout()
