@@ -277,6 +277,7 @@ class BaseController:
         if fault:
             step = self._fb_step
             u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
+            self.fallback_count += 1
             tau = V = rho = 0.0
             status, mode = QP_NOT_RUN, MODE_FAULT
         else:

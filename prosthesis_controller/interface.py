@@ -57,8 +57,10 @@ class Diagnostics:
     tau: phase (state-based in ps, the time-based estimate in pns); V: CLF value V_eps
     (evaluated for every controller in ps, 0 in pns); rho: relaxation (0 unless relaxed
     CLF-QP); qp_status, active: see the constants and :class:`Active`; fallback_count:
-    fallbacks since ``reset``; fault: :class:`~prosthesis_controller.measurement.Fault` bits of
-    this tick's measurement; domain: "ps" or "pns"; mode: see the MODE_* constants."""
+    ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
+    output or a faulty measurement); fault: the
+    :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
+    domain: "ps" or "pns"; mode: see the MODE_* constants."""
 
     tau: float
     V: float
