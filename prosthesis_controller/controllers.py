@@ -78,8 +78,8 @@ class ControllerContext:
     """Everything the controllers share, built once: subsystem, compiled terms, the RES-CLF,
     packed parameter vectors, limits and nominal durations.
 
-    Raises ``ValueError`` for gamma > c3, a tube made for another gait (``strict_tube``),
-    or non-positive durations that cannot be recovered from the gait."""
+    Raises ``ValueError`` for gamma > c3 or a tube made for another gait (``strict_tube``).
+    A gait without durations gets T = (p_max - p_min) / v_hip per domain."""
 
     def __init__(self, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
                  config: ControllerConfig | None = None, *,

@@ -52,7 +52,10 @@ def validate(m: object, t_prev: float, knee_range: tuple[float, float],
         qk, qa = float(m.knee_angle), float(m.ankle_angle)  # type: ignore[attr-defined]
         vk, va = float(m.knee_vel), float(m.ankle_vel)  # type: ignore[attr-defined]
         load = float(m.foot_load)  # type: ignore[attr-defined]
+        contact = m.contact  # type: ignore[attr-defined]
     except (AttributeError, TypeError, ValueError):
+        return Fault.TYPE
+    if contact not in (True, False):  # bool, 0/1, numpy bools; not "yes", NaN or 0.5
         return Fault.TYPE
     f = Fault.NONE
     isf = math.isfinite

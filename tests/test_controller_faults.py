@@ -61,6 +61,7 @@ BAD = [
                      foot_load=600.0, contact=True), Fault.TYPE),
     (SimpleNamespace(t=0.01, knee_angle="0.1x", ankle_angle=0.1, knee_vel=0.0, ankle_vel=0.0,
                      foot_load=600.0, contact=True), Fault.TYPE),
+    (ProsthesisMeasurement(0.01, 0.1, 0.1, 0.0, 0.0, 600.0, "yes"), Fault.TYPE),  # type: ignore[arg-type]
     (None, Fault.TYPE),
     ({"t": 0.01}, Fault.TYPE),
 ]
