@@ -124,8 +124,7 @@ def main() -> None:
     for m in meas:
         out = rec.tick(m)
         if out.diagnostics.qp_status in ("solved", "failed"):
-            qps.append(tuple(np.copy(x) if i not in (0, 2) else np.asfortranarray(x)
-                             for i, x in enumerate(rec.qp_data())))
+            qps.append(rec.qp_data())  # copies, Fortran-ordered matrices
 
     if a.no_gc:
         gc.disable()

@@ -393,8 +393,8 @@ class ClfQpController(BaseController):
         (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
         (copies; for cross-checks and benchmarks)."""
         n = self._n
-        return (np.asfortranarray(self._o_Pu[:n, :n]), self._o_cu[:n].copy(),
-                np.asfortranarray(self._o_Gu[:, :n]), self._o_hu.copy(), self._xl.copy(),
+        return (np.array(self._o_Pu[:n, :n], order="F"), self._o_cu[:n].copy(),
+                np.array(self._o_Gu[:, :n], order="F"), self._o_hu.copy(), self._xl.copy(),
                 self._xu.copy())
 
     def _bounds(self) -> None:

@@ -104,10 +104,11 @@ def polish(P, c, g_row, h: float, xl, xu, relaxed: bool,
     # bound multipliers from stationarity: grad + lam g = mu_lower - mu_upper
     gk = p00 * u0 + p01 * u1 + c[0] + lam * g0
     ga = p01 * u0 + p11 * u1 + c[1] + lam * g1
-    for fix, grad in ((fix_k, gk), (fix_a, ga)):
-        if (fix < 0 and grad < -_TOL) or (fix > 0 and grad > _TOL):
+    # (a variable whose two bounds coincide is fixed either way: no sign condition)
+    for i, fix, grad in ((0, fix_k, gk), (1, fix_a, ga)):
+        if xl[i] < xu[i] and ((fix < 0 and grad < -_TOL) or (fix > 0 and grad > _TOL)):
             return None
-    if relaxed and fix_r:
+    if relaxed and fix_r and xl[2] < xu[2]:
         grad = c[2] - lam * k
         if (fix_r < 0 and grad < -_TOL) or (fix_r > 0 and grad > _TOL):
             return None
