@@ -1,4 +1,53 @@
-"""Prosthesis controllers (robust CLF-QP exact and relaxed, PD, robust-passive, swing),
-the controller node process and its CAN port. Depends only on :mod:`hp_model` and
-:mod:`bus_schemas`.
+"""Prosthesis controllers (robust CLF-QP exact and relaxed, PD, robust-passive, swing).
+Depends only on :mod:`hp_model` (and numpy, scipy, piqp, casadi).  See ``README.md`` here.
 """
+
+from prosthesis_controller.config import (
+    ClfConfig,
+    ControllerConfig,
+    DomainConfig,
+    PassiveConfig,
+    PdConfig,
+    SafetyConfig,
+    SwingConfig,
+)
+from prosthesis_controller.controllers import (
+    CONTROLLERS,
+    BaseController,
+    ClfQpController,
+    ControllerContext,
+    PassiveController,
+    PDController,
+    make_controller,
+)
+from prosthesis_controller.interface import (
+    Active,
+    Controller,
+    ControlOutput,
+    Diagnostics,
+)
+from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
+
+__all__ = [
+    "CONTROLLERS",
+    "Active",
+    "BaseController",
+    "ClfConfig",
+    "ClfQpController",
+    "ControlOutput",
+    "Controller",
+    "ControllerConfig",
+    "ControllerContext",
+    "Diagnostics",
+    "DomainConfig",
+    "Fault",
+    "PDController",
+    "PassiveConfig",
+    "PassiveController",
+    "PdConfig",
+    "ProsthesisMeasurement",
+    "SafetyConfig",
+    "SwingConfig",
+    "make_controller",
+    "validate",
+]

@@ -1,0 +1,169 @@
+"""Benchmark: per-tick cost of the prosthesis controllers on a real stance trajectory.
+
+10,000 consecutive ticks (1 kHz) along the gait's prosthesis-stance collocation trajectory
+(th_pk, th_pa and their rates interpolated at 1 kHz, small noise added, repeated with time
+running on), for the relaxed robust CLF-QP, the exact one, PD and robust-passive; then the
+bare piqp update + solve of the very QPs the relaxed controller solved, in the same run,
+and the ratio of the relaxed tick to the bare solve.  Prints a markdown table.
+
+The machine is shared and noisy: quote ratios; rerun for absolutes.
+
+Usage: python benchmarks/bench_controllers.py [--gait gait.json] [--ticks 10000]
+                                               [--repeats 3] [--json out.json]
+Without --gait the test template gait is optimized first (20-50 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import platform
+import time
+from collections import Counter
+
+import numpy as np
+import piqp
+
+import hp_model
+from hp_model.force_tube import ForceTube
+from hp_model.gait_artifact import Gait, load_gait
+from prosthesis_controller import (
+    CONTROLLERS,
+    ControllerContext,
+    ProsthesisMeasurement,
+    make_controller,
+)
+
+HALF = (40.0, 60.0, 8.0)  # tube half-widths, N, N, N m (as in the tests)
+NOISE = (1e-4, 1e-4, 1e-2, 1e-2)  # rad, rad, rad/s, rad/s
+
+
+def template_gait(model) -> Gait:
+    from characterization.gait_design import build_gait
+    from characterization.phzd import PHZDOptions, optimize_gait
+    from tests.gait_template import template_targets
+
+    opt = PHZDOptions(nodes=11)
+    targets = template_targets()
+    result = optimize_gait(model, targets, opt)
+    if not result.success:
+        raise SystemExit(f"template gait did not converge: {result.status}")
+    return build_gait(model, result, targets, opt)
+
+
+def stance_measurements(model, gait: Gait, ticks: int, seed: int = 1):
+    tr = gait.trajectory["ps"]
+    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
+    t_end = float(tr["t"][-1])
+    t_grid = np.arange(0.0, t_end, 1e-3)
+    X = np.array([np.interp(t_grid, tr["t"], tr["q"][j]) for j in i]
+                 + [np.interp(t_grid, tr["t"], tr["qd"][j]) for j in i]).T
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(ticks):
+        x = X[k % len(X)] + rng.normal(size=4) * np.array(NOISE)
+        out.append(ProsthesisMeasurement(k * 1e-3, *map(float, x), 600.0, True))
+    return out, tr["u"][4:, 0]
+
+
+def time_ticks(ctl, meas, u0) -> tuple[np.ndarray, Counter]:
+    ctl.reset(u0)
+    ts = np.empty(len(meas))
+    modes: Counter = Counter()
+    clock = time.perf_counter_ns
+    for k, m in enumerate(meas):
+        t0 = clock()
+        out = ctl.tick(m)
+        ts[k] = clock() - t0
+        modes[out.diagnostics.mode] += 1
+    return ts / 1e3, modes
+
+
+def bare_piqp(ctl, qps) -> np.ndarray:
+    """update + solve of recorded QPs on a fresh solver with the controller's settings."""
+    s = piqp.DenseSolver()
+    st, cs = s.settings, ctl._solver.settings
+    for k in ("eps_abs", "eps_rel", "eps_duality_gap_abs", "eps_duality_gap_rel"):
+        setattr(st, k, getattr(cs, k))
+    P, c, G, h, xl, xu = qps[0]
+    s.setup(P=P, c=c, G=G, h_l=np.array([-np.inf]), h_u=h, x_l=xl, x_u=xu)
+    ts = np.empty(len(qps))
+    clock = time.perf_counter_ns
+    for k, (P, c, G, h, xl, xu) in enumerate(qps):
+        t0 = clock()
+        s.update(P=P, c=c, G=G, h_u=h, x_l=xl, x_u=xu)
+        s.solve()
+        _ = s.result.x
+        ts[k] = clock() - t0
+    return ts / 1e3
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gait", help="gait artifact (default: optimize the test template)")
+    ap.add_argument("--ticks", type=int, default=10_000)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--no-gc", action="store_true", help="disable the garbage collector")
+    ap.add_argument("--json", help="also write the figures to this JSON file")
+    a = ap.parse_args()
+
+    model = hp_model.load_model()
+    gait = load_gait(a.gait, model.parameter_hash()) if a.gait else template_gait(model)
+    h = np.array(HALF)[:, None] * np.ones((1, 2))
+    tube = ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
+                     nominal=gait.socket_nominal, lower=-h, upper=h)
+    ctx = ControllerContext(gait, tube, model)
+    meas, u0 = stance_measurements(model, gait, a.ticks)
+    ctls = {n: make_controller(n, gait, tube, model, context=ctx) for n in CONTROLLERS}
+
+    # the QPs the relaxed controller solves along this run (recorded in an untimed pass)
+    rec = ctls["clfqp"]
+    rec.reset(u0)
+    qps = []
+    for m in meas:
+        out = rec.tick(m)
+        if out.diagnostics.qp_status in ("solved", "failed"):
+            qps.append(rec.qp_data())  # copies, Fortran-ordered matrices
+
+    if a.no_gc:
+        gc.disable()
+    times: dict[str, list[np.ndarray]] = {n: [] for n in [*CONTROLLERS, "piqp"]}
+    modes: dict[str, Counter] = {}
+    for _ in range(a.repeats):
+        for n, c in ctls.items():
+            ts, md = time_ticks(c, meas, u0)
+            times[n].append(ts)
+            modes[n] = md
+        times["piqp"].append(bare_piqp(rec, qps))
+    gc.enable()
+
+    rows = {}
+    for n, lst in times.items():
+        ts = np.concatenate(lst)
+        rows[n] = {"median_us": float(np.median(ts)), "p99_us": float(np.percentile(ts, 99)),
+                   "n": int(ts.size)}
+    ratio = rows["clfqp"]["median_us"] / rows["piqp"]["median_us"]
+
+    print(f"\n{a.ticks} consecutive 1 kHz ticks along the ps trajectory x {a.repeats} "
+          f"repeats; tube +-{HALF}; {platform.processor() or platform.machine()}\n")
+    print("| controller | median per tick (us) | p99 (us) | modes (last repeat) |")
+    print("|---|---:|---:|---|")
+    labels = {"clfqp": "robust CLF-QP, relaxed", "clfqp-exact": "robust CLF-QP, exact",
+              "pd": "PD", "passive": "robust-passive",
+              "piqp": "bare piqp update + solve (relaxed QPs)"}
+    for n in [*CONTROLLERS, "piqp"]:
+        r = rows[n]
+        md = ", ".join(f"{k} {v}" for k, v in sorted(modes.get(n, {}).items())) or "-"
+        print(f"| {labels[n]} | {r['median_us']:.1f} | {r['p99_us']:.1f} | {md} |")
+    print(f"\nrelaxed tick / bare solve (medians): {ratio:.2f}x "
+          f"(targets: median <= 40 us, p99 <= 150 us, ratio <= 2.5x)")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"rows": rows, "ratio": ratio, "ticks": a.ticks,
+                       "repeats": a.repeats, "modes": {k: dict(v) for k, v in modes.items()}},
+                      f, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,143 @@
+"""Controller configuration: every gain and bound, with defaults that work on the default
+subject and device (``hp_model.load_model()``).
+
+Units: torques are MOTOR torques in N m (the model's ``u_p``; joint torque = gear ratio x
+motor torque) unless a field says "joint"; angles rad, rates rad/s, forces N, times s.
+All models are frozen pydantic models that refuse unknown fields, so a typo in a config
+file is an error, never a silently ignored option.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+Pair = tuple[float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ClfConfig(_Strict):
+    """Robust CLF-QP (paper eqs. robust_CLF_QP and robust_CLF_QP_relax).
+
+    - ``eps``: RES-CLF epsilon, 0 < eps < 1; V_eps = eta^T I_eps P I_eps eta with
+      I_eps = diag(1, 1/eps, 1) and the CLF condition dV <= -(gamma/eps) V.
+    - ``gamma``: decay constant, must be <= c3 = lmin(Q)/lmax(P) (checked at construction).
+    - ``Q`` (3x3), ``R`` (2x2): CARE weights for the output dynamics (F, G).
+    - ``rho_max``, ``c_rho``: relaxation bound (units of V, dimensionless) and its linear
+      cost weight (units of the cost |nu|^2 per unit of rho).  Only the relaxed variant.
+    - ``delta_u``: rate bound |u - u_prev| per tick (motor N m), relaxed variant only.
+    - ``limits_in_qp``: put the torque limits into the relaxed QP as bounds (paper: yes).
+    - ``exact_limits_in_qp``: torque limits as bounds of the exact QP too (paper eq.
+      robust_CLF_QP has none: off); the output is clamped to the limits either way.
+    - ``solver_eps``: piqp absolute, relative and duality-gap tolerances (normalised QP).
+    - ``polish``: re-solve exactly on the active set piqp reports (accepted only if it is
+      the verified optimum), as OSQP's polishing does.
+    """
+
+    eps: float = Field(0.02, gt=0, lt=1)
+    gamma: Positive = 0.3
+    Q: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
+                                                 (0.0, 0.0, 1.0))
+    R: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0))
+    rho_max: NonNegative = 100.0
+    c_rho: NonNegative = 1.0e3
+    delta_u: Positive = 0.25
+    limits_in_qp: bool = True
+    exact_limits_in_qp: bool = False
+    solver_eps: Positive = 1e-10
+    polish: bool = True
+
+    @model_validator(mode="after")
+    def _shapes(self) -> ClfConfig:
+        Q, R = np.array(self.Q, dtype=float), np.array(self.R, dtype=float)
+        if Q.shape != (3, 3) or R.shape != (2, 2):
+            raise ValueError(f"Q must be 3x3 and R 2x2, got {Q.shape} and {R.shape}")
+        for name, M in (("Q", Q), ("R", R)):
+            if not np.allclose(M, M.T) or np.linalg.eigvalsh(M).min() <= 0:
+                raise ValueError(f"{name} must be symmetric positive definite")
+        return self
+
+
+class PdConfig(_Strict):
+    """Joint PD on the nominal prosthesis trajectory at the time-based stance phase
+    (JOINT-side gains, N m/rad and N m s/rad; no model information, as the paper's PD)."""
+
+    kp: Pair = (1500.0, 1500.0)
+    kd: Pair = (30.0, 20.0)
+
+
+class PassiveConfig(_Strict):
+    """Spong's robust passivity-based law (REFERENCE.md Sec. 2), JOINT-side gains.
+
+    ``lam``: Lambda (1/s) in e_dot + Lambda e; ``k``: K (N m s/rad); ``rho_theta``: bound
+    on the parameter error |theta - theta0| (SI units of the inertial parameters
+    (m, m c_x, m c_z, I_joint) per moving link); ``boundary``: boundary-layer width of
+    |Y^T r| below which the robust term is linear (avoids chattering)."""
+
+    lam: Pair = (30.0, 30.0)
+    k: Pair = (40.0, 25.0)
+    rho_theta: NonNegative = 0.2
+    boundary: Positive = 0.5
+
+
+class SwingConfig(_Strict):
+    """Shared swing (pns) controller: PD + gravity feedforward on the pns Bezier rows of
+    th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains."""
+
+    kp: Pair = (200.0, 50.0)
+    kd: Pair = (8.0, 0.8)
+    gravity: bool = True
+
+
+class DomainConfig(_Strict):
+    """Domain detection with hysteresis from the foot-load cell and the contact switch.
+
+    Stance (ps) starts when ``contact`` and load >= ``load_on``; swing (pns) starts when
+    not ``contact`` or load <= ``load_off``; no switch within ``min_dwell`` of the last.
+    ``initial``: the domain assumed after ``reset()``."""
+
+    load_on: Positive = 150.0
+    load_off: NonNegative = 40.0
+    min_dwell: NonNegative = 0.08
+    initial: str = Field("ps", pattern="^(ps|pns)$")
+
+    @model_validator(mode="after")
+    def _hysteresis(self) -> DomainConfig:
+        if not self.load_on > self.load_off:
+            raise ValueError("load_on must exceed load_off (hysteresis)")
+        return self
+
+
+class SafetyConfig(_Strict):
+    """Measurement validation and output limits.
+
+    ``torque_limits``: motor N m (knee, ankle); ``None`` takes the device's
+    (``model.torque_limits[4:]``).  ``fallback_rate``: the per-tick step of every fallback
+    (motor N m).  A measurement with a non-finite field, an angle outside ``knee_range`` /
+    ``ankle_range``, a speed above ``max_speed``, a load outside ``load_range`` (a small
+    negative reading is load-cell offset) or a time that does not increase is a fault."""
+
+    torque_limits: Pair | None = None
+    fallback_rate: Positive = 0.25
+    knee_range: Pair = (-0.35, 2.2)
+    ankle_range: Pair = (-0.9, 0.9)
+    max_speed: Positive = 40.0
+    load_range: Pair = (-100.0, 5000.0)
+
+
+class ControllerConfig(_Strict):
+    """All settings of every controller; each controller reads the parts it uses."""
+
+    clf: ClfConfig = ClfConfig()
+    pd: PdConfig = PdConfig()
+    passive: PassiveConfig = PassiveConfig()
+    swing: SwingConfig = SwingConfig()
+    domain: DomainConfig = DomainConfig()
+    safety: SafetyConfig = SafetyConfig()

@@ -1,0 +1,518 @@
+"""The prosthesis controllers: robust CLF-QP (relaxed and exact), joint PD, robust-passive,
+and the shared swing controller.  See ``README.md`` in this package for the laws, the
+phase conventions and the fallbacks.
+
+Per tick every controller: validates the measurement (a fault -> the previous torque
+rate-limited toward zero), updates the domain (hysteresis on contact and foot load, minimum
+dwell), runs its stance law in ``ps`` or the shared swing law in ``pns``, and clamps the
+torque to the motor limits.  Model terms come from one generated-C call per tick.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import piqp
+
+from hp_model import bezier
+from hp_model.force_tube import ForceTube
+from hp_model.gait_artifact import Gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import Y2_COORDS
+from hp_model.prosthesis import ProsthesisSubsystem
+from prosthesis_controller.clf import ResClf, res_clf
+from prosthesis_controller.config import ControllerConfig
+from prosthesis_controller.interface import (
+    MODE_FALLBACK,
+    MODE_FAULT,
+    MODE_STANCE,
+    MODE_SWING,
+    QP_FAILED,
+    QP_INFEASIBLE,
+    QP_NONFINITE,
+    QP_NOT_RUN,
+    QP_SOLVED,
+    Active,
+    ControlOutput,
+    Diagnostics,
+)
+from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
+from prosthesis_controller.polish import polish
+from prosthesis_controller.terms import ControllerTerms
+
+PITCH_DEGREE = 5
+_INF = math.inf
+_SOLVED = piqp.PIQP_SOLVED
+_DUAL_TOL = 1e-7  # a multiplier above this (normalised problem) marks an active constraint
+_SLACK_TOL = 1e-4  # second polishing guess: constraints this close (relative) are active
+_ACTIVE_CLF, _ACTIVE_RHO = int(Active.CLF), int(Active.RHO_MAX)
+_ACTIVE_KL, _ACTIVE_KU = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
+_ACTIVE_AL, _ACTIVE_AU = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
+_ACTIVE_CLAMP = int(Active.OUTPUT_CLAMP)
+
+
+def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITCH_DEGREE
+                     ) -> np.ndarray:
+    """Bezier coefficients (1, degree+1) of the socket (prosthesis top link) pitch over the
+    pns phase t / T_pns, fitted to the gait's pns collocation trajectory; zeros (upright)
+    when the gait carries no trajectory."""
+    tr = gait.trajectory.get("pns") if gait.trajectory else None
+    if not tr or "q" not in tr or "t" not in tr:
+        return np.zeros((1, degree + 1))
+    q, t = np.asarray(tr["q"]), np.asarray(tr["t"], dtype=float)
+    if t[-1] <= t[0]:
+        return np.zeros((1, degree + 1))
+    frames = model.numeric()["frames"]
+    i = model.frame_index("socket")
+    zero = np.zeros(model.nq)
+    pitch = np.array([frames(q[:, k], zero)[0][2, i] for k in range(q.shape[1])])
+    s = (t - t[0]) / (t[-1] - t[0])
+    if len(s) <= degree:
+        return np.full((1, degree + 1), pitch.mean())
+    coef, *_ = np.linalg.lstsq(bezier.basis(degree, s), pitch, rcond=None)
+    return coef[None, :]
+
+
+class ControllerContext:
+    """Everything the controllers share, built once: subsystem, compiled terms, the RES-CLF,
+    packed parameter vectors, limits and nominal durations.
+
+    Raises ``ValueError`` for gamma > c3 or a tube made for another gait (``strict_tube``).
+    A gait without durations gets T = (p_max - p_min) / v_hip per domain."""
+
+    def __init__(self, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
+                 config: ControllerConfig | None = None, *,
+                 subsystem: ProsthesisSubsystem | None = None, strict_tube: bool = True,
+                 backend: str = "auto") -> None:
+        cfg = config or ControllerConfig()
+        self.config, self.gait, self.tube, self.model = cfg, gait, tube, model
+        if strict_tube and tube.gait_hash != gait.hash():
+            raise ValueError(f"the tube was made for gait {tube.gait_hash}, not for this gait "
+                             f"({gait.hash()}); refit the tube or pass strict_tube=False")
+        sub = subsystem or ProsthesisSubsystem(model)
+        self.subsystem = sub
+        self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
+                                     PITCH_DEGREE, backend)
+        c = cfg.clf
+        self.clf: ResClf = res_clf(np.array(c.Q), np.array(c.R), c.eps)
+        if c.gamma > self.clf.c3 + 1e-12:
+            raise ValueError(f"gamma = {c.gamma} exceeds c3 = {self.clf.c3:.4f} "
+                             "(lmin(Q)/lmax(P)); the CLF condition may be infeasible")
+        lim = cfg.safety.torque_limits or tuple(float(v) for v in model.torque_limits[4:])
+        self.limits = (float(lim[0]), float(lim[1]))
+        self.gear = (float(sub.B[3, 0]), float(sub.B[4, 1]))
+
+        ps, pns = gait.params["ps"], gait.params["pns"]
+        alpha_pk = ps.alpha[Y2_COORDS["ps"].index("th_pk")]
+        self.durations = {}
+        for d, p in (("ps", ps), ("pns", pns)):
+            T = float(gait.durations.get(d, 0.0)) if gait.durations else 0.0
+            self.durations[d] = T if T > 0 else (p.p_max - p.p_min) / p.v_hip
+        T = self.terms
+        self.clf_params = T.clf_layout.pack(
+            alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
+            P_eps=self.clf.P_eps, gamma_over_eps=c.gamma / c.eps, c_rho=c.c_rho,
+            nominal=tube.nominal, lower=tube.lower, upper=tube.upper, tau_lo=tube.tau_lo,
+            tau_hi=tube.tau_hi)
+        self.stance_params = T.stance_layout.pack(alpha_pk=alpha_pk, p_min=ps.p_min,
+                                                  p_max=ps.p_max)
+        rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]
+        self.swing_params = T.swing_layout.pack(alpha=pns.alpha[rows],
+                                                pitch=socket_pitch_fit(gait, model))
+        pc = cfg.passive
+        self.passive_params = T.passive_layout.pack(
+            alpha_pk=alpha_pk, p_min=ps.p_min, p_max=ps.p_max, lam=pc.lam, k=pc.k,
+            rho_theta=pc.rho_theta, boundary=pc.boundary, theta0=T.theta0)
+
+
+def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
+    """Time-based phase clip((t - t0) / T, 0, 1) and its rate (0 once clipped)."""
+    s = (t - t0) / T
+    if s <= 0.0:
+        return 0.0, 0.0
+    if s >= 1.0:
+        return 1.0, 0.0
+    return s, 1.0 / T
+
+
+def _near(v: float, i: int, xl: np.ndarray, xu: np.ndarray, fix: int) -> int:
+    """-1 / +1 if v is within the slack tolerance of its lower / upper bound, else ``fix``."""
+    lo, hi = xl[i], xu[i]
+    if v - lo < _SLACK_TOL * (1.0 + abs(lo)):
+        return -1
+    if hi - v < _SLACK_TOL * (1.0 + abs(hi)):
+        return 1
+    return fix
+
+
+def _toward(u: float, target: float, step: float) -> float:
+    d = target - u
+    return u + (step if d > step else -step if d < -step else d)
+
+
+class BaseController:
+    """Shared tick logic; subclasses provide ``_stance``.  See the module docstring."""
+
+    name = "base"
+
+    def __init__(self, ctx: ControllerContext) -> None:
+        self.ctx = ctx
+        cfg = ctx.config
+        s = cfg.safety
+        self._lim = ctx.limits
+        self._gear = ctx.gear
+        self._fb_step = float(s.fallback_rate)
+        self._vargs = (tuple(s.knee_range), tuple(s.ankle_range), float(s.max_speed),
+                       tuple(s.load_range))
+        d = cfg.domain
+        self._load_on, self._load_off, self._dwell = d.load_on, d.load_off, d.min_dwell
+        self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
+        num = ctx.terms.numeric
+        self._clf = num["clf_qp"]
+        self._clf.inputs[1][:] = ctx.clf_params
+        self._clf_x = self._clf.inputs[0]
+        self._o = dict(zip(self._clf.function.name_out(), self._clf.outputs, strict=True))
+        self._o_tau, self._o_V, self._o_check = self._o["tau"], self._o["V"], self._o["check"]
+        self._o_Gu, self._o_hu = self._o["Gu"], self._o["hu"]
+        self._sref = num["stance_ref"]
+        self._sref.inputs[2][:] = ctx.stance_params
+        self._swing = num["swing_ref"]
+        self._swing.inputs[3][:] = ctx.swing_params
+        self._pd_kp = tuple(cfg.pd.kp)
+        self._pd_kd = tuple(cfg.pd.kd)
+        self._sw_kp, self._sw_kd = tuple(cfg.swing.kp), tuple(cfg.swing.kd)
+        self._sw_grav = 1.0 if cfg.swing.gravity else 0.0
+        self.reset()
+
+    # -- state ------------------------------------------------------------------------
+    def reset(self, torque: tuple[float, float] | np.ndarray | None = None) -> None:
+        """Forget all state.  ``torque``: the previous torque to assume (motor N m, clamped
+        to the limits; default zero), e.g. when taking over from another controller."""
+        u = (0.0, 0.0) if torque is None else (float(torque[0]), float(torque[1]))
+        lk, la = self._lim
+        self._u0 = min(max(u[0], -lk), lk) if math.isfinite(u[0]) else 0.0
+        self._u1 = min(max(u[1], -la), la) if math.isfinite(u[1]) else 0.0
+        self._domain = self.ctx.config.domain.initial
+        self._t_switch: float | None = None
+        self._t_prev = -_INF
+        self.fallback_count = 0
+
+    @property
+    def domain(self) -> str:
+        return self._domain
+
+    @property
+    def previous_torque(self) -> np.ndarray:
+        return np.array((self._u0, self._u1))
+
+    def _update_domain(self, t: float, contact: bool, load: float) -> str:
+        stance = contact and load >= self._load_on
+        swing = (not contact) or load <= self._load_off
+        if self._t_switch is None:  # first valid sample: decide at once, start the clock
+            if stance:
+                self._domain = "ps"
+            elif swing:
+                self._domain = "pns"
+            self._t_switch = t
+        elif t - self._t_switch >= self._dwell:
+            if self._domain == "pns" and stance:
+                self._domain, self._t_switch = "ps", t
+            elif self._domain == "ps" and swing:
+                self._domain, self._t_switch = "pns", t
+        return self._domain
+
+    # -- laws -------------------------------------------------------------------------
+    def _clf_terms(self, qk: float, qa: float, vk: float, va: float) -> None:
+        x = self._clf_x
+        x[0], x[1], x[2], x[3] = qk, qa, vk, va
+        self._clf.call_inplace()
+
+    def _pd_torque(self, t: float, qk: float, qa: float, vk: float, va: float
+                   ) -> tuple[float, float]:
+        """Stance PD on the nominal trajectory at the time-based phase (motor N m)."""
+        tau, rate = _phase(t, self._t_switch, self._T_ps)  # type: ignore[arg-type]
+        f = self._sref
+        f.inputs[0][0], f.inputs[1][0] = tau, rate
+        f.call_inplace()
+        qd, vd = f.outputs[0], f.outputs[1]
+        kp, kd = self._pd_kp, self._pd_kd
+        uk = kp[0] * (qd[0] - qk) + kd[0] * (vd[0] - vk)
+        ua = kp[1] * (qd[1] - qa) + kd[1] * (vd[1] - va)
+        return uk / self._gear[0], ua / self._gear[1]
+
+    def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float
+                      ) -> tuple[float, float, float]:
+        """Shared swing law: PD + gravity on the pns Bezier rows at tau_hat (motor N m)."""
+        tau, rate = _phase(t, self._t_switch, self._T_pns)  # type: ignore[arg-type]
+        f = self._swing
+        x = f.inputs[0]
+        x[0], x[1], x[2], x[3] = qk, qa, vk, va
+        f.inputs[1][0], f.inputs[2][0] = tau, rate
+        f.call_inplace()
+        qd, vd, _, g = f.outputs
+        kp, kd, gw = self._sw_kp, self._sw_kd, self._sw_grav
+        uk = gw * g[0] + kp[0] * (qd[0] - qk) + kd[0] * (vd[0] - vk)
+        ua = gw * g[1] + kp[1] * (qd[1] - qa) + kd[1] * (vd[1] - va)
+        return uk / self._gear[0], ua / self._gear[1], tau
+
+    def _stance(self, t: float, qk: float, qa: float, vk: float, va: float):
+        """(u_knee, u_ankle, tau, V, rho, qp_status, active, mode) -- subclasses."""
+        raise NotImplementedError
+
+    def _fallback(self, t: float, qk: float, qa: float, vk: float, va: float
+                  ) -> tuple[float, float]:
+        """QP fallback: the previous torque moved by at most ``fallback_rate`` toward the
+        stance PD torque."""
+        self.fallback_count += 1
+        pk, pa = self._pd_torque(t, qk, qa, vk, va)
+        if not (math.isfinite(pk) and math.isfinite(pa)):
+            pk = pa = 0.0
+        return _toward(self._u0, pk, self._fb_step), _toward(self._u1, pa, self._fb_step)
+
+    # -- the tick ---------------------------------------------------------------------
+    def tick(self, meas: ProsthesisMeasurement) -> ControlOutput:
+        fault = validate(meas, self._t_prev, *self._vargs)
+        active = 0
+        if fault:
+            step = self._fb_step
+            u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
+            self.fallback_count += 1
+            tau = V = rho = 0.0
+            status, mode = QP_NOT_RUN, MODE_FAULT
+        else:
+            t = float(meas.t)
+            self._t_prev = t
+            qk, qa = float(meas.knee_angle), float(meas.ankle_angle)
+            vk, va = float(meas.knee_vel), float(meas.ankle_vel)
+            if self._update_domain(t, bool(meas.contact), float(meas.foot_load)) == "ps":
+                u0, u1, tau, V, rho, status, active, mode = self._stance(t, qk, qa, vk, va)
+            else:
+                u0, u1, tau = self._swing_torque(t, qk, qa, vk, va)
+                V = rho = 0.0
+                status, mode = QP_NOT_RUN, MODE_SWING
+            if not (math.isfinite(u0) and math.isfinite(u1)):
+                step = self._fb_step
+                u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
+                self.fallback_count += 1
+                mode = MODE_FALLBACK
+            if not (math.isfinite(tau) and math.isfinite(V) and math.isfinite(rho)):
+                tau = V = rho = 0.0
+        lk, la = self._lim
+        c0 = lk if u0 > lk else -lk if u0 < -lk else u0
+        c1 = la if u1 > la else -la if u1 < -la else u1
+        if c0 != u0 or c1 != u1:
+            active |= _ACTIVE_CLAMP
+        self._u0, self._u1 = c0, c1
+        return ControlOutput(
+            np.array((c0, c1)),
+            Diagnostics(tau, V, rho, status, active, self.fallback_count, int(fault),
+                        self._domain, mode))
+
+
+class PDController(BaseController):
+    """Joint PD on the nominal stance trajectory at the time-based phase."""
+
+    name = "pd"
+
+    def _stance(self, t, qk, qa, vk, va):
+        self._clf_terms(qk, qa, vk, va)
+        uk, ua = self._pd_torque(t, qk, qa, vk, va)
+        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0,
+                MODE_STANCE)
+
+
+class PassiveController(BaseController):
+    """Spong's robust passivity-based law (stand-in for Azimi et al. 2017)."""
+
+    name = "passive"
+
+    def __init__(self, ctx: ControllerContext) -> None:
+        super().__init__(ctx)
+        self._pas = ctx.terms.numeric["passive"]
+        self._pas.inputs[3][:] = ctx.passive_params
+
+    def _stance(self, t, qk, qa, vk, va):
+        self._clf_terms(qk, qa, vk, va)
+        tau_h, rate = _phase(t, self._t_switch, self._T_ps)
+        f = self._pas
+        x = f.inputs[0]
+        x[0], x[1], x[2], x[3] = qk, qa, vk, va
+        f.inputs[1][0], f.inputs[2][0] = tau_h, rate
+        f.call_inplace()
+        uj = f.outputs[0]
+        return (uj[0] / self._gear[0], uj[1] / self._gear[1], float(self._o_tau[0]),
+                float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+
+
+class ClfQpController(BaseController):
+    """Robust CLF-QP, relaxed and smoothed (paper eq. robust_CLF_QP_relax) or exact (eq.
+    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick) over
+    z = (u_k, u_a[, rho]) with the torque and rate limits as box bounds, then polished
+    (:mod:`prosthesis_controller.polish`)."""
+
+    name = "clfqp"
+
+    def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
+        self.relaxed = relaxed
+        c = ctx.config.clf
+        lk, la = ctx.limits
+        with_limits = c.limits_in_qp if relaxed else c.exact_limits_in_qp
+        self._qlim = (lk, la) if with_limits else (_INF, _INF)
+        self._du = float(c.delta_u) if relaxed else _INF
+        n = 3 if relaxed else 2
+        self._n = n
+        self._rho_max = float(c.rho_max)
+        self._xl = np.full(n, -_INF)  # bounds of z for the current tick
+        self._xu = np.full(n, _INF)
+        if relaxed:
+            self._xl[2], self._xu[2] = 0.0, self._rho_max
+        self._solver = piqp.DenseSolver()
+        st = self._solver.settings
+        st.eps_abs = st.eps_rel = float(c.solver_eps)
+        st.eps_duality_gap_abs = st.eps_duality_gap_rel = float(c.solver_eps)
+        st.verbose = False
+        # (u, u) block and row of the exact QP: contiguous copies refreshed every tick
+        self._P2 = np.zeros((2, 2), order="F")
+        self._G2 = np.zeros((1, 2), order="F")
+        xl0, xu0 = self._xl.copy(), self._xu.copy()
+        xl0[:2], xu0[:2] = -1.0, 1.0
+        self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
+                           G=np.asfortranarray(np.ones((1, n))), h_l=np.array([-_INF]),
+                           h_u=np.ones(1), x_l=xl0, x_u=xu0)
+        self.name = "clfqp" if relaxed else "clfqp-exact"
+        self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
+        self._polish = bool(c.polish)
+        super().__init__(ctx)
+        o = self._o
+        self._o_Pu, self._o_cu = o["Pu"], o["cu"]
+        self._c2 = o["cu"][:2]  # a view: contiguous
+
+    def qp_data(self) -> tuple[np.ndarray, ...]:
+        """The QP of the last stance tick as the solver got it, z = (u_k, u_a[, rho]):
+        (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
+        (copies; for cross-checks and benchmarks)."""
+        n = self._n
+        return (np.array(self._o_Pu[:n, :n], order="F"), self._o_cu[:n].copy(),
+                np.array(self._o_Gu[:, :n], order="F"), self._o_hu.copy(), self._xl.copy(),
+                self._xu.copy())
+
+    def _bounds(self) -> None:
+        du = self._du
+        lk, la = self._qlim
+        xl, xu = self._xl, self._xu
+        a, b = self._u0 - du, self._u0 + du
+        xl[0] = -lk if a < -lk else a
+        xu[0] = lk if b > lk else b
+        a, b = self._u1 - du, self._u1 + du
+        xl[1] = -la if a < -la else a
+        xu[1] = la if b > la else b
+
+    def _stance(self, t, qk, qa, vk, va):
+        self.qp_solution = None
+        self._clf_terms(qk, qa, vk, va)
+        tau, V = float(self._o_tau[0]), float(self._o_V[0])
+        if not math.isfinite(self._o_check[0]):
+            uk, ua = self._fallback(t, qk, qa, vk, va)
+            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+        self._bounds()
+        xl, xu = self._xl, self._xu
+        n = self._n
+        # exact feasibility test of the CLF row over the box: min_box G z <= h
+        Gu, hu = self._o_Gu, self._o_hu
+        g = Gu[0]
+        lo = 0.0
+        for i in range(n):
+            gi = g[i]
+            if gi > 0.0:
+                lo += gi * xl[i]
+            elif gi < 0.0:
+                lo += gi * xu[i]
+        h = float(hu[0])
+        if lo > h + 1e-9:
+            uk, ua = self._fallback(t, qk, qa, vk, va)
+            return uk, ua, tau, V, 0.0, QP_INFEASIBLE, 0, MODE_FALLBACK
+        s = self._solver
+        P = self._o_Pu
+        if n == 3:
+            s.update(P=P, c=self._o_cu, G=Gu, h_u=hu, x_l=xl, x_u=xu)
+        else:
+            P2, G2 = self._P2, self._G2
+            P2[0, 0], P2[0, 1], P2[1, 0], P2[1, 1] = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+            G2[0, 0], G2[0, 1] = g[0], g[1]
+            s.update(P=P2, c=self._c2, G=G2, h_u=hu, x_l=xl, x_u=xu)
+        if s.solve() != _SOLVED:
+            uk, ua = self._fallback(t, qk, qa, vk, va)
+            return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
+        res = s.result
+        z = res.x
+        uk, ua = float(z[0]), float(z[1])
+        rho = float(z[2]) if self.relaxed else 0.0
+        if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
+            uk, ua = self._fallback(t, qk, qa, vk, va)
+            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+        # active set from the solver's multipliers
+        d = _DUAL_TOL
+        row = res.z_u[0] > d
+        zbl, zbu = res.z_bl, res.z_bu
+        fk = -1 if zbl[0] > d else 1 if zbu[0] > d else 0
+        fa = -1 if zbl[1] > d else 1 if zbu[1] > d else 0
+        fr = (-1 if zbl[2] > d else 1 if zbu[2] > d else 0) if self.relaxed else 0
+        if self._polish:
+            zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+            if zp is None:  # weakly active constraints (tiny multipliers): guess by slack
+                fk, fa, fr, row = _near(uk, 0, xl, xu, fk), _near(ua, 1, xl, xu, fa), \
+                    (_near(rho, 2, xl, xu, fr) if self.relaxed else 0), \
+                    row or h - (g[0] * uk + g[1] * ua + (g[2] * rho if n == 3 else 0.0)) \
+                    < _SLACK_TOL * (1.0 + abs(h))
+                zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+            if zp is not None:
+                uk, ua = zp[0], zp[1]
+                if self.relaxed:
+                    rho = zp[2]
+        active = _ACTIVE_CLF if row else 0
+        if fk:
+            active |= _ACTIVE_KL if fk < 0 else _ACTIVE_KU
+        if fa:
+            active |= _ACTIVE_AL if fa < 0 else _ACTIVE_AU
+        if fr > 0:
+            active |= _ACTIVE_RHO
+        self.qp_solution = np.array((uk, ua, rho)[:n])
+        return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
+
+
+CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive")
+
+
+def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
+                    config: ControllerConfig | None = None, *,
+                    context: ControllerContext | None = None,
+                    subsystem: ProsthesisSubsystem | None = None,
+                    strict_tube: bool = True) -> BaseController:
+    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd" or
+    "passive".  Pass ``context`` to share the compiled terms between controllers (then
+    gait, tube, model and config are taken from it)."""
+    if name not in CONTROLLERS:
+        raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
+    ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
+                                       strict_tube=strict_tube)
+    if name == "clfqp":
+        return ClfQpController(ctx, relaxed=True)
+    if name == "clfqp-exact":
+        return ClfQpController(ctx, relaxed=False)
+    if name == "pd":
+        return PDController(ctx)
+    return PassiveController(ctx)
+
+
+__all__ = [
+    "CONTROLLERS",
+    "BaseController",
+    "ClfQpController",
+    "ControllerContext",
+    "Fault",
+    "PDController",
+    "PassiveController",
+    "make_controller",
+    "socket_pitch_fit",
+]

@@ -1,0 +1,97 @@
+"""The one controller interface and its output types.
+
+A controller is built once (``make_controller``), then called once per control period:
+
+    ctrl = make_controller("clfqp", gait, tube, model)
+    ctrl.reset()
+    out = ctrl.tick(ProsthesisMeasurement(t, qk, qa, vk, va, load, contact))
+    out.torque          # (2,) motor torques (knee, ankle), N m, finite, within the limits
+    out.diagnostics     # Diagnostics (below), every number finite
+
+Controllers hold their own state (previous torque, domain with hysteresis, time of the
+last domain switch, fallback count).  ``tick`` never raises on a bad measurement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntFlag
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from prosthesis_controller.measurement import ProsthesisMeasurement
+
+
+class Active(IntFlag):
+    """Constraints of the QP active at its solution (bits)."""
+
+    NONE = 0
+    CLF = 1  # the robust CLF row
+    KNEE_LOWER = 2  # knee torque at its lower bound (torque limit or rate bound)
+    KNEE_UPPER = 4
+    ANKLE_LOWER = 8
+    ANKLE_UPPER = 16
+    RHO_MAX = 32  # relaxation at rho_max
+    OUTPUT_CLAMP = 64  # not a QP constraint: the output clamp to the motor limits acted
+
+
+# qp_status values
+QP_NOT_RUN = "not_run"  # no QP this tick (swing, baselines, fault)
+QP_SOLVED = "solved"
+QP_INFEASIBLE = "infeasible"  # exact feasibility test of the one row over the bounds failed
+QP_FAILED = "failed"  # piqp did not report solved (max iterations, numerics, infeasible)
+QP_NONFINITE = "nonfinite"  # non-finite model terms or solution
+
+# mode values
+MODE_STANCE = "stance"  # the controller's own stance law
+MODE_SWING = "swing"  # the shared swing controller
+MODE_FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward the PD torque
+MODE_FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
+
+
+@dataclass(frozen=True, slots=True)
+class Diagnostics:
+    """Per-tick diagnostics; every number is finite.
+
+    tau: phase (state-based in ps, the time-based estimate in pns); V: CLF value V_eps
+    (evaluated for every controller in ps, 0 in pns); rho: relaxation (0 unless relaxed
+    CLF-QP); qp_status, active: see the constants and :class:`Active`; fallback_count:
+    ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
+    output or a faulty measurement); fault: the
+    :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
+    domain: "ps" or "pns"; mode: see the MODE_* constants."""
+
+    tau: float
+    V: float
+    rho: float
+    qp_status: str
+    active: int
+    fallback_count: int
+    fault: int
+    domain: str
+    mode: str
+
+
+@dataclass(frozen=True, slots=True)
+class ControlOutput:
+    """Motor torques (knee, ankle) in N m and the diagnostics of the tick."""
+
+    torque: np.ndarray
+    diagnostics: Diagnostics
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What every prosthesis controller provides."""
+
+    name: str
+
+    def reset(self, torque: tuple[float, float] | None = None) -> None:
+        """Forget all state: previous torque ``torque`` (default 0), initial domain, no switch
+        time, counts 0."""
+        ...
+
+    def tick(self, meas: ProsthesisMeasurement) -> ControlOutput:
+        """One control period."""
+        ...

@@ -1,0 +1,318 @@
+"""Symbolic controller terms, built once from the prosthesis subsystem and compiled to C.
+
+Every per-tick model evaluation of every controller is ONE call of a generated-C function
+(:class:`hp_model.compiled.FunctionSet`, preallocated buffers).  Gait, tube and gains enter
+as a numeric parameter vector ``p``, so the compiled library depends only on the Bezier
+degrees and is cached on disk across runs.
+
+Functions (x = x_p = (th_pk, th_pa, dth_pk, dth_pa)):
+
+``clf_qp(x, p)`` -- the robust CLF-QP of paper Sec. V.  With the reduced dynamics
+x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced``):
+
+    tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
+    eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
+             (B_pk continued linearly outside tau in [0, 1], see ``_bezier_rows``)
+    nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
+    V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
+    robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
+        (LGV Am) u - (gamma/eps) rho <= -(gamma/eps) V - LFV - LGV Lf - a^T c - |a|^T r,
+        a = As^T LGV^T
+    cost   |nu(u, F*)|^2 + c_rho rho = u^T H u + 2 b^T u + c_rho rho + const,
+           H = Am^T Am, b = Am^T (Lf + As F*)
+
+  and returns it in solver form for z = (u_k, u_a, rho): min 1/2 z^T Pu z + cu^T z,
+  Gu z <= hu, with the cost divided by trace(H) and the row by its norm (both only condition
+  the problem; the minimiser is unchanged).  The exact QP (no rho) is the (u, u) block.
+
+``stance_ref(tau, rate, p)`` -- the nominal stance joint trajectory at a phase tau moving at
+``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
+(p_min + tau dp - c_k th_pk) / c_a, and their first and second time derivatives.
+
+``swing_ref(x, tau, rate, p)`` -- pns Bezier rows of th_pk, th_pa at tau, their time
+derivatives, and the gravity torque (joint side) of the prosthesis hanging from a socket at
+the nominal pitch theta_s(tau) (a Bezier fit of the pns collocation trajectory).
+
+``passive(x, tau, rate, p)`` -- Spong's robust passivity-based law (REFERENCE.md Sec. 2) on
+the 2-DOF stance prosthesis (foot fixed, socket force ignored), JOINT torque out:
+
+    e = q - q_d, v = qd_d - L e, a = qdd_d - L e_dot, r = e_dot + L e,
+    u = Y(q, qd, a, v) (theta0 + dtheta) - K r,  dtheta = -rho Y^T r / max(|Y^T r|, eps_b)
+
+  M, C (Christoffel form), g are the reduced Lagrangian's: M = Phi^T D Phi with
+  Phi = d q_emb / d q_joint of the flat-foot embedding; the regressor Y is linear in the
+  standard parameters (m, m c_x, m c_z, I_o) of each link, obtained by AD from copies of the
+  SAME tree with one unit parameter set per link (no second hand-written model).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import casadi as ca
+import numpy as np
+
+from hp_model import bezier
+from hp_model.compiled import FunctionSet
+from hp_model.dynamics import mass_matrix_and_bias
+from hp_model.prosthesis import ProsthesisSubsystem
+from hp_model.tree import PlanarTree
+
+F_OUT = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
+G_OUT = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
+
+
+class Layout:
+    """A named, ordered parameter vector: symbols for building, packing for numbers."""
+
+    def __init__(self) -> None:
+        self._items: list[tuple[str, tuple[int, ...], ca.SX]] = []
+
+    def add(self, name: str, shape: tuple[int, ...] = ()) -> ca.SX:
+        """A symbol of ``shape``; matrices are packed row by row (numpy C order)."""
+        n = int(np.prod(shape)) if shape else 1
+        s = ca.SX.sym(name, n)
+        self._items.append((name, shape, s))
+        if len(shape) == 2:
+            return ca.reshape(s, shape[1], shape[0]).T
+        return s
+
+    @property
+    def symbol(self) -> ca.SX:
+        return ca.vertcat(*[s for _, _, s in self._items])
+
+    @property
+    def size(self) -> int:
+        return sum(s.numel() for _, _, s in self._items)
+
+    def pack(self, **values: object) -> np.ndarray:
+        missing = {n for n, _, _ in self._items} - set(values)
+        extra = set(values) - {n for n, _, _ in self._items}
+        if missing or extra:
+            raise ValueError(f"parameter layout: missing {sorted(missing)}, "
+                             f"unexpected {sorted(extra)}")
+        out = []
+        for name, shape, s in self._items:
+            a = np.asarray(values[name], dtype=float).reshape(-1)
+            if a.size != s.numel():
+                raise ValueError(f"parameter '{name}': expected shape {shape}, got {a.size}")
+            out.append(a)
+        return np.concatenate(out)
+
+
+def _bezier_rows(alpha: ca.SX, s: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """B, dB/ds, d2B/ds2 of the rows of alpha (n, m+1) at s, continued linearly outside
+    [0, 1] (C^1: B(s_c) + B'(s_c)(s - s_c), s_c = clip(s, 0, 1)); a degree-5 polynomial
+    extrapolated far outside its interval is meaningless and ill-conditions the QP."""
+    d1 = bezier.derivative(alpha)
+    d2 = bezier.derivative(d1)
+    sc = ca.fmin(ca.fmax(s, 0), 1)
+    inside = (s >= 0) * (s <= 1)
+    dB = bezier.evaluate(d1, sc)
+    return (bezier.evaluate(alpha, sc) + dB * (s - sc), dB,
+            bezier.evaluate(d2, sc) * inside)
+
+
+def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
+                       ) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
+    """(q_j, M(q_j), g(q_j), Christoffel C(q_j, qd_j)) of the stance prosthesis (foot flat
+    at the origin), in the joint coordinates q_j = (th_pk, th_pa), for ``tree`` (default the
+    subsystem's own) with the subsystem's embedding."""
+    tree = tree or sub.tree
+    qj = ca.SX.sym("qj", 2)
+    qdj = ca.SX.sym("qdj", 2)
+    x = ca.vertcat(qj, ca.SX.zeros(2))
+    q_emb = sub.functions["embed"](x)[0]
+    Phi = ca.jacobian(q_emb, qj)
+    q, qd = sub.q, sub.qd
+    D, H = mass_matrix_and_bias(tree, q, qd)
+    grav = ca.substitute(H, qd, ca.SX.zeros(sub.nq))
+    D_e = ca.substitute(D, q, q_emb)
+    M = Phi.T @ D_e @ Phi
+    g = Phi.T @ ca.substitute(grav, q, q_emb)
+    C = ca.SX.zeros(2, 2)
+    dM = [ca.jacobian(M[:, k], qj) for k in range(2)]  # dM[k][i, j] = dM_ik / dq_j
+    for i in range(2):
+        for j in range(2):
+            for k in range(2):
+                cijk = 0.5 * (dM[j][i, k] + dM[k][i, j] - dM[k][j, i])
+                C[i, j] += cijk * qdj[k]
+    return ca.vertcat(qj, qdj), M, g, C
+
+
+UNIT_SETS = (  # (mass, com, inertia about com) -> standard parameters (m, m cx, m cz, I_o)
+    (1.0, (0.0, 0.0), 0.0),  # -> (1, 0, 0, 0)
+    (1.0, (1.0, 0.0), 0.0),  # -> (1, 1, 0, 1)
+    (1.0, (0.0, 1.0), 0.0),  # -> (1, 0, 1, 1)
+    (0.0, (0.0, 0.0), 1.0),  # -> (0, 0, 0, 1)
+)
+
+
+def standard_parameters(tree: PlanarTree, bodies: Sequence[str]) -> np.ndarray:
+    """theta0: (m, m c_x, m c_z, I_com + m |c|^2) of each named body, stacked."""
+    out = []
+    for name in bodies:
+        b = tree.body(name)
+        cx, cz = b.com
+        out += [b.mass, b.mass * cx, b.mass * cz, b.inertia + b.mass * (cx * cx + cz * cz)]
+    return np.array(out)
+
+
+def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
+              ) -> tuple[ca.SX, list[str]]:
+    """Y (2 x 4 n_links) with Y theta = M a + C(q, qd) v + g for the moving links (the foot is
+    fixed in stance and drops out).  ``xa`` = (q_j, qd_j) symbol to express Y in."""
+    links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
+    cols: list[ca.SX] = []
+    for name in links:
+        per_set = []
+        for mass, com, inertia in UNIT_SETS:
+            bodies = tuple(
+                dataclasses.replace(b, mass=mass, com=com, inertia=inertia) if b.name == name
+                else dataclasses.replace(b, mass=0.0, inertia=0.0) for b in sub.tree.bodies)
+            tree = PlanarTree(bodies=bodies, frames=sub.tree.frames, gravity=sub.tree.gravity)
+            xs, M, g, C = reduced_lagrangian(sub, tree)
+            y = ca.substitute(M @ a + C @ v + g, xs, xa)
+            per_set.append(y)
+        y1, y2, y3, y4 = per_set
+        cols += [y1, y2 - y1 - y4, y3 - y1 - y4, y4]
+    return ca.horzcat(*cols), links
+
+
+class ControllerTerms:
+    """The compiled controller functions of one subsystem and Bezier degrees.
+
+    ``gait_degree``: degree of the gait's alpha; ``nominal_degree`` / ``bound_degree``: of
+    the tube's nominal and bound curves; ``pitch_degree``: of the swing socket-pitch fit.
+    """
+
+    def __init__(self, sub: ProsthesisSubsystem, gait_degree: int, nominal_degree: int,
+                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto") -> None:
+        self.sub = sub
+        ck, ca_ = sub.full.hip_progress_coefficients("ps")
+        self.c_k, self.c_a = ck, ca_
+        m = gait_degree
+        x = ca.SX.sym("x", 4)
+        th, dth = x[0:2], x[2:4]
+        f_p, g_m, g_s = sub.functions["reduced"](x)
+
+        # ---- clf_qp --------------------------------------------------------------------
+        L = Layout()
+        alpha = L.add("alpha_pk", (1, m + 1))
+        v_hip, p_min, p_max = L.add("v_hip"), L.add("p_min"), L.add("p_max")
+        P_eps = L.add("P_eps", (3, 3))
+        g_over_eps = L.add("gamma_over_eps")
+        c_rho = L.add("c_rho")
+        nom = L.add("nominal", (3, nominal_degree + 1))
+        lo_c = L.add("lower", (3, bound_degree + 1))
+        hi_c = L.add("upper", (3, bound_degree + 1))
+        tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
+        self.clf_layout = L
+
+        dp = p_max - p_min
+        tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
+        tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
+        B, dB, _ = _bezier_rows(alpha, tau)
+        y1 = ck * dth[0] + ca_ * dth[1] - v_hip
+        y2 = th[0] - B
+        dy2 = dth[0] - dB * tau_dot
+        eta = ca.vertcat(y1, y2, dy2)
+        Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
+        Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
+        F, G = ca.DM(F_OUT), ca.DM(G_OUT)
+        V = eta.T @ P_eps @ eta
+        LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
+        LGV = 2 * eta.T @ P_eps @ G  # 1 x 2
+        s = ca.fmin(ca.fmax((tau - tau_lo) / (tau_hi - tau_lo), 0), 1)
+        Fstar = bezier.evaluate(nom, s)
+        lo, hi = bezier.evaluate(lo_c, s), bezier.evaluate(hi_c, s)
+        c_box = Fstar + 0.5 * (lo + hi)
+        r_box = 0.5 * ca.fmax(hi - lo, 0)
+        g_u = LGV @ Am  # 1 x 2
+        a_F = As.T @ LGV.T  # 3
+        h = -g_over_eps * V - LFV - LGV @ Lf - a_F.T @ c_box - ca.fabs(a_F).T @ r_box
+        H = Am.T @ Am
+        b0 = Lf + As @ Fstar
+        b = Am.T @ b0
+        sc = ca.trace(H)
+        Pu = ca.SX.zeros(3, 3)
+        Pu[0:2, 0:2] = 2 * H / sc
+        cu = ca.vertcat(2 * b / sc, c_rho / sc)
+        row_u = ca.horzcat(g_u, -g_over_eps)
+        n_u = ca.norm_2(row_u)
+        Gu, hu = row_u / n_u, h / n_u
+        # one number that is non-finite iff any QP datum is (NaN and inf propagate)
+        chk = ca.sum1(ca.sum2(Pu)) + ca.sum1(cu) + ca.sum2(Gu) + hu + V
+        clf = ca.Function(
+            "clf_qp", [x, L.symbol],
+            [Pu, cu, Gu, hu, chk, eta, tau, V, LFV, LGV, Lf, Am, As, Fstar, c_box, r_box],
+            ["x", "p"],
+            ["Pu", "cu", "Gu", "hu", "check", "eta", "tau", "V", "LFV", "LGV", "Lf", "Am", "As",
+             "Fstar", "c", "r"])
+
+        # ---- stance_ref ----------------------------------------------------------------
+        R = Layout()
+        alpha_r = R.add("alpha_pk", (1, m + 1))
+        rp_min, rp_max = R.add("p_min"), R.add("p_max")
+        self.stance_layout = R
+        tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
+        Bk, dBk, ddBk = _bezier_rows(alpha_r, tau_s)
+        rdp = rp_max - rp_min
+        qd_ = ca.vertcat(Bk, (rp_min + tau_s * rdp - ck * Bk) / ca_)
+        dqd_ = rate * ca.vertcat(dBk, (rdp - ck * dBk) / ca_)
+        ddqd_ = rate**2 * ca.vertcat(ddBk, -ck * ddBk / ca_)
+        sref = ca.Function("stance_ref", [tau_s, rate, R.symbol], [qd_, dqd_, ddqd_],
+                           ["tau", "rate", "p"], ["q_d", "qd_d", "qdd_d"])
+
+        # ---- swing_ref -----------------------------------------------------------------
+        S = Layout()
+        alpha_s = S.add("alpha", (2, m + 1))
+        pitch_c = S.add("pitch", (1, pitch_degree + 1))
+        self.swing_layout = S
+        Bs, dBs, ddBs = _bezier_rows(alpha_s, tau_s)
+        pitch = bezier.evaluate(pitch_c, tau_s)
+        _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
+        grav_free = ca.substitute(H_free, sub.qd, ca.SX.zeros(sub.nq))
+        q_hang = ca.vertcat(0, 0, pitch, th)
+        g_sw = ca.substitute(grav_free, sub.q, q_hang)[3:5]
+        swref = ca.Function("swing_ref", [x, tau_s, rate, S.symbol],
+                            [Bs, rate * dBs, rate**2 * ddBs, g_sw],
+                            ["x", "tau", "rate", "p"], ["q_d", "qd_d", "qdd_d", "gravity"])
+
+        # ---- passive -------------------------------------------------------------------
+        Pl = Layout()
+        alpha_p = Pl.add("alpha_pk", (1, m + 1))
+        pp_min, pp_max = Pl.add("p_min"), Pl.add("p_max")
+        lam, kgain = Pl.add("lam", (2,)), Pl.add("k", (2,))
+        rho_th, bl = Pl.add("rho_theta"), Pl.add("boundary")
+        links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
+        theta0 = Pl.add("theta0", (4 * len(links),))
+        self.passive_layout = Pl
+        self.passive_links = links
+        q_d, qd_d, qdd_d = sref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
+        e, ed = th - q_d, dth - qd_d
+        vv = qd_d - lam * e
+        aa = qdd_d - lam * ed
+        rr = ed + lam * e
+        Y, _ = regressor(sub, x, aa, vv)
+        YTr = Y.T @ rr
+        dtheta = -rho_th * YTr / ca.fmax(ca.norm_2(YTr), bl)
+        u_pass = Y @ (theta0 + dtheta) - kgain * rr
+        passive = ca.Function("passive", [x, tau_s, rate, Pl.symbol],
+                              [u_pass, e, rr, Y @ theta0],
+                              ["x", "tau", "rate", "p"], ["u_joint", "e", "r", "Ytheta0"])
+
+        # ---- reduced-model pieces for tests and simulation ----------------------------
+        xs, M, g, C = reduced_lagrangian(sub)
+        lag = ca.Function("lagrangian", [xs], [M, g, C @ xs[2:4]], ["x"], ["M", "g", "Cqd"])
+        a_sym, v_sym = ca.SX.sym("a", 2), ca.SX.sym("v", 2)
+        Y2, _ = regressor(sub, x, a_sym, v_sym)
+        reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
+        red = ca.Function("reduced", [x], [f_p, g_m, g_s], ["x"], ["f_p", "g_m", "g_s"])
+
+        fns = [clf, sref, swref, passive, lag, reg, red]
+        name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}")
+        self.functions = {f.name(): f for f in fns}
+        self.numeric = FunctionSet(fns, name, backend)
+        self.theta0 = standard_parameters(sub.tree, links)

@@ -1,0 +1,79 @@
+"""Helpers for the controller tests: tubes built directly, QP terms by name, and an RK4 of
+the reduced 4-state prosthesis model with the controller in the loop (zero-order hold)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from hp_model.force_tube import ForceTube
+from hp_model.gait_artifact import Gait
+from prosthesis_controller import ProsthesisMeasurement
+from prosthesis_controller.controllers import BaseController, ControllerContext
+
+STANCE_LOAD = 600.0  # N on the foot load cell: clearly stance
+
+
+def tube_about_nominal(gait: Gait, half: tuple[float, float, float]) -> ForceTube:
+    """The gait's nominal socket force (tau in [0, 1]) with constant half-widths."""
+    h = np.asarray(half, dtype=float)[:, None] * np.ones((1, 2))
+    return ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
+                     nominal=gait.socket_nominal, lower=-h, upper=h)
+
+
+def constant_tube(gait: Gait, centre: np.ndarray, half: tuple[float, float, float]
+                  ) -> ForceTube:
+    """A tube whose box is the same at every phase: a constant nominal ``centre``."""
+    h = np.asarray(half, dtype=float)[:, None] * np.ones((1, 2))
+    return ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
+                     nominal=np.asarray(centre, dtype=float)[:, None], lower=-h, upper=h)
+
+
+def clf_terms(ctx: ControllerContext, x: np.ndarray) -> dict[str, np.ndarray]:
+    """All outputs of the compiled ``clf_qp`` function at x, by name (copies)."""
+    f = ctx.terms.numeric["clf_qp"]
+    outs = f(np.asarray(x, dtype=float), ctx.clf_params)
+    return dict(zip(f.function.name_out(), (np.array(o) for o in outs), strict=True))
+
+
+def stance_meas(t: float, x: np.ndarray) -> ProsthesisMeasurement:
+    return ProsthesisMeasurement(t, float(x[0]), float(x[1]), float(x[2]), float(x[3]),
+                                 STANCE_LOAD, True)
+
+
+def simulate_reduced(ctl: BaseController, ctx: ControllerContext, x0: np.ndarray,
+                     force: Callable[[np.ndarray], np.ndarray], duration: float,
+                     dt: float = 1e-3, substeps: int = 4,
+                     u0: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Closed loop of the reduced model x_dot = f_p + g_m u + g_s F_s(x): the controller
+    ticks every ``dt`` on the exact state and its torque is held (ZOH) over ``substeps``
+    RK4 steps.  Returns t, x (n, 4), u (n, 2), V, tau, rho, mode."""
+    red = ctx.terms.numeric["reduced"]
+
+    def f(x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        fp, gm, gs = red(x)
+        return fp + gm @ u + gs @ force(x)
+
+    ctl.reset(u0)
+    x = np.array(x0, dtype=float)
+    rows = []
+    h = dt / substeps
+    for k in range(round(duration / dt)):
+        t = k * dt
+        out = ctl.tick(stance_meas(t, x))
+        u = out.torque
+        d = out.diagnostics
+        rows.append((t, *x, *u, d.V, d.tau, d.rho, d.mode))
+        for _ in range(substeps):
+            k1 = f(x, u)
+            k2 = f(x + 0.5 * h * k1, u)
+            k3 = f(x + 0.5 * h * k2, u)
+            k4 = f(x + h * k3, u)
+            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.all(np.isfinite(x)):
+            break
+    cols = list(zip(*rows, strict=True))
+    return {"t": np.array(cols[0]), "x": np.array(cols[1:5]).T, "u": np.array(cols[5:7]).T,
+            "V": np.array(cols[7]), "tau": np.array(cols[8]), "rho": np.array(cols[9]),
+            "mode": np.array(cols[10])}

@@ -1,0 +1,84 @@
+"""Closed loop of the reduced 4-state prosthesis model alone (RK4, controller at 1 kHz with
+zero-order hold) with the socket force held at a vertex of the tube: the robust CLF-QP
+drives the outputs to the nominal with V decaying at the promised rate gamma/eps.
+
+Why a constant, narrow tube here: in the reduced model the socket force is exogenous and
+acts on the prosthesis alone, whose top link (1 kg, 0.0017 kg m^2 about the knee) turns
+1 N m of socket moment into ~440 m/s^2 of hip acceleration.  (a) A force that follows
+F*(tau(x)) adds a state feedback dF*/dtau dtau/dx that makes the open loop unstable at
+~550 1/s, beyond what any 1 kHz hold can track, so the vertex is held constant and the
+tube's nominal is that constant.  (b) The worst-case row makes the law act against the
+whole box each tick; a vertex other than the worst case then moves the outputs by up to
+2 |A_s r| dt per tick, so the continuous-time rate survives the 1 ms hold only while that
+is small against eta: r = (0.1 N, 0.15 N, 0.02 N m) gives 2 * 440 * 0.02 * 1e-3 = 0.018
+(m/s of y1) per tick.  Wider tubes are a property of the full human-prosthesis loop (the
+human's inertia is behind the socket), tested in the co-simulation, not here.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from prosthesis_controller import ClfConfig, ControllerConfig, ControllerContext, make_controller
+from tests.controller_support import clf_terms, constant_tube, simulate_reduced
+
+HALF = (0.1, 0.15, 0.02)  # N, N, N m
+DURATION = 0.15  # s
+# The 1 ms hold costs rate: over 0.15 s a factor 1.5 on V is a decay rate of at least
+# c - ln(1.5) / 0.15 = c - 2.7 1/s (c = gamma/eps = 15 1/s by default); measured loss < 1.2.
+MARGIN = 1.5
+PERTURBATIONS = (np.array([0.02, -0.01, 0.1, -0.1]), np.array([-0.03, 0.02, -0.3, 0.2]))
+NODES = (2, 8)  # start points on the ps collocation trajectory (tau ~ 0.1 and 0.4)
+VERTICES = list(itertools.product((-1.0, 1.0), repeat=3))
+
+
+def _setup(model, subsystem, gait, clf: ClfConfig):
+    tr = gait.trajectory["ps"]
+    centre = tr["lam"][3:6].mean(axis=1)  # the mean nominal socket wrench of the stance
+    tube = constant_tube(gait, centre, HALF)
+    ctx = ControllerContext(gait, tube, model, ControllerConfig(clf=clf),
+                            subsystem=subsystem)
+    return ctx, tube, tr
+
+
+def _starts(model, tr):
+    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
+    for node, p in itertools.product(NODES, PERTURBATIONS):
+        yield np.r_[tr["q"][i, node], tr["qd"][i, node]] + p
+
+
+def _fl_torque(ctx, x):
+    """The torque a running controller would hold: nu(u, F*) = 0."""
+    T = clf_terms(ctx, x)
+    return -np.linalg.solve(T["Am"], T["Lf"] + T["As"] @ T["Fstar"])
+
+
+@pytest.mark.parametrize("name", ["clfqp-exact", "clfqp"])
+def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsystem,
+                                                                   template_gait, name):
+    # the relaxed law with a small relaxation cap: it converges into V <= rho_max
+    clf = ClfConfig() if name == "clfqp-exact" else ClfConfig(rho_max=0.1)
+    ctx, tube, tr = _setup(model, subsystem, template_gait, clf)
+    ctl = make_controller(name, None, None, None, context=ctx)
+    c = clf.gamma / clf.eps
+    floor = 0.0 if name == "clfqp-exact" else clf.rho_max
+    c0, r0 = tube.box(0.5)
+    worst = 0.0
+    for x0 in _starts(model, tr):
+        for s in VERTICES:
+            F = c0 + np.array(s) * r0
+            run = simulate_reduced(ctl, ctx, x0, lambda x, F=F: F, DURATION,
+                                   u0=_fl_torque(ctx, x0))
+            assert len(run["t"]) == round(DURATION / 1e-3), "state diverged"
+            assert set(run["mode"]) == {"stance"}, "fallback in a feasible closed loop"
+            V, t = run["V"], run["t"]
+            bound = V[0] * np.exp(-c * t) + floor
+            worst = max(worst, float(np.max(V / bound)))
+            assert np.max(V / bound) <= MARGIN, (x0, s, float(np.max(V / bound)))
+            # the phase keeps progressing: |y1| -> 0 means the hip moves at v_hip
+            assert run["tau"][-1] - run["tau"][0] > 0.3
+            assert np.all(np.abs(run["u"]) <= np.array(ctx.limits) + 1e-12)
+    print(f"{name}: max V(t) / (V0 exp(-{c:.0f} t) + {floor}) = {worst:.3f}")
