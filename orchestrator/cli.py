@@ -20,6 +20,8 @@ from characterization.mocap_take import MocapError
 from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
+from human_fmu.build import FmuBuildError
+from orchestrator.fmu_cli import fmu_app
 from orchestrator.mocap_cli import mocap_app
 
 app = typer.Typer(
@@ -33,10 +35,11 @@ app = typer.Typer(
 model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True)
 app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
+app.add_typer(fmu_app, name="fmu")
 
 #: exceptions that are the user's input, reported in one line
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
-                                               FileNotFoundError, MocapError)
+                                               FileNotFoundError, MocapError, FmuBuildError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
