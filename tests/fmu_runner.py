@@ -97,6 +97,14 @@ def run(h: HumanFMU, policy: NominalPD, periods: int, dt: float = 1e-3,
     read without a step after it (like ``HybridSimulator.run``'s log).  ``tau_from`` "q"
     makes the policy compute tau from the ground-truth q (bit-identical to the simulator's
     phase), "output" uses the FMU's tau output (the C computation of the same formula)."""
+    log: dict = {}
+    for _ in stepper(h, policy, periods, dt, tau_from, log):
+        pass
+    return log
+
+
+def stepper(h: HumanFMU, policy: NominalPD, periods: int, dt: float, tau_from: str, log: dict):
+    """``run`` one sample at a time (a generator yielding the sample index), filling ``log``."""
     f = h.fmu
     sens = h.vrs(SENSORS)
     qv = h.vrs([f"q[{i}]" for i in range(1, 13)])
@@ -105,9 +113,8 @@ def run(h: HumanFMU, policy: NominalPD, periods: int, dt: float = 1e-3,
     fall = h.vrs(["fall"])
     uv = h.vrs(["u_knee", "u_ankle"])
     fv = h.vrs(FORCES)
-    log: dict[str, list] = {"sensors": [], "q": [], "qd": [], "domain": [], "u": [],
-                            "forces": [],
-                            "impacts": [], "fall": False, "fall_code": 0, "fall_period": -1}
+    log.update(sensors=[], q=[], qd=[], domain=[], u=[], forces=[], impacts=[], fall=False,
+               fall_code=0, fall_period=-1)
     steps = 0
     for k in range(periods):
         y = f.getReal(sens)
@@ -122,7 +129,7 @@ def run(h: HumanFMU, policy: NominalPD, periods: int, dt: float = 1e-3,
             steps = n_steps
         if f.getBoolean(fall)[0]:
             log.update(fall=True, fall_code=code, fall_period=k)
-            break
+            return
         d = DOMAINS[dom]
         tau = policy.phase(d, q) if tau_from == "q" else y[5]
         u = policy(d, tau, np.array(y[0:2]), np.array(y[2:4]))
@@ -131,7 +138,7 @@ def run(h: HumanFMU, policy: NominalPD, periods: int, dt: float = 1e-3,
         log["forces"].append(f.getReal(fv))
         if k < periods - 1:
             f.doStep(k * dt, dt)
-    return log
+        yield k
 
 
 def main(argv: list[str]) -> int:
