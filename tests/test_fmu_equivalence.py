@@ -9,6 +9,7 @@ import pytest
 
 from hp_model.simulator import SimOptions
 from human_fmu import initial_state, perturbed_thetas
+from human_fmu.perturbation import splitmix64, uniform
 from tests.fmu_runner import HumanFMU, NominalPD, run
 from tests.fmu_support import built_fmu, policy_table, python_run, simulator, start_state
 
@@ -135,3 +136,22 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
     assert log["fall_period"] == ref.t.size - 1 + lag
     print(f"x{factor}: {ref.reason}; FMU code {log['fall_code']} at sample "
           f"{log['fall_period']}")
+
+
+def test_perturbation_generator_is_splitmix64():
+    """Published SplitMix64 values (seed 0: e220a8397b1dcdaf, 6e789e6aa1b965f4; seed 1234567:
+    599ed017fb08fc85, the xoshiro reference's test vector)."""
+    assert splitmix64(0, 0) == 0xE220A8397B1DCDAF
+    assert splitmix64(0, 1) == 0x6E789E6AA1B965F4
+    assert splitmix64(1234567, 0) == 0x599ED017FB08FC85
+    assert uniform(-1, 3) == uniform((1 << 64) - 1, 3)  # negative seeds: two's complement
+    th = {"ps": np.arange(33.0), "pns": -np.arange(33.0)}
+    assert all(np.array_equal(perturbed_thetas(th, 0.0, 5)[d], th[d]) for d in th)
+    p = perturbed_thetas(th, 0.1, 5)
+    for d in th:
+        delta = p[d] - th[d]
+        assert np.all(np.abs(delta[:30]) <= 0.1) and np.all(delta[30:] == 0)
+        assert np.abs(delta[:30]).min() > 0
+    assert not np.array_equal(p["ps"] - th["ps"], -(p["pns"] - th["pns"]))
+    with pytest.raises(ValueError):
+        perturbed_thetas(th, -1.0, 0)

@@ -811,9 +811,10 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
     if (communicationStepSize == 0) return fmi2OK;
     s->time = currentCommunicationPoint;
     if (!s->failed) {
-        /* friction-cone check with the torques held over this step */
+        /* friction-cone check with the torques held over this step (the vector field is
+           already evaluated if the outputs were read after the inputs were set) */
         double fz, fx;
-        eval_field(c);
+        if (!s->outputs_valid) eval_field(c);
         fz = c->lam[1];
         fx = c->lam[0];
         s->bad_cone = (fz < s->min_normal_force || fabs(fx) > s->mu * fz) ? s->bad_cone + 1 : 0;
