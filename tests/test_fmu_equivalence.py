@@ -70,6 +70,9 @@ def test_fmu_reproduces_the_simulator_over_ten_steps(fmu_path, nominal, tau_from
           f"|dqd| {err_qd:.3g}, |d t_impact| {err_t:.3g} s")
     assert err_angles <= 1e-6
     assert err_t < H
+    # impacts are located inside the substeps, not at their boundaries
+    off_grid = np.abs(t_fmu / H - np.round(t_fmu / H)) * H
+    assert off_grid.min() > 1e-9, off_grid
     # the domain sequence and the sensed load agree sample by sample
     assert np.array_equal(np.array(log["domain"]), ref.domain)
     # forces read after setting the inputs = the simulator's log (same u_p)
@@ -102,6 +105,21 @@ def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, te
     assert not ref.failed and ref.steps == 3 and not log["fall"]
     assert np.abs(q - ref.q).max() <= 1e-9
     assert len(log["impacts"]) == ref.steps
+    assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
+
+
+def test_start_in_pns(fmu_path, model, template_gait):
+    """Initial state and domain as parameters: the gait's start of pns."""
+    sim = simulator(model, template_gait)
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    tr = template_gait.trajectory["pns"]
+    q0, qd0 = tr["q"][:, 0], tr["qd"][:, 0]
+    ref = python_run(sim, pd, q0, qd0, "pns", steps=2)
+    real = {f"q0[{i + 1}]": v for i, v in enumerate(q0)}
+    real |= {f"qd0[{i + 1}]": v for i, v in enumerate(qd0)}
+    log = fmu_run(fmu_path, pd, ref.t.size, "q", real=real, integer={"initial_domain": 1})
+    assert log["domain"][0] == 1 and not log["fall"] and not ref.failed
+    assert np.abs(np.array(log["q"]) - ref.q).max() <= 1e-9
     assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
 
 
