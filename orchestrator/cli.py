@@ -23,6 +23,8 @@ from hp_model.artifacts import ArtifactError
 from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
+from human_fmu.build import FmuBuildError
+from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
 
@@ -38,11 +40,13 @@ model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True
 app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
+app.add_typer(fmu_app, name="fmu")
 
 #: exceptions that are the user's input, reported in one line
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
                                                FileNotFoundError, MocapError, FitError,
-                                               ArtifactError, GaitOptimizationError)
+                                               ArtifactError, GaitOptimizationError,
+                                               FmuBuildError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",

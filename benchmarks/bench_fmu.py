@@ -1,0 +1,181 @@
+"""Benchmark: the human FMU (built C, stepped through fmpy) against the in-process Python
+simulator, and the FMU build time.
+
+  - build: ``build_fmu`` from the gait file (model, code generation, compile, zip);
+  - one 1 ms doStep (2 RK4 substeps, event location when an impact falls in the step) through
+    fmpy ``FMU2Slave.doStep``: median and p90 over a walking run whose prosthesis torques are
+    the nominal-PD policy's torques of the Python run, replayed (so both integrate the same
+    trajectory, impacts included); also the plain ctypes call without fmpy's wrapper, and a
+    whole co-simulation exchange (set 2 inputs + doStep + get 6 sensor outputs);
+  - the in-process ``HybridSimulator`` over the same periods with the same replayed torques
+    (mean per period: ``run`` does not expose single periods);
+  - the ratio Python per period / FMU doStep.
+
+Targets (issue): doStep median <= 30 us; >= 10x faster than the Python simulator; build < 60 s.
+The machines are shared: quote ratios.
+
+Usage: PYTHONPATH=. python benchmarks/bench_fmu.py [--gait gait.json] [--periods 3000]
+       [--json out.json]   (without --gait, the test template gait is optimized first)
+"""
+
+from __future__ import annotations
+
+import argparse
+import ctypes
+import json
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import hp_model
+from hp_model.gait_artifact import load_gait, save_gait
+from human_fmu import build_fmu
+from tests.fmu_runner import HumanFMU, NominalPD
+from tests.fmu_support import policy_table, python_run, simulator, start_state
+
+SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau")
+
+
+def template_gait(model, path: Path) -> None:
+    from characterization.gait_design import build_gait
+    from characterization.phzd import PHZDOptions, optimize_gait
+    from tests.gait_template import template_targets
+
+    opt = PHZDOptions(nodes=11)
+    targets = template_targets()
+    result = optimize_gait(model, targets, opt)
+    if not result.success:
+        raise SystemExit(f"template gait optimization failed: {result.status}")
+    save_gait(path, build_gait(model, result, targets, opt))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--gait", type=Path, help="gait file (default: optimize the template)")
+    ap.add_argument("--periods", type=int, default=3000)
+    ap.add_argument("--json", help="also write the figures to this JSON file")
+    a = ap.parse_args()
+
+    model = hp_model.load_model()
+    with tempfile.TemporaryDirectory() as tmp:
+        gait_path = a.gait
+        if gait_path is None:
+            gait_path = Path(tmp) / "gait.json"
+            print("optimizing the template gait ...", flush=True)
+            template_gait(model, gait_path)
+        gait = load_gait(gait_path, model.parameter_hash())
+
+        fmu_path = Path(tmp) / "human.fmu"
+        info = build_fmu(gait_path, fmu_path)  # fresh: model, codegen, compile (no cache)
+        build_s = info.seconds
+
+        # the Python reference run and its torques
+        sim = simulator(model, gait)
+        pd = NominalPD(policy_table(model, gait, sim))
+        q0, qd0 = start_state(gait)
+        python_run(sim, pd, q0, qd0, duration=0.1)  # warm-up
+        torques: list[np.ndarray] = []
+        rec = sim.run(q0, qd0, "ps", duration=a.periods * 1e-3,
+                      policy=lambda t, st: torques.append(
+                          pd(st.domain, st.tau, st.q[10:12], st.qd[10:12])) or torques[-1])
+        if rec.failed:
+            raise SystemExit(f"the reference run fell: {rec.reason}")
+        n = rec.t.size - 1
+        u = np.array(torques)
+        replay = iter(u)
+        t0 = time.perf_counter()
+        rep = sim.run(q0, qd0, "ps", duration=n * 1e-3, policy=lambda t, st: next(replay))
+        py_per_period = (time.perf_counter() - t0) / n * 1e6
+        assert np.array_equal(rep.q, rec.q)
+
+        # the FMU: doStep alone, the plain ctypes call, and a full exchange
+        h = HumanFMU(str(fmu_path))
+        f = h.fmu
+        uv, sv = h.vrs(["u_knee", "u_ankle"]), h.vrs(SENSORS)
+        qv = h.vrs([f"q[{i}]" for i in range(1, 13)])
+
+        def fresh():
+            f.reset()
+            h.setup()
+
+        fresh()
+        step_ns = np.empty(n)
+        pc = time.perf_counter_ns
+        for k in range(n):
+            f.setReal(uv, u[k].tolist())
+            t1 = pc()
+            f.doStep(k * 1e-3, 1e-3)
+            step_ns[k] = pc() - t1
+        q_end = np.array(f.getReal(qv))
+        same = bool(np.array_equal(q_end, rep.q[-1]))
+
+        fresh()
+        lib = ctypes.CDLL(str(Path(h.unzipdir) / "binaries" / "linux64" / "hpcosim_human.so"))
+        lib.fmi2DoStep.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double,
+                                   ctypes.c_int]
+        lib.fmi2DoStep.restype = ctypes.c_int
+        comp = f.component
+        raw_ns = np.empty(n)
+        for k in range(n):
+            f.setReal(uv, u[k].tolist())
+            t1 = pc()
+            lib.fmi2DoStep(comp, k * 1e-3, 1e-3, 1)
+            raw_ns[k] = pc() - t1
+
+        fresh()
+        cycle_ns = np.empty(n)
+        for k in range(n):
+            t1 = pc()
+            f.setReal(uv, u[k].tolist())
+            f.doStep(k * 1e-3, 1e-3)
+            f.getReal(sv)
+            cycle_ns[k] = pc() - t1
+        h.free()
+
+    step_us, raw_us, cycle_us = step_ns / 1e3, raw_ns / 1e3, cycle_ns / 1e3
+    fig = {
+        "periods": n, "impacts": rec.steps,
+        "build_s": build_s,
+        "fmu_doStep_us_median": float(np.median(step_us)),
+        "fmu_doStep_us_p90": float(np.percentile(step_us, 90)),
+        "fmu_doStep_us_mean": float(step_us.mean()),
+        "fmu_doStep_ctypes_us_median": float(np.median(raw_us)),
+        "fmu_exchange_us_median": float(np.median(cycle_us)),
+        "python_us_per_period": py_per_period,
+        "ratio_median": py_per_period / float(np.median(step_us)),
+        "ratio_mean": py_per_period / float(step_us.mean()),
+        "same_final_state": same,
+    }
+    print(f"machine: {platform.processor() or platform.machine()}, python "
+          f"{platform.python_version()}; {n} periods of 1 ms, {rec.steps} impacts; FMU and "
+          f"Python end in the same state: {same}")
+    rows = [
+        ("FMU build, total (s)", f"{build_s['total']:.1f}", "< 60",
+         build_s["total"] < 60),
+        ("  of which model / codegen / compile (s)",
+         f"{build_s['model']:.1f} / {build_s['codegen']:.2f} / {build_s['compile']:.1f}", "", None),
+        ("FMU doStep 1 ms via fmpy, median (us)", f"{fig['fmu_doStep_us_median']:.1f}", "<= 30",
+         fig["fmu_doStep_us_median"] <= 30),
+        ("FMU doStep via fmpy, p90 / mean (us)",
+         f"{fig['fmu_doStep_us_p90']:.1f} / {fig['fmu_doStep_us_mean']:.1f}", "", None),
+        ("FMU doStep via plain ctypes, median (us)", f"{fig['fmu_doStep_ctypes_us_median']:.1f}",
+         "", None),
+        ("set 2 inputs + doStep + get 6 outputs via fmpy, median (us)",
+         f"{fig['fmu_exchange_us_median']:.1f}", "", None),
+        ("Python HybridSimulator per 1 ms period, mean (us)", f"{py_per_period:.1f}", "", None),
+        ("speed-up Python / FMU doStep (median; mean)",
+         f"{fig['ratio_median']:.1f}x; {fig['ratio_mean']:.1f}x", ">= 10x",
+         fig["ratio_median"] >= 10),
+    ]
+    print("\n| measure | value | target | met |\n|---|---:|---:|:---:|")
+    for name, val, target, ok in rows:
+        print(f"| {name} | {val} | {target} | {'' if ok is None else ('yes' if ok else 'NO')} |")
+    if a.json:
+        Path(a.json).write_text(json.dumps(fig, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,377 @@
+"""Build the human-side FMU: generate C from the CasADi model, write modelDescription.xml and
+the C configuration from one variable table, compile, and zip (atomically).
+
+FMU layout (FMI 2.0 co-simulation, model identifier ``hpcosim_human``):
+
+    modelDescription.xml
+    binaries/linux64/hpcosim_human.so
+    sources/hpfmu.c             the FMI wrapper and the hybrid integration (hand-written)
+    sources/hpfmu_casadi.c      the plant and the human's controller (CasADi-generated)
+    sources/hpfmu_config.h      variables, start values and model constants (generated)
+    sources/fmi2*.h             the FMI 2.0 headers
+    sources/buildDescription.xml
+    resources/build_info.json   hashes, compiler flags, timings
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+import time
+import zipfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import casadi as ca
+import numpy as np
+
+import hp_model
+from hp_model.artifacts import ArtifactError
+from hp_model.closed_loop import ClosedLoop
+from hp_model.compiled import densified, find_c_compiler, generate_c
+from hp_model.gait_artifact import Gait, load_gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.simulator import SimOptions
+from human_fmu.initial import stance_frame
+from human_fmu.variables import UNITS, Variable, _Table, add_constants, build_table
+
+MODEL_IDENTIFIER = "hpcosim_human"
+PLATFORM = "linux64"
+#: compiler flags of the binary (README: rebuild); -ffp-contract=off keeps the arithmetic
+#: identical to the in-process simulator's compiled functions on FMA-capable targets
+FMU_CFLAGS = ("-shared", "-fPIC", "-O2", "-fno-math-errno", "-ffp-contract=off",
+              "-fvisibility=hidden")
+C_DIR = Path(__file__).parent / "c"
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+CASADI_FUNCTIONS = ("rk4_human_ps", "rk4_human_pns", "xdot_human_ps", "xdot_human_pns")
+MODEL_FUNCTIONS = ("impact_ps", "impact_pns", "guard_ps", "guard_pns", "frames")
+DOMAIN_ORDER = ("ps", "pns")
+
+
+class FmuBuildError(RuntimeError):
+    """The FMU cannot be built from these inputs (bad gait, gait of another model, no C
+    compiler, compiler failure, unsupported platform)."""
+
+
+@dataclass(frozen=True)
+class BuildInfo:
+    path: Path
+    guid: str
+    model_hash: str
+    gait_hash: str
+    degree: int
+    variables: dict[str, int]  # causality -> count
+    size_bytes: int
+    seconds: dict[str, float]  # model, codegen, compile, total
+
+
+def fmi_header_dir() -> Path:
+    import fmpy
+
+    d = Path(fmpy.__file__).parent / "c-code"
+    if not (d / "fmi2Functions.h").is_file():
+        raise FmuBuildError(f"FMI 2.0 headers not found in {d} (fmpy installation)")
+    return d
+
+
+def fmu_functions(model: HumanProsthesisModel, cl: ClosedLoop) -> list[ca.Function]:
+    """The CasADi functions compiled into the FMU (the ones HybridSimulator calls)."""
+    return ([densified(cl.functions[n]) for n in CASADI_FUNCTIONS]
+            + [densified(model.functions[n]) for n in MODEL_FUNCTIONS])
+
+
+# -- modelDescription.xml -----------------------------------------------------------------------
+def _fmt(v: float | int | bool | str) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(float(v))
+    return str(v)
+
+
+def model_description(table: _Table, guid: str, *, description: str, generated: str,
+                      annotations: dict[str, str]) -> str:
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "2.0", "modelName": MODEL_IDENTIFIER, "guid": guid,
+        "description": description, "author": "hpcosim",
+        "version": hp_model.__version__,
+        "generationTool": f"hpcosim human_fmu {hp_model.__version__} (CasADi {ca.__version__})",
+        "generationDateAndTime": generated, "variableNamingConvention": "flat",
+        "numberOfEventIndicators": "0"})
+    cs = ET.SubElement(root, "CoSimulation", {
+        "modelIdentifier": MODEL_IDENTIFIER, "needsExecutionTool": "false",
+        "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
+        "maxOutputDerivativeOrder": "0", "canRunAsynchronuously": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false",
+        "canNotUseMemoryManagementFunctions": "true", "canGetAndSetFMUstate": "true",
+        "canSerializeFMUstate": "false", "providesDirectionalDerivative": "false"})
+    sf = ET.SubElement(cs, "SourceFiles")
+    ET.SubElement(sf, "File", {"name": "hpfmu.c"})
+    used = sorted({v.unit for v in table.vars if v.unit})
+    ud = ET.SubElement(root, "UnitDefinitions")
+    for u in used:
+        ET.SubElement(ET.SubElement(ud, "Unit", {"name": u}), "BaseUnit",
+                      {k: str(e) for k, e in UNITS[u].items()})
+    lc = ET.SubElement(root, "LogCategories")
+    for name, desc in (("logEvents", "impacts and falls"),
+                       ("logStatusError", "errors: bad parameters, calls in the wrong state")):
+        ET.SubElement(lc, "Category", {"name": name, "description": desc})
+    ET.SubElement(root, "DefaultExperiment",
+                  {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"})
+    va = ET.SubElement(root, "VendorAnnotations")
+    ET.SubElement(ET.SubElement(va, "Tool", {"name": "hpcosim"}), "Build", annotations)
+    mv = ET.SubElement(root, "ModelVariables")
+    index: dict[str, int] = {}
+    for k, v in enumerate(table.vars, start=1):
+        index[v.name] = k
+        attrs = {"name": v.name, "valueReference": str(v.vr), "description": v.description,
+                 "causality": v.causality, "variability": v.variability}
+        if v.initial is not None and v.causality != "local":
+            attrs["initial"] = v.initial
+        sv = ET.SubElement(mv, "ScalarVariable", attrs)
+        tattrs: dict[str, str] = {}
+        if v.unit:
+            tattrs["unit"] = v.unit
+        if v.start is not None:
+            tattrs["start"] = _fmt(v.start)
+        ET.SubElement(sv, v.type, tattrs)
+    ms = ET.SubElement(root, "ModelStructure")
+    inputs = " ".join(str(index[v.name]) for v in table.vars if v.causality == "input")
+    outs = [v for v in table.vars if v.causality == "output"]
+    o = ET.SubElement(ms, "Outputs")
+    for v in outs:
+        ET.SubElement(o, "Unknown", {"index": str(index[v.name]),
+                                     "dependencies": inputs if v.feedthrough else ""})
+    iu = ET.SubElement(ms, "InitialUnknowns")
+    for v in outs:
+        ET.SubElement(iu, "Unknown", {"index": str(index[v.name])})
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") \
+        + "\n"
+
+
+def build_description(flags: Sequence[str]) -> str:
+    root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
+    bc = ET.SubElement(root, "BuildConfiguration", {
+        "modelIdentifier": MODEL_IDENTIFIER,
+        "description": "one translation unit (hpfmu.c includes hpfmu_casadi.c); link libm"})
+    sfs = ET.SubElement(bc, "SourceFileSet", {
+        "language": "C99", "compilerOptions": " ".join(f for f in flags
+                                                       if f not in ("-shared", "-fPIC"))})
+    ET.SubElement(sfs, "SourceFile", {"name": "hpfmu.c"})
+    ET.SubElement(bc, "Library", {"name": "m"})
+    ET.indent(root, space="  ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") \
+        + "\n"
+
+
+# -- hpfmu_config.h ---------------------------------------------------------------------------
+def _c_str(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def _c_double(v: float) -> str:
+    r = repr(float(v))
+    return r if any(ch in r for ch in ".eEn") else r + ".0"
+
+
+def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree: int,
+                  n_theta: int, phase_rows: dict[str, np.ndarray]) -> str:
+    names = model.coord_names
+    frames = [model.frame_index(stance_frame(model, d)) for d in DOMAIN_ORDER]
+    ankles = [names.index("th_pa" if stance_frame(model, d).startswith("p_") else "th_la")
+              for d in DOMAIN_ORDER]
+    nxt = [DOMAIN_ORDER.index(model.domains[d].next) for d in DOMAIN_ORDER]
+    lines = [
+        "/* hpfmu_config.h: generated by human_fmu.build from the variable table; do not edit */",
+        "#ifndef HPFMU_CONFIG_H", "#define HPFMU_CONFIG_H", "",
+        f"#define HPFMU_GUID {_c_str(guid)}",
+        f"#define HPFMU_NQ {model.nq}", f"#define HPFMU_NU {model.nu}",
+        f"#define HPFMU_NLAM {model.domains['ps'].n_constraints}",
+        f"#define HPFMU_NTHETA {n_theta}", f"#define HPFMU_NALPHA {n_theta - 3}",
+        f"#define HPFMU_DEGREE {degree}",
+        f"#define HPFMU_NFRAMES {len(model.frame_names)}",
+        f"#define HPFMU_IDX_ZB {names.index('z_B')}",
+        f"#define HPFMU_IDX_PK {names.index('th_pk')}",
+        f"#define HPFMU_IDX_PA {names.index('th_pa')}",
+        f"#define HPFMU_SOCKET_FIRST {names.index('x_f')}", "",
+        "/* domains: 0 = ps, 1 = pns */",
+        'static const char *const HPFMU_DOMAIN_NAME[2] = {"ps", "pns"};',
+        f"static const int HPFMU_NEXT[2] = {{{nxt[0]}, {nxt[1]}}};",
+        "/* frame held flat in the domain (= the frame that lands when entering it) */",
+        f"static const int HPFMU_STANCE_FRAME[2] = {{{frames[0]}, {frames[1]}}};",
+        f"static const int HPFMU_LANDING_ANKLE[2] = {{{ankles[0]}, {ankles[1]}}};",
+        "/* tau = (row . q - p_min) / (p_max - p_min): row = d delta_p_hip / dq */",
+        f"static const double HPFMU_PHASE_ROW[2][{model.nq}] = {{",
+    ]
+    for d in DOMAIN_ORDER:
+        lines.append("  {" + ", ".join(_c_double(v) for v in phase_rows[d]) + "},")
+    lines += ["};", ""]
+    for typ in ("Real", "Integer", "Boolean", "String"):
+        vs = [v for v in table.vars if v.type == typ]
+        up = typ.upper()
+        lines.append(f"#define HPFMU_N_{up} {len(vs)}")
+        for v in vs:
+            lines.append(f"#define VR_{v.macro} {v.vr}")
+        kind = "".join({"input": "i", "output": "o", "parameter": "p", "local": "c"}[v.causality]
+                       for v in vs)
+        lines.append(f"static const char HPFMU_{up}_KIND[{len(vs) + 1}] = {_c_str(kind)};")
+        lines.append(f"static const char *const HPFMU_{up}_NAME[{len(vs)}] = {{")
+        lines += [f"  {_c_str(v.name)}," for v in vs]
+        lines.append("};")
+        if typ == "Real":
+            vals = [_c_double(v.start if v.start is not None else 0.0) for v in vs]
+            lines.append(f"static const double HPFMU_REAL_START[{len(vs)}] = {{")
+        elif typ == "String":
+            vals = [_c_str(str(v.start)) for v in vs]
+            lines.append(f"static const char *const HPFMU_STRING_START[{len(vs)}] = {{")
+        else:
+            vals = [str(int(v.start or 0)) for v in vs]
+            lines.append(f"static const int HPFMU_{up}_START[{len(vs)}] = {{")
+        lines += [f"  {x}," for x in vals]
+        lines += ["};", ""]
+    lines += ["#endif", ""]
+    return "\n".join(lines)
+
+
+# -- build ----------------------------------------------------------------------------------
+def _guid(*parts: str) -> str:
+    h = hashlib.sha256("\0".join(parts).encode()).hexdigest()
+    return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
+
+
+def load_checked_gait(gait: str | os.PathLike[str], model: HumanProsthesisModel) -> Gait:
+    """The gait file, refused (FmuBuildError) if invalid or made for other model parameters,
+    or without the optimized initial state."""
+    try:
+        g = load_gait(gait, model.parameter_hash())
+    except ArtifactError as e:
+        raise FmuBuildError(str(e)) from None
+    tr = g.trajectory.get("ps", {})
+    if "q" not in tr or "qd" not in tr or tr["q"].shape[0] != model.nq:
+        raise FmuBuildError(f"{gait}: field 'trajectory.ps': the optimized initial state "
+                            "(q, qd) is missing; the FMU starts from it")
+    return g
+
+
+def _compile(cc: str, src_dir: Path, out: Path) -> None:
+    cmd = [cc, *FMU_CFLAGS, "-I", str(src_dir), str(src_dir / "hpfmu.c"), "-o", str(out), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        err = [ln for ln in proc.stderr.splitlines() if "error" in ln] or \
+            proc.stderr.strip().splitlines() or ["unknown error"]
+        raise FmuBuildError(f"compiling the FMU failed: {err[0]}")
+
+
+def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
+              subject: str | os.PathLike[str] | None = None,
+              device: str | os.PathLike[str] | None = None, *,
+              model: HumanProsthesisModel | None = None,
+              progress: Callable[[str], None] | None = None) -> BuildInfo:
+    """Build ``out`` (.fmu) for the gait file and the subject/device configs (defaults: the
+    shipped example files); ``model`` reuses an already built model of those configs."""
+    t0 = time.perf_counter()
+    say = progress or (lambda _msg: None)
+    out = Path(out)
+    if out.suffix != ".fmu":
+        raise FmuBuildError(f"{out}: the output file must end in .fmu")
+    if not out.parent.is_dir():
+        raise FmuBuildError(f"{out.parent}: no such folder")
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise FmuBuildError(f"binaries are built for {PLATFORM} only, not "
+                            f"{platform.system()} {platform.machine()}")
+    cc = find_c_compiler()
+    if cc is None:
+        raise FmuBuildError("no C compiler found (set CC or install gcc)")
+    headers = fmi_header_dir()
+    say("building the model")
+    if model is None:
+        model = hp_model.load_model(str(subject) if subject else None,
+                                    str(device) if device else None)
+    elif subject is not None or device is not None:
+        raise ValueError("give either model or subject/device")
+    g = load_checked_gait(gait, model)
+    model_hash, gait_hash = model.parameter_hash(), g.hash()
+    cl = ClosedLoop(model, g.degree)
+    thetas = {d: g.theta(d) for d in DOMAIN_ORDER}
+    n_theta = thetas["ps"].size
+    tr = g.trajectory["ps"]
+    table = build_table(model, thetas, g.gains, tr["q"][:, 0], tr["qd"][:, 0], g.degree,
+                        SimOptions())
+    add_constants(table, model_hash, gait_hash)
+    t_model = time.perf_counter()
+
+    say("generating C")
+    casadi_src = generate_c(fmu_functions(model, cl), "hpfmu_casadi")
+    wrapper_src = (C_DIR / "hpfmu.c").read_text()
+    table_key = json.dumps([(v.name, v.type, v.causality, v.vr, _fmt(v.start)
+                             if v.start is not None else None) for v in table.vars])
+    guid = _guid(casadi_src, wrapper_src, table_key, model_hash, gait_hash)
+    rows = {d: cl.vcs[d].c_row for d in DOMAIN_ORDER}
+    header = config_header(table, model, guid, g.degree, n_theta, rows)
+    generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    annotations = {"model_hash": model_hash, "gait_hash": gait_hash,
+                   "gait_file": Path(gait).name, "degree": str(g.degree),
+                   "subject": model.subject.name, "device": model.device.name}
+    md = model_description(
+        table, guid, generated=generated, annotations=annotations,
+        description=("hpcosim human side: 12-DOF human-prosthesis hybrid dynamics with the "
+                     "human's feedback linearization along the gait; inputs: prosthesis motor "
+                     "torques; outputs: AMPRO3 sensors and ground truth"))
+    t_gen = time.perf_counter()
+
+    say("compiling")
+    with tempfile.TemporaryDirectory(prefix="hpfmu_") as tmp:
+        root = Path(tmp) / "fmu"
+        src = root / "sources"
+        binp = root / "binaries" / PLATFORM
+        res = root / "resources"
+        for p in (src, binp, res):
+            p.mkdir(parents=True)
+        (src / "hpfmu_casadi.c").write_text(casadi_src)
+        (src / "hpfmu.c").write_text(wrapper_src)
+        (src / "hpfmu_config.h").write_text(header)
+        for h in FMI_HEADERS:
+            shutil.copyfile(headers / h, src / h)
+        (src / "buildDescription.xml").write_text(build_description(FMU_CFLAGS))
+        (root / "modelDescription.xml").write_text(md)
+        _compile(cc, src, binp / f"{MODEL_IDENTIFIER}.so")
+        t_cc = time.perf_counter()
+        seconds = {"model": t_model - t0, "codegen": t_gen - t_model, "compile": t_cc - t_gen}
+        info = {"model_identifier": MODEL_IDENTIFIER, "guid": guid, "model_hash": model_hash,
+                "gait_hash": gait_hash, "gait_file": Path(gait).name, "degree": g.degree,
+                "generated": generated, "compiler": cc, "cflags": list(FMU_CFLAGS),
+                "casadi": ca.__version__, "hpcosim": hp_model.__version__,
+                "functions": [*CASADI_FUNCTIONS, *MODEL_FUNCTIONS], "seconds": seconds}
+        (res / "build_info.json").write_text(json.dumps(info, indent=1) + "\n")
+        say("packaging")
+        fd, tmp_zip = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+        os.close(fd)
+        try:
+            with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
+                for p in sorted(root.rglob("*")):
+                    if p.is_file():
+                        zf.write(p, p.relative_to(root).as_posix())
+            os.replace(tmp_zip, out)
+        except BaseException:
+            Path(tmp_zip).unlink(missing_ok=True)
+            raise
+    seconds["total"] = time.perf_counter() - t0
+    counts: dict[str, int] = {}
+    for v in table.vars:
+        counts[v.causality] = counts.get(v.causality, 0) + 1
+    return BuildInfo(path=out, guid=guid, model_hash=model_hash, gait_hash=gait_hash,
+                     degree=g.degree, variables=counts, size_bytes=out.stat().st_size,
+                     seconds=seconds)
+
+
+__all__ = ["MODEL_IDENTIFIER", "BuildInfo", "FmuBuildError", "Variable", "build_fmu",
+           "fmu_functions", "load_checked_gait"]

@@ -1,0 +1,215 @@
+"""The FMU's variables: one table from which both ``modelDescription.xml`` and the C header
+``hpfmu_config.h`` are written, so the two cannot disagree.
+
+Value references are counted per type (Real, Integer, Boolean, String) from 0, in table
+order.  Every variable also has a C macro ``VR_<NAME>`` (arrays: ``VR_<NAME>`` is the first
+element, the rest follow consecutively).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import Y2_COORDS
+from hp_model.simulator import SimOptions
+
+#: unit name -> SI base-unit exponents (kg, m, s, rad)
+UNITS: dict[str, dict[str, int]] = {
+    "m": {"m": 1},
+    "m/s": {"m": 1, "s": -1},
+    "rad": {"rad": 1},
+    "rad/s": {"rad": 1, "s": -1},
+    "s": {"s": 1},
+    "1/s": {"s": -1},
+    "1/s2": {"s": -2},
+    "N": {"kg": 1, "m": 1, "s": -2},
+    "N.m": {"kg": 1, "m": 2, "s": -2},
+    "N.s": {"kg": 1, "m": 1, "s": -1},
+}
+
+FALL_CODES = {
+    0: "walking (no fall)",
+    1: "non-finite state",
+    2: "hip height below min_hip_height",
+    3: "phase tau ran backward more than tau_backward",
+    4: "no touchdown by tau_max",
+    5: "stance foot left the friction cone for cone_periods steps",
+    6: "landed on heel or toe (touchdown pitch above max_touchdown_pitch)",
+}
+
+
+@dataclass(frozen=True)
+class Variable:
+    name: str
+    type: str  # Real, Integer, Boolean, String
+    causality: str  # input, output, parameter, local
+    variability: str  # continuous, discrete, fixed, constant
+    vr: int
+    macro: str
+    description: str
+    start: float | int | bool | str | None = None
+    unit: str | None = None
+    initial: str | None = None
+    #: outputs: whether the value depends directly on the inputs (feedthrough)
+    feedthrough: bool = False
+
+
+class _Table:
+    def __init__(self) -> None:
+        self.vars: list[Variable] = []
+        self.count = {"Real": 0, "Integer": 0, "Boolean": 0, "String": 0}
+        self.arrays: dict[str, tuple[str, int, int]] = {}  # macro -> (type, first vr, length)
+
+    def add(self, name: str, type_: str, causality: str, description: str, *,
+            start=None, unit: str | None = None, macro: str | None = None,
+            feedthrough: bool = False) -> Variable:
+        variability = {"input": "continuous" if type_ == "Real" else "discrete",
+                       "output": "continuous" if type_ == "Real" else "discrete",
+                       "parameter": "fixed", "local": "constant"}[causality]
+        initial = {"input": None, "output": "calculated", "parameter": "exact",
+                   "local": "exact"}[causality]
+        v = Variable(name, type_, causality, variability, self.count[type_],
+                     macro or name.upper(), description, start, unit, initial, feedthrough)
+        self.count[type_] += 1
+        self.vars.append(v)
+        return v
+
+    def array(self, base: str, type_: str, causality: str, descriptions: Sequence[str],
+              units: Sequence[str | None], starts: Sequence | None = None,
+              feedthrough: Sequence[bool] | None = None) -> None:
+        first = self.count[type_]
+        for k, (desc, unit) in enumerate(zip(descriptions, units, strict=True)):
+            self.add(f"{base}[{k + 1}]", type_, causality, desc,
+                     start=None if starts is None else starts[k], unit=unit,
+                     macro=f"{base.upper()}_{k + 1}",
+                     feedthrough=bool(feedthrough[k]) if feedthrough is not None else False)
+        self.arrays[base.upper()] = (type_, first, len(descriptions))
+
+
+def coord_unit(name: str, derivative: bool = False) -> str:
+    linear = name.startswith(("x_", "z_"))
+    if derivative:
+        return "m/s" if linear else "rad/s"
+    return "m" if linear else "rad"
+
+
+def theta_descriptions(domain: str, degree: int) -> tuple[list[str], list[str]]:
+    desc, units = [], []
+    for row, coord in enumerate(Y2_COORDS[domain]):
+        for j in range(degree + 1):
+            desc.append(f"{domain} gait: Bezier coefficient alpha[{row},{j}] of {coord}")
+            units.append("rad")
+    desc += [f"{domain} gait: hip velocity v_hip", f"{domain} gait: phase start p_min",
+             f"{domain} gait: phase end p_max"]
+    units += ["m/s", "m", "m"]
+    return desc, units
+
+
+def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
+                gains: Sequence[float], q0: np.ndarray, qd0: np.ndarray, degree: int,
+                options: SimOptions | None = None) -> _Table:
+    """The variable table with start values from the gait (thetas, gains, initial state)."""
+    opt = options or SimOptions()
+    names = model.coord_names
+    t = _Table()
+    # inputs
+    t.add("u_knee", "Real", "input", "prosthesis knee motor torque, held over the step",
+          start=0.0, unit="N.m")
+    t.add("u_ankle", "Real", "input", "prosthesis ankle motor torque, held over the step",
+          start=0.0, unit="N.m")
+    # outputs: what AMPRO3 senses
+    t.add("knee_angle", "Real", "output", "prosthesis knee angle th_pk", unit="rad")
+    t.add("ankle_angle", "Real", "output", "prosthesis ankle angle th_pa", unit="rad")
+    t.add("knee_velocity", "Real", "output", "prosthesis knee velocity", unit="rad/s")
+    t.add("ankle_velocity", "Real", "output", "prosthesis ankle velocity", unit="rad/s")
+    t.add("foot_load", "Real", "output",
+          "prosthesis foot normal force (N) in ps, 0 in pns", unit="N", feedthrough=True)
+    t.add("foot_contact", "Boolean", "output", "prosthesis foot on the ground (domain ps)")
+    # outputs: ground truth
+    t.add("socket_Fx", "Real", "output", "socket force F_x (human on prosthesis, top-link frame)",
+          unit="N", feedthrough=True)
+    t.add("socket_Fz", "Real", "output", "socket force F_z", unit="N", feedthrough=True)
+    t.add("socket_My", "Real", "output", "socket moment M_y", unit="N.m", feedthrough=True)
+    t.add("stance_Fx", "Real", "output", "stance-foot ground force F_x (world)", unit="N",
+          feedthrough=True)
+    t.add("stance_Fz", "Real", "output", "stance-foot ground force F_z (world)", unit="N",
+          feedthrough=True)
+    t.add("stance_My", "Real", "output", "stance-foot ground moment M_y (world)", unit="N.m",
+          feedthrough=True)
+    t.array("q", "Real", "output", [f"coordinate {n}" for n in names],
+            [coord_unit(n) for n in names])
+    t.array("qd", "Real", "output", [f"velocity of {n}" for n in names],
+            [coord_unit(n, True) for n in names])
+    t.array("u", "Real", "output",
+            [f"torque of {a} ({'motor, N m' if a.startswith('th_p') else 'joint, N m'})"
+             for a in model.actuated], ["N.m"] * model.nu, feedthrough=[True] * model.nu)
+    t.add("tau", "Real", "output", "phase variable tau of the current domain")
+    t.add("t_impact", "Real", "output", "time of the last impact (located), -1 before any",
+          unit="s")
+    t.add("domain", "Integer", "output", "current domain: 0 = ps, 1 = pns")
+    t.add("steps", "Integer", "output", "impacts so far")
+    t.add("fall", "Boolean", "output", "the walker fell (integration stopped)")
+    t.add("fall_code", "Integer", "output",
+          "why: " + "; ".join(f"{k} {v}" for k, v in FALL_CODES.items()))
+    # parameters: the gait the human tracks and its feedback gains
+    for d in ("ps", "pns"):
+        desc, units = theta_descriptions(d, degree)
+        t.array(f"theta_{d}", "Real", "parameter", desc, units,
+                [float(v) for v in thetas[d]])
+    t.add("fl_eps", "Real", "parameter", "human feedback linearization gain on y1",
+          start=float(gains[0]), unit="1/s")
+    t.add("fl_kp", "Real", "parameter", "human feedback linearization gain kp on y2",
+          start=float(gains[1]), unit="1/s2")
+    t.add("fl_kd", "Real", "parameter", "human feedback linearization gain kd on y2",
+          start=float(gains[2]), unit="1/s")
+    t.add("human_perturbation", "Real", "parameter",
+          "amplitude of the deterministic perturbation of every Bezier coefficient "
+          "(uniform in [-a, a), SplitMix64; see README)", start=0.0, unit="rad")
+    t.add("human_seed", "Integer", "parameter", "seed of the human perturbation", start=0)
+    # parameters: initial state
+    t.array("q0", "Real", "parameter", [f"initial {n}" for n in names],
+            [coord_unit(n) for n in names], [float(v) for v in q0])
+    t.array("qd0", "Real", "parameter", [f"initial velocity of {n}" for n in names],
+            [coord_unit(n, True) for n in names], [float(v) for v in qd0])
+    t.add("initial_domain", "Integer", "parameter", "initial domain: 0 = ps, 1 = pns", start=0)
+    t.add("offset_knee", "Real", "parameter",
+          "initial offset added to th_pk (see README: foot re-placed, velocities projected)",
+          start=0.0, unit="rad")
+    t.add("offset_ankle", "Real", "parameter", "initial offset added to th_pa", start=0.0,
+          unit="rad")
+    # parameters: integration and events (SimOptions)
+    t.add("substeps", "Integer", "parameter", "RK4 steps per communication step",
+          start=opt.substeps)
+    t.add("guard_tau_min", "Real", "parameter", "the touchdown guard is armed past this phase",
+          start=opt.guard_tau_min)
+    t.add("event_tol", "Real", "parameter", "swing-sole height tolerance of the located impact",
+          start=opt.event_tol, unit="m")
+    t.add("event_iters", "Integer", "parameter", "maximum Illinois iterations per event",
+          start=opt.event_iters)
+    t.add("min_hip_height", "Real", "parameter", "fall: hip height below this",
+          start=opt.min_hip_height, unit="m")
+    t.add("tau_backward", "Real", "parameter", "fall: tau drops this far below its peak",
+          start=opt.tau_backward)
+    t.add("tau_max", "Real", "parameter", "fall: no touchdown by this phase",
+          start=opt.tau_max)
+    t.add("min_normal_force", "Real", "parameter", "fall: stance normal force below this",
+          start=opt.min_normal_force, unit="N")
+    t.add("mu", "Real", "parameter", "friction coefficient of the slip check", start=opt.mu)
+    t.add("cone_periods", "Integer", "parameter",
+          "fall: friction cone violated this many consecutive communication steps",
+          start=opt.cone_periods)
+    t.add("max_touchdown_pitch", "Real", "parameter",
+          "fall: landing-foot pitch removed at touchdown above this",
+          start=opt.max_touchdown_pitch, unit="rad")
+    return t
+
+
+def add_constants(t: _Table, model_hash: str, gait_hash: str) -> None:
+    t.add("model_hash", "String", "local", "hash of the subject/device parameters",
+          start=model_hash)
+    t.add("gait_hash", "String", "local", "hash of the gait the FMU was built from",
+          start=gait_hash)

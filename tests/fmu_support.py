@@ -1,0 +1,69 @@
+"""Shared pieces of the FMU tests: one FMU build per test session (cached in the process), the
+nominal-PD policy table of a gait, and the matching in-process simulator run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from hp_model.closed_loop import ClosedLoop
+from hp_model.gait_artifact import Gait, save_gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.simulator import HybridSimulator, SimOptions, SimResult
+from human_fmu import build_fmu
+from tests.fmu_runner import DOMAINS, NominalPD
+
+#: PD gains (joint N m/rad, N m s/rad): stiff in stance, soft on the light swinging leg
+PD_GAINS = {"ps": (500.0, 20.0), "pns": (50.0, 1.0)}
+
+_BUILT: dict[str, Path] = {}
+
+
+def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait) -> tuple[Path, Path]:
+    """(fmu path, gait path), built once per process for this gait."""
+    key = gait.hash()
+    if key not in _BUILT:
+        d = tmp_path_factory.mktemp("fmu")
+        save_gait(d / "gait.json", gait)
+        build_fmu(d / "gait.json", d / "human.fmu", model=model)
+        _BUILT[key] = d
+    d = _BUILT[key]
+    return d / "human.fmu", d / "gait.json"
+
+
+def simulator(model: HumanProsthesisModel, gait: Gait, thetas=None,
+              options: SimOptions | None = None) -> HybridSimulator:
+    cl = ClosedLoop(model, gait.degree)
+    th = thetas or {d: gait.theta(d) for d in DOMAINS}
+    return HybridSimulator(model, cl, th, gait.gains_array, options)
+
+
+def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) -> dict:
+    """The NominalPD table: nominal prosthesis angles, velocities and motor torques of the
+    gait's collocation trajectory over its phase."""
+    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    ratio = [float(model.B[k, 4]), float(model.B[a, 5])]
+    table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in DOMAINS},
+                   "phase": {}, "nominal": {}}
+    for d in DOMAINS:
+        th = sim.thetas[d]
+        table["phase"][d] = {"c_row": sim.cl.vcs[d].c_row.tolist(), "p_min": float(th[-2]),
+                             "p_max": float(th[-1])}
+        tr = gait.trajectory[d]
+        taus = [sim.phase(d, tr["q"][:, i]) for i in range(tr["q"].shape[1])]
+        table["nominal"][d] = {"tau": taus, "q": tr["q"][[k, a]].tolist(),
+                               "qd": tr["qd"][[k, a]].tolist(), "u": tr["u"][4:6].tolist()}
+    return table
+
+
+def python_run(sim: HybridSimulator, pd: NominalPD, q0: np.ndarray, qd0: np.ndarray,
+               domain: str = "ps", **kw) -> SimResult:
+    """The in-process run with the same policy (tau = the simulator's phase of q)."""
+    return sim.run(q0, qd0, domain, policy=lambda t, st: pd(st.domain, st.tau, st.q[10:12],
+                                                            st.qd[10:12]), **kw)
+
+
+def start_state(gait: Gait) -> tuple[np.ndarray, np.ndarray]:
+    tr = gait.trajectory["ps"]
+    return tr["q"][:, 0].copy(), tr["qd"][:, 0].copy()

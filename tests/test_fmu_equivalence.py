@@ -1,0 +1,175 @@
+"""The FMU, stepped by fmpy, reproduces the in-process HybridSimulator: same policy, same
+scenario, same trajectory and impact times (10 steps of walking), including the human
+perturbation, the initial prosthesis offsets, other step sizes, and a fall."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hp_model.simulator import SimOptions
+from human_fmu import initial_state, perturbed_thetas
+from human_fmu.perturbation import splitmix64, uniform
+from tests.fmu_runner import HumanFMU, NominalPD, run
+from tests.fmu_support import built_fmu, policy_table, python_run, simulator, start_state
+
+DT = 1e-3
+H = DT / SimOptions().substeps  # one integration substep
+#: FMU fall code -> words of the simulator's reason
+FALL_MATCH = {1: "non-finite", 2: "hip height", 3: "backward", 4: "no touchdown",
+              5: "friction cone", 6: "heel or toe"}
+
+
+@pytest.fixture(scope="module")
+def fmu_path(tmp_path_factory, model, template_gait):
+    return built_fmu(tmp_path_factory, model, template_gait)[0]
+
+
+@pytest.fixture(scope="module")
+def nominal(model, template_gait):
+    sim = simulator(model, template_gait)
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    q0, qd0 = start_state(template_gait)
+    return sim, pd, python_run(sim, pd, q0, qd0, steps=10)
+
+
+def fmu_run(path, pd, periods, tau_from="output", real=None, integer=None, dt=DT):
+    h = HumanFMU(str(path))
+    h.setup(real, integer)
+    log = run(h, pd, periods, dt, tau_from)
+    h.free()
+    return log
+
+
+def test_python_reference_walks_ten_steps(nominal):
+    _, _, ref = nominal
+    assert not ref.failed, ref.reason
+    assert ref.steps == 10
+    assert set(ref.domain) == {0, 1}
+
+
+@pytest.mark.parametrize("tau_from", ["q", "output"])
+def test_fmu_reproduces_the_simulator_over_ten_steps(fmu_path, nominal, tau_from):
+    """tau_from "q": the policy computes tau from the ground-truth q exactly as the simulator
+    (the two runs are then bit-identical on this machine); "output": it uses the FMU's tau
+    output (C loop vs numpy dot: ulp-level differences in the policy's input)."""
+    _, pd, ref = nominal
+    log = fmu_run(fmu_path, pd, ref.t.size, tau_from)
+    assert not log["fall"]
+    q = np.array(log["q"])
+    assert q.shape == ref.q.shape
+    angles = np.array(log["sensors"])[:, 0:2]
+    err_angles = np.abs(angles - ref.q[:, 10:12]).max()
+    err_q = np.abs(q - ref.q).max()
+    err_qd = np.abs(np.array(log["qd"]) - ref.qd).max()
+    t_ref = np.array([i.t for i in ref.impacts])
+    t_fmu = np.array(log["impacts"])
+    assert t_fmu.shape == t_ref.shape == (10,)
+    err_t = np.abs(t_fmu - t_ref).max()
+    print(f"tau from {tau_from}: |d angles| {err_angles:.3g} rad, |dq| {err_q:.3g}, "
+          f"|dqd| {err_qd:.3g}, |d t_impact| {err_t:.3g} s")
+    assert err_angles <= 1e-6
+    assert err_t < H
+    # impacts are located inside the substeps, not at their boundaries
+    off_grid = np.abs(t_fmu / H - np.round(t_fmu / H)) * H
+    assert off_grid.min() > 1e-9, off_grid
+    # the domain sequence and the sensed load agree sample by sample
+    assert np.array_equal(np.array(log["domain"]), ref.domain)
+    # forces read after setting the inputs = the simulator's log (same u_p)
+    forces = np.array(log["forces"])
+    load = np.where(ref.domain == 0, ref.lam[:, 1], 0.0)
+    assert np.abs(forces[:, 0] - load).max() <= 1e-6 * np.abs(load).max()
+    assert np.abs(forces[:, 1:4] - ref.lam[:, 3:6]).max() <= 1e-6 * np.abs(ref.lam).max()
+    assert np.abs(forces[:, 4:7] - ref.lam[:, 0:3]).max() <= 1e-6 * np.abs(ref.lam).max()
+    if tau_from == "q":  # same inputs, same generated C, same algorithm
+        assert err_q <= 1e-12 and err_t <= 1e-12
+
+
+def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, template_gait):
+    amp, seed, dk, da = 0.003, -7, 0.02, -0.01
+    thetas = perturbed_thetas({d: template_gait.theta(d) for d in ("ps", "pns")}, amp, seed)
+    assert not np.array_equal(thetas["ps"], template_gait.theta("ps"))
+    assert np.array_equal(thetas["ps"][-3:], template_gait.theta("ps")[-3:])
+    sim = simulator(model, template_gait, thetas)
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    q0, qd0 = start_state(template_gait)
+    q1, qd1 = initial_state(model, q0, qd0, "ps", dk, da)
+    assert q1[10] == q0[10] + dk and q1[11] == q0[11] + da
+    ref = python_run(sim, pd, q1, qd1, steps=3)
+    log = fmu_run(fmu_path, pd, ref.t.size, "q",
+                  real={"human_perturbation": amp, "offset_knee": dk, "offset_ankle": da},
+                  integer={"human_seed": seed})
+    q = np.array(log["q"])
+    assert np.abs(q[0] - q1).max() <= 1e-12
+    assert np.abs(np.array(log["qd"][0]) - qd1).max() <= 1e-9
+    assert not ref.failed and ref.steps == 3 and not log["fall"]
+    assert np.abs(q - ref.q).max() <= 1e-9
+    assert len(log["impacts"]) == ref.steps
+    assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
+
+
+def test_start_in_pns(fmu_path, model, template_gait):
+    """Initial state and domain as parameters: the gait's start of pns."""
+    sim = simulator(model, template_gait)
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    tr = template_gait.trajectory["pns"]
+    q0, qd0 = tr["q"][:, 0], tr["qd"][:, 0]
+    ref = python_run(sim, pd, q0, qd0, "pns", steps=2)
+    real = {f"q0[{i + 1}]": v for i, v in enumerate(q0)}
+    real |= {f"qd0[{i + 1}]": v for i, v in enumerate(qd0)}
+    log = fmu_run(fmu_path, pd, ref.t.size, "q", real=real, integer={"initial_domain": 1})
+    assert log["domain"][0] == 1 and not log["fall"] and not ref.failed
+    assert np.abs(np.array(log["q"]) - ref.q).max() <= 1e-9
+    assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
+
+
+def test_other_step_size_and_substeps(fmu_path, model, template_gait):
+    """doStep(2 ms) with 4 substeps = SimOptions(dt=2 ms, substeps=4)."""
+    sim = simulator(model, template_gait, options=SimOptions(dt=2e-3, substeps=4))
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    q0, qd0 = start_state(template_gait)
+    ref = python_run(sim, pd, q0, qd0, steps=2)
+    log = fmu_run(fmu_path, pd, ref.t.size, "q", integer={"substeps": 4}, dt=2e-3)
+    assert np.abs(np.array(log["q"]) - ref.q).max() <= 1e-9
+    assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
+
+
+@pytest.mark.parametrize("factor", [0.0, 0.5, 1.5, 2.0, 3.0])
+def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, factor):
+    """With the nominal prosthesis torques scaled the walker falls (in various ways); the FMU
+    raises `fall` with the simulator's reason at the same sample (a friction-cone fall
+    depends on the inputs of the step and shows one communication step later)."""
+    sim = simulator(model, template_gait)
+    table = policy_table(model, template_gait, sim)
+    for d in ("ps", "pns"):
+        table["nominal"][d]["u"] = (factor * np.array(table["nominal"][d]["u"])).tolist()
+    pd = NominalPD(table)
+    q0, qd0 = start_state(template_gait)
+    ref = python_run(sim, pd, q0, qd0, steps=10)
+    assert ref.failed
+    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q")
+    assert log["fall"]
+    assert FALL_MATCH[log["fall_code"]] in ref.reason
+    lag = 1 if log["fall_code"] == 5 else 0
+    assert log["fall_period"] == ref.t.size - 1 + lag
+    print(f"x{factor}: {ref.reason}; FMU code {log['fall_code']} at sample "
+          f"{log['fall_period']}")
+
+
+def test_perturbation_generator_is_splitmix64():
+    """Published SplitMix64 values (seed 0: e220a8397b1dcdaf, 6e789e6aa1b965f4; seed 1234567:
+    599ed017fb08fc85, the xoshiro reference's test vector)."""
+    assert splitmix64(0, 0) == 0xE220A8397B1DCDAF
+    assert splitmix64(0, 1) == 0x6E789E6AA1B965F4
+    assert splitmix64(1234567, 0) == 0x599ED017FB08FC85
+    assert uniform(-1, 3) == uniform((1 << 64) - 1, 3)  # negative seeds: two's complement
+    th = {"ps": np.arange(33.0), "pns": -np.arange(33.0)}
+    assert all(np.array_equal(perturbed_thetas(th, 0.0, 5)[d], th[d]) for d in th)
+    p = perturbed_thetas(th, 0.1, 5)
+    for d in th:
+        delta = p[d] - th[d]
+        assert np.all(np.abs(delta[:30]) <= 0.1) and np.all(delta[30:] == 0)
+        assert np.abs(delta[:30]).min() > 0
+    assert not np.array_equal(p["ps"] - th["ps"], -(p["pns"] - th["pns"]))
+    with pytest.raises(ValueError):
+        perturbed_thetas(th, -1.0, 0)
