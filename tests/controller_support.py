@@ -64,7 +64,7 @@ def simulate_reduced(ctl: BaseController, ctx: ControllerContext, x0: np.ndarray
         out = ctl.tick(stance_meas(t, x))
         u = out.torque
         d = out.diagnostics
-        rows.append((t, *x, *u, d.V, d.tau, d.rho, d.mode))
+        rows.append((t, *x, *u, d.V, d.tau, d.rho, d.mode, int(d.active)))
         for _ in range(substeps):
             k1 = f(x, u)
             k2 = f(x + 0.5 * h * k1, u)
@@ -76,4 +76,4 @@ def simulate_reduced(ctl: BaseController, ctx: ControllerContext, x0: np.ndarray
     cols = list(zip(*rows, strict=True))
     return {"t": np.array(cols[0]), "x": np.array(cols[1:5]).T, "u": np.array(cols[5:7]).T,
             "V": np.array(cols[7]), "tau": np.array(cols[8]), "rho": np.array(cols[9]),
-            "mode": np.array(cols[10])}
+            "mode": np.array(cols[10]), "active": np.array(cols[11])}
