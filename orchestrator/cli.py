@@ -24,6 +24,7 @@ from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from human_fmu.build import FmuBuildError
+from orchestrator import experiments_cli
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
@@ -41,6 +42,8 @@ app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
 app.add_typer(fmu_app, name="fmu")
+app.command("experiments")(experiments_cli.experiments)
+app.command("demo")(experiments_cli.demo)
 
 #: exceptions that are the user's input, reported in one line
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,

@@ -1,0 +1,305 @@
+"""Closed-loop scenarios: the full hybrid human-prosthesis model on the one simulator
+(:class:`hp_model.simulator.HybridSimulator`, mode ``human``), the human side tracking its
+outputs by feedback linearization (along perturbed thetas for perturbation cases), and a
+prosthesis controller at 1 kHz (zero-order hold) fed ONLY prosthesis measurements:
+
+    knee/ankle angle and velocity  = q, qd of th_pk, th_pa
+    foot load                      = lam[1] (ground normal force on the prosthesis foot) in
+                                     ps, else 0 (clipped at 0: a load cell does not pull)
+    contact                        = domain == "ps"
+
+Falls detected by the simulator end a run as a failure with its reason, time and tau.
+
+Perturbed human gaits come from :func:`human_fmu.perturbation.perturbed_thetas` (the
+generator the FMU uses), so the in-process and FMU runs of a case agree.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from characterization.force_tube_fit import deviation_profiles, fit_tube, nominal_coefficients
+from characterization.gait_verification import make_simulator
+from hp_model import bezier
+from hp_model.force_tube import ForceTube
+from hp_model.gait_artifact import Gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.simulator import HybridSimulator, SimOptions, SimState
+from human_fmu.perturbation import perturbed_thetas
+from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
+
+DOMAINS = ("ps", "pns")
+#: row of th_pk / th_pa in the y2 outputs of each domain (hp_model.outputs.OUTPUTS)
+KNEE_ROW = {"ps": 4, "pns": 3}
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """The human's gait: nominal (amplitude 0) or the deterministic perturbation of the
+    Bezier coefficients with ``amplitude`` (rad) and ``seed``."""
+
+    name: str = "nominal"
+    amplitude: float = 0.0
+    seed: int = 0
+
+    def thetas(self, gait: Gait) -> dict[str, np.ndarray]:
+        return perturbed_thetas({d: gait.theta(d) for d in DOMAINS}, self.amplitude,
+                                self.seed)
+
+
+NOMINAL = Perturbation()
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One closed-loop run: prosthesis controller, the human's gait, number of steps
+    (impacts), and an initial prosthesis offset (knee, ankle) in rad added to the nominal
+    initial state (the whole walker is then re-placed on the stance foot)."""
+
+    controller: str = "clfqp"
+    perturbation: Perturbation = NOMINAL
+    steps: int = 20
+    initial_offset: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def label(self) -> str:
+        off = "" if self.initial_offset == (0.0, 0.0) else " +offset"
+        return f"{self.controller} / {self.perturbation.name}{off}"
+
+
+@dataclass
+class ScenarioResult:
+    """Per-period time series (1 kHz) of one scenario and how it ended."""
+
+    scenario: Scenario
+    t: np.ndarray
+    tau: np.ndarray
+    domain: np.ndarray  # 0 = ps, 1 = pns
+    q_p: np.ndarray  # (n, 2) th_pk, th_pa
+    qd_p: np.ndarray  # (n, 2)
+    torque: np.ndarray  # (n, 2) motor torques the controller commanded
+    knee_ref: np.ndarray  # (n,) nominal knee B_pk(tau) of the domain (gait, not perturbed)
+    mode: list[str]
+    V: np.ndarray
+    rho: np.ndarray
+    fallback_count: int
+    steps: int
+    failed: bool
+    reason: str
+    fail_t: float | None
+    fail_tau: float | None
+    fail_domain: str | None
+    post_impact: list[np.ndarray] = field(default_factory=list)  # joint states after ps impacts
+    step_bounds: list[tuple[int, int]] = field(default_factory=list)  # ps segments [i0, i1)
+
+    @property
+    def success(self) -> bool:
+        return not self.failed and self.steps >= self.scenario.steps
+
+    def knee_rms(self, domain: str | None = "ps") -> float:
+        """RMS of th_pk - B_pk(tau) over the samples of ``domain`` (None: all), rad."""
+        m = np.ones(self.t.size, bool) if domain is None else \
+            self.domain == (0 if domain == "ps" else 1)
+        if not m.any():
+            return float("nan")
+        e = self.q_p[m, 0] - self.knee_ref[m]
+        return float(np.sqrt(np.mean(e**2)))
+
+    def chatter_per_step(self) -> list[float]:
+        """Total variation of the motor torques (sum over both joints of sum |du|, N m) over
+        each complete or partial ps segment."""
+        out = []
+        for i0, i1 in self.step_bounds:
+            u = self.torque[i0:i1]
+            out.append(float(np.abs(np.diff(u, axis=0)).sum()) if len(u) > 1 else 0.0)
+        return out
+
+
+def knee_reference(gait: Gait, domain: str, tau: float) -> float:
+    p = gait.params[domain]
+    return float(bezier.evaluate(p.alpha[KNEE_ROW[domain]:KNEE_ROW[domain] + 1],
+                                 np.clip(tau, 0.0, 1.0))[0])
+
+
+def initial_state(model: HumanProsthesisModel, gait: Gait,
+                  offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """The gait's initial ps state with the prosthesis (knee, ankle) offset; the walker is
+    re-placed so the prosthesis foot stays flat on the ground."""
+    tr = gait.trajectory["ps"]
+    q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
+    if any(offset):
+        names = model.coord_names
+        q[names.index("th_pk")] += offset[0]
+        q[names.index("th_pa")] += offset[1]
+        q = model.place_stance_foot(q, "ps")
+    return q, qd
+
+
+def measurement(model_idx: tuple[int, int], t: float, st: SimState) -> ProsthesisMeasurement:
+    """What AMPRO3 senses, from the simulator state (module docstring)."""
+    pk, pa = model_idx
+    load = max(float(st.lam[1]), 0.0) if st.domain == "ps" else 0.0
+    return ProsthesisMeasurement(t=float(t), knee_angle=float(st.q[pk]),
+                                 ankle_angle=float(st.q[pa]), knee_vel=float(st.qd[pk]),
+                                 ankle_vel=float(st.qd[pa]), foot_load=load,
+                                 contact=st.domain == "ps")
+
+
+_REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")
+
+
+def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
+                 scenario: Scenario, *, context: ControllerContext | None = None,
+                 options: SimOptions | None = None,
+                 q0: np.ndarray | None = None, qd0: np.ndarray | None = None
+                 ) -> ScenarioResult:
+    """Run one scenario on the full hybrid model (module docstring)."""
+    base = make_simulator(model, gait, options=options)
+    sim = HybridSimulator(model, base.cl, scenario.perturbation.thetas(gait),
+                          gait.gains_array, base.opt)
+    ctx = context or ControllerContext(gait, tube, model, None)
+    ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
+    ctrl.reset()
+    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
+    torques: list[np.ndarray] = []
+    modes: list[str] = []
+    Vs: list[float] = []
+    rhos: list[float] = []
+    fallbacks = [0]
+
+    def policy(t: float, st: SimState) -> np.ndarray:
+        out = ctrl.tick(measurement(idx, t, st))
+        dg = out.diagnostics
+        torques.append(np.array(out.torque, float))
+        modes.append(str(dg.mode))
+        Vs.append(float(dg.V))
+        rhos.append(float(dg.rho))
+        fallbacks[0] = int(dg.fallback_count)
+        return out.torque
+
+    if q0 is None or qd0 is None:
+        q0, qd0 = initial_state(model, gait, scenario.initial_offset)
+    r = sim.run(q0, qd0, "ps", steps=scenario.steps, policy=policy)
+    n = r.t.size
+    tq = np.array(torques[:n]) if torques else np.zeros((0, 2))
+    ref = np.array([knee_reference(gait, "ps" if dd == 0 else "pns", ta)
+                    for dd, ta in zip(r.domain, r.tau, strict=True)])
+    bounds, i0 = [], None
+    for i, dd in enumerate(r.domain):
+        if dd == 0 and i0 is None:
+            i0 = i
+        if dd != 0 and i0 is not None:
+            bounds.append((i0, i))
+            i0 = None
+    if i0 is not None:
+        bounds.append((i0, n))
+    j = [model.coord_names.index(c) for c in
+         ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")]
+    post = [np.r_[im.q[j], im.qd_plus[j]] for im in r.impacts if im.into == "ps"]
+    ft = ftau = fd = None
+    if r.failed:
+        m = _REASON.search(r.reason)
+        if m:
+            ft, fd, ftau = float(m.group(1)), m.group(2), float(m.group(3))
+    return ScenarioResult(
+        scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
+        q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
+        mode=modes[:n], V=np.array(Vs[:n]), rho=np.array(rhos[:n]),
+        fallback_count=fallbacks[0], steps=r.steps, failed=r.failed, reason=r.reason,
+        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds)
+
+
+def human_gait_walks(model: HumanProsthesisModel, gait: Gait, pert: Perturbation,
+                     steps: int) -> tuple[bool, str]:
+    """Whether the perturbed human gait walks ``steps`` steps with the prosthesis under
+    feedback linearization too (mode full): a perturbed gait the walker itself cannot
+    complete is not a test of the prosthesis controller."""
+    base = make_simulator(model, gait)
+    sim = HybridSimulator(model, base.cl, pert.thetas(gait), gait.gains_array, base.opt)
+    q0, qd0 = initial_state(model, gait)
+    r = sim.run(q0, qd0, "ps", steps=steps)
+    return (not r.failed and r.steps >= steps), r.reason
+
+
+def select_perturbations(model: HumanProsthesisModel, gait: Gait, n: int = 3,
+                         amplitude: float = 0.01, steps: int = 4, max_seed: int = 50
+                         ) -> list[Perturbation]:
+    """The first ``n`` seeds (0, 1, ...) whose perturbed human gait walks ``steps`` steps in
+    mode full (:func:`human_gait_walks`).  A fixed rule, independent of any controller."""
+    out: list[Perturbation] = []
+    for seed in range(max_seed):
+        p = Perturbation(f"human-{len(out) + 1} (seed {seed})", amplitude, seed)
+        if human_gait_walks(model, gait, p, steps)[0]:
+            out.append(p)
+            if len(out) == n:
+                return out
+    raise RuntimeError(f"fewer than {n} of {max_seed} perturbed gaits (amplitude "
+                       f"{amplitude} rad) walk {steps} steps under full feedback linearization")
+
+
+def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20,
+                   amplitude: float = 0.01, degree: int = 3, tau_lo: float = 0.02,
+                   tau_hi: float = 0.98, first_seed: int = 1000,
+                   progress: Callable[[int], None] | None = None
+                   ) -> tuple[ForceTube, list[tuple[np.ndarray, np.ndarray]]]:
+    """Stand-in for socket-force playback (until ``characterization.playback`` lands): the
+    socket force F_s = lam[3:6] of the first ps step of ``n_profiles`` perturbed human gaits
+    (seeds first_seed, ...; prosthesis under feedback linearization, mode full), deviation
+    from F*(tau), fitted with :func:`characterization.force_tube_fit.fit_tube`."""
+    base = make_simulator(model, gait)
+    q0, qd0 = initial_state(model, gait)
+    steps: list[tuple[np.ndarray, np.ndarray]] = []
+    seed = first_seed
+    while len(steps) < n_profiles and seed < first_seed + 20 * n_profiles:
+        p = Perturbation("tube", amplitude, seed)
+        seed += 1
+        sim = HybridSimulator(model, base.cl, p.thetas(gait), gait.gains_array, base.opt)
+        r = sim.run(q0, qd0, "ps", steps=1)
+        if r.failed or r.steps < 1:
+            continue
+        m = r.domain == 0
+        steps.append((r.tau[m], r.lam[m, 3:6]))
+        if progress is not None:
+            progress(len(steps))
+    coef = nominal_coefficients(gait, tau_lo, tau_hi)
+    prof = deviation_profiles(steps, coef, tau_lo, tau_hi)
+    tube = fit_tube(prof, coef, tau_lo, tau_hi, degree=degree, gait_hash=gait.hash(),
+                    source={"kind": "simulated perturbed human gaits (playback stand-in)",
+                            "amplitude_rad": amplitude, "first_seed": first_seed})
+    return tube, prof
+
+
+def summary(r: ScenarioResult) -> dict[str, Any]:
+    """The numbers of one run for metrics.json."""
+    return {"controller": r.scenario.controller, "perturbation": r.scenario.perturbation.name,
+            "amplitude_rad": r.scenario.perturbation.amplitude,
+            "seed": r.scenario.perturbation.seed,
+            "initial_offset_rad": list(r.scenario.initial_offset),
+            "steps_requested": r.scenario.steps, "steps_completed": r.steps,
+            "success": r.success, "failed": r.failed, "reason": r.reason,
+            "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
+            "duration_s": float(r.t[-1]) if r.t.size else 0.0,
+            "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),
+            "fallback_count": r.fallback_count,
+            "modes": {m: r.mode.count(m) for m in sorted(set(r.mode))}}
+
+
+def as_jsonable(x: Any) -> Any:
+    if isinstance(x, Mapping):
+        return {str(k): as_jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [as_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return as_jsonable(x.tolist())
+    if isinstance(x, np.floating | float):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
