@@ -16,11 +16,14 @@ from rich.console import Console
 from rich.table import Table
 
 import hp_model
+from characterization.bezier_fit import FitError
 from characterization.mocap_take import MocapError
+from hp_model.artifacts import ArtifactError
 from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from orchestrator.mocap_cli import mocap_app
+from orchestrator.tube_cli import tube_app
 
 app = typer.Typer(
     name="hpcosim",
@@ -33,10 +36,14 @@ app = typer.Typer(
 model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True)
 app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
+app.add_typer(tube_app, name="tube")
 
-#: exceptions that are the user's input, reported in one line
+#: exceptions that are the user's input, reported in one line (FitError covers
+#: characterization.playback.PlaybackError and force_tube_fit.TubeFitError without importing
+#: scipy at start-up; ArtifactError: gait and tube files)
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
-                                               FileNotFoundError, MocapError)
+                                               FileNotFoundError, MocapError, FitError,
+                                               ArtifactError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
