@@ -9,7 +9,7 @@ delta_p_hip.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,9 +60,12 @@ class DomainRegression:
 
 
 def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: Sequence[int],
-                   domain: str, degree: int, src: str = "steps") -> DomainRegression:
+                   domain: str, degree: int, src: str = "steps",
+                   windows: Mapping[int, tuple[int, int]] | None = None) -> DomainRegression:
     """Bezier regression of the stacked steps ``indices`` (all of ``domain``); one index
-    gives the fit of a single step (playback)."""
+    gives the fit of a single step (playback).  ``windows`` optionally restricts step i's
+    samples (y2 and the hip velocity) to its frames [a, b] (both included, counted from
+    the step's first frame); tau and the phase bounds stay the whole step's."""
     if not len(indices):
         raise FitError(f"{src}: no '{domain}' step (need at least one step of each domain)")
     names = list(steps.coord_names)
@@ -72,10 +75,12 @@ def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: S
     taus, ys, vels = [], [], []
     for i in indices:
         q = steps.step_q(i)
-        taus.append(steps.step_tau(i))
-        ys.append(q[:, cols])
         delta = ck * q[:, k] + ca_ * q[:, a]
-        vels.append(np.gradient(delta) * steps.frame_rate)
+        w = slice(None) if windows is None or i not in windows else \
+            slice(windows[i][0], windows[i][1] + 1)
+        taus.append(steps.step_tau(i)[w])
+        ys.append(q[w, cols])
+        vels.append((np.gradient(delta) * steps.frame_rate)[w])
     tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
     fit = fit_bezier(tau, y, degree)
     vfit = fit_bezier(tau, vel, 0)

@@ -84,6 +84,7 @@ class PlaybackOptions:
     dt: float = 1e-3  # s, log period (one F_s sample per period)
     substeps: int = 2  # RK4 steps per period
     stop_at_touchdown: bool = False  # also end a step at the human foot's touchdown
+    fit_frames: str = "single_support"  # frames of the step's Bezier fit: or "step"
     min_hip_height: float = 0.55  # m, below it the playback counts as fallen
     mu: float = 0.8  # friction coefficient of the (reported, not enforced) cone check
 
@@ -178,11 +179,21 @@ def check_inputs(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
 # ------------------------------------------------------------------------ one step
 
 def step_params(model: HumanProsthesisModel, steps: StepsArtifact, i: int, degree: int,
-                src: str = "steps") -> tuple[GaitParams, np.ndarray]:
+                src: str = "steps", fit_frames: str = "single_support"
+                ) -> tuple[GaitParams, np.ndarray]:
     """The step's gait parameters (its own Bezier fit, v_hip, phase bounds) and the fit's
-    RMS residual per joint."""
+    RMS residual per joint.  ``fit_frames``: "step" (every frame, the paper) or
+    "single_support" (the frames of the foot-marker rule's single support; the whole step
+    when it has none)."""
+    if fit_frames not in ("step", "single_support"):
+        raise PlaybackError(f"fit_frames must be 'step' or 'single_support', got {fit_frames!r}")
+    windows = None
+    a, b = int(steps.step_ss_start[i]), int(steps.step_ss_end[i])
+    if fit_frames == "single_support" and 0 <= a < b:
+        s0 = int(steps.step_start[i])
+        windows = {i: (a - s0, b - s0)}
     try:
-        r = regress_domain(model, steps, [i], DOMAIN, degree, f"{src}: step {i}")
+        r = regress_domain(model, steps, [i], DOMAIN, degree, f"{src}: step {i}", windows)
     except FitError as e:
         raise PlaybackError(str(e)) from None
     return GaitParams(r.fit.alpha, r.v_hip, r.p_min, r.p_max), np.asarray(r.fit.rms)
@@ -241,7 +252,7 @@ def play_step(model: HumanProsthesisModel, closed_loop: ClosedLoop, gait: Gait,
     opt = options or PlaybackOptions()
     if str(steps.step_domain[i]) != DOMAIN:
         raise PlaybackError(f"{src}: step {i} is not a ps step")
-    params, rms = step_params(model, steps, i, closed_loop.degree, src)
+    params, rms = step_params(model, steps, i, closed_loop.degree, src, opt.fit_frames)
     vc = closed_loop.vcs[DOMAIN]
     q0, qd0 = zero_dynamics_state(model, vc, params)
     sim = HybridSimulator(model, closed_loop, {DOMAIN: params.pack(), "pns": gait.theta("pns")},

@@ -5,22 +5,31 @@ hybrid simulator (mode "full": all 6 torques from feedback linearization) walks 
 steps ps, pns, ps, ...; each step tracks its own gait theta_k = the gait's parameters with
 the Bezier coefficients of the 5 joint outputs perturbed by independent normal draws
 (``sigma`` rad, seeded), so no two steps are alike.  The simulator switches theta at every
-impact (one ``run`` per step, restarted from the post-impact state).
+impact (one ``run`` per step, restarted from the post-impact state).  A step leaving the
+friction cone or falling raises :class:`TruthError`.
 
 The motion is recorded at ``rate`` Hz on a uniform global time grid: the state at a frame
-is the cubic Hermite interpolation of the simulator's 1 kHz log (q and qd), and the TRUE
-socket force at the frame is the socket rows 3:6 of the full constrained solve
-(``xdot_full_<d>``) at that state with that step's theta - the force the modelled subject
-really exerted on the prosthesis.  The recorded q becomes a :class:`StepsArtifact` exactly
-as motion capture would fill it (joint angles, hip position as the base, limb pitches, joint
-centres; steps with tau from the step's first/last delta_p_hip; single support by the
-paper's foot-marker rule on the swing foot's sole point, x speed above ``foot_speed`` m/s).
+is the cubic Hermite interpolation of the simulator's 1 kHz log (q and qd; the pre-impact
+state closes each step), and the TRUE socket force at the frame is the socket rows 3:6 of
+the full constrained solve (``xdot_full_<d>``) at that state with that step's theta - the
+force the modelled subject really exerted on the prosthesis.
 
-``perturb="interior"`` (default) perturbs only the coefficients 2..m-2, which leaves every
-curve's value and slope at tau = 0 and 1 unchanged, so each step starts on its own
-zero-dynamics surface (no post-impact transient that a single Bezier curve cannot follow);
-``perturb="all"`` perturbs every coefficient (the steps then begin with a transient of the
-feedback linearization, as a real subject's steps do not follow one curve either).
+The recording becomes a :class:`StepsArtifact` as motion capture would: q (hip position as
+the base, joint angles; optional white noise of ``noise_deg`` on the angles), limb pitches,
+joint centres; steps found by the paper's rule (:func:`segment_steps`: turning points of
+delta_p_hip(th_pk, th_pa)), tau from each step's first and last delta_p_hip; single support
+by the paper's foot-marker rule (the swing foot's sole point moving forward faster than
+``foot_speed``).  A ps step of the data therefore is not a ps domain of the simulation: it
+ends some 50 ms after the human foot's touchdown (delta_p_hip keeps rising for a while), in
+the model's pns; the foot-marker rule must and does cut that part off.
+
+``perturb``: "interior" (default) perturbs the coefficients 2..m-2, which leaves every
+curve's value and slope at tau = 0 and 1 unchanged (each step starts on its own
+zero-dynamics surface); "start" also perturbs coefficient 1 (the initial slope: a
+post-impact transient of the feedback linearization, which a single Bezier curve cannot
+follow exactly); "all" perturbs every coefficient (moves the touchdown posture too; the
+subject falls for sigma above a few mrad: the gait is close to the friction limit just
+after the impact).
 """
 
 from __future__ import annotations
@@ -31,7 +40,7 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from characterization.mocap_mapping import JOINTS, LIMBS
-from characterization.step_segmentation import single_support
+from characterization.step_segmentation import phase_tau, segment_steps, single_support
 from characterization.steps_artifact import StepsArtifact, validate_steps
 from hp_model.closed_loop import ClosedLoop
 from hp_model.gait_artifact import Gait
@@ -52,7 +61,8 @@ class TruthError(RuntimeError):
 
 @dataclass(frozen=True)
 class TruthOptions:
-    n_ps: int = 20  # ps steps to record (a pns step follows each)
+    n_ps: int = 20  # complete ps steps to record
+    min_excursion: float = 0.05  # m, turning-point hysteresis of the step segmentation
     seed: int = 0
     sigma: float = 0.02  # rad, SD of the perturbation of the Bezier coefficients
     perturb: str = "interior"  # "interior" or "all" (module docstring)
@@ -60,19 +70,23 @@ class TruthOptions:
     rate: float = 200.0  # Hz, recording
     dt: float = 1e-3  # s, simulator period
     foot_speed: float = 0.25  # m/s, single-support threshold of the foot-marker rule
+    noise_deg: float = 0.0  # SD of white noise added to the recorded angles (measurement)
 
 
 @dataclass(frozen=True)
 class TruthStep:
-    """One recorded step: its index in the artifact, domain, theta, and per frame the time,
-    the phase of the data (the step's own bounds) and the TRUE socket force (n, 3)."""
+    """One recorded step (as segmented by delta_p_hip): its index in the artifact, domain,
+    and per frame the time, the phase of the data (the step's own bounds), the TRUE socket
+    force, the simulator's domain and theta (a step of the data overlaps the neighbouring
+    steps of the simulation: their turning points of delta_p_hip are not the impacts)."""
 
     index: int
     domain: str
-    theta: np.ndarray
     time: np.ndarray
     tau: np.ndarray
-    socket: np.ndarray
+    socket: np.ndarray  # (n, 3) the true F_s
+    model_domain: np.ndarray  # (n,) the simulator's domain per frame (0 ps, 1 pns)
+    thetas: list[np.ndarray]  # per frame, the gait theta the simulated subject tracked
 
 
 @dataclass(frozen=True)
@@ -89,7 +103,7 @@ def _perturbed_theta(gait: Gait, d: str, rng: np.random.Generator, opt: TruthOpt
     p = gait.params[d]
     alpha = np.array(p.alpha)
     m = alpha.shape[1] - 1
-    cols = {"interior": np.arange(2, m - 1), "start": np.arange(0, m - 1),
+    cols = {"interior": np.arange(2, m - 1), "start": np.arange(1, m - 1),
             "all": np.arange(m + 1)}.get(opt.perturb)
     if cols is None:
         raise ValueError(f"perturb must be 'interior', 'start' or 'all', got {opt.perturb!r}")
@@ -111,7 +125,7 @@ def synthesize(model: HumanProsthesisModel, gait: Gait, options: TruthOptions | 
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
     d, t0 = "ps", 0.0
     segs = []  # (domain, theta, t (m,), q (m, 12), qd (m, 12))
-    for k in range(2 * opt.n_ps):
+    for k in range(2 * opt.n_ps + 3):
         theta = _perturbed_theta(gait, d, rng, opt)
         sim.thetas[d] = theta
         r = sim.run(q, qd, d, steps=1, duration=5.0)
@@ -155,32 +169,40 @@ def _package(model, cl, fs, segs, gait: Gait, opt: TruthOptions) -> SyntheticTak
     pos = np.empty((n, len(model.frame_names), 3))
     for j in range(n):
         pos[j] = frames(Q[j], np.zeros(model.nq))[0].T
+    if opt.noise_deg > 0:  # angle measurement noise (the foot marker and joint
+        # centres above come from the noise-free motion)
+        noise = np.random.default_rng(opt.seed + 1).standard_normal((n, model.nq))
+        angles = [i for i, c in enumerate(COORDS) if c.startswith("th_") and c != "th_f"]
+        Q[:, angles] += np.radians(opt.noise_deg) * noise[:, angles]
     names = list(COORDS)
     cidx = {c: names.index(c) for c in names}
     delta_ps = (model.hip_progress_coefficients("ps")[0] * Q[:, cidx["th_pk"]]
                 + model.hip_progress_coefficients("ps")[1] * Q[:, cidx["th_pa"]])
-    steps_dom, starts, ends, lows, highs, ss_a, ss_b, taus, truth = [], [], [], [], [], [], [], \
-        [], []
-    for k, (d, theta, _, _, _) in enumerate(segs):
-        rows = np.flatnonzero(owner == k)
-        if rows.size < 3:
-            continue
-        a, b = int(rows[0]), int(rows[-1])
-        ck, ca = model.hip_progress_coefficients(d)
-        kn, an = STANCE[d]
-        delta = ck * Q[a:b + 1, cidx[kn]] + ca * Q[a:b + 1, cidx[an]]
-        tau = (delta - delta[0]) / (delta[-1] - delta[0])
-        foot_x = pos[:, fidx[FOOT_MARKER[d]], 0]
-        ss = single_support(foot_x, rate, a, b, opt.foot_speed) or (-1, -1)
-        truth.append(TruthStep(len(steps_dom), d, theta, time[a:b + 1], tau, F[a:b + 1]))
-        steps_dom.append(d)
+    dom_code = np.array([DOMAIN_CODE[segs[k][0]] if k >= 0 else -1 for k in owner])
+    steps_dom, starts, ends, lows, highs, ss_a, ss_b, taus, truth = ([] for _ in range(9))
+    n_ps = 0
+    for b in segment_steps(delta_ps, opt.min_excursion):
+        if n_ps == opt.n_ps and b.domain == "ps":
+            break
+        a, e = b.start, b.end
+        ck, ca = model.hip_progress_coefficients(b.domain)
+        kn, an = STANCE[b.domain]
+        tau, lo, hi = phase_tau(ck * Q[a:e + 1, cidx[kn]] + ca * Q[a:e + 1, cidx[an]])
+        foot_x = pos[:, fidx[FOOT_MARKER[b.domain]], 0]
+        ss = single_support(foot_x, rate, a, e, opt.foot_speed) or (-1, -1)
+        truth.append(TruthStep(len(steps_dom), b.domain, time[a:e + 1], tau, F[a:e + 1],
+                               dom_code[a:e + 1], [segs[k][1] for k in owner[a:e + 1]]))
+        n_ps += b.domain == "ps"
+        steps_dom.append(b.domain)
         starts.append(a)
-        ends.append(b)
-        lows.append(delta[0])
-        highs.append(delta[-1])
+        ends.append(e)
+        lows.append(lo)
+        highs.append(hi)
         ss_a.append(ss[0])
         ss_b.append(ss[1])
         taus.append(tau)
+    if n_ps < opt.n_ps:
+        raise TruthError(f"only {n_ps} complete ps steps found in the synthetic take")
     lim = {"hat": ("th_B",), "l_thigh": ("th_B", "th_lh"), "l_shank": ("th_B", "th_lh", "th_lk"),
            "l_foot": ("th_B", "th_lh", "th_lk", "th_la"), "r_thigh": ("th_B", "th_rh"),
            "p_shin": ("th_B", "th_rh", "th_f", "th_pk"),
