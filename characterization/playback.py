@@ -416,18 +416,3 @@ def write_outputs(out: str | Path, res: TubeResult, steps_src: str = "steps",
     atomic_write_text(paths["report"], report_markdown(res, steps_src, gait_src) + "\n")
     save_tube(paths["tube"], res.tube)
     return paths
-
-
-def tube_contains(tube: ForceTube, profiles: Sequence[Profile], tol: np.ndarray | float = 0.0
-                  ) -> list[float]:
-    """Per profile (tau, dF) the largest excess over the tube's bounds in units of ``tol``
-    ... as plain numbers: max over samples and components of (excess / scale), where scale is
-    the component's max |dF| over all profiles; <= 0 means inside."""
-    allv = np.concatenate([np.abs(np.asarray(d)) for _, d in profiles])
-    scale = np.maximum(allv.max(axis=0), 1e-12)
-    out = []
-    for tau, dF in profiles:
-        lo, hi = tube.delta_bounds(np.asarray(tau))
-        ex = np.maximum(np.asarray(dF) - hi, lo - np.asarray(dF)) - tol
-        out.append(float((ex / scale).max()))
-    return out
