@@ -150,3 +150,17 @@ def test_stop_at_touchdown_ends_at_the_human_foot_contact(model, gait):
         assert sp.single_support[1] < sp.touchdown_tau < 1.0
         assert abs(sp.touchdown_tau - true_td) < 0.02
         assert sp.tau[-1] <= sp.touchdown_tau + 1e-9
+
+
+def test_socket_formula_matches_pinocchio(model, case):
+    """socket_ps (CasADi, generated C) = the same formula with Pinocchio's D, H, J_foot, at
+    played-back frames."""
+    from tests.playback_helpers import PinocchioSocket
+
+    _, _, result = case
+    oracle = PinocchioSocket(model)
+    for sp in result.playback.steps[:3]:
+        for j in range(0, len(sp.tau), 40):
+            ref = oracle(sp.q[j], sp.qd[j], sp.u[j], sp.lam[j, 0:3])
+            np.testing.assert_allclose(sp.socket[j], ref, rtol=1e-8,
+                                       atol=1e-8 * np.abs(ref).max())
