@@ -139,13 +139,13 @@ def main() -> None:
                           ("interior, 0.1 deg noise", TruthOptions(seed=3, sigma=0.03,
                                                                    noise_deg=0.1))):
             take = synthesize(model, gait, opt)
-            for ff in ("single_support", "step"):
+            for mg in (PlaybackOptions().fit_margin, 0.0, None):
                 r = fit_force_tube(model, gait, take.steps, args.degree,
-                                   options=PlaybackOptions(fit_frames=ff))
+                                   options=PlaybackOptions(fit_margin=mg))
                 e = 100 * relative_rms_errors(r, take).max(axis=0)
                 x = 100 * tube_excess(r, take).max()
                 print(f"   {name:25s} {e[0]:6.2f}  {e[1]:6.2f}  {e[2]:6.2f}   {x:6.2f}   "
-                      f"(fit on {ff} frames)")
+                      f"(fit margin {mg}{' = whole step' if mg is None else ''})")
 
 
 if __name__ == "__main__":

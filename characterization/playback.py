@@ -5,25 +5,33 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
 1. The step's joint trajectories are fitted with Bezier curves in the step's own tau, by the
    same regression as the gait's (:func:`characterization.gait_fit.regress_domain` with this
    one step; degree = the gait's): y2 = the 5 joint angles of ``Y2_COORDS["ps"]``;
-   v_hip = the mean of the step's per-frame d/dt delta_p_hip; the phase bounds are the step's
-   own delta_p_hip at its first and last frame.  These parameters alpha^pb_i are the step's
-   gait theta_i.
-2. Start on that step's zero-dynamics surface at tau = 0: the posture
-   ``VirtualConstraints.posture(0, theta_i)`` (stance foot flat at x = 0) and the velocity
-   qd = d(posture)/dtau * tau_dot with tau_dot = v_hip / (p_max - p_min), the base velocity
-   solving J_foot qd = 0 (y1 = y2 = dy2 = 0 exactly).
+   v_hip = the mean of the per-frame d/dt delta_p_hip; the phase bounds are the step's own
+   delta_p_hip at its first and last frame.  These parameters alpha^pb_i are the step's
+   gait theta_i.  Frames fitted (:func:`fit_window`, ``PlaybackOptions.fit_margin``): by
+   default the step's single support (the foot-marker rule's frames) widened by 0.1 in tau
+   on each side; ``fit_margin=None`` fits every frame of the step (the paper).  Measured in
+   characterization/PLAYBACK.md: the whole-step fit has to bend through the double-support
+   frames (for a model-generated subject, frames after the human foot's touchdown), which
+   biases the accelerations, hence F_s, over single support (M_y by about 10 % of its peak).
+2. Start on that step's zero-dynamics surface at the window's first tau (0 for the whole
+   step): the posture ``VirtualConstraints.posture(tau, theta_i)`` (stance foot flat at
+   x = 0) and the velocity qd = d(posture)/dtau * tau_dot with tau_dot = v_hip /
+   (p_max - p_min), the base velocity solving J_foot qd = 0 (y1 = y2 = dy2 = 0 exactly).
 3. Simulate the full 12-DOF model, all 6 torques from the feedback linearization of the
    step's outputs (:class:`hp_model.simulator.HybridSimulator`, mode "full"), until tau
-   reaches 1: duration ceil(T / dt) dt with T = (p_max - p_min) / v_hip (y1 = 0 keeps
-   tau = t / T).  By default the touchdown guard is disarmed, so the ps domain covers the
-   whole recorded phase, double-support ends included (they are removed afterwards, as in
-   the paper); with ``stop_at_touchdown`` the run also ends at the human foot's touchdown.
+   reaches the window's end (1 for the whole step): duration ceil(T / dt) dt with T the
+   window's share of (p_max - p_min) / v_hip (y1 = 0 keeps tau_dot constant).  The touchdown
+   guard is disarmed by default, so the ps domain covers the window even where the recorded
+   human foot is already on the ground (those frames are removed afterwards, as in the
+   paper); with ``stop_at_touchdown`` the run also ends at the human foot's touchdown.
    The stance-foot friction-cone check is not a failure here (playback replays data that need
    not respect the model's friction); the frames outside the cone are counted and reported.
-4. At every logged instant, F_s = ``socket_ps(q, qd, u, lam_foot)``: the paper's eq.
-   (Fsocket) with the stance-foot wrench lam_foot (rows 0:3 of the constrained solve) moved to
-   the known side.  It equals the socket rows 3:6 of the full KKT solve; the largest relative
-   difference is recorded per step (``kkt_residual``).
+   A playback that falls (hip below ``min_hip_height``, phase reversed, non-finite state) is
+   skipped and reported.
+4. At every logged instant (1 kHz), F_s = ``socket_ps(q, qd, u, lam_foot)``: the paper's eq.
+   (Fsocket) with the stance-foot wrench lam_foot (rows 0:3 of the constrained solve) moved
+   to the known side.  It equals the socket rows 3:6 of the full KKT solve; the largest
+   relative difference is recorded per step (``kkt_residual``; about 1e-13).
 
 Tube: dF_s^i(tau) = F_s^i(tau) - F*(tau) for (F_x, F_z, M_y), F* the gait's nominal socket
 force.  Double support is removed by the paper's foot-marker rule: the steps artifact's
@@ -31,10 +39,7 @@ single-support frames (human foot marker x moving forward faster than the thresh
 each step's [tau_a, tau_b]; the tube lives on [tau_lo, tau_hi] = [max tau_a, min tau_b]
 (:func:`characterization.force_tube_fit.tube_interval`).  Then the LPs, the certificate and
 the credibility of :func:`characterization.force_tube_fit.fit_tube`; the tube records the
-gait's hash.
-
-Steps are skipped (and listed, with the reason) when the foot-marker rule found no single
-support in them or their playback fell (hip too low, phase reversed, non-finite state).
+gait's hash.  Steps in which the foot-marker rule found no single support are skipped.
 """
 
 from __future__ import annotations
@@ -84,7 +89,9 @@ class PlaybackOptions:
     dt: float = 1e-3  # s, log period (one F_s sample per period)
     substeps: int = 2  # RK4 steps per period
     stop_at_touchdown: bool = False  # also end a step at the human foot's touchdown
-    fit_frames: str = "single_support"  # frames of the step's Bezier fit: or "step"
+    #: frames of each step's Bezier fit and span of its playback: None = the whole step (the
+    #: paper); m = the single support found by the foot-marker rule, widened by m in tau
+    fit_margin: float | None = 0.1
     min_hip_height: float = 0.55  # m, below it the playback counts as fallen
     mu: float = 0.8  # friction coefficient of the (reported, not enforced) cone check
 
@@ -178,20 +185,29 @@ def check_inputs(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
 
 # ------------------------------------------------------------------------ one step
 
+def fit_window(steps: StepsArtifact, i: int, margin: float | None
+               ) -> tuple[float, float, slice]:
+    """(tau_start, tau_end, frames) of step i's Bezier fit and playback: the whole step when
+    ``margin`` is None (the paper) or the step has no single support, else the foot-marker
+    rule's single support widened by ``margin`` (tau) on each side, within [0, 1]."""
+    ss = single_support_tau(steps, i)
+    if margin is None or ss is None:
+        return 0.0, 1.0, slice(None)
+    if not margin >= 0:
+        raise PlaybackError(f"the fit margin must be >= 0, got {margin}")
+    tau = steps.step_tau(i)
+    lo, hi = max(0.0, ss[0] - margin), min(1.0, ss[1] + margin)
+    rows = np.flatnonzero((tau >= lo) & (tau <= hi))
+    return float(tau[rows[0]]), float(tau[rows[-1]]), slice(int(rows[0]), int(rows[-1]) + 1)
+
+
 def step_params(model: HumanProsthesisModel, steps: StepsArtifact, i: int, degree: int,
-                src: str = "steps", fit_frames: str = "single_support"
+                src: str = "steps", margin: float | None = None
                 ) -> tuple[GaitParams, np.ndarray]:
     """The step's gait parameters (its own Bezier fit, v_hip, phase bounds) and the fit's
-    RMS residual per joint.  ``fit_frames``: "step" (every frame, the paper) or
-    "single_support" (the frames of the foot-marker rule's single support; the whole step
-    when it has none)."""
-    if fit_frames not in ("step", "single_support"):
-        raise PlaybackError(f"fit_frames must be 'step' or 'single_support', got {fit_frames!r}")
-    windows = None
-    a, b = int(steps.step_ss_start[i]), int(steps.step_ss_end[i])
-    if fit_frames == "single_support" and 0 <= a < b:
-        s0 = int(steps.step_start[i])
-        windows = {i: (a - s0, b - s0)}
+    RMS residual per joint; the fit uses the frames of :func:`fit_window`."""
+    w = fit_window(steps, i, margin)[2]
+    windows = None if w == slice(None) else {i: (w.start, w.stop - 1)}
     try:
         r = regress_domain(model, steps, [i], DOMAIN, degree, f"{src}: step {i}", windows)
     except FitError as e:
@@ -252,12 +268,14 @@ def play_step(model: HumanProsthesisModel, closed_loop: ClosedLoop, gait: Gait,
     opt = options or PlaybackOptions()
     if str(steps.step_domain[i]) != DOMAIN:
         raise PlaybackError(f"{src}: step {i} is not a ps step")
-    params, rms = step_params(model, steps, i, closed_loop.degree, src, opt.fit_frames)
+    params, rms = step_params(model, steps, i, closed_loop.degree, src, opt.fit_margin)
     vc = closed_loop.vcs[DOMAIN]
-    q0, qd0 = zero_dynamics_state(model, vc, params)
+    ss = single_support_tau(steps, i)
+    span = fit_window(steps, i, opt.fit_margin)[:2]
+    q0, qd0 = zero_dynamics_state(model, vc, params, span[0])
     sim = HybridSimulator(model, closed_loop, {DOMAIN: params.pack(), "pns": gait.theta("pns")},
                           gait.gains_array, opt.sim_options())
-    T = (params.p_max - params.p_min) / params.v_hip
+    T = (span[1] - span[0]) * (params.p_max - params.p_min) / params.v_hip
     run = sim.run(q0, qd0, DOMAIN, steps=1, duration=math.ceil(T / opt.dt - 1e-9) * opt.dt)
     keep = run.domain == 0
     if run.impacts:  # the frame logged after the touchdown belongs to the next domain
@@ -277,7 +295,7 @@ def play_step(model: HumanProsthesisModel, closed_loop: ClosedLoop, gait: Gait,
         failed, reason = True, "fewer than 2 frames simulated"
     return StepPlayback(
         step=i, params=params, fit_rms=rms, t=run.t[rows], tau=run.tau[rows], q=q, qd=qd, u=u,
-        lam=lam, socket=socket, single_support=single_support_tau(steps, i),
+        lam=lam, socket=socket, single_support=ss,
         kkt_residual=kkt, cone_frames=cone,
         touchdown_tau=float(sim.phase(DOMAIN, run.impacts[0].q)) if run.impacts else None,
         failed=failed, reason=reason)
@@ -346,6 +364,7 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
                       "F_s by eq. (Fsocket) (socket_ps)",
             "dt": (options or PlaybackOptions()).dt,
             "stop_at_touchdown": (options or PlaybackOptions()).stop_at_touchdown,
+            "fit_margin": (options or PlaybackOptions()).fit_margin,
             "bezier_degree": gait.degree,
             "max_kkt_residual": max(s.kkt_residual for s in good),
             "max_fit_rms_rad": float(max(s.fit_rms.max() for s in good)),
@@ -377,6 +396,11 @@ def report_markdown(res: TubeResult, steps_src: str = "steps", gait_src: str = "
         "(single support by the foot-marker rule).", "",
         f"Time: playback {res.seconds.get('playback', 0):.2f} s, tube "
         f"{res.seconds.get('tube', 0):.2f} s.", "",
+        "Each step's Bezier fit and playback window: "
+        + ("every frame, tau 0 to 1 (the paper)" if t.source.get("playback", {}).get(
+            "fit_margin", 0.1) is None else
+           f"its single support widened by {t.source['playback']['fit_margin']:g} in tau")
+        + "; F_s by eq. (Fsocket) at 1 kHz.", "",
         "## Playback", "",
         "| step | fit RMS (deg, max) | v_hip (m/s) | single support (tau) | F_s vs KKT (rel) "
         "| frames outside cone | status |",

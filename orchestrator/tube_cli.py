@@ -29,9 +29,15 @@ def fit(
     n_steps: Annotated[int | None, typer.Option(
         "--steps", min=1, help="Play back the first N prosthesis-stance steps (default: "
         "all; the paper used 20).")] = None,
+    fit_margin: Annotated[float, typer.Option(
+        "--fit-margin", min=0.0, max=1.0,
+        help="Fit each step's Bezier curves on its single support (foot-marker rule) widened "
+        "by this much tau on each side, and play back over that window.")] = 0.1,
+    whole_step_fit: Annotated[bool, typer.Option(
+        "--whole-step-fit", help="The paper's variant: fit every frame of the step and play "
+        "back from tau = 0 to 1 (overrides --fit-margin).")] = False,
     stop_at_touchdown: Annotated[bool, typer.Option(
-        help="End each playback at the human foot's touchdown too (default: at tau = 1).")
-    ] = False,
+        help="End each playback at the human foot's touchdown too.")] = False,
     subject: Annotated[Path | None, typer.Option(
         "--subject", help="Subject TOML (default: the shipped example subject).",
         dir_okay=False)] = None,
@@ -70,7 +76,9 @@ def fit(
             prog.update(task, description=what, completed=done, total=total)
 
         res = fit_force_tube(model, g, s, degree=degree, n_steps=n_steps,
-                             options=PlaybackOptions(stop_at_touchdown=stop_at_touchdown),
+                             options=PlaybackOptions(
+                                 stop_at_touchdown=stop_at_touchdown,
+                                 fit_margin=None if whole_step_fit else fit_margin),
                              progress=progress, src=str(steps))
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility

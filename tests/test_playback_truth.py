@@ -15,6 +15,7 @@ import pytest
 from characterization.playback import (
     PlaybackOptions,
     fit_force_tube,
+    fit_window,
     play_step,
     zero_dynamics_state,
 )
@@ -102,14 +103,31 @@ def test_paper_formula_equals_the_constrained_solve(case):
                                    atol=1e-9 * np.abs(sp.lam[:, 3:6]).max())
 
 
-def test_playback_covers_the_whole_phase(case):
-    _, _, result = case
+def test_playback_covers_its_fit_window(case):
+    """Each step is fitted and played back over its single support widened by the margin
+    (0.1 in tau), from the window's first frame to (one period past) its last."""
+    _, take, result = case
+    margin = PlaybackOptions().fit_margin
     for sp in result.playback.steps:
-        assert sp.tau[0] == pytest.approx(0.0, abs=1e-12)
+        lo, hi, _ = fit_window(take.steps, sp.step, margin)
+        a, b = sp.single_support
+        assert lo <= a and hi >= b and lo >= a - margin - 1e-12 and hi <= b + margin + 1e-12
+        assert sp.tau[0] == pytest.approx(lo, abs=1e-12)
         T = (sp.params.p_max - sp.params.p_min) / sp.params.v_hip
-        assert 1.0 <= sp.tau[-1] <= 1.0 + 2e-3 / T
+        assert hi <= sp.tau[-1] <= hi + 2e-3 / T
         assert np.all(np.diff(sp.tau) > 0)
         assert sp.touchdown_tau is None
+
+
+def test_whole_step_playback_covers_the_whole_phase(model, gait):
+    """The paper's variant: the Bezier fit of every frame, played back from tau = 0 to 1."""
+    take = synthesize(model, gait, TruthOptions(n_ps=2, sigma=0.03, seed=3))
+    cl = ClosedLoop(model, gait.degree)
+    tr = take.ps_truth()[0]
+    sp = play_step(model, cl, gait, take.steps, tr.index, PlaybackOptions(fit_margin=None))
+    T = (sp.params.p_max - sp.params.p_min) / sp.params.v_hip
+    assert sp.tau[0] == pytest.approx(0.0, abs=1e-12) and 1.0 <= sp.tau[-1] <= 1 + 2e-3 / T
+    assert not sp.failed and sp.kkt_residual < 1e-9
 
 
 def test_tube_records_the_gait(case, gait):
@@ -122,12 +140,17 @@ def test_tube_records_the_gait(case, gait):
 def test_start_is_on_the_zero_dynamics_surface(model, gait):
     take = synthesize(model, gait, TruthOptions(n_ps=2, sigma=0.03, seed=3))
     cl = ClosedLoop(model, gait.degree)
-    sp = play_step(model, cl, gait, take.steps, take.ps_truth()[0].index)
-    q0, qd0 = zero_dynamics_state(model, cl.vcs["ps"], sp.params)
+    i = take.ps_truth()[0].index
+    sp = play_step(model, cl, gait, take.steps, i)
+    tau0 = fit_window(take.steps, i, PlaybackOptions().fit_margin)[0]
+    assert tau0 > 0
+    for tau_start in (0.0, tau0):
+        q0, qd0 = zero_dynamics_state(model, cl.vcs["ps"], sp.params, tau_start)
+        y1, y2, dy2, tau = cl.numeric()["outputs_ps"](q0, qd0, sp.params.pack())
+        assert abs(float(y1[0])) < 1e-12 and np.abs(y2).max() < 1e-12
+        assert np.abs(dy2).max() < 1e-12 and abs(float(tau[0]) - tau_start) < 1e-12
     np.testing.assert_allclose(sp.q[0], q0)
-    y1, y2, dy2, tau = cl.numeric()["outputs_ps"](q0, qd0, sp.params.pack())
-    assert abs(float(y1[0])) < 1e-12 and np.abs(y2).max() < 1e-12
-    assert np.abs(dy2).max() < 1e-12 and abs(float(tau[0])) < 1e-12
+    np.testing.assert_allclose(sp.qd[0], qd0)
     pose, vel = model.numeric()["frames"](q0, qd0)
     i = model.frame_index("p_sole")
     np.testing.assert_allclose(pose[:, i], 0.0, atol=1e-12)
@@ -143,7 +166,7 @@ def test_stop_at_touchdown_ends_at_the_human_foot_contact(model, gait):
     cl = ClosedLoop(model, gait.degree)
     for tr in take.ps_truth():
         sp = play_step(model, cl, gait, take.steps, tr.index,
-                       PlaybackOptions(stop_at_touchdown=True))
+                       PlaybackOptions(stop_at_touchdown=True, fit_margin=None))
         k = np.flatnonzero(tr.model_domain == 0)[-1]  # the last frame before the impact
         true_td = 0.5 * (tr.tau[k] + tr.tau[k + 1])
         assert sp.touchdown_tau is not None and not sp.failed
