@@ -4,15 +4,16 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
 
 1. The step's joint trajectories are fitted with Bezier curves in the step's own tau, by the
    same regression as the gait's (:func:`characterization.gait_fit.regress_domain` with this
-   one step; degree = the gait's): y2 = the 5 joint angles of ``Y2_COORDS["ps"]``;
-   v_hip = the mean of the per-frame d/dt delta_p_hip; the phase bounds are the step's own
-   delta_p_hip at its first and last frame.  These parameters alpha^pb_i are the step's
-   gait theta_i.  Frames fitted (:func:`fit_window`, ``PlaybackOptions.fit_margin``): by
-   default the step's single support (the foot-marker rule's frames) widened by 0.1 in tau
-   on each side; ``fit_margin=None`` fits every frame of the step (the paper).  Measured in
-   characterization/PLAYBACK.md: the whole-step fit has to bend through the double-support
-   frames (for a model-generated subject, frames after the human foot's touchdown), which
-   biases the accelerations, hence F_s, over single support (M_y by about 10 % of its peak).
+   one step; degree = the gait's): y2 = the 5 joint angles of ``Y2_COORDS["ps"]``; v_hip =
+   the mean of the per-frame d/dt delta_p_hip over the fitted frames; the phase bounds are
+   the step's own delta_p_hip at its first and last frame. These parameters alpha^pb_i are
+   the step's gait theta_i. Frames fitted (:func:`fit_window`,
+   ``PlaybackOptions.fit_margin``): by default the step's single support (the foot-marker
+   rule's frames) widened by 0.1 in tau on each side; ``fit_margin=None`` fits every frame of
+   the step (the paper). Measured in characterization/PLAYBACK.md: the whole-step fit has to
+   bend through the double-support frames (for a model-generated subject, frames after the
+   human foot's touchdown), which biases the accelerations, hence F_s, over single support
+   (M_y by about 10 % of its peak).
 2. Start on that step's zero-dynamics surface at the window's first tau (0 for the whole
    step): the posture ``VirtualConstraints.posture(tau, theta_i)`` (stance foot flat at
    x = 0) and the velocity qd = d(posture)/dtau * tau_dot with tau_dot = v_hip /
@@ -234,8 +235,7 @@ def zero_dynamics_state(model: HumanProsthesisModel, vc: VirtualConstraints,
     qd = dq * tau_dot
     _, _, J, _ = model.numeric()[f"terms_{d}"](q, qd)
     Jf = np.array(J[0:3, :])
-    joints = [j for j in range(3, model.nq)]
-    qd[0:3] = np.linalg.solve(Jf[:, 0:3], -Jf[:, joints] @ qd[joints])
+    qd[0:3] = np.linalg.solve(Jf[:, 0:3], -Jf[:, 3:] @ qd[3:])
     return q, qd
 
 
