@@ -9,7 +9,7 @@ delta_p_hip.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,37 +46,65 @@ class Regression:
                     "hip_velocity_rms": self.hip_velocity_rms[d]} for d in CYCLE}
 
 
+@dataclass(frozen=True)
+class DomainRegression:
+    """The regression of some steps of one domain: y2's Bezier fit, v_hip (the mean of the
+    per-frame d/dt delta_p_hip) and its spread, the means of the steps' phase bounds."""
+
+    fit: BezierFit
+    v_hip: float
+    v_hip_rms: float
+    p_min: float
+    p_max: float
+    n_steps: int
+
+
+def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: Sequence[int],
+                   domain: str, degree: int, src: str = "steps",
+                   windows: Mapping[int, tuple[int, int]] | None = None) -> DomainRegression:
+    """Bezier regression of the stacked steps ``indices`` (all of ``domain``); one index
+    gives the fit of a single step (playback).  ``windows`` optionally restricts step i's
+    samples (y2 and the hip velocity) to its frames [a, b] (both included, counted from
+    the step's first frame); tau and the phase bounds stay the whole step's."""
+    if not len(indices):
+        raise FitError(f"{src}: no '{domain}' step (need at least one step of each domain)")
+    names = list(steps.coord_names)
+    cols = [names.index(c) for c in Y2_COORDS[domain]]
+    ck, ca_ = model.hip_progress_coefficients(domain)
+    k, a = (names.index(c) for c in STANCE[domain])
+    taus, ys, vels = [], [], []
+    for i in indices:
+        q = steps.step_q(i)
+        delta = ck * q[:, k] + ca_ * q[:, a]
+        w = slice(None) if windows is None or i not in windows else \
+            slice(windows[i][0], windows[i][1] + 1)
+        taus.append(steps.step_tau(i)[w])
+        ys.append(q[w, cols])
+        vels.append((np.gradient(delta) * steps.frame_rate)[w])
+    tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
+    fit = fit_bezier(tau, y, degree)
+    vfit = fit_bezier(tau, vel, 0)
+    v_hip = float(vfit.alpha[0, 0])
+    if not v_hip > 0.05:
+        raise FitError(f"{src}: mean hip velocity in '{domain}' is {v_hip:.3f} m/s; "
+                       "the steps do not progress forward")
+    sel = np.asarray(indices)
+    return DomainRegression(fit, v_hip, float(vfit.rms[0]),
+                            float(np.mean(steps.step_delta_lower[sel])),
+                            float(np.mean(steps.step_delta_upper[sel])), len(sel))
+
+
 def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int,
                   src: str = "steps") -> Regression:
     """Bezier regression of the stacked steps of each domain."""
-    names = list(steps.coord_names)
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
     for d in CYCLE:
         idx = [i for i in range(steps.n_steps) if steps.step_domain[i] == d]
-        if not idx:
-            raise FitError(f"{src}: no '{d}' step (need at least one step of each domain)")
-        cols = [names.index(c) for c in Y2_COORDS[d]]
-        ck, ca_ = model.hip_progress_coefficients(d)
-        k, a = (names.index(c) for c in STANCE[d])
-        taus, ys, vels = [], [], []
-        for i in idx:
-            q = steps.step_q(i)
-            taus.append(steps.step_tau(i))
-            ys.append(q[:, cols])
-            delta = ck * q[:, k] + ca_ * q[:, a]
-            vels.append(np.gradient(delta) * steps.frame_rate)
-        tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
-        fit = fit_bezier(tau, y, degree)
-        vfit = fit_bezier(tau, vel, 0)
-        fits[d], alpha[d] = fit, fit.alpha
-        v_hip[d], vrms[d] = float(vfit.alpha[0, 0]), float(vfit.rms[0])
-        sel = np.array(idx)
-        p_min[d] = float(np.mean(steps.step_delta_lower[sel]))
-        p_max[d] = float(np.mean(steps.step_delta_upper[sel]))
-        counts[d] = len(idx)
-        if not v_hip[d] > 0.05:
-            raise FitError(f"{src}: mean hip velocity in '{d}' is {v_hip[d]:.3f} m/s; "
-                           "the steps do not progress forward")
+        r = regress_domain(model, steps, idx, d, degree, src)
+        fits[d], alpha[d] = r.fit, r.fit.alpha
+        v_hip[d], vrms[d] = r.v_hip, r.v_hip_rms
+        p_min[d], p_max[d] = r.p_min, r.p_max
+        counts[d] = r.n_steps
     return Regression(DataTargets(alpha, v_hip, p_min, p_max), fits, vrms, counts)
 
 

@@ -28,6 +28,7 @@ from orchestrator import experiments_cli
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
+from orchestrator.tube_cli import tube_app
 
 app = typer.Typer(
     name="hpcosim",
@@ -41,11 +42,14 @@ model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True
 app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
+app.add_typer(tube_app, name="tube")
 app.add_typer(fmu_app, name="fmu")
 app.command("experiments")(experiments_cli.experiments)
 app.command("demo")(experiments_cli.demo)
 
-#: exceptions that are the user's input, reported in one line
+#: exceptions that are the user's input, reported in one line (FitError covers
+#: characterization.playback.PlaybackError and force_tube_fit.TubeFitError without importing
+#: scipy at start-up; ArtifactError: gait and tube files)
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
                                                FileNotFoundError, MocapError, FitError,
                                                ArtifactError, GaitOptimizationError,
