@@ -66,13 +66,13 @@ def demo(
     from characterization.gait_fit import fit_gait
     from characterization.mocap_files import process_file
     from characterization.phzd import PHZDOptions
+    from characterization.playback import fit_force_tube
+    from characterization.playback import write_outputs as write_tube_outputs
     from characterization.steps_artifact import load_steps
     from characterization.synthetic_subject import SynthOptions, synthesize, write_synthetic
-    from hp_model.force_tube import save_tube
     from hp_model.gait_artifact import save_gait
     from orchestrator.experiments import run_experiments
     from orchestrator.report import write_report
-    from orchestrator.scenarios import simulated_tube
 
     n_steps = steps or (3 if quick else 20)
     out.mkdir(parents=True, exist_ok=True)
@@ -107,9 +107,12 @@ def demo(
                         progress=lambda s: prog.update(task, description=f"gait fit: {s}"))
         save_gait(out / "gait.json", gait)
         done("gait fit", str(out / "gait.json"))
-        prog.update(task, description="tube fit (simulated socket forces)")
-        tube, _ = simulated_tube(model, gait, 10 if quick else 20)
-        save_tube(out / "tube.json", tube)
+        prog.update(task, description="tube fit (playback of the recorded steps)")
+        res = fit_force_tube(model, gait, data, n_steps=10 if quick else 20,
+                             src=str(out / "steps.npz"))
+        write_tube_outputs(out / "tube.json", res, str(out / "steps.npz"),
+                           str(out / "gait.json"))
+        tube = res.tube
         done("tube fit", str(out / "tube.json"))
         prog.update(task, description="experiments")
         m = run_experiments(model, gait, tube, out, n_steps, eigen=not quick,

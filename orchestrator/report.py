@@ -10,9 +10,10 @@ from typing import Any
 from hp_model.atomic_io import atomic_write_bytes
 
 DEVIATIONS = (
-    "The socket-force tube is fitted to socket forces of simulated perturbed human gaits "
-    "(prosthesis under feedback linearization) instead of mocap playback: the playback "
-    "module had not landed on main when this ran.",
+    "The socket-force tube comes from playback of the recorded steps (paper Sec. IV-B) with "
+    "each step's Bezier fit taken over its single support +/- 0.1 in tau (the paper fits the "
+    "whole step; on a model-generated subject that made M_y 8-11 % wrong, "
+    "characterization/PLAYBACK.md); playback holds each step's hip velocity constant.",
     "AMPRO3 masses, lengths and inertias are estimates (hp_model/configs/device_ampro3.toml); "
     "the estimated top-link inertia is tiny (0.0017 kg m^2 about the knee), which makes the "
     "reduced-model CLF-QP loop stiff (prosthesis_controller/README.md).",
