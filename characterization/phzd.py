@@ -285,7 +285,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     # initial impact-variable guesses: zero is poor; use the next domain's start velocity
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
     ipopt = {"max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
-             "linear_solver": "mumps", "mu_strategy": "adaptive"}
+             "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
     solver = ca.nlpsol("phzd", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
                                               "expand": opt.expand})
     x0 = np.concatenate(w0)

@@ -100,10 +100,14 @@ def test_infeasible_qp_falls_back_toward_pd_rate_limited(model, subsystem, templ
                           cfg, subsystem=subsystem)
     ctl = make_controller("clfqp", None, None, None, context=c)
     pd = make_controller("pd", None, None, None, context=c)
-    x = nominal_x + np.array([-0.05, 0.03, -0.5, 0.5])
-    ctl.reset((0.0, 0.0))
+    # the first of a few off-nominal states (growing outputs) whose QP is infeasible
+    for k in (1.0, 2.0, 4.0, -1.0, -2.0, -4.0):
+        x = nominal_x + k * np.array([-0.05, 0.03, -0.5, 0.5])
+        ctl.reset((0.0, 0.0))
+        out = ctl.tick(stance_meas(0.0, x))
+        if out.diagnostics.qp_status == QP_INFEASIBLE:
+            break
     pd.reset((0.0, 0.0))
-    out = ctl.tick(stance_meas(0.0, x))
     u_pd = pd.tick(stance_meas(0.0, x)).torque
     d = out.diagnostics
     assert d.qp_status == QP_INFEASIBLE and d.mode == MODE_FALLBACK and d.fallback_count == 1
