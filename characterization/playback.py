@@ -10,7 +10,7 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
    the step's gait theta_i. Frames fitted (:func:`fit_window`,
    ``PlaybackOptions.fit_margin``): by default the step's single support (the foot-marker
    rule's frames) widened by 0.1 in tau on each side; ``fit_margin=None`` fits every frame of
-   the step (the paper). Measured in the README, section "Socket-force playback": the whole-step fit has to
+   the step (the paper). Measured (README, "Socket-force playback"): the whole-step fit has to
    bend through the double-support frames (for a model-generated subject, frames after the
    human foot's touchdown), which biases the accelerations, hence F_s, over single support
    (M_y by about 10 % of its peak).
