@@ -12,12 +12,11 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # The main job, on the embedded default input (the synthetic subject): model self-check,
-# a synthetic take, its processing into steps, the gait fit (outputs in out/demo/).
+# then `hpcosim demo`: synthetic take -> steps -> gait -> tube -> experiments -> report.md
+# (outputs in out/demo/).
 demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
-	$(VENV)/bin/hpcosim mocap synth --out out/demo --seed 1
-	$(VENV)/bin/hpcosim mocap process out/demo/take.csv --out out/demo/steps.npz
-	$(VENV)/bin/hpcosim gait fit out/demo/steps.npz --out out/demo/gait.json
+	$(VENV)/bin/hpcosim demo --out out/demo
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
