@@ -24,6 +24,7 @@ from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from human_fmu.build import FmuBuildError
+from orchestrator.cosim_cli import register as register_cosim
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
@@ -41,12 +42,13 @@ app.add_typer(model_app, name="model")
 app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
 app.add_typer(fmu_app, name="fmu")
+register_cosim(app)
 
 #: exceptions that are the user's input, reported in one line
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
                                                FileNotFoundError, MocapError, FitError,
                                                ArtifactError, GaitOptimizationError,
-                                               FmuBuildError)
+                                               FmuBuildError, ValueError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
