@@ -48,7 +48,7 @@ register_cosim(app)
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
                                                FileNotFoundError, MocapError, FitError,
                                                ArtifactError, GaitOptimizationError,
-                                               FmuBuildError, ValueError)
+                                               FmuBuildError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",

@@ -69,11 +69,17 @@ def run(
     console = Console()
     cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
                       perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time)
+    from orchestrator.cosim import CosimError
+
     with console.status("starting") as status:
-        res = run_cosim(cfg, say=lambda m: status.update(m),
-                        progress=lambda k, t, s: status.update(
-                            f"t = {t:.2f} s, {s}/{steps} steps"),
-                        install_signal_handlers=record is not None)
+        try:
+            res = run_cosim(cfg, say=lambda m: status.update(m),
+                            progress=lambda k, t, s: status.update(
+                                f"t = {t:.2f} s, {s}/{steps} steps"),
+                            install_signal_handlers=record is not None)
+        except (CosimError, ValueError) as e:
+            Console(stderr=True).print(f"hpcosim: error: {e}")
+            raise typer.Exit(2) from None
     t = Table(title=f"co-simulation {res.run_id} ({mode})")
     t.add_column("item")
     t.add_column("value")
