@@ -70,7 +70,7 @@ class CosimConfig:
     dt: float = 1e-3
     run_id: str | None = None
     watchdog_periods: int = 5
-    reply_timeout: float = 0.02  # s wall per reply in lockstep before a period counts missed
+    reply_timeout: float = 0.25  # s wall per reply in lockstep before a period counts missed
     start_timeout: float = 60.0  # s wall for the controller process to come alive
     status_every: int = 100
     controller_watchdog: float = 0.05  # s, the node's own watchdog

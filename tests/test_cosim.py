@@ -81,7 +81,10 @@ def test_recording_reads_back_every_channel_decodes(lockstep):
     assert topics["/can/rx"] == res.frames_rx
     assert topics["/prosthesis/measurements"] == res.ticks
     assert topics["/ground_truth"] == res.ticks
-    assert topics["/prosthesis/torque_command"] == res.ticks
+    # one enabled reply per cycle (+ SAFE commands if the node's wall-clock watchdog
+    # tripped on a loaded machine)
+    cmds = [o for _, _, o in read_messages(path, ["/prosthesis/torque_command"])]
+    assert sum(1 for o in cmds if o["enable"]) == res.ticks
     rec = read_recording(path, messages=False)
     assert {"config", "versions", "hashes", "summary", "run"} <= set(rec.metadata)
     assert {"gait.json", "tube.json", "modelDescription.xml", "ampro3.dbc"} <= set(
