@@ -227,7 +227,7 @@ def test_plant_rejects_bad_controller_frames():
     bad[0] ^= 4
     for m in (good, good, can.Message(arbitration_id=0x010, dlc=8, data=bytes(bad),
                                       is_extended_id=False),
-              can.Message(arbitration_id=0x101, dlc=8, data=bytes(8), is_extended_id=False)):
+              can.Message(arbitration_id=0x7FF, dlc=8, data=bytes(8), is_extended_id=False)):
         p.on_rx(m)
     c = p.checker.counts
     assert c["ok"] == 1 and c["duplicate"] == 1 and c["bad_checksum"] == 1
@@ -265,7 +265,8 @@ def test_recording_interrupted_by_signal_is_readable(files, sig):
     p.send_signal(sig)
     p.wait(60)
     p.stderr.close()
-    assert p.returncode != 0
+    if sig == signal.SIGTERM:
+        assert p.returncode != 0
     assert rec.is_file() and not part.exists()
     r = read_recording(rec, messages=False)
     assert "signal" in r.metadata
