@@ -24,6 +24,7 @@ recording is always finished (also on SIGTERM/SIGINT).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import platform
@@ -215,9 +216,9 @@ class FaultPlan:
         if self.case == "drop":
             return rest, "drop"
         if self.case == "delay":
-            return rest + [knee], "delay"  # arrives after the cycle's SimTime: too late
+            return [*rest, knee], "delay"  # arrives after the cycle's SimTime: too late
         if self.case == "duplicate":
-            return [knee, knee] + rest, "duplicate"
+            return [knee, knee, *rest], "duplicate"
         bad = can.Message(timestamp=knee.timestamp, arbitration_id=knee.arbitration_id,
                           is_extended_id=False, dlc=8, data=bytearray(knee.data))
         if self.case == "corrupt-counter":
@@ -230,7 +231,7 @@ class FaultPlan:
         elif self.case == "corrupt-length":
             bad = can.Message(timestamp=knee.timestamp, arbitration_id=knee.arbitration_id,
                               is_extended_id=False, dlc=7, data=bytes(knee.data[:7]))
-        return [bad] + rest, self.case
+        return [bad, *rest], self.case
 
 
 # --------------------------------------------------------------------------- helpers
@@ -400,10 +401,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, progress)
     finally:
         if sub is not None:
-            try:
+            with contextlib.suppress(Exception):
                 sub.undeclare()
-            except Exception:
-                pass
         if bus is not None:
             bus.shutdown()
         if proc is not None:
@@ -448,7 +447,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     plant = Plant()
     dt = cfg.dt
     realtime = cfg.mode == "realtime"
-    n_max = int(round(cfg.max_time / dt))
+    n_max = round(cfg.max_time / dt)
     u = (0.0, 0.0)
     missed_run = 0
     lat: list[float] = []
@@ -461,7 +460,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     domains = ("ps", "pns")
 
     def log_ns(t: float) -> int:
-        return int(round((time.perf_counter() - wall0 if realtime else t) * 1e9))
+        return round((time.perf_counter() - wall0 if realtime else t) * 1e9)
 
     def record_rx(msg: can.Message, v: codec.Verdict, t: float) -> None:
         res.frames_rx += 1
@@ -476,7 +475,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             rec.write("/prosthesis/torque_command", {
                 "knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
                 "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable),
-                "counter": v.counter, "cycle_time_us": int(round(msg.timestamp * 1e6))}, ns)
+                "counter": v.counter, "cycle_time_us": round(msg.timestamp * 1e6)}, ns)
         elif v.frame_id == FrameId.CTRL_STATUS:
             s = v.value
             rec.write("/controller/diagnostics", {
@@ -505,7 +504,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             break
         if plan.case == "kill" and k == plan.start and proc.poll() is None:
             proc.kill()
-        t_us = int(round(t * 1e6))
+        t_us = round(t * 1e6)
         frames = codec.encode_feedback(y[0], y[2], y[1], y[3], y[4], dom == 0, k % 16,
                                        sim_time_us=t_us, timestamp=t)
         if rec is not None:
@@ -528,10 +527,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         res.frames_tx += len(send)
         # -- wait for this cycle's torque
         got = False
-        if realtime:
-            deadline = wall0 + (k + 0.8) * dt
-        else:
-            deadline = s0 + cfg.reply_timeout
+        deadline = wall0 + (k + 0.8) * dt if realtime else s0 + cfg.reply_timeout
         while True:
             left = deadline - time.perf_counter()
             if left <= 0 or lost.is_set():
@@ -562,9 +558,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         reason = ""
         if lost.is_set():
             reason = "controller liveliness token lost"
-        elif missed_run >= cfg.watchdog_periods and not realtime:
-            reason = f"{missed_run} control periods without a torque reply"
-        elif realtime and missed_run >= max(cfg.watchdog_periods, 50):
+        elif missed_run >= (max(cfg.watchdog_periods, 50) if realtime
+                            else cfg.watchdog_periods):
             reason = f"{missed_run} control periods without a torque reply"
         elif plant.ctrl_state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 \
                 and not got:
@@ -622,4 +617,4 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
 
 
 def tmp_run_id() -> str:
-    return f"t{next(tempfile._get_candidate_names())}"  # noqa: SLF001
+    return f"t{next(tempfile._get_candidate_names())}"

@@ -13,9 +13,10 @@ the first complete cycle the node answers with torque disabled.
 
 Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
 zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
-``watchdog`` seconds; the next good cycle resumes RUNNING (the controller's state is kept, so a
-lockstep run stays deterministic when a slow plant trips the watchdog). Over zenoh the node declares the
-liveliness token ``hpcosim/run/<id>/ctrl/alive`` only once the controller is built and the
+``watchdog`` seconds; the next good cycle resumes RUNNING (the controller's state is kept,
+so a lockstep run stays deterministic when a slow plant trips the watchdog). Over zenoh the
+node declares the liveliness token ``hpcosim/run/<id>/ctrl/alive`` only once the controller
+is built and the
 bus subscribed (so a plant seeing it can start), and leaves when the plant's token goes away.
 
 Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube T

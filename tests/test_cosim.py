@@ -105,7 +105,7 @@ def test_lockstep_equals_in_process_simulation(lockstep, files, model):
                       codec.quantize_torque)
 
     def policy(t, st):
-        us = int(round(t * 1e6))
+        us = round(t * 1e6)
         ps = st.domain == "ps"
         m = ProsthesisMeasurement(us * 1e-6, qa(st.q[10]), qa(st.q[11]), qv(st.qd[10]),
                                   qv(st.qd[11]), ql(st.lam[1] if ps else 0.0), ps)
@@ -168,7 +168,7 @@ def test_controller_killed_mid_run(files, model):
     gt = [o for _, _, o in read_messages(rec, ["/ground_truth"])]
     assert gt[-1]["u_applied"] == [0.0, 0.0]
     r = read_recording(rec, messages=False)
-    assert "summary" in r.metadata and '"faulted": true' in r.metadata["summary"]["faulted"] \
+    assert ("summary" in r.metadata and '"faulted": true' in r.metadata["summary"]["faulted"]) \
         or r.metadata["summary"]["faulted"] == "true"
 
 
