@@ -241,9 +241,10 @@ def test_fault_plan_parse():
 
 
 def test_realtime_mode_reports_latency(files, model):
-    res = run_cosim(cfg(files, mode="realtime", max_time=0.3, steps=5), model=model)
+    # 2 ms period (the DBC cycle): 1 ms is marginal on these loaded 2-core machines
+    res = run_cosim(cfg(files, mode="realtime", max_time=0.3, steps=5, dt=2e-3), model=model)
     assert not res.faulted, res
-    assert res.ticks == 300
+    assert res.ticks == 150
     assert res.latency_us["n"] > 0 and res.latency_us["median"] > 0
 
 
