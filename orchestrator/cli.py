@@ -25,6 +25,7 @@ from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from human_fmu.build import FmuBuildError
 from orchestrator import experiments_cli
+from orchestrator.cosim_cli import register as register_cosim
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
@@ -46,6 +47,7 @@ app.add_typer(tube_app, name="tube")
 app.add_typer(fmu_app, name="fmu")
 app.command("experiments")(experiments_cli.experiments)
 app.command("demo")(experiments_cli.demo)
+register_cosim(app)
 
 #: exceptions that are the user's input, reported in one line (FitError covers
 #: characterization.playback.PlaybackError and force_tube_fit.TubeFitError without importing

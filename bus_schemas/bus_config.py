@@ -1,0 +1,93 @@
+"""Which CAN bus a node talks to: configuration, not code (DESIGN: python-can style).
+
+A :class:`BusConfig` names a python-can interface and its arguments:
+
+- ``zenoh`` (default): CAN over zenoh, ``run_id`` + ``listen``/``connect`` endpoints
+  (loopback only unless ``allow_remote``); built as :class:`bus_schemas.zenoh_can.ZenohBus`
+  directly (no entry point needed);
+- ``virtual``: python-can's in-process virtual bus (``channel``);
+- anything else python-can knows (``socketcan`` with ``channel = "can0"`` for hardware in
+  the loop, ``pcan``, ...), built with ``can.Bus(interface=..., channel=..., **options)``.
+
+Files: TOML or JSON with the same keys, e.g.::
+
+    interface = "zenoh"
+    run_id = "run42"
+    connect = ["tcp/127.0.0.1:7447"]
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+
+ROLES = ("plant", "ctrl", "monitor")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    interface: str = "zenoh"
+    run_id: str = "cosim"
+    channel: str | None = None  # non-zenoh interfaces; zenoh: derived from run_id + role
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    allow_remote: bool = False
+    options: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["listen"], d["connect"] = list(self.listen), list(self.connect)
+        return d
+
+
+def bus_config_from_dict(d: dict[str, Any], src: str = "bus config") -> BusConfig:
+    known = {"interface", "run_id", "channel", "listen", "connect", "allow_remote", "options"}
+    extra = set(d) - known
+    if extra:
+        raise ValueError(f"{src}: unknown keys {sorted(extra)} (known: {sorted(known)})")
+
+    def eps(v: Any) -> tuple[str, ...]:
+        if v is None:
+            return ()
+        if isinstance(v, str):
+            return tuple(x.strip() for x in v.split(",") if x.strip())
+        return tuple(str(x) for x in v)
+
+    return BusConfig(interface=str(d.get("interface", "zenoh")),
+                     run_id=str(d.get("run_id", "cosim")),
+                     channel=None if d.get("channel") is None else str(d["channel"]),
+                     listen=eps(d.get("listen")), connect=eps(d.get("connect")),
+                     allow_remote=bool(d.get("allow_remote", False)),
+                     options=dict(d.get("options", {})))
+
+
+def load_bus_config(path: str | Path) -> BusConfig:
+    """Read a TOML (``.toml``) or JSON bus config file."""
+    p = Path(path)
+    text = p.read_text()
+    d = tomllib.loads(text) if p.suffix == ".toml" else json.loads(text)
+    if not isinstance(d, dict):
+        raise ValueError(f"{p}: expected a table/object")
+    return bus_config_from_dict(d, str(p))
+
+
+def make_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
+    """Open the bus of ``cfg`` for ``role`` (plant / ctrl / monitor)."""
+    if role not in ROLES:
+        raise ValueError(f"role {role!r}: expected one of {ROLES}")
+    if cfg.interface == "zenoh":
+        from bus_schemas.zenoh_can import ZenohBus
+
+        kw = dict(cfg.options)
+        kw.update(extra)
+        return ZenohBus(f"{cfg.run_id}/{role}", listen=list(cfg.listen) or None,
+                        connect=list(cfg.connect) or None, allow_remote=cfg.allow_remote,
+                        **kw)
+    kw = dict(cfg.options)
+    kw.update({k: v for k, v in extra.items() if k not in ("declare_alive",)})
+    return can.Bus(interface=cfg.interface, channel=cfg.channel or cfg.run_id, **kw)

@@ -1,0 +1,620 @@
+"""Co-simulation master: the human FMU (fmpy) on the plant side, the prosthesis controller
+in its own process, CAN frames (AMPRO3 protocol) over zenoh between them, MCAP recording.
+
+Per tick k (t = k dt, dt = 1 ms by default) the plant
+
+1. reads the FMU outputs (sensors as AMPRO3 senses them, ground truth);
+2. emulates the AMPRO3 drives: encodes ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad``,
+   ``SimTime`` (rolling counter k mod 16, timestamp t) and sends them (through the fault
+   injector of the ``perturb`` case);
+3. waits for the ``TorqueCmd`` answering this cycle (its timestamp echoes t):
+   *lockstep* blocks for it (deterministic), *realtime* waits at most until the tick's wall
+   deadline and otherwise holds the last torque (counted late; latency stats kept);
+   other controller frames (heartbeat, status, rejects) are checked and recorded on the way;
+4. sets the torque inputs, reads the socket force (it depends on them), records ground
+   truth, and steps the FMU by dt.
+
+Fault handling: a missing reply holds the last torque; ``watchdog_periods`` (5) missed
+replies in a row, the controller's liveliness token disappearing, or its heartbeat reporting
+SAFE/FAULT make the plant apply the safe torque (zero) and end the run as *faulted*. The
+recording is always finished (also on SIGTERM/SIGINT).
+
+:func:`run_cosim` is the function behind ``hpcosim run``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+from bus_schemas import codec, keys
+from bus_schemas.protocol import CTRL_TO_PLANT, CtrlState, FrameId
+from bus_schemas.zenoh_config import loopback_endpoint
+
+ROOT = Path(__file__).resolve().parents[1]
+SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau")
+FORCES = ("socket_Fx", "socket_Fz", "socket_My")
+PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
+                 "corrupt-length", "kill", "human")
+
+
+class CosimError(RuntimeError):
+    """A co-simulation that could not start or run (one-line message)."""
+
+
+@dataclass
+class CosimConfig:
+    controller: str
+    gait: Path
+    tube: Path
+    steps: int = 20
+    max_time: float = 60.0  # s of simulation time
+    mode: str = "lockstep"  # or "realtime"
+    perturb: str = "none"  # CASE[:start[:every[:count]]] or human:AMPLITUDE[:SEED]
+    record: Path | None = None
+    fmu: Path | None = None
+    dt: float = 1e-3
+    run_id: str | None = None
+    watchdog_periods: int = 5
+    reply_timeout: float = 0.25  # s wall per reply in lockstep before a period counts missed
+    start_timeout: float = 60.0  # s wall for the controller process to come alive
+    status_every: int = 100
+    controller_watchdog: float = 0.05  # s, the node's own watchdog
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
+
+
+@dataclass
+class CosimResult:
+    ticks: int = 0
+    sim_time: float = 0.0
+    steps: int = 0
+    fell: bool = False
+    fall_code: int = 0
+    faulted: bool = False
+    fault_reason: str = ""
+    detection_periods: int = 0  # periods from the first unanswered one to the fault
+    wall_time: float = 0.0
+    late: int = 0
+    missed: int = 0
+    frames_tx: int = 0
+    frames_rx: int = 0
+    plant_rejects: dict[str, int] = field(default_factory=dict)
+    ctrl_rejects: dict[str, int] = field(default_factory=dict)
+    injected: dict[str, int] = field(default_factory=dict)
+    latency_us: dict[str, float] = field(default_factory=dict)
+    timing_us: dict[str, float] = field(default_factory=dict)
+    record: str | None = None
+    run_id: str = ""
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else 0.0
+
+
+# --------------------------------------------------------------------------- FMU
+
+
+def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
+               progress: Callable[[str], None] | None = None) -> Path:
+    """The FMU file: ``fmu`` if given, else a cached build for this gait
+    (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/fmu/<gait sha256>/human.fmu)."""
+    if fmu is not None:
+        if not Path(fmu).is_file():
+            raise FileNotFoundError(f"{fmu}: no such FMU")
+        return Path(fmu)
+    from human_fmu import build_fmu
+
+    digest = sha256(gait_path)[:16]
+    cache = Path(os.environ.get("HPCOSIM_CACHE", Path.home() / ".cache" / "hpcosim"))
+    out = cache / "fmu" / digest / "human.fmu"
+    if not out.is_file():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        build_fmu(gait_path, out, model=model, progress=progress)
+    return out
+
+
+class Fmu:
+    """fmpy FMU2Slave of the human FMU with name-based value references."""
+
+    def __init__(self, path: Path, real: dict[str, float] | None = None,
+                 integer: dict[str, int] | None = None) -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.path = Path(path)
+        self.md = read_model_description(str(path))
+        self.unzipdir = extract(str(path))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
+                             modelIdentifier=self.md.coSimulation.modelIdentifier,
+                             instanceName="human")
+        self.fmu.instantiate()
+        f = self.fmu
+        f.setupExperiment(startTime=0.0)
+        if real:
+            f.setReal(self.vrs(real), [float(v) for v in real.values()])
+        if integer:
+            f.setInteger(self.vrs(integer), [int(v) for v in integer.values()])
+        f.enterInitializationMode()
+        f.exitInitializationMode()
+
+    def vrs(self, names: Any) -> list[int]:
+        return [self.vr[n] for n in names]
+
+    def model_description_xml(self) -> bytes:
+        return (Path(self.unzipdir) / "modelDescription.xml").read_bytes()
+
+    def free(self) -> None:
+        try:
+            self.fmu.terminate()
+            self.fmu.freeInstance()
+        finally:
+            shutil.rmtree(self.unzipdir, ignore_errors=True)
+
+
+# --------------------------------------------------------------------------- faults
+
+
+@dataclass
+class FaultPlan:
+    """Frame faults injected into the plant's KneeFeedback frames (or the controller kill):
+    at ticks ``start, start + every, ...`` (``count`` times)."""
+
+    case: str = "none"
+    start: int = 100
+    every: int = 97
+    count: int = 5
+    amplitude: float = 0.0  # human perturbation
+    seed: int = 0
+
+    @classmethod
+    def parse(cls, text: str | None) -> FaultPlan:
+        if not text or text == "none":
+            return cls()
+        parts = text.split(":")
+        case = parts[0]
+        if case not in PERTURB_CASES:
+            raise ValueError(f"perturb case {case!r}: choose one of {', '.join(PERTURB_CASES)}")
+        if case == "human":
+            amp = float(parts[1]) if len(parts) > 1 else 0.001
+            return cls(case, amplitude=amp, seed=int(parts[2]) if len(parts) > 2 else 0)
+        nums = [int(p) for p in parts[1:]]
+        plan = cls(case)
+        for name, v in zip(("start", "every", "count"), nums, strict=False):
+            setattr(plan, name, v)
+        return plan
+
+    def hits(self, k: int) -> bool:
+        if self.case in ("none", "human") or k < self.start:
+            return False
+        d = k - self.start
+        return d % max(1, self.every) == 0 and d // max(1, self.every) < self.count
+
+    def apply(self, k: int, frames: list[can.Message]) -> tuple[list[can.Message], str | None]:
+        """Frames to send this tick (SimTime last unless delayed) and the fault applied."""
+        if not self.hits(k) or self.case == "kill":
+            return frames, None
+        knee = frames[0]
+        rest = frames[1:]
+        if self.case == "drop":
+            return rest, "drop"
+        if self.case == "delay":
+            return [*rest, knee], "delay"  # arrives after the cycle's SimTime: too late
+        if self.case == "duplicate":
+            return [knee, knee, *rest], "duplicate"
+        bad = can.Message(timestamp=knee.timestamp, arbitration_id=knee.arbitration_id,
+                          is_extended_id=False, dlc=8, data=bytearray(knee.data))
+        if self.case == "corrupt-counter":
+            v = codec.decode(knee).value
+            bad = codec.encode_frame(FrameId.KNEE_FEEDBACK,
+                                     {"KneeAngle": v.angle, "KneeVelocity": v.velocity},
+                                     ((knee.data[6] & 0x0F) + 5) % 16, timestamp=knee.timestamp)
+        elif self.case == "corrupt-checksum":
+            bad.data[0] ^= 0x01
+        elif self.case == "corrupt-length":
+            bad = can.Message(timestamp=knee.timestamp, arbitration_id=knee.arbitration_id,
+                              is_extended_id=False, dlc=7, data=bytes(knee.data[:7]))
+        return [bad, *rest], self.case
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for p in ("eclipse-zenoh", "python-can", "mcap", "fmpy", "numpy", "casadi", "piqp"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            out[p] = "missing"
+    try:
+        import hp_model
+
+        out["hpcosim"] = hp_model.__version__
+    except Exception:  # pragma: no cover
+        pass
+    try:
+        out["git"] = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"],
+                                    capture_output=True, text=True, timeout=5).stdout.strip()
+    except Exception:  # pragma: no cover
+        out["git"] = "unknown"
+    return out
+
+
+def controller_command(cfg: CosimConfig, run_id: str, endpoint: str) -> list[str]:
+    return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
+            "--gait", str(cfg.gait), "--tube", str(cfg.tube), "--run-id", run_id,
+            "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
+            "--status-every", str(cfg.status_every)]
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + ([env["PYTHONPATH"]]
+                                                      if env.get("PYTHONPATH") else []))
+    return env
+
+
+def _pct(a: list[float], q: float) -> float:
+    return float(np.percentile(a, q)) if a else 0.0
+
+
+# --------------------------------------------------------------------------- the run
+
+
+class Plant:
+    """The plant side of one run: rx frame checking and the controller state it implies."""
+
+    def __init__(self) -> None:
+        self.checker = codec.FrameChecker(accept=CTRL_TO_PLANT)
+        self.ctrl_state: int | None = None
+        self.ctrl_rejects: dict[str, int] = {}
+        self.last_status: Any = None
+
+    def on_rx(self, msg: can.Message) -> codec.Verdict:
+        """Classify one controller frame (never raises) and track heartbeat and status."""
+        v = self.checker.check(msg)
+        if v.ok:
+            if v.frame_id == FrameId.CTRL_HEARTBEAT:
+                self.ctrl_state = int(v.value.state)
+            elif v.frame_id == FrameId.CTRL_REJECTS:
+                self.ctrl_rejects = {k: int(n) for k, n in v.value._asdict().items()}
+            elif v.frame_id == FrameId.CTRL_STATUS:
+                self.last_status = v.value
+        return v
+
+
+def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] | None = None,
+              model: Any = None, say: Callable[[str], None] | None = None,
+              install_signal_handlers: bool = False) -> CosimResult:
+    """Run one co-simulation (module docstring). Returns the summary; the recording (if any)
+    is complete and readable whatever happens."""
+    import zenoh
+
+    import hp_model
+    from bus_schemas.mcap_schemas import Recorder
+    from bus_schemas.protocol import DBC_PATH
+    from bus_schemas.zenoh_can import ZenohBus
+    from hp_model.gait_artifact import load_gait
+
+    say = say or (lambda _m: None)
+    if cfg.mode not in ("lockstep", "realtime"):
+        raise ValueError(f"mode {cfg.mode!r}: expected lockstep or realtime")
+    plan = FaultPlan.parse(cfg.perturb)
+    model = model or hp_model.load_model()
+    gait = load_gait(cfg.gait, model.parameter_hash())
+    from hp_model.force_tube import load_tube
+
+    load_tube(cfg.tube, gait.hash())  # refuse a mismatched tube here, not in the child
+    fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
+    run_id = cfg.run_id or f"run-{os.getpid()}-{time.monotonic_ns() % 10**9}"
+    keys.validate_run_id(run_id)
+    k_idx, a_idx = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    ratio = (float(model.B[k_idx, 4]), float(model.B[a_idx, 5]))
+
+    res = CosimResult(run_id=run_id)
+    rec = None
+    bus = None
+    proc = None
+    fmu = None
+    lost = threading.Event()
+    sub = None
+    try:
+        real = {}
+        integer = {}
+        if plan.case == "human":
+            real["human_perturbation"] = plan.amplitude
+            integer["human_seed"] = plan.seed
+        fmu = Fmu(fmu_path, real, integer)
+        if cfg.record is not None:
+            Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
+            rec = Recorder(cfg.record, metadata={"run_id": run_id})
+            if install_signal_handlers:
+                rec.install_signal_handlers()
+            rec.register_all()
+            rec.add_metadata("config", cfg.to_dict())
+            rec.add_metadata("versions", versions())
+            rec.add_metadata("hashes", {"gait_sha256": sha256(cfg.gait),
+                                        "tube_sha256": sha256(cfg.tube),
+                                        "fmu_sha256": sha256(fmu_path),
+                                        "gait_hash": gait.hash(),
+                                        "model_hash": model.parameter_hash(),
+                                        "fmu_guid": fmu.md.guid})
+            rec.add_metadata("device", {"gear_ratio_knee": ratio[0],
+                                        "gear_ratio_ankle": ratio[1], "dt": cfg.dt})
+            rec.add_attachment("gait.json", Path(cfg.gait).read_bytes(), "application/json")
+            rec.add_attachment("tube.json", Path(cfg.tube).read_bytes(), "application/json")
+            rec.add_attachment("modelDescription.xml", fmu.model_description_xml(),
+                               "application/xml")
+            rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")
+
+        endpoint = loopback_endpoint()
+        bus = ZenohBus(f"{run_id}/plant", listen=endpoint)
+        alive = threading.Event()
+
+        def _on_live(sample: Any) -> None:  # sets flags only; nothing blocks here
+            if sample.kind == zenoh.SampleKind.PUT:
+                alive.set()
+            else:
+                lost.set()
+
+        sub = bus.session.liveliness().declare_subscriber(keys.ctrl_alive_key(run_id),
+                                                          _on_live, history=True)
+        say(f"starting controller {cfg.controller} (run {run_id})")
+        proc = subprocess.Popen(controller_command(cfg, run_id, endpoint), env=_env(),
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                cwd=str(ROOT))
+        deadline = time.monotonic() + cfg.start_timeout
+        while not alive.wait(0.05):
+            if proc.poll() is not None:
+                err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+                raise CosimError(f"controller process exited ({proc.returncode}) before it "
+                                 f"was alive: {err.strip().splitlines()[-1:]}")
+            if time.monotonic() > deadline:
+                raise CosimError(f"controller not alive after {cfg.start_timeout} s")
+        if not bus.wait_for_peer(10.0):
+            raise CosimError("controller alive but not subscribed")
+        say("controller alive")
+        _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, progress)
+    finally:
+        if sub is not None:
+            with contextlib.suppress(Exception):
+                sub.undeclare()
+        if bus is not None:
+            bus.shutdown()
+        if proc is not None:
+            try:
+                proc.wait(3.0)
+            except subprocess.TimeoutExpired:
+                proc.terminate()
+                try:
+                    proc.wait(3.0)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+            if proc.stderr:
+                proc.stderr.close()
+        if fmu is not None:
+            fmu.free()
+        if rec is not None and not rec.finished:
+            try:
+                rec.add_metadata("summary", _summary_dict(res))
+            finally:
+                rec.finish()
+    return res
+
+
+def _summary_dict(res: CosimResult) -> dict[str, Any]:
+    d = asdict(res)
+    d["real_time_factor"] = res.real_time_factor
+    return d
+
+
+def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc: Any,
+          lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
+          progress: Callable[[int, float, int], None] | None) -> None:
+    f = fmu.fmu
+    sens = fmu.vrs(SENSORS)
+    qv = fmu.vrs([f"q[{i}]" for i in range(1, 13)])
+    qdv = fmu.vrs([f"qd[{i}]" for i in range(1, 13)])
+    iv = fmu.vrs(["domain", "steps", "fall_code"])
+    fallv = fmu.vrs(["fall"])
+    uv = fmu.vrs(["u_knee", "u_ankle"])
+    fv = fmu.vrs(FORCES)
+    plant = Plant()
+    dt = cfg.dt
+    realtime = cfg.mode == "realtime"
+    n_max = round(cfg.max_time / dt)
+    u = (0.0, 0.0)
+    missed_run = 0
+    lat: list[float] = []
+    t_rt: list[float] = []
+    t_fmu = 0.0
+    t_total = 0.0
+    wall0 = time.perf_counter()
+    rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
+    injected: dict[str, int] = {}
+    domains = ("ps", "pns")
+
+    def log_ns(t: float) -> int:
+        return round((time.perf_counter() - wall0 if realtime else t) * 1e9)
+
+    def record_rx(msg: can.Message, v: codec.Verdict, t: float) -> None:
+        res.frames_rx += 1
+        if rec is None:
+            return
+        ns = log_ns(t)
+        rec.write_can(msg, "rx", ns, name=v.name, status=str(v.status))
+        if not v.ok:
+            return
+        if v.frame_id == FrameId.TORQUE_CMD:
+            c = v.value
+            rec.write("/prosthesis/torque_command", {
+                "knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
+                "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable),
+                "counter": v.counter, "cycle_time_us": round(msg.timestamp * 1e6)}, ns)
+        elif v.frame_id == FrameId.CTRL_STATUS:
+            s = v.value
+            rec.write("/controller/diagnostics", {
+                "t": msg.timestamp, "controller": cfg.controller, "domain": None, "tau": None,
+                "V": None, "rho": None, "u": [u[0] * ratio[0], u[1] * ratio[1]],
+                "qp_status": getattr(s.qp_status, "name", str(s.qp_status)),
+                "active_constraints": [a.name for a in type(s.active_constraints)
+                                       if a in s.active_constraints and a.name],
+                "fallback_count": s.fallback_count, "fault_flags": int(s.fault_flags),
+                "solve_time_us": None, "source": "CtrlStatus frame",
+                "ctrl_rejects": plant.ctrl_rejects}, ns)
+
+    k = 0
+    fault_first_miss = -1
+    while True:
+        tick0 = time.perf_counter()
+        t = k * dt
+        y = f.getReal(sens)
+        dom, steps, code = f.getInteger(iv)
+        fell = f.getBoolean(fallv)[0]
+        res.steps = steps
+        if fell:
+            res.fell, res.fall_code = True, code
+            break
+        if steps >= cfg.steps or k >= n_max:
+            break
+        if plan.case == "kill" and k == plan.start and proc.poll() is None:
+            proc.kill()
+        t_us = round(t * 1e6)
+        frames = codec.encode_feedback(y[0], y[2], y[1], y[3], y[4], dom == 0, k % 16,
+                                       sim_time_us=t_us, timestamp=t)
+        if rec is not None:
+            ns = log_ns(t)
+            for m in frames:
+                rec.write_can(m, "tx", ns, name=codec.decode(m).name)
+            rec.write("/prosthesis/measurements", {
+                "knee_angle": codec.quantize_angle(y[0]),
+                "knee_velocity": codec.quantize_velocity(y[2]),
+                "ankle_angle": codec.quantize_angle(y[1]),
+                "ankle_velocity": codec.quantize_velocity(y[3]),
+                "foot_load": codec.quantize_load(y[4]), "contact": dom == 0,
+                "sim_time_us": t_us % (1 << 32), "counter": k % 16}, ns)
+        send, what = plan.apply(k, frames)
+        if what:
+            injected[what] = injected.get(what, 0) + 1
+        s0 = time.perf_counter()
+        for m in send:
+            bus.send(m)
+        res.frames_tx += len(send)
+        # -- wait for this cycle's torque
+        got = False
+        deadline = wall0 + (k + 0.8) * dt if realtime else s0 + cfg.reply_timeout
+        while True:
+            left = deadline - time.perf_counter()
+            if left <= 0 or lost.is_set():
+                break
+            msg = bus.recv(min(left, 0.005))
+            if msg is None:
+                continue
+            v = plant.on_rx(msg)
+            record_rx(msg, v, t)
+            if v.ok and v.frame_id == FrameId.TORQUE_CMD:
+                c = v.value
+                u = (c.knee, c.ankle) if c.enable else (0.0, 0.0)
+                if abs(msg.timestamp - t) <= rtol:
+                    got = True
+                    lat.append(time.perf_counter() - s0)
+                    break
+        if got:
+            t_rt.append(time.perf_counter() - s0)
+            missed_run = 0
+            fault_first_miss = -1
+        else:
+            if realtime:
+                res.late += 1
+            res.missed += 1
+            missed_run += 1
+            if fault_first_miss < 0:
+                fault_first_miss = k
+        reason = ""
+        if lost.is_set():
+            reason = "controller liveliness token lost"
+        elif missed_run >= (max(cfg.watchdog_periods, 50) if realtime
+                            else cfg.watchdog_periods):
+            reason = f"{missed_run} control periods without a torque reply"
+        elif plant.ctrl_state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 \
+                and not got:
+            reason = f"controller reports state {CtrlState(plant.ctrl_state).name}"
+        if reason:
+            u = (0.0, 0.0)
+            res.faulted, res.fault_reason = True, reason
+            res.detection_periods = k - (fault_first_miss if fault_first_miss >= 0 else k) + 1
+        f0 = time.perf_counter()
+        f.setReal(uv, list(u))
+        if rec is not None:
+            fs = f.getReal(fv)
+            q = f.getReal(qv)
+            qd = f.getReal(qdv)
+            rec.write("/ground_truth", {
+                "t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]}, "q": q,
+                "qd": qd, "domain": domains[dom], "tau": y[5], "step": steps,
+                "fallen": False, "u_applied": list(u)}, log_ns(t))
+        f.doStep(t, dt)
+        f1 = time.perf_counter()
+        t_fmu += f1 - f0
+        if res.faulted:
+            k += 1
+            break
+        k += 1
+        if progress is not None and k % 100 == 0:
+            progress(k, t, steps)
+        if realtime:  # pace to the wall clock; take late replies meanwhile
+            end = wall0 + k * dt
+            while True:
+                left = end - time.perf_counter()
+                if left <= 0:
+                    break
+                msg = bus.recv(left)
+                if msg is not None:
+                    v = plant.on_rx(msg)
+                    record_rx(msg, v, t)
+                    if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
+                        u = (v.value.knee, v.value.ankle)
+        t_total += time.perf_counter() - tick0
+    res.ticks = k
+    res.sim_time = k * dt
+    res.wall_time = time.perf_counter() - wall0
+    res.injected = injected
+    res.plant_rejects = {str(s): n for s, n in plant.checker.counts.items() if str(s) != "ok"}
+    res.ctrl_rejects = plant.ctrl_rejects
+    if lat:
+        a = [x * 1e6 for x in lat]
+        res.latency_us = {"median": _pct(a, 50), "p99": _pct(a, 99), "max": max(a),
+                          "n": len(a)}
+    n = max(1, k)
+    rt = sum(t_rt) / max(1, len(t_rt)) * 1e6
+    res.timing_us = {"tick": t_total / n * 1e6, "fmu": t_fmu / n * 1e6, "round_trip": rt,
+                     "overhead": t_total / n * 1e6 - t_fmu / n * 1e6 - rt}
+
+
+def tmp_run_id() -> str:
+    return f"t{next(tempfile._get_candidate_names())}"

@@ -1,0 +1,156 @@
+"""``hpcosim controller serve``, ``hpcosim run``, ``hpcosim replay``, ``hpcosim tube refit``."""
+
+from __future__ import annotations
+
+import glob
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
+tube_app = typer.Typer(help="Force tubes.", no_args_is_help=True)
+
+GaitOpt = Annotated[Path, typer.Option("--gait", help="Gait file.", dir_okay=False)]
+TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_okay=False)]
+
+
+@controller_app.command("serve")
+def serve(
+    controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
+                                            "passive.")],
+    gait: GaitOpt,
+    tube: TubeOpt,
+    bus: Annotated[Path | None, typer.Option("--bus", help="Bus config (TOML/JSON): "
+                                             "interface zenoh/virtual/socketcan/...")] = None,
+    interface: Annotated[str | None, typer.Option(help="Override: python-can interface.")
+                         ] = None,
+    run_id: Annotated[str | None, typer.Option(help="Override: zenoh run id.")] = None,
+    channel: Annotated[str | None, typer.Option(help="Override: CAN channel (non-zenoh).")
+                       ] = None,
+    listen: Annotated[str | None, typer.Option(help="Override: zenoh listen endpoints.")
+                      ] = None,
+    connect: Annotated[str | None, typer.Option(help="Override: zenoh connect endpoints.")
+                       ] = None,
+    watchdog_ms: Annotated[float, typer.Option(help="Safe state after this long without "
+                                               "measurements.")] = 50.0,
+) -> None:
+    """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
+    from prosthesis_controller.node import bus_config_from_args, run_node
+
+    cfg = bus_config_from_args(str(bus) if bus else None, interface=interface, run_id=run_id,
+                               channel=channel, listen=listen, connect=connect)
+    s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3)
+    Console(stderr=True).print(f"controller node: {s}")
+
+
+def run(
+    controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
+                                            "passive.")],
+    gait: GaitOpt,
+    tube: TubeOpt,
+    steps: Annotated[int, typer.Option(help="Stop after this many impacts.")] = 20,
+    perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
+                                         "corrupt-counter, corrupt-checksum, corrupt-length, "
+                                         "kill (CASE[:start[:every[:count]]]), "
+                                         "human[:AMPLITUDE[:SEED]].")] = "none",
+    mode: Annotated[str, typer.Option(help="lockstep or realtime.")] = "lockstep",
+    record: Annotated[Path | None, typer.Option(help="MCAP file to write.", dir_okay=False)
+                      ] = None,
+    fmu: Annotated[Path | None, typer.Option(help="Human FMU (default: built and cached "
+                                             "for the gait).", dir_okay=False)] = None,
+    max_time: Annotated[float, typer.Option(help="Simulation time limit [s].")] = 60.0,
+) -> None:
+    """Co-simulate the human FMU with the controller in its own process over zenoh."""
+    from orchestrator.cosim import CosimConfig, run_cosim
+
+    console = Console()
+    cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
+                      perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time)
+    from orchestrator.cosim import CosimError
+
+    with console.status("starting") as status:
+        try:
+            res = run_cosim(cfg, say=lambda m: status.update(m),
+                            progress=lambda k, t, s: status.update(
+                                f"t = {t:.2f} s, {s}/{steps} steps"),
+                            install_signal_handlers=record is not None)
+        except (CosimError, ValueError) as e:
+            Console(stderr=True).print(f"hpcosim: error: {e}")
+            raise typer.Exit(2) from None
+    t = Table(title=f"co-simulation {res.run_id} ({mode})")
+    t.add_column("item")
+    t.add_column("value")
+    end = ("FAULTED: " + res.fault_reason) if res.faulted else \
+        (f"fell (code {res.fall_code})" if res.fell else "completed")
+    t.add_row("result", end)
+    t.add_row("sim time / steps / ticks", f"{res.sim_time:.3f} s / {res.steps} / {res.ticks}")
+    t.add_row("real-time factor", f"{res.real_time_factor:.2f}")
+    t.add_row("frames tx / rx", f"{res.frames_tx} / {res.frames_rx}")
+    t.add_row("missed / late replies", f"{res.missed} / {res.late}")
+    t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"
+                                                         for k, v in res.latency_us.items()))
+    t.add_row("per tick us", ", ".join(f"{k} {v:.0f}" for k, v in res.timing_us.items()))
+    t.add_row("rejects plant / controller", f"{res.plant_rejects} / {res.ctrl_rejects}")
+    t.add_row("injected", str(res.injected))
+    if record:
+        t.add_row("recording", str(record))
+    console.print(t)
+    if res.faulted:
+        raise typer.Exit(1)
+
+
+def replay_cmd(
+    recording: Annotated[Path, typer.Argument(help="MCAP recording.", dir_okay=False)],
+    controller: Annotated[str | None, typer.Option(help="Controller (default: recorded).")
+                          ] = None,
+    to_bus: Annotated[Path | None, typer.Option("--to-bus", help="Play the recorded frames "
+                                                "onto this bus config instead.")] = None,
+    speed: Annotated[float, typer.Option(help="Playback speed for --to-bus (0: fast).")
+                     ] = 1.0,
+) -> None:
+    """Replay recorded measurements through a controller and report the largest torque
+    difference, or play the recorded frames onto a CAN bus at recorded timing."""
+    console = Console()
+    if to_bus is not None:
+        from bus_schemas.bus_config import load_bus_config, make_bus
+        from orchestrator.recording import play_to_bus
+
+        bus = make_bus(load_bus_config(to_bus), "plant")
+        try:
+            n = play_to_bus(recording, bus, speed=speed)
+        finally:
+            bus.shutdown()
+        console.print(f"{n} frames sent")
+        return
+    from orchestrator.recording import replay
+
+    r = replay(recording, controller)
+    console.print(f"{r.controller}: {r.cycles} cycles, largest torque difference "
+                  f"{r.max_torque_diff:.3g} N m (motor)")
+
+
+@tube_app.command("refit")
+def refit(
+    recordings: Annotated[list[str], typer.Argument(help="MCAP recordings (globs ok).")],
+    gait: GaitOpt,
+    out: Annotated[Path, typer.Option("--out", help="Tube file to write.", dir_okay=False)],
+    old: Annotated[Path | None, typer.Option("--old", help="Tube to report coverage of "
+                                             "(default: the first recording's).")] = None,
+) -> None:
+    """Refit the force tube from recorded ground-truth socket force (ps portions)."""
+    from orchestrator.recording import refit_tube
+
+    paths = [p for r in recordings for p in (sorted(glob.glob(r)) or [r])]
+    rep = refit_tube(paths, gait, out, old_tube=old)
+    Console().print(rep)
+
+
+def register(app: typer.Typer) -> None:
+    """Add the co-simulation verbs to the ``hpcosim`` app."""
+    app.add_typer(controller_app, name="controller")
+    app.add_typer(tube_app, name="tube")
+    app.command("run")(run)
+    app.command("replay")(replay_cmd)

@@ -1,0 +1,239 @@
+"""Working with co-simulation recordings (MCAP): read back, replay against a controller,
+play frames onto a CAN bus, refit the force tube from recorded ground truth.
+
+A recording carries what it needs: the gait and tube as attachments, the run config,
+versions and hashes as metadata (see ``orchestrator/COSIM.md``).
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+from mcap.reader import make_reader
+
+from bus_schemas import codec
+from bus_schemas.mcap_schemas import JsonDecoderFactory, read_messages
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be used (one-line message naming the file)."""
+
+
+@dataclass
+class Recording:
+    path: Path
+    metadata: dict[str, dict[str, str]]
+    attachments: dict[str, bytes]
+    counts: dict[str, int]
+    measurements: list[dict[str, Any]] = field(default_factory=list)
+    torques: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return {k: _parse(v) for k, v in self.metadata.get("config", {}).items()}
+
+
+def _parse(v: str) -> Any:
+    try:
+        return json.loads(v)
+    except (ValueError, TypeError):
+        return v
+
+
+def read_recording(path: str | Path, *, messages: bool = True) -> Recording:
+    """Metadata, attachments, per-channel counts and (optionally) measurements and torque
+    commands of a recording."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+            summary = reader.get_summary()
+            meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+            att = {a.name: bytes(a.data) for a in reader.iter_attachments()}
+            counts: dict[str, int] = {}
+            if summary is not None and summary.statistics is not None:
+                for cid, n in summary.statistics.channel_message_counts.items():
+                    counts[summary.channels[cid].topic] = n
+    except FileNotFoundError:
+        raise
+    except Exception as e:
+        raise RecordingError(f"{p}: not a readable MCAP recording ({e})") from e
+    rec = Recording(p, meta, att, counts)
+    if messages:
+        for topic, _, obj in read_messages(p, ["/prosthesis/measurements",
+                                               "/prosthesis/torque_command"]):
+            (rec.measurements if topic == "/prosthesis/measurements"
+             else rec.torques).append(obj)
+    return rec
+
+
+def _artifacts(rec: Recording, tmp: Path) -> tuple[Path, Path]:
+    for name in ("gait.json", "tube.json"):
+        if name not in rec.attachments:
+            raise RecordingError(f"{rec.path}: attachment {name} missing")
+        (tmp / name).write_bytes(rec.attachments[name])
+    return tmp / "gait.json", tmp / "tube.json"
+
+
+@dataclass
+class ReplayResult:
+    controller: str
+    cycles: int
+    max_torque_diff: float  # N m, motor side, over cycles with a recorded reply
+    max_diff_cycle_us: int | None
+
+
+def replay(path: str | Path, controller: str | None = None, *, model: Any = None,
+           tube: str | Path | None = None) -> ReplayResult:
+    """Feed the recorded measurements (as the controller decoded them) to ``controller``
+    (default: the recorded one) and compare its torque, quantized as on the bus, with the
+    recorded torque commands cycle by cycle. With the same controller the difference is 0
+    for a clean run (frames lost on the way make the node hold values the recording does not
+    show)."""
+    import hp_model
+    from hp_model.force_tube import load_tube
+    from hp_model.gait_artifact import load_gait
+    from prosthesis_controller import ProsthesisMeasurement, make_controller
+
+    rec = read_recording(path)
+    name = controller or rec.config.get("controller")
+    if not name:
+        raise RecordingError(f"{rec.path}: no controller named in the recording; pass one")
+    model = model or hp_model.load_model()
+    with tempfile.TemporaryDirectory() as td:
+        gp, tp = _artifacts(rec, Path(td))
+        gait = load_gait(gp, model.parameter_hash())
+        tb = load_tube(tube if tube is not None else tp, gait.hash())
+    ctrl = make_controller(name, gait, tb, model)
+    ctrl.reset()
+    by_cycle = {int(t["cycle_time_us"]): t for t in rec.torques if t.get("enable")}
+    worst, at = 0.0, None
+    for m in rec.measurements:
+        meas = ProsthesisMeasurement(m["sim_time_us"] * 1e-6, m["knee_angle"],
+                                     m["ankle_angle"], m["knee_velocity"],
+                                     m["ankle_velocity"], m["foot_load"], bool(m["contact"]))
+        u = ctrl.tick(meas).torque
+        r = by_cycle.get(int(m["sim_time_us"]))
+        if r is None:
+            continue
+        d = max(abs(codec.quantize_torque(float(u[0])) - r["knee"]),
+                abs(codec.quantize_torque(float(u[1])) - r["ankle"]))
+        if d > worst:
+            worst, at = d, int(m["sim_time_us"])
+    return ReplayResult(name, len(rec.measurements), worst, at)
+
+
+def recorded_frames(path: str | Path, directions: Iterable[str] = ("tx", "rx")
+                    ) -> list[tuple[int, can.Message]]:
+    """(log_time ns, frame) of the recorded CAN frames in log-time order."""
+    topics = [f"/can/{d}" for d in directions]
+    out = []
+    for _, ns, o in read_messages(path, topics):
+        out.append((ns, can.Message(timestamp=o["timestamp"], arbitration_id=o["id"],
+                                    is_extended_id=bool(o.get("extended")), dlc=o["dlc"],
+                                    data=bytes(o["data"]))))
+    out.sort(key=lambda x: x[0])
+    return out
+
+
+def play_to_bus(path: str | Path, bus: can.BusABC, *, directions: Iterable[str] = ("tx",),
+                speed: float = 1.0) -> int:
+    """Send the recorded frames onto ``bus`` at their recorded timing (log-time deltas,
+    divided by ``speed``; ``speed <= 0``: as fast as possible). Returns frames sent."""
+    frames = recorded_frames(path, directions)
+    if not frames:
+        return 0
+    t0, w0 = frames[0][0], time.perf_counter()
+    for ns, msg in frames:
+        if speed > 0:
+            due = w0 + (ns - t0) * 1e-9 / speed
+            while (left := due - time.perf_counter()) > 0:
+                time.sleep(min(left, 0.001) if left > 0.002 else 0)
+        bus.send(msg)
+    return len(frames)
+
+
+# --------------------------------------------------------------------------- refit
+
+
+def ps_profiles(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Recorded ground-truth socket force of every complete prosthesis-stance (ps) portion:
+    (tau (n,), F_s (n, 3)). A ps portion is complete when it starts at the run start or at
+    an impact into ps and ends with the impact into pns."""
+    rows = [o for _, _, o in read_messages(path, ["/ground_truth"])]
+    out, cur, complete_start = [], [], True
+    prev = None
+    for o in rows:
+        d = o["domain"]
+        if d == "ps":
+            if prev == "pns":
+                cur, complete_start = [], True
+            f = o["socket_force"]
+            cur.append((o["tau"], f["Fx"], f["Fz"], f["My"]))
+        elif prev == "ps" and cur and complete_start:
+            a = np.array(cur, dtype=float)
+            out.append((a[:, 0], a[:, 1:]))
+            cur = []
+        prev = d
+    return out
+
+
+def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Path, *,
+               old_tube: str | Path | None = None, degree: int = 3,
+               model: Any = None) -> dict[str, Any]:
+    """Refit the force tube from the recorded ps portions of ``paths``; report coverage of
+    the old tube (``old_tube``, default the tube attached to the first recording): the
+    fraction of samples and of steps inside it."""
+    import hp_model
+    from characterization.force_tube_fit import fit_tube, nominal_coefficients
+    from hp_model.force_tube import load_tube, save_tube
+    from hp_model.gait_artifact import load_gait
+
+    model = model or hp_model.load_model()
+    gait = load_gait(gait_path, model.parameter_hash())
+    paths = [Path(p) for p in paths]
+    steps: list[tuple[np.ndarray, np.ndarray]] = []
+    for p in paths:
+        steps.extend(ps_profiles(p))
+    if len(steps) < degree + 2:
+        raise RecordingError(f"{len(steps)} complete ps steps in {len(paths)} recordings; "
+                             f"need at least {degree + 2}")
+    tau_lo = max(0.0, max(float(s[0].min()) for s in steps))
+    tau_hi = min(1.0, min(float(s[0].max()) for s in steps))
+    nominal = nominal_coefficients(gait, tau_lo, tau_hi)
+    profiles = []
+    for tau, fs in steps:
+        keep = (tau >= tau_lo) & (tau <= tau_hi)
+        profiles.append((tau[keep], fs[keep] - gait.socket_force(tau[keep])))
+    tube = fit_tube(profiles, nominal, tau_lo, tau_hi, degree=degree, gait_hash=gait.hash(),
+                    source={"recordings": [str(p) for p in paths]})
+    save_tube(out, tube)
+    report: dict[str, Any] = {"steps": len(steps), "tau_lo": tau_lo, "tau_hi": tau_hi,
+                              "out": str(out)}
+    old = None
+    if old_tube is not None:
+        old = load_tube(old_tube, gait.hash())
+    else:
+        rec = read_recording(paths[0], messages=False)
+        if "tube.json" in rec.attachments:
+            with tempfile.TemporaryDirectory() as td:
+                (Path(td) / "t.json").write_bytes(rec.attachments["tube.json"])
+                old = load_tube(Path(td) / "t.json", gait.hash())
+    if old is not None:
+        inside_s, n_s, inside_steps = 0, 0, 0
+        for tau, fs in steps:
+            ok = old.contains(tau, fs - old.nominal_force(tau))
+            inside_s += int(ok.sum())
+            n_s += ok.size
+            inside_steps += bool(ok.all())
+        report["old_coverage_samples"] = inside_s / max(1, n_s)
+        report["old_coverage_steps"] = inside_steps / len(steps)
+    return report

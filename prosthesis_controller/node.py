@@ -1,0 +1,308 @@
+"""The controller node: a prosthesis controller behind the AMPRO3 CAN port.
+
+Per control cycle the plant sends ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad`` and, last,
+``SimTime``, all with the same rolling counter. The node checks every frame
+(:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter; rejects are counted and
+reported in ``CtrlRejects``), collects the cycle, and on ``SimTime`` ticks the controller and
+answers with (heartbeat every ``heartbeat_every`` ticks, ``CtrlStatus`` + ``CtrlRejects``
+every ``status_every`` ticks, then) one ``TorqueCmd``. The torque frame's timestamp echoes
+the ``SimTime`` frame's timestamp, so the plant knows which cycle a reply answers (lockstep
+plants stamp frames with simulation time). A feedback frame missing from a cycle (dropped,
+corrupted, late) is replaced by its last accepted value and flagged ``stale_feedback``; before
+the first complete cycle the node answers with torque disabled.
+
+Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
+zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
+``watchdog`` seconds; the next good cycle resumes RUNNING (the controller's state is kept,
+so a lockstep run stays deterministic when a slow plant trips the watchdog). Over zenoh the
+node declares the liveliness token ``hpcosim/run/<id>/ctrl/alive`` only once the controller
+is built and the
+bus subscribed (so a plant seeing it can start), and leaves when the plant's token goes away.
+
+Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube T
+[--bus bus.toml | --run-id ID --connect tcp/127.0.0.1:PORT]`` or
+``hpcosim controller serve``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import can
+
+from bus_schemas import codec
+from bus_schemas.bus_config import BusConfig, bus_config_from_dict, load_bus_config, make_bus
+from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
+from prosthesis_controller.interface import Active, Controller
+from prosthesis_controller.measurement import ProsthesisMeasurement
+
+FEEDBACK = (FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD)
+_QP = {"solved": QpStatus.SOLVED, "not_run": QpStatus.NOT_RUN,
+       "infeasible": QpStatus.PRIMAL_INFEASIBLE, "failed": QpStatus.UNSOLVED,
+       "nonfinite": QpStatus.NUMERICS}
+
+
+def _active_bits(a: int) -> int:
+    out = 0
+    if a & (Active.KNEE_LOWER | Active.KNEE_UPPER):
+        out |= 1
+    if a & (Active.ANKLE_LOWER | Active.ANKLE_UPPER):
+        out |= 2
+    if a & Active.RHO_MAX:
+        out |= 16
+    return out
+
+
+class ControllerNode:
+    """Frame handling and controller ticking, independent of the transport (testable
+    without a bus): :meth:`handle` one received frame -> frames to send; :meth:`poll` the
+    watchdog."""
+
+    def __init__(self, controller: Controller, *, watchdog: float = 0.05,
+                 heartbeat_every: int = 10, status_every: int = 100) -> None:
+        self.controller = controller
+        self.watchdog = float(watchdog)
+        self.heartbeat_every = max(1, int(heartbeat_every))
+        self.status_every = max(1, int(status_every))
+        self.checker = codec.FrameChecker(accept=PLANT_TO_CTRL)
+        self.pending: dict[int, tuple[int, Any]] = {}
+        self.last: dict[int, Any] = {}
+        self.state = CtrlState.INIT
+        self.ticks = 0
+        self.stale_cycles = 0
+        self.safe_entries = 0
+        self._counter = 0  # TorqueCmd rolling counter
+        self._hb_counter = 0
+        self._last_cycle = time.monotonic()
+        self._last_safe_send = 0.0
+        self._flags = FaultFlag.NONE
+        self._last_diag: Any = None
+        self._wrap = 0
+        self._last_us: int | None = None
+        controller.reset()
+
+    # -- frames in, frames out
+    def handle(self, msg: can.Message, now: float | None = None) -> list[can.Message]:
+        v = self.checker.check(msg)
+        if not v.ok:
+            self._flags |= FaultFlag.BAD_FRAMES
+            return []
+        if v.frame_id in FEEDBACK:
+            self.pending[v.frame_id] = (v.counter, v.value)
+            return []
+        if v.frame_id == FrameId.SIM_TIME:
+            return self._cycle(v, time.monotonic() if now is None else now)
+        return []
+
+    def _time(self, us: int) -> float:
+        if self._last_us is not None and us < self._last_us:
+            self._wrap += 1 << 32
+        self._last_us = us
+        return (us + self._wrap) * 1e-6
+
+    def _cycle(self, v: codec.Verdict, now: float) -> list[can.Message]:
+        self._last_cycle = now
+        fresh = True
+        for f in FEEDBACK:
+            p = self.pending.pop(f, None)
+            if p is not None and p[0] == v.counter:
+                self.last[f] = p[1]
+            else:
+                fresh = False
+        t = self._time(v.value.us)
+        out: list[can.Message] = []
+        if not fresh:
+            self.stale_cycles += 1
+            self._flags |= FaultFlag.STALE_FEEDBACK
+        if len(self.last) < len(FEEDBACK):  # nothing to control on yet
+            out.append(codec.encode_torque(0.0, 0.0, self._next(), enable=False,
+                                           timestamp=v.timestamp))
+            return out
+        k, a, ld = (self.last[f] for f in FEEDBACK)
+        meas = ProsthesisMeasurement(t, k.angle, a.angle, k.velocity, a.velocity, ld.load,
+                                     bool(ld.contact))
+        res = self.controller.tick(meas)
+        d = res.diagnostics
+        self._last_diag = d
+        if d.qp_status in ("infeasible", "failed", "nonfinite"):
+            self._flags |= FaultFlag.QP_FAILED
+        if d.active & Active.OUTPUT_CLAMP:
+            self._flags |= FaultFlag.TORQUE_SATURATED
+        self.state = CtrlState.RUNNING
+        if self.ticks % self.heartbeat_every == 0:
+            out.append(self._heartbeat(v.timestamp))
+        if self.ticks % self.status_every == 0:
+            out.extend(self.status_frames(v.timestamp))
+        self.ticks += 1
+        u = res.torque
+        out.append(codec.encode_torque(float(u[0]), float(u[1]), self._next(), enable=True,
+                                       timestamp=v.timestamp))
+        return out
+
+    def _next(self) -> int:
+        c = self._counter
+        self._counter = (c + 1) % 16
+        return c
+
+    def _heartbeat(self, ts: float) -> can.Message:
+        c = self._hb_counter
+        self._hb_counter = (c + 1) % 16
+        return codec.encode_heartbeat(self.state, self.ticks, c, timestamp=ts)
+
+    def status_frames(self, ts: float = 0.0) -> list[can.Message]:
+        d = self._last_diag
+        qp = _QP.get(d.qp_status, QpStatus.UNKNOWN) if d is not None else QpStatus.NOT_RUN
+        frames = codec.encode_status(self._flags, qp, 0,
+                                     min(d.fallback_count, 65535) if d is not None else 0,
+                                     _active_bits(d.active) if d is not None else 0,
+                                     self.checker.counts, timestamp=ts)
+        self._flags = FaultFlag.NONE
+        return frames
+
+    def poll(self, now: float | None = None) -> list[can.Message]:
+        """Watchdog: SAFE state (zero torque, disabled) when no cycle came for
+        ``watchdog`` s; repeated every ``watchdog`` s while it lasts."""
+        now = time.monotonic() if now is None else now
+        if now - self._last_cycle < self.watchdog:
+            return []
+        if self.state != CtrlState.SAFE:
+            self.state = CtrlState.SAFE
+            self.safe_entries += 1
+            self._flags |= FaultFlag.STALE_FEEDBACK | FaultFlag.PLANT_LOST
+        elif now - self._last_safe_send < self.watchdog:
+            return []
+        self._last_safe_send = now
+        return [self._heartbeat(0.0),
+                codec.encode_torque(0.0, 0.0, self._next(), enable=False)]
+
+
+# --------------------------------------------------------------------------- serving
+
+
+def build_controller(name: str, gait_path: str, tube_path: str,
+                     subject: str | None = None, device: str | None = None) -> Controller:
+    import hp_model
+    from hp_model.force_tube import load_tube
+    from hp_model.gait_artifact import load_gait
+    from prosthesis_controller.controllers import make_controller
+
+    model = hp_model.load_model(subject, device)
+    gait = load_gait(gait_path, model.parameter_hash())
+    tube = load_tube(tube_path, gait.hash())
+    return make_controller(name, gait, tube, model)
+
+
+def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
+          exit_with_plant: bool = True, on_ready: Any = None) -> dict[str, Any]:
+    """Serve until ``stop`` (a threading.Event) is set, SIGTERM/SIGINT, or (zenoh) the
+    plant's liveliness token disappears after having been seen. Returns counts."""
+    import zenoh
+
+    from bus_schemas import keys
+
+    token = plant_sub = None
+    session = getattr(bus, "session", None)
+    run_id = getattr(bus, "run_id", None)
+    if session is not None and run_id is not None:
+        plant_sub = session.liveliness().declare_subscriber(
+            keys.plant_alive_key(run_id), zenoh.handlers.FifoChannel(64), history=True)
+        token = session.liveliness().declare_token(keys.ctrl_alive_key(run_id))
+    if on_ready is not None:
+        on_ready()
+    plant_seen = False
+    timeout = max(1e-3, node.watchdog / 2)
+    try:
+        while stop is None or not stop.is_set():
+            msg = bus.recv(timeout)
+            now = time.monotonic()
+            out = node.handle(msg, now) if msg is not None else []
+            out += node.poll(now)
+            for m in out:
+                bus.send(m)
+            if plant_sub is not None:
+                s = plant_sub.try_recv()
+                while s is not None:
+                    if s.kind == zenoh.SampleKind.PUT:
+                        plant_seen = True
+                    elif plant_seen and exit_with_plant:
+                        return _summary(node, "plant gone")
+                    s = plant_sub.try_recv()
+    except can.CanOperationError:
+        return _summary(node, "bus closed")
+    finally:
+        for obj in (token, plant_sub):
+            if obj is not None:
+                with contextlib.suppress(Exception):
+                    obj.undeclare()
+    return _summary(node, "stopped")
+
+
+def _summary(node: ControllerNode, why: str) -> dict[str, Any]:
+    return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
+            "safe_entries": node.safe_entries,
+            "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"}}
+
+
+def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
+    """A bus file, overridden by the non-None keyword options (interface, run_id, ...)."""
+    base = load_bus_config(bus).to_dict() if bus else {}
+    base.update({k: v for k, v in kw.items() if v is not None})
+    return bus_config_from_dict(base)
+
+
+def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
+             watchdog: float = 0.05, status_every: int = 100, heartbeat_every: int = 10,
+             subject: str | None = None, device: str | None = None) -> dict[str, Any]:
+    ctrl = build_controller(controller, gait, tube, subject, device)
+    node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every,
+                          heartbeat_every=heartbeat_every)
+    bus = make_bus(cfg, "ctrl", declare_alive=False) if cfg.interface == "zenoh" \
+        else make_bus(cfg, "ctrl")
+
+    def _term(signum: int, _frame: Any) -> None:
+        raise SystemExit(128 + signum)
+
+    old = signal.signal(signal.SIGTERM, _term)
+    try:
+        return serve(node, bus, on_ready=lambda: print("ready", flush=True))
+    finally:
+        signal.signal(signal.SIGTERM, old)
+        bus.shutdown()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="prosthesis_controller.node", description=__doc__.split(
+        "\n\n")[0])
+    p.add_argument("--controller", required=True)
+    p.add_argument("--gait", required=True)
+    p.add_argument("--tube", required=True)
+    p.add_argument("--bus", help="bus config file (TOML/JSON)")
+    p.add_argument("--interface")
+    p.add_argument("--run-id")
+    p.add_argument("--channel")
+    p.add_argument("--listen")
+    p.add_argument("--connect")
+    p.add_argument("--watchdog-ms", type=float, default=50.0)
+    p.add_argument("--status-every", type=int, default=100)
+    p.add_argument("--subject")
+    p.add_argument("--device")
+    a = p.parse_args(argv)
+    cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
+                               channel=a.channel, listen=a.listen, connect=a.connect)
+    try:
+        s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
+                     status_every=a.status_every, subject=a.subject, device=a.device)
+    except KeyboardInterrupt:
+        return 130
+    print(f"controller node: {s}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
