@@ -10,8 +10,9 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from orchestrator.tube_cli import tube_app  # `tube refit` joins `tube fit`
+
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
-tube_app = typer.Typer(help="Force tubes.", no_args_is_help=True)
 
 GaitOpt = Annotated[Path, typer.Option("--gait", help="Gait file.", dir_okay=False)]
 TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_okay=False)]
@@ -151,6 +152,5 @@ def refit(
 def register(app: typer.Typer) -> None:
     """Add the co-simulation verbs to the ``hpcosim`` app."""
     app.add_typer(controller_app, name="controller")
-    app.add_typer(tube_app, name="tube")
     app.command("run")(run)
     app.command("replay")(replay_cmd)
