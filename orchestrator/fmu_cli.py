@@ -9,6 +9,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from orchestrator.cli_options import DeviceOpt, SubjectOpt
+
 fmu_app = typer.Typer(help="The human side (plant + human controller) as an FMU.",
                       no_args_is_help=True)
 
@@ -20,12 +22,8 @@ def build(
                                        dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="FMU to write (.fmu).",
                                       dir_okay=False)] = Path("human.fmu"),
-    subject: Annotated[Path | None, typer.Option(
-        "--subject", help="Subject TOML (default: the shipped example subject).",
-        dir_okay=False)] = None,
-    device: Annotated[Path | None, typer.Option(
-        "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).",
-        dir_okay=False)] = None,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
     validate: Annotated[bool, typer.Option(help="Validate the result with fmpy.")] = True,
 ) -> None:
     """Generate C from the model, compile it into an FMI 2.0 co-simulation FMU (Linux

@@ -10,6 +10,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from orchestrator.cli_options import DeviceOpt, SubjectOpt
+
 gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimization.",
                        no_args_is_help=True)
 
@@ -20,12 +22,8 @@ def fit(
                                           dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Gait file to write (.json); the Fig. 4 "
                                       "figure goes next to it.", dir_okay=False)],
-    subject: Annotated[Path | None, typer.Option(
-        "--subject", help="Subject TOML (default: the shipped example subject).",
-        dir_okay=False)] = None,
-    device: Annotated[Path | None, typer.Option(
-        "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).",
-        dir_okay=False)] = None,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
     degree: Annotated[int, typer.Option(help="Bezier degree of the joint outputs.",
                                         min=1, max=9)] = 5,
     nodes: Annotated[int, typer.Option(help="Collocation nodes per domain.",

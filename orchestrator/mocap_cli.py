@@ -9,6 +9,8 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from orchestrator.cli_options import DeviceOpt, SubjectOpt
+
 mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectories.",
                         no_args_is_help=True)
 
@@ -20,12 +22,8 @@ def process(
     out: Annotated[Path, typer.Option("--out", help="Steps file to write (.npz or .json); "
                                       "the QA report and figures go next to it.",
                                       dir_okay=False)],
-    subject: Annotated[Path | None, typer.Option(
-        "--subject", help="Subject TOML (default: the shipped example subject).",
-        dir_okay=False)] = None,
-    device: Annotated[Path | None, typer.Option(
-        "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).",
-        dir_okay=False)] = None,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="Limb mapping TOML (default: the synthetic subject's naming).",
         dir_okay=False)] = None,
@@ -67,8 +65,8 @@ def synth(
     dropout_frames: Annotated[int, typer.Option(min=1, help="Longest occlusion, "
                                                 "frames.")] = 10,
     rate: Annotated[float, typer.Option(min=1, help="Frame rate, Hz.")] = 120.0,
-    subject: Annotated[Path | None, typer.Option("--subject", dir_okay=False)] = None,
-    device: Annotated[Path | None, typer.Option("--device", dir_okay=False)] = None,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
 ) -> None:
     """A synthetic subject on the prosthesis: Motive CSV, C3D and ground truth."""
     import hp_model

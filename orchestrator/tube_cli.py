@@ -11,6 +11,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from orchestrator.cli_options import DeviceOpt, SubjectOpt
+
 tube_app = typer.Typer(help="The socket-force tube: playback of the recorded steps (paper "
                        "Sec. IV-B).", no_args_is_help=True)
 
@@ -38,12 +40,8 @@ def fit(
         "back from tau = 0 to 1 (overrides --fit-margin).")] = False,
     stop_at_touchdown: Annotated[bool, typer.Option(
         help="End each playback at the human foot's touchdown too.")] = False,
-    subject: Annotated[Path | None, typer.Option(
-        "--subject", help="Subject TOML (default: the shipped example subject).",
-        dir_okay=False)] = None,
-    device: Annotated[Path | None, typer.Option(
-        "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).",
-        dir_okay=False)] = None,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
 ) -> None:
     """Play back every prosthesis-stance step on the full model, estimate the socket force,
     and fit the certified force tube around its deviation from the gait's nominal F*."""
