@@ -48,3 +48,14 @@ def template_gait(model):
     result = optimize_gait(model, targets, opt)
     assert result.success, result.status
     return build_gait(model, result, targets, opt)
+
+
+@pytest.fixture(scope="module")
+def ctx(model, subsystem, template_gait):
+    """A controller context on the template gait with a +/-(40 N, 60 N, 8 N m) tube about
+    its nominal socket force."""
+    from prosthesis_controller import ControllerContext
+    from tests.controller_support import tube_about_nominal
+
+    return ControllerContext(template_gait, tube_about_nominal(template_gait, (40, 60, 8)),
+                             model, subsystem=subsystem)

@@ -25,12 +25,6 @@ from tests.controller_support import stance_meas, tube_about_nominal
 
 
 @pytest.fixture(scope="module")
-def ctx(model, subsystem, template_gait):
-    return ControllerContext(template_gait, tube_about_nominal(template_gait, (40, 60, 8)),
-                             model, subsystem=subsystem)
-
-
-@pytest.fixture(scope="module")
 def nominal_x(model, template_gait):
     tr = template_gait.trajectory["ps"]
     i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]

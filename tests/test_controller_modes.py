@@ -12,18 +12,11 @@ from hp_model import bezier
 from hp_model.outputs import Y2_COORDS
 from prosthesis_controller import (
     CONTROLLERS,
-    ControllerContext,
     ProsthesisMeasurement,
     make_controller,
 )
 from prosthesis_controller.interface import MODE_STANCE, MODE_SWING
 from tests.controller_support import tube_about_nominal
-
-
-@pytest.fixture(scope="module")
-def ctx(model, subsystem, template_gait):
-    return ControllerContext(template_gait, tube_about_nominal(template_gait, (40, 60, 8)),
-                             model, subsystem=subsystem)
 
 
 def m(t, x=(0.1, 0.1, 0.0, 0.0), load=0.0, contact=False):
