@@ -29,6 +29,7 @@ from orchestrator.cosim_cli import register as register_cosim
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
+from orchestrator.sweep_cli import sweep_app
 from orchestrator.tube_cli import tube_app
 
 app = typer.Typer(
@@ -45,6 +46,7 @@ app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
 app.add_typer(tube_app, name="tube")
 app.add_typer(fmu_app, name="fmu")
+app.add_typer(sweep_app, name="sweep")
 app.command("experiments")(experiments_cli.experiments)
 app.command("demo")(experiments_cli.demo)
 register_cosim(app)
