@@ -151,10 +151,11 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
     failed = code != 0
     fail_t = fail_tau = fail_d = None
     reason = ""
-    if failed and n:
-        fail_t, fail_tau, fail_d = t_log[-1], float(tau[-1]), DOMAINS[domain[-1]]
-        reason = (f"t = {fail_t:.3f} s, {fail_d}, tau = {fail_tau:.3f}: "
+    if failed and n:  # worded, and rounded, as the simulator's reason (scenarios._REASON)
+        fail_d = DOMAINS[domain[-1]]
+        reason = (f"t = {t_log[-1]:.3f} s, {fail_d}, tau = {tau[-1]:.3f}: "
                   f"{FALL_CODES.get(code, f'fall code {code}')}")
+        fail_t, fail_tau = float(f"{t_log[-1]:.3f}"), float(f"{tau[-1]:.3f}")
     ref = np.array([knee_reference(gait, DOMAINS[d], ta) for d, ta in zip(domain, tau,
                                                                            strict=True)])
     bounds, i0 = [], None

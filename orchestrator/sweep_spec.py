@@ -122,8 +122,10 @@ class _Group(_Strict):
 
 
 def _check_range(d: Any, lo: float, strict: bool) -> Any:
+    if d is None:
+        return d
     s = support(d)
-    if d is not None and s is not None and (s[0] < lo or (strict and s[0] <= lo)):
+    if s is not None and (s[0] < lo or (strict and s[0] <= lo)):
         rel = ">" if strict else ">="
         raise ValueError(f"must be {rel} {lo:g}; this distribution draws {s[0]:g}")
     return d
