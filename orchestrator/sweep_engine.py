@@ -20,6 +20,7 @@
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 import time
@@ -161,7 +162,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
                 by_future[fut] = k
                 return fut
 
-            first = [submit(k) for k, _ in zip(pending, range(win), strict=False)]
+            first = [submit(k) for k in itertools.islice(pending, win)]
             t0 = time.perf_counter()
             last_flush = t0
             ac = as_completed(first, with_results=True, raise_errors=False)

@@ -52,7 +52,8 @@ def mcnemar_exact(b: int, c: int) -> float:
     return min(1.0, 2 * tail)
 
 
-_NUM = re.compile(r"\s*\([^)]*\)|[-+]?\d+(\.\d+)?")
+_PAREN = re.compile(r"\s*\([^)]*\)")
+_NUM = re.compile(r"\s*=?\s*[-+]?\d+(\.\d+)?(\s*(m|N|rad|s)\b)?")
 
 
 def reason_class(reason: str | None) -> str:
@@ -60,7 +61,7 @@ def reason_class(reason: str | None) -> str:
     if not reason:
         return ""
     text = reason.split(": ", 1)[1] if ": " in reason else reason
-    return _NUM.sub("", text).strip(" ,")
+    return " ".join(_NUM.sub("", _PAREN.sub("", text)).split()).strip(" ,=")
 
 
 def _q(a: list[float], p: float) -> float | None:

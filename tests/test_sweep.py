@@ -180,6 +180,10 @@ def test_mcnemar_exact_equals_binomial_test(b, c):
 def test_reason_class_drops_numbers():
     r = "t = 0.538 s, ps, tau = 0.530: stance foot left the friction cone (F_x 516 N, F_z 4 N)"
     assert reason_class(r) == "stance foot left the friction cone"
+    assert reason_class("t = 1.2 s, pns, tau = 1.301: no touchdown by tau = 1.3") == \
+        "no touchdown by tau"
+    assert reason_class("t = 1 s, ps, tau = 0.5: hip height 0.540 m below 0.55 m") == \
+        "hip height below"
 
 
 # ------------------------------------------------------------------ applying a draw
@@ -364,8 +368,8 @@ def test_two_workers_give_identical_rows(reference, spec_path, tmp_path):
     from orchestrator.sweep_engine import run_sweep
 
     _, ref = reference
-    o = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2)
-    assert o.status == "completed" and o.workers == 2
+    o = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2, window=3)
+    assert o.status == "completed" and o.workers == 2 and o.done == len(ref)
     rows = read_results(tmp_path / "out").to_pylist()
     assert len({r["worker"] for r in rows if r["error"] is None}) == 2  # both worked
     assert stable(rows) == stable(ref)
