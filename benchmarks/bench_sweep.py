@@ -5,20 +5,23 @@ runs done serially in this process (no Dask) measured in the same session.
         [--draws 20] [--steps 3] [--repeats 3]
 
 Throughput is counted from the first submitted run to the last result (cluster start and
-worker setup reported separately); the order of the configurations alternates between
-repeats so machine load drifts hit them alike.
+worker setup excluded).  The two local clusters are started once and kept; the order of the
+configurations alternates between repeats and the 2-worker / 1-worker ratio is taken per
+repeat (back to back), so drifts of the machine's load hit both alike.  The load average
+is printed with every measurement.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
 from orchestrator.sweep_draws import make_draw, run_keys
-from orchestrator.sweep_engine import run_sweep
+from orchestrator.sweep_engine import dask_client, run_sweep
 from orchestrator.sweep_runs import Artifacts, Resources, run_draw
 from orchestrator.sweep_spec import load_spec
 
@@ -41,15 +44,15 @@ def serial(spec) -> tuple[float, float]:
         res.close()
 
 
-def dask(spec, workers: int) -> tuple[float, float]:
+def dask(spec, address: str, workers: int) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as td:
-        o = run_sweep(spec, Path(td) / "out", workers=workers)
-    assert o.status == "completed" and o.workers == workers
+        o = run_sweep(spec, Path(td) / "out", scheduler=address)
+    assert o.status == "completed" and o.workers == workers and o.errors == 0
     return o.runs_per_min, o.setup_s
 
 
 def summary(name: str, v: list[float]) -> str:
-    return f"{name}: median {statistics.median(v):.1f} (min {min(v):.1f}, max {max(v):.1f})"
+    return f"{name}: median {statistics.median(v):.3g} (min {min(v):.3g}, max {max(v):.3g})"
 
 
 def main() -> None:
@@ -64,22 +67,27 @@ def main() -> None:
           f"{len(spec.families)} families x {spec.draws} draws, {spec.steps} steps)")
     rates: dict[str, list[float]] = {"serial": [], "dask 1 worker": [], "dask 2 workers": []}
     setups: dict[str, list[float]] = {k: [] for k in rates}
-    configs = [("serial", lambda: serial(spec)), ("dask 1 worker", lambda: dask(spec, 1)),
-               ("dask 2 workers", lambda: dask(spec, 2))]
-    for r in range(a.repeats):
-        for name, fn in (configs if r % 2 == 0 else configs[::-1]):
-            rate, setup = fn()
-            rates[name].append(rate)
-            setups[name].append(setup)
-            print(f"  repeat {r + 1} {name}: {rate:.1f} runs/min (setup {setup:.1f} s)",
-                  flush=True)
+    with dask_client(None, 1) as c1, dask_client(None, 2) as c2:
+        a1, a2 = c1.scheduler.address, c2.scheduler.address
+        configs = [("serial", lambda: serial(spec)),
+                   ("dask 1 worker", lambda: dask(spec, a1, 1)),
+                   ("dask 2 workers", lambda: dask(spec, a2, 2))]
+        for r in range(a.repeats):
+            for name, fn in (configs if r % 2 == 0 else configs[::-1]):
+                load = os.getloadavg()[0]
+                rate, setup = fn()
+                rates[name].append(rate)
+                setups[name].append(setup)
+                print(f"  repeat {r + 1} {name}: {rate:.1f} runs/min (setup {setup:.1f} s, "
+                      f"load average {load:.1f})", flush=True)
     print("runs per minute")
     for name, v in rates.items():
         print("  " + summary(name, v) + f"; setup median {statistics.median(setups[name]):.1f} s")
-    one, two, ser = (statistics.median(rates[k]) for k in ("dask 1 worker", "dask 2 workers",
-                                                           "serial"))
-    print(f"scaling 2 workers / 1 worker: {two / one:.2f} (ideal 2.00 on 2 free cores)")
-    print(f"dask 1 worker / serial in process: {one / ser:.2f} (Dask overhead per run)")
+    ratio = [b / a for a, b in zip(rates["dask 1 worker"], rates["dask 2 workers"],
+                                   strict=True)]
+    over = [b / a for a, b in zip(rates["serial"], rates["dask 1 worker"], strict=True)]
+    print("  " + summary("2 workers / 1 worker, per repeat (ideal 2.00 on 2 free cores)", ratio))
+    print("  " + summary("dask 1 worker / serial in process, per repeat", over))
 
 
 if __name__ == "__main__":

@@ -158,6 +158,8 @@ class Resources:
         from prosthesis_controller import ControllerContext
 
         self.digest = artifacts.digest()
+        #: identifies this set-up (host, process, time): one per worker, not per run
+        self.setup_id = f"{socket.gethostname()}:{os.getpid()}:{time.time_ns()}"
         base = Path(workdir or tempfile.gettempdir()) / f"hpcosim-sweep-{self.digest[:12]}"
         base.mkdir(parents=True, exist_ok=True)
         self.workdir = Path(tempfile.mkdtemp(prefix=f"{os.getpid()}-", dir=base))
@@ -281,7 +283,8 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
     except Exception as e:  # a run's own failure is a result, not a crash of the sweep
         row.update(EMPTY_RESULT)
         row.update(error=f"{type(e).__name__}: {e}", error_kind="run")
-    row.update(wall_s=time.perf_counter() - t0, worker=f"{socket.gethostname()}:{os.getpid()}")
+    row.update(wall_s=time.perf_counter() - t0, worker=f"{socket.gethostname()}:{os.getpid()}",
+               setup=res.setup_id)
     return row
 
 

@@ -55,11 +55,12 @@ COLUMNS = pa.schema([
     ("fault_ticks", pa.int64()), ("max_torque_knee", pa.float64()),
     ("max_torque_ankle", pa.float64()), ("torque_finite", pa.bool_()),
     ("error", pa.string()), ("error_kind", pa.string()),
-    ("wall_s", pa.float64()), ("worker", pa.string()), ("session", pa.string()),
+    ("wall_s", pa.float64()), ("worker", pa.string()), ("setup", pa.string()),
+    ("session", pa.string()),
     ("seq", pa.int64()),
 ])
 #: columns that depend on where and when a run ran, not on what it computed
-VOLATILE = ("wall_s", "worker", "session", "seq")
+VOLATILE = ("wall_s", "worker", "setup", "session", "seq")
 ARTIFACT_NAMES = {"gait": "gait.json", "tube": "tube.json", "fmu": "human.fmu",
                   "subject": "subject.toml", "device": "device.toml"}
 
