@@ -128,7 +128,8 @@ def model_check(
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning user errors into one-line messages."""
     try:
-        app(args=argv, standalone_mode=False)
+        # without standalone mode click returns (not raises) a command's typer.Exit code
+        rc = app(args=argv, standalone_mode=False)
     except typer.Exit as e:
         return e.exit_code
     except typer.Abort:
@@ -147,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             e.show()
             return e.exit_code
         raise
-    return 0
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

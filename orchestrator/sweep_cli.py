@@ -117,7 +117,8 @@ def run(
             console.print(f"interrupted: finished runs are saved in {out}; run the same "
                           "command again to resume")
             raise typer.Exit(130) from None
-    console.print(f"{o.done} runs in {o.wall_s:.1f} s on {o.workers} workers "
+    console.print(f"{o.done} runs in {o.wall_s:.1f} s on {o.workers} "
+                  f"worker{'s' if o.workers != 1 else ''} "
                   f"({o.runs_per_min:.1f} runs/min, setup {o.setup_s:.1f} s); "
                   f"{o.skipped} already done; {o.errors} errors")
     if report:
