@@ -83,7 +83,7 @@ def run(
         TimeRemainingColumn,
     )
 
-    from orchestrator.sweep_engine import run_sweep
+    from orchestrator.sweep_engine import SweepError, run_sweep
     from orchestrator.sweep_report import write_report
     from orchestrator.sweep_spec import load_spec
 
@@ -112,15 +112,21 @@ def run(
         try:
             o = run_sweep(sp, out, scheduler=scheduler, workers=workers, progress=progress,
                           say=lambda m: prog.update(task, description=m))
+        except SweepError as e:
+            prog.stop()
+            raise _fail(str(e)) from None
         except KeyboardInterrupt:
             prog.stop()
             console.print(f"interrupted: finished runs are saved in {out}; run the same "
                           "command again to resume")
             raise typer.Exit(130) from None
-    console.print(f"{o.done} runs in {o.wall_s:.1f} s on {o.workers} "
-                  f"worker{'s' if o.workers != 1 else ''} "
-                  f"({o.runs_per_min:.1f} runs/min, setup {o.setup_s:.1f} s); "
-                  f"{o.skipped} already done; {o.errors} errors")
+    if o.done == 0 and o.skipped == o.total:
+        console.print(f"all {o.total} runs are already in {out}")
+    else:
+        console.print(f"{o.done} runs in {o.wall_s:.1f} s on {o.workers} "
+                      f"worker{'s' if o.workers != 1 else ''} "
+                      f"({o.runs_per_min:.1f} runs/min, setup {o.setup_s:.1f} s); "
+                      f"{o.skipped} already done; {o.errors} errors")
     if report:
         s = write_report(out)
         console.print(_cells_table(s))

@@ -25,7 +25,7 @@ import logging
 import os
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -63,13 +63,22 @@ class SweepOutcome:
         return 60.0 * self.done / self.wall_s if self.wall_s > 0 else 0.0
 
 
+class SweepError(RuntimeError):
+    """A sweep that cannot start (one line), e.g. an unreachable scheduler."""
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
     """A client of ``scheduler``, or of a new LocalCluster of ``workers`` processes."""
     from distributed import Client, LocalCluster
 
     if scheduler:
-        client = Client(scheduler, timeout=30)
+        try:
+            client = Client(scheduler, timeout=10)
+        except (OSError, TimeoutError, ValueError) as e:
+            raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: "
+                             f"{str(e).splitlines()[0] if str(e) else type(e).__name__}"
+                             ) from None
         try:
             yield client
         finally:
@@ -103,114 +112,128 @@ def prepare_fmu(spec: SweepSpec) -> Path | None:
     return ensure_fmu(spec.gait, model)
 
 
+@dataclass
+class _Parts:
+    """Buffers result rows and writes them as parquet parts (``batch`` rows or every
+    ``flush_s`` seconds); numbers rows in the order they were consumed."""
+
+    store: ResultStore
+    session: str
+    batch: int
+    flush_s: float
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    part: int = 0
+    seq: int = 0
+    last: float = field(default_factory=time.perf_counter)
+
+    def add(self, row: dict[str, Any]) -> None:
+        row.update(session=self.session, seq=self.seq)
+        self.seq += 1
+        self.rows.append(row)
+        if len(self.rows) >= self.batch or time.perf_counter() - self.last >= self.flush_s:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.rows:
+            self.store.write_part(self.rows, self.session, self.part)
+            self.part += 1
+            self.rows = []
+        self.last = time.perf_counter()
+
+
+def _consume(client: Any, plugin: str, spec: SweepSpec, digest: str, session: str,
+             todo: list[RunKey], parts: _Parts, outcome: SweepOutcome, window: int,
+             on_result: Callable[[dict[str, Any]], None] | None,
+             progress: Progress | None) -> None:
+    """Submit ``todo`` (at most ``window`` in flight) and store each result as it comes."""
+    from distributed import as_completed
+
+    pending = iter(todo)
+    by_future: dict[Any, RunKey] = {}
+
+    def submit(k: RunKey) -> Any:
+        fut = client.submit(run_task, plugin, spec, k, make_draw(spec, k.family, k.draw),
+                            key=f"hpcosim-run-{digest[:8]}-{session}-{k.text}", pure=False)
+        by_future[fut] = k
+        return fut
+
+    first = [submit(k) for k in itertools.islice(pending, window)]
+    t0 = time.perf_counter()
+    ac = as_completed(first, with_results=True, raise_errors=False)
+    for fut, result in ac:
+        k = by_future.pop(fut)
+        if fut.status != "finished" or not isinstance(result, dict):
+            exc = result[1] if isinstance(result, tuple) and len(result) == 3 else result
+            row = base_row(spec, digest, k, make_draw(spec, k.family, k.draw))
+            row.update(error=f"{type(exc).__name__}: {exc}", error_kind="infrastructure",
+                       success=False)
+        else:
+            row = result
+        nxt = next(pending, None)
+        if nxt is not None:
+            ac.add(submit(nxt))
+        parts.add(row)
+        outcome.done += 1
+        outcome.errors += row.get("error") is not None
+        outcome.wall_s = time.perf_counter() - t0
+        if on_result is not None:
+            on_result(row)
+        if progress is not None:
+            progress(outcome.done, len(todo), outcome.errors, outcome.runs_per_min)
+
+
 def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
               workers: int | None = None, progress: Progress | None = None,
               on_result: Callable[[dict[str, Any]], None] | None = None,
               say: Callable[[str], None] | None = None, window: int | None = None,
               flush_s: float = 10.0) -> SweepOutcome:
-    """Run (or resume) ``spec`` into ``out`` (module docstring)."""
-    from distributed import as_completed
-
+    """Run (or resume) ``spec`` into ``out`` (module docstring).  Nothing is written
+    before the cluster is up (a spec that does not fit ``out``, an unreachable scheduler or
+    an interrupt during start-up leave ``out`` as it was)."""
     say = say or (lambda _m: None)
     t_setup = time.perf_counter()
     art = Artifacts.from_spec(spec, prepare_fmu(spec))
     digest = art.digest()
     store = ResultStore(Path(out))
-    manifest = store.open(spec, art.hashes(), digest,
-                          {"gait": art.gait, "tube": art.tube, "fmu": art.fmu,
-                           "subject": art.subject, "device": art.device})
+    files = {"gait": art.gait, "tube": art.tube, "fmu": art.fmu, "subject": art.subject,
+             "device": art.device}
+    store.check(spec, art.hashes(), digest)
     keys = list(run_keys(spec))
     have = done_keys(out)
     todo = [k for k in keys if k.text not in have]
     session = new_session_id()
-    entry = session_entry(session, scheduler=scheduler or "local", runs_total=len(keys),
-                          runs_skipped=len(keys) - len(todo))
-    manifest["sessions"].append(entry)
-    store.write_manifest(manifest)
     outcome = SweepOutcome(Path(out), session, len(keys), len(keys) - len(todo), 0, 0, 0, 0.0,
                            0.0, "failed")
-    buf: list[dict[str, Any]] = []
-    seq = [0, 0]  # part number, row number
-
-    def flush() -> None:
-        if buf:
-            store.write_part(buf, session, seq[0])
-            seq[0] += 1
-            buf.clear()
-
-    t0 = time.perf_counter()
-    try:
-        if not todo:
+    if not todo:
+        outcome.status = "completed"
+        return outcome
+    with dask_client(scheduler, workers) as client:
+        say("setting up workers (model functions, controllers)")
+        plugin = SweepSetup(art)
+        client.register_plugin(plugin)
+        outcome.workers = len(client.scheduler_info()["workers"])
+        outcome.setup_s = time.perf_counter() - t_setup
+        manifest = store.open(spec, art.hashes(), digest, files)
+        entry = session_entry(session, scheduler=scheduler or "local", runs_total=len(keys),
+                              runs_skipped=outcome.skipped, workers=outcome.workers)
+        manifest["sessions"].append(entry)
+        store.write_manifest(manifest)
+        say(f"{outcome.workers} workers ready; {len(todo)} runs to do")
+        parts = _Parts(store, session, spec.batch, flush_s)
+        try:
+            _consume(client, plugin.name, spec, digest, session, todo, parts, outcome,
+                     window or max(32, 8 * outcome.workers), on_result, progress)
             outcome.status = "completed"
-            return outcome
-        with dask_client(scheduler, workers) as client:
-            say("setting up workers (model functions, controllers)")
-            plugin = SweepSetup(art)
-            client.register_plugin(plugin)
-            n_workers = len(client.scheduler_info()["workers"])
-            outcome.workers = n_workers
-            entry["workers"] = n_workers
-            outcome.setup_s = time.perf_counter() - t_setup
-            say(f"{n_workers} workers ready; {len(todo)} runs to do")
-            win = window or max(32, 8 * n_workers)
-            pending = iter(todo)
-            by_future: dict[Any, RunKey] = {}
-
-            def submit(k: RunKey) -> Any:
-                fut = client.submit(run_task, plugin.name, spec, k,
-                                    make_draw(spec, k.family, k.draw),
-                                    key=f"hpcosim-run-{digest[:8]}-{session}-{k.text}",
-                                    pure=False)
-                by_future[fut] = k
-                return fut
-
-            first = [submit(k) for k in itertools.islice(pending, win)]
-            t0 = time.perf_counter()
-            last_flush = t0
-            ac = as_completed(first, with_results=True, raise_errors=False)
-            for fut, result in ac:
-                k = by_future.pop(fut)
-                if fut.status != "finished" or not isinstance(result, dict):
-                    exc = result[1] if isinstance(result, tuple) and len(result) == 3 \
-                        else result
-                    row = base_row(spec, digest, k, make_draw(spec, k.family, k.draw))
-                    row.update(error=f"{type(exc).__name__}: {exc}",
-                               error_kind="infrastructure", success=False)
-                else:
-                    row = result
-                row.update(session=session, seq=seq[1])
-                seq[1] += 1
-                buf.append(row)
-                outcome.done += 1
-                outcome.errors += row.get("error") is not None
-                nxt = next(pending, None)
-                if nxt is not None:
-                    ac.add(submit(nxt))
-                now = time.perf_counter()
-                if len(buf) >= spec.batch or now - last_flush >= flush_s:
-                    flush()
-                    last_flush = now
-                if on_result is not None:
-                    on_result(row)
-                if progress is not None:
-                    el = now - t0
-                    progress(outcome.done, len(todo), outcome.errors,
-                             60.0 * outcome.done / el if el > 0 else 0.0)
-            outcome.wall_s = time.perf_counter() - t0
-            flush()
-            outcome.status = "completed"
+        except KeyboardInterrupt:
+            outcome.status = "interrupted"
+            raise
+        finally:
+            parts.flush()
+            entry.update(finished=session_entry(session)["started"], status=outcome.status,
+                         runs_done=outcome.done, errors=outcome.errors,
+                         wall_s=outcome.wall_s, setup_s=outcome.setup_s,
+                         runs_per_min=outcome.runs_per_min)
+            store.write_manifest(manifest)
             with contextlib.suppress(Exception):  # leave an external cluster as it was
                 client.unregister_worker_plugin(plugin.name)
-    except KeyboardInterrupt:
-        outcome.status = "interrupted"
-        raise
-    finally:
-        flush()
-        if outcome.status != "completed":
-            outcome.wall_s = time.perf_counter() - t0
-        entry.update(finished=session_entry(session)["started"], status=outcome.status,
-                     runs_done=outcome.done, errors=outcome.errors, wall_s=outcome.wall_s,
-                     setup_s=outcome.setup_s, workers=outcome.workers,
-                     runs_per_min=outcome.runs_per_min)
-        store.write_manifest(manifest)
     return outcome

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import shutil
 import socket
 import tempfile
 import time
@@ -209,8 +210,12 @@ class Resources:
         return ctx
 
     def close(self) -> None:
-        if self.fmu is not None:
-            self.fmu.free()
+        """Free the FMU instance and remove the files written for this set-up."""
+        try:
+            if self.fmu is not None:
+                self.fmu.free()
+        finally:
+            shutil.rmtree(self.workdir, ignore_errors=True)
 
 
 # ------------------------------------------------------------------ the run

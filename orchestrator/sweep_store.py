@@ -95,14 +95,12 @@ class ResultStore:
     def write_manifest(self, doc: dict[str, Any]) -> None:
         atomic_write_text(self.manifest_path, json.dumps(doc, indent=1) + "\n")
 
-    def open(self, spec: SweepSpec, hashes: dict[str, str | None], artifacts_digest: str,
-             files: dict[str, bytes | None]) -> dict[str, Any]:
-        """Create the folder for ``spec``, or check that it holds a compatible sweep: same
-        identity (seed, steps, backend), same artifacts, and every family present in both
-        defined alike (added controllers, families and draws are fine).  Returns the
-        manifest, with the spec updated to this one."""
-        self.root.mkdir(parents=True, exist_ok=True)
-        self.results.mkdir(exist_ok=True)
+    def check(self, spec: SweepSpec, hashes: dict[str, str | None], artifacts_digest: str
+              ) -> dict[str, Any] | None:
+        """Whether the folder (if any) holds a sweep ``spec`` may resume: same identity
+        (seed, steps, backend), same artifacts, and every family present in both defined
+        alike (added controllers, families and draws are fine).  Raises :class:`SpecError`;
+        returns the existing manifest (None for a new folder).  Writes nothing."""
         fams = {f: spec.family_hash(f) for f in spec.families}
         old = self.manifest()
         if old is not None:
@@ -117,7 +115,17 @@ class ResultStore:
                 if f in old["family_hashes"] and old["family_hashes"][f] != h:
                     raise SpecError(f"{self.root}: family '{f}' is defined differently from "
                                     "the sweep there; rename it or use another --out")
-            fams = {**old["family_hashes"], **fams}
+        return old
+
+    def open(self, spec: SweepSpec, hashes: dict[str, str | None], artifacts_digest: str,
+             files: dict[str, bytes | None]) -> dict[str, Any]:
+        """Create the folder for ``spec`` or reopen a compatible one (:meth:`check`), copy
+        the artifacts, and return the manifest with the spec updated to this one."""
+        old = self.check(spec, hashes, artifacts_digest)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self.results.mkdir(exist_ok=True)
+        fams = {**(old or {}).get("family_hashes", {}),
+                **{f: spec.family_hash(f) for f in spec.families}}
         adir = self.root / "artifacts"
         adir.mkdir(exist_ok=True)
         local: dict[str, str] = {}

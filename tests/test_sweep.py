@@ -305,6 +305,29 @@ def test_store_parts_are_atomic_and_newest_row_wins(tmp_path):
     assert not [p for p in st.results.iterdir() if p.name.startswith(".")]
 
 
+def test_output_folder_refuses_another_sweep(tmp_path, files):
+    _, tube = files
+    a = load_spec(write_spec(tmp_path / "a.toml", tube))
+    art = Artifacts.from_spec(a)
+    st = ResultStore(tmp_path / "out")
+    assert st.check(a, art.hashes(), art.digest()) is None
+    assert not st.root.exists()  # checking writes nothing
+    st.open(a, art.hashes(), art.digest(), {"gait": art.gait, "tube": art.tube})
+    more = load_spec(write_spec(tmp_path / "b.toml", tube, draws=9,
+                                extra="\n[families.extra]\ninitial.knee = 0.01\n"))
+    assert st.check(more, art.hashes(), art.digest()) is not None  # more draws, a family: ok
+    other_seed = load_spec(tmp_path / "b.toml", {"seed": 8})
+    with pytest.raises(SpecError, match="other settings"):
+        st.check(other_seed, art.hashes(), art.digest())
+    c = write_spec(tmp_path / "c.toml", tube)
+    c.write_text(c.read_text().replace("high = 0.02", "high = 0.03"))  # family 'mixed'
+    with pytest.raises(SpecError, match="family 'mixed'"):
+        st.check(load_spec(c), art.hashes(), art.digest())
+    loaded = st.spec()  # the manifest's spec points at the copied artifacts
+    assert loaded.gait == (st.root / "artifacts" / "gait.json").resolve()
+    assert loaded.families == a.families
+
+
 # ------------------------------------------------------------------ Dask
 
 def stable(rows: list[dict]) -> dict[str, dict]:
