@@ -24,12 +24,13 @@ from orchestrator.sweep_draws import make_draw, run_keys
 from orchestrator.sweep_engine import dask_client, run_sweep
 from orchestrator.sweep_runs import Artifacts, Resources, run_draw
 from orchestrator.sweep_spec import load_spec
+from orchestrator.sweep_store import read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def serial(spec) -> tuple[float, float]:
-    """(runs per minute, setup s) of the same runs in this process, one after another."""
+def serial(spec) -> tuple[float, float, float]:
+    """(runs per minute, setup s, 1) of the same runs in this process, one after another."""
     t0 = time.perf_counter()
     res = Resources(Artifacts.from_spec(spec))
     setup = time.perf_counter() - t0
@@ -39,16 +40,19 @@ def serial(spec) -> tuple[float, float]:
         for k in run_keys(spec):
             run_draw(res, spec, k, make_draw(spec, k.family, k.draw))
             n += 1
-        return 60 * n / (time.perf_counter() - t0), setup
+        return 60 * n / (time.perf_counter() - t0), setup, 1.0
     finally:
         res.close()
 
 
-def dask(spec, address: str, workers: int) -> tuple[float, float]:
+def dask(spec, address: str, workers: int) -> tuple[float, float, float]:
+    """(runs per minute, setup s, worker busy fraction = sum of run times / (wall x
+    workers))."""
     with tempfile.TemporaryDirectory() as td:
         o = run_sweep(spec, Path(td) / "out", scheduler=address)
+        busy = sum(read_results(Path(td) / "out")["wall_s"].to_pylist())
     assert o.status == "completed" and o.workers == workers and o.errors == 0
-    return o.runs_per_min, o.setup_s
+    return o.runs_per_min, o.setup_s, busy / (o.wall_s * workers)
 
 
 def summary(name: str, v: list[float]) -> str:
@@ -75,11 +79,11 @@ def main() -> None:
         for r in range(a.repeats):
             for name, fn in (configs if r % 2 == 0 else configs[::-1]):
                 load = os.getloadavg()[0]
-                rate, setup = fn()
+                rate, setup, busy = fn()
                 rates[name].append(rate)
                 setups[name].append(setup)
                 print(f"  repeat {r + 1} {name}: {rate:.1f} runs/min (setup {setup:.1f} s, "
-                      f"load average {load:.1f})", flush=True)
+                      f"workers busy {100 * busy:.0f} %, load average {load:.1f})", flush=True)
     print("runs per minute")
     for name, v in rates.items():
         print("  " + summary(name, v) + f"; setup median {statistics.median(setups[name]):.1f} s")
