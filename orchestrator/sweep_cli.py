@@ -50,6 +50,19 @@ def _cells_table(s: dict[str, Any]) -> Table:
     return t
 
 
+def _print_report(console: Console, s: dict[str, Any], out: Path) -> None:
+    """The cells table and, per cell, the worst run with the command reproducing it."""
+    console.print(_cells_table(s))
+    for c in s["cells"]:
+        if c["worst"]:
+            w = c["worst"][0]
+            console.print(f"worst {c['controller']} / {c['family']}: "
+                          f"{w['reason'] or 'completed'}\n  {w['replay']}"
+                          + (f"\n  {w['cosim']}" if w["cosim"] else ""), highlight=False,
+                          markup=False, soft_wrap=True)
+    console.print(f"wrote {out}/report.md, report.json and figures")
+
+
 @sweep_app.command("run")
 def run(
     spec: Annotated[Path, typer.Argument(help="Sweep spec (TOML).", dir_okay=False)],
@@ -129,8 +142,7 @@ def run(
                       f"{o.skipped} already done; {o.errors} errors")
     if report:
         s = write_report(out)
-        console.print(_cells_table(s))
-        console.print(f"wrote {out}/report.md, report.json and figures")
+        _print_report(console, s, out)
 
 
 @sweep_app.command("report")
@@ -140,9 +152,7 @@ def report_cmd(
     """Write OUT/report.md, report.json and figures from the stored results."""
     from orchestrator.sweep_report import write_report
 
-    s = write_report(out)
-    Console().print(_cells_table(s))
-    Console().print(f"wrote {out}/report.md, report.json and figures")
+    _print_report(Console(), write_report(out), out)
 
 
 @sweep_app.command("replay")
