@@ -29,6 +29,7 @@ from orchestrator.cosim_cli import register as register_cosim
 from orchestrator.fmu_cli import fmu_app
 from orchestrator.gait_cli import gait_app
 from orchestrator.mocap_cli import mocap_app
+from orchestrator.sweep_cli import sweep_app
 from orchestrator.tube_cli import tube_app
 
 app = typer.Typer(
@@ -45,6 +46,7 @@ app.add_typer(mocap_app, name="mocap")
 app.add_typer(gait_app, name="gait")
 app.add_typer(tube_app, name="tube")
 app.add_typer(fmu_app, name="fmu")
+app.add_typer(sweep_app, name="sweep")
 app.command("experiments")(experiments_cli.experiments)
 app.command("demo")(experiments_cli.demo)
 register_cosim(app)
@@ -126,7 +128,8 @@ def model_check(
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning user errors into one-line messages."""
     try:
-        app(args=argv, standalone_mode=False)
+        # without standalone mode click returns (not raises) a command's typer.Exit code
+        rc = app(args=argv, standalone_mode=False)
     except typer.Exit as e:
         return e.exit_code
     except typer.Abort:
@@ -145,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             e.show()
             return e.exit_code
         raise
-    return 0
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ import numpy as np
 from characterization.force_tube_fit import deviation_profiles, fit_tube, nominal_coefficients
 from characterization.gait_verification import make_simulator
 from hp_model import bezier
+from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -156,12 +157,17 @@ _REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")
 def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                  scenario: Scenario, *, context: ControllerContext | None = None,
                  options: SimOptions | None = None,
-                 q0: np.ndarray | None = None, qd0: np.ndarray | None = None
-                 ) -> ScenarioResult:
-    """Run one scenario on the full hybrid model (module docstring)."""
-    base = make_simulator(model, gait, options=options)
-    sim = HybridSimulator(model, base.cl, scenario.perturbation.thetas(gait),
-                          gait.gains_array, base.opt)
+                 q0: np.ndarray | None = None, qd0: np.ndarray | None = None,
+                 closed_loop: ClosedLoop | None = None) -> ScenarioResult:
+    """Run one scenario on the full hybrid model (module docstring).  ``closed_loop``: the
+    compiled closed-loop functions of the gait's degree, to reuse between runs (building
+    them costs about 0.5 s); built here when absent."""
+    if closed_loop is None:
+        closed_loop = ClosedLoop(model, gait.degree)
+    elif closed_loop.degree != gait.degree or closed_loop.model is not model:
+        raise ValueError("closed_loop was built for another model or Bezier degree")
+    sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait),
+                          gait.gains_array, options or SimOptions())
     ctx = context or ControllerContext(gait, tube, model, None)
     ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
     ctrl.reset()

@@ -1,0 +1,297 @@
+"""The sweep specification (TOML, ``schema_version = 1``), validated on load.
+
+A sweep runs every (controller, family, draw) of the spec: ``draws`` random draws of each
+perturbation *family*, each draw run once per controller (the controllers face the same
+draws: a paired comparison).  A family combines any of four groups of perturbations, each
+quantity given as a number (fixed) or a distribution::
+
+    [families.NAME]
+    human.bezier_amplitude = {dist = "uniform", low = 0.0, high = 0.02}  # rad, every
+                            # Bezier coefficient of the human's outputs, SplitMix64 generator
+                            # of human_fmu.perturbation (its seed is drawn per run)
+    human.output_offset    = {dist = "normal", mean = 0.0, std = 0.02}   # rad, a constant
+                            # added to each human output (th_lh, th_lk, th_la, th_rh; drawn
+                            # independently per joint, same in both domains)
+    socket.tube_scale      = {dist = "uniform", low = 1.0, high = 3.0}   # the socket-force
+                            # deviations exceed the controller's tube by this factor (its
+                            # tube is the spec's tube divided by it, about F*)
+    model.mass_scale       = {dist = "choice", values = [0.8, 1.2]}      # controller model
+    model.inertia_scale    = 1.0                                          # errors: prosthesis
+    model.com_scale        = 1.0                                          # links (fixed/choice)
+    initial.knee           = {dist = "uniform", low = -0.05, high = 0.05} # rad, prosthesis
+    initial.ankle          = 0.0                                          # initial offsets
+
+Distributions: a number, ``{dist = "fixed", value}``, ``{dist = "uniform", low, high}``,
+``{dist = "normal", mean, std}``, ``{dist = "choice", values = [...]}``.  Model errors take
+only fixed or choice values (each distinct value compiles a controller model once per
+worker).  An unbounded normal distribution on a quantity with a range (amplitude >= 0,
+scales > 0) is allowed; a draw outside the range makes that run fail with its error
+recorded.
+
+A bad spec is refused with one line naming the file and the field (:class:`SpecError`).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from hp_model.artifacts import canonical_hash
+from hp_model.config import ConfigError
+from prosthesis_controller import CONTROLLERS
+
+SCHEMA_VERSION = 1
+BACKENDS = ("simulator", "fmu")
+FAMILY_NAME = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+class SpecError(ConfigError):
+    """A sweep spec that cannot be run (one line: file, field, reason)."""
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Fixed(_Strict):
+    dist: Literal["fixed"] = "fixed"
+    value: float = Field(allow_inf_nan=False)
+
+
+class Uniform(_Strict):
+    dist: Literal["uniform"]
+    low: float = Field(allow_inf_nan=False)
+    high: float = Field(allow_inf_nan=False)
+
+    @model_validator(mode="after")
+    def _order(self) -> Uniform:
+        if self.low > self.high:
+            raise ValueError(f"low ({self.low}) must not exceed high ({self.high})")
+        return self
+
+
+class Normal(_Strict):
+    dist: Literal["normal"]
+    mean: float = Field(allow_inf_nan=False)
+    std: float = Field(ge=0, allow_inf_nan=False)
+
+
+class Choice(_Strict):
+    dist: Literal["choice"]
+    values: tuple[Annotated[float, Field(allow_inf_nan=False)], ...] = Field(min_length=1)
+
+
+Dist = Annotated[Fixed | Uniform | Normal | Choice, Field(discriminator="dist")]
+
+
+def _as_dist(v: Any) -> Any:
+    """A bare number is a fixed value."""
+    if isinstance(v, int | float) and not isinstance(v, bool):
+        return {"dist": "fixed", "value": v}
+    return v
+
+
+def support(d: Fixed | Uniform | Normal | Choice) -> tuple[float, float] | None:
+    """(min, max) of the values a distribution can draw; None if unbounded."""
+    if isinstance(d, Fixed):
+        return d.value, d.value
+    if isinstance(d, Uniform):
+        return d.low, d.high
+    if isinstance(d, Choice):
+        return min(d.values), max(d.values)
+    return (d.mean, d.mean) if d.std == 0 else None
+
+
+class _Group(_Strict):
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers(cls, data: Any) -> Any:
+        return {k: _as_dist(v) for k, v in data.items()} if isinstance(data, dict) else data
+
+
+def _check_range(d: Any, lo: float, strict: bool) -> Any:
+    if d is None:
+        return d
+    s = support(d)
+    if s is not None and (s[0] < lo or (strict and s[0] <= lo)):
+        rel = ">" if strict else ">="
+        raise ValueError(f"must be {rel} {lo:g}; this distribution draws {s[0]:g}")
+    return d
+
+
+class HumanGroup(_Group):
+    """The human's gait: Bezier coefficient perturbation and constant output offsets."""
+
+    bezier_amplitude: Dist | None = None
+    output_offset: Dist | None = None
+
+    @field_validator("bezier_amplitude")
+    @classmethod
+    def _nonnegative(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=False)
+
+
+class SocketGroup(_Group):
+    """Socket-force deviation beyond the controller's tube."""
+
+    tube_scale: Dist | None = None
+
+    @field_validator("tube_scale")
+    @classmethod
+    def _positive(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=True)
+
+
+class ModelGroup(_Group):
+    """Parameter errors of the controller's model (prosthesis links)."""
+
+    mass_scale: Dist | None = None
+    inertia_scale: Dist | None = None
+    com_scale: Dist | None = None
+
+    @field_validator("mass_scale", "inertia_scale", "com_scale")
+    @classmethod
+    def _discrete(cls, d: Any, info: ValidationInfo) -> Any:
+        if d is not None and not isinstance(d, Fixed | Choice):
+            raise ValueError("model errors take a fixed value or a choice (each distinct "
+                             "value compiles a controller model)")
+        return _check_range(d, 0.0, strict=info.field_name != "com_scale")
+
+
+class InitialGroup(_Group):
+    """Offsets (rad) of the prosthesis knee and ankle from the gait's initial state."""
+
+    knee: Dist | None = None
+    ankle: Dist | None = None
+
+
+class Family(_Strict):
+    """One perturbation family (module docstring); empty = the nominal case."""
+
+    human: HumanGroup = HumanGroup()
+    socket: SocketGroup = SocketGroup()
+    model: ModelGroup = ModelGroup()
+    initial: InitialGroup = InitialGroup()
+
+    def quantities(self) -> dict[str, Any]:
+        """The given quantities by dotted name (``human.bezier_amplitude``, ...)."""
+        out = {}
+        for g in ("human", "socket", "model", "initial"):
+            for k, v in getattr(self, g):
+                if v is not None:
+                    out[f"{g}.{k}"] = v
+        return out
+
+
+class SweepSpec(_Strict):
+    """A validated sweep spec; artifact paths are absolute after :func:`load_spec`."""
+
+    schema_version: Literal[1] = 1
+    name: str = "sweep"
+    gait: Path
+    tube: Path
+    subject: Path | None = None
+    device: Path | None = None
+    controllers: tuple[str, ...] = Field(min_length=1)
+    families: dict[str, Family] = Field(min_length=1)
+    draws: int = Field(ge=1)
+    seed: int = Field(ge=0)
+    steps: int = Field(10, ge=1)
+    backend: Literal["simulator", "fmu"] = "simulator"
+    fmu: Path | None = None
+    batch: int = Field(25, ge=1)
+
+    @field_validator("controllers")
+    @classmethod
+    def _controllers(cls, cs: tuple[str, ...]) -> tuple[str, ...]:
+        for c in cs:
+            if c not in CONTROLLERS:
+                raise ValueError(f"unknown controller '{c}'; choose from "
+                                 f"{', '.join(CONTROLLERS)}")
+        if len(set(cs)) != len(cs):
+            raise ValueError("a controller is listed twice")
+        return cs
+
+    @field_validator("families")
+    @classmethod
+    def _family_names(cls, fams: dict[str, Family]) -> dict[str, Family]:
+        for f in fams:
+            if not FAMILY_NAME.match(f):
+                raise ValueError(f"family name '{f}': use letters, digits, '_' and '-'")
+        return fams
+
+    @model_validator(mode="after")
+    def _fmu(self) -> SweepSpec:
+        if self.fmu is not None and self.backend != "fmu":
+            raise ValueError("'fmu' is given but backend is not 'fmu'")
+        return self
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.controllers) * len(self.families) * self.draws
+
+    def identity(self) -> dict[str, Any]:
+        """What a run's result depends on besides its controller, family and draw index
+        (artifact contents enter through :func:`orchestrator.sweep_runs.Artifacts.digest`)."""
+        return {"seed": self.seed, "steps": self.steps, "backend": self.backend}
+
+    def family_hash(self, family: str) -> str:
+        return canonical_hash(self.families[family].model_dump(mode="json"))
+
+
+def _fail(path: Path, loc: str, msg: str) -> SpecError:
+    return SpecError(f"{path}: field '{loc}': {msg}")
+
+
+def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
+    """Validate a spec document; relative artifact paths are taken from ``path``'s folder."""
+    if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
+        raise _fail(path, "schema_version", f"version {data['schema_version']!r} is not "
+                    f"supported (this hpcosim reads version {SCHEMA_VERSION})")
+    try:
+        spec = SweepSpec.model_validate(data)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"] if p not in ("fixed", "uniform", "normal",
+                                                                 "choice")) or "<top>"
+        msg = err["msg"].removeprefix("Value error, ")
+        more = f" (and {len(e.errors()) - 1} more)" if len(e.errors()) > 1 else ""
+        raise _fail(path, loc, msg + more) from None
+    base = path.parent
+    files: dict[str, Path] = {}
+    for name in ("gait", "tube", "subject", "device", "fmu"):
+        p = getattr(spec, name)
+        if p is None:
+            continue
+        p = p if p.is_absolute() else (base / p)
+        if not p.is_file():
+            raise _fail(path, name, f"no such file: {p}")
+        files[name] = p.resolve()
+    return spec.model_copy(update=files)
+
+
+def load_spec(path: str | Path, overrides: dict[str, Any] | None = None) -> SweepSpec:
+    """Read and validate a sweep spec TOML; ``overrides`` replace top-level fields (CLI)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise SpecError(f"{path}: cannot read: {e.strerror or e}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SpecError(f"{path}: not valid TOML: {e}") from None
+    data.update({k: v for k, v in (overrides or {}).items() if v is not None})
+    return parse_spec(data, path)
