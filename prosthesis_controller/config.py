@@ -89,11 +89,21 @@ class PassiveConfig(_Strict):
 
 class SwingConfig(_Strict):
     """Shared swing (pns) controller: PD + gravity feedforward on the pns Bezier rows of
-    th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains."""
+    th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains.
 
-    kp: Pair = (200.0, 50.0)
-    kd: Pair = (8.0, 0.8)
+    Landing (``terms.swing_ref``): from tau_hat = ``landing_start`` the target lowers the
+    sole by ``landing_depth`` (m) times w, w rising linearly to 1 at tau_hat = 1 and on to
+    ``landing_max`` (the foot keeps reaching for the ground when the touchdown is late), and
+    turns the foot flat (world pitch 0 at the nominal socket pitch) over the next
+    ``landing_flatten`` of tau_hat.  ``landing_depth = 0`` only flattens the foot."""
+
+    kp: Pair = (2000.0, 135.0)
+    kd: Pair = (24.0, 1.6)
     gravity: bool = True
+    landing_depth: NonNegative = 0.01
+    landing_start: float = Field(0.8, gt=0, lt=1)
+    landing_max: Positive = 2.0
+    landing_flatten: Positive = 0.05
 
 
 class DomainConfig(_Strict):

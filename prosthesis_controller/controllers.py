@@ -118,8 +118,11 @@ class ControllerContext:
         self.stance_params = T.stance_layout.pack(alpha_pk=alpha_pk, p_min=ps.p_min,
                                                   p_max=ps.p_max)
         rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]
-        self.swing_params = T.swing_layout.pack(alpha=pns.alpha[rows],
-                                                pitch=socket_pitch_fit(gait, model))
+        sw = cfg.swing
+        self.swing_params = T.swing_layout.pack(
+            alpha=pns.alpha[rows], pitch=socket_pitch_fit(gait, model),
+            landing_depth=sw.landing_depth, landing_start=sw.landing_start,
+            landing_max=sw.landing_max, landing_flatten=sw.landing_flatten)
         pc = cfg.passive
         self.passive_params = T.passive_layout.pack(
             alpha_pk=alpha_pk, p_min=ps.p_min, p_max=ps.p_max, lam=pc.lam, k=pc.k,
@@ -243,14 +246,16 @@ class BaseController:
 
     def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float
                       ) -> tuple[float, float, float]:
-        """Shared swing law: PD + gravity on the pns Bezier rows at tau_hat (motor N m)."""
-        tau, rate = _phase(t, self._t_switch, self._T_pns)  # type: ignore[arg-type]
+        """Shared swing law: PD + gravity on the swing target (the pns Bezier rows at tau_hat
+        and the landing offset, ``terms.swing_ref``), motor N m."""
         f = self._swing
         x = f.inputs[0]
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
-        f.inputs[1][0], f.inputs[2][0] = tau, rate
+        f.inputs[1][0] = (t - self._t_switch) / self._T_pns  # type: ignore[operator]
+        f.inputs[2][0] = 1.0 / self._T_pns
         f.call_inplace()
-        qd, vd, _, g = f.outputs
+        qd, vd, _, g, tau_o = f.outputs
+        tau = float(tau_o[0])
         kp, kd, gw = self._sw_kp, self._sw_kd, self._sw_grav
         uk = gw * g[0] + kp[0] * (qd[0] - qk) + kd[0] * (vd[0] - vk)
         ua = gw * g[1] + kp[1] * (qd[1] - qa) + kd[1] * (vd[1] - va)

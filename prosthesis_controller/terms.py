@@ -12,7 +12,7 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 
     tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
     eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
-             (B_pk continued linearly outside tau in [0, 1], see ``_bezier_rows``)
+             (B_pk continued linearly outside tau in [0, 1], see ``hp_model.bezier.evaluate_continued``)
     nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
     V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
     robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
@@ -29,9 +29,18 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 ``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
 (p_min + tau dp - c_k th_pk) / c_a, and their first and second time derivatives.
 
-``swing_ref(x, tau, rate, p)`` -- pns Bezier rows of th_pk, th_pa at tau, their time
-derivatives, and the gravity torque (joint side) of the prosthesis hanging from a socket at
-the nominal pitch theta_s(tau) (a Bezier fit of the pns collocation trajectory).
+``swing_ref(x, s_raw, rate_raw, p)`` -- the swing target at the unclipped time phase
+s_raw = (t - t_liftoff) / T_pns (rate_raw = 1 / T_pns): the pns Bezier rows of th_pk, th_pa
+at tau = clip(s_raw, 0, 1) plus the landing offset, its time derivatives, the gravity torque
+(joint side) of the prosthesis hanging from a socket at the nominal pitch theta_s(tau) (a
+Bezier fit of the pns collocation trajectory), and tau.  Landing: from ``landing_start`` on,
+the target lowers the sole by landing_depth * w, w = clip((s_raw - landing_start) /
+(1 - landing_start), 0, landing_max), and turns the foot flat (pitch 0 in the world) over the
+next landing_flatten of the phase, solved
+to first order about the Bezier posture (sole height and pitch against knee and ankle, the
+socket at theta_s(tau)): the nominal gait's swing foot skims the ground over the last part
+of pns and touches it tangentially, so a controller that cannot sense the human's phase
+must reach for the ground to land.
 
 ``passive(x, tau, rate, p)`` -- Spong's robust passivity-based law (REFERENCE.md Sec. 2) on
 the 2-DOF stance prosthesis (foot fixed, socket force ignored), JOINT torque out:
@@ -57,7 +66,7 @@ from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.prosthesis import ProsthesisSubsystem
-from hp_model.tree import PlanarTree
+from hp_model.tree import PlanarTree, frame_pose
 
 F_OUT = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
 G_OUT = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
@@ -99,19 +108,6 @@ class Layout:
                 raise ValueError(f"parameter '{name}': expected shape {shape}, got {a.size}")
             out.append(a)
         return np.concatenate(out)
-
-
-def _bezier_rows(alpha: ca.SX, s: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """B, dB/ds, d2B/ds2 of the rows of alpha (n, m+1) at s, continued linearly outside
-    [0, 1] (C^1: B(s_c) + B'(s_c)(s - s_c), s_c = clip(s, 0, 1)); a degree-5 polynomial
-    extrapolated far outside its interval is meaningless and ill-conditions the QP."""
-    d1 = bezier.derivative(alpha)
-    d2 = bezier.derivative(d1)
-    sc = ca.fmin(ca.fmax(s, 0), 1)
-    inside = (s >= 0) * (s <= 1)
-    dB = bezier.evaluate(d1, sc)
-    return (bezier.evaluate(alpha, sc) + dB * (s - sc), dB,
-            bezier.evaluate(d2, sc) * inside)
 
 
 def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
@@ -213,7 +209,7 @@ class ControllerTerms:
         dp = p_max - p_min
         tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
         tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
-        B, dB, _ = _bezier_rows(alpha, tau)
+        B, dB, _ = bezier.evaluate_continued(alpha, tau)
         y1 = ck * dth[0] + ca_ * dth[1] - v_hip
         y2 = th[0] - B
         dy2 = dth[0] - dB * tau_dot
@@ -257,7 +253,7 @@ class ControllerTerms:
         rp_min, rp_max = R.add("p_min"), R.add("p_max")
         self.stance_layout = R
         tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
-        Bk, dBk, ddBk = _bezier_rows(alpha_r, tau_s)
+        Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
         rdp = rp_max - rp_min
         qd_ = ca.vertcat(Bk, (rp_min + tau_s * rdp - ck * Bk) / ca_)
         dqd_ = rate * ca.vertcat(dBk, (rdp - ck * dBk) / ca_)
@@ -269,16 +265,35 @@ class ControllerTerms:
         S = Layout()
         alpha_s = S.add("alpha", (2, m + 1))
         pitch_c = S.add("pitch", (1, pitch_degree + 1))
+        depth, s_land, w_max = S.add("landing_depth"), S.add("landing_start"), \
+            S.add("landing_max")
+        flat_span = S.add("landing_flatten")
         self.swing_layout = S
-        Bs, dBs, ddBs = _bezier_rows(alpha_s, tau_s)
-        pitch = bezier.evaluate(pitch_c, tau_s)
+        s_raw, rate_raw = ca.SX.sym("s_raw"), ca.SX.sym("rate_raw")
+        s_c = ca.fmin(ca.fmax(s_raw, 0), 1)  # the Bezier rows hold their end values
+        pitch = bezier.evaluate(pitch_c, s_c)
+        Bs = bezier.evaluate(alpha_s, s_c)
+        # landing: lower the sole by depth * w and bring it flat, w ramping from 0 at
+        # landing_start to 1 at s = 1 and on to landing_max, solved to first order about the
+        # Bezier posture with the socket at its nominal pitch
+        qj, th_s = ca.SX.sym("qj", 2), ca.SX.sym("th_s")
+        sole_j = frame_pose(sub.tree, ca.vertcat(0, 0, th_s, qj), "p_sole")[1:3]
+        zp = ca.Function("sole", [qj, th_s], [sole_j, ca.jacobian(sole_j, qj)])
+        sole, J_sole = zp(Bs, pitch)  # (z, pitch) and their Jacobian by (knee, ankle)
+        w = ca.fmin(ca.fmax((s_raw - s_land) / (1 - s_land), 0), w_max)
+        w_flat = ca.fmin(ca.fmax((s_raw - s_land) / flat_span, 0), 1)
+        dy = ca.vertcat(-depth * w, -sole[1] * w_flat)
+        q_sw = Bs + ca.solve(J_sole, dy)
+        qd_sw = ca.jacobian(q_sw, s_raw) * rate_raw
+        qdd_sw = ca.jacobian(qd_sw, s_raw) * rate_raw
         _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
         grav_free = ca.substitute(H_free, sub.qd, ca.SX.zeros(sub.nq))
         q_hang = ca.vertcat(0, 0, pitch, th)
         g_sw = ca.substitute(grav_free, sub.q, q_hang)[3:5]
-        swref = ca.Function("swing_ref", [x, tau_s, rate, S.symbol],
-                            [Bs, rate * dBs, rate**2 * ddBs, g_sw],
-                            ["x", "tau", "rate", "p"], ["q_d", "qd_d", "qdd_d", "gravity"])
+        swref = ca.Function("swing_ref", [x, s_raw, rate_raw, S.symbol],
+                            [q_sw, qd_sw, qdd_sw, g_sw, s_c],
+                            ["x", "s_raw", "rate_raw", "p"],
+                            ["q_d", "qd_d", "qdd_d", "gravity", "tau"])
 
         # ---- passive -------------------------------------------------------------------
         Pl = Layout()
