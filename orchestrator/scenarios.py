@@ -128,8 +128,12 @@ def knee_reference(gait: Gait, domain: str, tau: float) -> float:
 
 def initial_state(model: HumanProsthesisModel, gait: Gait,
                   offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """The gait's initial ps state with the prosthesis (knee, ankle) offset; the walker is
-    re-placed so the prosthesis foot stays flat on the ground."""
+    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad): the
+    walker is re-placed so the prosthesis foot stays flat on the ground, and the base
+    velocity is recomputed from the joint velocities so that the foot is at rest
+    (J_foot qd = 0; the constrained dynamics only hold the constraint's acceleration, so a
+    foot velocity left in qd would drift the stance foot off the ground for the whole
+    step)."""
     tr = gait.trajectory["ps"]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
     if any(offset):
@@ -137,6 +141,9 @@ def initial_state(model: HumanProsthesisModel, gait: Gait,
         q[names.index("th_pk")] += offset[0]
         q[names.index("th_pa")] += offset[1]
         q = model.place_stance_foot(q, "ps")
+        J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3, :]
+        rest = np.r_[3:model.nq]
+        qd[0:3] = np.linalg.solve(J[:, 0:3], -J[:, rest] @ qd[rest])
     return q, qd
 
 

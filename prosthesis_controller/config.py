@@ -110,11 +110,14 @@ class DomainConfig(_Strict):
     """Domain detection with hysteresis from the foot-load cell and the contact switch.
 
     Stance (ps) starts when ``contact`` and load >= ``load_on``; swing (pns) starts when
-    not ``contact`` or load <= ``load_off``; no switch within ``min_dwell`` of the last.
-    ``initial``: the domain assumed after ``reset()``."""
+    not ``contact``, or when load <= ``load_off`` has held for ``off_hold`` s with contact (a
+    one-tick dip of the load, e.g. the rigid contact's response to a torque step, is not a
+    lift-off); no switch within ``min_dwell`` of the last.  ``initial``: the domain assumed
+    after ``reset()``."""
 
     load_on: Positive = 150.0
     load_off: NonNegative = 40.0
+    off_hold: NonNegative = 0.01
     min_dwell: NonNegative = 0.08
     initial: str = Field("ps", pattern="^(ps|pns)$")
 

@@ -130,12 +130,13 @@ class ControllerContext:
 
 
 def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
-    """Time-based phase clip((t - t0) / T, 0, 1) and its rate (0 once clipped)."""
+    """Time-based stance phase max((t - t0) / T, 0) and its rate.  Past 1 it keeps running:
+    the stance reference is continued linearly there (``terms.stance_ref``), as the human's
+    outputs are, so a late touchdown of the human foot meets a reference that keeps moving
+    at its final velocity instead of one that stops dead (a torque step)."""
     s = (t - t0) / T
     if s <= 0.0:
         return 0.0, 0.0
-    if s >= 1.0:
-        return 1.0, 0.0
     return s, 1.0 / T
 
 
@@ -170,6 +171,7 @@ class BaseController:
                        tuple(s.load_range))
         d = cfg.domain
         self._load_on, self._load_off, self._dwell = d.load_on, d.load_off, d.min_dwell
+        self._off_hold = d.off_hold
         self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
         num = ctx.terms.numeric
         self._clf = num["clf_qp"]
@@ -198,6 +200,7 @@ class BaseController:
         self._u1 = min(max(u[1], -la), la) if math.isfinite(u[1]) else 0.0
         self._domain = self.ctx.config.domain.initial
         self._t_switch: float | None = None
+        self._t_unloaded: float | None = None  # since when load <= load_off with contact
         self._t_prev = -_INF
         self.fallback_count = 0
 
@@ -211,11 +214,18 @@ class BaseController:
 
     def _update_domain(self, t: float, contact: bool, load: float) -> str:
         stance = contact and load >= self._load_on
-        swing = (not contact) or load <= self._load_off
+        if contact and load <= self._load_off:
+            if self._t_unloaded is None:
+                self._t_unloaded = t
+            unloaded = t - self._t_unloaded >= self._off_hold
+        else:
+            self._t_unloaded = None
+            unloaded = False
+        swing = (not contact) or unloaded
         if self._t_switch is None:  # first valid sample: decide at once, start the clock
             if stance:
                 self._domain = "ps"
-            elif swing:
+            elif (not contact) or load <= self._load_off:
                 self._domain = "pns"
             self._t_switch = t
         elif t - self._t_switch >= self._dwell:
