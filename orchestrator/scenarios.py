@@ -29,6 +29,7 @@ from hp_model import bezier
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import Y2_COORDS
 from hp_model.simulator import HybridSimulator, SimOptions, SimState
 from human_fmu.perturbation import perturbed_thetas
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
@@ -128,22 +129,35 @@ def knee_reference(gait: Gait, domain: str, tau: float) -> float:
 
 def initial_state(model: HumanProsthesisModel, gait: Gait,
                   offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad): the
-    walker is re-placed so the prosthesis foot stays flat on the ground, and the base
-    velocity is recomputed from the joint velocities so that the foot is at rest
-    (J_foot qd = 0; the constrained dynamics only hold the constraint's acceleration, so a
-    foot velocity left in qd would drift the stance foot off the ground for the whole
-    step)."""
+    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad) and the
+    human on its own outputs: the offset moves the phase tau (delta_p_hip is a function of
+    the prosthesis angles), so the human joints are put on their Bezier curves at the new
+    tau, with velocities dB/dtau * dtau/dt; the walker is re-placed with the prosthesis foot
+    flat on the ground and the base velocity solved from J_foot qd = 0 (the constrained
+    dynamics hold only the constraint's acceleration: a foot velocity left in qd would drift
+    the stance foot off the ground for the whole step).  Only the prosthesis starts off
+    its nominal trajectory, as in the paper's robustness test."""
     tr = gait.trajectory["ps"]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
-    if any(offset):
-        names = model.coord_names
-        q[names.index("th_pk")] += offset[0]
-        q[names.index("th_pa")] += offset[1]
-        q = model.place_stance_foot(q, "ps")
-        J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3, :]
-        rest = np.r_[3:model.nq]
-        qd[0:3] = np.linalg.solve(J[:, 0:3], -J[:, rest] @ qd[rest])
+    if not any(offset):
+        return q, qd
+    names = model.coord_names
+    pk, pa = names.index("th_pk"), names.index("th_pa")
+    q[pk] += offset[0]
+    q[pa] += offset[1]
+    p = gait.params["ps"]
+    ck, ca_ = model.hip_progress_coefficients("ps")
+    dp = p.p_max - p.p_min
+    tau = (ck * q[pk] + ca_ * q[pa] - p.p_min) / dp
+    tau_dot = (ck * qd[pk] + ca_ * qd[pa]) / dp
+    human = [names.index(c) for c in Y2_COORDS["ps"] if c != "th_pk"]
+    rows = [Y2_COORDS["ps"].index(names[i]) for i in human]
+    q[human] = bezier.evaluate(p.alpha[rows], tau)
+    qd[human] = bezier.evaluate(bezier.derivative(p.alpha[rows]), tau) * tau_dot
+    q = model.place_stance_foot(q, "ps")
+    J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3, :]
+    rest = np.r_[3:model.nq]
+    qd[0:3] = np.linalg.solve(J[:, 0:3], -J[:, rest] @ qd[rest])
     return q, qd
 
 

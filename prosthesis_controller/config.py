@@ -73,6 +73,20 @@ class PdConfig(_Strict):
     kd: Pair = (30.0, 20.0)
 
 
+class PhasePdConfig(_Strict):
+    """Phase-PD reference (not one of the paper's controllers): on the CLF-QP's state-based
+    phase tau(th_pk, th_pa) and outputs, the gait's nominal stance motor torque u*(tau) plus
+    the JOINT-side feedback knee -kp y2 - kd dy2 and ankle k_vhip y1 (N m per m/s of hip
+    velocity error: positive ankle torque, plantarflexion, brakes the shank's forward
+    rotation over the flat foot, so a hip too fast is slowed).  ``feedforward = False``
+    drops u*."""
+
+    kp: Positive = 1500.0
+    kd: NonNegative = 30.0
+    k_vhip: float = 250.0
+    feedforward: bool = True
+
+
 class PassiveConfig(_Strict):
     """Spong's robust passivity-based law (REFERENCE.md Sec. 2), JOINT-side gains.
 
@@ -150,6 +164,7 @@ class ControllerConfig(_Strict):
 
     clf: ClfConfig = ClfConfig()
     pd: PdConfig = PdConfig()
+    phase_pd: PhasePdConfig = PhasePdConfig()
     passive: PassiveConfig = PassiveConfig()
     swing: SwingConfig = SwingConfig()
     domain: DomainConfig = DomainConfig()

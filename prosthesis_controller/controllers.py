@@ -42,6 +42,7 @@ from prosthesis_controller.polish import polish
 from prosthesis_controller.terms import ControllerTerms
 
 PITCH_DEGREE = 5
+FEEDFORWARD_DEGREE = 9  # phase-PD nominal torque: fit RMS ~0.01 N m motor on the demo gait
 _INF = math.inf
 _SOLVED = piqp.PIQP_SOLVED
 _DUAL_TOL = 1e-7  # a multiplier above this (normalised problem) marks an active constraint
@@ -74,6 +75,27 @@ def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITC
     return coef[None, :]
 
 
+def stance_torque_fit(gait: Gait, model: HumanProsthesisModel,
+                      degree: int = FEEDFORWARD_DEGREE) -> np.ndarray:
+    """Bezier coefficients (2, degree+1) of the nominal prosthesis MOTOR torques (knee, ankle)
+    over the ps phase tau, least-squares fit to the gait's ps collocation trajectory; zeros
+    (no feedforward) when the gait carries no trajectory."""
+    tr = gait.trajectory.get("ps") if gait.trajectory else None
+    if not tr or "q" not in tr or "u" not in tr:
+        return np.zeros((2, degree + 1))
+    q, u = np.asarray(tr["q"], dtype=float), np.asarray(tr["u"], dtype=float)
+    p = gait.params["ps"]
+    ck, ca_ = model.hip_progress_coefficients("ps")
+    names = model.coord_names
+    tau = (ck * q[names.index("th_pk")] + ca_ * q[names.index("th_pa")] - p.p_min) \
+        / (p.p_max - p.p_min)
+    B = bezier.basis(degree, np.clip(tau, 0.0, 1.0))
+    if len(tau) <= degree:
+        return np.repeat(u[4:6].mean(axis=1, keepdims=True), degree + 1, axis=1)
+    coef, *_ = np.linalg.lstsq(B, u[4:6].T, rcond=None)
+    return coef.T
+
+
 class ControllerContext:
     """Everything the controllers share, built once: subsystem, compiled terms, the RES-CLF,
     packed parameter vectors, limits and nominal durations.
@@ -93,7 +115,7 @@ class ControllerContext:
         sub = subsystem or ProsthesisSubsystem(model)
         self.subsystem = sub
         self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
-                                     PITCH_DEGREE, backend)
+                                     PITCH_DEGREE, backend, FEEDFORWARD_DEGREE)
         c = cfg.clf
         self.clf: ResClf = res_clf(np.array(c.Q), np.array(c.R), c.eps)
         if c.gamma > self.clf.c3 + 1e-12:
@@ -123,6 +145,12 @@ class ControllerContext:
             alpha=pns.alpha[rows], pitch=socket_pitch_fit(gait, model),
             landing_depth=sw.landing_depth, landing_start=sw.landing_start,
             landing_max=sw.landing_max, landing_flatten=sw.landing_flatten)
+        pp = cfg.phase_pd
+        self.feedforward = stance_torque_fit(gait, model) if pp.feedforward else \
+            np.zeros((2, FEEDFORWARD_DEGREE + 1))
+        self.phase_pd_params = T.phase_pd_layout.pack(
+            alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
+            feedforward=self.feedforward, kp=pp.kp, kd=pp.kd, k_vhip=pp.k_vhip)
         pc = cfg.passive
         self.passive_params = T.passive_layout.pack(
             alpha_pk=alpha_pk, p_min=ps.p_min, p_max=ps.p_max, lam=pc.lam, k=pc.k,
@@ -337,6 +365,30 @@ class PDController(BaseController):
                 MODE_STANCE)
 
 
+class PhasePdController(BaseController):
+    """Phase-PD reference (``terms.phase_pd``): nominal torque + knee PD + hip-velocity
+    feedback through the ankle, on the state-based phase.  Not one of the paper's
+    controllers: the closed-loop experiments use it to show what a controller with the
+    prosthesis's own measurements achieves when its feedback has the full loop's sign."""
+
+    name = "phase-pd"
+
+    def __init__(self, ctx: ControllerContext) -> None:
+        super().__init__(ctx)
+        self._ppd = ctx.terms.numeric["phase_pd"]
+        self._ppd.inputs[1][:] = ctx.phase_pd_params
+
+    def _stance(self, t, qk, qa, vk, va):
+        self._clf_terms(qk, qa, vk, va)
+        f = self._ppd
+        x = f.inputs[0]
+        x[0], x[1], x[2], x[3] = qk, qa, vk, va
+        f.call_inplace()
+        ff, fb = f.outputs[0], f.outputs[1]
+        return (ff[0] + fb[0] / self._gear[0], ff[1] + fb[1] / self._gear[1],
+                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+
+
 class PassiveController(BaseController):
     """Spong's robust passivity-based law (stand-in for Azimi et al. 2017)."""
 
@@ -496,7 +548,7 @@ class ClfQpController(BaseController):
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 
 
-CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive")
+CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive", "phase-pd")
 
 
 def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
@@ -504,9 +556,10 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
                     context: ControllerContext | None = None,
                     subsystem: ProsthesisSubsystem | None = None,
                     strict_tube: bool = True) -> BaseController:
-    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd" or
-    "passive".  Pass ``context`` to share the compiled terms between controllers (then
-    gait, tube, model and config are taken from it)."""
+    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd",
+    "passive" or "phase-pd" (reference, not in the paper).  Pass ``context`` to share the
+    compiled terms between controllers (then gait, tube, model and config are taken from
+    it)."""
     if name not in CONTROLLERS:
         raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
     ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
@@ -517,6 +570,8 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
         return ClfQpController(ctx, relaxed=False)
     if name == "pd":
         return PDController(ctx)
+    if name == "phase-pd":
+        return PhasePdController(ctx)
     return PassiveController(ctx)
 
 
@@ -528,6 +583,8 @@ __all__ = [
     "Fault",
     "PDController",
     "PassiveController",
+    "PhasePdController",
     "make_controller",
     "socket_pitch_fit",
+    "stance_torque_fit",
 ]

@@ -12,7 +12,7 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 
     tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
     eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
-             (B_pk continued linearly outside tau in [0, 1], see ``hp_model.bezier.evaluate_continued``)
+             (B_pk continued linearly outside tau in [0, 1]: bezier.evaluate_continued)
     nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
     V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
     robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
@@ -41,6 +41,11 @@ to first order about the Bezier posture (sole height and pitch against knee and 
 socket at theta_s(tau)): the nominal gait's swing foot skims the ground over the last part
 of pns and touches it tangentially, so a controller that cannot sense the human's phase
 must reach for the ground to land.
+
+``phase_pd(x, p)`` -- the phase-PD reference law on the same state-based phase and outputs
+as the CLF-QP: the gait's nominal stance motor torque u*(tau) (a Bezier fit of the ps
+collocation trajectory, ``feedforward``) and the joint-side feedback
+(-kp y2 - kd dy2, k_vhip y1) (knee, ankle).
 
 ``passive(x, tau, rate, p)`` -- Spong's robust passivity-based law (REFERENCE.md Sec. 2) on
 the 2-DOF stance prosthesis (foot fixed, socket force ignored), JOINT torque out:
@@ -108,6 +113,20 @@ class Layout:
                 raise ValueError(f"parameter '{name}': expected shape {shape}, got {a.size}")
             out.append(a)
         return np.concatenate(out)
+
+
+def stance_outputs(x: ca.SX, alpha: ca.SX, v_hip: ca.SX, p_min: ca.SX, p_max: ca.SX,
+                   ck: float, ca_: float) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """tau, tau_dot and the paper's prosthesis outputs y1 = c_k dth_pk + c_a dth_pa - v_hip*,
+    y2 = th_pk - B_pk(tau), dy2 at x = (th_pk, th_pa, dth_pk, dth_pa) (B_pk continued
+    linearly outside [0, 1])."""
+    th, dth = x[0:2], x[2:4]
+    dp = p_max - p_min
+    tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
+    tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
+    B, dB, _ = bezier.evaluate_continued(alpha, tau)
+    y1 = ck * dth[0] + ca_ * dth[1] - v_hip
+    return tau, tau_dot, y1, th[0] - B, dth[0] - dB * tau_dot
 
 
 def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
@@ -180,11 +199,13 @@ class ControllerTerms:
     """The compiled controller functions of one subsystem and Bezier degrees.
 
     ``gait_degree``: degree of the gait's alpha; ``nominal_degree`` / ``bound_degree``: of
-    the tube's nominal and bound curves; ``pitch_degree``: of the swing socket-pitch fit.
+    the tube's nominal and bound curves; ``pitch_degree``: of the swing socket-pitch fit;
+    ``feedforward_degree``: of the phase-PD's nominal stance torque.
     """
 
     def __init__(self, sub: ProsthesisSubsystem, gait_degree: int, nominal_degree: int,
-                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto") -> None:
+                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto",
+                 feedforward_degree: int = 9) -> None:
         self.sub = sub
         ck, ca_ = sub.full.hip_progress_coefficients("ps")
         self.c_k, self.c_a = ck, ca_
@@ -206,13 +227,7 @@ class ControllerTerms:
         tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
         self.clf_layout = L
 
-        dp = p_max - p_min
-        tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
-        tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
-        B, dB, _ = bezier.evaluate_continued(alpha, tau)
-        y1 = ck * dth[0] + ca_ * dth[1] - v_hip
-        y2 = th[0] - B
-        dy2 = dth[0] - dB * tau_dot
+        tau, _, y1, y2, dy2 = stance_outputs(x, alpha, v_hip, p_min, p_max, ck, ca_)
         eta = ca.vertcat(y1, y2, dy2)
         Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
         Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
@@ -295,6 +310,21 @@ class ControllerTerms:
                             ["x", "s_raw", "rate_raw", "p"],
                             ["q_d", "qd_d", "qdd_d", "gravity", "tau"])
 
+        # ---- phase_pd ------------------------------------------------------------------
+        Q = Layout()
+        alpha_q = Q.add("alpha_pk", (1, m + 1))
+        v_hip_q, p_min_q, p_max_q = Q.add("v_hip"), Q.add("p_min"), Q.add("p_max")
+        ff = Q.add("feedforward", (2, feedforward_degree + 1))
+        kp_q, kd_q, kv_q = Q.add("kp"), Q.add("kd"), Q.add("k_vhip")
+        self.phase_pd_layout = Q
+        tau_q, _, y1_q, y2_q, dy2_q = stance_outputs(x, alpha_q, v_hip_q, p_min_q, p_max_q,
+                                                     ck, ca_)
+        u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(tau_q, 0), 1))
+        fb = ca.vertcat(-kp_q * y2_q - kd_q * dy2_q, kv_q * y1_q)
+        phase_pd = ca.Function("phase_pd", [x, Q.symbol],
+                               [u_ff, fb, tau_q, ca.vertcat(y1_q, y2_q, dy2_q)],
+                               ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
+
         # ---- passive -------------------------------------------------------------------
         Pl = Layout()
         alpha_p = Pl.add("alpha_pk", (1, m + 1))
@@ -326,8 +356,9 @@ class ControllerTerms:
         reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
         red = ca.Function("reduced", [x], [f_p, g_m, g_s], ["x"], ["f_p", "g_m", "g_s"])
 
-        fns = [clf, sref, swref, passive, lag, reg, red]
-        name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}")
+        fns = [clf, sref, swref, phase_pd, passive, lag, reg, red]
+        name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}"
+                f"_f{feedforward_degree}")
         self.functions = {f.name(): f for f in fns}
         self.numeric = FunctionSet(fns, name, backend)
         self.theta0 = standard_parameters(sub.tree, links)
