@@ -97,6 +97,9 @@ class ScenarioResult:
     fail_domain: str | None
     post_impact: list[np.ndarray] = field(default_factory=list)  # joint states after ps impacts
     step_bounds: list[tuple[int, int]] = field(default_factory=list)  # ps segments [i0, i1)
+    socket_force: np.ndarray | None = None  # (n, 3) F_s (ground truth, never fed back)
+    fs_in_tube: float | None = None  # fraction of ps samples in [tau_lo, tau_hi] with F_s in tube
+    touchdown_pitch: list[float] = field(default_factory=list)  # rad, landing-foot correction
 
     @property
     def success(self) -> bool:
@@ -227,12 +230,28 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         m = _REASON.search(r.reason)
         if m:
             ft, fd, ftau = float(m.group(1)), m.group(2), float(m.group(3))
+    ps = r.domain == 0
     return ScenarioResult(
         scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
         q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
         mode=modes[:n], V=np.array(Vs[:n]), rho=np.array(rhos[:n]),
         fallback_count=fallbacks[0], steps=r.steps, failed=r.failed, reason=r.reason,
-        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds)
+        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
+        socket_force=r.lam[:, 3:6].copy(),
+        fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
+        touchdown_pitch=[float(im.foot_pitch) for im in r.impacts])
+
+
+def socket_force_in_tube(tube: ForceTube, tau: np.ndarray, force: np.ndarray
+                         ) -> float | None:
+    """Fraction of the samples with tau in [tau_lo, tau_hi] whose socket force lies in the
+    tube: the premise under which the robust CLF condition holds; None without samples."""
+    tau = np.asarray(tau, float)
+    m = (tau >= tube.tau_lo) & (tau <= tube.tau_hi)
+    if not m.any():
+        return None
+    delta = np.asarray(force, float)[m] - tube.nominal_force(tau[m]).reshape(-1, 3)
+    return float(np.mean(tube.contains(tau[m], delta)))
 
 
 def human_gait_walks(model: HumanProsthesisModel, gait: Gait, pert: Perturbation,
@@ -306,6 +325,9 @@ def summary(r: ScenarioResult) -> dict[str, Any]:
             "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
             "duration_s": float(r.t[-1]) if r.t.size else 0.0,
             "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),
+            "socket_force_in_tube": r.fs_in_tube,
+            "max_touchdown_pitch_rad": (max(abs(p) for p in r.touchdown_pitch)
+                                        if r.touchdown_pitch else None),
             "fallback_count": r.fallback_count,
             "modes": {m: r.mode.count(m) for m in sorted(set(r.mode))}}
 

@@ -105,18 +105,18 @@ class SwingConfig(_Strict):
     """Shared swing (pns) controller: PD + gravity feedforward on the pns Bezier rows of
     th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains.
 
-    Landing (``terms.swing_ref``): from tau_hat = ``landing_start`` the target lowers the
-    sole by ``landing_depth`` (m) times w, w rising linearly to 1 at tau_hat = 1 and on to
-    ``landing_max`` (the foot keeps reaching for the ground when the touchdown is late), and
-    turns the foot flat (world pitch 0 at the nominal socket pitch) over the next
-    ``landing_flatten`` of tau_hat.  ``landing_depth = 0`` only flattens the foot."""
+    Landing (``terms.swing_ref``): from tau_hat = ``landing_start`` the knee turns the shank
+    toward the vertical under the knee (lowering the sole at a fixed foot pitch) by the
+    fraction landing_reach (tau_hat - landing_start) / (1 - landing_start) of its angle,
+    capped at 1 (it keeps reaching when the touchdown is late), and the ankle turns the foot
+    flat (world pitch 0 at the nominal socket pitch) over the next ``landing_flatten`` of
+    tau_hat.  ``landing_reach = 0`` only flattens the foot."""
 
     kp: Pair = (2000.0, 135.0)
     kd: Pair = (24.0, 1.6)
     gravity: bool = True
-    landing_depth: NonNegative = 0.01
+    landing_reach: float = Field(0.1, ge=0, le=1)
     landing_start: float = Field(0.8, gt=0, lt=1)
-    landing_max: Positive = 2.0
     landing_flatten: Positive = 0.05
 
 

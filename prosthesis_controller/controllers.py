@@ -143,8 +143,8 @@ class ControllerContext:
         sw = cfg.swing
         self.swing_params = T.swing_layout.pack(
             alpha=pns.alpha[rows], pitch=socket_pitch_fit(gait, model),
-            landing_depth=sw.landing_depth, landing_start=sw.landing_start,
-            landing_max=sw.landing_max, landing_flatten=sw.landing_flatten)
+            landing_reach=sw.landing_reach, landing_start=sw.landing_start,
+            landing_flatten=sw.landing_flatten)
         pp = cfg.phase_pd
         self.feedforward = stance_torque_fit(gait, model) if pp.feedforward else \
             np.zeros((2, FEEDFORWARD_DEGREE + 1))

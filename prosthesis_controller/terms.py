@@ -33,14 +33,14 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 s_raw = (t - t_liftoff) / T_pns (rate_raw = 1 / T_pns): the pns Bezier rows of th_pk, th_pa
 at tau = clip(s_raw, 0, 1) plus the landing offset, its time derivatives, the gravity torque
 (joint side) of the prosthesis hanging from a socket at the nominal pitch theta_s(tau) (a
-Bezier fit of the pns collocation trajectory), and tau.  Landing: from ``landing_start`` on,
-the target lowers the sole by landing_depth * w, w = clip((s_raw - landing_start) /
-(1 - landing_start), 0, landing_max), and turns the foot flat (pitch 0 in the world) over the
-next landing_flatten of the phase, solved
-to first order about the Bezier posture (sole height and pitch against knee and ankle, the
-socket at theta_s(tau)): the nominal gait's swing foot skims the ground over the last part
-of pns and touches it tangentially, so a controller that cannot sense the human's phase
-must reach for the ground to land.
+Bezier fit of the pns collocation trajectory), and tau.  Landing: from ``landing_start``
+on, about the Bezier posture with the socket at theta_s(tau), the knee turns the shank
+toward the vertical under the knee by the fraction w = clip(landing_reach (s_raw -
+landing_start) / (1 - landing_start), 0, 1) of its angle (the lowest the sole gets at a fixed
+foot pitch; the reach keeps growing past tau = 1 when the touchdown is late) and the ankle
+turns the foot flat in the world over the next landing_flatten of the phase.  The nominal
+gait's swing foot skims the ground over the last part of pns and touches it tangentially,
+so a controller that cannot sense the human's phase must reach for the ground to land.
 
 ``phase_pd(x, p)`` -- the phase-PD reference law on the same state-based phase and outputs
 as the CLF-QP: the gait's nominal stance motor torque u*(tau) (a Bezier fit of the ps
@@ -280,25 +280,30 @@ class ControllerTerms:
         S = Layout()
         alpha_s = S.add("alpha", (2, m + 1))
         pitch_c = S.add("pitch", (1, pitch_degree + 1))
-        depth, s_land, w_max = S.add("landing_depth"), S.add("landing_start"), \
-            S.add("landing_max")
+        reach, s_land = S.add("landing_reach"), S.add("landing_start")
         flat_span = S.add("landing_flatten")
         self.swing_layout = S
         s_raw, rate_raw = ca.SX.sym("s_raw"), ca.SX.sym("rate_raw")
         s_c = ca.fmin(ca.fmax(s_raw, 0), 1)  # the Bezier rows hold their end values
         pitch = bezier.evaluate(pitch_c, s_c)
         Bs = bezier.evaluate(alpha_s, s_c)
-        # landing: lower the sole by depth * w and bring it flat, w ramping from 0 at
-        # landing_start to 1 at s = 1 and on to landing_max, solved to first order about the
-        # Bezier posture with the socket at its nominal pitch
+        # landing, about the Bezier posture with the socket at its nominal pitch: the knee
+        # turns the shank toward the vertical under the knee (the lowest the sole gets at a
+        # fixed foot pitch) by the fraction w of its angle psi, and the ankle keeps the foot
+        # flat in the world; both are exact (psi and the foot pitch are linear in the joint
+        # angles, slopes +-1)
         qj, th_s = ca.SX.sym("qj", 2), ca.SX.sym("th_s")
-        sole_j = frame_pose(sub.tree, ca.vertcat(0, 0, th_s, qj), "p_sole")[1:3]
-        zp = ca.Function("sole", [qj, th_s], [sole_j, ca.jacobian(sole_j, qj)])
-        sole, J_sole = zp(Bs, pitch)  # (z, pitch) and their Jacobian by (knee, ankle)
-        w = ca.fmin(ca.fmax((s_raw - s_land) / (1 - s_land), 0), w_max)
+        q5 = ca.vertcat(0, 0, th_s, qj)
+        knee, ankle = (frame_pose(sub.tree, q5, f) for f in ("p_knee", "p_ankle"))
+        psi = ca.atan2(ankle[0] - knee[0], knee[1] - ankle[1])  # shank from vertical
+        foot = frame_pose(sub.tree, q5, "p_sole")[2]
+        geo = ca.Function("landing_geometry", [qj, th_s],
+                          [psi, ca.jacobian(psi, qj)[0], foot])
+        psi0, dpsi_dk, pitch0 = geo(Bs, pitch)
+        w = ca.fmin(ca.fmax(reach * (s_raw - s_land) / (1 - s_land), 0), 1)
         w_flat = ca.fmin(ca.fmax((s_raw - s_land) / flat_span, 0), 1)
-        dy = ca.vertcat(-depth * w, -sole[1] * w_flat)
-        q_sw = Bs + ca.solve(J_sole, dy)
+        dk = -w * psi0 / dpsi_dk
+        q_sw = Bs + ca.vertcat(dk, -dk - pitch0 * w_flat)
         qd_sw = ca.jacobian(q_sw, s_raw) * rate_raw
         qdd_sw = ca.jacobian(qd_sw, s_raw) * rate_raw
         _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
