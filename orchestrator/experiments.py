@@ -261,15 +261,14 @@ def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
             REFERENCE_CONTROLLER: "tab:gray"}
     for i, (n, rr) in enumerate(runs.items()):
         a = ax[i, 0]
-        first = True
+        longest = max(rr.values(), key=lambda r: r.t.size)  # desired B_pk(tau) along it
+        m = longest.domain == 0
+        a.plot(longest.t, np.where(m, longest.knee_ref, np.nan), color="lightblue", lw=2.5,
+               zorder=0, label=f"desired (along {longest.scenario.controller})")
         for c, r in rr.items():
             m = r.domain == 0
             a.plot(r.t, np.where(m, r.q_p[:, 0], np.nan), color=cols[c], lw=0.8,
                    label=f"{c} ({'ok' if r.success else 'fell'})")
-            if first:
-                a.plot(r.t, np.where(m, r.knee_ref, np.nan), color="lightblue", lw=2.5,
-                       zorder=0, label="desired")
-                first = False
             if r.failed and r.fail_t is not None:
                 a.axvline(r.fail_t, color=cols[c], ls=":", lw=1)
         a.set_title(n, fontsize=9)
@@ -308,12 +307,17 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     say("diagnosis: input authority, reduced model vs full loop")
     auth = input_authority(model, gait, ctx)
     w = tube.box(0.5)[1]
+    tt = np.linspace(tube.tau_lo, tube.tau_hi, 201)
+    lo, hi = tube.delta_bounds(tt)
     metrics = {
         "schema_version": SCHEMA_VERSION, "kind": "hpcosim-experiments",
         "steps": steps, "gait_hash": gait.hash(),
         "tube": {"gait_hash": tube.gait_hash, "n_steps": tube.n_steps,
                  "tau_lo": tube.tau_lo, "tau_hi": tube.tau_hi,
                  "half_width_mid_stance": {"F_x_N": w[0], "F_z_N": w[1], "M_y_Nm": w[2]},
+                 # share of [tau_lo, tau_hi] where the gait's own F* lies in the tube
+                 "nominal_inside_fraction": float(np.mean(np.all((lo <= 0) & (hi >= 0),
+                                                                 axis=1))),
                  "source": dict(tube.source)},
         "nominal": m1, "reference": m1r, "exact_vs_relaxed": m2, "robustness": m3,
         "diagnosis": {"input_authority": auth},

@@ -66,7 +66,9 @@ def render(metrics: Mapping[str, Any], stages: Sequence[Mapping[str, Any]] = (),
     w = t["half_width_mid_stance"]
     lines += ["", f"Tube: {t['n_steps']} profiles, tau in [{t['tau_lo']:.2f}, "
               f"{t['tau_hi']:.2f}], half-width at tau = 0.5: F_x {w['F_x_N']:.1f} N, "
-              f"F_z {w['F_z_N']:.1f} N, M_y {w['M_y_Nm']:.2f} N m.", ""]
+              f"F_z {w['F_z_N']:.1f} N, M_y {w['M_y_Nm']:.2f} N m; the gait's own nominal "
+              f"F* lies in it on {_pct(t.get('nominal_inside_fraction'))} of "
+              "[tau_lo, tau_hi].", ""]
     rb = m["robustness"]
     ref = rb.get("reference_controller")
     lines += ["## Robustness (Fig. 8)", "",
