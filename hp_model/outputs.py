@@ -8,12 +8,7 @@ th_la):
     y1(q, qd)      = d/dt delta_p_hip - v_hip            (relative degree 1)
     y2(q)          = y2_a(q) - B(tau(q); alpha)          (relative degree 2, 5 outputs)
 
-y2_a are the joint angles other than the stance ankle, in the order of ``Y2_COORDS``.  B is
-continued linearly outside tau in [0, 1] (``bezier.evaluate_continued``): a walker whose
-swing foot has not touched down by tau = 1 keeps its last joint velocities instead of
-following the polynomial's extrapolation, which bends away within a few percent of the
-phase (the closed-loop functions and hence the simulator and the FMU use these outputs; the
-gait optimization stays inside [0, 1]).  The
+y2_a are the joint angles other than the stance ankle, in the order of ``Y2_COORDS``.  The
 outputs are symbolic in the gait parameters theta = (alpha row by row, v_hip, p_min, p_max),
 so one object serves the regression, the optimizer, the simulator and the controllers.
 
@@ -127,7 +122,9 @@ class VirtualConstraints:
         cD, SD = ca.DM(c).T, ca.DM(S)
         tau = (cD @ q - p_min) / dp
         tau_d = (cD @ qd) / dp
-        Bd, dB, ddB = bezier.evaluate_continued(alpha, tau)
+        Bd = bezier.evaluate(alpha, tau)
+        dB = bezier.evaluate(bezier.derivative(alpha), tau)
+        ddB = bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau)
         y1 = cD @ qd - v_hip
         y2 = SD @ q - Bd
         dy2 = SD @ qd - dB * tau_d

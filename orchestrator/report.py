@@ -39,10 +39,9 @@ DEVIATIONS = (
     "lands tangentially; the paper's pns feedback linearization sees the human's phase, a "
     "prosthesis-only swing controller does not, and without reaching for the ground it "
     "misses the touchdown.",
-    "The Bezier outputs are continued linearly (C^1) outside tau in [0, 1] for the human's "
-    "feedback linearization (a walker whose swing foot has not landed by tau = 1 keeps its "
-    "last joint velocities instead of following the polynomial's extrapolation), and the "
-    "time-based stance references of PD and robust-passive keep running past 1.",
+    "The time-based stance references of PD and robust-passive keep running past their "
+    "nominal duration (continued linearly) instead of stopping when the human touches down "
+    "late.",
     "The prosthesis initial offset of the robustness cases moves the knee output y2 by "
     "0.02 rad at the nominal start phase (ankle moved so tau is unchanged), the human on its "
     "own outputs; the paper does not give its offset.",

@@ -159,9 +159,9 @@ class ControllerContext:
 
 def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
     """Time-based stance phase max((t - t0) / T, 0) and its rate.  Past 1 it keeps running:
-    the stance reference is continued linearly there (``terms.stance_ref``), as the human's
-    outputs are, so a late touchdown of the human foot meets a reference that keeps moving
-    at its final velocity instead of one that stops dead (a torque step)."""
+    the stance reference is continued linearly there (``terms.stance_ref``), so a late
+    touchdown of the human foot meets a reference that keeps moving at its final velocity
+    instead of one that stops dead (a torque step)."""
     s = (t - t0) / T
     if s <= 0.0:
         return 0.0, 0.0
