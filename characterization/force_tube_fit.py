@@ -228,6 +228,19 @@ def deviation_profiles(steps: Sequence[tuple[np.ndarray, np.ndarray]], nominal: 
     return out
 
 
+def peak_socket_force(steps: Sequence[tuple[np.ndarray, np.ndarray]], tau_lo: float,
+                      tau_hi: float) -> list[float]:
+    """Per component, the largest |F_s| (N, N, N m) of the steps' (tau, F_s) samples in
+    [tau_lo, tau_hi]: the scale the tube's estimation allowance is a fraction of."""
+    peak = np.zeros(3)
+    for tau, F in steps:
+        tau, F = np.asarray(tau, float).ravel(), np.asarray(F, float)
+        keep = (tau >= tau_lo) & (tau <= tau_hi)
+        if keep.any():
+            peak = np.maximum(peak, np.abs(F[keep]).max(axis=0))
+    return [float(v) for v in peak]
+
+
 # ------------------------------------------------------------------------------ the LPs
 
 @dataclass(frozen=True)
@@ -589,9 +602,13 @@ def credibility(profiles: Sequence[Profile], lower: np.ndarray, upper: np.ndarra
 
 def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: float,
              tau_hi: float, degree: int = 3, gait_hash: str = "",
-             source: Mapping[str, Any] | None = None, beta: float = 0.05) -> ForceTube:
+             source: Mapping[str, Any] | None = None, beta: float = 0.05,
+             allowance: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0)) -> ForceTube:
     """Fit, certify and assess the force tube of N deviation profiles (module docstring).
 
+    ``allowance`` (3,) >= 0 (N, N, N m) widens the certified bounds for the estimation error
+    of the profiles (:class:`hp_model.force_tube.ForceTube`); the certificate and the
+    credibility are those of the certified bounds (widening only adds margin).
     ``profiles``: N pairs (tau (n_i,), dF (n_i, 3)) inside [tau_lo, tau_hi];
     ``nominal_coeffs``: F* as (3, k+1) Bezier coefficients over s (:func:`nominal_coefficients`).
     Raises :class:`TubeFitError` on bad input, or when a sample is outside or a bound has no
@@ -607,6 +624,9 @@ def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: fl
         raise TubeFitError("nominal coefficients: non-finite values")
     if not 0 < beta < 1:
         raise TubeFitError(f"beta must be in (0, 1), got {beta}")
+    allow = np.asarray(allowance, float).reshape(-1)
+    if allow.shape != (3,) or not np.all(np.isfinite(allow)) or np.any(allow < 0):
+        raise TubeFitError(f"allowance must be 3 finite values >= 0, got {allow}")
     data = _pool(profiles, tau_lo, tau_hi, degree)
     lower, upper = _fit(data, np.ones(data.s.size, bool))
     t_lp = time.perf_counter() - t0
@@ -635,7 +655,7 @@ def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: fl
                 "fit_seconds": time.perf_counter() - t0, "lp_seconds": t_lp})
     return ForceTube(gait_hash=gait_hash, tau_lo=float(tau_lo), tau_hi=float(tau_hi),
                      nominal=nominal, lower=lower, upper=upper, n_steps=data.n_steps,
-                     credibility=cred, source=src)
+                     credibility=cred, source=src, allowance=allow)
 
 
 # ---------------------------------------------------------------------- figure, report
@@ -653,14 +673,19 @@ def tube_figure_bytes(tube: ForceTube, profiles: Sequence[Profile], fmt: str = "
     fig.subplots_adjust(left=0.13, right=0.97, top=0.94, bottom=0.07, hspace=0.12)
     axes = fig.subplots(3, 1, sharex=True)
     tau = np.linspace(tube.tau_lo, tube.tau_hi, 301)
-    lo, hi = tube.delta_bounds(tau)
+    lo, hi = tube.delta_bounds(tau, widened=False)
+    wlo, whi = tube.delta_bounds(tau)
     colors = [matplotlib.colormaps["tab20"](i % 20) for i in range(len(profiles))]
     labels = (r"$\Delta F_{s,x}$ [N]", r"$\Delta F_{s,z}$ [N]", r"$\Delta M_{s,y}$ [N m]")
     for c, ax in enumerate(axes):
         for (t, dF), col in zip(profiles, colors, strict=True):
             ax.plot(t, np.asarray(dF)[:, c], lw=0.8, color=col)
         ax.plot(tau, lo[:, c], lw=2.5, color="tab:green")
-        ax.plot(tau, hi[:, c], lw=2.5, color="tab:green", label="force tube")
+        ax.plot(tau, hi[:, c], lw=2.5, color="tab:green", label="force tube (certified)")
+        if tube.allowance[c] > 0:
+            ax.plot(tau, wlo[:, c], lw=1.2, ls="--", color="tab:green")
+            ax.plot(tau, whi[:, c], lw=1.2, ls="--", color="tab:green",
+                    label="+ estimation allowance")
         ax.set_ylabel(labels[c])
         ax.grid(alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)

@@ -8,9 +8,16 @@ prosthesis stance, for each component F_s = (F_x [N], F_z [N], M_y [N m]):
 with F*, dF_lo and dF_hi Bezier curves in s (coefficients stored).  Outside [tau_lo, tau_hi]
 (the double-support ends of the recorded steps) the bounds of the nearest end are used.
 
+``lower``/``upper`` are the certified LP bounds of the estimated profiles.  ``allowance``
+(3,) >= 0 widens both by a constant per component for the estimation error of the playback
+(the estimated profiles are not the true ones); the tube everyone uses (:meth:`box`,
+:meth:`delta_bounds`, :meth:`contains`, the controllers) is the widened one:
+dF_lo - allowance <= dF <= dF_hi + allowance.  (A constant added to every Bezier coefficient
+shifts the curve by that constant.)
+
 File layout (``kind = "hpcosim-tube"``, ``schema_version = 1``): gait_hash, tau_lo, tau_hi,
-degree, nominal (3, k+1), lower (3, m+1), upper (3, m+1), n_steps, credibility {...},
-source {...}.
+degree, nominal (3, k+1), lower (3, m+1), upper (3, m+1), allowance (3,) (optional, default
+0), n_steps, credibility {...}, source {...}.
 """
 
 from __future__ import annotations
@@ -43,10 +50,16 @@ class ForceTube:
     n_steps: int = 0
     credibility: Mapping[str, Any] = field(default_factory=dict)
     source: Mapping[str, Any] = field(default_factory=dict)
+    allowance: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (N, N, N m)
 
     def __post_init__(self) -> None:
         if not self.tau_hi > self.tau_lo:
             raise ValueError(f"tau_hi ({self.tau_hi}) must exceed tau_lo ({self.tau_lo})")
+        a = np.array(self.allowance, dtype=float).reshape(-1)
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise ValueError(f"allowance must be 3 finite values >= 0, got {a}")
+        a.setflags(write=False)
+        object.__setattr__(self, "allowance", a)
         for name in ("nominal", "lower", "upper"):
             a = np.array(getattr(self, name), dtype=float)
             if a.ndim != 2 or a.shape[0] != 3:
@@ -65,10 +78,24 @@ class ForceTube:
         return np.clip((np.asarray(tau, dtype=float) - self.tau_lo)
                        / (self.tau_hi - self.tau_lo), 0.0, 1.0)
 
-    def delta_bounds(self, tau: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(dF_lo, dF_hi) at tau: (3,) each for scalar tau, (n, 3) for arrays."""
+    @property
+    def widened_lower(self) -> np.ndarray:
+        """(3, m+1) Bezier coefficients of dF_lo - allowance (the bound in use)."""
+        return self.lower - self.allowance[:, None]
+
+    @property
+    def widened_upper(self) -> np.ndarray:
+        """(3, m+1) Bezier coefficients of dF_hi + allowance (the bound in use)."""
+        return self.upper + self.allowance[:, None]
+
+    def delta_bounds(self, tau: float | np.ndarray, widened: bool = True
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """(dF_lo, dF_hi) at tau: (3,) each for scalar tau, (n, 3) for arrays; with
+        ``widened=False`` the certified LP bounds without the allowance."""
         s = self.phase(tau)
-        return bezier.evaluate(self.lower, s), bezier.evaluate(self.upper, s)
+        lo, hi = (self.widened_lower, self.widened_upper) if widened else (self.lower,
+                                                                          self.upper)
+        return bezier.evaluate(lo, s), bezier.evaluate(hi, s)
 
     def nominal_force(self, tau: float | np.ndarray) -> np.ndarray:
         return bezier.evaluate(self.nominal, self.phase(tau))
@@ -78,6 +105,7 @@ class ForceTube:
         F_s in [c - r, c + r]."""
         s = float(self.phase(tau))
         lo, hi = bezier.evaluate(self.lower, s), bezier.evaluate(self.upper, s)
+        lo, hi = lo - self.allowance, hi + self.allowance
         f = bezier.evaluate(self.nominal, s)
         return f + 0.5 * (lo + hi), 0.5 * np.maximum(hi - lo, 0.0)
 
@@ -92,7 +120,8 @@ def to_document(t: ForceTube) -> dict[str, Any]:
         "kind": KIND, "schema_version": SCHEMA_VERSION, "gait_hash": t.gait_hash,
         "components": list(COMPONENTS), "tau_lo": t.tau_lo, "tau_hi": t.tau_hi,
         "degree": t.degree, "nominal": t.nominal, "lower": t.lower, "upper": t.upper,
-        "n_steps": t.n_steps, "credibility": dict(t.credibility), "source": dict(t.source),
+        "allowance": t.allowance, "n_steps": t.n_steps, "credibility": dict(t.credibility),
+        "source": dict(t.source),
     }
 
 
@@ -114,8 +143,11 @@ def load_tube(path: str | os.PathLike[str], gait_hash: str | None = None) -> For
     s = np.linspace(0, 1, 201)
     if np.any(bezier.evaluate(lower, s) > bezier.evaluate(upper, s) + 1e-9):
         raise r.fail("lower", "the lower bound exceeds the upper bound somewhere")
+    allowance = r.array("allowance", (3,)) if "allowance" in r.doc else np.zeros(3)
+    if np.any(allowance < 0):
+        raise r.fail("allowance", "must be >= 0")
     t = ForceTube(gait_hash=r.string("gait_hash"), tau_lo=tau_lo, tau_hi=tau_hi,
-                  nominal=nominal, lower=lower, upper=upper,
+                  nominal=nominal, lower=lower, upper=upper, allowance=allowance,
                   n_steps=int(r.number("n_steps", 0, 1e9)),
                   credibility=dict(r.get("credibility")), source=dict(r.get("source")))
     if gait_hash is not None and gait_hash != t.gait_hash:

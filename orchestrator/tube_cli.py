@@ -40,6 +40,10 @@ def fit(
         "back from tau = 0 to 1 (overrides --fit-margin).")] = False,
     stop_at_touchdown: Annotated[bool, typer.Option(
         help="End each playback at the human foot's touchdown too.")] = False,
+    allowance: Annotated[float, typer.Option(
+        "--allowance", min=0.0, max=0.99,
+        help="Widen the certified bounds by this fraction of each component's peak |F_s| "
+        "for the playback's estimation error (0: the paper's bare tube).")] = 0.01,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
@@ -77,7 +81,7 @@ def fit(
                              options=PlaybackOptions(
                                  stop_at_touchdown=stop_at_touchdown,
                                  fit_margin=None if whole_step_fit else fit_margin),
-                             progress=progress, src=str(steps))
+                             progress=progress, src=str(steps), allowance=allowance)
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility
     console.print(f"[bold]{steps}[/]: {len(res.playback.steps)} ps steps played back in "

@@ -135,8 +135,8 @@ class ControllerContext:
         self.clf_params = T.clf_layout.pack(
             alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
             P_eps=self.clf.P_eps, gamma_over_eps=c.gamma / c.eps, c_rho=c.c_rho,
-            nominal=tube.nominal, lower=tube.lower, upper=tube.upper, tau_lo=tube.tau_lo,
-            tau_hi=tube.tau_hi)
+            nominal=tube.nominal, lower=tube.widened_lower, upper=tube.widened_upper,
+            tau_lo=tube.tau_lo, tau_hi=tube.tau_hi)
         self.stance_params = T.stance_layout.pack(alpha_pk=alpha_pk, p_min=ps.p_min,
                                                   p_max=ps.p_max)
         rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]

@@ -45,10 +45,11 @@ def relative_rms_errors(result, take) -> np.ndarray:
     return np.array(out)
 
 
-def tube_excess(result, take) -> np.ndarray:
+def tube_excess(result, take, widened: bool = True) -> np.ndarray:
     """(N, 3): per used step and component, the largest excursion of the TRUE deviation
     F_s - F* outside the tube over [tau_lo, tau_hi] (<= 0: inside), divided by the peak
-    |F_s| of the true profile."""
+    |F_s| of the true profile; ``widened=False``: outside the certified bounds without the
+    estimation allowance."""
     truth = {t.index: t for t in take.ps_truth()}
     tube = result.tube
     out = []
@@ -57,7 +58,7 @@ def tube_excess(result, take) -> np.ndarray:
         inside = (tr.tau >= tube.tau_lo) & (tr.tau <= tube.tau_hi)
         tau = tr.tau[inside]
         dF = tr.socket[inside] - tube.nominal_force(tau)
-        lo, hi = tube.delta_bounds(tau)
+        lo, hi = tube.delta_bounds(tau, widened=widened)
         out.append(np.maximum(dF - hi, lo - dF).max(axis=0) / np.abs(tr.socket).max(axis=0))
     return np.array(out)
 

@@ -188,3 +188,20 @@ def test_relaxed_without_relaxation_or_bounds_is_the_exact_qp(ctx, ctx_unbounded
     np.testing.assert_allclose(ur, ue, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(orl.torque, oe.torque, rtol=1e-6, atol=1e-6)
     assert abs(relaxed.qp_solution[2]) <= 1e-9
+
+
+def test_the_law_sees_the_tube_widened_by_its_allowance(ctx, model, subsystem, template_gait):
+    """The box in the CLF row is the tube in use: certified bounds +/- the allowance."""
+    import dataclasses
+
+    allow = np.array([5.0, 7.0, 1.5])
+    wide = dataclasses.replace(ctx.tube, allowance=allow)
+    wctx = ControllerContext(template_gait, wide, model, subsystem=subsystem)
+    for tau in (0.2, 0.5, 0.8):
+        x = state_at(ctx, (tau, 0.05, 0.5, -0.5))
+        T, W = clf_terms(ctx, x), clf_terms(wctx, x)
+        np.testing.assert_allclose(W["c"].ravel(), T["c"].ravel(), atol=1e-9)
+        np.testing.assert_allclose(W["r"].ravel(), T["r"].ravel() + allow, atol=1e-9)
+        c, r = wide.box(float(W["tau"].ravel()[0]))
+        np.testing.assert_allclose(W["r"].ravel(), r, atol=1e-9)
+        np.testing.assert_allclose(W["c"].ravel(), c, atol=1e-9)

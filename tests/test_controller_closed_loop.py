@@ -1,6 +1,18 @@
-"""Closed loop of the reduced 4-state prosthesis model alone (RK4, controller at 1 kHz with
+"""Closed loop of the reduced 4-state prosthesis model alone (RK4, controller ticking with
 zero-order hold) with the socket force held at a vertex of the tube: the robust CLF-QP
-drives the outputs to the nominal with V decaying at the promised rate gamma/eps.
+drives the outputs to the nominal with V decaying exponentially at the promised rate
+gamma/eps, i.e. V(t) <= M V(0) exp(-(gamma/eps) t) with a constant M close to 1.
+
+The promise is a continuous-time one; how much of it survives the sample-and-hold depends on
+the controller rate against the subsystem's fastest dynamics, so two rates are tested:
+
+- 10 kHz: the full rate, M = 1.15 over 0.15 s (measured worst 1.11, i.e. an effective rate
+  >= 14.3 of the promised 15 1/s);
+- 1 kHz (the deployed rate): half the rate, M = 1.5 (measured worst decay 9 1/s);
+
+both on the tube +/-(0.1 N, 0.15 N, 0.02 N m) about a constant centre.  Wider boxes (up to
++/-(4 N, 6 N, 0.8 N m) measured) keep the rate at 10 kHz too, but there most runs end on a
+torque or per-tick rate bound, where the promise no longer applies.
 
 Why a constant, narrow tube here: in the reduced model the socket force is exogenous and
 acts on the prosthesis alone, whose top link (1 kg, 0.0017 kg m^2 about the knee) turns
@@ -18,6 +30,7 @@ human's inertia is behind the socket), tested in the co-simulation, not here.
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -26,11 +39,27 @@ from prosthesis_controller import ClfConfig, ControllerConfig, ControllerContext
 from prosthesis_controller.interface import Active
 from tests.controller_support import clf_terms, constant_tube, simulate_reduced
 
-HALF = (0.1, 0.15, 0.02)  # N, N, N m
 DURATION = 0.15  # s
-# The 1 ms hold costs rate: over 0.15 s a factor 1.5 on V is a decay rate of at least
-# c - ln(1.5) / 0.15 = c - 2.7 1/s (c = gamma/eps = 15 1/s by default); measured loss < 1.2.
-MARGIN = 1.5
+
+
+@dataclass(frozen=True)
+class Rate:
+    """A controller rate, the constant tube's half-widths (N, N, N m) it is tested on, the
+    fraction of the promised decay rate asserted and the constant M of the bound."""
+
+    dt: float
+    half: tuple[float, float, float]
+    fraction: float
+    M: float
+    substeps: int
+
+
+RATES = {
+    # the hold of 0.1 ms costs < 0.7 1/s: exp(0.7 * 0.15) = 1.11 measured, 1.15 allowed
+    "10kHz": Rate(1e-4, (0.1, 0.15, 0.02), 1.0, 1.15, 2),
+    # at 1 kHz over 0.15 s a factor 1.5 on V at half the rate (measured: >= 9 of 15 1/s)
+    "1kHz": Rate(1e-3, (0.1, 0.15, 0.02), 0.5, 1.5, 4),
+}
 PERTURBATIONS = (np.array([0.02, -0.01, 0.1, -0.1]), np.array([-0.03, 0.02, -0.3, 0.2]))
 #: start points on the ps collocation trajectory at tau ~ 0.1 and 0.4 (fractions of its points)
 NODE_FRACTIONS = (0.1, 0.4)
@@ -39,10 +68,10 @@ BOUNDS = (Active.KNEE_LOWER | Active.KNEE_UPPER | Active.ANKLE_LOWER | Active.AN
 VERTICES = list(itertools.product((-1.0, 1.0), repeat=3))
 
 
-def _setup(model, subsystem, gait, clf: ClfConfig):
+def _setup(model, subsystem, gait, clf: ClfConfig, half: tuple[float, float, float]):
     tr = gait.trajectory["ps"]
     centre = tr["lam"][3:6].mean(axis=1)  # the mean nominal socket wrench of the stance
-    tube = constant_tube(gait, centre, HALF)
+    tube = constant_tube(gait, centre, half)
     ctx = ControllerContext(gait, tube, model, ControllerConfig(clf=clf),
                             subsystem=subsystem)
     return ctx, tube, tr
@@ -62,17 +91,16 @@ def _fl_torque(ctx, x):
     return -np.linalg.solve(T["Am"], T["Lf"] + T["As"] @ T["Fstar"])
 
 
+@pytest.mark.parametrize("rate", [pytest.param("10kHz", marks=pytest.mark.slow), "1kHz"])
 @pytest.mark.parametrize("name", ["clfqp-exact", "clfqp"])
 def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsystem,
-                                                                   template_gait, name):
+                                                                   template_gait, name, rate):
+    r = RATES[rate]
     # the relaxed law with a small relaxation cap: it converges into V <= rho_max
     clf = ClfConfig() if name == "clfqp-exact" else ClfConfig(rho_max=0.1)
-    ctx, tube, tr = _setup(model, subsystem, template_gait, clf)
+    ctx, tube, tr = _setup(model, subsystem, template_gait, clf, r.half)
     ctl = make_controller(name, None, None, None, context=ctx)
-    # At 1 kHz with zero-order hold the promised continuous-time rate gamma/eps (15 1/s) is
-    # not reached everywhere: on the default template gait the worst start decays at 9 1/s.
-    # Asserted: at least half the promised rate (README, deviations).
-    c = 0.5 * clf.gamma / clf.eps
+    c = r.fraction * clf.gamma / clf.eps
     floor = 0.0 if name == "clfqp-exact" else clf.rho_max
     c0, r0 = tube.box(0.5)
     worst = 0.0
@@ -80,9 +108,9 @@ def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsy
     for x0 in _starts(model, tr):
         for s in VERTICES:
             F = c0 + np.array(s) * r0
-            run = simulate_reduced(ctl, ctx, x0, lambda x, F=F: F, DURATION,
-                                   u0=_fl_torque(ctx, x0))
-            assert len(run["t"]) == round(DURATION / 1e-3), "state diverged"
+            run = simulate_reduced(ctl, ctx, x0, lambda x, F=F: F, DURATION, dt=r.dt,
+                                   substeps=r.substeps, u0=_fl_torque(ctx, x0))
+            assert len(run["t"]) == round(DURATION / r.dt), "state diverged"
             assert set(run["mode"]) == {"stance"}, "fallback in a feasible closed loop"
             V, t = run["V"], run["t"]
             # the rate is promised while the CLF row decides the torque; a torque bound
@@ -95,7 +123,7 @@ def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsy
                     continue
             bound = V[0] * np.exp(-c * t) + floor
             worst = max(worst, float(np.max(V / bound)))
-            assert np.max(V / bound) <= MARGIN, (x0, s, float(np.max(V / bound)))
+            assert np.max(V / bound) <= r.M, (x0, s, float(np.max(V / bound)))
             # the phase keeps progressing: |y1| -> 0 means the hip moves at v_hip
             assert run["tau"][-1] - run["tau"][0] > 0.3
             assert np.all(np.abs(run["u"]) <= np.array(ctx.limits) + 1e-12)

@@ -354,6 +354,28 @@ def test_save_load_round_trip(tube, tmp_path):
         load_tube(p, gait_hash="other")
 
 
+def test_allowance_widens_every_bound_in_use_and_round_trips(profiles, nominal, tmp_path):
+    allow = np.array([2.0, 3.0, 0.5])
+    bare = ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, gait_hash="g")
+    wide = ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, gait_hash="g",
+                        allowance=allow)
+    # the certified LP bounds are the same; the bounds in use are shifted by the allowance
+    np.testing.assert_array_equal(wide.lower, bare.lower)
+    tau = np.linspace(TAU_LO, TAU_HI, 7)
+    (lo_w, hi_w), (lo_b, hi_b) = wide.delta_bounds(tau), bare.delta_bounds(tau)
+    np.testing.assert_allclose(lo_w, lo_b - allow, atol=1e-9)
+    np.testing.assert_allclose(hi_w, hi_b + allow, atol=1e-9)
+    c_w, r_w = wide.box(0.5)
+    c_b, r_b = bare.box(0.5)
+    np.testing.assert_allclose(c_w, c_b, atol=1e-9)
+    np.testing.assert_allclose(r_w, r_b + allow, atol=1e-9)
+    p = tmp_path / "tube.json"
+    save_tube(p, wide)
+    np.testing.assert_array_equal(load_tube(p).allowance, allow)
+    with pytest.raises(ftf.TubeFitError, match="allowance"):
+        ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, allowance=(1.0, -1.0, 0))
+
+
 def test_figure_written_atomically(tube, profiles, tmp_path):
     p = tmp_path / "fig5.png"
     ftf.save_tube_figure(p, tube, profiles)
