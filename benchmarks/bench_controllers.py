@@ -150,7 +150,7 @@ def main() -> None:
     print("| controller | median per tick (us) | p99 (us) | modes (last repeat) |")
     print("|---|---:|---:|---|")
     labels = {"clfqp": "robust CLF-QP, relaxed", "clfqp-exact": "robust CLF-QP, exact",
-              "pd": "PD", "passive": "robust-passive",
+              "pd": "PD", "passive": "robust-passive", "phase-pd": "phase-PD reference",
               "piqp": "bare piqp update + solve (relaxed QPs)"}
     for n in [*CONTROLLERS, "piqp"]:
         r = rows[n]

@@ -43,6 +43,21 @@ def derivative(alpha):
     return m * (alpha[:, 1:] - alpha[:, :-1])
 
 
+def evaluate_continued(alpha, s):
+    """(B, dB/ds, d2B/ds2) of the rows of ``alpha`` at a CasADi scalar ``s``, continued
+    linearly (C^1) outside [0, 1]: B(s_c) + B'(s_c)(s - s_c) with s_c = clip(s, 0, 1), so
+    d2B/ds2 = 0 outside (a jump at the ends: not for anything that must be C^2 there).  A
+    degree-m polynomial extrapolated beyond its interval bends away within a few percent of
+    the phase (and ill-conditions anything that inverts it); the linear continuation keeps
+    the last velocity.  (n_outputs, 1) columns."""
+    d1 = derivative(alpha)
+    d2 = derivative(d1)
+    sc = ca.fmin(ca.fmax(s, 0), 1)
+    inside = (s >= 0) * (s <= 1)
+    dB = evaluate(d1, sc)
+    return evaluate(alpha, sc) + dB * (s - sc), dB, evaluate(d2, sc) * inside
+
+
 def gram(m: int) -> np.ndarray:
     """G_ij = integral_0^1 B_i(s) B_j(s) ds, so integral (sum e_i B_i)^2 ds = e^T G e."""
     G = np.empty((m + 1, m + 1))

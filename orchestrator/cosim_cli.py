@@ -21,7 +21,7 @@ TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_ok
 @controller_app.command("serve")
 def serve(
     controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
-                                            "passive.")],
+                                            "passive, phase-pd.")],
     gait: GaitOpt,
     tube: TubeOpt,
     bus: Annotated[Path | None, typer.Option("--bus", help="Bus config (TOML/JSON): "
@@ -49,7 +49,7 @@ def serve(
 
 def run(
     controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
-                                            "passive.")],
+                                            "passive, phase-pd.")],
     gait: GaitOpt,
     tube: TubeOpt,
     steps: Annotated[int, typer.Option(help="Stop after this many impacts.")] = 20,

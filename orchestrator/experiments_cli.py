@@ -53,8 +53,8 @@ def experiments(
 def demo(
     out: Annotated[Path, typer.Option("--out", help="Output folder.",
                                       file_okay=False)] = Path("out/demo-experiments"),
-    quick: Annotated[bool, typer.Option("--quick", help="Fewer strides, nodes and steps "
-                                        "(CI).")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="Fewer strides and steps, no gait "
+                                        "verification (CI).")] = False,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps per closed-loop "
                                               "run (default 20, --quick 3).")] = None,
 ) -> None:

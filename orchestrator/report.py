@@ -33,6 +33,18 @@ DEVIATIONS = (
     "paper tuned the robust-passive ankle gains.",
     "Rigid impacts with the landing foot rotated flat (simulator); falls are detected by "
     "the simulator (friction cone, hip height, phase running backward, no touchdown).",
+    "Swing landing (all controllers): from tau_hat = 0.8 the swing target lowers the sole by "
+    "up to 1 cm (2 cm if the touchdown is late) and turns the foot flat at the nominal socket "
+    "pitch. The optimized gait's swing foot skims the ground over the last part of pns and "
+    "lands tangentially; the paper's pns feedback linearization sees the human's phase, a "
+    "prosthesis-only swing controller does not, and without reaching for the ground it "
+    "misses the touchdown.",
+    "The time-based stance references of PD and robust-passive keep running past their "
+    "nominal duration (continued linearly) instead of stopping when the human touches down "
+    "late.",
+    "The prosthesis initial offset of the robustness cases moves the knee output y2 by "
+    "0.02 rad at the nominal start phase (ankle moved so tau is unchanged), the human on its "
+    "own outputs; the paper does not give its offset.",
 )
 
 
@@ -53,17 +65,26 @@ def render(metrics: Mapping[str, Any], stages: Sequence[Mapping[str, Any]] = (),
     w = t["half_width_mid_stance"]
     lines += ["", f"Tube: {t['n_steps']} profiles, tau in [{t['tau_lo']:.2f}, "
               f"{t['tau_hi']:.2f}], half-width at tau = 0.5: F_x {w['F_x_N']:.1f} N, "
-              f"F_z {w['F_z_N']:.1f} N, M_y {w['M_y_Nm']:.2f} N m.", ""]
+              f"F_z {w['F_z_N']:.1f} N, M_y {w['M_y_Nm']:.2f} N m; the gait's own nominal "
+              f"F* lies in it on {_pct(t.get('nominal_inside_fraction'))} of "
+              "[tau_lo, tau_hi].", ""]
     rb = m["robustness"]
+    ref = rb.get("reference_controller")
     lines += ["## Robustness (Fig. 8)", "",
-              f"Human perturbation amplitude {rb['amplitude_rad']} rad, prosthesis initial "
-              f"offset (knee, ankle) {rb['initial_offset_rad']} rad, default gains.", "",
-              "| case | controller | knee RMS in ps (rad) | result |", "|---|---|---:|---|"]
+              f"Human perturbation amplitude {rb['amplitude_rad']} rad, prosthesis knee output "
+              f"offset {rb.get('knee_output_offset_rad')} rad (joint offsets "
+              f"{_fmt_list(rb['initial_offset_rad'])} rad), default gains."
+              + (f" `{ref}` is the reference controller, not one of the paper's." if ref
+                 else ""), "",
+              "| case | controller | knee RMS in ps (rad) | F_s in tube | result |",
+              "|---|---|---:|---:|---|"]
     for case, cc in rb["cases"].items():
         for c, s in cc.items():
             res = ("ok" if s["success"] else
-                   f"fell at tau = {s['fail_tau']} ({s['fail_domain']}): {s['reason']}")
-            lines.append(f"| {case} | {c} | {s['knee_rms_ps_rad']:.4f} | {res} |")
+                   f"fell at tau = {_num(s['fail_tau'])} ({s['fail_domain']}): {s['reason']}")
+            lines.append(f"| {case} | {c} | {_num(s['knee_rms_ps_rad'], 4)} | "
+                         f"{_pct(s.get('socket_force_in_tube'))} | {res} |")
+    lines += ["", *_diagnosis(m)]
     lines += ["", "## Figures", ""]
     for k, f in m["figures"].items():
         lines.append(f"![{k}]({f})")
@@ -71,6 +92,64 @@ def render(metrics: Mapping[str, Any], stages: Sequence[Mapping[str, Any]] = (),
     lines += [f"- {d}" for d in (*DEVIATIONS, *extra_deviations)]
     lines.append("")
     return "\n".join(lines)
+
+
+def _num(x: Any, digits: int = 3) -> str:
+    return "n/a" if x is None else f"{x:.{digits}g}" if digits < 4 else f"{x:.{digits}f}"
+
+
+def _pct(x: Any) -> str:
+    return "n/a" if x is None else f"{100 * x:.0f} %"
+
+
+def _fmt_list(v: Sequence[float]) -> str:
+    return "(" + ", ".join(f"{x:.4f}" for x in v) + ")"
+
+
+def _diagnosis(m: Mapping[str, Any]) -> list[str]:
+    """The reference run and the input-authority comparison (README, closed loop)."""
+    out = ["## Diagnosis", ""]
+    ref = m.get("reference")
+    n = m["nominal"]
+    if ref:
+        run, rm = ref["run"], ref["return_map"]
+        out += [f"Reference controller `{ref['controller']}` (not in the paper: nominal stance "
+                "torque of the gait as feedforward, knee PD on the CLF-QP's state-based "
+                "phase, hip-velocity feedback through the ankle with the sign of the full "
+                "loop), nominal human: "
+                f"{run['steps_completed']}/{run['steps_requested']} steps"
+                + (f", fell: {run['reason']}" if run["failed"] else "")
+                + (f"; return-map spectral radius {rm['spectral_radius']:.3g}"
+                   if rm["computed"] else f"; return map not computed: {rm['why_not']}")
+                + f"; knee RMS in ps {_num(run['knee_rms_ps_rad'], 4)} rad.", ""]
+    out += ["Socket force inside the tube (the premise of the robust CLF condition), share of "
+            f"the ps samples in [tau_lo, tau_hi]: robust CLF-QP nominal run "
+            f"{_pct(n['run'].get('socket_force_in_tube'))}"
+            + (f", reference nominal run {_pct(ref['run'].get('socket_force_in_tube'))}"
+               if ref else "") + ".", ""]
+    auth = m.get("diagnosis", {}).get("input_authority")
+    if auth:
+        out += ["Input authority of the prosthesis motor torque on the outputs (dy1, d2y2) "
+                "per motor N m: the reduced model the CLF-QP uses (socket force held "
+                "fixed) against the full loop (the human tracking its outputs, so the socket "
+                "force answers the torque):", "",
+                "| tau | reduced A_m | full loop A | norm ratio | signs agree (row y1; row y2) |",
+                "|---:|---|---|---:|---|"]
+        for a in auth:
+            out.append(f"| {a['tau']:.2f} | {_mat(a['reduced_Am_per_motor_Nm'])} | "
+                       f"{_mat(a['full_A_per_motor_Nm'])} | "
+                       f"{a['norm_ratio_reduced_over_full']:.0f} | "
+                       f"{_signs(a['sign_agreement'])} |")
+        out.append("")
+    return out
+
+
+def _mat(a: Sequence[Sequence[float]]) -> str:
+    return "[" + "; ".join(", ".join(f"{v:.3g}" for v in row) for row in a) + "]"
+
+
+def _signs(a: Sequence[Sequence[bool]]) -> str:
+    return "; ".join(", ".join("yes" if v else "NO" for v in row) for row in a)
 
 
 def write_report(out: str | os.PathLike[str], metrics: Mapping[str, Any],

@@ -30,6 +30,7 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import Y2_COORDS
 from hp_model.simulator import HybridSimulator, SimOptions, SimState
 from human_fmu.perturbation import perturbed_thetas
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
@@ -97,6 +98,9 @@ class ScenarioResult:
     fail_domain: str | None
     post_impact: list[np.ndarray] = field(default_factory=list)  # joint states after ps impacts
     step_bounds: list[tuple[int, int]] = field(default_factory=list)  # ps segments [i0, i1)
+    socket_force: np.ndarray | None = None  # (n, 3) F_s (ground truth, never fed back)
+    fs_in_tube: float | None = None  # fraction of ps samples in [tau_lo, tau_hi] with F_s in tube
+    touchdown_pitch: list[float] = field(default_factory=list)  # rad, landing-foot correction
 
     @property
     def success(self) -> bool:
@@ -129,15 +133,35 @@ def knee_reference(gait: Gait, domain: str, tau: float) -> float:
 
 def initial_state(model: HumanProsthesisModel, gait: Gait,
                   offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """The gait's initial ps state with the prosthesis (knee, ankle) offset; the walker is
-    re-placed so the prosthesis foot stays flat on the ground."""
+    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad) and the
+    human on its own outputs: the offset moves the phase tau (delta_p_hip is a function of
+    the prosthesis angles), so the human joints are put on their Bezier curves at the new
+    tau, with velocities dB/dtau * dtau/dt; the walker is re-placed with the prosthesis foot
+    flat on the ground and the base velocity solved from J_foot qd = 0 (the constrained
+    dynamics hold only the constraint's acceleration: a foot velocity left in qd would drift
+    the stance foot off the ground for the whole step).  Only the prosthesis starts off
+    its nominal trajectory, as in the paper's robustness test."""
     tr = gait.trajectory["ps"]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
-    if any(offset):
-        names = model.coord_names
-        q[names.index("th_pk")] += offset[0]
-        q[names.index("th_pa")] += offset[1]
-        q = model.place_stance_foot(q, "ps")
+    if not any(offset):
+        return q, qd
+    names = model.coord_names
+    pk, pa = names.index("th_pk"), names.index("th_pa")
+    q[pk] += offset[0]
+    q[pa] += offset[1]
+    p = gait.params["ps"]
+    ck, ca_ = model.hip_progress_coefficients("ps")
+    dp = p.p_max - p.p_min
+    tau = (ck * q[pk] + ca_ * q[pa] - p.p_min) / dp
+    tau_dot = (ck * qd[pk] + ca_ * qd[pa]) / dp
+    human = [names.index(c) for c in Y2_COORDS["ps"] if c != "th_pk"]
+    rows = [Y2_COORDS["ps"].index(names[i]) for i in human]
+    q[human] = bezier.evaluate(p.alpha[rows], tau)
+    qd[human] = bezier.evaluate(bezier.derivative(p.alpha[rows]), tau) * tau_dot
+    q = model.place_stance_foot(q, "ps")
+    J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3, :]
+    rest = np.r_[3:model.nq]
+    qd[0:3] = np.linalg.solve(J[:, 0:3], -J[:, rest] @ qd[rest])
     return q, qd
 
 
@@ -212,12 +236,28 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         m = _REASON.search(r.reason)
         if m:
             ft, fd, ftau = float(m.group(1)), m.group(2), float(m.group(3))
+    ps = r.domain == 0
     return ScenarioResult(
         scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
         q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
         mode=modes[:n], V=np.array(Vs[:n]), rho=np.array(rhos[:n]),
         fallback_count=fallbacks[0], steps=r.steps, failed=r.failed, reason=r.reason,
-        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds)
+        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
+        socket_force=r.lam[:, 3:6].copy(),
+        fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
+        touchdown_pitch=[float(im.foot_pitch) for im in r.impacts])
+
+
+def socket_force_in_tube(tube: ForceTube, tau: np.ndarray, force: np.ndarray
+                         ) -> float | None:
+    """Fraction of the samples with tau in [tau_lo, tau_hi] whose socket force lies in the
+    tube: the premise under which the robust CLF condition holds; None without samples."""
+    tau = np.asarray(tau, float)
+    m = (tau >= tube.tau_lo) & (tau <= tube.tau_hi)
+    if not m.any():
+        return None
+    delta = np.asarray(force, float)[m] - tube.nominal_force(tau[m]).reshape(-1, 3)
+    return float(np.mean(tube.contains(tau[m], delta)))
 
 
 def human_gait_walks(model: HumanProsthesisModel, gait: Gait, pert: Perturbation,
@@ -291,6 +331,9 @@ def summary(r: ScenarioResult) -> dict[str, Any]:
             "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
             "duration_s": float(r.t[-1]) if r.t.size else 0.0,
             "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),
+            "socket_force_in_tube": r.fs_in_tube,
+            "max_touchdown_pitch_rad": (max(abs(p) for p in r.touchdown_pitch)
+                                        if r.touchdown_pitch else None),
             "fallback_count": r.fallback_count,
             "modes": {m: r.mode.count(m) for m in sorted(set(r.mode))}}
 

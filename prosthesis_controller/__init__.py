@@ -1,4 +1,5 @@
-"""Prosthesis controllers (robust CLF-QP exact and relaxed, PD, robust-passive, swing).
+"""Prosthesis controllers (robust CLF-QP exact and relaxed, PD, robust-passive, swing, and
+the phase-PD reference).
 Depends only on :mod:`hp_model` (and numpy, scipy, piqp, casadi).  See ``README.md`` here.
 """
 
@@ -8,6 +9,7 @@ from prosthesis_controller.config import (
     DomainConfig,
     PassiveConfig,
     PdConfig,
+    PhasePdConfig,
     SafetyConfig,
     SwingConfig,
 )
@@ -18,6 +20,7 @@ from prosthesis_controller.controllers import (
     ControllerContext,
     PassiveController,
     PDController,
+    PhasePdController,
     make_controller,
 )
 from prosthesis_controller.interface import (
@@ -45,6 +48,8 @@ __all__ = [
     "PassiveConfig",
     "PassiveController",
     "PdConfig",
+    "PhasePdConfig",
+    "PhasePdController",
     "ProsthesisMeasurement",
     "SafetyConfig",
     "SwingConfig",

@@ -73,6 +73,20 @@ class PdConfig(_Strict):
     kd: Pair = (30.0, 20.0)
 
 
+class PhasePdConfig(_Strict):
+    """Phase-PD reference (not one of the paper's controllers): on the CLF-QP's state-based
+    phase tau(th_pk, th_pa) and outputs, the gait's nominal stance motor torque u*(tau) plus
+    the JOINT-side feedback knee -kp y2 - kd dy2 and ankle k_vhip y1 (N m per m/s of hip
+    velocity error: positive ankle torque, plantarflexion, brakes the shank's forward
+    rotation over the flat foot, so a hip too fast is slowed).  ``feedforward = False``
+    drops u*."""
+
+    kp: Positive = 1500.0
+    kd: NonNegative = 30.0
+    k_vhip: float = 250.0
+    feedforward: bool = True
+
+
 class PassiveConfig(_Strict):
     """Spong's robust passivity-based law (REFERENCE.md Sec. 2), JOINT-side gains.
 
@@ -89,22 +103,35 @@ class PassiveConfig(_Strict):
 
 class SwingConfig(_Strict):
     """Shared swing (pns) controller: PD + gravity feedforward on the pns Bezier rows of
-    th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains."""
+    th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains.
 
-    kp: Pair = (200.0, 50.0)
-    kd: Pair = (8.0, 0.8)
+    Landing (``terms.swing_ref``): from tau_hat = ``landing_start`` the knee turns the shank
+    toward the vertical under the knee (lowering the sole at a fixed foot pitch) by the
+    fraction landing_reach (tau_hat - landing_start) / (1 - landing_start) of its angle,
+    capped at 1 (it keeps reaching when the touchdown is late), and the ankle turns the foot
+    flat (world pitch 0 at the nominal socket pitch) over the next ``landing_flatten`` of
+    tau_hat.  ``landing_reach = 0`` only flattens the foot."""
+
+    kp: Pair = (2000.0, 135.0)
+    kd: Pair = (24.0, 1.6)
     gravity: bool = True
+    landing_reach: float = Field(0.1, ge=0, le=1)
+    landing_start: float = Field(0.8, gt=0, lt=1)
+    landing_flatten: Positive = 0.05
 
 
 class DomainConfig(_Strict):
     """Domain detection with hysteresis from the foot-load cell and the contact switch.
 
     Stance (ps) starts when ``contact`` and load >= ``load_on``; swing (pns) starts when
-    not ``contact`` or load <= ``load_off``; no switch within ``min_dwell`` of the last.
-    ``initial``: the domain assumed after ``reset()``."""
+    not ``contact``, or when load <= ``load_off`` has held for ``off_hold`` s with contact (a
+    one-tick dip of the load, e.g. the rigid contact's response to a torque step, is not a
+    lift-off); no switch within ``min_dwell`` of the last.  ``initial``: the domain assumed
+    after ``reset()``."""
 
     load_on: Positive = 150.0
     load_off: NonNegative = 40.0
+    off_hold: NonNegative = 0.01
     min_dwell: NonNegative = 0.08
     initial: str = Field("ps", pattern="^(ps|pns)$")
 
@@ -137,6 +164,7 @@ class ControllerConfig(_Strict):
 
     clf: ClfConfig = ClfConfig()
     pd: PdConfig = PdConfig()
+    phase_pd: PhasePdConfig = PhasePdConfig()
     passive: PassiveConfig = PassiveConfig()
     swing: SwingConfig = SwingConfig()
     domain: DomainConfig = DomainConfig()

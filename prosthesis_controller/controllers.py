@@ -42,6 +42,7 @@ from prosthesis_controller.polish import polish
 from prosthesis_controller.terms import ControllerTerms
 
 PITCH_DEGREE = 5
+FEEDFORWARD_DEGREE = 9  # phase-PD nominal torque: fit RMS ~0.01 N m motor on the demo gait
 _INF = math.inf
 _SOLVED = piqp.PIQP_SOLVED
 _DUAL_TOL = 1e-7  # a multiplier above this (normalised problem) marks an active constraint
@@ -74,6 +75,27 @@ def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITC
     return coef[None, :]
 
 
+def stance_torque_fit(gait: Gait, model: HumanProsthesisModel,
+                      degree: int = FEEDFORWARD_DEGREE) -> np.ndarray:
+    """Bezier coefficients (2, degree+1) of the nominal prosthesis MOTOR torques (knee, ankle)
+    over the ps phase tau, least-squares fit to the gait's ps collocation trajectory; zeros
+    (no feedforward) when the gait carries no trajectory."""
+    tr = gait.trajectory.get("ps") if gait.trajectory else None
+    if not tr or "q" not in tr or "u" not in tr:
+        return np.zeros((2, degree + 1))
+    q, u = np.asarray(tr["q"], dtype=float), np.asarray(tr["u"], dtype=float)
+    p = gait.params["ps"]
+    ck, ca_ = model.hip_progress_coefficients("ps")
+    names = model.coord_names
+    tau = (ck * q[names.index("th_pk")] + ca_ * q[names.index("th_pa")] - p.p_min) \
+        / (p.p_max - p.p_min)
+    B = bezier.basis(degree, np.clip(tau, 0.0, 1.0))
+    if len(tau) <= degree:
+        return np.repeat(u[4:6].mean(axis=1, keepdims=True), degree + 1, axis=1)
+    coef, *_ = np.linalg.lstsq(B, u[4:6].T, rcond=None)
+    return coef.T
+
+
 class ControllerContext:
     """Everything the controllers share, built once: subsystem, compiled terms, the RES-CLF,
     packed parameter vectors, limits and nominal durations.
@@ -93,7 +115,7 @@ class ControllerContext:
         sub = subsystem or ProsthesisSubsystem(model)
         self.subsystem = sub
         self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
-                                     PITCH_DEGREE, backend)
+                                     PITCH_DEGREE, backend, FEEDFORWARD_DEGREE)
         c = cfg.clf
         self.clf: ResClf = res_clf(np.array(c.Q), np.array(c.R), c.eps)
         if c.gamma > self.clf.c3 + 1e-12:
@@ -118,8 +140,17 @@ class ControllerContext:
         self.stance_params = T.stance_layout.pack(alpha_pk=alpha_pk, p_min=ps.p_min,
                                                   p_max=ps.p_max)
         rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]
-        self.swing_params = T.swing_layout.pack(alpha=pns.alpha[rows],
-                                                pitch=socket_pitch_fit(gait, model))
+        sw = cfg.swing
+        self.swing_params = T.swing_layout.pack(
+            alpha=pns.alpha[rows], pitch=socket_pitch_fit(gait, model),
+            landing_reach=sw.landing_reach, landing_start=sw.landing_start,
+            landing_flatten=sw.landing_flatten)
+        pp = cfg.phase_pd
+        self.feedforward = stance_torque_fit(gait, model) if pp.feedforward else \
+            np.zeros((2, FEEDFORWARD_DEGREE + 1))
+        self.phase_pd_params = T.phase_pd_layout.pack(
+            alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
+            feedforward=self.feedforward, kp=pp.kp, kd=pp.kd, k_vhip=pp.k_vhip)
         pc = cfg.passive
         self.passive_params = T.passive_layout.pack(
             alpha_pk=alpha_pk, p_min=ps.p_min, p_max=ps.p_max, lam=pc.lam, k=pc.k,
@@ -127,12 +158,13 @@ class ControllerContext:
 
 
 def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
-    """Time-based phase clip((t - t0) / T, 0, 1) and its rate (0 once clipped)."""
+    """Time-based stance phase max((t - t0) / T, 0) and its rate.  Past 1 it keeps running:
+    the stance reference is continued linearly there (``terms.stance_ref``), so a late
+    touchdown of the human foot meets a reference that keeps moving at its final velocity
+    instead of one that stops dead (a torque step)."""
     s = (t - t0) / T
     if s <= 0.0:
         return 0.0, 0.0
-    if s >= 1.0:
-        return 1.0, 0.0
     return s, 1.0 / T
 
 
@@ -167,6 +199,7 @@ class BaseController:
                        tuple(s.load_range))
         d = cfg.domain
         self._load_on, self._load_off, self._dwell = d.load_on, d.load_off, d.min_dwell
+        self._off_hold = d.off_hold
         self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
         num = ctx.terms.numeric
         self._clf = num["clf_qp"]
@@ -195,6 +228,7 @@ class BaseController:
         self._u1 = min(max(u[1], -la), la) if math.isfinite(u[1]) else 0.0
         self._domain = self.ctx.config.domain.initial
         self._t_switch: float | None = None
+        self._t_unloaded: float | None = None  # since when load <= load_off with contact
         self._t_prev = -_INF
         self.fallback_count = 0
 
@@ -208,11 +242,18 @@ class BaseController:
 
     def _update_domain(self, t: float, contact: bool, load: float) -> str:
         stance = contact and load >= self._load_on
-        swing = (not contact) or load <= self._load_off
+        if contact and load <= self._load_off:
+            if self._t_unloaded is None:
+                self._t_unloaded = t
+            unloaded = t - self._t_unloaded >= self._off_hold
+        else:
+            self._t_unloaded = None
+            unloaded = False
+        swing = (not contact) or unloaded
         if self._t_switch is None:  # first valid sample: decide at once, start the clock
             if stance:
                 self._domain = "ps"
-            elif swing:
+            elif (not contact) or load <= self._load_off:
                 self._domain = "pns"
             self._t_switch = t
         elif t - self._t_switch >= self._dwell:
@@ -243,14 +284,16 @@ class BaseController:
 
     def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float
                       ) -> tuple[float, float, float]:
-        """Shared swing law: PD + gravity on the pns Bezier rows at tau_hat (motor N m)."""
-        tau, rate = _phase(t, self._t_switch, self._T_pns)  # type: ignore[arg-type]
+        """Shared swing law: PD + gravity on the swing target (the pns Bezier rows at tau_hat
+        and the landing offset, ``terms.swing_ref``), motor N m."""
         f = self._swing
         x = f.inputs[0]
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
-        f.inputs[1][0], f.inputs[2][0] = tau, rate
+        f.inputs[1][0] = (t - self._t_switch) / self._T_pns  # type: ignore[operator]
+        f.inputs[2][0] = 1.0 / self._T_pns
         f.call_inplace()
-        qd, vd, _, g = f.outputs
+        qd, vd, _, g, tau_o = f.outputs
+        tau = float(tau_o[0])
         kp, kd, gw = self._sw_kp, self._sw_kd, self._sw_grav
         uk = gw * g[0] + kp[0] * (qd[0] - qk) + kd[0] * (vd[0] - vk)
         ua = gw * g[1] + kp[1] * (qd[1] - qa) + kd[1] * (vd[1] - va)
@@ -320,6 +363,30 @@ class PDController(BaseController):
         uk, ua = self._pd_torque(t, qk, qa, vk, va)
         return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0,
                 MODE_STANCE)
+
+
+class PhasePdController(BaseController):
+    """Phase-PD reference (``terms.phase_pd``): nominal torque + knee PD + hip-velocity
+    feedback through the ankle, on the state-based phase.  Not one of the paper's
+    controllers: the closed-loop experiments use it to show what a controller with the
+    prosthesis's own measurements achieves when its feedback has the full loop's sign."""
+
+    name = "phase-pd"
+
+    def __init__(self, ctx: ControllerContext) -> None:
+        super().__init__(ctx)
+        self._ppd = ctx.terms.numeric["phase_pd"]
+        self._ppd.inputs[1][:] = ctx.phase_pd_params
+
+    def _stance(self, t, qk, qa, vk, va):
+        self._clf_terms(qk, qa, vk, va)
+        f = self._ppd
+        x = f.inputs[0]
+        x[0], x[1], x[2], x[3] = qk, qa, vk, va
+        f.call_inplace()
+        ff, fb = f.outputs[0], f.outputs[1]
+        return (ff[0] + fb[0] / self._gear[0], ff[1] + fb[1] / self._gear[1],
+                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
 
 
 class PassiveController(BaseController):
@@ -481,7 +548,7 @@ class ClfQpController(BaseController):
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 
 
-CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive")
+CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive", "phase-pd")
 
 
 def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
@@ -489,9 +556,10 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
                     context: ControllerContext | None = None,
                     subsystem: ProsthesisSubsystem | None = None,
                     strict_tube: bool = True) -> BaseController:
-    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd" or
-    "passive".  Pass ``context`` to share the compiled terms between controllers (then
-    gait, tube, model and config are taken from it)."""
+    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd",
+    "passive" or "phase-pd" (reference, not in the paper).  Pass ``context`` to share the
+    compiled terms between controllers (then gait, tube, model and config are taken from
+    it)."""
     if name not in CONTROLLERS:
         raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
     ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
@@ -502,6 +570,8 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
         return ClfQpController(ctx, relaxed=False)
     if name == "pd":
         return PDController(ctx)
+    if name == "phase-pd":
+        return PhasePdController(ctx)
     return PassiveController(ctx)
 
 
@@ -513,6 +583,8 @@ __all__ = [
     "Fault",
     "PDController",
     "PassiveController",
+    "PhasePdController",
     "make_controller",
     "socket_pitch_fit",
+    "stance_torque_fit",
 ]

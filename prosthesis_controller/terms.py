@@ -12,7 +12,7 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 
     tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
     eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
-             (B_pk continued linearly outside tau in [0, 1], see ``_bezier_rows``)
+             (B_pk continued linearly outside tau in [0, 1]: bezier.evaluate_continued)
     nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
     V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
     robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
@@ -29,9 +29,23 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
 ``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
 (p_min + tau dp - c_k th_pk) / c_a, and their first and second time derivatives.
 
-``swing_ref(x, tau, rate, p)`` -- pns Bezier rows of th_pk, th_pa at tau, their time
-derivatives, and the gravity torque (joint side) of the prosthesis hanging from a socket at
-the nominal pitch theta_s(tau) (a Bezier fit of the pns collocation trajectory).
+``swing_ref(x, s_raw, rate_raw, p)`` -- the swing target at the unclipped time phase
+s_raw = (t - t_liftoff) / T_pns (rate_raw = 1 / T_pns): the pns Bezier rows of th_pk, th_pa
+at tau = clip(s_raw, 0, 1) plus the landing offset, its time derivatives, the gravity torque
+(joint side) of the prosthesis hanging from a socket at the nominal pitch theta_s(tau) (a
+Bezier fit of the pns collocation trajectory), and tau.  Landing: from ``landing_start``
+on, about the Bezier posture with the socket at theta_s(tau), the knee turns the shank
+toward the vertical under the knee by the fraction w = clip(landing_reach (s_raw -
+landing_start) / (1 - landing_start), 0, 1) of its angle (the lowest the sole gets at a fixed
+foot pitch; the reach keeps growing past tau = 1 when the touchdown is late) and the ankle
+turns the foot flat in the world over the next landing_flatten of the phase.  The nominal
+gait's swing foot skims the ground over the last part of pns and touches it tangentially,
+so a controller that cannot sense the human's phase must reach for the ground to land.
+
+``phase_pd(x, p)`` -- the phase-PD reference law on the same state-based phase and outputs
+as the CLF-QP: the gait's nominal stance motor torque u*(tau) (a Bezier fit of the ps
+collocation trajectory, ``feedforward``) and the joint-side feedback
+(-kp y2 - kd dy2, k_vhip y1) (knee, ankle).
 
 ``passive(x, tau, rate, p)`` -- Spong's robust passivity-based law (REFERENCE.md Sec. 2) on
 the 2-DOF stance prosthesis (foot fixed, socket force ignored), JOINT torque out:
@@ -57,7 +71,7 @@ from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.prosthesis import ProsthesisSubsystem
-from hp_model.tree import PlanarTree
+from hp_model.tree import PlanarTree, frame_pose
 
 F_OUT = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]])
 G_OUT = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])
@@ -101,17 +115,18 @@ class Layout:
         return np.concatenate(out)
 
 
-def _bezier_rows(alpha: ca.SX, s: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
-    """B, dB/ds, d2B/ds2 of the rows of alpha (n, m+1) at s, continued linearly outside
-    [0, 1] (C^1: B(s_c) + B'(s_c)(s - s_c), s_c = clip(s, 0, 1)); a degree-5 polynomial
-    extrapolated far outside its interval is meaningless and ill-conditions the QP."""
-    d1 = bezier.derivative(alpha)
-    d2 = bezier.derivative(d1)
-    sc = ca.fmin(ca.fmax(s, 0), 1)
-    inside = (s >= 0) * (s <= 1)
-    dB = bezier.evaluate(d1, sc)
-    return (bezier.evaluate(alpha, sc) + dB * (s - sc), dB,
-            bezier.evaluate(d2, sc) * inside)
+def stance_outputs(x: ca.SX, alpha: ca.SX, v_hip: ca.SX, p_min: ca.SX, p_max: ca.SX,
+                   ck: float, ca_: float) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """tau, tau_dot and the paper's prosthesis outputs y1 = c_k dth_pk + c_a dth_pa - v_hip*,
+    y2 = th_pk - B_pk(tau), dy2 at x = (th_pk, th_pa, dth_pk, dth_pa) (B_pk continued
+    linearly outside [0, 1])."""
+    th, dth = x[0:2], x[2:4]
+    dp = p_max - p_min
+    tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
+    tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
+    B, dB, _ = bezier.evaluate_continued(alpha, tau)
+    y1 = ck * dth[0] + ca_ * dth[1] - v_hip
+    return tau, tau_dot, y1, th[0] - B, dth[0] - dB * tau_dot
 
 
 def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
@@ -184,11 +199,13 @@ class ControllerTerms:
     """The compiled controller functions of one subsystem and Bezier degrees.
 
     ``gait_degree``: degree of the gait's alpha; ``nominal_degree`` / ``bound_degree``: of
-    the tube's nominal and bound curves; ``pitch_degree``: of the swing socket-pitch fit.
+    the tube's nominal and bound curves; ``pitch_degree``: of the swing socket-pitch fit;
+    ``feedforward_degree``: of the phase-PD's nominal stance torque.
     """
 
     def __init__(self, sub: ProsthesisSubsystem, gait_degree: int, nominal_degree: int,
-                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto") -> None:
+                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto",
+                 feedforward_degree: int = 9) -> None:
         self.sub = sub
         ck, ca_ = sub.full.hip_progress_coefficients("ps")
         self.c_k, self.c_a = ck, ca_
@@ -210,13 +227,7 @@ class ControllerTerms:
         tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
         self.clf_layout = L
 
-        dp = p_max - p_min
-        tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
-        tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
-        B, dB, _ = _bezier_rows(alpha, tau)
-        y1 = ck * dth[0] + ca_ * dth[1] - v_hip
-        y2 = th[0] - B
-        dy2 = dth[0] - dB * tau_dot
+        tau, _, y1, y2, dy2 = stance_outputs(x, alpha, v_hip, p_min, p_max, ck, ca_)
         eta = ca.vertcat(y1, y2, dy2)
         Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
         Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
@@ -257,7 +268,7 @@ class ControllerTerms:
         rp_min, rp_max = R.add("p_min"), R.add("p_max")
         self.stance_layout = R
         tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
-        Bk, dBk, ddBk = _bezier_rows(alpha_r, tau_s)
+        Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
         rdp = rp_max - rp_min
         qd_ = ca.vertcat(Bk, (rp_min + tau_s * rdp - ck * Bk) / ca_)
         dqd_ = rate * ca.vertcat(dBk, (rdp - ck * dBk) / ca_)
@@ -269,16 +280,55 @@ class ControllerTerms:
         S = Layout()
         alpha_s = S.add("alpha", (2, m + 1))
         pitch_c = S.add("pitch", (1, pitch_degree + 1))
+        reach, s_land = S.add("landing_reach"), S.add("landing_start")
+        flat_span = S.add("landing_flatten")
         self.swing_layout = S
-        Bs, dBs, ddBs = _bezier_rows(alpha_s, tau_s)
-        pitch = bezier.evaluate(pitch_c, tau_s)
+        s_raw, rate_raw = ca.SX.sym("s_raw"), ca.SX.sym("rate_raw")
+        s_c = ca.fmin(ca.fmax(s_raw, 0), 1)  # the Bezier rows hold their end values
+        pitch = bezier.evaluate(pitch_c, s_c)
+        Bs = bezier.evaluate(alpha_s, s_c)
+        # landing, about the Bezier posture with the socket at its nominal pitch: the knee
+        # turns the shank toward the vertical under the knee (the lowest the sole gets at a
+        # fixed foot pitch) by the fraction w of its angle psi, and the ankle keeps the foot
+        # flat in the world; both are exact (psi and the foot pitch are linear in the joint
+        # angles, slopes +-1)
+        qj, th_s = ca.SX.sym("qj", 2), ca.SX.sym("th_s")
+        q5 = ca.vertcat(0, 0, th_s, qj)
+        knee, ankle = (frame_pose(sub.tree, q5, f) for f in ("p_knee", "p_ankle"))
+        psi = ca.atan2(ankle[0] - knee[0], knee[1] - ankle[1])  # shank from vertical
+        foot = frame_pose(sub.tree, q5, "p_sole")[2]
+        geo = ca.Function("landing_geometry", [qj, th_s],
+                          [psi, ca.jacobian(psi, qj)[0], foot])
+        psi0, dpsi_dk, pitch0 = geo(Bs, pitch)
+        w = ca.fmin(ca.fmax(reach * (s_raw - s_land) / (1 - s_land), 0), 1)
+        w_flat = ca.fmin(ca.fmax((s_raw - s_land) / flat_span, 0), 1)
+        dk = -w * psi0 / dpsi_dk
+        q_sw = Bs + ca.vertcat(dk, -dk - pitch0 * w_flat)
+        qd_sw = ca.jacobian(q_sw, s_raw) * rate_raw
+        qdd_sw = ca.jacobian(qd_sw, s_raw) * rate_raw
         _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
         grav_free = ca.substitute(H_free, sub.qd, ca.SX.zeros(sub.nq))
         q_hang = ca.vertcat(0, 0, pitch, th)
         g_sw = ca.substitute(grav_free, sub.q, q_hang)[3:5]
-        swref = ca.Function("swing_ref", [x, tau_s, rate, S.symbol],
-                            [Bs, rate * dBs, rate**2 * ddBs, g_sw],
-                            ["x", "tau", "rate", "p"], ["q_d", "qd_d", "qdd_d", "gravity"])
+        swref = ca.Function("swing_ref", [x, s_raw, rate_raw, S.symbol],
+                            [q_sw, qd_sw, qdd_sw, g_sw, s_c],
+                            ["x", "s_raw", "rate_raw", "p"],
+                            ["q_d", "qd_d", "qdd_d", "gravity", "tau"])
+
+        # ---- phase_pd ------------------------------------------------------------------
+        Q = Layout()
+        alpha_q = Q.add("alpha_pk", (1, m + 1))
+        v_hip_q, p_min_q, p_max_q = Q.add("v_hip"), Q.add("p_min"), Q.add("p_max")
+        ff = Q.add("feedforward", (2, feedforward_degree + 1))
+        kp_q, kd_q, kv_q = Q.add("kp"), Q.add("kd"), Q.add("k_vhip")
+        self.phase_pd_layout = Q
+        tau_q, _, y1_q, y2_q, dy2_q = stance_outputs(x, alpha_q, v_hip_q, p_min_q, p_max_q,
+                                                     ck, ca_)
+        u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(tau_q, 0), 1))
+        fb = ca.vertcat(-kp_q * y2_q - kd_q * dy2_q, kv_q * y1_q)
+        phase_pd = ca.Function("phase_pd", [x, Q.symbol],
+                               [u_ff, fb, tau_q, ca.vertcat(y1_q, y2_q, dy2_q)],
+                               ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
 
         # ---- passive -------------------------------------------------------------------
         Pl = Layout()
@@ -311,8 +361,9 @@ class ControllerTerms:
         reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
         red = ca.Function("reduced", [x], [f_p, g_m, g_s], ["x"], ["f_p", "g_m", "g_s"])
 
-        fns = [clf, sref, swref, passive, lag, reg, red]
-        name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}")
+        fns = [clf, sref, swref, phase_pd, passive, lag, reg, red]
+        name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}"
+                f"_f{feedforward_degree}")
         self.functions = {f.name(): f for f in fns}
         self.numeric = FunctionSet(fns, name, backend)
         self.theta0 = standard_parameters(sub.tree, links)

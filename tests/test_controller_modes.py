@@ -40,14 +40,26 @@ def test_domain_switches_with_hysteresis_and_dwell(ctx):
     # mid-band load keeps stance (hysteresis)
     assert ctl.tick(m(0.5, load=0.5 * (cfg.load_on + cfg.load_off),
                       contact=True)).diagnostics.domain == "ps"
-    out = ctl.tick(m(0.6, load=10, contact=True))  # load below load_off ends stance
+    # a one-tick dip of the load below load_off with contact is not a lift-off
+    assert ctl.tick(m(0.6, load=10, contact=True)).diagnostics.domain == "ps"
+    assert ctl.tick(m(0.601, load=600, contact=True)).diagnostics.domain == "ps"
+    # load held below load_off for off_hold ends stance
+    t0 = 0.7
+    assert ctl.tick(m(t0, load=10, contact=True)).diagnostics.domain == "ps"
+    assert ctl.tick(m(t0 + 0.5 * cfg.off_hold, load=10, contact=True)).diagnostics.domain \
+        == "ps"
+    out = ctl.tick(m(t0 + cfg.off_hold, load=10, contact=True))
     assert out.diagnostics.domain == "pns" and out.diagnostics.mode == MODE_SWING
+    # losing contact ends stance at once
+    ctl.reset()
+    ctl.tick(m(0.0, load=600, contact=True))
+    assert ctl.tick(m(cfg.min_dwell, load=600, contact=False)).diagnostics.domain == "pns"
 
 
 def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, model,
                                                                        template_gait):
-    """At the desired state the swing torque is the gravity torque alone; tau_hat is
-    (t - t_liftoff) / T_pns, clipped to [0, 1]."""
+    """Before the landing starts, at the desired state the swing torque is the gravity
+    torque alone; tau_hat is (t - t_liftoff) / T_pns."""
     T = ctx.durations["pns"]
     pns = template_gait.params["pns"]
     rows = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
@@ -57,12 +69,13 @@ def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, mod
     ctl.tick(m(t0))  # lift-off at t0 (first sample: swing)
     sub = ctx.subsystem
     energy = sub.numeric()["energy"]
-    pitch_c = ctx.swing_params[-(ctx.terms.swing_layout.size - 2 * (pns.degree + 1)):]
-    for frac in (0.25, 0.6, 1.4):
+    pitch_c = ctx.swing_params[2 * (pns.degree + 1):2 * (pns.degree + 1) + 6]
+    assert ctx.config.swing.landing_start > 0.6
+    for frac in (0.25, 0.6):
         t = t0 + frac * T
-        s = min(frac, 1.0)
+        s = frac
         qd = bezier.evaluate(pns.alpha[rows], s)
-        vd = bezier.evaluate(bezier.derivative(pns.alpha[rows]), s) / T if frac < 1 else 0 * qd
+        vd = bezier.evaluate(bezier.derivative(pns.alpha[rows]), s) / T
         out = ctl.tick(m(t, (*qd, *vd)))
         assert out.diagnostics.tau == pytest.approx(s)
         assert out.diagnostics.mode == MODE_SWING
@@ -77,6 +90,105 @@ def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, mod
             vm = float(energy(q - e, np.zeros(5))[1][0])
             g[j] = (vp - vm) / 2e-6
         np.testing.assert_allclose(out.torque * np.array(ctx.gear), g, rtol=1e-6, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def stored_ctx(model, subsystem):
+    """A context on the stored human-like gait (ps 0.81 s; tests/data/playback)."""
+    from hp_model.gait_artifact import load_gait
+    from prosthesis_controller import ControllerContext
+    from tests.playback_helpers import GAIT
+
+    gait = load_gait(GAIT, model.parameter_hash())
+    return ControllerContext(gait, tube_about_nominal(gait, (40, 60, 8)), model,
+                             subsystem=subsystem)
+
+
+def test_swing_landing_straightens_the_shank_and_flattens_the_foot(stored_ctx):
+    """From landing_start on, the swing target turns the shank toward the vertical under the
+    knee by the fraction w of its angle (w = reach (s - start) / (1 - start), capped at 1)
+    and the foot flat in the world (socket at its nominal pitch), which lowers the sole;
+    checked with the subsystem's forward kinematics (the 5-DOF tree's frames, not the
+    controller's terms)."""
+    ctx = stored_ctx
+    sw = ctx.config.swing
+    T = ctx.durations["pns"]
+    pns = ctx.gait.params["pns"]
+    rows = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
+    pitch_c = ctx.swing_params[2 * (pns.degree + 1):2 * (pns.degree + 1) + 6]
+    f = ctx.terms.numeric["swing_ref"]
+    frames = ctx.subsystem.numeric()["frames"]
+    idx = {n: ctx.subsystem.frame_index(n) for n in ("p_knee", "p_ankle", "p_sole")}
+
+    def geometry(pitch, qj):
+        P = frames(np.r_[0.0, 0.0, pitch, qj], np.zeros(5))[0]
+        k, a, s = P[:, idx["p_knee"]], P[:, idx["p_ankle"]], P[:, idx["p_sole"]]
+        return np.arctan2(a[0] - k[0], k[1] - a[1]), s[1], s[2]  # psi, sole z, foot pitch
+
+    dev = ctx.model.device.prosthesis
+    L, h = dev.shin.length.value, dev.foot.ankle_height.value
+    a, flat = sw.landing_start, sw.landing_start + sw.landing_flatten
+    for s_raw in (0.5 * (a + flat), flat + 0.02, 1.0, 1.3, 12.0):
+        s = min(s_raw, 1.0)
+        q_d = f(np.zeros(4), s_raw, 1.0 / T, ctx.swing_params)[0].copy()
+        pitch = float(bezier.evaluate(pitch_c[None, :], s)[0])
+        psi0, z0, foot0 = geometry(pitch, bezier.evaluate(pns.alpha[rows], s))
+        psi, z, foot = geometry(pitch, q_d)
+        w = min(sw.landing_reach * (s_raw - a) / (1 - a), 1.0)
+        w_flat = min((s_raw - a) / sw.landing_flatten, 1.0)
+        assert psi == pytest.approx((1 - w) * psi0, abs=1e-9)
+        assert foot == pytest.approx((1 - w_flat) * foot0, abs=1e-9)
+        # the knee stays put: sole z = z_knee - L_shin cos(psi) - h_ankle cos(foot pitch)
+        dz = L * (np.cos(psi) - np.cos(psi0)) + h * (np.cos(foot) - np.cos(foot0))
+        assert z == pytest.approx(z0 - dz, abs=1e-9)
+        if w > 0:
+            assert z < z0
+    # before landing_start the target is the Bezier posture
+    q_d = f(np.zeros(4), 0.5 * a, 1.0 / T, ctx.swing_params)[0].copy()
+    np.testing.assert_allclose(q_d, bezier.evaluate(pns.alpha[rows], 0.5 * a), atol=1e-12)
+
+
+def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, template_gait):
+    """On the nominal (y = 0) the phase-PD torque is the fitted nominal stance torque; a
+    knee error adds -kp y2 - kd dy2 and a hip-velocity error k_vhip y1 (joint side); the
+    feedforward fit reproduces the gait's collocation torques."""
+    from prosthesis_controller.controllers import stance_torque_fit
+
+    ps = template_gait.params["ps"]
+    ck, ca_ = ctx.terms.c_k, ctx.terms.c_a
+    cfg = ctx.config.phase_pd
+    gear = np.array(ctx.gear)
+    ctl = make_controller("phase-pd", None, None, None, context=ctx)
+    ctl.reset()
+    ctl.tick(m(0.0, load=600, contact=True))
+    ff = stance_torque_fit(template_gait, ctx.model)
+    tr = template_gait.trajectory["ps"]
+    q, u = np.asarray(tr["q"]), np.asarray(tr["u"])
+    tau_c = (ck * q[10] + ca_ * q[11] - ps.p_min) / (ps.p_max - ps.p_min)
+    fit = bezier.evaluate(ff, np.clip(tau_c, 0, 1))
+    # fit error well below the motor limits (2.4, 3 N m): 5 % of them
+    assert np.abs(fit - u[4:6].T).max() < 0.05 * min(ctx.limits)
+    for k, tau in enumerate((0.2, 0.5, 0.8)):
+        qk = float(bezier.evaluate(ps.alpha[4:5], tau)[0])
+        qa = (ps.p_min + tau * (ps.p_max - ps.p_min) - ck * qk) / ca_
+        # velocities on the nominal: tau_dot = v_hip / dp, knee dB/dtau tau_dot
+        tdot = ps.v_hip / (ps.p_max - ps.p_min)
+        vk = float(bezier.evaluate(bezier.derivative(ps.alpha[4:5]), tau)[0]) * tdot
+        va = (ps.v_hip - ck * vk) / ca_
+        t = 0.1 + 0.1 * k
+        out = ctl.tick(m(t, (qk, qa, vk, va), load=600, contact=True))
+        expected = bezier.evaluate(ff, tau)
+        np.testing.assert_allclose(out.torque, expected, atol=1e-9)
+        assert out.diagnostics.tau == pytest.approx(tau, abs=1e-12)
+        # knee error e (tau unchanged: the ankle moves by -c_k/c_a e) and hip speed error dv
+        e, dv = 0.01, 0.05
+        out = ctl.tick(m(t + 0.01, (qk + e, qa - ck / ca_ * e, vk, va + dv / ca_),
+                         load=600, contact=True))
+        # y2 = e; dy2 = -dB/dtau * dv / dp (tau_dot grows with the hip speed); y1 = dv
+        dB = float(bezier.evaluate(bezier.derivative(ps.alpha[4:5]), tau)[0])
+        dy2 = -dB * dv / (ps.p_max - ps.p_min)
+        fb = np.array([-cfg.kp * e - cfg.kd * dy2, cfg.k_vhip * dv]) / gear
+        np.testing.assert_allclose(out.torque, expected + fb, atol=1e-9)
 
 
 def test_pd_reference_obeys_the_phase_relation_and_vanishes_on_it(ctx, template_gait):

@@ -13,11 +13,14 @@ from orchestrator.scenarios import (
     NOMINAL,
     Perturbation,
     Scenario,
+    initial_state,
     measurement,
     run_scenario,
     simulated_tube,
+    socket_force_in_tube,
     summary,
 )
+from tests.controller_support import tube_about_nominal
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +53,59 @@ def test_run_scenario_consistent(model, template_gait, tube):
     assert math.isclose(s["knee_rms_ps_rad"], r.knee_rms("ps"))
 
 
+@pytest.fixture(scope="module")
+def stored_gait(model):
+    """The stored human-like gait (ps 0.81 s, tests/data/playback)."""
+    from hp_model.gait_artifact import load_gait
+    from tests.playback_helpers import GAIT
+
+    return load_gait(GAIT, model.parameter_hash())
+
+
+def test_offset_start_moves_only_the_prosthesis_knee_output(model, stored_gait):
+    """knee_offset(d) puts the knee output d rad off at the nominal phase; the human is on
+    its outputs and the stance foot flat and at rest (J_foot qd = 0)."""
+    from hp_model.closed_loop import ClosedLoop
+    from orchestrator.experiments import knee_offset
+
+    vc = ClosedLoop(model, stored_gait.degree).vcs["ps"]
+    out = vc.numeric()["outputs_ps"]
+    th = stored_gait.theta("ps")
+    q0, qd0 = initial_state(model, stored_gait)
+    q, qd = initial_state(model, stored_gait, knee_offset(model, 0.02))
+    _, y2_0, _, tau0 = (a.copy() for a in out(q0, qd0, th))
+    _, y2, _, tau = (a.copy() for a in out(q, qd, th))
+    assert float(tau[0]) == pytest.approx(float(tau0[0]), abs=1e-12)
+    assert float(y2[4] - y2_0[4]) == pytest.approx(0.02, abs=1e-12)
+    np.testing.assert_allclose(y2[:4], y2_0[:4], atol=1e-12)  # human outputs unchanged
+    J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3]
+    np.testing.assert_allclose(J @ qd, 0.0, atol=1e-12)
+    frames = model.numeric()["frames"](q, qd)[0]
+    np.testing.assert_allclose(frames[1:3, model.frame_index("p_sole")], 0.0, atol=1e-12)
+
+
+def test_socket_force_in_tube_counts_the_box(stored_gait):
+    tube = tube_about_nominal(stored_gait, (10.0, 20.0, 3.0))
+    tau = np.array([0.2, 0.4, 0.6, 0.8])
+    f = tube.nominal_force(tau).reshape(-1, 3)
+    f[1, 0] += 11.0  # outside in F_x
+    f[2, 2] -= 2.9  # inside
+    assert socket_force_in_tube(tube, tau, f) == pytest.approx(0.75)
+
+
+def test_phase_pd_walks_the_stored_gait_with_flat_landings(model, stored_gait):
+    """The full hybrid model, the human by feedback linearization, the phase-PD reference in
+    ps and the shared swing controller (with its landing) in pns at 1 kHz: 4 steps, every
+    touchdown within 0.02 rad of flat (the simulator ends a run above 0.1 rad), and the knee
+    within 2 degrees RMS of its nominal in ps."""
+    tube = tube_about_nominal(stored_gait, (40.0, 60.0, 8.0))
+    r = run_scenario(model, stored_gait, tube, Scenario("phase-pd", NOMINAL, 4))
+    assert r.success, r.reason
+    assert max(abs(p) for p in r.touchdown_pitch) < 0.02
+    assert r.knee_rms("ps") < np.radians(2.0)
+    assert all(m in ("stance", "swing") for m in r.mode)
+
+
 def test_perturbation_changes_the_human_only(template_gait):
     p = Perturbation("x", 0.01, 3)
     th = p.thetas(template_gait)
@@ -67,17 +123,25 @@ def test_demo_quick_end_to_end(tmp_path):
               "fig7_phase_portraits.png", "fig8_robustness.png"):
         assert (out / f).stat().st_size > 0, f
     m = json.loads((out / "metrics.json").read_text())
-    assert m["schema_version"] == 1 and m["steps"] == 3
+    assert m["schema_version"] == 2 and m["steps"] == 3
     run = m["nominal"]["run"]
     assert run["success"] == (not run["failed"] and run["steps_completed"] >= 3)
     e = m["exact_vs_relaxed"]
     a, b = e["clfqp-exact"]["chatter_rate_Nm_per_s"], e["clfqp"]["chatter_rate_Nm_per_s"]
     if a is not None and b:
         assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
+    ref = m["reference"]
+    assert ref["controller"] == "phase-pd"
+    assert ref["run"]["success"] == (not ref["run"]["failed"]
+                                     and ref["run"]["steps_completed"] >= 3)
+    for a in m["diagnosis"]["input_authority"]:
+        full, red = np.array(a["full_A_per_motor_Nm"]), np.array(a["reduced_Am_per_motor_Nm"])
+        assert a["norm_ratio_reduced_over_full"] == pytest.approx(
+            np.linalg.norm(red) / np.linalg.norm(full), rel=1e-9)
     rb = m["robustness"]
     assert len(rb["cases"]) == 3
     for cc in rb["cases"].values():
-        assert set(cc) == {"clfqp", "passive", "pd"}
+        assert set(cc) == {"clfqp", "passive", "pd", "phase-pd"}
         for s in cc.values():
             assert s["knee_rms_ps_rad"] is None or s["knee_rms_ps_rad"] >= 0
             if s["failed"]:
@@ -85,6 +149,9 @@ def test_demo_quick_end_to_end(tmp_path):
     order = [cc["clfqp"]["knee_rms_ps_rad"] < cc["passive"]["knee_rms_ps_rad"]
              < cc["pd"]["knee_rms_ps_rad"] for cc in rb["cases"].values()]
     assert rb["knee_rms_order_clfqp_lt_passive_lt_pd"] == order
+    done = [all(cc[c]["success"] for c in ("clfqp", "passive", "pd"))
+            for cc in rb["cases"].values()]
+    assert rb["knee_rms_order_all_completed"] == [o and d for o, d in zip(order, done, strict=True)]
     assert rb["clfqp_succeeds_every_case"] == all(cc["clfqp"]["success"]
                                                   for cc in rb["cases"].values())
     claims = {c["id"]: c for c in m["claims"]}
