@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,3 +92,17 @@ def make_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
     kw = dict(cfg.options)
     kw.update({k: v for k, v in extra.items() if k not in ("declare_alive",)})
     return can.Bus(interface=cfg.interface, channel=cfg.channel or cfg.run_id, **kw)
+
+
+def send_frames(bus: can.BusABC, msgs: Sequence[can.Message]) -> None:
+    """Send the frames of one control cycle, in order: as one bulk transfer where the bus
+    has ``send_batch`` (:class:`bus_schemas.zenoh_can.ZenohBus`), else frame by frame
+    (any python-can bus)."""
+    if not msgs:
+        return
+    batch = getattr(bus, "send_batch", None)
+    if batch is not None:
+        batch(msgs)
+    else:
+        for m in msgs:
+            bus.send(m)

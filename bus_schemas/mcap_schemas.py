@@ -24,6 +24,7 @@ import math
 import os
 import signal
 import time
+from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from types import FrameType
@@ -261,6 +262,7 @@ class Recorder:
         self._pending: int | None = None
         self._exit_on_signal = True
         self._old_handlers: dict[int, Any] = {}
+        self._deferred: deque[tuple[str, Any, int | None]] = deque()
         if metadata:
             self.add_metadata("run", metadata)
 
@@ -301,6 +303,7 @@ class Recorder:
             raise RuntimeError(f"recorder {self.path} is finished")
         t = time.time_ns() if log_time_ns is None else int(log_time_ns)
         data = message if isinstance(message, bytes) else encode_json(message)
+        outer = self._busy
         self._busy = True
         try:
             cid = self._channels[topic] if topic in self._channels else self.add_channel(topic)
@@ -310,8 +313,8 @@ class Recorder:
                                      else int(publish_time_ns), sequence=seq)
             self.message_count += 1
         finally:
-            self._busy = False
-        if self._pending is not None:
+            self._busy = outer
+        if not outer and self._pending is not None:
             self._handle_pending()
 
     def write_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
@@ -319,6 +322,37 @@ class Recorder:
         """Write a frame to ``/can/tx`` or ``/can/rx``."""
         self.write(f"/can/{direction}", can_frame_message(msg, direction, name=name,
                                                            status=status), log_time_ns)
+
+    # -- deferred writes: record now, serialize when the caller has time (e.g. while it
+    #    waits for a reply); :meth:`finish` writes what is left, also on a signal
+    def defer(self, topic: str, message: Any, log_time_ns: int | None = None) -> None:
+        """Queue one message for :meth:`write_deferred` (``message`` must not change
+        afterwards). ``log_time_ns`` None: the time of this call."""
+        if self.finished:
+            self.write(topic, message, log_time_ns)  # raises or counts as dropped
+            return
+        self._deferred.append((topic, message, time.time_ns() if log_time_ns is None
+                               else int(log_time_ns)))
+
+    def defer_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
+                  *, name: str | None = None, status: str | None = None) -> None:
+        """Queue a frame for ``/can/tx`` or ``/can/rx`` (see :meth:`write_can`)."""
+        self.defer(f"/can/{direction}", can_frame_message(msg, direction, name=name,
+                                                           status=status), log_time_ns)
+
+    @property
+    def deferred(self) -> int:
+        """Messages queued and not yet written."""
+        return len(self._deferred)
+
+    def write_deferred(self) -> int:
+        """Write the queued messages in queue order; returns how many."""
+        n = 0
+        q = self._deferred
+        while q and not self.finished:
+            self.write(*q.popleft())
+            n += 1
+        return n
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
         """A metadata record; values are stored as strings (JSON for non-strings)."""
@@ -352,6 +386,7 @@ class Recorder:
         if self.finished:
             return self.path
         with self._critical():
+            self.write_deferred()
             self.finished = True
             try:
                 self._writer.finish()

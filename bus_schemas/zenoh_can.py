@@ -13,7 +13,10 @@ accepted too. Plant and controller buses also declare the liveliness token
 Frames travel as a 15-byte header plus the data bytes (:func:`pack_message`); the received
 message keeps the sender's ``timestamp`` as it was (seconds), so a lockstep plant can stamp
 frames with simulation time; ``stamp=True`` makes the bus stamp wall time (``time.time()``)
-at send instead.
+at send instead. :meth:`ZenohBus.send_batch` sends the frames of one control cycle as one
+zenoh sample (a *frame batch*, :func:`pack_batch`, like a CAN driver's bulk transfer: each
+frame still individually encoded, counted and checked; the receiver's ``recv`` returns them
+one by one, in order). Plain ``send`` sends one frame in the single-frame form.
 
 Reception happens in the caller's thread, one hop from zenoh's network thread: ``recv``
 blocks in the subscriber's ring channel (no Python callback, no reader thread). zenoh's
@@ -32,6 +35,7 @@ import threading
 import time
 import uuid
 from collections import deque
+from collections.abc import Sequence
 from typing import Any
 
 import can
@@ -42,6 +46,8 @@ from bus_schemas.keys import Direction
 from bus_schemas.zenoh_config import make_config
 
 WIRE_VERSION = 1
+BATCH_VERSION = 2
+MAX_BATCH = 255  # frames per batch sample (count byte)
 _HEADER = struct.Struct("<BdIBB")  # version, timestamp [s], arbitration id, flags, dlc
 _EXT, _REMOTE, _ERROR, _FD, _BRS, _ESI = 1, 2, 4, 8, 16, 32
 _MAX_DATA = 64
@@ -80,6 +86,46 @@ def unpack_message(payload: bytes, channel: Any = None) -> can.Message | None:
                        data=data, is_fd=bool(flags & _FD), is_rx=True,
                        bitrate_switch=bool(flags & _BRS),
                        error_state_indicator=bool(flags & _ESI))
+
+
+def pack_batch(msgs: Sequence[can.Message], timestamp: float | None = None) -> bytes:
+    """Wire form of a frame batch: version byte 2, frame count n (1..255), then per frame
+    its length L (one byte) and its :func:`pack_message` form (L bytes; 23 for a classic
+    8-byte frame, so four frames take 2 + 4 x 24 = 98 bytes)."""
+    if not 1 <= len(msgs) <= MAX_BATCH:
+        raise ValueError(f"frame batch of {len(msgs)} frames (1..{MAX_BATCH})")
+    parts = [bytes((BATCH_VERSION, len(msgs)))]
+    for m in msgs:
+        p = pack_message(m, timestamp)
+        parts.append(bytes((len(p),)))
+        parts.append(p)
+    return b"".join(parts)
+
+
+def unpack_payload(payload: bytes, channel: Any = None) -> tuple[list[can.Message], int]:
+    """The frames of a sample (single frame or batch) and the number of malformed ones
+    (a batch whose lengths do not add up counts as one). Never raises."""
+    if payload[:1] != b"\x02":
+        m = unpack_message(payload, channel)
+        return ([m], 0) if m is not None else ([], 1)
+    n, pos, end = (payload[1] if len(payload) > 1 else 0), 2, len(payload)
+    spans = []
+    for _ in range(n):
+        size = payload[pos] if pos < end else end
+        if pos + 1 + size > end:
+            return [], 1
+        spans.append((pos + 1, pos + 1 + size))
+        pos += 1 + size
+    if pos != end or n == 0:
+        return [], 1
+    out, bad = [], 0
+    for a, b in spans:
+        m = unpack_message(payload[a:b], channel)
+        if m is None:
+            bad += 1
+        else:
+            out.append(m)
+    return out, bad
 
 
 def publisher_matched(pub: zenoh.Publisher) -> bool:
@@ -220,6 +266,7 @@ class ZenohBus(can.BusABC):
         self.rx_queue_size = int(rx_queue_size)
         self.rx_malformed = 0
         self._own: deque[can.Message] = deque()
+        self._pending: deque[can.Message] = deque()  # rest of a received batch
         self._owns_session = session is None
         self._pub: zenoh.Publisher | None = None
         self._rx: _Receiver | None = None
@@ -261,20 +308,34 @@ class ZenohBus(can.BusABC):
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """Publish one frame (reliable, blocking congestion control; ``timeout`` is not
         supported by zenoh and ignored)."""
+        self._publish(pack_message(msg, time.time() if self.stamp else None))
+
+    def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> None:
+        """Publish the frames of one cycle as one zenoh sample (:func:`pack_batch`; more
+        than 255 frames go as several, a single frame in the single-frame form). The
+        receiver's ``recv`` returns them one by one in this order. Nothing for none."""
+        msgs = list(msgs)
+        ts = time.time() if self.stamp else None
+        for i in range(0, len(msgs), MAX_BATCH):
+            part = msgs[i:i + MAX_BATCH]
+            self._publish(pack_message(part[0], ts) if len(part) == 1
+                          else pack_batch(part, ts))
+
+    def _publish(self, payload: bytes) -> None:
         if self._is_shutdown:
             raise can.CanOperationError("ZenohBus is shut down")
         if self._pub is None:
             raise can.CanOperationError(f"ZenohBus {self.channel!r} is a monitor: no send")
         try:
-            payload = pack_message(msg, time.time() if self.stamp else None)
             self._pub.put(payload)
         except Exception as e:
             raise can.CanOperationError(f"ZenohBus send failed: {e}") from e
         if self.receive_own_messages and self._rx is not None:
-            own = unpack_message(payload, self.channel)
-            if own is not None:
-                own.is_rx = False
-                self._own.append(own)
+            own, _ = unpack_payload(payload, self.channel)
+            for m in own:
+                m.is_rx = False
+            self._own.extend(own)
+            if own:
                 self._rx.wake()
 
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
@@ -282,16 +343,20 @@ class ZenohBus(can.BusABC):
             raise can.CanOperationError("ZenohBus is shut down")
         if self._own:
             return self._own.popleft(), False
+        if self._pending:
+            return self._pending.popleft(), False
         try:
             sample = self._rx.recv(timeout)
         except zenoh.ZError as e:
             raise can.CanOperationError(f"ZenohBus {self.channel!r} closed: {e}") from e
         if sample is None:
             return (self._own.popleft() if self._own else None), False
-        msg = unpack_message(sample.payload.to_bytes(), self.channel)
-        if msg is None:
-            self.rx_malformed += 1
-        return msg, False
+        frames, bad = unpack_payload(sample.payload.to_bytes(), self.channel)
+        self.rx_malformed += bad
+        if not frames:
+            return None, False
+        self._pending.extend(frames[1:])
+        return frames[0], False
 
     def wait_for_peer(self, timeout: float = 5.0, *, alive: bool = True) -> bool:
         """Wait until a subscriber matches what this bus sends and, if ``alive``, the other

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import os
 import platform
 import shutil
@@ -43,12 +44,12 @@ import can
 import numpy as np
 
 from bus_schemas import codec, keys
-from bus_schemas.protocol import CTRL_TO_PLANT, CtrlState, FrameId
+from bus_schemas.bus_config import send_frames
+from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
 from bus_schemas.zenoh_config import loopback_endpoint
+from orchestrator.fmu_port import FmuPort
 
 ROOT = Path(__file__).resolve().parents[1]
-SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau")
-FORCES = ("socket_Fx", "socket_Fz", "socket_My")
 PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
                  "corrupt-length", "kill", "human")
 
@@ -100,6 +101,7 @@ class CosimResult:
     injected: dict[str, int] = field(default_factory=dict)
     latency_us: dict[str, float] = field(default_factory=dict)
     timing_us: dict[str, float] = field(default_factory=dict)
+    node: dict[str, Any] = field(default_factory=dict)  # the controller node's summary
     record: str | None = None
     run_id: str = ""
 
@@ -416,6 +418,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                     proc.kill()
                     proc.wait()
             if proc.stderr:
+                with contextlib.suppress(Exception):
+                    res.node = node_summary(proc.stderr.read().decode(errors="replace"))
                 proc.stderr.close()
         if fmu is not None:
             fmu.free()
@@ -427,6 +431,21 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     return res
 
 
+def node_summary(stderr: str) -> dict[str, Any]:
+    """The controller node's JSON summary (its last ``controller node: {...}`` line on
+    stderr), or {} if it printed none (killed, crashed)."""
+    from prosthesis_controller.node import SUMMARY_PREFIX
+
+    for line in reversed(stderr.splitlines()):
+        if line.startswith(SUMMARY_PREFIX):
+            try:
+                d = json.loads(line[len(SUMMARY_PREFIX):])
+            except ValueError:
+                return {}
+            return d if isinstance(d, dict) else {}
+    return {}
+
+
 def _summary_dict(res: CosimResult) -> dict[str, Any]:
     d = asdict(res)
     d["real_time_factor"] = res.real_time_factor
@@ -436,14 +455,10 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc: Any,
           lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
           progress: Callable[[int, float, int], None] | None) -> None:
-    f = fmu.fmu
-    sens = fmu.vrs(SENSORS)
-    qv = fmu.vrs([f"q[{i}]" for i in range(1, 13)])
-    qdv = fmu.vrs([f"qd[{i}]" for i in range(1, 13)])
-    iv = fmu.vrs(["domain", "steps", "fall_code"])
-    fallv = fmu.vrs(["fall"])
-    uv = fmu.vrs(["u_knee", "u_ankle"])
-    fv = fmu.vrs(FORCES)
+    """The tick loop (module docstring). Recording is deferred: the tick's frames and
+    signals are queued as they happen and serialized while the plant waits for the
+    controller's reply (after sending), so MCAP writing overlaps the round trip."""
+    port = FmuPort(fmu.fmu, fmu.vr)
     plant = Plant()
     dt = cfg.dt
     realtime = cfg.mode == "realtime"
@@ -451,34 +466,41 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     u = (0.0, 0.0)
     missed_run = 0
     lat: list[float] = []
-    t_rt: list[float] = []
-    t_fmu = 0.0
-    t_total = 0.0
+    clock = time.perf_counter_ns
+    # per tick [ns]: whole tick, FMU calls, send -> reply in hand, MCAP serialization
+    # (inside the round trip), blocked waiting after it
+    t_tick: list[int] = []
+    t_fmu: list[int] = []
+    t_rt: list[int] = []
+    t_rec: list[int] = []
+    t_wait: list[int] = []
     wall0 = time.perf_counter()
     rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
     injected: dict[str, int] = {}
     domains = ("ps", "pns")
+    names = {fid: frame_specs()[fid].name for fid in PLANT_TO_CTRL}
 
     def log_ns(t: float) -> int:
         return round((time.perf_counter() - wall0 if realtime else t) * 1e9)
 
-    def record_rx(msg: can.Message, v: codec.Verdict, t: float) -> None:
+    def on_rx(msg: can.Message, t: float) -> codec.Verdict:
+        v = plant.on_rx(msg)
         res.frames_rx += 1
         if rec is None:
-            return
+            return v
         ns = log_ns(t)
-        rec.write_can(msg, "rx", ns, name=v.name, status=str(v.status))
+        rec.defer_can(msg, "rx", ns, name=v.name, status=str(v.status))
         if not v.ok:
-            return
+            return v
         if v.frame_id == FrameId.TORQUE_CMD:
             c = v.value
-            rec.write("/prosthesis/torque_command", {
+            rec.defer("/prosthesis/torque_command", {
                 "knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
                 "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable),
                 "counter": v.counter, "cycle_time_us": round(msg.timestamp * 1e6)}, ns)
         elif v.frame_id == FrameId.CTRL_STATUS:
             s = v.value
-            rec.write("/controller/diagnostics", {
+            rec.defer("/controller/diagnostics", {
                 "t": msg.timestamp, "controller": cfg.controller, "domain": None, "tau": None,
                 "V": None, "rho": None, "u": [u[0] * ratio[0], u[1] * ratio[1]],
                 "qp_status": getattr(s.qp_status, "name", str(s.qp_status)),
@@ -487,15 +509,15 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
                 "fallback_count": s.fallback_count, "fault_flags": int(s.fault_flags),
                 "solve_time_us": None, "source": "CtrlStatus frame",
                 "ctrl_rejects": plant.ctrl_rejects}, ns)
+        return v
 
     k = 0
     fault_first_miss = -1
     while True:
-        tick0 = time.perf_counter()
+        tick0 = clock()
         t = k * dt
-        y = f.getReal(sens)
-        dom, steps, code = f.getInteger(iv)
-        fell = f.getBoolean(fallv)[0]
+        y, state, (dom, steps, code), fell = port.read()
+        fmu_ns = clock() - tick0
         res.steps = steps
         if fell:
             res.fell, res.fall_code = True, code
@@ -510,8 +532,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         if rec is not None:
             ns = log_ns(t)
             for m in frames:
-                rec.write_can(m, "tx", ns, name=codec.decode(m).name)
-            rec.write("/prosthesis/measurements", {
+                rec.defer_can(m, "tx", ns, name=names[m.arbitration_id])
+            rec.defer("/prosthesis/measurements", {
                 "knee_angle": codec.quantize_angle(y[0]),
                 "knee_velocity": codec.quantize_velocity(y[2]),
                 "ankle_angle": codec.quantize_angle(y[1]),
@@ -521,13 +543,18 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         send, what = plan.apply(k, frames)
         if what:
             injected[what] = injected.get(what, 0) + 1
-        s0 = time.perf_counter()
-        for m in send:
-            bus.send(m)
+        s0 = clock()
+        send_frames(bus, send)
         res.frames_tx += len(send)
+        # -- while the controller works: serialize what this tick and the last recorded
+        if rec is not None:
+            r0 = clock()
+            rec.write_deferred()
+            t_rec.append(clock() - r0)
+        w0 = clock()
         # -- wait for this cycle's torque
         got = False
-        deadline = wall0 + (k + 0.8) * dt if realtime else s0 + cfg.reply_timeout
+        deadline = wall0 + (k + 0.8) * dt if realtime else s0 * 1e-9 + cfg.reply_timeout
         while True:
             left = deadline - time.perf_counter()
             if left <= 0 or lost.is_set():
@@ -535,17 +562,18 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             msg = bus.recv(min(left, 0.005))
             if msg is None:
                 continue
-            v = plant.on_rx(msg)
-            record_rx(msg, v, t)
+            v = on_rx(msg, t)
             if v.ok and v.frame_id == FrameId.TORQUE_CMD:
                 c = v.value
                 u = (c.knee, c.ankle) if c.enable else (0.0, 0.0)
                 if abs(msg.timestamp - t) <= rtol:
                     got = True
-                    lat.append(time.perf_counter() - s0)
                     break
         if got:
-            t_rt.append(time.perf_counter() - s0)
+            r1 = clock()
+            lat.append((r1 - s0) * 1e-9)
+            t_rt.append(r1 - s0)
+            t_wait.append(r1 - w0)
             missed_run = 0
             fault_first_miss = -1
         else:
@@ -568,19 +596,16 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             u = (0.0, 0.0)
             res.faulted, res.fault_reason = True, reason
             res.detection_periods = k - (fault_first_miss if fault_first_miss >= 0 else k) + 1
-        f0 = time.perf_counter()
-        f.setReal(uv, list(u))
+        f0 = clock()
+        port.set_torque(*u)
         if rec is not None:
-            fs = f.getReal(fv)
-            q = f.getReal(qv)
-            qd = f.getReal(qdv)
-            rec.write("/ground_truth", {
-                "t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]}, "q": q,
-                "qd": qd, "domain": domains[dom], "tau": y[5], "step": steps,
-                "fallen": False, "u_applied": list(u)}, log_ns(t))
-        f.doStep(t, dt)
-        f1 = time.perf_counter()
-        t_fmu += f1 - f0
+            fs = port.forces()
+            rec.defer("/ground_truth", {
+                "t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]},
+                "q": state[:12], "qd": state[12:], "domain": domains[dom], "tau": y[5],
+                "step": steps, "fallen": False, "u_applied": list(u)}, log_ns(t))
+        port.step(t, dt)
+        t_fmu.append(fmu_ns + clock() - f0)
         if res.faulted:
             k += 1
             break
@@ -595,11 +620,10 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
                     break
                 msg = bus.recv(left)
                 if msg is not None:
-                    v = plant.on_rx(msg)
-                    record_rx(msg, v, t)
+                    v = on_rx(msg, t)
                     if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
                         u = (v.value.knee, v.value.ankle)
-        t_total += time.perf_counter() - tick0
+        t_tick.append(clock() - tick0)
     res.ticks = k
     res.sim_time = k * dt
     res.wall_time = time.perf_counter() - wall0
@@ -610,10 +634,28 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         a = [x * 1e6 for x in lat]
         res.latency_us = {"median": _pct(a, 50), "p99": _pct(a, 99), "max": max(a),
                           "n": len(a)}
-    n = max(1, k)
-    rt = sum(t_rt) / max(1, len(t_rt)) * 1e6
-    res.timing_us = {"tick": t_total / n * 1e6, "fmu": t_fmu / n * 1e6, "round_trip": rt,
-                     "overhead": t_total / n * 1e6 - t_fmu / n * 1e6 - rt}
+    res.timing_us = tick_breakdown(t_tick, t_fmu, t_rt, t_rec, t_wait)
+
+
+def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],
+                   wait: list[int]) -> dict[str, float]:
+    """Mean per tick [us] of the whole tick, the FMU calls, the round trip (send -> this
+    cycle's reply in hand: zenoh both ways, the node's frame handling and controller tick,
+    and the plant's MCAP serialization done meanwhile), and the overhead beyond FMU + round
+    trip (FMU-output encoding, frame checks, queuing records); ``record``: serialization
+    inside the round trip; ``wait``: blocked after it; ``reply_early``: share of ticks
+    whose reply was in before serialization ended (wait < 20 us: there the round trip
+    figure is the serialization time, an upper bound of the real round trip)."""
+    n = max(1, len(tick))
+
+    def mean(a: list[int], over: int | None = None) -> float:
+        return sum(a) / (over or max(1, len(a))) * 1e-3
+
+    out = {"tick": mean(tick), "fmu": mean(fmu, n), "round_trip": mean(rt),
+           "record": mean(rec), "wait": mean(wait)}
+    out["overhead"] = out["tick"] - out["fmu"] - sum(rt) / n * 1e-3
+    out["reply_early"] = sum(1 for w in wait if w < 20_000) / max(1, len(wait))
+    return out
 
 
 def tmp_run_id() -> str:

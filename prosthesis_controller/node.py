@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import signal
 import sys
 import time
@@ -37,11 +38,20 @@ from typing import Any
 import can
 
 from bus_schemas import codec
-from bus_schemas.bus_config import BusConfig, bus_config_from_dict, load_bus_config, make_bus
+from bus_schemas.bus_config import (
+    BusConfig,
+    bus_config_from_dict,
+    load_bus_config,
+    make_bus,
+    send_frames,
+)
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
 from prosthesis_controller.interface import Active, Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
+from prosthesis_controller.timing import Durations
 
+_SEND = Durations()
+SUMMARY_PREFIX = "controller node: "  # + the JSON summary, last line on stderr at exit
 FEEDBACK = (FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD)
 _QP = {"solved": QpStatus.SOLVED, "not_run": QpStatus.NOT_RUN,
        "infeasible": QpStatus.PRIMAL_INFEASIBLE, "failed": QpStatus.UNSOLVED,
@@ -85,6 +95,7 @@ class ControllerNode:
         self._last_diag: Any = None
         self._wrap = 0
         self._last_us: int | None = None
+        self.tick_time = Durations()  # controller.tick per cycle
         controller.reset()
 
     # -- frames in, frames out
@@ -127,7 +138,9 @@ class ControllerNode:
         k, a, ld = (self.last[f] for f in FEEDBACK)
         meas = ProsthesisMeasurement(t, k.angle, a.angle, k.velocity, a.velocity, ld.load,
                                      bool(ld.contact))
+        t0 = time.perf_counter_ns()
         res = self.controller.tick(meas)
+        self.tick_time.add(time.perf_counter_ns() - t0)
         d = res.diagnostics
         self._last_diag = d
         if d.qp_status in ("infeasible", "failed", "nonfinite"):
@@ -217,36 +230,49 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
         on_ready()
     plant_seen = False
     timeout = max(1e-3, node.watchdog / 2)
+    cycle = Durations()  # first frame of a cycle received -> its reply sent
+    first: int | None = None
     try:
         while stop is None or not stop.is_set():
             msg = bus.recv(timeout)
+            if msg is not None and first is None:
+                first = time.perf_counter_ns()
             now = time.monotonic()
             out = node.handle(msg, now) if msg is not None else []
             out += node.poll(now)
-            for m in out:
-                bus.send(m)
+            _a = time.perf_counter_ns()
+            send_frames(bus, out)
+            if out: _SEND.add(time.perf_counter_ns() - _a)
+            if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:
+                cycle.add(time.perf_counter_ns() - first)
+                first = None
             if plant_sub is not None:
                 s = plant_sub.try_recv()
                 while s is not None:
                     if s.kind == zenoh.SampleKind.PUT:
                         plant_seen = True
                     elif plant_seen and exit_with_plant:
-                        return _summary(node, "plant gone")
+                        return _summary(node, "plant gone", cycle)
                     s = plant_sub.try_recv()
     except can.CanOperationError:
-        return _summary(node, "bus closed")
+        return _summary(node, "bus closed", cycle)
     finally:
         for obj in (token, plant_sub):
             if obj is not None:
                 with contextlib.suppress(Exception):
                     obj.undeclare()
-    return _summary(node, "stopped")
+    return _summary(node, "stopped", cycle)
 
 
-def _summary(node: ControllerNode, why: str) -> dict[str, Any]:
+def _summary(node: ControllerNode, why: str, cycle: Durations) -> dict[str, Any]:
+    """What the node did; ``timing_us``: ``controller_tick`` (controller.tick alone) and
+    ``cycle`` (first frame of a cycle received -> its TorqueCmd sent: frame checks, the
+    tick, encoding, sending)."""
     return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
             "safe_entries": node.safe_entries,
-            "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"}}
+            "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"},
+            "timing_us": {"send": _SEND.summary(), "controller_tick": node.tick_time.summary(),
+                          "cycle": cycle.summary()}}
 
 
 def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
@@ -300,7 +326,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                      status_every=a.status_every, subject=a.subject, device=a.device)
     except KeyboardInterrupt:
         return 130
-    print(f"controller node: {s}", file=sys.stderr)
+    print(f"{SUMMARY_PREFIX}{json.dumps(s)}", file=sys.stderr)
     return 0
 
 
