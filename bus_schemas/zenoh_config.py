@@ -72,18 +72,25 @@ def _endpoints(value: str | Iterable[str] | None, what: str, allow_remote: bool)
     return items
 
 
+#: zenoh's low-latency unicast transport: a sender writes to the link from its own thread
+#: (no transmission pipeline and batching task), no QoS priorities; used only when both
+#: peers set it (otherwise they agree on the normal transport)
+LOW_LATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
+
+
 def make_config(*, listen: str | Iterable[str] | None = None,
                 connect: str | Iterable[str] | None = None, mode: str = "peer",
-                allow_remote: bool = False,
+                allow_remote: bool = False, low_latency: bool = False,
                 options: Mapping[str, Any] | None = None) -> zenoh.Config:
     """A zenoh config with scouting off and explicit endpoints.
 
     ``listen``/``connect``: endpoints (a list, or one comma-separated string); empty means
     none (a session without endpoints still delivers within its own process).
     ``mode``: ``peer`` (default) or ``client`` (needs ``connect``, cannot listen).
-    ``options``: further ``{key: value}`` settings inserted last with ``insert_json5``
-    (e.g. ``{"transport/unicast/lowlatency": True}``); keys under listen, connect,
-    scouting and mode need ``allow_remote=True``.
+    ``low_latency``: zenoh's low-latency transport (:data:`LOW_LATENCY`; used between two
+    peers that both set it).
+    ``options``: further ``{key: value}`` settings inserted last with ``insert_json5``;
+    keys under listen, connect, scouting and mode need ``allow_remote=True``.
     """
     if mode not in MODES:
         raise ValueError(f"zenoh mode {mode!r}: expected one of {MODES}")
@@ -97,7 +104,7 @@ def make_config(*, listen: str | Iterable[str] | None = None,
     cfg.insert_json5("scouting/gossip/enabled", "false")
     cfg.insert_json5("listen/endpoints", json.dumps(lst))
     cfg.insert_json5("connect/endpoints", json.dumps(con))
-    for key, value in (options or {}).items():
+    for key, value in {**(LOW_LATENCY if low_latency else {}), **(options or {})}.items():
         if key.split("/", 1)[0] in _GUARDED_KEYS and not allow_remote:
             raise ValueError(f"zenoh option {key!r} may open the session beyond loopback; "
                              "pass allow_remote=True to set it")

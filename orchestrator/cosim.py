@@ -48,6 +48,7 @@ from bus_schemas.bus_config import send_frames
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
 from bus_schemas.zenoh_config import loopback_endpoint
 from orchestrator.fmu_port import FmuPort
+from prosthesis_controller.timing import Usage
 
 ROOT = Path(__file__).resolve().parents[1]
 PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
@@ -76,6 +77,7 @@ class CosimConfig:
     start_timeout: float = 60.0  # s wall for the controller process to come alive
     status_every: int = 100
     controller_watchdog: float = 0.05  # s, the node's own watchdog
+    low_latency: bool = True  # zenoh low-latency transport on both sides
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
@@ -102,6 +104,7 @@ class CosimResult:
     latency_us: dict[str, float] = field(default_factory=dict)
     timing_us: dict[str, float] = field(default_factory=dict)
     node: dict[str, Any] = field(default_factory=dict)  # the controller node's summary
+    usage: dict[str, float] = field(default_factory=dict)  # plant process over the loop
     record: str | None = None
     run_id: str = ""
 
@@ -270,7 +273,8 @@ def controller_command(cfg: CosimConfig, run_id: str, endpoint: str) -> list[str
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
             "--gait", str(cfg.gait), "--tube", str(cfg.tube), "--run-id", run_id,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
-            "--status-every", str(cfg.status_every)]
+            "--status-every", str(cfg.status_every)] + (["--low-latency"] if cfg.low_latency
+                                                        else [])
 
 
 def _env() -> dict[str, str]:
@@ -374,7 +378,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
             rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")
 
         endpoint = loopback_endpoint()
-        bus = ZenohBus(f"{run_id}/plant", listen=endpoint)
+        bus = ZenohBus(f"{run_id}/plant", listen=endpoint, low_latency=cfg.low_latency)
         alive = threading.Event()
 
         def _on_live(sample: Any) -> None:  # sets flags only; nothing blocks here
@@ -474,6 +478,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     t_rt: list[int] = []
     t_rec: list[int] = []
     t_wait: list[int] = []
+    usage = Usage()
     wall0 = time.perf_counter()
     rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
     injected: dict[str, int] = {}
@@ -635,6 +640,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         res.latency_us = {"median": _pct(a, 50), "p99": _pct(a, 99), "max": max(a),
                           "n": len(a)}
     res.timing_us = tick_breakdown(t_tick, t_fmu, t_rt, t_rec, t_wait)
+    res.usage = usage.since()
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],

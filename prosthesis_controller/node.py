@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import signal
 import sys
@@ -48,9 +49,8 @@ from bus_schemas.bus_config import (
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
 from prosthesis_controller.interface import Active, Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
-from prosthesis_controller.timing import Durations
+from prosthesis_controller.timing import Durations, Usage
 
-_SEND = Durations()
 SUMMARY_PREFIX = "controller node: "  # + the JSON summary, last line on stderr at exit
 FEEDBACK = (FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD)
 _QP = {"solved": QpStatus.SOLVED, "not_run": QpStatus.NOT_RUN,
@@ -232,6 +232,7 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
     timeout = max(1e-3, node.watchdog / 2)
     cycle = Durations()  # first frame of a cycle received -> its reply sent
     first: int | None = None
+    usage = Usage()
     try:
         while stop is None or not stop.is_set():
             msg = bus.recv(timeout)
@@ -240,9 +241,7 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
             now = time.monotonic()
             out = node.handle(msg, now) if msg is not None else []
             out += node.poll(now)
-            _a = time.perf_counter_ns()
             send_frames(bus, out)
-            if out: _SEND.add(time.perf_counter_ns() - _a)
             if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:
                 cycle.add(time.perf_counter_ns() - first)
                 first = None
@@ -252,27 +251,30 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
                     if s.kind == zenoh.SampleKind.PUT:
                         plant_seen = True
                     elif plant_seen and exit_with_plant:
-                        return _summary(node, "plant gone", cycle)
+                        return _summary(node, "plant gone", cycle, usage)
                     s = plant_sub.try_recv()
     except can.CanOperationError:
-        return _summary(node, "bus closed", cycle)
+        return _summary(node, "bus closed", cycle, usage)
     finally:
         for obj in (token, plant_sub):
             if obj is not None:
                 with contextlib.suppress(Exception):
                     obj.undeclare()
-    return _summary(node, "stopped", cycle)
+    return _summary(node, "stopped", cycle, usage)
 
 
-def _summary(node: ControllerNode, why: str, cycle: Durations) -> dict[str, Any]:
+def _summary(node: ControllerNode, why: str, cycle: Durations, usage: Usage
+             ) -> dict[str, Any]:
     """What the node did; ``timing_us``: ``controller_tick`` (controller.tick alone) and
     ``cycle`` (first frame of a cycle received -> its TorqueCmd sent: frame checks, the
-    tick, encoding, sending)."""
+    tick, encoding, sending); ``usage``: the process's CPU time and context switches
+    while serving (all threads, zenoh's included)."""
     return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
             "safe_entries": node.safe_entries,
             "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"},
-            "timing_us": {"send": _SEND.summary(), "controller_tick": node.tick_time.summary(),
-                          "cycle": cycle.summary()}}
+            "timing_us": {"controller_tick": node.tick_time.summary(),
+                          "cycle": cycle.summary()},
+            "usage": usage.since()}
 
 
 def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
@@ -314,6 +316,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--channel")
     p.add_argument("--listen")
     p.add_argument("--connect")
+    p.add_argument("--low-latency", action="store_true",
+                   help="zenoh low-latency transport (the plant must use it too)")
     p.add_argument("--watchdog-ms", type=float, default=50.0)
     p.add_argument("--status-every", type=int, default=100)
     p.add_argument("--subject")
@@ -321,6 +325,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = p.parse_args(argv)
     cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
                                channel=a.channel, listen=a.listen, connect=a.connect)
+    if a.low_latency and cfg.interface == "zenoh":
+        cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": True})
     try:
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
                      status_every=a.status_every, subject=a.subject, device=a.device)

@@ -1,7 +1,10 @@
-"""Bounded per-cycle duration statistics (for a node that may serve for hours)."""
+"""Bounded per-cycle duration statistics (for a node that may serve for hours) and the
+process's CPU use over a stretch of work."""
 
 from __future__ import annotations
 
+import resource
+import time
 from collections import deque
 
 import numpy as np
@@ -28,3 +31,20 @@ class Durations:
         a = np.fromiter(self._last, dtype=np.int64) * 1e-3
         return {"n": self.count, "mean_us": self.total_ns / self.count * 1e-3,
                 "median_us": float(np.median(a)), "p99_us": float(np.percentile(a, 99))}
+
+
+class Usage:
+    """CPU time and context switches of this process (all its threads) since creation."""
+
+    def __init__(self) -> None:
+        self._wall = time.perf_counter()
+        self._ru = resource.getrusage(resource.RUSAGE_SELF)
+
+    def since(self) -> dict[str, float]:
+        """``wall_s``, ``cpu_s`` (user + system), ``voluntary_switches`` (blocking waits),
+        ``involuntary_switches`` (preempted while runnable: CPU contention)."""
+        ru, r0 = resource.getrusage(resource.RUSAGE_SELF), self._ru
+        return {"wall_s": time.perf_counter() - self._wall,
+                "cpu_s": ru.ru_utime - r0.ru_utime + ru.ru_stime - r0.ru_stime,
+                "voluntary_switches": ru.ru_nvcsw - r0.ru_nvcsw,
+                "involuntary_switches": ru.ru_nivcsw - r0.ru_nivcsw}
