@@ -25,7 +25,7 @@ import os
 import signal
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from types import FrameType
 from typing import Any
@@ -151,6 +151,11 @@ def can_frame_message(msg: can.Message, direction: str, *, name: str | None = No
             "status": None if status is None else str(status)}
 
 
+def _can_record(msg: can.Message, direction: str, name: str | None, status: str | None
+                ) -> dict[str, Any]:
+    return can_frame_message(msg, direction, name=name, status=status)
+
+
 # --------------------------------------------------------------------------- JSON
 
 
@@ -274,7 +279,8 @@ class Recorder:
         self._pending: int | None = None
         self._exit_on_signal = True
         self._old_handlers: dict[int, Any] = {}
-        self._deferred: deque[tuple[str, Any, int | None]] = deque()
+        self._deferred: deque[tuple[str, Callable[..., Any] | None, tuple[Any, ...], int]] \
+            = deque()
         if metadata:
             self.add_metadata("run", metadata)
 
@@ -335,22 +341,31 @@ class Recorder:
         self.write(f"/can/{direction}", can_frame_message(msg, direction, name=name,
                                                            status=status), log_time_ns)
 
-    # -- deferred writes: record now, serialize when the caller has time (e.g. while it
+    # -- deferred writes: queue now, serialize when the caller has time (e.g. while it
     #    waits for a reply); :meth:`finish` writes what is left, also on a signal
     def defer(self, topic: str, message: Any, log_time_ns: int | None = None) -> None:
-        """Queue one message for :meth:`write_deferred` (``message`` must not change
-        afterwards). ``log_time_ns`` None: the time of this call."""
+        """Queue one message (JSON-able or bytes; must not change afterwards) for
+        :meth:`write_deferred`. ``log_time_ns`` None: the time of this call."""
+        self.defer_call(topic, log_time_ns, None, message)
+
+    def defer_call(self, topic: str, log_time_ns: int | None,
+                   build: Callable[..., Any] | None, *args: Any) -> None:
+        """Queue the message ``build(*args)``, built only when written (so the caller's
+        hot path pays for a tuple, not for building the record); ``build`` None: the one
+        argument is the message."""
         if self.finished:
-            self.write(topic, message, log_time_ns)  # raises or counts as dropped
+            self.write(topic, build(*args) if build else args[0], log_time_ns)
             return
-        self._deferred.append((topic, message, time.time_ns() if log_time_ns is None
+        self._deferred.append((topic, build, args, time.time_ns() if log_time_ns is None
                                else int(log_time_ns)))
 
     def defer_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
                   *, name: str | None = None, status: str | None = None) -> None:
         """Queue a frame for ``/can/tx`` or ``/can/rx`` (see :meth:`write_can`)."""
-        self.defer(f"/can/{direction}", can_frame_message(msg, direction, name=name,
-                                                           status=status), log_time_ns)
+        if direction not in ("tx", "rx"):
+            raise ValueError(f"direction {direction!r}: expected 'tx' or 'rx'")
+        self.defer_call(f"/can/{direction}", log_time_ns, _can_record, msg, direction, name,
+                        status)
 
     @property
     def deferred(self) -> int:
@@ -362,7 +377,8 @@ class Recorder:
         n = 0
         q = self._deferred
         while q and not self.finished:
-            self.write(*q.popleft())
+            topic, build, args, ns = q.popleft()
+            self.write(topic, build(*args) if build else args[0], ns)
             n += 1
         return n
 

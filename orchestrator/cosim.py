@@ -48,7 +48,7 @@ from bus_schemas.bus_config import send_frames
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
 from bus_schemas.zenoh_config import loopback_endpoint
 from orchestrator.fmu_port import FmuPort
-from prosthesis_controller.timing import Usage
+from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
 PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
@@ -78,6 +78,7 @@ class CosimConfig:
     status_every: int = 100
     controller_watchdog: float = 0.05  # s, the node's own watchdog
     low_latency: bool = True  # zenoh low-latency transport on both sides
+    pin_cpus: bool = True  # plant loop and controller node each on its own CPU (>= 2 CPUs)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
@@ -105,6 +106,7 @@ class CosimResult:
     timing_us: dict[str, float] = field(default_factory=dict)
     node: dict[str, Any] = field(default_factory=dict)  # the controller node's summary
     usage: dict[str, float] = field(default_factory=dict)  # plant process over the loop
+    reply_early: float = 0.0  # see reply_early_share
     record: str | None = None
     run_id: str = ""
 
@@ -269,12 +271,26 @@ def versions() -> dict[str, str]:
     return out
 
 
-def controller_command(cfg: CosimConfig, run_id: str, endpoint: str) -> list[str]:
+def cpu_plan(cfg: CosimConfig) -> tuple[int | None, int | None]:
+    """(plant CPU, controller CPU): the first two CPUs this process may use when
+    ``pin_cpus`` and there are two, else (None, None).
+
+    Lockstep alternates between the two processes; on a small shared machine, letting the
+    scheduler place them makes each wake-up (the reply arriving, the next cycle's frames)
+    land on a CPU busy with the other process or other jobs. Each process on its own CPU,
+    with its zenoh threads, keeps those hand-offs local (measured: README, co-simulation)."""
+    avail = sorted(os.sched_getaffinity(0))
+    return (avail[0], avail[1]) if cfg.pin_cpus and len(avail) >= 2 else (None, None)
+
+
+def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
+                       cpu: int | None = None) -> list[str]:
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
             "--gait", str(cfg.gait), "--tube", str(cfg.tube), "--run-id", run_id,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
-            "--status-every", str(cfg.status_every)] + (["--low-latency"] if cfg.low_latency
-                                                        else [])
+            "--status-every", str(cfg.status_every)] + (
+                ["--low-latency"] if cfg.low_latency else []) + (
+                ["--cpu", str(cpu)] if cpu is not None else [])
 
 
 def _env() -> dict[str, str]:
@@ -348,6 +364,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     fmu = None
     lost = threading.Event()
     sub = None
+    affinity: set[int] | None = None  # to restore after pinning the plant loop
     try:
         real = {}
         integer = {}
@@ -378,6 +395,9 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
             rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")
 
         endpoint = loopback_endpoint()
+        plant_cpu, node_cpu = cpu_plan(cfg)
+        if plant_cpu is not None:  # before the bus: zenoh threads started now inherit it
+            affinity = pin_thread(plant_cpu)
         bus = ZenohBus(f"{run_id}/plant", listen=endpoint, low_latency=cfg.low_latency)
         alive = threading.Event()
 
@@ -390,7 +410,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         sub = bus.session.liveliness().declare_subscriber(keys.ctrl_alive_key(run_id),
                                                           _on_live, history=True)
         say(f"starting controller {cfg.controller} (run {run_id})")
-        proc = subprocess.Popen(controller_command(cfg, run_id, endpoint), env=_env(),
+        proc = subprocess.Popen(controller_command(cfg, run_id, endpoint, node_cpu), env=_env(),
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 cwd=str(ROOT))
         deadline = time.monotonic() + cfg.start_timeout
@@ -406,6 +426,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         say("controller alive")
         _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, progress)
     finally:
+        if affinity is not None:
+            os.sched_setaffinity(0, affinity)
         if sub is not None:
             with contextlib.suppress(Exception):
                 sub.undeclare()
@@ -482,7 +504,6 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     wall0 = time.perf_counter()
     rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
     injected: dict[str, int] = {}
-    domains = ("ps", "pns")
     names = {fid: frame_specs()[fid].name for fid in PLANT_TO_CTRL}
 
     def log_ns(t: float) -> int:
@@ -498,11 +519,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         if not v.ok:
             return v
         if v.frame_id == FrameId.TORQUE_CMD:
-            c = v.value
-            rec.defer("/prosthesis/torque_command", {
-                "knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
-                "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable),
-                "counter": v.counter, "cycle_time_us": round(msg.timestamp * 1e6)}, ns)
+            rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
+                           v.counter, msg.timestamp, ratio)
         elif v.frame_id == FrameId.CTRL_STATUS:
             s = v.value
             rec.defer("/controller/diagnostics", {
@@ -538,13 +556,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             ns = log_ns(t)
             for m in frames:
                 rec.defer_can(m, "tx", ns, name=names[m.arbitration_id])
-            rec.defer("/prosthesis/measurements", {
-                "knee_angle": codec.quantize_angle(y[0]),
-                "knee_velocity": codec.quantize_velocity(y[2]),
-                "ankle_angle": codec.quantize_angle(y[1]),
-                "ankle_velocity": codec.quantize_velocity(y[3]),
-                "foot_load": codec.quantize_load(y[4]), "contact": dom == 0,
-                "sim_time_us": t_us % (1 << 32), "counter": k % 16}, ns)
+            rec.defer_call("/prosthesis/measurements", ns, measurement_record, y, dom == 0,
+                           t_us, k % 16)
         send, what = plan.apply(k, frames)
         if what:
             injected[what] = injected.get(what, 0) + 1
@@ -604,11 +617,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         f0 = clock()
         port.set_torque(*u)
         if rec is not None:
-            fs = port.forces()
-            rec.defer("/ground_truth", {
-                "t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]},
-                "q": state[:12], "qd": state[12:], "domain": domains[dom], "tau": y[5],
-                "step": steps, "fallen": False, "u_applied": list(u)}, log_ns(t))
+            rec.defer_call("/ground_truth", log_ns(t), ground_truth_record, t, port.forces(),
+                           state, dom, y[5], steps, u)
         port.step(t, dt)
         t_fmu.append(fmu_ns + clock() - f0)
         if res.faulted:
@@ -640,7 +650,38 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         res.latency_us = {"median": _pct(a, 50), "p99": _pct(a, 99), "max": max(a),
                           "n": len(a)}
     res.timing_us = tick_breakdown(t_tick, t_fmu, t_rt, t_rec, t_wait)
+    res.reply_early = reply_early_share(t_wait) if rec is not None else 0.0
     res.usage = usage.since()
+
+
+def measurement_record(y: list[float], contact: bool, t_us: int, counter: int
+                       ) -> dict[str, Any]:
+    """``/prosthesis/measurements``: the sensor outputs ``y`` (knee, ankle angle; knee,
+    ankle velocity; load) as the controller decodes them (codec quantization)."""
+    return {"knee_angle": codec.quantize_angle(y[0]),
+            "knee_velocity": codec.quantize_velocity(y[2]),
+            "ankle_angle": codec.quantize_angle(y[1]),
+            "ankle_velocity": codec.quantize_velocity(y[3]),
+            "foot_load": codec.quantize_load(y[4]), "contact": contact,
+            "sim_time_us": t_us % (1 << 32), "counter": counter}
+
+
+def torque_record(c: codec.TorqueCmd, counter: int | None, timestamp: float,
+                  ratio: tuple[float, float]) -> dict[str, Any]:
+    """``/prosthesis/torque_command``: motor torques [N m] and the joint torques they give
+    (gear ``ratio``), for the cycle whose SimTime timestamp [s] the frame echoes."""
+    return {"knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
+            "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable), "counter": counter,
+            "cycle_time_us": round(timestamp * 1e6)}
+
+
+def ground_truth_record(t: float, fs: list[float], state: list[float], dom: int, tau: float,
+                        steps: int, u: tuple[float, float]) -> dict[str, Any]:
+    """``/ground_truth`` at sim time ``t`` [s]: socket force (Fx, Fz [N], My [N m]) under
+    the applied motor torques ``u``, q and qd (``state``, 12 + 12), domain 0 ps / 1 pns."""
+    return {"t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]},
+            "q": state[:12], "qd": state[12:], "domain": ("ps", "pns")[dom], "tau": tau,
+            "step": steps, "fallen": False, "u_applied": list(u)}
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],
@@ -649,9 +690,7 @@ def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int
     cycle's reply in hand: zenoh both ways, the node's frame handling and controller tick,
     and the plant's MCAP serialization done meanwhile), and the overhead beyond FMU + round
     trip (FMU-output encoding, frame checks, queuing records); ``record``: serialization
-    inside the round trip; ``wait``: blocked after it; ``reply_early``: share of ticks
-    whose reply was in before serialization ended (wait < 20 us: there the round trip
-    figure is the serialization time, an upper bound of the real round trip)."""
+    inside the round trip; ``wait``: blocked after it (see :func:`reply_early_share`)."""
     n = max(1, len(tick))
 
     def mean(a: list[int], over: int | None = None) -> float:
@@ -660,8 +699,14 @@ def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int
     out = {"tick": mean(tick), "fmu": mean(fmu, n), "round_trip": mean(rt),
            "record": mean(rec), "wait": mean(wait)}
     out["overhead"] = out["tick"] - out["fmu"] - sum(rt) / n * 1e-3
-    out["reply_early"] = sum(1 for w in wait if w < 20_000) / max(1, len(wait))
     return out
+
+
+def reply_early_share(wait: list[int], threshold_ns: int = 20_000) -> float:
+    """Share of ticks whose reply was already in when the plant finished serializing
+    (blocked less than ``threshold_ns``): for those the round trip figure is the
+    serialization time, an upper bound of the real round trip."""
+    return sum(1 for w in wait if w < threshold_ns) / max(1, len(wait))
 
 
 def tmp_run_id() -> str:

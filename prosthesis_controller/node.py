@@ -49,7 +49,7 @@ from bus_schemas.bus_config import (
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
 from prosthesis_controller.interface import Active, Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
-from prosthesis_controller.timing import Durations, Usage
+from prosthesis_controller.timing import Durations, Usage, pin_thread
 
 SUMMARY_PREFIX = "controller node: "  # + the JSON summary, last line on stderr at exit
 FEEDBACK = (FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD)
@@ -286,7 +286,12 @@ def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
 
 def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
              watchdog: float = 0.05, status_every: int = 100, heartbeat_every: int = 10,
-             subject: str | None = None, device: str | None = None) -> dict[str, Any]:
+             subject: str | None = None, device: str | None = None,
+             cpu: int | None = None) -> dict[str, Any]:
+    """Build the controller, open the bus, serve (see :func:`serve`). ``cpu``: run this
+    process (the serving thread and the bus's threads, started after) on that CPU only."""
+    if cpu is not None:
+        pin_thread(cpu)
     ctrl = build_controller(controller, gait, tube, subject, device)
     node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every,
                           heartbeat_every=heartbeat_every)
@@ -318,6 +323,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--connect")
     p.add_argument("--low-latency", action="store_true",
                    help="zenoh low-latency transport (the plant must use it too)")
+    p.add_argument("--cpu", type=int, help="run the node on this CPU only")
     p.add_argument("--watchdog-ms", type=float, default=50.0)
     p.add_argument("--status-every", type=int, default=100)
     p.add_argument("--subject")
@@ -329,9 +335,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": True})
     try:
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
-                     status_every=a.status_every, subject=a.subject, device=a.device)
+                     status_every=a.status_every, subject=a.subject, device=a.device,
+                     cpu=a.cpu)
     except KeyboardInterrupt:
         return 130
+    except ValueError as e:  # a bad option value (e.g. --cpu): one line, no traceback
+        print(f"controller node: error: {e}", file=sys.stderr)
+        return 2
     print(f"{SUMMARY_PREFIX}{json.dumps(s)}", file=sys.stderr)
     return 0
 

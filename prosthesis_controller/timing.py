@@ -3,6 +3,7 @@ process's CPU use over a stretch of work."""
 
 from __future__ import annotations
 
+import os
 import resource
 import time
 from collections import deque
@@ -48,3 +49,15 @@ class Usage:
                 "cpu_s": ru.ru_utime - r0.ru_utime + ru.ru_stime - r0.ru_stime,
                 "voluntary_switches": ru.ru_nvcsw - r0.ru_nvcsw,
                 "involuntary_switches": ru.ru_nivcsw - r0.ru_nivcsw}
+
+
+def pin_thread(cpu: int) -> set[int]:
+    """Run the calling thread on CPU ``cpu`` only (threads it starts later, and child
+    processes, inherit this); returns the CPUs it was allowed before. Raises ValueError
+    for a CPU this machine does not let it use."""
+    before = os.sched_getaffinity(0)
+    try:
+        os.sched_setaffinity(0, {int(cpu)})
+    except (OSError, OverflowError) as e:
+        raise ValueError(f"cannot run on CPU {cpu}: {getattr(e, 'strerror', e)}") from None
+    return before
