@@ -37,6 +37,8 @@ from mcap.reader import make_reader
 from mcap.records import Schema
 from mcap.writer import CompressionType, Writer
 
+from bus_schemas.mcap_append import append_messages, supports
+
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
 #: generalized coordinates q of the 12-DOF model (= ``hp_model.COORDS``, tested)
@@ -268,6 +270,7 @@ class Recorder:
         self._file = open(self.part_path, "wb")  # noqa: SIM115 - closed in finish()
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
+        self._append = supports(self._writer)  # the one-pack path (mcap_append)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
@@ -326,9 +329,12 @@ class Recorder:
         try:
             cid = self._channels[topic] if topic in self._channels else self.add_channel(topic)
             seq = self._sequence[cid] = self._sequence[cid] + 1
-            self._writer.add_message(channel_id=cid, log_time=t, data=data,
-                                     publish_time=t if publish_time_ns is None
-                                     else int(publish_time_ns), sequence=seq)
+            pub = t if publish_time_ns is None else int(publish_time_ns)
+            if self._append:
+                append_messages(self._writer, ((cid, seq, t, pub, data),))
+            else:
+                self._writer.add_message(channel_id=cid, log_time=t, data=data,
+                                         publish_time=pub, sequence=seq)
             self.message_count += 1
         finally:
             self._busy = outer
@@ -472,6 +478,7 @@ class Recorder:
         if signum is None:
             return
         if not self.finished:
+            self.write_deferred()  # what was queued before the signal is part of the run
             self.interrupted = signum
             self.add_metadata("signal", {"signal": signal.Signals(signum).name,
                                          "messages": str(self.message_count)})

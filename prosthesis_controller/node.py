@@ -239,7 +239,12 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
             if msg is not None and first is None:
                 first = time.perf_counter_ns()
             now = time.monotonic()
-            out = node.handle(msg, now) if msg is not None else []
+            out: list[can.Message] = []
+            while msg is not None:  # the frames already here, up to a cycle's end
+                out = node.handle(msg, now)
+                if out:
+                    break
+                msg = bus.recv(0.0)
             out += node.poll(now)
             send_frames(bus, out)
             if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:

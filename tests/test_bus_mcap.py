@@ -3,6 +3,7 @@ SIGTERM/SIGINT."""
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -15,9 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType
+from mcap.writer import CompressionType, Writer
 
 from bus_schemas import codec
+from bus_schemas.mcap_append import append_messages, supports
 from bus_schemas.mcap_schemas import (
     CHANNELS,
     COORDS,
@@ -156,6 +158,74 @@ def test_recorder_round_trip_every_channel(tmp_path):
     assert sum(1 for _ in read_messages(path, ["/ground_truth"])) == 100
 
 
+@pytest.mark.parametrize("compression", [CompressionType.NONE, CompressionType.ZSTD])
+def test_append_messages_writes_the_bytes_add_message_writes(compression):
+    """The one-pack path leaves the same file as mcap's add_message: several chunks, three
+    channels, log times out of order, empty and large payloads."""
+    rng = np.random.default_rng(7)
+    rows = []
+    for k in range(600):
+        cid = int(rng.integers(1, 4))
+        size = int(rng.choice([0, 3, 40, 700]))
+        rows.append((cid, k + 1, int(rng.integers(0, 10**12)), int(rng.integers(0, 10**12)),
+                     bytes(rng.integers(0, 256, size, dtype=np.uint8))))
+    files = []
+    for fast in (False, True):
+        buf = io.BytesIO()
+        w = Writer(buf, chunk_size=4096, compression=compression)
+        w.start(profile="", library="test")
+        sid = w.register_schema("s", "jsonschema", b"{}")
+        for topic in ("/a", "/b", "/c"):
+            w.register_channel(topic, "json", sid)
+        if fast:
+            assert supports(w)
+            assert append_messages(w, rows[:250]) == 250  # a batch, then one by one
+            for r in rows[250:]:
+                append_messages(w, [r])
+        else:
+            for cid, seq, t, pub, data in rows:
+                w.add_message(channel_id=cid, log_time=t, data=data, publish_time=pub,
+                              sequence=seq)
+        w.finish()
+        files.append(buf.getvalue())
+    assert files[0] == files[1]
+    reader = make_reader(io.BytesIO(files[1]))
+    assert reader.get_summary().statistics.message_count == 600
+    assert len(reader.get_summary().chunk_indexes) > 10
+    got = sorted((m.log_time, m.sequence, m.data) for _, _, m in reader.iter_messages())
+    assert got == sorted((t, seq, data) for _, seq, t, _, data in rows)
+
+
+def test_deferred_writes_are_built_late_written_in_order_and_on_finish(tmp_path):
+    path = tmp_path / "d.mcap"
+    built = []
+
+    def gt(k: int) -> dict:
+        built.append(k)
+        return ground_truth(k)
+
+    rec = Recorder(path)
+    rec.register_all()
+    frame = codec.encode_torque(0.5, -0.5, 3)
+    rec.defer_can(frame, "rx", 5, name="TorqueCmd", status="ok")
+    rec.defer_call("/ground_truth", 7, gt, 7)
+    rec.defer("/prosthesis/measurements", measurements(2), 2)
+    assert rec.deferred == 3 and built == [] and rec.message_count == 0
+    assert rec.write_deferred() == 3 and built == [7] and rec.deferred == 0
+    rec.defer_call("/ground_truth", 9, gt, 9)  # left for finish()
+    with pytest.raises(ValueError, match="direction"):
+        rec.defer_can(frame, "up")
+    rec.finish()
+    assert built == [7, 9] and rec.message_count == 4
+    got = [(topic, ns, obj) for topic, ns, obj in read_messages(path)]
+    assert [(t, ns) for t, ns, _ in got] == [("/prosthesis/measurements", 2),
+                                             ("/can/rx", 5), ("/ground_truth", 7),
+                                             ("/ground_truth", 9)]
+    assert got[1][2] == json.loads(encode_json(can_frame_message(frame, "rx", name="TorqueCmd",
+                                                                 status="ok")))
+    assert got[3][2] == json.loads(encode_json(ground_truth(9)))
+
+
 def test_writes_after_finish_are_refused(tmp_path):
     rec = Recorder(tmp_path / "a.mcap", compression="none")
     rec.write("/ground_truth", ground_truth(0), 0)
@@ -179,8 +249,10 @@ def test_signal_in_process_finishes_without_exit(tmp_path):
     before = signal.getsignal(signal.SIGTERM)
     rec = Recorder(path)
     rec.install_signal_handlers([signal.SIGTERM], exit=False)
-    for k in range(5):
+    for k in range(3):
         rec.write("/ground_truth", ground_truth(k), k)
+    for k in range(3, 5):  # queued, not yet written: part of the file all the same
+        rec.defer_call("/ground_truth", k, ground_truth, k)
     os.kill(os.getpid(), signal.SIGTERM)  # handled in this thread at the next bytecode
     assert rec.interrupted == signal.SIGTERM and rec.finished
     rec.write("/ground_truth", ground_truth(6), 6)  # dropped, not an error
