@@ -30,6 +30,7 @@ counters (:class:`bus_schemas.codec.FrameChecker`) reveal such losses.
 from __future__ import annotations
 
 import contextlib
+import os
 import struct
 import threading
 import time
@@ -159,14 +160,19 @@ class _Receiver:
     """Blocking receive with a timeout from one zenoh subscriber, in the caller's thread.
 
     Samples on keys outside ``accept`` (the wake-ups) make :meth:`recv` return None early;
-    python-can's ``BusABC.recv`` then calls again with the time left.
+    python-can's ``BusABC.recv`` then calls again with the time left. With ``poll`` > 0 s
+    a receive that finds nothing polls the ring for up to that long, giving the CPU away
+    between polls (``os.sched_yield``), before it blocks: a frame arriving meanwhile is
+    taken without the sleep and wake-up of a blocked thread (lockstep co-simulation, where
+    the reply is due within a fraction of a millisecond), for CPU time spent polling.
     """
 
     MAX_BLOCK = 0.25  # s; an indefinite wait is cut into slices so Python handles signals
 
     def __init__(self, session: zenoh.Session, sub_key: str, accept: frozenset[str],
-                 capacity: int) -> None:
+                 capacity: int, poll: float = 0.0) -> None:
         self._session = session
+        self.poll = max(0.0, float(poll))  # s of yielding busy-poll before blocking
         self._accept = accept
         self._wake_key = f"{sub_key.removesuffix('/**')}/wake/{uuid.uuid4().hex}"
         self._cond = threading.Condition()
@@ -212,6 +218,20 @@ class _Receiver:
                 return s
         if timeout is not None and timeout <= 0:
             return None
+        if self.poll > 0:
+            budget = self.poll if timeout is None else min(self.poll, timeout)
+            end = time.perf_counter() + budget
+            while True:
+                os.sched_yield()
+                s = handler.try_recv()
+                if s is not None:
+                    return s if str(s.key_expr) in self._accept else None
+                if time.perf_counter() >= end:
+                    break
+            if timeout is not None:
+                timeout -= budget
+                if timeout <= 0:
+                    return None
         wait = self.MAX_BLOCK if timeout is None else min(timeout, 1e6)
         deadline = time.monotonic() + wait
         with self._cond:
@@ -250,6 +270,8 @@ class ZenohBus(can.BusABC):
     :param stamp: send ``time.time()`` as the frame timestamp instead of ``msg.timestamp``.
     :param low_latency: zenoh's low-latency transport (both peers must set it; see
         :func:`bus_schemas.zenoh_config.make_config`).
+    :param poll_us: before a ``recv`` blocks, poll for up to this many microseconds,
+        yielding the CPU between polls (default 0: block at once).
     """
 
     def __init__(self, channel: str, can_filters: Any = None, *,
@@ -257,7 +279,8 @@ class ZenohBus(can.BusABC):
                  allow_remote: bool = False, zenoh_options: dict[str, Any] | None = None,
                  session: zenoh.Session | None = None, receive_own_messages: bool = False,
                  rx_queue_size: int = 10_000, declare_alive: bool = True,
-                 stamp: bool = False, low_latency: bool = False, **kwargs: Any) -> None:
+                 stamp: bool = False, low_latency: bool = False, poll_us: float = 0.0,
+                 **kwargs: Any) -> None:
         run_id, send, recv = parse_channel(channel)
         self.run_id = run_id
         self.channel = channel
@@ -295,7 +318,7 @@ class ZenohBus(can.BusABC):
             sub_key = (f"{self.recv_keys[0]}/**" if len(self.recv_keys) == 1
                        else f"{keys.run_prefix(run_id)}/can/**")
             self._rx = _Receiver(self._session, sub_key, frozenset(self.recv_keys),
-                                 self.rx_queue_size)
+                                 self.rx_queue_size, float(poll_us) * 1e-6)
         except Exception as e:
             self._close()
             raise can.CanInitializationError(f"ZenohBus {channel!r}: {e}") from e

@@ -79,6 +79,7 @@ class CosimConfig:
     controller_watchdog: float = 0.05  # s, the node's own watchdog
     low_latency: bool = True  # zenoh low-latency transport on both sides
     pin_cpus: bool = True  # plant loop and controller node each on its own CPU (>= 2 CPUs)
+    poll_us: float = 300.0  # lockstep: both sides poll this long before blocking on a frame
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
@@ -283,6 +284,13 @@ def cpu_plan(cfg: CosimConfig) -> tuple[int | None, int | None]:
     return (avail[0], avail[1]) if cfg.pin_cpus and len(avail) >= 2 else (None, None)
 
 
+def bus_poll_us(cfg: CosimConfig) -> float:
+    """How long a receive polls before it blocks, on both sides: ``poll_us`` in lockstep
+    (the next frame is due within a fraction of a millisecond), 0 in realtime mode (pacing
+    to the wall clock: nothing to gain, a CPU to keep free)."""
+    return float(cfg.poll_us) if cfg.mode == "lockstep" else 0.0
+
+
 def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
                        cpu: int | None = None) -> list[str]:
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
@@ -290,7 +298,8 @@ def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
             "--status-every", str(cfg.status_every)] + (
                 ["--low-latency"] if cfg.low_latency else []) + (
-                ["--cpu", str(cpu)] if cpu is not None else [])
+                ["--cpu", str(cpu)] if cpu is not None else []) + (
+                ["--poll-us", str(bus_poll_us(cfg))] if bus_poll_us(cfg) else [])
 
 
 def _env() -> dict[str, str]:
@@ -398,7 +407,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         plant_cpu, node_cpu = cpu_plan(cfg)
         if plant_cpu is not None:  # before the bus: zenoh threads started now inherit it
             affinity = pin_thread(plant_cpu)
-        bus = ZenohBus(f"{run_id}/plant", listen=endpoint, low_latency=cfg.low_latency)
+        bus = ZenohBus(f"{run_id}/plant", listen=endpoint, low_latency=cfg.low_latency,
+                       poll_us=bus_poll_us(cfg))
         alive = threading.Event()
 
         def _on_live(sample: Any) -> None:  # sets flags only; nothing blocks here

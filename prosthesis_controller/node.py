@@ -329,6 +329,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--low-latency", action="store_true",
                    help="zenoh low-latency transport (the plant must use it too)")
     p.add_argument("--cpu", type=int, help="run the node on this CPU only")
+    p.add_argument("--poll-us", type=float, default=0.0,
+                   help="zenoh bus: poll this long (yielding the CPU) before blocking")
     p.add_argument("--watchdog-ms", type=float, default=50.0)
     p.add_argument("--status-every", type=int, default=100)
     p.add_argument("--subject")
@@ -336,8 +338,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     a = p.parse_args(argv)
     cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
                                channel=a.channel, listen=a.listen, connect=a.connect)
-    if a.low_latency and cfg.interface == "zenoh":
-        cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": True})
+    if cfg.interface == "zenoh" and (a.low_latency or a.poll_us):
+        cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": a.low_latency,
+                                                "poll_us": a.poll_us})
     try:
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
                      status_every=a.status_every, subject=a.subject, device=a.device,
