@@ -157,7 +157,7 @@ class Verdict(NamedTuple):
 
     @property
     def ok(self) -> bool:
-        return self.status is FrameStatus.OK
+        return self.status is _OK
 
 
 # --------------------------------------------------------------------------- encode
@@ -299,32 +299,42 @@ def decode(msg: can.Message) -> Verdict:
         remote, fd = bool(msg.is_remote_frame), bool(msg.is_fd)
         data, dlc = msg.data, msg.dlc
     except (AttributeError, TypeError, ValueError):
-        return Verdict(FrameStatus.UNKNOWN_ID, None, timestamp=ts, detail="not a CAN message")
+        return Verdict(_UNKNOWN_ID, None, timestamp=ts, detail="not a CAN message")
     spec = None if (ext or err) else frame_specs().get(fid)
     if spec is None:
-        return Verdict(FrameStatus.UNKNOWN_ID, fid, timestamp=ts,
+        return Verdict(_UNKNOWN_ID, fid, timestamp=ts,
                        detail="extended id" if ext else "error frame" if err else "id")
     if isinstance(data, memoryview):
         data = data.tobytes()
-    n = len(data) if isinstance(data, (bytes, bytearray)) else -1
+    n = len(data) if isinstance(data, bytes | bytearray) else -1
     if remote or fd or dlc != FRAME_LENGTH or n != FRAME_LENGTH:
-        return Verdict(FrameStatus.BAD_LENGTH, fid, spec.name, timestamp=ts,
+        return Verdict(_BAD_LENGTH, fid, spec.name, timestamp=ts,
                        detail=f"dlc {dlc}, {n} data bytes" + (", remote" if remote else "")
                        + (", fd" if fd else ""))
     counter = None
     if spec.protected:
-        crc = crc8_update(spec.crc_state, data[:7]) ^ XOROUT
-        if crc != data[7]:
-            return Verdict(FrameStatus.BAD_CHECKSUM, fid, spec.name, timestamp=ts,
-                           detail=f"checksum {data[7]:#04x}, expected {crc:#04x}")
+        c, t = spec.crc_state, TABLE
+        for b in data[:7]:
+            c = t[c ^ b]
+        c ^= XOROUT
+        if c != data[7]:
+            return Verdict(_BAD_CHECKSUM, fid, spec.name, timestamp=ts,
+                           detail=f"checksum {data[7]:#04x}, expected {c:#04x}")
         counter = data[6] & 0x0F
     vals = _values(spec, data)
-    if fid == FrameId.CTRL_HEARTBEAT:
+    if fid == _HEARTBEAT:
         vals[0] = _member(CtrlState, vals[0])
-    elif fid == FrameId.CTRL_STATUS:
+    elif fid == _STATUS:
         vals[0], vals[1] = FaultFlag(vals[0]), _member(QpStatus, vals[1])
         vals[4] = ActiveConstraint(vals[4])
-    return Verdict(FrameStatus.OK, fid, spec.name, counter, PAYLOAD_TYPES[fid](*vals), ts)
+    return Verdict(_OK, fid, spec.name, counter, PAYLOAD_TYPES[fid](*vals), ts)
+
+
+# hot-path constants (enum attribute lookups cost more than a global)
+_OK, _BAD_CHECKSUM, _BAD_COUNTER, _BAD_LENGTH, _DUPLICATE, _UNKNOWN_ID = (
+    FrameStatus.OK, FrameStatus.BAD_CHECKSUM, FrameStatus.BAD_COUNTER,
+    FrameStatus.BAD_LENGTH, FrameStatus.DUPLICATE, FrameStatus.UNKNOWN_ID)
+_HEARTBEAT, _STATUS = int(FrameId.CTRL_HEARTBEAT), int(FrameId.CTRL_STATUS)
 
 
 def _member(enum_type: type[enum.IntEnum], raw: int) -> int:
@@ -443,46 +453,56 @@ class FrameChecker:
         self.accept = None if accept is None else frozenset(int(i) for i in accept)
         self.max_gap = max_gap
         self._last: dict[int, int] = {}
-        self._counts = dict.fromkeys(FrameStatus, 0)
+        self._ok = 0
+        self._counts = dict.fromkeys(FrameStatus, 0)  # rejections (OK counted in _ok)
         self.lost = 0
 
     @property
     def counts(self) -> dict[FrameStatus, int]:
         """Frames seen per class (a copy)."""
-        return dict(self._counts)
+        out = dict(self._counts)
+        out[_OK] = self._ok
+        return out
 
     @property
     def rejected(self) -> int:
-        return sum(n for s, n in self._counts.items() if s is not FrameStatus.OK)
+        return sum(n for s, n in self._counts.items() if s is not _OK)
 
     def reset(self) -> None:
         """Forget counter state and counts."""
         self._last.clear()
+        self._ok = 0
         self._counts = dict.fromkeys(FrameStatus, 0)
         self.lost = 0
 
     def check(self, msg: can.Message) -> Verdict:
         v = decode(msg)
-        if v.ok and self.accept is not None and v.frame_id not in self.accept:
-            v = Verdict(FrameStatus.UNKNOWN_ID, v.frame_id, v.name, timestamp=v.timestamp,
+        if v.status is not _OK:
+            self._counts[v.status] += 1
+            return v
+        fid = v.frame_id
+        if self.accept is not None and fid not in self.accept:
+            v = Verdict(_UNKNOWN_ID, fid, v.name, timestamp=v.timestamp,
                         detail="not accepted by this receiver")
-        elif v.ok and v.counter is not None:
-            assert v.frame_id is not None
-            last = self._last.get(v.frame_id)
+        elif v.counter is not None:
+            last = self._last.get(fid)  # type: ignore[arg-type]
             if last is not None:
                 delta = (v.counter - last) % 16
                 if delta == 0:
-                    v = Verdict(FrameStatus.DUPLICATE, v.frame_id, v.name, v.counter,
+                    v = Verdict(_DUPLICATE, fid, v.name, v.counter,
                                 timestamp=v.timestamp, detail=f"counter {v.counter} again")
                 elif delta > self.max_gap:
-                    self._last[v.frame_id] = v.counter
-                    v = Verdict(FrameStatus.BAD_COUNTER, v.frame_id, v.name, v.counter,
+                    self._last[fid] = v.counter  # type: ignore[index]
+                    v = Verdict(_BAD_COUNTER, fid, v.name, v.counter,
                                 timestamp=v.timestamp,
                                 detail=f"counter {v.counter} after {last}")
                 else:
                     self.lost += delta - 1
-                    self._last[v.frame_id] = v.counter
+                    self._last[fid] = v.counter  # type: ignore[index]
             else:
-                self._last[v.frame_id] = v.counter
-        self._counts[v.status] += 1
+                self._last[fid] = v.counter  # type: ignore[index]
+        if v.status is _OK:
+            self._ok += 1
+        else:
+            self._counts[v.status] += 1
         return v

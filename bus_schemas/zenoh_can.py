@@ -81,6 +81,9 @@ def unpack_message(payload: bytes, channel: Any = None) -> can.Message | None:
     data = payload[_HEADER.size:]
     if len(data) > _MAX_DATA or aid > 0x1FFFFFFF or ts != ts:
         return None
+    if not flags:  # a classic data frame with a standard id (the common case)
+        return can.Message(timestamp=ts, arbitration_id=aid, is_extended_id=False,
+                           channel=channel, dlc=dlc, data=data, is_rx=True)
     return can.Message(timestamp=ts, arbitration_id=aid, is_extended_id=bool(flags & _EXT),
                        is_remote_frame=bool(flags & _REMOTE),
                        is_error_frame=bool(flags & _ERROR), channel=channel, dlc=dlc,
