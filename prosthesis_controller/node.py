@@ -14,7 +14,10 @@ the first complete cycle the node answers with torque disabled.
 Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
 zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
 ``watchdog`` seconds; the next good cycle resumes RUNNING (the controller's state is kept,
-so a lockstep run stays deterministic when a slow plant trips the watchdog). Over zenoh the
+so a lockstep run stays deterministic when a slow plant trips the watchdog). The first
+cycle arms it: before any measurement there is nothing to stop (and a SAFE torque frame,
+timestamp 0, sent while a slow plant starts up would pass for the reply to its cycle at
+t = 0). Over zenoh the
 node declares the liveliness token ``hpcosim/run/<id>/ctrl/alive`` only once the controller
 is built and the
 bus subscribed (so a plant seeing it can start), and leaves when the plant's token goes away.
@@ -89,7 +92,7 @@ class ControllerNode:
         self.safe_entries = 0
         self._counter = 0  # TorqueCmd rolling counter
         self._hb_counter = 0
-        self._last_cycle = time.monotonic()
+        self._last_cycle: float | None = None  # the watchdog is armed by the first cycle
         self._last_safe_send = 0.0
         self._flags = FaultFlag.NONE
         self._last_diag: Any = None
@@ -182,7 +185,7 @@ class ControllerNode:
         """Watchdog: SAFE state (zero torque, disabled) when no cycle came for
         ``watchdog`` s; repeated every ``watchdog`` s while it lasts."""
         now = time.monotonic() if now is None else now
-        if now - self._last_cycle < self.watchdog:
+        if self._last_cycle is None or now - self._last_cycle < self.watchdog:
             return []
         if self.state != CtrlState.SAFE:
             self.state = CtrlState.SAFE

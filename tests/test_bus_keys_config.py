@@ -84,6 +84,11 @@ def test_remote_endpoints_and_options_need_explicit_permission():
     assert json.loads(cfg.get_json("connect/endpoints")) == ["tcp/10.0.0.2:7447"]
     cfg = make_config(options={"transport/unicast/lowlatency": False})
     assert json.loads(cfg.get_json("transport/unicast/lowlatency")) is False
+    cfg = make_config(low_latency=True)
+    assert json.loads(cfg.get_json("transport/unicast/lowlatency")) is True
+    assert json.loads(cfg.get_json("transport/unicast/qos/enabled")) is False
+    cfg = make_config(low_latency=True, options={"transport/unicast/lowlatency": False})
+    assert json.loads(cfg.get_json("transport/unicast/lowlatency")) is False  # options last
     with pytest.raises(ValueError, match="client"):
         make_config(mode="client")
     with pytest.raises(ValueError, match="mode"):

@@ -18,22 +18,33 @@ import pytest
 import zenoh
 
 from bus_schemas import codec
+from bus_schemas.bus_config import send_frames
 from bus_schemas.codec import FrameChecker
 from bus_schemas.keys import Direction
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState
-from bus_schemas.zenoh_can import ZenohBus, pack_message, parse_channel, unpack_message
+from bus_schemas.zenoh_can import (
+    ZenohBus,
+    pack_batch,
+    pack_message,
+    parse_channel,
+    unpack_message,
+    unpack_payload,
+)
 from bus_schemas.zenoh_config import loopback_endpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture
-def pair():
+@pytest.fixture(params=["default", "low_latency+poll"])
+def pair(request):
     """A plant bus listening on a free loopback port and a controller bus connected to it,
-    each with its own zenoh session."""
+    each with its own zenoh session; once with zenoh's normal transport and blocking
+    receives, once with the low-latency transport and a polling receive (as in a lockstep
+    co-simulation)."""
     ep = loopback_endpoint()
-    plant = ZenohBus("t1/plant", listen=ep)
-    ctrl = ZenohBus("t1/ctrl", connect=ep)
+    kw = {} if request.param == "default" else {"low_latency": True, "poll_us": 300.0}
+    plant = ZenohBus("t1/plant", listen=ep, **kw)
+    ctrl = ZenohBus("t1/ctrl", connect=ep, **kw)
     try:
         assert plant.wait_for_peer(5.0) and ctrl.wait_for_peer(5.0)
         yield plant, ctrl
@@ -68,6 +79,82 @@ def test_wire_format_rejects_garbage():
     for bad in (b"", b"\x01" * 14, b"\x02" + good[1:], good + bytes(60),
                 good[:5] + b"\xff\xff\xff\xff" + good[9:]):
         assert unpack_message(bad) is None
+
+
+def test_batch_wire_format_round_trip():
+    msgs = codec.encode_feedback(0.1, -0.2, 0.3, 0.0, 650.0, True, 7, sim_time_us=7000,
+                                 timestamp=0.007)
+    fd = can.Message(timestamp=3.0, arbitration_id=0x66, is_fd=True, data=bytes(range(64)))
+    p = pack_batch([*msgs, fd])
+    assert p[:2] == bytes((2, 5)) and len(p) == 2 + 4 * 24 + (1 + 15 + 64)
+    got, bad = unpack_payload(p, "ch")
+    assert bad == 0 and len(got) == 5
+    for a, b in zip(got, [*msgs, fd], strict=True):
+        assert a.equals(b, timestamp_delta=0.0, check_channel=False) and a.is_rx
+    assert pack_batch(msgs[:2], 9.5)[3:12] == pack_message(msgs[0], 9.5)[:9]
+    # a single frame is the single-frame form; both are understood
+    assert unpack_payload(pack_message(msgs[0]))[0][0].arbitration_id == 0x101
+    with pytest.raises(ValueError, match="batch"):
+        pack_batch([])
+
+
+def test_batch_wire_format_rejects_garbage():
+    p = pack_batch(codec.encode_feedback(0.1, 0.0, 0.0, 0.0, 1.0, False, 1))
+    for bad in (p[:-1], p + b"\x00", bytes((2, 5)) + p[2:], bytes((2, 0)), b"\x02",
+                bytes((2, 1, 200)) + bytes(20)):
+        assert unpack_payload(bad) == ([], 1), bad
+    inner = bytearray(p)
+    inner[2 + 1] = 9  # the first frame's own version byte
+    frames, bad = unpack_payload(bytes(inner))
+    assert bad == 1 and [m.arbitration_id for m in frames] == [0x102, 0x110]
+
+
+def test_send_batch_arrives_frame_by_frame_in_order(pair):
+    plant, ctrl = pair
+    for k in range(30):
+        cycle = codec.encode_feedback(0.01 * k, 0.0, 0.0, 0.0, 600.0, True, k,
+                                      sim_time_us=1000 * k, timestamp=k * 1e-3)
+        plant.send_batch(cycle)
+        got = [ctrl.recv(2.0) for _ in range(4)]
+        assert [m.arbitration_id for m in got] == [0x101, 0x102, 0x110, 0x080]
+        assert [bytes(m.data) for m in got] == [bytes(m.data) for m in cycle]
+        send_frames(ctrl, [codec.encode_heartbeat(CtrlState.RUNNING, k, k),
+                           codec.encode_torque(0.1, 0.2, k, timestamp=k * 1e-3)])
+        hb, tq = plant.recv(2.0), plant.recv(2.0)
+        assert (hb.arbitration_id, tq.arbitration_id) == (0x020, 0x010)
+        assert tq.timestamp == k * 1e-3
+    send_frames(ctrl, [])  # nothing to send: nothing sent
+    ctrl.send_batch([])
+    assert plant.recv(0.05) is None
+    assert plant.rx_malformed == ctrl.rx_malformed == 0
+
+
+def test_send_frames_on_a_plain_python_can_bus():
+    """Buses without send_batch (any python-can interface) get the frames one by one."""
+    tx = can.Bus(interface="virtual", channel="send-frames")
+    rx = can.Bus(interface="virtual", channel="send-frames")
+    try:
+        cycle = codec.encode_feedback(0.1, 0.0, 0.0, 0.0, 1.0, True, 3, sim_time_us=3)
+        send_frames(tx, cycle)
+        assert [rx.recv(1.0).arbitration_id for _ in cycle] == [0x101, 0x102, 0x110, 0x080]
+    finally:
+        tx.shutdown()
+        rx.shutdown()
+
+
+def test_polling_receive_honours_timeouts():
+    ep = loopback_endpoint()
+    with ZenohBus("t6/plant", listen=ep, poll_us=2000.0) as plant, \
+            ZenohBus("t6/ctrl", connect=ep, poll_us=2000.0) as ctrl:
+        assert plant.wait_for_peer(5.0)
+        t0 = time.monotonic()
+        assert ctrl.recv(0.0005) is None  # poll budget cut to the timeout
+        assert ctrl.recv(0.05) is None  # polls 2 ms, then blocks for the rest
+        assert 0.04 < time.monotonic() - t0 < 2.0
+        plant.send_batch(codec.encode_feedback(0.1, 0.0, 0.0, 0.0, 1.0, True, 1,
+                                               sim_time_us=1))
+        assert [ctrl.recv(2.0).arbitration_id for _ in range(4)] == [0x101, 0x102, 0x110,
+                                                                     0x080]
 
 
 def test_channel_roles():
@@ -173,6 +260,8 @@ def test_recv_timeout_filters_and_own_messages(pair):
             assert back is not None and not back.is_rx
             assert abs(back.timestamp - time.time()) < 5.0
             assert codec.decode(back).value == codec.TorqueCmd(1.0, 2.0, 1)
+            echo.send_batch([codec.encode_sim_time(1, 1), codec.encode_sim_time(2, 2)])
+            assert [codec.decode(echo.recv(1.0)).value.us for _ in range(2)] == [1, 2]
         finally:
             echo.shutdown()
         # the monitor sees both directions

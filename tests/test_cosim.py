@@ -22,7 +22,17 @@ from bus_schemas.mcap_schemas import CHANNELS, JsonDecoderFactory, read_messages
 from bus_schemas.protocol import CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
-from orchestrator.cosim import CosimConfig, FaultPlan, Plant, run_cosim
+from orchestrator.cosim import (
+    CosimConfig,
+    FaultPlan,
+    Fmu,
+    Plant,
+    cpu_plan,
+    node_summary,
+    run_cosim,
+    tick_breakdown,
+)
+from orchestrator.fmu_port import FORCES, INPUTS, SENSORS, STATE, FmuPort
 from orchestrator.recording import play_to_bus, read_recording, refit_tube, replay
 from prosthesis_controller import ControlOutput, Diagnostics, ProsthesisMeasurement
 from prosthesis_controller.controllers import make_controller
@@ -53,7 +63,9 @@ def cfg(files, **kw) -> CosimConfig:
 @pytest.fixture(scope="module")
 def lockstep(files, model):
     rec = files["dir"] / "lockstep.mcap"
+    before = os.sched_getaffinity(0)
     res = run_cosim(cfg(files, steps=10, record=rec), model=model)
+    assert os.sched_getaffinity(0) == before  # the plant's CPU pinning is undone
     return res, rec
 
 
@@ -66,6 +78,16 @@ def test_lockstep_run_completes(lockstep):
     assert res.steps == 10 and res.missed == 0
     assert res.frames_tx == 4 * res.ticks
     assert all(v == 0 for v in res.plant_rejects.values())
+    # the node's own summary, read back from its stderr: one controller tick per cycle
+    assert res.node["ticks"] == res.ticks and res.node["reason"] == "plant gone"
+    assert all(v == 0 for v in res.node["rejects"].values())
+    assert res.node["timing_us"]["controller_tick"]["n"] == res.ticks
+    assert res.node["timing_us"]["cycle"]["n"] == res.ticks
+    assert 0 < res.node["timing_us"]["controller_tick"]["mean_us"] \
+        < res.node["timing_us"]["cycle"]["mean_us"]
+    assert res.node["usage"]["cpu_s"] > 0 and res.usage["cpu_s"] > 0
+    t = res.timing_us
+    assert 0 < t["fmu"] < t["tick"] and 0 < t["record"] < t["round_trip"] < t["tick"]
 
 
 def test_recording_reads_back_every_channel_decodes(lockstep):
@@ -218,6 +240,74 @@ def test_node_rejects_bad_frames_and_goes_safe():
     safe = node.poll(now=1.0)
     assert node.state == CtrlState.SAFE
     assert codec.decode(safe[-1]).value.enable == 0
+
+
+def test_node_watchdog_is_armed_by_the_first_cycle():
+    """Before any measurement the node stays quiet (a SAFE torque frame, timestamp 0,
+    sent while a slow plant starts would pass for the reply to the cycle at t = 0)."""
+
+    class Fake:
+        name = "fake"
+
+        def reset(self, torque=None):
+            pass
+
+        def tick(self, m):
+            return ControlOutput(np.array([0.1, -0.1]),
+                                 Diagnostics(0.5, 0.0, 0.0, "solved", 0, 0, 0, "ps", "stance"))
+
+    node = ControllerNode(Fake(), watchdog=0.05)
+    assert node.poll(now=time.monotonic() + 100.0) == [] and node.state == CtrlState.INIT
+    for m in codec.encode_feedback(0.1, 0.0, 0.2, 0.0, 500.0, True, 0, sim_time_us=0):
+        node.handle(m, now=10.0)
+    assert node.poll(now=10.01) == []
+    assert [m.arbitration_id for m in node.poll(now=10.06)] == [FrameId.CTRL_HEARTBEAT,
+                                                                 FrameId.TORQUE_CMD]
+    assert node.state == CtrlState.SAFE
+
+
+def test_node_summary_cpu_plan_and_tick_breakdown():
+    s = node_summary('warning: x\ncontroller node: {"ticks": 3, "reason": "stopped"}\n')
+    assert s == {"ticks": 3, "reason": "stopped"}
+    assert node_summary("controller node: {oops") == {} and node_summary("") == {}
+    assert cpu_plan(CosimConfig("pd", Path("g"), Path("t"), pin_cpus=False)) == (None, None)
+    plant, node = cpu_plan(CosimConfig("pd", Path("g"), Path("t")))
+    avail = os.sched_getaffinity(0)
+    if len(avail) >= 2:
+        assert plant in avail and node in avail and plant != node
+    b = tick_breakdown([1000, 3000], [100, 300], [600, 2000], [50, 60], [400, 1500])
+    assert b["tick"] == 2.0 and b["fmu"] == 0.2 and b["round_trip"] == 1.3
+    assert b["overhead"] == pytest.approx(2.0 - 0.2 - 1.3)
+
+
+def test_fmu_port_matches_fmpy(files):
+    """The preallocated-buffer port reads and writes what fmpy's getReal/setReal do."""
+    fmu = Fmu(files["fmu"])
+    try:
+        f, port = fmu.fmu, FmuPort(fmu.fmu, fmu.vr)
+        state0 = port.read()[1]
+        for k in range(20):
+            y, state, ints, fell = port.read()
+            assert y == f.getReal(fmu.vrs(SENSORS)) and state == f.getReal(fmu.vrs(STATE))
+            assert ints == f.getInteger(fmu.vrs(["domain", "steps", "fall_code"]))
+            assert fell == f.getBoolean(fmu.vrs(["fall"]))[0]
+            port.set_torque(0.01 * k, -0.02 * k)
+            assert f.getReal(fmu.vrs(INPUTS)) == [0.01 * k, -0.02 * k]
+            assert port.forces() == f.getReal(fmu.vrs(FORCES))
+            port.step(k * 1e-3, 1e-3)
+        assert port.read()[1] != state0  # the steps moved the state on
+    finally:
+        fmu.free()
+
+
+def test_node_bad_cpu_is_one_line(files):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    p = subprocess.run([sys.executable, "-m", "prosthesis_controller.node", "--controller",
+                        CTRL, "--gait", str(files["gait"]), "--tube", str(files["tube"]),
+                        "--run-id", "badcpu", "--cpu", "100000"], env=env, cwd=str(ROOT),
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2
+    assert p.stderr.strip().count("\n") == 0 and "CPU 100000" in p.stderr
 
 
 def test_plant_rejects_bad_controller_frames():
