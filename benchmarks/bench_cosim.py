@@ -4,7 +4,7 @@ FMU step), every figure measured inside the same run; median and spread over ``-
 
     PYTHONPATH=. python benchmarks/bench_cosim.py --gait gait.json --tube tube.json \
         [--controller clfqp] [--steps 20] [--runs 3] [--fmu human.fmu] \
-        [--no-pin] [--no-low-latency] [--json out.json]
+        [--no-pin] [--no-low-latency] [--poll-us 300] [--json out.json]
 
 Per run (plant side, means per tick): ``tick``; ``fmu`` (all FMU calls: outputs, inputs,
 doStep); ``round_trip`` (the cycle's frames sent -> its TorqueCmd in hand: zenoh both ways,
@@ -63,7 +63,8 @@ def one_run(a: argparse.Namespace) -> tuple[dict[str, float], CosimResult]:
         path = Path(td) / "b.mcap"
         res = run_cosim(CosimConfig(controller=a.controller, gait=a.gait, tube=a.tube,
                                     fmu=a.fmu, steps=a.steps, record=path,
-                                    pin_cpus=not a.no_pin, low_latency=not a.no_low_latency))
+                                    pin_cpus=not a.no_pin, low_latency=not a.no_low_latency,
+                                    poll_us=a.poll_us))
         size = path.stat().st_size
     if res.faulted or res.missed:
         raise SystemExit(f"bench_cosim: run faulted or missed replies: {res.fault_reason}")
@@ -81,6 +82,8 @@ def main() -> None:
     p.add_argument("--no-pin", action="store_true", help="let the OS place both processes")
     p.add_argument("--no-low-latency", action="store_true",
                    help="zenoh's normal transport instead of the low-latency one")
+    p.add_argument("--poll-us", type=float, default=CosimConfig.poll_us,
+                   help="receive polling before blocking, both sides (0: block at once)")
     p.add_argument("--json", type=Path)
     a = p.parse_args()
     runs: list[dict[str, float]] = []

@@ -78,7 +78,10 @@ class CosimConfig:
     status_every: int = 100
     controller_watchdog: float = 0.05  # s, the node's own watchdog
     low_latency: bool = True  # zenoh low-latency transport on both sides
-    pin_cpus: bool = True  # plant loop and controller node each on its own CPU (>= 2 CPUs)
+    # plant loop and controller node each on its own CPU (>= 2 CPUs; see cpu_plan). The
+    # calling thread's affinity is restored after the run; zenoh's threads, if this run
+    # starts them (the first zenoh session of the process), stay on the plant's CPU.
+    pin_cpus: bool = True
     poll_us: float = 300.0  # lockstep: both sides poll this long before blocking on a frame
 
     def to_dict(self) -> dict[str, Any]:
@@ -273,15 +276,20 @@ def versions() -> dict[str, str]:
 
 
 def cpu_plan(cfg: CosimConfig) -> tuple[int | None, int | None]:
-    """(plant CPU, controller CPU): the first two CPUs this process may use when
-    ``pin_cpus`` and there are two, else (None, None).
+    """(plant CPU, controller CPU) when ``pin_cpus`` and this process may use two CPUs,
+    else (None, None): a pair of the allowed CPUs, chosen by process id on a larger
+    machine so that runs started side by side spread out (on two CPUs: both).
 
     Lockstep alternates between the two processes; on a small shared machine, letting the
     scheduler place them makes each wake-up (the reply arriving, the next cycle's frames)
     land on a CPU busy with the other process or other jobs. Each process on its own CPU,
-    with its zenoh threads, keeps those hand-offs local (measured: README, co-simulation)."""
+    with its zenoh threads, keeps those hand-offs local (measured: README, co-simulation).
+    """
     avail = sorted(os.sched_getaffinity(0))
-    return (avail[0], avail[1]) if cfg.pin_cpus and len(avail) >= 2 else (None, None)
+    if not cfg.pin_cpus or len(avail) < 2:
+        return None, None
+    i = 2 * (os.getpid() % (len(avail) // 2))
+    return avail[i], avail[i + 1]
 
 
 def bus_poll_us(cfg: CosimConfig) -> float:

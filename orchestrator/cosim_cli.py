@@ -63,13 +63,16 @@ def run(
     fmu: Annotated[Path | None, typer.Option(help="Human FMU (default: built and cached "
                                              "for the gait).", dir_okay=False)] = None,
     max_time: Annotated[float, typer.Option(help="Simulation time limit [s].")] = 60.0,
+    pin: Annotated[bool, typer.Option(help="Run the plant and the controller each on its "
+                                      "own CPU.")] = True,
 ) -> None:
     """Co-simulate the human FMU with the controller in its own process over zenoh."""
     from orchestrator.cosim import CosimConfig, run_cosim
 
     console = Console()
     cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
-                      perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time)
+                      perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time,
+                      pin_cpus=pin)
     from orchestrator.cosim import CosimError
 
     with console.status("starting") as status:
@@ -94,6 +97,10 @@ def run(
     t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"
                                                          for k, v in res.latency_us.items()))
     t.add_row("per tick us", ", ".join(f"{k} {v:.0f}" for k, v in res.timing_us.items()))
+    nt = res.node.get("timing_us", {})
+    if nt:
+        t.add_row("controller node us (mean)", ", ".join(
+            f"{k.replace('_', ' ')} {v.get('mean_us', 0):.0f}" for k, v in nt.items()))
     t.add_row("rejects plant / controller", f"{res.plant_rejects} / {res.ctrl_rejects}")
     t.add_row("injected", str(res.injected))
     if record:
