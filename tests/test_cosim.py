@@ -271,6 +271,7 @@ def test_node_summary_cpu_plan_and_tick_breakdown():
     assert s == {"ticks": 3, "reason": "stopped"}
     assert node_summary("controller node: {oops") == {} and node_summary("") == {}
     assert cpu_plan(CosimConfig("pd", Path("g"), Path("t"), pin_cpus=False)) == (None, None)
+    assert cpu_plan(CosimConfig("pd", Path("g"), Path("t"), mode="realtime")) == (None, None)
     plant, node = cpu_plan(CosimConfig("pd", Path("g"), Path("t")))
     avail = os.sched_getaffinity(0)
     if len(avail) >= 2:
