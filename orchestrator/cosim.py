@@ -29,7 +29,6 @@ import hashlib
 import json
 import os
 import platform
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -47,6 +46,7 @@ from bus_schemas import codec, keys
 from bus_schemas.bus_config import send_frames
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
 from bus_schemas.zenoh_config import loopback_endpoint
+from human_fmu.instance import FmuInstance
 from orchestrator.fmu_port import FmuPort
 from prosthesis_controller.timing import Usage, pin_thread
 
@@ -141,43 +141,16 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
     return out
 
 
-class Fmu:
-    """fmpy FMU2Slave of the human FMU with name-based value references."""
+class Fmu(FmuInstance):
+    """The human FMU of a run: instantiated and initialized with the run's start values."""
 
     def __init__(self, path: Path, real: dict[str, float] | None = None,
                  integer: dict[str, int] | None = None) -> None:
-        from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
-
-        self.path = Path(path)
-        self.md = read_model_description(str(path))
-        self.unzipdir = extract(str(path))
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzipdir,
-                             modelIdentifier=self.md.coSimulation.modelIdentifier,
-                             instanceName="human")
-        self.fmu.instantiate()
-        f = self.fmu
-        f.setupExperiment(startTime=0.0)
-        if real:
-            f.setReal(self.vrs(real), [float(v) for v in real.values()])
-        if integer:
-            f.setInteger(self.vrs(integer), [int(v) for v in integer.values()])
-        f.enterInitializationMode()
-        f.exitInitializationMode()
-
-    def vrs(self, names: Any) -> list[int]:
-        return [self.vr[n] for n in names]
+        super().__init__(path, instance="human")
+        self.initialize(real, integer)
 
     def model_description_xml(self) -> bytes:
-        return (Path(self.unzipdir) / "modelDescription.xml").read_bytes()
-
-    def free(self) -> None:
-        try:
-            self.fmu.terminate()
-            self.fmu.freeInstance()
-        finally:
-            shutil.rmtree(self.unzipdir, ignore_errors=True)
+        return (self.unzipdir / "modelDescription.xml").read_bytes()
 
 
 # --------------------------------------------------------------------------- faults

@@ -17,7 +17,6 @@ the FMU starts exactly where the simulator's run of the same draw starts.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +24,7 @@ import numpy as np
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from human_fmu import FALL_CODES
+from human_fmu.instance import FmuInstance
 from orchestrator.scenarios import Scenario, ScenarioResult, knee_reference
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 
@@ -33,30 +33,18 @@ CONE_FALL = 5  # reported one period late (module docstring)
 DOMAINS = ("ps", "pns")
 
 
-class FmuPlant:
+class FmuPlant(FmuInstance):
     """One instance of the human FMU, extracted into ``workdir`` and instantiated once."""
 
     def __init__(self, path: Path, workdir: Path) -> None:
-        from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
-
-        self.md = read_model_description(str(path))
-        self.unzipdir = Path(extract(str(path), unzipdir=str(workdir / "fmu")))
+        super().__init__(path, unzipdir=workdir / "fmu", instance="sweep")
         info = self.unzipdir / "resources" / "build_info.json"
         self.build_info = json.loads(info.read_text()) if info.is_file() else {}
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(self.unzipdir),
-                             modelIdentifier=self.md.coSimulation.modelIdentifier,
-                             instanceName="sweep")
-        self.fmu.instantiate()
         self._sens = self.vrs(SENSORS)
         self._ints = self.vrs(("domain", "steps", "fall_code"))
         self._fall = self.vrs(("fall",))
         self._u = self.vrs(("u_knee", "u_ankle"))
         self._n_theta = sum(1 for n in self.vr if n.startswith("theta_ps["))
-
-    def vrs(self, names: tuple[str, ...] | list[str]) -> list[int]:
-        return [self.vr[n] for n in names]
 
     def check_gait(self, gait: Gait) -> None:
         """Refuse an FMU built for another gait (its build_info gait hash)."""
@@ -68,9 +56,7 @@ class FmuPlant:
     def start(self, thetas: dict[str, np.ndarray], q0: np.ndarray, qd0: np.ndarray) -> None:
         """Reset and initialise for one run: the human tracks ``thetas``, start (q0, qd0)
         in ps, no FMU-side perturbation or offset."""
-        f = self.fmu
-        f.reset()
-        f.setupExperiment(startTime=0.0)
+        self.fmu.reset()
         names: list[str] = []
         vals: list[float] = []
         for d in DOMAINS:
@@ -84,17 +70,8 @@ class FmuPlant:
         vals += [float(v) for v in q0] + [float(v) for v in qd0]
         names += ["human_perturbation", "offset_knee", "offset_ankle"]
         vals += [0.0, 0.0, 0.0]
-        f.setReal(self.vrs(names), vals)
-        f.setInteger(self.vrs(["human_seed", "initial_domain"]), [0, 0])
-        f.enterInitializationMode()
-        f.exitInitializationMode()
-
-    def free(self) -> None:
-        try:
-            self.fmu.terminate()
-            self.fmu.freeInstance()
-        finally:
-            shutil.rmtree(self.unzipdir, ignore_errors=True)
+        self.initialize(dict(zip(names, vals, strict=True)),
+                        {"human_seed": 0, "initial_domain": 0})
 
 
 def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,

@@ -1,0 +1,56 @@
+"""One instance of a co-simulation FMU loaded through fmpy, with name-based value references.
+
+Shared by the co-simulation master (:mod:`orchestrator.cosim`) and the sweep's FMU backend
+(:mod:`orchestrator.sweep_fmu`).  (``tests/fmu_runner.py`` keeps its own copy on purpose: it
+must run in a Python where this project cannot be imported.)
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+
+class FmuInstance:
+    """An fmpy ``FMU2Slave`` of the FMU at ``path``, extracted into ``unzipdir`` (a fresh
+    temporary folder by default, removed by :meth:`free`) and instantiated once."""
+
+    def __init__(self, path: str | Path, *, unzipdir: str | Path | None = None,
+                 instance: str = "human") -> None:
+        from fmpy import extract, read_model_description
+        from fmpy.fmi2 import FMU2Slave
+
+        self.path = Path(path)
+        self.md = read_model_description(str(path))
+        self.unzipdir = Path(extract(str(path),
+                                     unzipdir=None if unzipdir is None else str(unzipdir)))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(self.unzipdir),
+                             modelIdentifier=self.md.coSimulation.modelIdentifier,
+                             instanceName=instance)
+        self.fmu.instantiate()
+
+    def vrs(self, names: Iterable[str]) -> list[int]:
+        """Value references of ``names`` (KeyError for an unknown name)."""
+        return [self.vr[n] for n in names]
+
+    def initialize(self, real: Mapping[str, float] | None = None,
+                   integer: Mapping[str, int] | None = None) -> None:
+        """setupExperiment(t = 0), set the start values, enter and exit initialization."""
+        f = self.fmu
+        f.setupExperiment(startTime=0.0)
+        if real:
+            f.setReal(self.vrs(real), [float(v) for v in real.values()])
+        if integer:
+            f.setInteger(self.vrs(integer), [int(v) for v in integer.values()])
+        f.enterInitializationMode()
+        f.exitInitializationMode()
+
+    def free(self) -> None:
+        """Terminate and free the instance, then remove the extracted files."""
+        try:
+            self.fmu.terminate()
+            self.fmu.freeInstance()
+        finally:
+            shutil.rmtree(self.unzipdir, ignore_errors=True)
