@@ -60,6 +60,7 @@ class PHZDOptions:
     w_y1: float = 10.0
     w_y2: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)
     w_step: float = 100.0
+    w_offset: float = 0.0
     duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
     offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
     expand: bool = False  # expand the NLP to SX: 15x faster derivatives, but on the
@@ -261,6 +262,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
             e = alpha[k, :].T - a_mc[k, :] - X["delta"][k]
             cost += opt.w_y2[k] * (e.T @ G @ e)
         cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
+        cost += opt.w_offset * ca.sumsqr(X["delta"])
         cost += opt.w_step * ((targets.p_max[d] - targets.p_min[d]) - (p_max - p_min)) ** 2
         if d == "ps":
             eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
