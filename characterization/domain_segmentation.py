@@ -43,7 +43,7 @@ class TouchdownOptions:
 
     rest_speed: float = 0.15  # m/s, ankle "moving" above this
     swing_speed: float = 0.8  # m/s, a swing reaches at least this speed
-    rest_radius: float = 0.003  # m, at rest within this distance of the rest position
+    rest_radius: float = 0.0015  # m, at rest within this distance of the rest position
     rest_time: float = 0.08  # s, window after the swing that gives the rest position
 
 

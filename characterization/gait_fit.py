@@ -110,14 +110,39 @@ def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: S
                             float(np.mean(steps.step_delta_upper[sel])), len(sel))
 
 
+#: per touchdown portion: frames at each end left out of the regression (the mocap low-pass
+#: spreads the impact's velocity jump over them), and frames after/before those whose
+#: straight line, extrapolated to the touchdown, gives the phase bound (s; see
+#: :func:`regress_segments`)
+EDGE_TIME = 0.015
+BOUND_FIT_TIME = 0.035
+
+
+def _segment_phase(delta: np.ndarray, rate: float) -> tuple[float, float, slice] | None:
+    """Phase bounds (m) of a touchdown portion and the frames to regress: the touchdowns
+    fell on average half a frame outside the portion's end frames; delta_p_hip is
+    extrapolated there along straight lines through the frames next to the left-out
+    edges (the low-pass bends the end frames)."""
+    k = int(np.ceil(EDGE_TIME * rate - 1e-9))
+    m = max(2, round(BOUND_FIT_TIME * rate))
+    n = len(delta)
+    if n < 2 * (k + m):
+        return None
+    i = np.arange(n, dtype=float)
+    p_lo = np.polyval(np.polyfit(i[k:k + m], delta[k:k + m], 1), -0.5)
+    p_hi = np.polyval(np.polyfit(i[n - k - m:n - k], delta[n - k - m:n - k], 1), n - 0.5)
+    if not p_hi > p_lo:
+        return None
+    return float(p_lo), float(p_hi), slice(k, n - k)
+
+
 def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
                      segments: Sequence[StepBounds], domain: str, degree: int,
                      src: str = "steps") -> DomainRegression:
-    """Bezier regression of the stacked frame ranges ``segments`` (all of ``domain``) of the
-    take; tau over each from the stance leg's delta_p_hip at its first and last frame."""
-    if not len(segments):
-        raise FitError(f"{src}: no '{domain}' portion found (need at least one of each "
-                       "domain)")
+    """Bezier regression of the stacked touchdown portions ``segments`` (all of
+    ``domain``) of the take; tau over each from the stance leg's delta_p_hip and the
+    phase bounds of :func:`_segment_phase`.  Portions too short for it, or where the hip
+    does not progress, are left out."""
     names = list(steps.coord_names)
     cols = [names.index(c) for c in Y2_COORDS[domain]]
     ck, ca_ = model.hip_progress_coefficients(domain)
@@ -126,15 +151,18 @@ def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
     for s in segments:
         q = steps.q[s.start:s.end + 1]
         delta = ck * q[:, k] + ca_ * q[:, a]
-        if not delta[-1] > delta[0]:
-            continue  # the hip did not progress over the stance foot: not a usable portion
-        taus.append((delta - delta[0]) / (delta[-1] - delta[0]))
-        ys.append(q[:, cols])
-        vels.append(np.gradient(delta) * steps.frame_rate)
-        lo.append(delta[0])
-        hi.append(delta[-1])
+        phase = _segment_phase(delta, steps.frame_rate)
+        if phase is None:
+            continue
+        p_lo, p_hi, keep = phase
+        taus.append(((delta - p_lo) / (p_hi - p_lo))[keep])
+        ys.append(q[keep, cols])
+        vels.append((np.gradient(delta) * steps.frame_rate)[keep])
+        lo.append(p_lo)
+        hi.append(p_hi)
     if not taus:
-        raise FitError(f"{src}: no '{domain}' portion where the hip progresses")
+        raise FitError(f"{src}: no usable '{domain}' portion between touchdowns (need at "
+                       "least one of each domain)")
     tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
     fit = fit_bezier(tau, y, degree)
     vfit = fit_bezier(tau, vel, 0)
@@ -147,7 +175,7 @@ def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int
     """Bezier regression of the stacked portions of each domain (``segments``: module
     docstring)."""
     if segments not in SEGMENTS:
-        raise ValueError(f"segments must be one of {SEGMENTS}, got {segments!r}")
+        raise FitError(f"segments must be one of {', '.join(SEGMENTS)}, got {segments!r}")
     found = domain_segments(steps) if segments == "touchdown" else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
     for d in CYCLE:
@@ -201,12 +229,14 @@ def verify_gait(model: HumanProsthesisModel, gait: Gait, steps: int = 20) -> dic
 
 def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
              src: str = "steps", verify: bool = True,
-             progress: Callable[[str], None] | None = None) -> Gait:
-    """The whole ``gait fit``: regression, optimization, verification.  Raises
-    :class:`GaitOptimizationError` (with IPOPT's status) when the optimization fails."""
+             progress: Callable[[str], None] | None = None,
+             segments: str = "touchdown") -> Gait:
+    """The whole ``gait fit``: regression (of the portions ``segments``, module
+    docstring), optimization, verification.  Raises :class:`GaitOptimizationError` (with
+    IPOPT's status) when the optimization fails."""
     say = progress or (lambda _m: None)
     say("Bezier regression of the steps")
-    reg = regress_steps(model, steps, opt.degree, src)
+    reg = regress_steps(model, steps, opt.degree, src, segments)
     say("PHZD optimization (IPOPT)")
     res = optimize_gait(model, reg.targets, opt)
     if not res.success:

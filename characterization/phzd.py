@@ -13,9 +13,10 @@ and the closed-loop output dynamics of the feedback-linearizing controller hold,
 with y2 = 0 and dy2 = 0 at the first point of each domain (partial hybrid zero dynamics:
 the relative-degree-2 outputs are impact invariant, y1 is not).  The trajectory is thus the
 one the controller produces; the decision variables are the gait parameters (alpha_v,
-v_hip, p_min, p_max), offsets delta_alpha and the states.  Cost exactly as the paper: the
+v_hip, p_min, p_max), offsets delta_alpha and the states.  Cost as the paper: the
 weighted integral of squared Bezier differences as a quadratic form (``bezier.gram``) plus
-the step-length term.
+the step-length term; plus, not in the paper, ``w_offset`` times the squared offsets (see
+:class:`PHZDOptions`; 0 gives the paper's cost exactly).
 """
 
 from __future__ import annotations
@@ -60,7 +61,10 @@ class PHZDOptions:
     w_y1: float = 10.0
     w_y2: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)
     w_step: float = 100.0
-    w_offset: float = 0.0
+    w_offset: float = 0.1  # weight of sum(delta_alpha^2) per domain: not in the paper's J_v.
+    #  Without it the offsets are not identified (a valley: trunk pitch against both hip
+    #  angles); on the model-generated subject (true offsets 0) IPOPT then drifted to
+    #  offsets of 8.6 deg and a gait 8.8 deg from the truth, at 0.2 deg from the data
     duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
     offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
     expand: bool = False  # expand the NLP to SX: 15x faster derivatives, but on the

@@ -8,9 +8,10 @@ from pathlib import Path
 import numpy as np
 
 from characterization.steps_artifact import StepsArtifact
+from characterization.synthetic_subject import REFERENCE_GAIT
 
-DATA = Path(__file__).parent / "data" / "playback"
-GAIT = DATA / "gait_synthetic.json"
+#: the packaged reference gait (characterization/data/NOTICE.md)
+GAIT: Path = REFERENCE_GAIT
 
 
 def subset_steps(a: StepsArtifact, keep: list[int]) -> StepsArtifact:
