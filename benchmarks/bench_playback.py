@@ -14,7 +14,7 @@ F_s computation (our compiled ``socket_ps``) against the same computation with P
    (:mod:`characterization.playback_truth`) for a few angle-noise levels.
 
     PYTHONPATH=. python benchmarks/bench_playback.py [--repeats 7] [--steps 20]
-        [--gait characterization/data/reference_gait.json] [--steps-file steps.npz] [--accuracy]
+        [--gait tests/data/playback/gait_synthetic.json] [--steps-file steps.npz] [--accuracy]
 
 Without ``--steps-file`` the steps come from the model-generated subject (20 ps steps).
 """
@@ -48,7 +48,7 @@ from tests.playback_helpers import (
     tube_excess,
 )
 
-DEFAULT_GAIT = Path(__file__).resolve().parents[1] / "characterization/data/reference_gait.json"
+DEFAULT_GAIT = Path(__file__).resolve().parents[1] / "tests/data/playback/gait_synthetic.json"
 
 
 def stats(v: list[float], scale: float = 1.0) -> str:

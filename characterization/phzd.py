@@ -71,6 +71,8 @@ class PHZDOptions:
     #  synthetic subject IPOPT then ended in a far worse local optimum (RMS 15-47 deg)
     max_iter: int = 1000
     tol: float = 1e-6
+    mu_strategy: str = "monotone"  # IPOPT's barrier update: "adaptive" diverged (restoration
+    #  failure) on the kinematic template subject once the offsets were regularized
     print_level: int = 0
 
 
@@ -291,7 +293,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     # initial impact-variable guesses: zero is poor; use the next domain's start velocity
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
     ipopt = {"max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
-             "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
+             "linear_solver": "mumps", "mu_strategy": opt.mu_strategy, "sb": "yes"}
     solver = ca.nlpsol("phzd", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
                                               "expand": opt.expand})
     x0 = np.concatenate(w0)

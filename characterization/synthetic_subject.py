@@ -235,7 +235,7 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
                ) -> SyntheticTake:
     """Generate the synthetic take and its truth.
 
-    Truth keys (positions in the sagittal projection of the lab frame): time, q (n, 12),
+    Truth keys (positions in the sagittal projection of the lab frame): source, time, q (n, 12),
     limb_pitch (n, 7), joint_position (n, 6, 2), joint_lambda (6, 2, 2), delta_ps (n,),
     step_domain/step_start/step_end (truth steps from the extrema of the noise-free
     delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
@@ -344,8 +344,8 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     q = q.copy()
     q[:, 0:2] += shift
     truth = {
-        "time": t - t[0], "q": q, "limb_pitch": limb_pitch, "joint_position": joint_pos,
-        "joint_lambda": lam, "delta_ps": delta,
+        "source": np.array(opts.source), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
+        "joint_position": joint_pos, "joint_lambda": lam, "delta_ps": delta,
         "step_domain": np.array([s[0] for s in steps]),
         "step_start": np.array([s[1] for s in steps], dtype=np.int64),
         "step_end": np.array([s[2] for s in steps], dtype=np.int64),

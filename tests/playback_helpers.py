@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from characterization.steps_artifact import StepsArtifact
-from characterization.synthetic_subject import REFERENCE_GAIT
 
-#: the packaged reference gait (characterization/data/NOTICE.md)
-GAIT: Path = REFERENCE_GAIT
+DATA = Path(__file__).parent / "data" / "playback"
+GAIT = DATA / "gait_synthetic.json"
 
 
 def subset_steps(a: StepsArtifact, keep: list[int]) -> StepsArtifact:
