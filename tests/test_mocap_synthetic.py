@@ -121,10 +121,10 @@ def test_double_support_trimmed_with_the_foot_marker(processed, synth) -> None:
     """Single support = the non-stance foot moving: within 6 frames of the true lift-off
     and touch-down (the foot starts and stops smoothly, so a speed threshold lags)."""
     if str(synth.truth["source"]) == "model":
-        pytest.skip("model source: its reference gait's human foot moves backward after "
-                    "lift-off and before touchdown, so the forward-speed rule trims 140 ms "
-                    "of single support at each end (reported in the README); the gait "
-                    "fit's touchdowns are tested in test_domain_segmentation.py")
+        pytest.skip("model source: its reference gait's human foot first moves back and "
+                    "slowly after lift-off, so the forward-speed rule starts single support "
+                    "about 125 ms late (reported in the README); the gait fit's touchdowns "
+                    "are tested in test_domain_segmentation.py")
     tr = synth.truth
     for s, a, b in zip(processed.steps, tr["step_ss_start"], tr["step_ss_end"], strict=True):
         assert s.single_support is not None
