@@ -1,11 +1,14 @@
 """Benchmark: the two-domain 12-DOF PHZD optimization from the regression's initial guess
-(issue 4 target: under 60 s median), on the synthetic subject's steps.
+(issue 4 target: under 60 s median), on the synthetic subject's steps (37 strides, seed 1;
+``--source model``, the default subject walking the packaged reference gait, or
+``--source template``, the kinematic template).
 
 Per repeat: NLP construction + IPOPT solve (wall), iterations, and the share of the solve
 spent evaluating functions and derivatives (CasADi's t_wall_nlp_* statistics); then the
-closed-loop verification (20 steps + return map).
+closed-loop verification (20 steps + return map).  Printed once: the optimized outputs'
+RMS from the data (+ offsets), and for the model source from the reference gait.
 
-    PYTHONPATH=. python benchmarks/bench_gait.py [--repeats 3]
+    PYTHONPATH=. python benchmarks/bench_gait.py [--repeats 3] [--source model|template]
 """
 
 from __future__ import annotations
@@ -16,23 +19,27 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 import hp_model
 from characterization.gait_design import build_gait
-from characterization.gait_fit import regress_steps, verify_gait
+from characterization.gait_fit import output_rms, regress_steps, verify_gait
 from characterization.mocap_mapping import default_mapping
 from characterization.mocap_pipeline import process_take, to_artifact
 from characterization.phzd import PHZDOptions, optimize_gait
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.synthetic_subject import SynthOptions, reference_gait, synthesize
+from hp_model import bezier
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--source", choices=("model", "template"), default="model")
     args = ap.parse_args()
     model = hp_model.load_model()
     coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
     with tempfile.TemporaryDirectory():
-        s = synthesize(model, SynthOptions(n_strides=37, seed=1))
+        s = synthesize(model, SynthOptions(n_strides=37, seed=1, source=args.source))
         steps = to_artifact(process_take(s.take, default_mapping(), coef))
     reg = regress_steps(model, steps, 5)
     opt = PHZDOptions()
@@ -43,7 +50,8 @@ def main() -> None:
         total = time.perf_counter() - t0
         fe = sum(v for k, v in r.stats.items() if k.startswith("t_wall_nlp"))
         t1 = time.perf_counter()
-        v = verify_gait(model, build_gait(model, r, reg.targets, opt))
+        gait = build_gait(model, r, reg.targets, opt)
+        v = verify_gait(model, gait)
         rows.append((total, r.solve_seconds, r.iterations, fe / r.solve_seconds,
                      time.perf_counter() - t1, r.status, v["spectral_radius"]))
     med = statistics.median
@@ -54,7 +62,15 @@ def main() -> None:
         xs = [row[i] for row in rows]
         print(f"| {name} | {med(xs):.3g} | {min(xs):.3g} | {max(xs):.3g} |")
     print(f"\nstatus {rows[0][5]}; return-map spectral radius {rows[0][6]:.2g}; "
-          f"repeats {args.repeats}")
+          f"repeats {args.repeats}; source {args.source}")
+    tau = np.linspace(0.0, 1.0, 201)
+    for d, x in output_rms(gait).items():
+        line = f"{d}: outputs vs data + offsets, RMS deg {np.round(np.degrees(x), 2)}"
+        if args.source == "model":
+            ref = reference_gait(model).params[d].alpha
+            e = bezier.evaluate(gait.params[d].alpha, tau) - bezier.evaluate(ref, tau)
+            line += f"; vs the reference gait {np.round(np.degrees(np.sqrt(np.mean(e**2, 0))), 2)}"
+        print(line)
 
 
 if __name__ == "__main__":

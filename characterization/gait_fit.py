@@ -1,10 +1,15 @@
 """``gait fit``: steps -> Bezier regression -> PHZD optimization -> verified gait artifact.
 
-Regression (paper Sec. IV-A): per domain, the steps of that domain are stacked; y2 (the 5
-joint angles of ``Y2_COORDS``) is fitted with Bezier curves of the chosen degree in the
-step's tau; y1's desired value, the hip velocity, is the degree-0 fit (the mean) of the
-per-frame d/dt delta_p_hip; the phase bounds are the means of the steps' initial and final
-delta_p_hip.
+Regression (paper Sec. IV-A): per domain, the data's portions of that domain are stacked;
+y2 (the 5 joint angles of ``Y2_COORDS``) is fitted with Bezier curves of the chosen degree
+in the portion's tau; y1's desired value, the hip velocity, is the degree-0 fit (the mean)
+of the per-frame d/dt delta_p_hip; the phase bounds are the means of the portions' initial
+and final delta_p_hip.
+
+The portions (``segments``): ``"touchdown"`` (default) the model's domains found in the
+take, touchdown to touchdown (:mod:`characterization.domain_segmentation`); ``"paper"``
+the paper's steps (delta_p_hip(th_pk, th_pa) rising = ps, falling = pns), whose ps step
+also holds the start of the model's pns (see that module).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from characterization.bezier_fit import BezierFit, FitError, fit_bezier
+from characterization.domain_segmentation import domain_segments
 from characterization.gait_design import build_gait
 from characterization.gait_verification import make_simulator, poincare, simulate_gait
 from characterization.phzd import (
@@ -24,11 +30,14 @@ from characterization.phzd import (
     PHZDOptions,
     optimize_gait,
 )
+from characterization.step_segmentation import StepBounds
 from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS
+
+SEGMENTS = ("touchdown", "paper")
 
 
 @dataclass(frozen=True)
@@ -39,11 +48,13 @@ class Regression:
     fits: dict[str, BezierFit]  # y2 per domain
     hip_velocity_rms: dict[str, float]  # m/s, spread of d/dt delta_p_hip about its mean
     n_steps: dict[str, int]
+    segments: str = "touchdown"
 
     def quality(self) -> dict[str, dict]:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
                     "n": self.fits[d].n, "steps": self.n_steps[d],
-                    "hip_velocity_rms": self.hip_velocity_rms[d]} for d in CYCLE}
+                    "hip_velocity_rms": self.hip_velocity_rms[d],
+                    "segments": self.segments} for d in CYCLE}
 
 
 @dataclass(frozen=True)
@@ -57,6 +68,15 @@ class DomainRegression:
     p_min: float
     p_max: float
     n_steps: int
+
+
+def _hip_velocity(vfit: BezierFit, domain: str, src: str) -> float:
+    """The degree-0 fit of d/dt delta_p_hip (m/s); an error if the hip does not progress."""
+    v_hip = float(vfit.alpha[0, 0])
+    if not v_hip > 0.05:
+        raise FitError(f"{src}: mean hip velocity in '{domain}' is {v_hip:.3f} m/s; "
+                       "the steps do not progress forward")
+    return v_hip
 
 
 def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: Sequence[int],
@@ -84,28 +104,92 @@ def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: S
     tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
     fit = fit_bezier(tau, y, degree)
     vfit = fit_bezier(tau, vel, 0)
-    v_hip = float(vfit.alpha[0, 0])
-    if not v_hip > 0.05:
-        raise FitError(f"{src}: mean hip velocity in '{domain}' is {v_hip:.3f} m/s; "
-                       "the steps do not progress forward")
     sel = np.asarray(indices)
-    return DomainRegression(fit, v_hip, float(vfit.rms[0]),
+    return DomainRegression(fit, _hip_velocity(vfit, domain, src), float(vfit.rms[0]),
                             float(np.mean(steps.step_delta_lower[sel])),
                             float(np.mean(steps.step_delta_upper[sel])), len(sel))
 
 
+#: per touchdown portion: frames at each end left out of the regression (the mocap low-pass
+#: spreads the impact's velocity jump over them), and frames after/before those whose
+#: straight line, extrapolated to the touchdown, gives the phase bound (s; see
+#: :func:`regress_segments`)
+EDGE_TIME = 0.015
+BOUND_FIT_TIME = 0.035
+
+
+def _segment_phase(delta: np.ndarray, rate: float) -> tuple[float, float, slice] | None:
+    """Phase bounds (m) of a touchdown portion and the frames to regress: the touchdowns
+    fell on average half a frame outside the portion's end frames; delta_p_hip is
+    extrapolated there along straight lines through the frames next to the left-out
+    edges (the low-pass bends the end frames)."""
+    k = int(np.ceil(EDGE_TIME * rate - 1e-9))
+    m = max(2, round(BOUND_FIT_TIME * rate))
+    n = len(delta)
+    if n < 2 * (k + m):
+        return None
+    i = np.arange(n, dtype=float)
+    p_lo = np.polyval(np.polyfit(i[k:k + m], delta[k:k + m], 1), -0.5)
+    p_hi = np.polyval(np.polyfit(i[n - k - m:n - k], delta[n - k - m:n - k], 1), n - 0.5)
+    if not p_hi > p_lo:
+        return None
+    return float(p_lo), float(p_hi), slice(k, n - k)
+
+
+def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
+                     segments: Sequence[StepBounds], domain: str, degree: int,
+                     src: str = "steps") -> DomainRegression:
+    """Bezier regression of the stacked touchdown portions ``segments`` (all of
+    ``domain``) of the take; tau over each from the stance leg's delta_p_hip and the
+    phase bounds of :func:`_segment_phase`.  Portions too short for it, or where the hip
+    does not progress, are left out."""
+    names = list(steps.coord_names)
+    cols = [names.index(c) for c in Y2_COORDS[domain]]
+    ck, ca_ = model.hip_progress_coefficients(domain)
+    k, a = (names.index(c) for c in STANCE[domain])
+    taus, ys, vels, lo, hi = [], [], [], [], []
+    for s in segments:
+        q = steps.q[s.start:s.end + 1]
+        delta = ck * q[:, k] + ca_ * q[:, a]
+        phase = _segment_phase(delta, steps.frame_rate)
+        if phase is None:
+            continue
+        p_lo, p_hi, keep = phase
+        taus.append(((delta - p_lo) / (p_hi - p_lo))[keep])
+        ys.append(q[keep, cols])
+        vels.append((np.gradient(delta) * steps.frame_rate)[keep])
+        lo.append(p_lo)
+        hi.append(p_hi)
+    if not taus:
+        raise FitError(f"{src}: no usable '{domain}' portion between touchdowns (need at "
+                       "least one of each domain)")
+    tau, y, vel = np.concatenate(taus), np.concatenate(ys), np.concatenate(vels)
+    fit = fit_bezier(tau, y, degree)
+    vfit = fit_bezier(tau, vel, 0)
+    return DomainRegression(fit, _hip_velocity(vfit, domain, src), float(vfit.rms[0]),
+                            float(np.mean(lo)), float(np.mean(hi)), len(taus))
+
+
 def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int,
-                  src: str = "steps") -> Regression:
-    """Bezier regression of the stacked steps of each domain."""
+                  src: str = "steps", segments: str = "touchdown") -> Regression:
+    """Bezier regression of the stacked portions of each domain (``segments``: module
+    docstring)."""
+    if segments not in SEGMENTS:
+        raise FitError(f"segments must be one of {', '.join(SEGMENTS)}, got {segments!r}")
+    found = domain_segments(steps) if segments == "touchdown" else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
     for d in CYCLE:
-        idx = [i for i in range(steps.n_steps) if steps.step_domain[i] == d]
-        r = regress_domain(model, steps, idx, d, degree, src)
+        if segments == "touchdown":
+            r = regress_segments(model, steps, [s for s in found if s.domain == d], d,
+                                 degree, src)
+        else:
+            idx = [i for i in range(steps.n_steps) if steps.step_domain[i] == d]
+            r = regress_domain(model, steps, idx, d, degree, src)
         fits[d], alpha[d] = r.fit, r.fit.alpha
         v_hip[d], vrms[d] = r.v_hip, r.v_hip_rms
         p_min[d], p_max[d] = r.p_min, r.p_max
         counts[d] = r.n_steps
-    return Regression(DataTargets(alpha, v_hip, p_min, p_max), fits, vrms, counts)
+    return Regression(DataTargets(alpha, v_hip, p_min, p_max), fits, vrms, counts, segments)
 
 
 def output_rms(gait: Gait, n: int = 201) -> dict[str, np.ndarray]:
@@ -145,12 +229,14 @@ def verify_gait(model: HumanProsthesisModel, gait: Gait, steps: int = 20) -> dic
 
 def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
              src: str = "steps", verify: bool = True,
-             progress: Callable[[str], None] | None = None) -> Gait:
-    """The whole ``gait fit``: regression, optimization, verification.  Raises
-    :class:`GaitOptimizationError` (with IPOPT's status) when the optimization fails."""
+             progress: Callable[[str], None] | None = None,
+             segments: str = "touchdown") -> Gait:
+    """The whole ``gait fit``: regression (of the portions ``segments``, module
+    docstring), optimization, verification.  Raises :class:`GaitOptimizationError` (with
+    IPOPT's status) when the optimization fails."""
     say = progress or (lambda _m: None)
     say("Bezier regression of the steps")
-    reg = regress_steps(model, steps, opt.degree, src)
+    reg = regress_steps(model, steps, opt.degree, src, segments)
     say("PHZD optimization (IPOPT)")
     res = optimize_gait(model, reg.targets, opt)
     if not res.success:

@@ -13,9 +13,10 @@ and the closed-loop output dynamics of the feedback-linearizing controller hold,
 with y2 = 0 and dy2 = 0 at the first point of each domain (partial hybrid zero dynamics:
 the relative-degree-2 outputs are impact invariant, y1 is not).  The trajectory is thus the
 one the controller produces; the decision variables are the gait parameters (alpha_v,
-v_hip, p_min, p_max), offsets delta_alpha and the states.  Cost exactly as the paper: the
+v_hip, p_min, p_max), offsets delta_alpha and the states.  Cost as the paper: the
 weighted integral of squared Bezier differences as a quadratic form (``bezier.gram``) plus
-the step-length term.
+the step-length term; plus, not in the paper, ``w_offset`` times the squared offsets (see
+:class:`PHZDOptions`; 0 gives the paper's cost exactly).
 """
 
 from __future__ import annotations
@@ -60,12 +61,18 @@ class PHZDOptions:
     w_y1: float = 10.0
     w_y2: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0, 1.0)
     w_step: float = 100.0
+    w_offset: float = 0.1  # weight of sum(delta_alpha^2) per domain: not in the paper's J_v.
+    #  Without it the offsets are not identified (a valley: trunk pitch against both hip
+    #  angles); on the model-generated subject (true offsets 0) IPOPT then drifted to
+    #  offsets of 8.6 deg and a gait 8.8 deg from the truth, at 0.2 deg from the data
     duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
     offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
     expand: bool = False  # expand the NLP to SX: 15x faster derivatives, but on the
     #  synthetic subject IPOPT then ended in a far worse local optimum (RMS 15-47 deg)
     max_iter: int = 1000
     tol: float = 1e-6
+    mu_strategy: str = "monotone"  # IPOPT's barrier update: "adaptive" diverged (restoration
+    #  failure) on the kinematic template subject once the offsets were regularized
     print_level: int = 0
 
 
@@ -261,6 +268,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
             e = alpha[k, :].T - a_mc[k, :] - X["delta"][k]
             cost += opt.w_y2[k] * (e.T @ G @ e)
         cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
+        cost += opt.w_offset * ca.sumsqr(X["delta"])
         cost += opt.w_step * ((targets.p_max[d] - targets.p_min[d]) - (p_max - p_min)) ** 2
         if d == "ps":
             eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
@@ -285,7 +293,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     # initial impact-variable guesses: zero is poor; use the next domain's start velocity
     nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
     ipopt = {"max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
-             "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
+             "linear_solver": "mumps", "mu_strategy": opt.mu_strategy, "sb": "yes"}
     solver = ca.nlpsol("phzd", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
                                               "expand": opt.expand})
     x0 = np.concatenate(w0)

@@ -1,14 +1,26 @@
 """A synthetic subject on the prosthesis with known ground truth (``hpcosim mocap synth``).
 
-The model's forward kinematics (``model.numeric()["frames"]``) is driven by the gait of
-:mod:`characterization.synthetic_gait`.  Every limb carries four markers offset from its
-joints (Marker1 -> Marker2 lies along the limb's long axis, for feet heel -> toe); a rigid
-body per limb is created in the zero pose with lab-aligned axes (Motive's default) and its
-pose is solved each frame from the visible noisy markers (least-squares fit, >= 3 markers,
-as Motive does).  Measurement noise is Gaussian per coordinate; dropouts are random marker
-occlusions and rigid-body losses.  The take is written as a Motive CSV (Y up) and a C3D (Z
-up, markers only), with the ground truth in ``truth.npz``.  Everything is a deterministic
-function of the options (seed included).
+The motion q(t) comes from one of two sources (``SynthOptions.source``):
+
+- ``"model"`` (default): the model itself walks (:mod:`characterization.model_walk`): the
+  hybrid simulator tracks a reference gait of the model (``gait_file``, default the packaged
+  ``characterization/data/reference_gait.json``, see the NOTICE beside it), every step with
+  its own perturbed Bezier coefficients (``sigma``) and hip velocity (``sigma_v_hip``).
+  The motion is dynamically consistent with the model (impacts, no double support: a foot
+  lifts when the other lands), so a gait fit of the take can be checked against the
+  reference gait.  The truth's contact events are the simulated impacts.
+- ``"template"``: the kinematic template of :mod:`characterization.synthetic_gait`
+  (task-space footfalls with double support and inverse kinematics): human-like timing,
+  but not a motion of the model's dynamics.
+
+The model's forward kinematics (``model.numeric()["frames"]``) turns q into limb poses.
+Every limb carries four markers offset from its joints (Marker1 -> Marker2 lies along the
+limb's long axis, for feet heel -> toe); a rigid body per limb is created in the zero pose
+with lab-aligned axes (Motive's default) and its pose is solved each frame from the visible
+noisy markers (least-squares fit, >= 3 markers, as Motive does).  Measurement noise is
+Gaussian per coordinate; dropouts are random marker occlusions and rigid-body losses.  The
+take is written as a Motive CSV (Y up) and a C3D (Z up, markers only), with the ground truth
+in ``truth.npz``.  Everything is a deterministic function of the options (seed included).
 """
 
 from __future__ import annotations
@@ -25,16 +37,24 @@ from scipy.spatial.transform import Rotation
 
 from characterization.c3d_io import write_c3d
 from characterization.mocap_mapping import JOINTS, LIMBS, default_mapping, synthetic_names
-from characterization.mocap_take import RigidBodyTrack, Take
+from characterization.mocap_take import MocapError, RigidBodyTrack, Take
+from characterization.model_walk import WalkError, WalkOptions, resample, walk
 from characterization.motive_csv import write_motive_csv
 from characterization.synthetic_gait import (
+    GaitEvents,
     GaitParams,
     LegGeometry,
     gait_events,
     gait_q,
 )
 from hp_model import HumanProsthesisModel
+from hp_model.artifacts import ArtifactError
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
+from hp_model.gait_artifact import Gait, load_gait
+
+#: the packaged reference gait of the default subject and device (NOTICE.md beside it)
+REFERENCE_GAIT = Path(__file__).resolve().parent / "data" / "reference_gait.json"
+SOURCES = ("model", "template")
 
 #: limb -> (frame giving its origin, coordinates summed for its pitch)
 LIMB_POSE = {"hat": ("hip", ("th_B",)), "l_thigh": ("hip", ("th_B", "th_lh")),
@@ -81,7 +101,11 @@ class SynthOptions:
     rb_dropout_rate: float = 0.3  # rigid-body losses (markers still seen) per body per second
     rb_dropout_max_frames: int = 24
     lead: float = 0.35  # s of partial steps before the first and after the last cycle
-    gait: GaitParams = field(default_factory=GaitParams)
+    source: str = "model"  # "model" or "template" (module docstring)
+    gait_file: str | None = None  # model source: reference gait (None: the packaged one)
+    sigma: float = 0.03  # model source: rad, SD of the interior Bezier coefficients per step
+    sigma_v_hip: float = 0.03  # model source: relative SD of the hip velocity per step
+    gait: GaitParams = field(default_factory=GaitParams)  # template source
 
 
 @dataclass(frozen=True)
@@ -131,37 +155,31 @@ def _gaps(rng: np.random.Generator, n: int, rate_per_frame: float, max_len: int
 
 def _truth_steps(delta: np.ndarray, t: np.ndarray, ev_p_land: np.ndarray,
                  ev_p_lift: np.ndarray, T: float) -> list[tuple[str, int, int]]:
-    """Steps from the exact extrema of the noise-free delta_p_hip around contact events."""
-    mins, maxs = [], []
-    for tl in ev_p_land:
-        w = (t >= tl - 0.25 * T) & (t <= tl + 0.15 * T)
-        if w.any() and t[0] < tl - 0.25 * T and t[-1] > tl + 0.15 * T:
-            mins.append(int(np.flatnonzero(w)[np.argmin(delta[w])]))
-    for tl in ev_p_lift:
-        w = (t >= tl - 0.10 * T) & (t <= tl + 0.25 * T)
-        if w.any() and t[0] < tl - 0.10 * T and t[-1] > tl + 0.25 * T:
-            maxs.append(int(np.flatnonzero(w)[np.argmax(delta[w])]))
-    pts = sorted([(i, "min") for i in mins] + [(i, "max") for i in maxs])
+    """Steps from the exact extrema of the noise-free delta_p_hip around contact events
+    (windows clipped to the take; an extremum on the take's first or last frame is its
+    edge, not a turn)."""
+    def extremum(tl: float, before: float, after: float, pick) -> int | None:
+        w = np.flatnonzero((t >= tl - before * T) & (t <= tl + after * T))
+        if w.size == 0:
+            return None
+        i = int(w[pick(delta[w])])
+        return i if 0 < i < len(t) - 1 else None
+
+    mins = [extremum(tl, 0.25, 0.15, np.argmin) for tl in ev_p_land]
+    maxs = [extremum(tl, 0.10, 0.25, np.argmax) for tl in ev_p_lift]
+    pts = sorted([(i, "min") for i in mins if i is not None]
+                 + [(i, "max") for i in maxs if i is not None])
     return [("ps" if ka == "min" else "pns", a, b)
             for (a, ka), (b, _) in itertools.pairwise(pts)]
 
 
-def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
-               ) -> SyntheticTake:
-    """Generate the synthetic take and its truth.
-
-    Truth keys (positions in the sagittal projection of the lab frame): time, q (n, 12),
-    limb_pitch (n, 7), joint_position (n, 6, 2), joint_lambda (6, 2, 2), delta_ps (n,),
-    step_domain/step_start/step_end (truth steps from the extrema of the noise-free
-    delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
-    support), p_land/p_lift/h_lift/h_land (contact event times, s).
-    """
-    rng = np.random.default_rng(opts.seed)
-    fs = model.numeric()
-    fr = fs["frames"]
-    names = model.frame_names
-    z0 = fr(np.zeros(model.nq), np.zeros(model.nq))[0].copy()
-    zf = {n: z0[:, i] for i, n in enumerate(names)}
+def _template_motion(model: HumanProsthesisModel, opts: SynthOptions,
+                     rng: np.random.Generator
+                     ) -> tuple[np.ndarray, np.ndarray, GaitEvents, float]:
+    """Times (s), q (n, 12), contact events and the nominal stride time of the kinematic
+    template (:mod:`characterization.synthetic_gait`)."""
+    z0 = model.numeric()["frames"](np.zeros(model.nq), np.zeros(model.nq))[0].copy()
+    zf = {n: z0[:, i] for i, n in enumerate(model.frame_names)}
     left = LegGeometry(-zf["l_knee"][1], zf["l_knee"][1] - zf["l_ankle"][1],
                        zf["l_ankle"][1] - zf["l_sole"][1])
     right = LegGeometry(-zf["p_knee"][1], zf["p_knee"][1] - zf["p_ankle"][1],
@@ -169,9 +187,70 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     g = opts.gait
     ev = gait_events(opts.n_strides + 2, g, rng)
     t0, t1 = ev.p_land[1] - opts.lead, ev.p_land[-1] + opts.lead
-    n = int(np.floor((t1 - t0) * opts.rate)) + 1
-    t = t0 + np.arange(n) / opts.rate
-    q = gait_q(t, ev, g, left, right, rng)
+    t = t0 + np.arange(int(np.floor((t1 - t0) * opts.rate)) + 1) / opts.rate
+    return t, gait_q(t, ev, g, left, right, rng), ev, g.stride_time
+
+
+def reference_gait(model: HumanProsthesisModel, gait_file: str | None = None) -> Gait:
+    """The reference gait the model source walks: ``gait_file`` or the packaged one; one
+    line (MocapError) if it was made for other model parameters."""
+    path = gait_file or REFERENCE_GAIT
+    try:
+        return load_gait(path, model.parameter_hash())
+    except ArtifactError as e:
+        if gait_file is None and "model_hash" in str(e):
+            raise MocapError("synthetic subject: the packaged reference gait was made for the "
+                             "default subject and device; give a gait of this model "
+                             "(--gait, from `hpcosim gait fit`) or use --source template"
+                             ) from None
+        raise
+
+
+def _model_motion(model: HumanProsthesisModel, opts: SynthOptions,
+                  rng: np.random.Generator
+                  ) -> tuple[np.ndarray, np.ndarray, GaitEvents, float]:
+    """Times (s), q (n, 12), contact events (the impacts) and the mean stride time of the
+    model walking its reference gait (:mod:`characterization.model_walk`)."""
+    gait = reference_gait(model, opts.gait_file)
+    wopt = WalkOptions(sigma=opts.sigma, sigma_v_hip=opts.sigma_v_hip)
+    try:  # strides 0 .. n_strides + 1 (the take covers 1 .. n_strides + 1)
+        steps = walk(model, gait, 2 * (opts.n_strides + 2), rng, wopt)
+    except WalkError as e:
+        raise MocapError(f"synthetic subject: {e}; lower --variability") from None
+    p_land = np.array([s.t[0] for s in steps if s.domain == "ps"])
+    h_land = np.array([s.t[0] for s in steps if s.domain == "pns"])
+    # start in the pns before stride 1 and end in the last ps: at most halfway into them,
+    # so that the take's ends are not turning points of delta_p_hip
+    t0 = p_land[1] - min(opts.lead, 0.5 * (p_land[1] - h_land[0]))
+    t1 = p_land[-1] + min(opts.lead, 0.5 * (h_land[-1] - p_land[-1]))
+    t = t0 + np.arange(int(np.floor((t1 - t0) * opts.rate)) + 1) / opts.rate
+    q, _, _ = resample(steps, t)
+    none = np.full(p_land.size, np.nan)
+    ev = GaitEvents(p_land=p_land, h_lift=p_land, h_land=h_land, p_lift=h_land,
+                    p_print=none, h_print=none)
+    return t, q, ev, float(np.mean(np.diff(p_land)))
+
+
+def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
+               ) -> SyntheticTake:
+    """Generate the synthetic take and its truth.
+
+    Truth keys (positions in the sagittal projection of the lab frame): source, time, q (n, 12),
+    limb_pitch (n, 7), joint_position (n, 6, 2), joint_lambda (6, 2, 2), delta_ps (n,),
+    step_domain/step_start/step_end (truth steps from the extrema of the noise-free
+    delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
+    support), p_land/p_lift/h_lift/h_land (contact event times, s).
+    """
+    if opts.source not in SOURCES:
+        raise MocapError(f"synthetic subject: source must be one of {SOURCES}, got "
+                         f"{opts.source!r}")
+    rng = np.random.default_rng(opts.seed)
+    fs = model.numeric()
+    fr = fs["frames"]
+    names = model.frame_names
+    motion = _template_motion if opts.source == "template" else _model_motion
+    t, q, ev, stride_time = motion(model, opts, rng)
+    n = t.size
     poses = np.empty((n, 3, len(names)))
     zero = np.zeros(model.nq)
     for i in range(n):
@@ -241,7 +320,7 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     # truth
     ck, ca = model.hip_progress_coefficients("ps")
     delta = ck * q[:, ci["th_pk"]] + ca * q[:, ci["th_pa"]]
-    steps = _truth_steps(delta, t, ev.p_land, ev.p_lift, g.stride_time)
+    steps = _truth_steps(delta, t, ev.p_land, ev.p_lift, stride_time)
     ss = []
     for dom, a, b in steps:
         lifts, lands = ((ev.h_lift, ev.h_land) if dom == "ps" else (ev.p_lift[:-1],
@@ -265,8 +344,8 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     q = q.copy()
     q[:, 0:2] += shift
     truth = {
-        "time": t - t[0], "q": q, "limb_pitch": limb_pitch, "joint_position": joint_pos,
-        "joint_lambda": lam, "delta_ps": delta,
+        "source": np.array(opts.source), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
+        "joint_position": joint_pos, "joint_lambda": lam, "delta_ps": delta,
         "step_domain": np.array([s[0] for s in steps]),
         "step_start": np.array([s[1] for s in steps], dtype=np.int64),
         "step_end": np.array([s[2] for s in steps], dtype=np.int64),

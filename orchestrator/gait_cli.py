@@ -29,6 +29,16 @@ def fit(
     nodes: Annotated[int, typer.Option(help="Collocation nodes per domain.",
                                        min=5, max=101)] = 21,
     max_iter: Annotated[int, typer.Option(help="IPOPT iteration limit.", min=1)] = 1000,
+    segments: Annotated[str, typer.Option(
+        help="Portions of the take regressed per domain: 'touchdown' (the model's domains, "
+        "touchdown to touchdown) or 'paper' (delta_p_hip rising = ps, falling = pns).")
+    ] = "touchdown",
+    offset_weight: Annotated[float, typer.Option(
+        help="Weight of the squared offsets delta_alpha in the cost (0 = the paper's cost).",
+        min=0.0)] = 0.1,
+    touchdown_slip: Annotated[float | None, typer.Option(
+        help="Largest forward/backward speed of the swing sole at touchdown, m/s (default: "
+        "not bounded).", min=0.0)] = None,
     verify: Annotated[bool, typer.Option(help="Closed-loop verification (20 steps, "
                                          "return map).")] = True,
     figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
@@ -45,10 +55,11 @@ def fit(
     data = load_steps(steps)
     model = hp_model.load_model(str(subject) if subject else None,
                                 str(device) if device else None)
-    opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter)
+    opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter, w_offset=offset_weight,
+                      touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip)
     with console.status("gait fit") as status:
         gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
-                        progress=lambda m: status.update(m))
+                        progress=lambda m: status.update(m), segments=segments)
     save_gait(out, gait)
     if figure:
         save_gait_figure(out.with_suffix(".png"), gait, data)

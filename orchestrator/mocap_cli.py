@@ -65,6 +65,17 @@ def synth(
     dropout_frames: Annotated[int, typer.Option(min=1, help="Longest occlusion, "
                                                 "frames.")] = 10,
     rate: Annotated[float, typer.Option(min=1, help="Frame rate, Hz.")] = 120.0,
+    source: Annotated[str, typer.Option(
+        help="'model': the model walks a reference gait (hybrid simulator, dynamically "
+        "consistent); 'template': a kinematic template with double support.")] = "model",
+    gait: Annotated[Path | None, typer.Option(
+        "--gait", help="Reference gait of --source model (default: the packaged gait of the "
+        "default subject and device).", dir_okay=False)] = None,
+    variability: Annotated[float, typer.Option(
+        min=0, help="--source model: SD of the interior Bezier coefficients per step, "
+        "rad.")] = 0.03,
+    speed_variability: Annotated[float, typer.Option(
+        min=0, help="--source model: relative SD of the hip velocity per step.")] = 0.03,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
@@ -75,13 +86,14 @@ def synth(
     console = Console()
     opts = SynthOptions(n_strides=steps, seed=seed, noise_mm=noise_mm,
                         dropout_rate=dropout_rate, dropout_max_frames=dropout_frames,
-                        rate=rate)
+                        rate=rate, source=source, gait_file=str(gait) if gait else None,
+                        sigma=variability, sigma_v_hip=speed_variability)
     with console.status("generating the synthetic take"):
         model = hp_model.load_model(str(subject) if subject else None,
                                     str(device) if device else None)
         s = synthesize(model, opts)
         paths = write_synthetic(out, s, opts)
-    console.print(f"{steps} step cycles, {s.take.n_frames} frames at {rate:g} Hz, "
+    console.print(f"{steps} step cycles ({source}), {s.take.n_frames} frames at {rate:g} Hz, "
                   f"{len(s.truth['step_domain'])} complete steps in the truth")
     for k, v in paths.items():
         console.print(f"  {k}: {v}")

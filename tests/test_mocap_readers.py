@@ -218,8 +218,11 @@ def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
     c3d = read_c3d(files["c3d"])
     auto = _pitches(c3d)
     explicit = _pitches(c3d, m)
+    # auto-detection takes the trunk's net travel (about 5 m here, 0.5 mm noise at each end),
+    # so it is off the lab axis by ~1e-4 rad of yaw; a yaw error e moves a pitch by about
+    # e x (the pair's lateral noise / its length), 1e-6 rad: 1e-5 allowed
     for limb in LIMBS:
-        np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-6)
+        np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-5)
     # walking the other way round flips every pitch's sign
     back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
     np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
