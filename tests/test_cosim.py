@@ -34,7 +34,7 @@ from orchestrator.cosim import (
 )
 from orchestrator.fmu_port import FORCES, INPUTS, SENSORS, STATE, FmuPort
 from orchestrator.recording import play_to_bus, read_recording, refit_tube, replay
-from prosthesis_controller import ControlOutput, Diagnostics, ProsthesisMeasurement
+from prosthesis_controller import ProsthesisMeasurement
 from prosthesis_controller.controllers import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
@@ -211,18 +211,8 @@ def test_frame_faults_rejected_and_counted(files, model, case):
         assert res.ctrl_rejects[cls] >= 5, res.ctrl_rejects
 
 
-def test_node_rejects_bad_frames_and_goes_safe():
-    class Fake:
-        name = "fake"
-
-        def reset(self, torque=None):
-            pass
-
-        def tick(self, m):
-            return ControlOutput(np.array([0.1, -0.1]),
-                                 Diagnostics(0.5, 0.0, 0.0, "solved", 0, 0, 0, "ps", "stance"))
-
-    node = ControllerNode(Fake(), watchdog=0.05)
+def test_node_rejects_bad_frames_and_goes_safe(ctx):
+    node = ControllerNode(make_controller("pd", None, None, None, context=ctx), watchdog=0.05)
     fr = codec.encode_feedback(0.1, 0.0, 0.2, 0.0, 500.0, True, 0, sim_time_us=0)
     out = []
     for m in fr:
@@ -242,21 +232,10 @@ def test_node_rejects_bad_frames_and_goes_safe():
     assert codec.decode(safe[-1]).value.enable == 0
 
 
-def test_node_watchdog_is_armed_by_the_first_cycle():
+def test_node_watchdog_is_armed_by_the_first_cycle(ctx):
     """Before any measurement the node stays quiet (a SAFE torque frame, timestamp 0,
     sent while a slow plant starts would pass for the reply to the cycle at t = 0)."""
-
-    class Fake:
-        name = "fake"
-
-        def reset(self, torque=None):
-            pass
-
-        def tick(self, m):
-            return ControlOutput(np.array([0.1, -0.1]),
-                                 Diagnostics(0.5, 0.0, 0.0, "solved", 0, 0, 0, "ps", "stance"))
-
-    node = ControllerNode(Fake(), watchdog=0.05)
+    node = ControllerNode(make_controller("pd", None, None, None, context=ctx), watchdog=0.05)
     assert node.poll(now=time.monotonic() + 100.0) == [] and node.state == CtrlState.INIT
     for m in codec.encode_feedback(0.1, 0.0, 0.2, 0.0, 500.0, True, 0, sim_time_us=0):
         node.handle(m, now=10.0)
