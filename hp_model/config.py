@@ -13,7 +13,7 @@ from __future__ import annotations
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -126,16 +126,23 @@ class DeviceConfig(_Strict):
     notes: str = ""
 
 
-def _load(path: Path | str, model: type[_Strict]) -> _Strict:
+def read_toml(path: Path | str, error: type[Exception] = ValueError) -> dict[str, Any]:
+    """The TOML document at ``path``; an unreadable or invalid file raises ``error`` with a
+    one-line message naming the file."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as e:
-        raise ConfigError(f"{path}: cannot read: {e.strerror or e}") from None
+        raise error(f"{path}: cannot read: {e.strerror or e}") from None
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+        raise error(f"{path}: not valid TOML: {e}") from None
+
+
+def _load(path: Path | str, model: type[_Strict]) -> _Strict:
+    path = Path(path)
+    data = read_toml(path, ConfigError)
     if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
         raise ConfigError(
             f"{path}: field 'schema_version': version {data['schema_version']!r} is not "

@@ -34,7 +34,6 @@ A bad spec is refused with one line naming the file and the field (:class:`SpecE
 from __future__ import annotations
 
 import re
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -49,7 +48,7 @@ from pydantic import (
 )
 
 from hp_model.artifacts import canonical_hash
-from hp_model.config import ConfigError
+from hp_model.config import ConfigError, read_toml
 from prosthesis_controller import CONTROLLERS
 
 SCHEMA_VERSION = 1
@@ -285,13 +284,6 @@ def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
 def load_spec(path: str | Path, overrides: dict[str, Any] | None = None) -> SweepSpec:
     """Read and validate a sweep spec TOML; ``overrides`` replace top-level fields (CLI)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise SpecError(f"{path}: cannot read: {e.strerror or e}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise SpecError(f"{path}: not valid TOML: {e}") from None
+    data = read_toml(path, SpecError)
     data.update({k: v for k, v in (overrides or {}).items() if v is not None})
     return parse_spec(data, path)

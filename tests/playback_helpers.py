@@ -31,15 +31,21 @@ def estimate_at(sp, tau: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(tau, sp.tau, sp.socket[:, c]) for c in range(3)])
 
 
+def _truth_windows(result, take):
+    """Per used step: (played-back step, its truth, mask of the truth's frames in
+    [tau_lo, tau_hi])."""
+    truth = {t.index: t for t in take.ps_truth()}
+    tube = result.tube
+    for sp in result.playback.good:
+        tr = truth[sp.step]
+        yield sp, tr, (tr.tau >= tube.tau_lo) & (tr.tau <= tube.tau_hi)
+
+
 def relative_rms_errors(result, take) -> np.ndarray:
     """(N, 3): per used step and component, RMS of (estimate - truth) over the truth's
     frames in [tau_lo, tau_hi], divided by the peak |F_s| of the true profile."""
-    truth = {t.index: t for t in take.ps_truth()}
-    tube = result.tube
     out = []
-    for sp in result.playback.good:
-        tr = truth[sp.step]
-        inside = (tr.tau >= tube.tau_lo) & (tr.tau <= tube.tau_hi)
+    for sp, tr, inside in _truth_windows(result, take):
         err = estimate_at(sp, tr.tau[inside]) - tr.socket[inside]
         out.append(np.sqrt(np.mean(err**2, axis=0)) / np.abs(tr.socket).max(axis=0))
     return np.array(out)
@@ -50,12 +56,9 @@ def tube_excess(result, take, widened: bool = True) -> np.ndarray:
     F_s - F* outside the tube over [tau_lo, tau_hi] (<= 0: inside), divided by the peak
     |F_s| of the true profile; ``widened=False``: outside the certified bounds without the
     estimation allowance."""
-    truth = {t.index: t for t in take.ps_truth()}
     tube = result.tube
     out = []
-    for sp in result.playback.good:
-        tr = truth[sp.step]
-        inside = (tr.tau >= tube.tau_lo) & (tr.tau <= tube.tau_hi)
+    for _, tr, inside in _truth_windows(result, take):
         tau = tr.tau[inside]
         dF = tr.socket[inside] - tube.nominal_force(tau)
         lo, hi = tube.delta_bounds(tau, widened=widened)
