@@ -42,6 +42,17 @@ def stance_meas(t: float, x: np.ndarray) -> ProsthesisMeasurement:
                                  STANCE_LOAD, True)
 
 
+def rk4_step(f: Callable[[int, np.ndarray], np.ndarray], x: np.ndarray, h: float
+             ) -> np.ndarray:
+    """One classical RK4 step of x_dot = f(stage, x); ``stage`` (0-3) numbers the four
+    evaluations in order."""
+    k1 = f(0, x)
+    k2 = f(1, x + 0.5 * h * k1)
+    k3 = f(2, x + 0.5 * h * k2)
+    k4 = f(3, x + h * k3)
+    return x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 def simulate_reduced(ctl: BaseController, ctx: ControllerContext, x0: np.ndarray,
                      force: Callable[[np.ndarray], np.ndarray], duration: float,
                      dt: float = 1e-3, substeps: int = 4,
@@ -66,14 +77,44 @@ def simulate_reduced(ctl: BaseController, ctx: ControllerContext, x0: np.ndarray
         d = out.diagnostics
         rows.append((t, *x, *u, d.V, d.tau, d.rho, d.mode, int(d.active)))
         for _ in range(substeps):
-            k1 = f(x, u)
-            k2 = f(x + 0.5 * h * k1, u)
-            k3 = f(x + 0.5 * h * k2, u)
-            k4 = f(x + h * k3, u)
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            x = rk4_step(lambda _stage, x, u=u: f(x, u), x, h)
         if not np.all(np.isfinite(x)):
             break
     cols = list(zip(*rows, strict=True))
     return {"t": np.array(cols[0]), "x": np.array(cols[1:5]).T, "u": np.array(cols[5:7]).T,
             "V": np.array(cols[7]), "tau": np.array(cols[8]), "rho": np.array(cols[9]),
             "mode": np.array(cols[10]), "active": np.array(cols[11])}
+
+
+def simulate_reduced_continuous(ctl: BaseController, ctx: ControllerContext,
+                                x0: np.ndarray, force: Callable[[np.ndarray], np.ndarray],
+                                duration: float, h: float) -> dict[str, np.ndarray]:
+    """Closed loop of the reduced model with the controller as a CONTINUOUS feedback law,
+    the setting of the paper's guarantee: its torque is recomputed at every RK4 stage (no
+    hold), step ``h`` (s).  The controller refuses a time that does not increase, so the four
+    stage evaluations of a step carry the stamps t, t + h/4, t + h/2, t + 3h/4; the stance
+    laws depend on the state only, never on time.  Returns t, x (n, 4), u (n, 2), V, tau,
+    mode, active at the start of every step."""
+    red = ctx.terms.numeric["reduced"]
+
+    ctl.reset(None)
+    x = np.array(x0, dtype=float)
+    rows = []
+    for k in range(round(duration / h)):
+        t = k * h
+
+        def f(stage: int, x: np.ndarray, t: float = t) -> np.ndarray:
+            out = ctl.tick(stance_meas(t + stage * h / 4, x))
+            if stage == 0:
+                d = out.diagnostics
+                rows.append((t, *x, *out.torque, d.V, d.tau, d.mode, int(d.active)))
+            fp, gm, gs = red(x)
+            return np.ravel(fp + gm @ out.torque + gs @ force(x))
+
+        x = rk4_step(f, x, h)
+        if not np.all(np.isfinite(x)):
+            break
+    cols = list(zip(*rows, strict=True))
+    return {"t": np.array(cols[0]), "x": np.array(cols[1:5]).T, "u": np.array(cols[5:7]).T,
+            "V": np.array(cols[7]), "tau": np.array(cols[8]), "mode": np.array(cols[9]),
+            "active": np.array(cols[10])}
