@@ -8,9 +8,10 @@ and the ratio of the relaxed tick to the bare solve.  Prints a markdown table.
 
 The machine is shared and noisy: quote ratios; rerun for absolutes.
 
-Usage: python benchmarks/bench_controllers.py [--gait gait.json] [--ticks 10000]
-                                               [--repeats 3] [--json out.json]
-Without --gait the test template gait is optimized first (20-50 s).
+Usage: python benchmarks/bench_controllers.py [--gait gait.json [--tube tube.json]]
+                                               [--ticks 10000] [--repeats 3] [--json out.json]
+Without --gait the test template gait is optimized first (20-50 s); without --tube the tube
+is +-(40 N, 60 N, 8 N m) about the gait's nominal socket force (as in the tests).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import numpy as np
 import piqp
 
 import hp_model
-from hp_model.force_tube import ForceTube
+from hp_model.force_tube import ForceTube, load_tube
 from hp_model.gait_artifact import Gait, load_gait
 from prosthesis_controller import (
     CONTROLLERS,
@@ -102,17 +103,23 @@ def bare_piqp(ctl, qps) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gait", help="gait artifact (default: optimize the test template)")
+    ap.add_argument("--tube", help="force-tube artifact of --gait (default: +-HALF about F*)")
     ap.add_argument("--ticks", type=int, default=10_000)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--no-gc", action="store_true", help="disable the garbage collector")
     ap.add_argument("--json", help="also write the figures to this JSON file")
     a = ap.parse_args()
+    if a.tube and not a.gait:
+        ap.error("--tube needs the --gait it was fitted for")
 
     model = hp_model.load_model()
     gait = load_gait(a.gait, model.parameter_hash()) if a.gait else template_gait(model)
-    h = np.array(HALF)[:, None] * np.ones((1, 2))
-    tube = ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
-                     nominal=gait.socket_nominal, lower=-h, upper=h)
+    if a.tube:
+        tube = load_tube(a.tube, gait.hash())
+    else:
+        h = np.array(HALF)[:, None] * np.ones((1, 2))
+        tube = ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
+                         nominal=gait.socket_nominal, lower=-h, upper=h)
     ctx = ControllerContext(gait, tube, model)
     meas, u0 = stance_measurements(model, gait, a.ticks)
     ctls = {n: make_controller(n, gait, tube, model, context=ctx) for n in CONTROLLERS}
@@ -146,7 +153,7 @@ def main() -> None:
     ratio = rows["clfqp"]["median_us"] / rows["piqp"]["median_us"]
 
     print(f"\n{a.ticks} consecutive 1 kHz ticks along the ps trajectory x {a.repeats} "
-          f"repeats; tube +-{HALF}; {platform.processor() or platform.machine()}\n")
+          f"repeats; tube {a.tube or f'+-{HALF}'}; {platform.processor() or platform.machine()}\n")
     print("| controller | median per tick (us) | p99 (us) | modes (last repeat) |")
     print("|---|---:|---:|---|")
     labels = {"clfqp": "robust CLF-QP, relaxed", "clfqp-exact": "robust CLF-QP, exact",

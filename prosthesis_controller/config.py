@@ -32,6 +32,8 @@ class ClfConfig(_Strict):
     - ``Q`` (3x3), ``R`` (2x2): CARE weights for the output dynamics (F, G).
     - ``rho_max``, ``c_rho``: relaxation bound (units of V, dimensionless) and its linear
       cost weight (units of the cost |nu|^2 per unit of rho).  Only the relaxed variant.
+      The default rho_max keeps the QP feasible along the default subject's nominal stance
+      with its fitted tube (largest rho measured 7.4e3; README).
     - ``delta_u``: rate bound |u - u_prev| per tick (motor N m), relaxed variant only.
     - ``limits_in_qp``: put the torque limits into the relaxed QP as bounds (paper: yes).
     - ``exact_limits_in_qp``: torque limits as bounds of the exact QP too (paper eq.
@@ -46,7 +48,7 @@ class ClfConfig(_Strict):
     Q: tuple[tuple[float, float, float], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0),
                                                  (0.0, 0.0, 1.0))
     R: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0))
-    rho_max: NonNegative = 100.0
+    rho_max: NonNegative = 1.0e4
     c_rho: NonNegative = 1.0e3
     delta_u: Positive = 0.25
     limits_in_qp: bool = True
