@@ -20,11 +20,15 @@ import argparse
 import gc
 import json
 import platform
+import sys
 import time
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import piqp
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 import hp_model
 from hp_model.force_tube import ForceTube, load_tube

@@ -24,11 +24,14 @@ import argparse
 import ctypes
 import json
 import platform
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 import hp_model
 from hp_model.gait_artifact import load_gait, save_gait
