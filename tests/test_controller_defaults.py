@@ -1,0 +1,90 @@
+"""The controllers' defaults on the default subject: along the nominal stance of the gait
+fitted from the default synthetic subject, with the force tube fitted from that subject's own
+steps (tests/data/controller/NOTICE.md), every controller keeps to its normal mode on every
+1 kHz tick.  For the relaxed robust CLF-QP that means its QP stays feasible: the paper adds
+rho "to ensure the QP is always solvable", and rho_max must be large enough for a realistic
+tube (measured: the largest rho used is 7.4e3; with the former default rho_max = 100, 22 % of
+the ticks were infeasible and fell back)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hp_model.force_tube import load_tube
+from hp_model.gait_artifact import load_gait
+from prosthesis_controller import (
+    CONTROLLERS,
+    ClfConfig,
+    ControllerConfig,
+    ControllerContext,
+    ProsthesisMeasurement,
+    make_controller,
+)
+from tests.controller_support import STANCE_LOAD
+
+DATA = Path(__file__).parent / "data" / "controller"
+NOISE = np.array([1e-4, 1e-4, 1e-2, 1e-2])  # rad, rad, rad/s, rad/s: encoder-like
+TICKS = 2000  # 1 kHz: two and a half stances of 0.81 s
+
+
+@pytest.fixture(scope="module")
+def demo(model, subsystem):
+    gait = load_gait(DATA / "gait_demo.json", model.parameter_hash())
+    tube = load_tube(DATA / "tube_demo.json", gait.hash())
+    return gait, tube
+
+
+def stance_ticks(model, gait, n: int, seed: int = 1) -> list[ProsthesisMeasurement]:
+    """The gait's ps collocation trajectory of (th_pk, th_pa) and rates at 1 kHz, repeated,
+    with small measurement noise; time runs on."""
+    tr = gait.trajectory["ps"]
+    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
+    grid = np.arange(0.0, float(tr["t"][-1]), 1e-3)
+    X = np.array([np.interp(grid, tr["t"], tr["q"][j]) for j in i]
+                 + [np.interp(grid, tr["t"], tr["qd"][j]) for j in i]).T
+    rng = np.random.default_rng(seed)
+    return [ProsthesisMeasurement(k * 1e-3, *map(float, X[k % len(X)] + rng.normal(size=4)
+                                                 * NOISE), STANCE_LOAD, True)
+            for k in range(n)]
+
+
+def run_ticks(ctl, meas, u0):
+    ctl.reset(u0)
+    outs = [ctl.tick(m) for m in meas]
+    modes = [o.diagnostics.mode for o in outs]
+    return outs, modes
+
+
+@pytest.mark.parametrize("name", CONTROLLERS)
+def test_defaults_keep_every_controller_in_stance_on_the_default_subject(model, subsystem,
+                                                                        demo, name):
+    gait, tube = demo
+    ctx = ControllerContext(gait, tube, model, subsystem=subsystem)
+    ctl = make_controller(name, None, None, None, context=ctx)
+    outs, modes = run_ticks(ctl, stance_ticks(model, gait, TICKS),
+                            gait.trajectory["ps"]["u"][4:, 0])
+    assert set(modes) == {"stance"}, {m: modes.count(m) for m in set(modes)}
+    u = np.array([o.torque for o in outs])
+    assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= np.array(ctx.limits) + 1e-12)
+    if name == "clfqp":
+        rho = np.array([o.diagnostics.rho for o in outs])
+        assert np.all(rho <= ctx.config.clf.rho_max)
+        assert rho.max() > 100.0  # the former default would not have been enough
+
+
+def test_former_rho_max_made_the_relaxed_qp_infeasible_on_the_default_subject(model,
+                                                                               subsystem,
+                                                                               demo):
+    gait, tube = demo
+    cfg = ControllerConfig(clf=ClfConfig(rho_max=100.0))
+    ctx = ControllerContext(gait, tube, model, cfg, subsystem=subsystem)
+    ctl = make_controller("clfqp", None, None, None, context=ctx)
+    outs, modes = run_ticks(ctl, stance_ticks(model, gait, TICKS),
+                            gait.trajectory["ps"]["u"][4:, 0])
+    fallback = modes.count("fallback") / len(modes)
+    assert fallback > 0.1, fallback
+    assert {o.diagnostics.qp_status for o in outs if o.diagnostics.mode == "fallback"} \
+        == {"infeasible"}
