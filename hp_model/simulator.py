@@ -26,7 +26,9 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   height below ``min_hip_height``; phase tau running backward more than ``tau_backward``;
   the stance foot pulling on the ground or slipping (normal force below ``min_normal_force``
   or |F_x| > mu F_z, sustained over ``cone_periods`` periods); no touchdown by
-  ``tau_max``; a non-finite state.
+  ``tau_max``; the phase stalled (no touchdown within ``max_step_time`` s of the start or
+  of the last impact: a walker standing still, with tau neither progressing nor running
+  back, would otherwise be simulated forever); a non-finite state.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class SimOptions:
     min_hip_height: float = 0.55  # m
     tau_backward: float = 0.15  # fall if tau drops this far below its running maximum
     tau_max: float = 1.3  # fall if no touchdown by this phase
+    max_step_time: float = 3.0  # s; fall if no touchdown this long after the last (or start)
     min_normal_force: float = 0.0  # N
     mu: float = 0.8  # friction coefficient for the slip check
     cone_periods: int = 5
@@ -219,6 +222,7 @@ class HybridSimulator:
         log_t, log_q, log_qd, log_u, log_lam, log_tau, log_d = [], [], [], [], [], [], []
         impacts: list[Impact] = []
         tau_peak = -np.inf
+        t_step = 0.0  # start of the current step: the start, then the last impact
         bad_cone = 0
         failed, reason = False, ""
         z_prev = float(self.mfs[f"guard_{d}"](x[:nq], x[nq:])[0][0])
@@ -252,6 +256,9 @@ class HybridSimulator:
                 failed, reason = True, f"phase ran backward (tau {tau:.3f}, peak {tau_peak:.3f})"
             elif tau > opt.tau_max:
                 failed, reason = True, f"no touchdown by tau = {opt.tau_max}"
+            elif t - t_step > opt.max_step_time:
+                failed, reason = True, (f"phase stalled (no touchdown within "
+                                        f"{opt.max_step_time:g} s)")
             elif bad_cone >= opt.cone_periods:
                 failed, reason = True, (f"stance foot left the friction cone "
                                         f"(F_x {fx:.0f} N, F_z {fz:.0f} N)")
@@ -284,6 +291,7 @@ class HybridSimulator:
                         d = nxt
                         z_prev = float(self.mfs[f"guard_{d}"](qe, qdp)[0][0])
                         tau_peak = -np.inf
+                        t_step = impacts[-1].t
                         rest -= s * rest
                         if rest <= 1e-15 * h:
                             break

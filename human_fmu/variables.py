@@ -39,6 +39,7 @@ FALL_CODES = {
     4: "no touchdown by tau_max",
     5: "stance foot left the friction cone for cone_periods steps",
     6: "landed on heel or toe (touchdown pitch above max_touchdown_pitch)",
+    7: "phase stalled: no touchdown within max_step_time of the start or the last impact",
 }
 
 
@@ -196,6 +197,9 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
           start=opt.tau_backward)
     t.add("tau_max", "Real", "parameter", "fall: no touchdown by this phase",
           start=opt.tau_max)
+    t.add("max_step_time", "Real", "parameter",
+          "fall: no touchdown this long after the start or the last impact",
+          start=opt.max_step_time, unit="s")
     t.add("min_normal_force", "Real", "parameter", "fall: stance normal force below this",
           start=opt.min_normal_force, unit="N")
     t.add("mu", "Real", "parameter", "friction coefficient of the slip check", start=opt.mu)

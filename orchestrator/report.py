@@ -32,7 +32,8 @@ DEVIATIONS = (
     "The same default controller gains are used in every case (no per-case tuning); the "
     "paper tuned the robust-passive ankle gains.",
     "Rigid impacts with the landing foot rotated flat (simulator); falls are detected by "
-    "the simulator (friction cone, hip height, phase running backward, no touchdown).",
+    "the simulator (friction cone, hip height, phase running backward, no touchdown, phase "
+    "stalled).",
     "Swing landing (all controllers): from tau_hat = 0.8 the swing target lowers the sole by "
     "up to 1 cm (2 cm if the touchdown is late) and turns the foot flat at the nominal socket "
     "pitch. The optimized gait's swing foot skims the ground over the last part of pns and "

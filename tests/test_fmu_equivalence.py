@@ -17,7 +17,7 @@ DT = 1e-3
 H = DT / SimOptions().substeps  # one integration substep
 #: FMU fall code -> words of the simulator's reason
 FALL_MATCH = {1: "non-finite", 2: "hip height", 3: "backward", 4: "no touchdown",
-              5: "friction cone", 6: "heel or toe"}
+              5: "friction cone", 6: "heel or toe", 7: "phase stalled"}
 
 
 @pytest.fixture(scope="module")
@@ -154,6 +154,20 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
     assert log["fall_period"] == ref.t.size - 1 + lag
     print(f"x{factor}: {ref.reason}; FMU code {log['fall_code']} at sample "
           f"{log['fall_period']}")
+
+
+def test_stalled_phase_is_detected_like_the_simulator(fmu_path, model, template_gait):
+    """``max_step_time`` shorter than the first step: both stop at the same sample with the
+    stall (code 7)."""
+    limit = 0.1
+    sim = simulator(model, template_gait, options=SimOptions(max_step_time=limit))
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    q0, qd0 = start_state(template_gait)
+    ref = python_run(sim, pd, q0, qd0, steps=2)
+    assert ref.failed and "phase stalled" in ref.reason
+    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={"max_step_time": limit})
+    assert log["fall"] and log["fall_code"] == 7
+    assert log["fall_period"] == ref.t.size - 1
 
 
 def test_perturbation_generator_is_splitmix64():

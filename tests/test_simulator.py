@@ -74,3 +74,24 @@ def test_a_policy_holds_its_torque_and_a_bad_one_falls(model, template_gait):
     r = sim.run(tr["q"][:, 0], tr["qd"][:, 0], "ps", steps=4, policy=lambda t, s: np.zeros(2))
     assert r.failed and r.reason
     assert np.all(r.u[:, 4:] == 0.0)
+
+
+def test_a_stalled_phase_ends_the_run_and_an_impact_restarts_its_clock(model, template_gait,
+                                                                       run20):
+    """``max_step_time``: no touchdown within it of the start or of the last impact is a fall
+    (a walker standing still would otherwise be simulated forever); each impact restarts the
+    clock, so a limit just above the longest step lets the nominal gait walk on."""
+    _, nominal = run20
+    t_imp = np.array([0.0] + [i.t for i in nominal.impacts[:4]])
+    longest = float(np.diff(t_imp).max())
+    tr = template_gait.trajectory["ps"]
+    limit = 0.5 * longest
+    sim = make_simulator(model, template_gait, options=SimOptions(max_step_time=limit))
+    r = simulate_gait(sim, template_gait, steps=4)
+    assert r.failed and "phase stalled" in r.reason and r.steps == 0
+    assert r.t[-1] == pytest.approx(np.ceil(limit / 1e-3 + 1e-9) * 1e-3, abs=1.5e-3)
+    sim = make_simulator(model, template_gait,
+                         options=SimOptions(max_step_time=longest + 0.01))
+    r = simulate_gait(sim, template_gait, steps=4)
+    assert not r.failed, r.reason
+    assert r.steps == 4 and tr["q"].shape[0] == model.nq

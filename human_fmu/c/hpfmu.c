@@ -13,7 +13,7 @@
  *       method on s in (0, 1], one RK4 step of length s h per iteration, |z| <= event_tol or
  *       event_iters iterations); the landing foot is rotated flat about its ankle; the impact
  *       map of the next domain gives qd+; the rest (1 - s) h is integrated in the new domain;
- *     - state checks at the end (non-finite, hip height, tau backward, tau_max) and the
+ *     - state checks at the end (non-finite, hip height, tau backward, tau_max, stall) and the
  *       touchdown-pitch check; a fall freezes the state and raises the `fall` output.
  *
  * No global mutable state: any number of instances may live in one process.
@@ -74,12 +74,13 @@ typedef struct {
     int fall_code;
     int heel;        /* a touchdown with too much foot pitch happened in this step */
     double t_impact;
+    double t_step;   /* start of the current step: the start time, then the last impact */
     double theta[2][NTH];
     double gains[3];
     double up[2];
     int substeps, event_iters, cone_periods;
-    double guard_tau_min, event_tol, min_hip_height, tau_backward, tau_max, min_normal_force,
-        mu, max_touchdown_pitch;
+    double guard_tau_min, event_tol, min_hip_height, tau_backward, tau_max, max_step_time,
+        min_normal_force, mu, max_touchdown_pitch;
     int outputs_valid;
 } Data;
 
@@ -220,6 +221,7 @@ static const char *fall_reason(int code) {
     case 4: return "no touchdown by tau_max";
     case 5: return "stance foot left the friction cone";
     case 6: return "landed on heel or toe";
+    case 7: return "phase stalled";
     default: return "none";
     }
 }
@@ -246,6 +248,7 @@ static void state_checks(Inst *c) {
     else if (s->x[HPFMU_IDX_ZB] < s->min_hip_height) code = 2;
     else if (tau < s->tau_peak - s->tau_backward) code = 3;
     else if (tau > s->tau_max) code = 4;
+    else if (s->time - s->t_step > s->max_step_time) code = 7;
     else if (s->heel) code = 6;
     if (code) set_fall(c, code);
 }
@@ -269,6 +272,7 @@ static void integrate(Inst *c, double t0, double H) {
                 pitch = flatten_landing_foot(c, nxt, qe);
                 impact(c, nxt, qe, xe + NQ, qdp);
                 s->t_impact = t0 + j * h + (h - rest) + sl * rest;
+                s->t_step = s->t_impact;
                 s->steps += 1;
                 logmsg(c, fmi2OK, "logEvents",
                        "impact %d at t = %.9f s into %s (foot pitch removed %.3g rad)",
@@ -352,6 +356,7 @@ static fmi2Status setup(Inst *c) {
     if (!(r[VR_MAX_TOUCHDOWN_PITCH] > 0))
         return fail(c, "parameter %s must be > 0", "max_touchdown_pitch");
     if (!(r[VR_TAU_BACKWARD] > 0)) return fail(c, "parameter %s must be > 0", "tau_backward");
+    if (!(r[VR_MAX_STEP_TIME] > 0)) return fail(c, "parameter %s must be > 0", "max_step_time");
     if (!(r[VR_FL_EPS] >= 0 && r[VR_FL_KP] >= 0 && r[VR_FL_KD] >= 0))
         return fail(c, "parameter %s must be >= 0", "fl_eps, fl_kp, fl_kd");
     for (d = 0; d < 2; d++) {
@@ -389,6 +394,7 @@ static fmi2Status setup(Inst *c) {
     s->min_hip_height = r[VR_MIN_HIP_HEIGHT];
     s->tau_backward = r[VR_TAU_BACKWARD];
     s->tau_max = r[VR_TAU_MAX];
+    s->max_step_time = r[VR_MAX_STEP_TIME];
     s->min_normal_force = r[VR_MIN_NORMAL_FORCE];
     s->mu = r[VR_MU];
     s->max_touchdown_pitch = r[VR_MAX_TOUCHDOWN_PITCH];
@@ -437,6 +443,7 @@ static fmi2Status setup(Inst *c) {
     s->fall_code = 0;
     s->heel = 0;
     s->t_impact = -1.0;
+    s->t_step = s->time;  /* the experiment's start time (fmi2SetupExperiment) */
     s->outputs_valid = 0;
     return fmi2OK;
 }
