@@ -35,10 +35,17 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
    relative difference is recorded per step (``kkt_residual``; about 1e-13).
 
 Tube: dF_s^i(tau) = F_s^i(tau) - F*(tau) for (F_x, F_z, M_y), F* the gait's nominal socket
-force.  Double support is removed by the paper's foot-marker rule: the steps artifact's
-single-support frames (human foot marker x moving forward faster than the threshold) give
-each step's [tau_a, tau_b]; the tube lives on [tau_lo, tau_hi] = [max tau_a, min tau_b]
-(:func:`characterization.force_tube_fit.tube_interval`).  Then the LPs, the certificate and
+force.  tau is, by default (``PlaybackOptions.tube_phase = "gait"``), the GAIT's phase of
+each sample, (delta_p_hip - p_min*) / (p_max* - p_min*): the phase F* is a function of and
+the one the controllers compute from the prosthesis's angles.  Each step's own tau (the
+paper's per-step normalization, ``"step"``) puts a sample of the same configuration at
+another phase: a recorded step spans more hip progress than the gait's ps, and F* is then
+compared at the wrong place (on the demo subject: a tube ~30 % wider, centred up to 50 N
+away from F*).  Double support is removed by the paper's foot-marker rule: the steps
+artifact's single-support frames (human foot marker x moving forward faster than the
+threshold) give each step's [tau_a, tau_b]; the tube lives on [tau_lo, tau_hi] =
+[max tau_a, min tau_b] (:func:`characterization.force_tube_fit.tube_interval`), within
+[0, 1] in the gait's phase.  Then the LPs, the certificate and
 the credibility of :func:`characterization.force_tube_fit.fit_tube`; the tube records the
 gait's hash.  Steps in which the foot-marker rule found no single support are skipped.
 """
@@ -48,7 +55,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +87,8 @@ DOMAIN = "ps"
 #: the model-generated subject the true profiles leave the bare tube by <= 0.3 % of peak
 #: without noise and <= 0.8 % with 0.05 deg of angle noise (README table)
 DEFAULT_ALLOWANCE = 0.01
+#: what the tube's tau can be (PlaybackOptions.tube_phase)
+TUBE_PHASES = ("gait", "step")
 #: a progress callback: (what, done, total)
 Progress = Callable[[str, int, int], None]
 
@@ -100,12 +109,29 @@ class PlaybackOptions:
     fit_margin: float | None = 0.1
     min_hip_height: float = 0.55  # m, below it the playback counts as fallen
     mu: float = 0.8  # friction coefficient of the (reported, not enforced) cone check
+    #: the phase the tube is a function of: "gait" = the gait's tau of each sample's
+    #: configuration, (delta_p_hip - p_min*) / (p_max* - p_min*), the phase the controllers
+    #: compute; "step" = each step's own tau (its own phase bounds, the paper's per-step
+    #: normalization)
+    tube_phase: str = "gait"
+
+    def __post_init__(self) -> None:
+        if self.tube_phase not in TUBE_PHASES:
+            raise PlaybackError(f"tube phase must be one of {', '.join(TUBE_PHASES)}, got "
+                                f"{self.tube_phase!r}")
 
     def sim_options(self) -> SimOptions:
         return SimOptions(dt=self.dt, substeps=self.substeps,
                           guard_tau_min=0.6 if self.stop_at_touchdown else math.inf,
                           min_hip_height=self.min_hip_height, tau_max=1.3,
                           cone_periods=2**62, mu=self.mu)
+
+
+def phase_map(step: GaitParams, gait: GaitParams, tau: np.ndarray | float) -> np.ndarray:
+    """A step's tau (its own phase bounds) as the phase of ``gait``: the same hip progress
+    delta_p_hip = p_min + tau (p_max - p_min), normalised by the gait's bounds (affine)."""
+    p = step.p_min + np.asarray(tau, float) * (step.p_max - step.p_min)
+    return (p - gait.p_min) / (gait.p_max - gait.p_min)
 
 
 @dataclass(frozen=True)
@@ -133,6 +159,17 @@ class StepPlayback:
     def profile(self) -> tuple[np.ndarray, np.ndarray]:
         return self.tau, self.socket
 
+    def in_phase_of(self, gait: GaitParams) -> StepPlayback:
+        """This playback with tau (and its single support) re-expressed in the phase of
+        ``gait`` (:func:`phase_map`)."""
+        def tau_g(tau):
+            return phase_map(self.params, gait, tau)
+
+        ss = None if self.single_support is None else (
+            float(tau_g(self.single_support[0])), float(tau_g(self.single_support[1])))
+        td = None if self.touchdown_tau is None else float(tau_g(self.touchdown_tau))
+        return replace(self, tau=tau_g(self.tau), single_support=ss, touchdown_tau=td)
+
 
 @dataclass(frozen=True)
 class Playback:
@@ -149,11 +186,23 @@ class Playback:
 
 @dataclass(frozen=True)
 class TubeResult:
+    """A fitted tube with its inputs.  ``playback`` keeps each step in its own phase (the
+    playback's); ``profiles`` and the tube are in ``phase`` (``PlaybackOptions.tube_phase``),
+    the gait's when ``gait_ps`` is its ps parameters."""
+
     tube: ForceTube
     profiles: list[Profile]  # (tau, dF) per step in the tube, inside [tau_lo, tau_hi]
     playback: Playback
     used: list[int]  # step indices in the tube
     seconds: dict[str, float] = field(default_factory=dict)
+    phase: str = "step"
+    gait_ps: GaitParams | None = None
+
+    def tube_tau(self, sp: StepPlayback, tau: np.ndarray | float) -> np.ndarray:
+        """A phase of step ``sp`` (its own tau) in the tube's phase."""
+        if self.phase == "gait" and self.gait_ps is not None:
+            return phase_map(sp.params, self.gait_ps, tau)
+        return np.asarray(tau, float)
 
 
 # ---------------------------------------------------------------------------- checks
@@ -362,10 +411,18 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
         why = "; ".join(f"step {i}: {r}" for i, r in pb.skipped[:3])
         raise PlaybackError(f"{src}: only {len(good)} ps step(s) played back with single "
                             f"support, a degree-{degree} tube needs {degree + 1} ({why})")
-    tau_lo, tau_hi = tube_interval([s.single_support for s in good])  # type: ignore[misc]
+    opt = options or PlaybackOptions()
+    gait_ps = gait.params[DOMAIN]
+    inner = [s.in_phase_of(gait_ps) for s in good] if opt.tube_phase == "gait" else good
+    tau_lo, tau_hi = tube_interval([s.single_support for s in inner])  # type: ignore[misc]
+    if opt.tube_phase == "gait":  # the gait's F* is defined on its ps, tau in [0, 1]
+        tau_lo, tau_hi = max(tau_lo, 0.0), min(tau_hi, 1.0)
+        if not tau_hi > tau_lo:
+            raise PlaybackError(f"{src}: the steps' common single support [{tau_lo:.3f}, "
+                                f"{tau_hi:.3f}] in the gait's phase is empty")
     nominal = nominal_coefficients(gait, tau_lo, tau_hi)
-    profiles = deviation_profiles([s.profile for s in good], nominal, tau_lo, tau_hi)
-    peak = peak_socket_force([s.profile for s in good], tau_lo, tau_hi)
+    profiles = deviation_profiles([s.profile for s in inner], nominal, tau_lo, tau_hi)
+    peak = peak_socket_force([s.profile for s in inner], tau_lo, tau_hi)
     if progress is not None:
         progress("force-tube LPs, certificate, credibility", 0, 1)
     source = {
@@ -377,14 +434,16 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
             "dt": (options or PlaybackOptions()).dt,
             "stop_at_touchdown": (options or PlaybackOptions()).stop_at_touchdown,
             "fit_margin": (options or PlaybackOptions()).fit_margin,
+            "tube_phase": opt.tube_phase,
             "bezier_degree": gait.degree,
             "max_kkt_residual": max(s.kkt_residual for s in good),
             "max_fit_rms_rad": float(max(s.fit_rms.max() for s in good)),
             "cone_frames": {str(s.step): s.cone_frames for s in good if s.cone_frames},
             "seconds": pb.seconds},
         "single_support": {"rule": "human foot marker x moving forward (steps artifact)",
+                           "phase": opt.tube_phase,
                            "per_step": {str(s.step): list(s.single_support)  # type: ignore
-                                        for s in good}},
+                                        for s in inner}},
         "allowance": {"fraction_of_peak": allowance, "peak_abs_F_s": peak,
                       "why": "estimation error of the playback (README: evidence on a "
                              "subject generated by the model)"},
@@ -395,7 +454,8 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
     if progress is not None:
         progress("force tube done", 1, 1)
     return TubeResult(tube, profiles, pb, [s.step for s in good],
-                      {"playback": t1 - t0, "tube": t2 - t1, "total": t2 - t0})
+                      {"playback": t1 - t0, "tube": t2 - t1, "total": t2 - t0},
+                      opt.tube_phase, gait_ps if opt.tube_phase == "gait" else None)
 
 
 # ------------------------------------------------------------------- report, files
@@ -408,7 +468,10 @@ def report_markdown(res: TubeResult, steps_src: str = "steps", gait_src: str = "
         f"Steps `{steps_src}`, gait `{gait_src}` (hash `{t.gait_hash}`); "
         f"{len(pb.steps)} ps steps played back, {len(res.used)} in the tube; "
         f"degree-{t.degree} Bezier bounds on tau in [{t.tau_lo:.3f}, {t.tau_hi:.3f}] "
-        "(single support by the foot-marker rule).", "",
+        "(single support by the foot-marker rule), tau = "
+        + ("the gait's phase of each sample (the controllers' phase)"
+           if res.phase == "gait" else "each step's own phase (the paper's normalization)")
+        + ".", "",
         f"Time: playback {res.seconds.get('playback', 0):.2f} s, tube "
         f"{res.seconds.get('tube', 0):.2f} s.", "",
         "Each step's Bezier fit and playback window: "
@@ -417,7 +480,8 @@ def report_markdown(res: TubeResult, steps_src: str = "steps", gait_src: str = "
            f"its single support widened by {t.source['playback']['fit_margin']:g} in tau")
         + "; F_s by eq. (Fsocket) at 1 kHz.", "",
         "## Playback", "",
-        "| step | fit RMS (deg, max) | v_hip (m/s) | single support (tau) | F_s vs KKT (rel) "
+        "| step | fit RMS (deg, max) | v_hip (m/s) | single support (step's tau) "
+        "| F_s vs KKT (rel) "
         "| frames outside cone | status |",
         "|---|---|---|---|---|---|---|"]
     skipped = dict(pb.skipped)

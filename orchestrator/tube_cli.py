@@ -44,6 +44,10 @@ def fit(
         "--allowance", min=0.0, max=0.99,
         help="Widen the certified bounds by this fraction of each component's peak |F_s| "
         "for the playback's estimation error (0: the paper's bare tube).")] = 0.01,
+    phase: Annotated[str, typer.Option(
+        "--phase", help="The tube's tau: 'gait' = the gait's phase of each sample (the phase "
+        "the controllers compute; default), 'step' = each step's own phase (the paper's "
+        "per-step normalization).")] = "gait",
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
@@ -80,13 +84,15 @@ def fit(
         res = fit_force_tube(model, g, s, degree=degree, n_steps=n_steps,
                              options=PlaybackOptions(
                                  stop_at_touchdown=stop_at_touchdown,
-                                 fit_margin=None if whole_step_fit else fit_margin),
+                                 fit_margin=None if whole_step_fit else fit_margin,
+                                 tube_phase=phase),
                              progress=progress, src=str(steps), allowance=allowance)
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility
     console.print(f"[bold]{steps}[/]: {len(res.playback.steps)} ps steps played back in "
                   f"{res.seconds['playback']:.2f} s, {len(res.used)} in the tube; tau in "
-                  f"[{t.tau_lo:.3f}, {t.tau_hi:.3f}] (single support, foot-marker rule)")
+                  f"[{t.tau_lo:.3f}, {t.tau_hi:.3f}] (single support, foot-marker rule; "
+                  f"{res.phase} phase)")
     for i, why in res.playback.skipped:
         console.print(f"  [yellow]skipped[/] step {i}: {why}")
     table = Table(title=f"force tube (degree {t.degree}) around F* of gait {t.gait_hash}")

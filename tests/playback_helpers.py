@@ -33,19 +33,21 @@ def estimate_at(sp, tau: np.ndarray) -> np.ndarray:
 
 def _truth_windows(result, take):
     """Per used step: (played-back step, its truth, mask of the truth's frames in
-    [tau_lo, tau_hi])."""
+    [tau_lo, tau_hi], the truth's tau in the tube's phase).  The truth's tau and the
+    playback's are the step's own; the tube's may be the gait's (``result.tube_tau``)."""
     truth = {t.index: t for t in take.ps_truth()}
     tube = result.tube
     for sp in result.playback.good:
         tr = truth[sp.step]
-        yield sp, tr, (tr.tau >= tube.tau_lo) & (tr.tau <= tube.tau_hi)
+        tau = result.tube_tau(sp, tr.tau)
+        yield sp, tr, (tau >= tube.tau_lo) & (tau <= tube.tau_hi), tau
 
 
 def relative_rms_errors(result, take) -> np.ndarray:
     """(N, 3): per used step and component, RMS of (estimate - truth) over the truth's
     frames in [tau_lo, tau_hi], divided by the peak |F_s| of the true profile."""
     out = []
-    for sp, tr, inside in _truth_windows(result, take):
+    for sp, tr, inside, _ in _truth_windows(result, take):
         err = estimate_at(sp, tr.tau[inside]) - tr.socket[inside]
         out.append(np.sqrt(np.mean(err**2, axis=0)) / np.abs(tr.socket).max(axis=0))
     return np.array(out)
@@ -58,8 +60,8 @@ def tube_excess(result, take, widened: bool = True) -> np.ndarray:
     estimation allowance."""
     tube = result.tube
     out = []
-    for _, tr, inside in _truth_windows(result, take):
-        tau = tr.tau[inside]
+    for _, tr, inside, tau_tube in _truth_windows(result, take):
+        tau = tau_tube[inside]
         dF = tr.socket[inside] - tube.nominal_force(tau)
         lo, hi = tube.delta_bounds(tau, widened=widened)
         out.append(np.maximum(dF - hi, lo - dF).max(axis=0) / np.abs(tr.socket).max(axis=0))

@@ -23,6 +23,7 @@ from characterization.playback import (
 from characterization.playback_truth import TruthOptions, synthesize
 from hp_model.closed_loop import ClosedLoop
 from hp_model.gait_artifact import load_gait
+from hp_model.simulator import HybridSimulator
 from tests.playback_helpers import GAIT, relative_rms_errors, tube_excess
 
 #: interior: every step starts on its own zero-dynamics surface (no transient);
@@ -91,16 +92,34 @@ def test_tube_contains_every_true_profile(case):
 
 
 def test_tube_interval_is_the_common_single_support(case):
+    """The foot-marker rule's single support of every step, in the tube's phase (the gait's:
+    the step's own tau mapped through the same hip progress), intersected within [0, 1]."""
     _, take, result = case
     tube, s = result.tube, take.steps
+    assert result.phase == "gait" and tube.source["playback"]["tube_phase"] == "gait"
+    played = {sp.step: sp for sp in result.playback.good}
     starts, ends = [], []
     for i in result.used:
-        tau = s.step_tau(i)
+        tau = result.tube_tau(played[i], s.step_tau(i))
         starts.append(tau[s.step_ss_start[i] - s.step_start[i]])
         ends.append(tau[s.step_ss_end[i] - s.step_start[i]])
-    assert tube.tau_lo == pytest.approx(max(starts)) and tube.tau_hi == pytest.approx(min(ends))
+    assert tube.tau_lo == pytest.approx(max(max(starts), 0.0))
+    assert tube.tau_hi == pytest.approx(min(min(ends), 1.0))
     for tau, _ in result.profiles:
         assert tau.min() >= tube.tau_lo and tau.max() <= tube.tau_hi
+
+
+def test_gait_phase_is_the_hip_progress_normalised_by_the_gait(case, gait, model):
+    """A sample's tube phase is the gait's tau of its configuration: the controllers' phase,
+    computed from the played-back q by the gait's own virtual constraints."""
+    _, _, result = case
+    cl = ClosedLoop(model, gait.degree)
+    sim_phase = HybridSimulator(model, cl, {d: gait.theta(d) for d in ("ps", "pns")},
+                                gait.gains_array).phase
+    sp = result.playback.good[0]
+    for j in (0, len(sp.tau) // 2, len(sp.tau) - 1):
+        assert float(result.tube_tau(sp, sp.tau[j])) == pytest.approx(
+            sim_phase("ps", sp.q[j]), abs=1e-9)
 
 
 def test_paper_formula_equals_the_constrained_solve(case):
