@@ -33,7 +33,7 @@ class ClfConfig(_Strict):
     - ``rho_max``, ``c_rho``: relaxation bound (units of V, dimensionless) and its linear
       cost weight (units of the cost |nu|^2 per unit of rho).  Only the relaxed variant.
       The default rho_max keeps the QP feasible along the default subject's nominal stance
-      with its fitted tube (largest rho measured 7.4e3; README).
+      with its fitted tube (largest rho measured 3.7e3; README).
     - ``delta_u``: rate bound |u - u_prev| per tick (motor N m), relaxed variant only.
     - ``limits_in_qp``: put the torque limits into the relaxed QP as bounds (paper: yes).
     - ``exact_limits_in_qp``: torque limits as bounds of the exact QP too (paper eq.

@@ -432,8 +432,14 @@ class ClfQpController(BaseController):
         self._rho_max = float(c.rho_max)
         self._xl = np.full(n, -_INF)  # bounds of z for the current tick
         self._xu = np.full(n, _INF)
+        # the solver sees rho / rho_scale in [0, 1]: rho's range (up to 1e4) against the
+        # torques' (~1) made piqp's iterations 2-6x more numerous
+        self._rho_scale = self._rho_max if self._rho_max > 0 else 1.0
         if relaxed:
-            self._xl[2], self._xu[2] = 0.0, self._rho_max
+            self._xl[2], self._xu[2] = 0.0, self._rho_max / self._rho_scale
+        self._G3 = np.zeros((1, 3), order="F")  # the relaxed row and cost in those units
+        self._c3 = np.zeros(3)
+        self._h3 = np.zeros(1)
         self._solver = piqp.DenseSolver()
         st = self._solver.settings
         st.eps_abs = st.eps_rel = float(c.solver_eps)
@@ -456,13 +462,23 @@ class ClfQpController(BaseController):
         self._c2 = o["cu"][:2]  # a view: contiguous
 
     def qp_data(self) -> tuple[np.ndarray, ...]:
-        """The QP of the last stance tick as the solver got it, z = (u_k, u_a[, rho]):
-        (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
-        (copies; for cross-checks and benchmarks)."""
+        """The QP of the last stance tick as the solver got it, z = (u_k, u_a[, rho /
+        rho_scale]): (P, c, G, h, x_l, x_u) with min 1/2 z^T P z + c^T z, G z <= h,
+        x_l <= z <= x_u (copies; for cross-checks and benchmarks).  ``qp_solution`` is in
+        the same variables."""
         n = self._n
+        if n == 3:
+            return (np.array(self._o_Pu, order="F"), self._c3.copy(),
+                    np.array(self._G3, order="F"), self._h3.copy(), self._xl.copy(),
+                    self._xu.copy())
         return (np.array(self._o_Pu[:n, :n], order="F"), self._o_cu[:n].copy(),
                 np.array(self._o_Gu[:, :n], order="F"), self._o_hu.copy(), self._xl.copy(),
                 self._xu.copy())
+
+    @property
+    def rho_scale(self) -> float:
+        """rho = rho_scale z[2] (1 for the exact QP)."""
+        return self._rho_scale if self.relaxed else 1.0
 
     def _bounds(self) -> None:
         du = self._du
@@ -486,7 +502,16 @@ class ClfQpController(BaseController):
         xl, xu = self._xl, self._xu
         n = self._n
         # exact feasibility test of the CLF row over the box: min_box G z <= h
-        Gu, hu = self._o_Gu, self._o_hu
+        Gu, hu, cu = self._o_Gu, self._o_hu, self._o_cu
+        if n == 3:  # rho in units of rho_scale, the row normalised again
+            sc = self._rho_scale
+            G3, c3, h3 = self._G3, self._c3, self._h3
+            a0, a1, a2 = float(Gu[0, 0]), float(Gu[0, 1]), float(Gu[0, 2]) * sc
+            nrm = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+            G3[0, 0], G3[0, 1], G3[0, 2] = a0 / nrm, a1 / nrm, a2 / nrm
+            h3[0] = float(hu[0]) / nrm
+            c3[0], c3[1], c3[2] = cu[0], cu[1], float(cu[2]) * sc
+            Gu, hu, cu = G3, h3, c3
         g = Gu[0]
         lo = 0.0
         for i in range(n):
@@ -502,7 +527,7 @@ class ClfQpController(BaseController):
         s = self._solver
         P = self._o_Pu
         if n == 3:
-            s.update(P=P, c=self._o_cu, G=Gu, h_u=hu, x_l=xl, x_u=xu)
+            s.update(P=P, c=cu, G=Gu, h_u=hu, x_l=xl, x_u=xu)
         else:
             P2, G2 = self._P2, self._G2
             P2[0, 0], P2[0, 1], P2[1, 0], P2[1, 1] = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
@@ -526,13 +551,13 @@ class ClfQpController(BaseController):
         fa = -1 if zbl[1] > d else 1 if zbu[1] > d else 0
         fr = (-1 if zbl[2] > d else 1 if zbu[2] > d else 0) if self.relaxed else 0
         if self._polish:
-            zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+            zp = polish(P, cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
             if zp is None:  # weakly active constraints (tiny multipliers): guess by slack
                 fk, fa, fr, row = _near(uk, 0, xl, xu, fk), _near(ua, 1, xl, xu, fa), \
                     (_near(rho, 2, xl, xu, fr) if self.relaxed else 0), \
                     row or h - (g[0] * uk + g[1] * ua + (g[2] * rho if n == 3 else 0.0)) \
                     < _SLACK_TOL * (1.0 + abs(h))
-                zp = polish(P, self._o_cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
+                zp = polish(P, cu, g, h, xl, xu, self.relaxed, row, fk, fa, fr)
             if zp is not None:
                 uk, ua = zp[0], zp[1]
                 if self.relaxed:
@@ -545,6 +570,8 @@ class ClfQpController(BaseController):
         if fr > 0:
             active |= _ACTIVE_RHO
         self.qp_solution = np.array((uk, ua, rho)[:n])
+        if n == 3:
+            rho *= self._rho_scale
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 
 
