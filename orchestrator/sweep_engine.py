@@ -125,6 +125,8 @@ class _Parts:
     part: int = 0
     seq: int = 0
     last: float = field(default_factory=time.perf_counter)
+    written: int = 0  # rows on disk: what a session reports as done, whenever it stopped
+    errors: int = 0  # of those, rows with an error
 
     def add(self, row: dict[str, Any]) -> None:
         row.update(session=self.session, seq=self.seq)
@@ -137,6 +139,8 @@ class _Parts:
         if self.rows:
             self.store.write_part(self.rows, self.session, self.part)
             self.part += 1
+            self.written += len(self.rows)
+            self.errors += sum(r.get("error") is not None for r in self.rows)
             self.rows = []
         self.last = time.perf_counter()
 
@@ -229,6 +233,9 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
             raise
         finally:
             parts.flush()
+            # counted from what is on disk: a Ctrl-C between storing a row and counting it
+            # must not leave the session's count one short of its rows
+            outcome.done, outcome.errors = parts.written, parts.errors
             entry.update(finished=session_entry(session)["started"], status=outcome.status,
                          runs_done=outcome.done, errors=outcome.errors,
                          wall_s=outcome.wall_s, setup_s=outcome.setup_s,
