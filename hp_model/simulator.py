@@ -28,7 +28,9 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   or |F_x| > mu F_z, sustained over ``cone_periods`` periods); no touchdown by
   ``tau_max``; the phase stalled (no touchdown within ``max_step_time`` s of the start or
   of the last impact: a walker standing still, with tau neither progressing nor running
-  back, would otherwise be simulated forever); a non-finite state.
+  back, would otherwise be simulated forever); a non-finite state or a generalized speed
+  above ``max_speed`` (the state diverging, e.g. a knee snapping through its straight
+  posture: ended before it turns non-finite and poisons the logged impacts).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ class SimOptions:
     tau_backward: float = 0.15  # fall if tau drops this far below its running maximum
     tau_max: float = 1.3  # fall if no touchdown by this phase
     max_step_time: float = 3.0  # s; fall if no touchdown this long after the last (or start)
+    max_speed: float = 200.0  # m/s or rad/s; fall if any |qd_i| exceeds it (diverging)
     min_normal_force: float = 0.0  # N
     mu: float = 0.8  # friction coefficient for the slip check
     cone_periods: int = 5
@@ -250,6 +253,9 @@ class HybridSimulator:
                 else 0
             if not np.all(np.isfinite(x)):
                 failed, reason = True, "non-finite state"
+            elif np.max(np.abs(qd)) > opt.max_speed:
+                failed, reason = True, (f"state diverged (a speed above {opt.max_speed:g} "
+                                        f"m/s or rad/s)")
             elif q[1] < opt.min_hip_height:
                 failed, reason = True, f"hip height {q[1]:.3f} m below {opt.min_hip_height} m"
             elif tau < tau_peak - opt.tau_backward:

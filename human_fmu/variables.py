@@ -40,6 +40,7 @@ FALL_CODES = {
     5: "stance foot left the friction cone for cone_periods steps",
     6: "landed on heel or toe (touchdown pitch above max_touchdown_pitch)",
     7: "phase stalled: no touchdown within max_step_time of the start or the last impact",
+    8: "state diverged: a generalized speed above max_speed",
 }
 
 
@@ -200,6 +201,9 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("max_step_time", "Real", "parameter",
           "fall: no touchdown this long after the start or the last impact",
           start=opt.max_step_time, unit="s")
+    t.add("max_speed", "Real", "parameter",
+          "fall: a generalized speed above this (m/s or rad/s: the state diverging)",
+          start=opt.max_speed)
     t.add("min_normal_force", "Real", "parameter", "fall: stance normal force below this",
           start=opt.min_normal_force, unit="N")
     t.add("mu", "Real", "parameter", "friction coefficient of the slip check", start=opt.mu)

@@ -17,7 +17,8 @@ DT = 1e-3
 H = DT / SimOptions().substeps  # one integration substep
 #: FMU fall code -> words of the simulator's reason
 FALL_MATCH = {1: "non-finite", 2: "hip height", 3: "backward", 4: "no touchdown",
-              5: "friction cone", 6: "heel or toe", 7: "phase stalled"}
+              5: "friction cone", 6: "heel or toe", 7: "phase stalled",
+              8: "state diverged"}
 
 
 @pytest.fixture(scope="module")
@@ -167,6 +168,21 @@ def test_stalled_phase_is_detected_like_the_simulator(fmu_path, model, template_
     assert ref.failed and "phase stalled" in ref.reason
     log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={"max_step_time": limit})
     assert log["fall"] and log["fall_code"] == 7
+    assert log["fall_period"] == ref.t.size - 1
+
+
+def test_diverging_state_is_detected_like_the_simulator(fmu_path, model, template_gait,
+                                                        nominal):
+    """``max_speed`` below the gait's peak speed: both stop at the same sample (code 8)."""
+    _, _, ref0 = nominal
+    limit = 0.5 * float(np.abs(ref0.qd).max())
+    sim = simulator(model, template_gait, options=SimOptions(max_speed=limit))
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    q0, qd0 = start_state(template_gait)
+    ref = python_run(sim, pd, q0, qd0, steps=2)
+    assert ref.failed and "state diverged" in ref.reason
+    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={"max_speed": limit})
+    assert log["fall"] and log["fall_code"] == 8
     assert log["fall_period"] == ref.t.size - 1
 
 

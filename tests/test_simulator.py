@@ -95,3 +95,17 @@ def test_a_stalled_phase_ends_the_run_and_an_impact_restarts_its_clock(model, te
     r = simulate_gait(sim, template_gait, steps=4)
     assert not r.failed, r.reason
     assert r.steps == 4 and tr["q"].shape[0] == model.nq
+
+
+def test_a_diverging_state_ends_the_run_before_it_turns_non_finite(model, template_gait,
+                                                                   run20):
+    """``max_speed``: a generalized speed above it is a fall ("state diverged"); the nominal
+    gait stays far below the default (200 m/s or rad/s; the quick template gait peaks at
+    27 rad/s, right after its impacts)."""
+    _, nominal = run20
+    peak = float(np.abs(nominal.qd).max())
+    assert peak < 0.25 * SimOptions().max_speed
+    sim = make_simulator(model, template_gait, options=SimOptions(max_speed=0.5 * peak))
+    r = simulate_gait(sim, template_gait, steps=4)
+    assert r.failed and "state diverged" in r.reason
+    assert np.all(np.abs(r.qd[:-1]) <= 0.5 * peak) and np.abs(r.qd[-1]).max() > 0.5 * peak

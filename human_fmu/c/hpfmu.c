@@ -13,7 +13,7 @@
  *       method on s in (0, 1], one RK4 step of length s h per iteration, |z| <= event_tol or
  *       event_iters iterations); the landing foot is rotated flat about its ankle; the impact
  *       map of the next domain gives qd+; the rest (1 - s) h is integrated in the new domain;
- *     - state checks at the end (non-finite, hip height, tau backward, tau_max, stall) and the
+ *     - state checks at the end (non-finite, speed, hip height, tau backward, tau_max, stall) and the
  *       touchdown-pitch check; a fall freezes the state and raises the `fall` output.
  *
  * No global mutable state: any number of instances may live in one process.
@@ -80,7 +80,7 @@ typedef struct {
     double up[2];
     int substeps, event_iters, cone_periods;
     double guard_tau_min, event_tol, min_hip_height, tau_backward, tau_max, max_step_time,
-        min_normal_force, mu, max_touchdown_pitch;
+        max_speed, min_normal_force, mu, max_touchdown_pitch;
     int outputs_valid;
 } Data;
 
@@ -222,6 +222,7 @@ static const char *fall_reason(int code) {
     case 5: return "stance foot left the friction cone";
     case 6: return "landed on heel or toe";
     case 7: return "phase stalled";
+    case 8: return "state diverged";
     default: return "none";
     }
 }
@@ -240,11 +241,14 @@ static void set_fall(Inst *c, int code) {
 static void state_checks(Inst *c) {
     Data *s = &c->s;
     double tau = phase(c, s->d, s->x);
-    int k, finite = 1, code = 0;
+    int k, finite = 1, fast = 0, code = 0;
     if (tau > s->tau_peak) s->tau_peak = tau;
     for (k = 0; k < NX; k++)
         if (!isfinite(s->x[k])) finite = 0;
+    for (k = NQ; k < NX; k++)
+        if (fabs(s->x[k]) > s->max_speed) fast = 1;
     if (!finite) code = 1;
+    else if (fast) code = 8;
     else if (s->x[HPFMU_IDX_ZB] < s->min_hip_height) code = 2;
     else if (tau < s->tau_peak - s->tau_backward) code = 3;
     else if (tau > s->tau_max) code = 4;
@@ -357,6 +361,7 @@ static fmi2Status setup(Inst *c) {
         return fail(c, "parameter %s must be > 0", "max_touchdown_pitch");
     if (!(r[VR_TAU_BACKWARD] > 0)) return fail(c, "parameter %s must be > 0", "tau_backward");
     if (!(r[VR_MAX_STEP_TIME] > 0)) return fail(c, "parameter %s must be > 0", "max_step_time");
+    if (!(r[VR_MAX_SPEED] > 0)) return fail(c, "parameter %s must be > 0", "max_speed");
     if (!(r[VR_FL_EPS] >= 0 && r[VR_FL_KP] >= 0 && r[VR_FL_KD] >= 0))
         return fail(c, "parameter %s must be >= 0", "fl_eps, fl_kp, fl_kd");
     for (d = 0; d < 2; d++) {
@@ -395,6 +400,7 @@ static fmi2Status setup(Inst *c) {
     s->tau_backward = r[VR_TAU_BACKWARD];
     s->tau_max = r[VR_TAU_MAX];
     s->max_step_time = r[VR_MAX_STEP_TIME];
+    s->max_speed = r[VR_MAX_SPEED];
     s->min_normal_force = r[VR_MIN_NORMAL_FORCE];
     s->mu = r[VR_MU];
     s->max_touchdown_pitch = r[VR_MAX_TOUCHDOWN_PITCH];
