@@ -157,32 +157,20 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
           f"{log['fall_period']}")
 
 
-def test_stalled_phase_is_detected_like_the_simulator(fmu_path, model, template_gait):
-    """``max_step_time`` shorter than the first step: both stop at the same sample with the
-    stall (code 7)."""
-    limit = 0.1
-    sim = simulator(model, template_gait, options=SimOptions(max_step_time=limit))
-    pd = NominalPD(policy_table(model, template_gait, sim))
-    q0, qd0 = start_state(template_gait)
-    ref = python_run(sim, pd, q0, qd0, steps=2)
-    assert ref.failed and "phase stalled" in ref.reason
-    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={"max_step_time": limit})
-    assert log["fall"] and log["fall_code"] == 7
-    assert log["fall_period"] == ref.t.size - 1
-
-
-def test_diverging_state_is_detected_like_the_simulator(fmu_path, model, template_gait,
-                                                        nominal):
-    """``max_speed`` below the gait's peak speed: both stop at the same sample (code 8)."""
+@pytest.mark.parametrize("option, code", [("max_step_time", 7), ("max_speed", 8)])
+def test_stall_and_divergence_are_detected_like_the_simulator(fmu_path, model, template_gait,
+                                                              nominal, option, code):
+    """A limit the nominal gait breaks -- ``max_step_time`` shorter than its first step, or
+    ``max_speed`` half its peak speed: both stop at the same sample with the same reason."""
     _, _, ref0 = nominal
-    limit = 0.5 * float(np.abs(ref0.qd).max())
-    sim = simulator(model, template_gait, options=SimOptions(max_speed=limit))
+    limit = 0.1 if option == "max_step_time" else 0.5 * float(np.abs(ref0.qd).max())
+    sim = simulator(model, template_gait, options=SimOptions(**{option: limit}))
     pd = NominalPD(policy_table(model, template_gait, sim))
     q0, qd0 = start_state(template_gait)
     ref = python_run(sim, pd, q0, qd0, steps=2)
-    assert ref.failed and "state diverged" in ref.reason
-    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={"max_speed": limit})
-    assert log["fall"] and log["fall_code"] == 8
+    assert ref.failed and FALL_MATCH[code] in ref.reason
+    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={option: limit})
+    assert log["fall"] and log["fall_code"] == code
     assert log["fall_period"] == ref.t.size - 1
 
 
