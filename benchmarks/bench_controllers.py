@@ -36,12 +36,11 @@ from hp_model.gait_artifact import Gait, load_gait
 from prosthesis_controller import (
     CONTROLLERS,
     ControllerContext,
-    ProsthesisMeasurement,
     make_controller,
 )
+from tests.controller_support import stance_ticks
 
 HALF = (40.0, 60.0, 8.0)  # tube half-widths, N, N, N m (as in the tests)
-NOISE = (1e-4, 1e-4, 1e-2, 1e-2)  # rad, rad, rad/s, rad/s
 
 
 def template_gait(model) -> Gait:
@@ -55,21 +54,6 @@ def template_gait(model) -> Gait:
     if not result.success:
         raise SystemExit(f"template gait did not converge: {result.status}")
     return build_gait(model, result, targets, opt)
-
-
-def stance_measurements(model, gait: Gait, ticks: int, seed: int = 1):
-    tr = gait.trajectory["ps"]
-    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
-    t_end = float(tr["t"][-1])
-    t_grid = np.arange(0.0, t_end, 1e-3)
-    X = np.array([np.interp(t_grid, tr["t"], tr["q"][j]) for j in i]
-                 + [np.interp(t_grid, tr["t"], tr["qd"][j]) for j in i]).T
-    rng = np.random.default_rng(seed)
-    out = []
-    for k in range(ticks):
-        x = X[k % len(X)] + rng.normal(size=4) * np.array(NOISE)
-        out.append(ProsthesisMeasurement(k * 1e-3, *map(float, x), 600.0, True))
-    return out, tr["u"][4:, 0]
 
 
 def time_ticks(ctl, meas, u0) -> tuple[np.ndarray, Counter]:
@@ -125,7 +109,7 @@ def main() -> None:
         tube = ForceTube(gait_hash=gait.hash(), tau_lo=0.0, tau_hi=1.0,
                          nominal=gait.socket_nominal, lower=-h, upper=h)
     ctx = ControllerContext(gait, tube, model)
-    meas, u0 = stance_measurements(model, gait, a.ticks)
+    meas, u0 = stance_ticks(model, gait, a.ticks)
     ctls = {n: make_controller(n, gait, tube, model, context=ctx) for n in CONTROLLERS}
 
     # the QPs the relaxed controller solves along this run (recorded in an untimed pass)

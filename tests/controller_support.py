@@ -37,6 +37,28 @@ def clf_terms(ctx: ControllerContext, x: np.ndarray) -> dict[str, np.ndarray]:
     return dict(zip(f.function.name_out(), (np.array(o) for o in outs), strict=True))
 
 
+#: encoder-like measurement noise of ``stance_ticks``: rad, rad, rad/s, rad/s
+TICK_NOISE = (1e-4, 1e-4, 1e-2, 1e-2)
+
+
+def stance_ticks(model, gait: Gait, n: int, seed: int = 1
+                 ) -> tuple[list[ProsthesisMeasurement], np.ndarray]:
+    """``n`` consecutive 1 kHz measurements along the gait's ps collocation trajectory of
+    (th_pk, th_pa) and their rates (interpolated, repeated with time running on, noise
+    ``TICK_NOISE``), and the nominal motor torque at its start (a controller's u0)."""
+    tr = gait.trajectory["ps"]
+    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
+    grid = np.arange(0.0, float(tr["t"][-1]), 1e-3)
+    X = np.array([np.interp(grid, tr["t"], tr["q"][j]) for j in i]
+                 + [np.interp(grid, tr["t"], tr["qd"][j]) for j in i]).T
+    rng = np.random.default_rng(seed)
+    noise = np.array(TICK_NOISE)
+    meas = [ProsthesisMeasurement(k * 1e-3, *map(float, X[k % len(X)]
+                                                 + rng.normal(size=4) * noise),
+                                  STANCE_LOAD, True) for k in range(n)]
+    return meas, tr["u"][4:, 0]
+
+
 def stance_meas(t: float, x: np.ndarray) -> ProsthesisMeasurement:
     return ProsthesisMeasurement(t, float(x[0]), float(x[1]), float(x[2]), float(x[3]),
                                  STANCE_LOAD, True)

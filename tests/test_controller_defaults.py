@@ -20,13 +20,11 @@ from prosthesis_controller import (
     ClfConfig,
     ControllerConfig,
     ControllerContext,
-    ProsthesisMeasurement,
     make_controller,
 )
-from tests.controller_support import STANCE_LOAD
+from tests.controller_support import stance_ticks
 
 DATA = Path(__file__).parent / "data" / "controller"
-NOISE = np.array([1e-4, 1e-4, 1e-2, 1e-2])  # rad, rad, rad/s, rad/s: encoder-like
 TICKS = 2000  # 1 kHz: two and a half stances of 0.81 s
 
 
@@ -35,20 +33,6 @@ def demo(model, subsystem):
     gait = load_gait(DATA / "gait_demo.json", model.parameter_hash())
     tube = load_tube(DATA / "tube_demo.json", gait.hash())
     return gait, tube
-
-
-def stance_ticks(model, gait, n: int, seed: int = 1) -> list[ProsthesisMeasurement]:
-    """The gait's ps collocation trajectory of (th_pk, th_pa) and rates at 1 kHz, repeated,
-    with small measurement noise; time runs on."""
-    tr = gait.trajectory["ps"]
-    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
-    grid = np.arange(0.0, float(tr["t"][-1]), 1e-3)
-    X = np.array([np.interp(grid, tr["t"], tr["q"][j]) for j in i]
-                 + [np.interp(grid, tr["t"], tr["qd"][j]) for j in i]).T
-    rng = np.random.default_rng(seed)
-    return [ProsthesisMeasurement(k * 1e-3, *map(float, X[k % len(X)] + rng.normal(size=4)
-                                                 * NOISE), STANCE_LOAD, True)
-            for k in range(n)]
 
 
 def run_ticks(ctl, meas, u0):
@@ -64,8 +48,7 @@ def test_defaults_keep_every_controller_in_stance_on_the_default_subject(model, 
     gait, tube = demo
     ctx = ControllerContext(gait, tube, model, subsystem=subsystem)
     ctl = make_controller(name, None, None, None, context=ctx)
-    outs, modes = run_ticks(ctl, stance_ticks(model, gait, TICKS),
-                            gait.trajectory["ps"]["u"][4:, 0])
+    outs, modes = run_ticks(ctl, *stance_ticks(model, gait, TICKS))
     assert set(modes) == {"stance"}, {m: modes.count(m) for m in set(modes)}
     u = np.array([o.torque for o in outs])
     assert np.all(np.isfinite(u)) and np.all(np.abs(u) <= np.array(ctx.limits) + 1e-12)
@@ -82,8 +65,7 @@ def test_former_rho_max_made_the_relaxed_qp_infeasible_on_the_default_subject(mo
     cfg = ControllerConfig(clf=ClfConfig(rho_max=100.0))
     ctx = ControllerContext(gait, tube, model, cfg, subsystem=subsystem)
     ctl = make_controller("clfqp", None, None, None, context=ctx)
-    outs, modes = run_ticks(ctl, stance_ticks(model, gait, TICKS),
-                            gait.trajectory["ps"]["u"][4:, 0])
+    outs, modes = run_ticks(ctl, *stance_ticks(model, gait, TICKS))
     fallback = modes.count("fallback") / len(modes)
     assert fallback > 0.1, fallback
     assert {o.diagnostics.qp_status for o in outs if o.diagnostics.mode == "fallback"} \
