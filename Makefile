@@ -1,14 +1,17 @@
-# Two entry points (README): `make demo` and `make test`. Both create .venv on first use.
+# Two entry points (README): `make demo` and `make test`. Both create .venv on first use and
+# install the exact versions of requirements.lock (`make lock` updates it: README, Tests).
 PYTHON ?= python3
 VENV   ?= .venv
 STAMP  := $(VENV)/.installed
+LOCK   := requirements.lock
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench lock clean
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/python -m pip install --quiet --upgrade pip
-	$(VENV)/bin/python -m pip install --quiet -e '.[dev]'
+	$(VENV)/bin/python -m pip install --quiet --constraint $(LOCK) pip
+	$(VENV)/bin/python -m pip install --quiet --constraint $(LOCK) -e '.[dev]'
+	$(VENV)/bin/python -m pip check
 	touch $(STAMP)
 
 # The main job, on the embedded default input (the synthetic subject): model self-check,
@@ -18,14 +21,29 @@ demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
 	$(VENV)/bin/hpcosim demo --out out/demo
 
+# --durations: the slowest tests are printed with every run (the suite's time is a target)
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest
+	$(VENV)/bin/python -m pytest --durations=15
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_model.py
+
+# Re-resolve every dependency within pyproject's ranges in a scratch venv and write the
+# exact versions to requirements.lock; then run `make clean test` and commit both files.
+lock:
+	rm -rf .venv-lock
+	$(PYTHON) -m venv .venv-lock
+	.venv-lock/bin/python -m pip install --quiet --upgrade pip
+	.venv-lock/bin/python -m pip install --quiet -e '.[dev]'
+	( echo "# Exact versions the suite was run with (CPython $$(.venv-lock/bin/python -c 'import platform; print(platform.python_version())'), Linux x86_64)."; \
+	  echo "# Installed by make and .ci/run with pip's --constraint; regenerate with 'make lock'."; \
+	  .venv-lock/bin/python -m pip freeze --all --exclude-editable | grep -v -i '^hpcosim' \
+	) > $(LOCK).tmp
+	mv $(LOCK).tmp $(LOCK)
+	rm -rf .venv-lock
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

@@ -27,12 +27,14 @@ from characterization.phzd import (
     CYCLE,
     DataTargets,
     GaitOptimizationError,
+    GaitVerificationError,
     PHZDOptions,
     optimize_gait,
 )
 from characterization.step_segmentation import StepBounds
 from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
+from hp_model.blas_threads import single_threaded_blas
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS
@@ -222,29 +224,57 @@ def verify_gait(model: HumanProsthesisModel, gait: Gait, steps: int = 20) -> dic
     except RuntimeError as e:
         result.update(spectral_radius=float("nan"), stable=False, poincare_error=str(e))
     result["output_rms_deg"] = {d: np.degrees(v) for d, v in output_rms(gait).items()}
+    result["steps_required"] = steps
     result["stable_20_steps"] = bool(not run.failed and run.steps >= steps
                                      and result.get("stable", False))
     return result
 
 
+def walking_failures(verification: Mapping) -> list[str]:
+    """The failed closed-loop checks of a verification record (empty: the gait walks)."""
+    failed = []
+    n = verification.get("steps_required", 20)
+    if verification.get("simulation_failed") or verification.get("steps_simulated", 0) < n:
+        failed.append(f"fell after {verification.get('steps_simulated', 0)} of {n} steps "
+                      f"({verification.get('failure') or 'no reason given'})")
+    rho = float(verification.get("spectral_radius", np.nan))
+    if not rho < 1.0:
+        why = verification.get("poincare_error")
+        failed.append(f"return-map spectral radius {rho:.3g} >= 1" if np.isfinite(rho)
+                      else f"return map not computed ({why or 'no fixed point'})")
+    return failed
+
+
 def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
              src: str = "steps", verify: bool = True,
              progress: Callable[[str], None] | None = None,
-             segments: str = "touchdown") -> Gait:
+             segments: str = "touchdown", allow_unstable: bool = False) -> Gait:
     """The whole ``gait fit``: regression (of the portions ``segments``, module
     docstring), optimization, verification.  Raises :class:`GaitOptimizationError` (with
-    IPOPT's status) when the optimization fails."""
+    IPOPT's status) when the optimization fails and :class:`GaitVerificationError` when the
+    optimized gait does not walk 20 steps with a contracting return map, unless
+    ``allow_unstable`` (then the gait's verification says ``walks: false``).  Every linear
+    algebra runs single-threaded, so the result does not depend on the thread settings."""
     say = progress or (lambda _m: None)
-    say("Bezier regression of the steps")
-    reg = regress_steps(model, steps, opt.degree, src, segments)
-    say("PHZD optimization (IPOPT)")
-    res = optimize_gait(model, reg.targets, opt)
-    if not res.success:
-        raise GaitOptimizationError(
-            f"the gait optimization did not converge: IPOPT status '{res.status}' after "
-            f"{res.iterations} iterations ({res.solve_seconds:.1f} s); no gait written")
-    gait = build_gait(model, res, reg.targets, opt, reg.quality())
-    if verify:
+    with single_threaded_blas():
+        say("Bezier regression of the steps")
+        reg = regress_steps(model, steps, opt.degree, src, segments)
+        say("PHZD optimization (IPOPT)")
+        res = optimize_gait(model, reg.targets, opt)
+        if not res.success:
+            raise GaitOptimizationError(
+                f"the gait optimization did not converge: IPOPT status '{res.status}' after "
+                f"{res.iterations} iterations ({res.solve_seconds:.1f} s); no gait written")
+        gait = build_gait(model, res, reg.targets, opt, reg.quality())
+        if not verify:
+            return gait
         say("closed-loop verification (20 steps, return map)")
-        gait = gait.with_verification(verify_gait(model, gait))
-    return gait
+        v = verify_gait(model, gait)
+    failed = walking_failures(v)
+    v["walks"] = not failed
+    if failed and not allow_unstable:
+        raise GaitVerificationError(
+            f"{src}: the optimized gait does not walk: {'; '.join(failed)} (IPOPT "
+            f"'{res.status}', {res.iterations} iterations); no gait written "
+            "(--allow-unstable writes it, marked as not walking)")
+    return gait.with_verification(v)

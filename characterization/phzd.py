@@ -28,6 +28,7 @@ import casadi as ca
 import numpy as np
 
 from hp_model import bezier
+from hp_model.blas_threads import single_threaded_blas
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import N_Y2, GaitParams, VirtualConstraints, unpack_symbolic
 
@@ -36,6 +37,11 @@ CYCLE = ("ps", "pns")
 
 class GaitOptimizationError(RuntimeError):
     """IPOPT did not converge; the message carries its status."""
+
+
+class GaitVerificationError(RuntimeError):
+    """The optimized gait does not walk (falls, or its return map is not contracting); the
+    message names the failed check with its numbers."""
 
 
 @dataclass(frozen=True)
@@ -298,8 +304,9 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
                                               "expand": opt.expand})
     x0 = np.concatenate(w0)
     t0 = time.perf_counter()
-    sol = solver(x0=x0, lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
-                 lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
+    with single_threaded_blas():  # the same iterates whatever the thread settings
+        sol = solver(x0=x0, lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
+                     lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
     elapsed = time.perf_counter() - t0
     stats = solver.stats()
     xs = np.array(sol["x"]).ravel()

@@ -31,11 +31,15 @@ class CompileError(RuntimeError):
     """The C compiler failed on generated code."""
 
 
-def cache_dir() -> Path:
-    """Where compiled libraries are kept: $HPCOSIM_CACHE, else ~/.cache/hpcosim."""
+def cache_root() -> Path:
+    """hpcosim's cache (compiled models, built FMUs): $HPCOSIM_CACHE, else ~/.cache/hpcosim."""
     env = os.environ.get("HPCOSIM_CACHE")
-    base = Path(env) if env else Path.home() / ".cache" / "hpcosim"
-    return base / "casadi"
+    return Path(env) if env else Path.home() / ".cache" / "hpcosim"
+
+
+def cache_dir() -> Path:
+    """Where compiled libraries are kept: ``cache_root()/casadi``."""
+    return cache_root() / "casadi"
 
 
 def find_c_compiler() -> str | None:

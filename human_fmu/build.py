@@ -243,6 +243,20 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
 
 
 # -- build ----------------------------------------------------------------------------------
+def builder_digest() -> str:
+    """SHA-256 over everything besides the gait and the model parameters that decides what
+    an FMU build produces: the sources of the builder, its C wrapper and headers, the model
+    package (the generated C comes from it), CasADi's version and the compiler flags.  A
+    cached FMU is reused only under the same digest."""
+    h = hashlib.sha256()
+    files = sorted([*Path(__file__).parent.glob("*.py"), *C_DIR.glob("*"),
+                    *Path(hp_model.__file__).parent.glob("*.py")])
+    for f in files:
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    h.update(f"casadi {ca.__version__}\0{' '.join(FMU_CFLAGS)}".encode())
+    return h.hexdigest()
+
+
 def _guid(*parts: str) -> str:
     h = hashlib.sha256("\0".join(parts).encode()).hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"

@@ -18,7 +18,7 @@ from rich.table import Table
 import hp_model
 from characterization.bezier_fit import FitError
 from characterization.mocap_take import MocapError
-from characterization.phzd import GaitOptimizationError
+from characterization.phzd import GaitOptimizationError, GaitVerificationError
 from hp_model.artifacts import ArtifactError
 from hp_model.compiled import CompileError
 from hp_model.config import ConfigError
@@ -58,6 +58,9 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, Compile
                                                FileNotFoundError, MocapError, FitError,
                                                ArtifactError, GaitOptimizationError,
                                                FmuBuildError)
+
+#: a check that ran and failed (exit 1)
+CHECK_FAILURES: tuple[type[BaseException], ...] = (GaitVerificationError,)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
@@ -138,6 +141,9 @@ def main(argv: list[str] | None = None) -> int:
     except USER_ERRORS as e:
         print(f"hpcosim: error: {e}", file=sys.stderr)
         return 2
+    except CHECK_FAILURES as e:
+        print(f"hpcosim: check failed: {e}", file=sys.stderr)
+        return 1
     except Exception as e:  # click usage errors carry their own exit code
         try:
             from click import ClickException

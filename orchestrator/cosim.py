@@ -29,6 +29,7 @@ import hashlib
 import json
 import os
 import platform
+import signal
 import subprocess
 import sys
 import tempfile
@@ -52,7 +53,10 @@ from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
 PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
-                 "corrupt-length", "kill", "human")
+                 "corrupt-length", "kill", "hang", "human")
+#: the controller-process cases: SIGKILL it (dies, liveliness goes) or SIGSTOP it (hangs
+#: alive: only the missing replies show it)
+PROCESS_CASES = ("kill", "hang")
 
 
 class CosimError(RuntimeError):
@@ -124,17 +128,20 @@ class CosimResult:
 
 def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
                progress: Callable[[str], None] | None = None) -> Path:
-    """The FMU file: ``fmu`` if given, else a cached build for this gait
-    (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/fmu/<gait sha256>/human.fmu)."""
+    """The FMU file: ``fmu`` if given, else a cached build for this gait, model and builder
+    (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/fmu/<digest>/human.fmu; the digest covers
+    the gait file, the model parameters and :func:`human_fmu.build.builder_digest`)."""
     if fmu is not None:
         if not Path(fmu).is_file():
             raise FileNotFoundError(f"{fmu}: no such FMU")
         return Path(fmu)
+    from hp_model.compiled import cache_root
     from human_fmu import build_fmu
+    from human_fmu.build import builder_digest
 
-    digest = sha256(gait_path)[:16]
-    cache = Path(os.environ.get("HPCOSIM_CACHE", Path.home() / ".cache" / "hpcosim"))
-    out = cache / "fmu" / digest / "human.fmu"
+    digest = hashlib.sha256(f"{sha256(gait_path)}\0{model.parameter_hash()}\0"
+                            f"{builder_digest()}".encode()).hexdigest()[:16]
+    out = cache_root() / "fmu" / digest / "human.fmu"
     if not out.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
         build_fmu(gait_path, out, model=model, progress=progress)
@@ -193,7 +200,7 @@ class FaultPlan:
 
     def apply(self, k: int, frames: list[can.Message]) -> tuple[list[can.Message], str | None]:
         """Frames to send this tick (SimTime last unless delayed) and the fault applied."""
-        if not self.hits(k) or self.case == "kill":
+        if not self.hits(k) or self.case in PROCESS_CASES:
             return frames, None
         knee = frames[0]
         rest = frames[1:]
@@ -428,6 +435,9 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if bus is not None:
             bus.shutdown()
         if proc is not None:
+            if plan.case == "hang" and proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError):
+                    proc.send_signal(signal.SIGCONT)  # let it see the plant gone and exit
             try:
                 proc.wait(3.0)
             except subprocess.TimeoutExpired:
@@ -541,8 +551,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             break
         if steps >= cfg.steps or k >= n_max:
             break
-        if plan.case == "kill" and k == plan.start and proc.poll() is None:
-            proc.kill()
+        if plan.case in PROCESS_CASES and k == plan.start and proc.poll() is None:
+            proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
         t_us = round(t * 1e6)
         frames = codec.encode_feedback(y[0], y[2], y[1], y[3], y[4], dom == 0, k % 16,
                                        sim_time_us=t_us, timestamp=t)
@@ -564,9 +574,12 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             rec.write_deferred()
             t_rec.append(clock() - r0)
         w0 = clock()
-        # -- wait for this cycle's torque
+        # -- wait for this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt
+        # into the tick's slot, or 0.8 dt after sending when the plant itself runs behind
+        # (a late plant must not count its own lateness as the controller's missed reply)
         got = False
-        deadline = wall0 + (k + 0.8) * dt if realtime else s0 * 1e-9 + cfg.reply_timeout
+        deadline = (max(wall0 + (k + 0.8) * dt, s0 * 1e-9 + 0.8 * dt) if realtime
+                    else s0 * 1e-9 + cfg.reply_timeout)
         while True:
             left = deadline - time.perf_counter()
             if left <= 0 or lost.is_set():
@@ -598,8 +611,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         reason = ""
         if lost.is_set():
             reason = "controller liveliness token lost"
-        elif missed_run >= (max(cfg.watchdog_periods, 50) if realtime
-                            else cfg.watchdog_periods):
+        elif missed_run >= cfg.watchdog_periods:
             reason = f"{missed_run} control periods without a torque reply"
         elif plant.ctrl_state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 \
                 and not got:

@@ -55,7 +55,7 @@ def run(
     steps: Annotated[int, typer.Option(help="Stop after this many impacts.")] = 20,
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "
-                                         "kill (CASE[:start[:every[:count]]]), "
+                                         "kill, hang (CASE[:start[:every[:count]]]), "
                                          "human[:AMPLITUDE[:SEED]].")] = "none",
     mode: Annotated[str, typer.Option(help="lockstep or realtime.")] = "lockstep",
     record: Annotated[Path | None, typer.Option(help="MCAP file to write.", dir_okay=False)

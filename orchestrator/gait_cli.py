@@ -39,8 +39,18 @@ def fit(
     touchdown_slip: Annotated[float | None, typer.Option(
         help="Largest forward/backward speed of the swing sole at touchdown, m/s (default: "
         "not bounded).", min=0.0)] = None,
+    track_kp: Annotated[float, typer.Option(
+        help="Stiffness (1/s^2) of the human's output tracking stored with the gait (the "
+        "simulated human, the FMU); the orbit does not depend on it, its stability does.",
+        min=0.0)] = 1600.0,
+    track_kd: Annotated[float, typer.Option(help="Damping (1/s) of that tracking.",
+                                            min=0.0)] = 80.0,
     verify: Annotated[bool, typer.Option(help="Closed-loop verification (20 steps, "
-                                         "return map).")] = True,
+                                         "return map); a gait that fails it is not written.")
+                      ] = True,
+    allow_unstable: Annotated[bool, typer.Option(
+        help="Write the gait even when it falls or its return map is not contracting "
+        "(marked walks: false in its verification).")] = False,
     figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
 ) -> None:
     """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
@@ -56,10 +66,12 @@ def fit(
     model = hp_model.load_model(str(subject) if subject else None,
                                 str(device) if device else None)
     opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter, w_offset=offset_weight,
-                      touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip)
+                      touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip,
+                      track_kp=track_kp, track_kd=track_kd)
     with console.status("gait fit") as status:
         gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
-                        progress=lambda m: status.update(m), segments=segments)
+                        progress=lambda m: status.update(m), segments=segments,
+                        allow_unstable=allow_unstable)
     save_gait(out, gait)
     if figure:
         save_gait_figure(out.with_suffix(".png"), gait, data)
@@ -84,7 +96,9 @@ def _summary(console: Console, gait, out: Path) -> None:
                   " ".join(f"{x:.1f}" for x in rms) if rms is not None else "-")
     console.print(t)
     if v:
+        verdict = "walks" if v.get("walks") else "does NOT walk: written by --allow-unstable"
         console.print(f"closed loop: {v['steps_simulated']} steps simulated"
                       f"{' (FAILED: ' + v['failure'] + ')' if v['simulation_failed'] else ''}; "
-                      f"return-map spectral radius {v['spectral_radius']:.3g} "
-                      f"({'stable' if v.get('stable') else 'NOT stable'})")
+                      f"return-map spectral radius {v['spectral_radius']:.3g} ({verdict})")
+    else:
+        console.print("closed loop: not verified (--no-verify)")

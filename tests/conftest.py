@@ -2,11 +2,31 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import hp_model
 from hp_model import HumanProsthesisModel, ProsthesisSubsystem
+from tests.committed_gaits import load_committed
+
+
+@pytest.fixture(scope="session", autouse=True)
+def private_cache(tmp_path_factory) -> Iterator[Path]:
+    """A cache of compiled models and FMUs for this session only (HPCOSIM_CACHE, inherited by
+    the CLI and controller processes the tests start): the suite never reads or writes the
+    user's ~/.cache/hpcosim, and never reuses a build from another checkout."""
+    path = tmp_path_factory.mktemp("hpcosim-cache")
+    before = os.environ.get("HPCOSIM_CACHE")
+    os.environ["HPCOSIM_CACHE"] = str(path)
+    yield path
+    if before is None:
+        os.environ.pop("HPCOSIM_CACHE", None)
+    else:
+        os.environ["HPCOSIM_CACHE"] = before
 
 
 @pytest.fixture(scope="session")
@@ -37,19 +57,37 @@ def random_state(model, rng, on_socket: bool = True, scale: float = 0.4):
 
 @pytest.fixture(scope="session")
 def template_gait(model):
-    """A converged gait of the default model, optimized once per session from a human-like
-    template (about 20 s)."""
-    from characterization.gait_design import build_gait
-    from characterization.phzd import PHZDOptions, optimize_gait
-    from tests.gait_template import template_targets
+    """The quick template gait (ps about 0.3 s), committed test data (tests/data/gaits,
+    regenerated and checked by tests/test_phzd.py), checked to walk."""
+    return load_committed(model, "template")
 
-    # the paper's cost and IPOPT's adaptive barrier: the gait the controller, FMU and
-    # co-simulation tests were written against
-    opt = PHZDOptions(w_offset=0.0, mu_strategy="adaptive")
-    targets = template_targets()
-    result = optimize_gait(model, targets, opt)
-    assert result.success, result.status
-    return build_gait(model, result, targets, opt)
+
+@pytest.fixture(scope="session")
+def regenerated(model):
+    """``regenerated(name)``: the committed gait ``name`` made anew by its recipe, once per
+    session (the solve is shared by the tests that check it)."""
+    from tests.committed_gaits import regenerate
+
+    made: dict = {}
+
+    def get(name: str):
+        if name not in made:
+            made[name] = regenerate(name, model)
+        return made[name]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def playback_gait(model):
+    """The playback tests' gait (ps about 0.8 s), committed test data, checked to walk."""
+    return load_committed(model, "playback")
+
+
+@pytest.fixture(scope="session")
+def demo_gait(model):
+    """The demo subject's gait, committed test data, checked to walk."""
+    return load_committed(model, "demo")
 
 
 @pytest.fixture(scope="module")

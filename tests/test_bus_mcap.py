@@ -13,6 +13,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 from mcap.reader import make_reader
@@ -62,7 +63,6 @@ def test_hp_model_coordinates_match():
 
 
 def test_schemas_are_valid_and_examples_conform():
-    jsonschema = pytest.importorskip("jsonschema")
     frame = codec.encode_torque(1.0, -1.0, 2)
     examples = {
         "/can/tx": can_frame_message(frame, "tx", name="TorqueCmd"),

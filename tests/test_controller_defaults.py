@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from hp_model.force_tube import load_tube
-from hp_model.gait_artifact import load_gait
 from prosthesis_controller import (
     CONTROLLERS,
     ClfConfig,
@@ -29,8 +28,8 @@ TICKS = 2000  # 1 kHz: two and a half stances of 0.81 s
 
 
 @pytest.fixture(scope="module")
-def demo(model, subsystem):
-    gait = load_gait(DATA / "gait_demo.json", model.parameter_hash())
+def demo(model, subsystem, demo_gait):
+    gait = demo_gait
     tube = load_tube(DATA / "tube_demo.json", gait.hash())
     return gait, tube
 

@@ -93,13 +93,11 @@ def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, mod
 
 
 @pytest.fixture(scope="module")
-def stored_ctx(model, subsystem):
+def stored_ctx(model, subsystem, playback_gait):
     """A context on the stored human-like gait (ps 0.81 s; tests/data/playback)."""
-    from hp_model.gait_artifact import load_gait
     from prosthesis_controller import ControllerContext
-    from tests.playback_helpers import GAIT
 
-    gait = load_gait(GAIT, model.parameter_hash())
+    gait = playback_gait
     return ControllerContext(gait, tube_about_nominal(gait, (40, 60, 8)), model,
                              subsystem=subsystem)
 

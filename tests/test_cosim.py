@@ -41,7 +41,7 @@ from tests.controller_support import tube_about_nominal
 from tests.fmu_support import built_fmu, simulator, start_state
 
 ROOT = Path(__file__).resolve().parents[1]
-CTRL = "clfqp"
+CTRL = "phase-pd"  # walks the template gait (the paper-literal clfqp falls: README)
 
 
 @pytest.fixture(scope="module")
@@ -136,11 +136,21 @@ def test_lockstep_equals_in_process_simulation(lockstep, files, model):
 
     q0, qd0 = start_state(gait)
     sim = simulator(model, gait).run(q0, qd0, "ps", steps=10, policy=policy)
+    # both runs walk all their steps: the comparison covers the whole run, impacts included
+    assert not res.fell and res.steps == 10, res
+    assert not sim.failed and sim.steps == 10, sim.reason
     gt = np.array([o["q"] for _, _, o in read_messages(path, ["/ground_truth"])])
+    assert len(gt) == res.ticks
     n = min(len(gt), len(sim.q))
     assert n >= res.ticks - 1
     err = np.abs(gt[:n, 10:12] - sim.q[:n, 10:12]).max()
     assert err <= 1e-6, err
+    # the same impacts at the same ticks (simulation time to one period)
+    t_imp = [i.t for i in sim.impacts]
+    steps_gt = np.array([o["step"] for _, _, o in read_messages(path, ["/ground_truth"])])
+    t_gt = (np.flatnonzero(np.diff(steps_gt)) + 1) * (res.sim_time / res.ticks)
+    assert len(t_imp) >= len(t_gt) >= 9
+    np.testing.assert_allclose(t_gt, t_imp[:len(t_gt)], atol=1.5e-3)
 
 
 def test_replay_same_controller_zero_difference(lockstep, model):
@@ -192,6 +202,28 @@ def test_controller_killed_mid_run(files, model):
     r = read_recording(rec, messages=False)
     assert ("summary" in r.metadata and '"faulted": true' in r.metadata["summary"]["faulted"]) \
         or r.metadata["summary"]["faulted"] == "true"
+
+
+@pytest.mark.parametrize("mode", ["lockstep", "realtime"])
+def test_controller_hung_alive_is_detected_by_missing_replies(files, model, mode):
+    """SIGSTOP: the controller process stays alive (its zenoh liveliness token too), only
+    its replies stop.  The plant's missed-reply watchdog must end the run within 5 periods,
+    with zero torque, and the recording must be complete."""
+    rec = files["dir"] / f"hung-{mode}.mcap"
+    dt = 1e-3 if mode == "lockstep" else 2e-3
+    start = 120
+    res = run_cosim(cfg(files, steps=5, record=rec, perturb=f"hang:{start}", mode=mode, dt=dt),
+                    model=model)
+    assert res.faulted, res
+    assert "without a torque reply" in res.fault_reason, res.fault_reason
+    assert res.detection_periods <= 5, res.detection_periods
+    assert start < res.ticks <= start + 6
+    gt = [o for _, _, o in read_messages(rec, ["/ground_truth"])]
+    assert len(gt) == res.ticks
+    assert gt[-1]["u_applied"] == [0.0, 0.0]
+    r = read_recording(rec, messages=False)
+    summary = r.metadata["summary"]
+    assert summary["faulted"] in ("true", "True", True) or '"faulted": true' in str(summary)
 
 
 EXPECTED = {"duplicate": "duplicate", "corrupt-counter": "bad_counter",

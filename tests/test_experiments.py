@@ -54,12 +54,9 @@ def test_run_scenario_consistent(model, template_gait, tube):
 
 
 @pytest.fixture(scope="module")
-def stored_gait(model):
+def stored_gait(playback_gait):
     """The stored human-like gait (ps 0.81 s, tests/data/playback)."""
-    from hp_model.gait_artifact import load_gait
-    from tests.playback_helpers import GAIT
-
-    return load_gait(GAIT, model.parameter_hash())
+    return playback_gait
 
 
 def test_offset_start_moves_only_the_prosthesis_knee_output(model, stored_gait):

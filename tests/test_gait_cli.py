@@ -26,6 +26,7 @@ import pytest
 from characterization.synthetic_subject import reference_gait
 from hp_model import bezier
 from hp_model.gait_artifact import load_gait
+from tests.committed_gaits import COEFFICIENT_TOLERANCE, RECIPES, ROOT, coefficient_difference
 from tests.test_cli import run
 
 pytestmark = pytest.mark.slow
@@ -34,7 +35,8 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def steps_file(tmp_path_factory):
     d = tmp_path_factory.mktemp("gaitcli")
-    r = run("mocap", "synth", "--out", str(d), "--seed", "1")
+    # the demo's subject (tests/committed_gaits.py, recipe "demo")
+    r = run("mocap", "synth", "--out", str(d), "--seed", "1", "--steps", "20")
     assert r.returncode == 0, r.stderr
     r = run("mocap", "process", str(d / "take.csv"), "--out", str(d / "steps.npz"),
             "--no-figures")
@@ -67,7 +69,13 @@ def test_fit_recovers_the_reference_gait(steps_file, tmp_path, model):
     doc = json.loads(out.read_text())
     assert doc["kind"] == "hpcosim-gait" and doc["model_hash"] == model.parameter_hash()
     v = doc["verification"]
-    assert v["stable_20_steps"] and v["spectral_radius"] < 1
+    assert v["walks"] and v["stable_20_steps"] and v["spectral_radius"] < 1
+    # the demo recipe through the command line: the committed demo gait
+    fitted = load_gait(out, model.parameter_hash())
+    diff = coefficient_difference(fitted, load_gait(ROOT / RECIPES["demo"].path))
+    assert diff <= COEFFICIENT_TOLERANCE, (
+        f"gait fit of the demo subject is {diff:.3g} from tests/data/controller/gait_demo.json"
+        " (python -m tests.committed_gaits demo regenerates it)")
     for d in ("ps", "pns"):
         assert max(v["output_rms_deg"][d]) < 2.0, (d, v["output_rms_deg"][d])
     gait = load_gait(out, model.parameter_hash())
@@ -80,3 +88,25 @@ def test_fit_recovers_the_reference_gait(steps_file, tmp_path, model):
         mean_velocity = (ref.params[d].p_max - ref.params[d].p_min) / ref.durations[d]
         assert gait.params[d].v_hip == pytest.approx(mean_velocity, rel=0.03), d
         assert gait.durations[d] == pytest.approx(ref.durations[d], rel=0.05), d
+
+
+def test_a_gait_that_does_not_walk_is_not_written(steps_file, tmp_path):
+    """A soft human tracking (kp 25, kd 10: the orbit is the same, its stability is not) makes
+    the optimized gait fall: one line naming the failed checks with their numbers, exit 1, no
+    file; --allow-unstable writes it, marked as not walking."""
+    out = tmp_path / "soft.json"
+    args = ("gait", "fit", str(steps_file), "--out", str(out), "--nodes", "9",
+            "--track-kp", "25", "--track-kd", "10", "--no-figure")
+    r = run(*args)
+    assert r.returncode == 1, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines[0].startswith("hpcosim: check failed: ")
+    assert "does not walk: fell after" in lines[0]
+    assert "return map" in lines[0] and "no gait written" in lines[0]
+    assert not list(tmp_path.iterdir())
+    r = run(*args, "--allow-unstable")
+    assert r.returncode == 0, r.stderr
+    v = json.loads(out.read_text())["verification"]
+    assert v["walks"] is False and v["steps_simulated"] < 20
+    assert "does NOT walk" in r.stdout

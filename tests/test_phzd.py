@@ -1,27 +1,25 @@
 """PHZD gait optimization: IPOPT converges from the regression's guess, and the result is a
 real gait of the model, checked with independent pieces (the forward KKT dynamics and the
-impact map)."""
+impact map).  The solve is the regeneration of the committed template gait
+(tests/committed_gaits.py), shared with tests/test_committed_gaits.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from characterization.phzd import CYCLE, PHZDOptions, optimize_gait
-from tests.gait_template import template_targets
+from characterization.phzd import CYCLE
 
 pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def result(model):
-    r = optimize_gait(model, template_targets(), PHZDOptions())
-    print(f"PHZD: {r.status} in {r.iterations} iterations, {r.solve_seconds:.1f} s")
-    return r
+def result(regenerated):
+    return regenerated("template")
 
 
 def test_ipopt_converges(result):
-    assert result.success, result.status
+    assert result.solver["success"], result.solver["status"]
     for d in CYCLE:
         assert np.all(np.abs(result.offsets[d]) <= 0.15 + 1e-6)
 

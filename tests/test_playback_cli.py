@@ -16,7 +16,7 @@ from characterization.playback_truth import TruthOptions, synthesize
 from characterization.steps_artifact import save_steps
 from hp_model.artifacts import ArtifactError
 from hp_model.force_tube import load_tube
-from hp_model.gait_artifact import load_gait, save_gait
+from hp_model.gait_artifact import save_gait
 from tests.playback_helpers import GAIT, subset_steps
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,8 +29,8 @@ def hpcosim(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope="module")
-def gait(model):
-    return load_gait(GAIT, model.parameter_hash())
+def gait(playback_gait):
+    return playback_gait
 
 
 @pytest.fixture(scope="module")

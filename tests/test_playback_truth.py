@@ -22,9 +22,8 @@ from characterization.playback import (
 )
 from characterization.playback_truth import TruthOptions, synthesize
 from hp_model.closed_loop import ClosedLoop
-from hp_model.gait_artifact import load_gait
 from hp_model.simulator import HybridSimulator
-from tests.playback_helpers import GAIT, relative_rms_errors, tube_excess
+from tests.playback_helpers import relative_rms_errors, tube_excess
 
 #: interior: every step starts on its own zero-dynamics surface (no transient);
 #: start: the start of each curve is perturbed too (a post-impact transient the playback's
@@ -40,8 +39,8 @@ BARE_TOL = 0.005
 
 
 @pytest.fixture(scope="module")
-def gait(model):
-    return load_gait(GAIT, model.parameter_hash())
+def gait(playback_gait):
+    return playback_gait
 
 
 @pytest.fixture(scope="module", params=list(CASES))

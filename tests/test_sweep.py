@@ -19,7 +19,6 @@ from scipy.stats import binomtest
 
 from hp_model import bezier
 from hp_model.force_tube import save_tube
-from hp_model.gait_artifact import load_gait
 from hp_model.outputs import Y2_COORDS
 from orchestrator.sweep_draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
 from orchestrator.sweep_replay import TAU_COLUMNS, compare_rows
@@ -63,8 +62,8 @@ human.bezier_amplitude = {{ dist = "normal", mean = 0.0, std = 0.01 }}
 
 
 @pytest.fixture(scope="module")
-def gait(model):
-    return load_gait(GAIT, model.parameter_hash())
+def gait(playback_gait):
+    return playback_gait
 
 
 @pytest.fixture(scope="module")
