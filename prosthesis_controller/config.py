@@ -41,6 +41,11 @@ class ClfConfig(_Strict):
     - ``solver_eps``: piqp absolute, relative and duality-gap tolerances (normalised QP).
     - ``polish``: re-solve exactly on the active set piqp reports (accepted only if it is
       the verified optimum), as OSQP's polishing does.
+    - ``loop_solver_eps``: piqp tolerances of the interaction-aware QP (``clfqp``), whose
+      A is well conditioned (cond 50-140) and needs no polishing; near V = 0 its CLF row is
+      degenerate (LGV -> 0) and piqp stalls at 1e-10 (measured: 250 iterations), converging
+      in 11-12 at 1e-8 (agreement with quadprog: tests).  A failed solve is retried once at
+      100x the tolerance before the fallback.
     """
 
     eps: float = Field(0.02, gt=0, lt=1)
@@ -55,6 +60,7 @@ class ClfConfig(_Strict):
     exact_limits_in_qp: bool = False
     solver_eps: Positive = 1e-10
     polish: bool = True
+    loop_solver_eps: Positive = 1e-8
 
     @model_validator(mode="after")
     def _shapes(self) -> ClfConfig:
@@ -65,6 +71,23 @@ class ClfConfig(_Strict):
             if not np.allclose(M, M.T) or np.linalg.eigvalsh(M).min() <= 0:
                 raise ValueError(f"{name} must be symmetric positive definite")
         return self
+
+
+class ContactConfig(_Strict):
+    """Stance-foot contact rows of the interaction-aware CLF-QP (``clfqp``): the ground
+    reaction w = (F_x, F_z, M_y) at the prosthesis sole, affine in the motor torque, is kept
+    in the friction cone |F_x| <= ``mu`` F_z, with F_z >= ``f_min`` and its centre of pressure
+    -M_y / F_z within ``cop_fraction`` of the heel and toe distances.  The rows are relaxed
+    together by sigma in [0, ``sigma_max``] (torque-equivalent units, N m motor per row) at
+    the linear cost ``c_sigma``: zero whenever they can hold (an exact penalty).
+
+    ``mu`` 0.5 leaves a margin to the simulated ground's 0.8 (and the gait design's 0.6)."""
+
+    mu: Positive = 0.5
+    f_min: NonNegative = 30.0
+    cop_fraction: float = Field(0.8, gt=0, le=1)
+    sigma_max: Positive = 100.0
+    c_sigma: Positive = 1.0e6
 
 
 class PdConfig(_Strict):
@@ -165,6 +188,7 @@ class ControllerConfig(_Strict):
     """All settings of every controller; each controller reads the parts it uses."""
 
     clf: ClfConfig = ClfConfig()
+    contact: ContactConfig = ContactConfig()
     pd: PdConfig = PdConfig()
     phase_pd: PhasePdConfig = PhasePdConfig()
     passive: PassiveConfig = PassiveConfig()

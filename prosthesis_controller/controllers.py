@@ -114,8 +114,10 @@ class ControllerContext:
                              f"({gait.hash()}); refit the tube or pass strict_tube=False")
         sub = subsystem or ProsthesisSubsystem(model)
         self.subsystem = sub
+        self.margin = _margin(tube)
         self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
-                                     PITCH_DEGREE, backend, FEEDFORWARD_DEGREE)
+                                     PITCH_DEGREE, backend, FEEDFORWARD_DEGREE,
+                                     self.margin["margin_lower"].shape[1] - 1)
         c = cfg.clf
         self.clf: ResClf = res_clf(np.array(c.Q), np.array(c.R), c.eps)
         if c.gamma > self.clf.c3 + 1e-12:
@@ -151,10 +153,25 @@ class ControllerContext:
         self.phase_pd_params = T.phase_pd_layout.pack(
             alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
             feedforward=self.feedforward, kp=pp.kp, kd=pp.kd, k_vhip=pp.k_vhip)
+        ct = cfg.contact
+        toe, heel = foot_extent(model)
+        self.clf_loop_params = T.clf_loop_layout.pack(
+            theta=gait.theta("ps"), gains=gait.gains_array, P_eps=self.clf.P_eps,
+            gamma_over_eps=c.gamma / c.eps, c_rho=c.c_rho,
+            rho_scale=c.rho_max if c.rho_max > 0 else 1.0, c_sigma=ct.c_sigma,
+            sigma_scale=ct.sigma_max, mu=ct.mu, f_min=ct.f_min,
+            toe=ct.cop_fraction * toe, heel=ct.cop_fraction * heel, **self.margin)
         pc = cfg.passive
         self.passive_params = T.passive_layout.pack(
             alpha_pk=alpha_pk, p_min=ps.p_min, p_max=ps.p_max, lam=pc.lam, k=pc.k,
             rho_theta=pc.rho_theta, boundary=pc.boundary, theta0=T.theta0)
+
+
+def foot_extent(model: HumanProsthesisModel, side: str = "p") -> tuple[float, float]:
+    """(toe, heel): distances (m) of the sole's toe and heel points ahead of and behind the
+    sole frame, from the model's frames."""
+    frames = {f.name: f for f in model.tree.frames}
+    return float(frames[f"{side}_toe"].point[0]), float(-frames[f"{side}_heel"].point[0])
 
 
 def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
@@ -181,6 +198,18 @@ def _near(v: float, i: int, xl: np.ndarray, xu: np.ndarray, fix: int) -> int:
 def _toward(u: float, target: float, step: float) -> float:
     d = target - u
     return u + (step if d > step else -step if d < -step else d)
+
+
+def _margin(tube: ForceTube) -> dict[str, object]:
+    """The output-uncertainty margin of the tube (Bezier box of d over its phase interval),
+    or none (zeros) when the tube does not carry one."""
+    u = getattr(tube, "output_uncertainty", None)
+    if u is None:
+        z = np.zeros((2, 1))
+        return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0,
+                "margin_tau_hi": 1.0}
+    return {"margin_lower": u.lower, "margin_upper": u.upper, "margin_tau_lo": u.tau_lo,
+            "margin_tau_hi": u.tau_hi}
 
 
 class BaseController:
@@ -413,12 +442,14 @@ class PassiveController(BaseController):
 
 
 class ClfQpController(BaseController):
-    """Robust CLF-QP, relaxed and smoothed (paper eq. robust_CLF_QP_relax) or exact (eq.
-    robust_CLF_QP), solved by piqp (dense; set up once, updated every tick) over
+    """The paper's literal robust CLF-QP (``clfqp-paper``, ``clfqp-paper-exact``) on the
+    prosthesis subsystem with the socket force an exogenous input in the tube: relaxed and
+    smoothed (paper eq. robust_CLF_QP_relax) or exact (eq. robust_CLF_QP), solved by piqp
+    (dense; set up once, updated every tick) over
     z = (u_k, u_a[, rho]) with the torque and rate limits as box bounds, then polished
     (:mod:`prosthesis_controller.polish`)."""
 
-    name = "clfqp"
+    name = "clfqp-paper"
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
@@ -453,7 +484,7 @@ class ClfQpController(BaseController):
         self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
                            G=np.asfortranarray(np.ones((1, n))), h_l=np.array([-_INF]),
                            h_u=np.ones(1), x_l=xl0, x_u=xu0)
-        self.name = "clfqp" if relaxed else "clfqp-exact"
+        self.name = "clfqp-paper" if relaxed else "clfqp-paper-exact"
         self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
         self._polish = bool(c.polish)
         super().__init__(ctx)
@@ -575,7 +606,8 @@ class ClfQpController(BaseController):
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
 
 
-CONTROLLERS = ("clfqp", "clfqp-exact", "pd", "passive", "phase-pd")
+CONTROLLERS = ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd", "passive",
+               "phase-pd")
 
 
 def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
@@ -583,17 +615,23 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
                     context: ControllerContext | None = None,
                     subsystem: ProsthesisSubsystem | None = None,
                     strict_tube: bool = True) -> BaseController:
-    """A controller by name: "clfqp" (relaxed robust CLF-QP), "clfqp-exact", "pd",
-    "passive" or "phase-pd" (reference, not in the paper).  Pass ``context`` to share the
-    compiled terms between controllers (then gait, tube, model and config are taken from
-    it)."""
+    """A controller by name: "clfqp" (the interaction-aware robust CLF-QP, relaxed; the
+    default), "clfqp-exact" (its unrelaxed form), "clfqp-paper" / "clfqp-paper-exact" (the
+    paper's literal formulation on the prosthesis subsystem with the socket-force tube: a
+    documented negative result), "pd", "passive" or "phase-pd" (reference, not in the
+    paper).  Pass ``context`` to share the compiled terms between controllers (then gait,
+    tube, model and config are taken from it)."""
     if name not in CONTROLLERS:
         raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
     ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
                                        strict_tube=strict_tube)
-    if name == "clfqp":
+    if name in ("clfqp", "clfqp-exact"):
+        from prosthesis_controller.loop_clfqp import LoopClfQpController
+
+        return LoopClfQpController(ctx, relaxed=name == "clfqp")
+    if name == "clfqp-paper":
         return ClfQpController(ctx, relaxed=True)
-    if name == "clfqp-exact":
+    if name == "clfqp-paper-exact":
         return ClfQpController(ctx, relaxed=False)
     if name == "pd":
         return PDController(ctx)

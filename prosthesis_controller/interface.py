@@ -34,6 +34,7 @@ class Active(IntFlag):
     ANKLE_UPPER = 16
     RHO_MAX = 32  # relaxation at rho_max
     OUTPUT_CLAMP = 64  # not a QP constraint: the output clamp to the motor limits acted
+    CONTACT = 128  # a stance-foot contact row (friction, normal force, CoP) of clfqp
 
 
 # qp_status values

@@ -115,3 +115,56 @@ def polish(P, c, g_row, h: float, xl, xu, relaxed: bool,
     if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(rho)):
         return None
     return u0, u1, rho
+
+
+def polish_active_set(P, c, G, h, xl, xu, rows, lower, upper, tol: float = 1e-9):
+    """The exact optimum of min 1/2 z^T P z + c^T z, G z <= h, xl <= z <= xu for a guessed
+    active set (``rows``: indices of rows held as equalities; ``lower``/``upper``: indices of
+    variables at their bounds), or None if that guess does not satisfy the KKT conditions
+    (primal feasibility, non-negative multipliers, stationarity) to ``tol`` relative.
+
+    For QPs of a few variables (numpy; the interaction-aware CLF-QP's 4).  The equality KKT
+    system is solved by least squares, so a singular P in a slack's direction is fine when
+    the KKT point is unique in the torques (the checks reject any other)."""
+    import numpy as np
+
+    n = len(c)
+    fixed = np.zeros(n, bool)
+    z = np.zeros(n)
+    for i in lower:
+        fixed[i], z[i] = True, xl[i]
+    for i in upper:
+        fixed[i], z[i] = True, xu[i]
+    free = np.flatnonzero(~fixed)
+    Ge = G[list(rows)] if len(rows) else np.zeros((0, n))
+    he = h[list(rows)] if len(rows) else np.zeros(0)
+    nf, ne = len(free), len(Ge)
+    K = np.zeros((nf + ne, nf + ne))
+    K[:nf, :nf] = P[np.ix_(free, free)]
+    K[:nf, nf:] = Ge[:, free].T
+    K[nf:, :nf] = Ge[:, free]
+    rhs = np.concatenate([-(c[free] + P[np.ix_(free, fixed)] @ z[fixed]),
+                          he - Ge[:, fixed] @ z[fixed]])
+    sol, *_ = np.linalg.lstsq(K, rhs, rcond=None)
+    z[free] = sol[:nf]
+    lam = sol[nf:]
+    scale = 1.0 + float(np.abs(c).max()) + float(np.abs(P).max())
+    if not np.all(np.isfinite(z)) or np.any(lam < -tol * scale):
+        return None
+    if np.any(G @ z > h + tol * (1.0 + np.abs(h))):
+        return None
+    if np.any(z < xl - tol * (1.0 + np.abs(xl))) or np.any(z > xu + tol * (1.0 + np.abs(xu))):
+        return None
+    grad = P @ z + c + Ge.T @ lam  # = multipliers of the bounds: + at lower, - at upper
+    for i in range(n):
+        if i in lower and xl[i] < xu[i]:
+            ok = grad[i] >= -tol * scale
+        elif i in upper and xl[i] < xu[i]:
+            ok = grad[i] <= tol * scale
+        elif fixed[i]:
+            ok = True
+        else:
+            ok = abs(grad[i]) <= tol * scale
+        if not ok:
+            return None
+    return z

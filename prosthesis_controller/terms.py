@@ -70,6 +70,8 @@ import numpy as np
 from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
+from hp_model.interaction import InteractionModel
+from hp_model.outputs import Y2_COORDS, unpack_symbolic
 from hp_model.prosthesis import ProsthesisSubsystem
 from hp_model.tree import PlanarTree, frame_pose
 
@@ -195,6 +197,92 @@ def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
     return ca.horzcat(*cols), links
 
 
+#: QP rows of :func:`clf_qp_loop_function`: the CLF row, then the stance-foot contact rows
+LOOP_ROWS = ("clf", "friction_fwd", "friction_back", "normal_force", "cop_toe", "cop_heel")
+
+
+def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: int
+                         ) -> tuple[Layout, ca.Function]:
+    """``clf_qp_loop(x, p)``: the interaction-aware robust CLF-QP (issue 17) in solver form.
+
+    The model is the human-prosthesis loop restricted to the gait's nominal human
+    (:mod:`hp_model.interaction`): x_dot = f_r + g_r u, foot wrench w = w0 + W u, both
+    affine in the motor torque u.  With the paper's prosthesis outputs eta = (y1, y2, dy2)
+    (:func:`stance_outputs`; y2 on the knee) and Jo = d(y1, dy2)/dx:
+
+        nu = a + A u,  a = Jo f_r,  A = Jo g_r
+        CLF row:  LGV A u - (gamma/eps) rho <= -(gamma/eps) V - LFV - LGV a
+                                                - LGV c_d - |LGV| r_d
+        contact:  F_x - mu F_z <= 0, -F_x - mu F_z <= 0, F_z >= f_min,
+                  toe F_z + M_y >= 0, heel F_z - M_y >= 0      (w = w0 + W u; - sigma)
+        cost:     |a + A u|^2 + c_rho rho + c_sigma sigma
+
+    with [c_d - r_d, c_d + r_d] the characterised bound of what the nominal-human model does
+    not explain, d = nu_true - (a + A u), a Bezier box over the phase s in [tau_lo, tau_hi]
+    (zero: no margin).  Decision variables z = (u_k, u_a, rho / rho_scale, sigma /
+    sigma_scale); each row is divided by the norm of its torque part, so sigma is the
+    violation of a contact row in torque-equivalent units, and the cost by trace(A^T A).
+    The exact form uses the (u, u) block and the first two columns of the rows."""
+    full = sub.full
+    inter = InteractionModel(full, degree)
+    ck, ca_ = full.hip_progress_coefficients("ps")
+    L = Layout()
+    theta = L.add("theta", (inter.vc.n_params,))
+    gains = L.add("gains", (3,))
+    P_eps = L.add("P_eps", (3, 3))
+    g_over_eps = L.add("gamma_over_eps")
+    c_rho, rho_scale = L.add("c_rho"), L.add("rho_scale")
+    c_sigma, sigma_scale = L.add("c_sigma"), L.add("sigma_scale")
+    d_lo = L.add("margin_lower", (2, margin_degree + 1))
+    d_hi = L.add("margin_upper", (2, margin_degree + 1))
+    tau_lo, tau_hi = L.add("margin_tau_lo"), L.add("margin_tau_hi")
+    mu, f_min = L.add("mu"), L.add("f_min")
+    toe, heel = L.add("toe"), L.add("heel")
+    x = ca.SX.sym("x", 4)
+    f_r, g_r, w0, W, _ = inter.functions["interaction_ps"](x, theta, gains)
+    alpha, v_hip, p_min, p_max = unpack_symbolic(theta, degree)
+    alpha_pk = alpha[Y2_COORDS["ps"].index("th_pk"), :]
+    tau, _, y1, y2, dy2 = stance_outputs(x, alpha_pk, v_hip, p_min, p_max, ck, ca_)
+    eta = ca.vertcat(y1, y2, dy2)
+    Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
+    a, A = Jo @ f_r, Jo @ g_r
+    F, G = ca.DM(F_OUT), ca.DM(G_OUT)
+    V = eta.T @ P_eps @ eta
+    LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
+    LGV = 2 * eta.T @ P_eps @ G
+    s = ca.fmin(ca.fmax((tau - tau_lo) / ca.fmax(tau_hi - tau_lo, 1e-9), 0), 1)
+    lo, hi = bezier.evaluate(d_lo, s), bezier.evaluate(d_hi, s)
+    c_d, r_d = 0.5 * (lo + hi), 0.5 * ca.fmax(hi - lo, 0)
+    h_clf = -g_over_eps * V - LFV - LGV @ a - LGV @ c_d - ca.fabs(LGV) @ r_d
+    g_clf = LGV @ A
+    fx0, fz0, my0 = w0[0], w0[1], w0[2]
+    Wx, Wz, Wm = W[0, :], W[1, :], W[2, :]
+    rows_u = [Wx - mu * Wz, -Wx - mu * Wz, -Wz, -(toe * Wz + Wm), -(heel * Wz - Wm)]
+    rows_h = [mu * fz0 - fx0, mu * fz0 + fx0, fz0 - f_min, toe * fz0 + my0,
+              heel * fz0 - my0]
+    n_clf = ca.norm_2(ca.horzcat(g_clf, g_over_eps * rho_scale))
+    Gq = [ca.horzcat(g_clf, -g_over_eps * rho_scale, 0) / n_clf]
+    hq = [h_clf / n_clf]
+    for gu, hh in zip(rows_u, rows_h, strict=True):
+        n = ca.norm_2(gu) + 1e-12
+        Gq.append(ca.horzcat(gu / n, 0, -sigma_scale))
+        hq.append(hh / n)
+    Gq, hq = ca.vertcat(*Gq), ca.vertcat(*hq)
+    H = A.T @ A
+    sc = ca.trace(H)
+    Pq = ca.SX.zeros(4, 4)
+    Pq[0:2, 0:2] = 2 * H / sc
+    cq = ca.vertcat(2 * A.T @ a / sc, c_rho * rho_scale / sc, c_sigma * sigma_scale / sc)
+    chk = ca.sum1(ca.sum2(Pq)) + ca.sum1(cq) + ca.sum1(ca.sum2(Gq)) + ca.sum1(hq) + V
+    fn = ca.Function(
+        "clf_qp_loop", [x, L.symbol],
+        [Pq, cq, Gq, hq, chk, eta, tau, V, a, A, w0, W, c_d, r_d],
+        ["x", "p"],
+        ["P", "c", "G", "h", "check", "eta", "tau", "V", "a", "A", "w0", "W", "c_d", "r_d"],
+        {"cse": True})
+    return L, fn
+
+
 class ControllerTerms:
     """The compiled controller functions of one subsystem and Bezier degrees.
 
@@ -205,7 +293,7 @@ class ControllerTerms:
 
     def __init__(self, sub: ProsthesisSubsystem, gait_degree: int, nominal_degree: int,
                  bound_degree: int, pitch_degree: int = 5, backend: str = "auto",
-                 feedforward_degree: int = 9) -> None:
+                 feedforward_degree: int = 9, margin_degree: int = 0) -> None:
         self.sub = sub
         ck, ca_ = sub.full.hip_progress_coefficients("ps")
         self.c_k, self.c_a = ck, ca_
@@ -261,6 +349,9 @@ class ControllerTerms:
             ["x", "p"],
             ["Pu", "cu", "Gu", "hu", "check", "eta", "tau", "V", "LFV", "LGV", "Lf", "Am", "As",
              "Fstar", "c", "r"])
+
+        # ---- clf_qp_loop: the interaction-aware robust CLF-QP ----------------------------
+        self.clf_loop_layout, clf_loop = clf_qp_loop_function(sub, m, margin_degree)
 
         # ---- stance_ref ----------------------------------------------------------------
         R = Layout()
@@ -361,9 +452,9 @@ class ControllerTerms:
         reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
         red = ca.Function("reduced", [x], [f_p, g_m, g_s], ["x"], ["f_p", "g_m", "g_s"])
 
-        fns = [clf, sref, swref, phase_pd, passive, lag, reg, red]
+        fns = [clf, clf_loop, sref, swref, phase_pd, passive, lag, reg, red]
         name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}"
-                f"_f{feedforward_degree}")
+                f"_f{feedforward_degree}_d{margin_degree}")
         self.functions = {f.name(): f for f in fns}
         self.numeric = FunctionSet(fns, name, backend)
         self.theta0 = standard_parameters(sub.tree, links)

@@ -157,7 +157,7 @@ def _vertex_margin(ctx, x, u):
 def test_exact_qp_satisfies_the_clf_condition_at_every_box_vertex(ctx, ctx_exact_bounded, d):
     x = state_at(ctx, d)
     for c in (ctx, ctx_exact_bounded):
-        ctl = make_controller("clfqp-exact", None, None, None, context=c)
+        ctl = make_controller("clfqp-paper-exact", None, None, None, context=c)
         ctl.reset()
         out = ctl.tick(stance_meas(0.0, x))
         if out.diagnostics.qp_status != QP_SOLVED:
@@ -177,8 +177,8 @@ def test_exact_qp_satisfies_the_clf_condition_at_every_box_vertex(ctx, ctx_exact
 @given(d=draws)
 def test_relaxed_without_relaxation_or_bounds_is_the_exact_qp(ctx, ctx_unbounded_relaxed, d):
     x = state_at(ctx, d)
-    exact = make_controller("clfqp-exact", None, None, None, context=ctx)
-    relaxed = make_controller("clfqp", None, None, None, context=ctx_unbounded_relaxed)
+    exact = make_controller("clfqp-paper-exact", None, None, None, context=ctx)
+    relaxed = make_controller("clfqp-paper", None, None, None, context=ctx_unbounded_relaxed)
     exact.reset()
     relaxed.reset()
     oe, orl = exact.tick(stance_meas(0.0, x)), relaxed.tick(stance_meas(0.0, x))

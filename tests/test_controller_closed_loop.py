@@ -112,16 +112,16 @@ def _fl_torque(ctx, x):
 
 
 @pytest.mark.parametrize("rate", [pytest.param("10kHz", marks=pytest.mark.slow), "1kHz"])
-@pytest.mark.parametrize("name", ["clfqp-exact", "clfqp"])
+@pytest.mark.parametrize("name", ["clfqp-paper-exact", "clfqp-paper"])
 def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsystem,
                                                                    template_gait, name, rate):
     r = RATES[rate]
     # the relaxed law with a small relaxation cap: it converges into V <= rho_max
-    clf = ClfConfig() if name == "clfqp-exact" else ClfConfig(rho_max=0.1)
+    clf = ClfConfig() if name == "clfqp-paper-exact" else ClfConfig(rho_max=0.1)
     ctx, tube, tr = _setup(model, subsystem, template_gait, clf, r.half)
     ctl = make_controller(name, None, None, None, context=ctx)
     c = r.fraction * clf.gamma / clf.eps
-    floor = 0.0 if name == "clfqp-exact" else clf.rho_max
+    floor = 0.0 if name == "clfqp-paper-exact" else clf.rho_max
     c0, r0 = tube.box(0.5)
     worst = 0.0
     saturated_runs: list = []
@@ -145,7 +145,9 @@ def test_closed_loop_converges_at_the_promised_rate_at_every_vertex(model, subsy
             worst = max(worst, float(np.max(V / bound)))
             assert np.max(V / bound) <= r.M, (x0, s, float(np.max(V / bound)))
             # the phase keeps progressing: |y1| -> 0 means the hip moves at v_hip
-            assert run["tau"][-1] - run["tau"][0] > 0.3
+            # the walker moves through stance (not a run held still): the phase advances by
+            # a third of its nominal progress at least (measured about half)
+            assert run["tau"][-1] - run["tau"][0] > DURATION / ctx.durations["ps"] / 3
             assert np.all(np.abs(run["u"]) <= np.array(ctx.limits) + 1e-12)
     print(f"{name}: max V(t) / (V0 exp(-{c:.0f} t) + {floor}) = {worst:.3f}; "
           f"{len(saturated_runs)} runs reached a torque bound")
@@ -174,9 +176,10 @@ class Continuous:
 
 
 CONTINUOUS = {
-    # the tube of the other controller tests (conftest ``ctx``); RK4 error in the ratio:
-    # 2e-4 at h = 50 us, 3e-6 at 20 us (the loop has modes of ~1e4 1/s)
-    "wide": Continuous((40.0, 60.0, 8.0), 5e-5, False),
+    # the tube of the other controller tests (conftest ``ctx``); the loop has modes of ~1e4
+    # 1/s: on the committed template gait RK4 at h = 50 us gives a ratio of 1.79 (the
+    # integration error, not the law), at 20 us the law's rate to 1e-5
+    "wide": Continuous((40.0, 60.0, 8.0), 2e-5, False),
     "wide, every start": Continuous((40.0, 60.0, 8.0), 2e-5, True),
     # the mean half-widths of the demo subject's fitted tube (`make demo`): 1.47 at 50 us
     "demo width": Continuous((48.0, 100.0, 19.0), 1e-5, False),
@@ -197,7 +200,7 @@ def test_exact_law_keeps_the_promised_rate_in_continuous_time_on_a_wide_tube(
     cfg = ControllerConfig(clf=clf, safety=SafetyConfig(torque_limits=OPEN_LIMITS))
     ctx = ControllerContext(template_gait, tube_about_nominal(template_gait, k.half), model,
                             cfg, subsystem=subsystem)
-    ctl = make_controller("clfqp-exact", None, None, None, context=ctx)
+    ctl = make_controller("clfqp-paper-exact", None, None, None, context=ctx)
     c = clf.gamma / clf.eps
     starts = list(_starts(model, template_gait.trajectory["ps"]))
     if not k.every_start:
@@ -213,7 +216,9 @@ def test_exact_law_keeps_the_promised_rate_in_continuous_time_on_a_wide_tube(
             ratio = float(np.max(run["V"] / (run["V"][0] * np.exp(-c * run["t"]))))
             worst = max(worst, ratio)
             assert ratio <= 1.01, (x0, s, ratio)
-            assert run["tau"][-1] - run["tau"][0] > 0.3
+            # the walker moves through stance (not a run held still): the phase advances by
+            # a third of its nominal progress at least (measured about half)
+            assert run["tau"][-1] - run["tau"][0] > DURATION / ctx.durations["ps"] / 3
             peak = np.maximum(peak, np.abs(run["u"]).max(axis=0))
     print(f"{case}: max V(t) / (V0 exp(-{c:.0f} t)) = {worst:.6f}; peak motor torque "
           f"{peak.round(1)} N m (device limits {np.round(model.torque_limits[4:], 1)})")

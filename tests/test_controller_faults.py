@@ -92,7 +92,7 @@ def test_infeasible_qp_falls_back_toward_pd_rate_limited(model, subsystem, templ
     cfg = ControllerConfig(clf=ClfConfig(rho_max=0.0, delta_u=1e-4))
     c = ControllerContext(template_gait, tube_about_nominal(template_gait, (40, 60, 8)), model,
                           cfg, subsystem=subsystem)
-    ctl = make_controller("clfqp", None, None, None, context=c)
+    ctl = make_controller("clfqp-paper", None, None, None, context=c)
     pd = make_controller("pd", None, None, None, context=c)
     # the first of a few off-nominal states (growing outputs) whose QP is infeasible
     for k in (1.0, 2.0, 4.0, -1.0, -2.0, -4.0):

@@ -41,7 +41,7 @@ from tests.controller_support import tube_about_nominal
 from tests.fmu_support import built_fmu, simulator, start_state
 
 ROOT = Path(__file__).resolve().parents[1]
-CTRL = "phase-pd"  # walks the template gait (the paper-literal clfqp falls: README)
+CTRL = "clfqp"  # the default controller: walks the template gait
 
 
 @pytest.fixture(scope="module")

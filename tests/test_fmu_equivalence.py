@@ -87,7 +87,9 @@ def test_fmu_reproduces_the_simulator_over_ten_steps(fmu_path, nominal, tau_from
 
 
 def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, template_gait):
-    amp, seed, dk, da = 0.003, -7, 0.02, -0.01
+    # within what the test's NominalPD walks on the committed template gait (3 steps): at
+    # amplitude 0.003 the perturbed human touches down late in the third stance and it falls
+    amp, seed, dk, da = 0.001, -7, 0.01, -0.005
     thetas = perturbed_thetas({d: template_gait.theta(d) for d in ("ps", "pns")}, amp, seed)
     assert not np.array_equal(thetas["ps"], template_gait.theta("ps"))
     assert np.array_equal(thetas["ps"][-3:], template_gait.theta("ps")[-3:])
@@ -135,7 +137,7 @@ def test_other_step_size_and_substeps(fmu_path, model, template_gait):
     assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
 
 
-@pytest.mark.parametrize("factor", [0.0, 0.5, 1.5, 2.0, 3.0])
+@pytest.mark.parametrize("factor", [0.0, 0.5, 2.0, 3.0, -1.0])
 def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, factor):
     """With the nominal prosthesis torques scaled the walker falls (in various ways); the FMU
     raises `fall` with the simulator's reason at the same sample (a friction-cone fall

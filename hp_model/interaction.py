@@ -1,0 +1,142 @@
+"""The human-prosthesis loop restricted to the gait's nominal human: what the prosthesis's
+torque does when a human hangs on the socket (prosthesis stance, ``ps``).
+
+The paper's prosthesis subsystem treats the socket force F_s as an input independent of the
+prosthesis torque.  In the loop it is not: the human hangs on the socket, and F_s answers the
+torque.  Here the full 12-DOF model is evaluated with the human where the gait puts it, at the
+phase the prosthesis measures:
+
+- **walker state** (:func:`nominal_walker_state`) from x_p = (th_pk, th_pa, dth_pk, dth_pa)
+  and the gait's ps parameters theta: tau = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min),
+  tau_dot from the prosthesis rates; the human joints (th_lh, th_lk, th_la, th_rh) on their
+  Bezier curves B(tau), their rates dB(tau) tau_dot; the socket joint q_f = 0; the base
+  placed so that the prosthesis sole is flat on the ground at x = 0, its rates from
+  J_foot qd = 0 (y2 = dy2 = 0 for the human's outputs);
+- **the human's torques** from its feedback linearization given the prosthesis motor torque
+  u_p (``hfl_ps`` of :class:`hp_model.outputs.VirtualConstraints`), then the constrained
+  dynamics ``dyn_ps``: the prosthesis joint accelerations and the stance-foot wrench.
+
+Both are exactly affine in u_p (the human's law is affine in u_p, the dynamics in u):
+
+    x_p_dot   = f_r(x_p) + g_r(x_p) u_p        (4,), (4, 2)
+    w_foot    = w_0(x_p) + W(x_p) u_p          (F_x, F_z, M_y) at the prosthesis sole, (3,), (3, 2)
+
+so a controller's output dynamics are nu = Jo (f_r + g_r u_p) for any outputs of x_p.  On a
+state of the nominal gait these equal the full loop's (``xdot_human_ps``) exactly; elsewhere
+they are the loop's response with the human where it should be, the model error being what
+the human does differently.
+
+Functions (``InteractionModel.functions``; compiled by ``numeric()``):
+
+    walker_ps(x_p, theta)                  -> q (12), qd (12), tau
+    interaction_ps(x_p, theta, gains)      -> f (4), g (4, 2), w0 (3), W (3, 2), tau
+
+``gains`` = (eps, kp, kd) of the human's tracking (the gait's); on the nominal human its
+outputs are zero and the gains do not enter, but they are kept as inputs so that the same
+function serves a human placed off its curves.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from hp_model import bezier
+from hp_model.compiled import FunctionSet
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import STANCE, Y2_COORDS, VirtualConstraints, unpack_symbolic
+
+DOMAIN = "ps"
+
+
+def stance_frame(model: HumanProsthesisModel, domain: str = DOMAIN) -> str:
+    """The frame the domain holds flat on the ground (its first frame constraint)."""
+    return next(str(c.target) for c in model.domains[domain].constraints if c.kind == "frame")
+
+
+def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_p: ca.SX,
+                         theta: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+    """(q, qd, tau) of the walker in ``vc.domain`` = ps with the prosthesis at x_p and the
+    human on the gait's curves at the phase x_p gives (module docstring); symbolic."""
+    if vc.domain != DOMAIN:
+        raise ValueError("the restricted model is defined in prosthesis stance (ps)")
+    nq, idx = model.nq, model.coord_names.index
+    alpha, _v_hip, p_min, p_max = unpack_symbolic(theta, vc.degree)
+    dp = p_max - p_min
+    ck, ca_ = vc.c_knee, vc.c_ankle
+    tau = (ck * x_p[0] + ca_ * x_p[1] - p_min) / dp
+    tau_d = (ck * x_p[2] + ca_ * x_p[3]) / dp
+    B = bezier.evaluate(alpha, tau)
+    dB = bezier.evaluate(bezier.derivative(alpha), tau)
+    knee, ankle = (idx(n) for n in STANCE[DOMAIN])
+    human = [(idx(n), r) for r, n in enumerate(Y2_COORDS[DOMAIN]) if n not in STANCE[DOMAIN]]
+
+    def joints(base: ca.SX) -> ca.SX:
+        q = [ca.SX(0)] * nq
+        q[0], q[1], q[2] = base[0], base[1], base[2]
+        q[knee], q[ankle] = x_p[0], x_p[1]
+        for i, r in human:
+            q[i] = B[r]
+        return ca.vertcat(*q)
+
+    frame = stance_frame(model)
+    # the sole's pitch is th_B plus joint angles (planar tree): flat -> th_B = -pitch at 0
+    th_B = -model.frame_expr(frame, joints(ca.vertcat(0, 0, 0)))[2]
+    pos = model.frame_expr(frame, joints(ca.vertcat(0, 0, th_B)))[0:2]
+    q = joints(ca.vertcat(-pos[0], -pos[1], th_B))
+    qd_list = [ca.SX(0)] * nq
+    qd_list[knee], qd_list[ankle] = x_p[2], x_p[3]
+    for i, r in human:
+        qd_list[i] = dB[r] * tau_d
+    qd_rest = ca.vertcat(*qd_list)
+    qs = ca.SX.sym("q", nq)
+    Jf = ca.Function("Jf", [qs], [ca.jacobian(model.frame_expr(frame, qs), qs)])(q)
+    qd_base = -ca.solve(Jf[:, 0:3], Jf[:, 3:] @ qd_rest[3:])
+    qd = ca.vertcat(qd_base, qd_rest[3:])
+    return q, qd, tau
+
+
+class InteractionModel:
+    """The restricted human-prosthesis dynamics of one model and Bezier degree (module
+    docstring), symbolic in ``functions`` and compiled by :meth:`numeric`."""
+
+    def __init__(self, model: HumanProsthesisModel, degree: int) -> None:
+        self.model, self.degree = model, degree
+        vc = VirtualConstraints(model, DOMAIN, degree)
+        self.vc = vc
+        x_p = ca.SX.sym("x_p", 4)
+        theta = ca.SX.sym("theta", vc.n_params)
+        gains = ca.SX.sym("gains", 3)
+        u_p = ca.SX.sym("u_p", 2)
+        q, qd, tau = nominal_walker_state(model, vc, x_p, theta)
+        u = vc.functions[f"hfl_{DOMAIN}"](q, qd, theta, gains, u_p)
+        qdd, lam = model.function(f"dyn_{DOMAIN}")(q, qd, u)
+        idx = model.coord_names.index
+        xdot = ca.vertcat(x_p[2], x_p[3], *(qdd[idx(n)] for n in STANCE[DOMAIN]))
+        wrench = lam[0:3]
+        zero = ca.DM.zeros(2)
+        f = ca.substitute(xdot, u_p, zero)
+        g = ca.jacobian(xdot, u_p)
+        w0 = ca.substitute(wrench, u_p, zero)
+        W = ca.jacobian(wrench, u_p)
+        self.functions = {
+            "walker_ps": ca.Function("walker_ps", [x_p, theta], [q, qd, tau],
+                                     ["x_p", "theta"], ["q", "qd", "tau"]),
+            "interaction_ps": ca.Function(
+                "interaction_ps", [x_p, theta, gains], [f, g, w0, W, tau],
+                ["x_p", "theta", "gains"], ["f", "g", "w0", "W", "tau"], {"cse": True}),
+        }
+        self._numeric: FunctionSet | None = None
+
+    def numeric(self) -> FunctionSet:
+        """The functions compiled to C (cached on disk by source hash), through buffers."""
+        if self._numeric is None:
+            self._numeric = FunctionSet(list(self.functions.values()),
+                                        f"{self.model.name}_interaction_m{self.degree}")
+        return self._numeric
+
+    def walker_state(self, x_p: np.ndarray, theta: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
+        """Numeric (q, qd, tau) of :func:`nominal_walker_state` (copies)."""
+        q, qd, tau = self.numeric()["walker_ps"](np.asarray(x_p, float), theta)
+        return q.copy(), qd.copy(), float(tau[0])
