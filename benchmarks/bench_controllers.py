@@ -10,8 +10,8 @@ The machine is shared and noisy: quote ratios; rerun for absolutes.
 
 Usage: python benchmarks/bench_controllers.py [--gait gait.json [--tube tube.json]]
                                                [--ticks 10000] [--repeats 3] [--json out.json]
-Without --gait the test template gait is optimized first (20-50 s); without --tube the tube
-is +-(40 N, 60 N, 8 N m) about the gait's nominal socket force (as in the tests).
+Without --gait the tests' committed template gait; without --tube the tube is
++-(40 N, 60 N, 8 N m) about the gait's nominal socket force (as in the tests).
 """
 
 from __future__ import annotations
@@ -44,16 +44,10 @@ HALF = (40.0, 60.0, 8.0)  # tube half-widths, N, N, N m (as in the tests)
 
 
 def template_gait(model) -> Gait:
-    from characterization.gait_design import build_gait
-    from characterization.phzd import PHZDOptions, optimize_gait
-    from tests.gait_template import template_targets
+    """The tests' committed template gait (tests/data/gaits, see its NOTICE)."""
+    from tests.committed_gaits import RECIPES, ROOT
 
-    opt = PHZDOptions(nodes=11)
-    targets = template_targets()
-    result = optimize_gait(model, targets, opt)
-    if not result.success:
-        raise SystemExit(f"template gait did not converge: {result.status}")
-    return build_gait(model, result, targets, opt)
+    return load_gait(ROOT / RECIPES["template"].path, model.parameter_hash())
 
 
 def time_ticks(ctl, meas, u0) -> tuple[np.ndarray, Counter]:
@@ -76,7 +70,7 @@ def bare_piqp(ctl, qps) -> np.ndarray:
     for k in ("eps_abs", "eps_rel", "eps_duality_gap_abs", "eps_duality_gap_rel"):
         setattr(st, k, getattr(cs, k))
     P, c, G, h, xl, xu = qps[0]
-    s.setup(P=P, c=c, G=G, h_l=np.array([-np.inf]), h_u=h, x_l=xl, x_u=xu)
+    s.setup(P=P, c=c, G=G, h_l=np.full(len(h), -np.inf), h_u=h, x_l=xl, x_u=xu)
     ts = np.empty(len(qps))
     clock = time.perf_counter_ns
     for k, (P, c, G, h, xl, xu) in enumerate(qps):
@@ -144,8 +138,11 @@ def main() -> None:
           f"repeats; tube {a.tube or f'+-{HALF}'}; {platform.processor() or platform.machine()}\n")
     print("| controller | median per tick (us) | p99 (us) | modes (last repeat) |")
     print("|---|---:|---:|---|")
-    labels = {"clfqp": "robust CLF-QP, relaxed", "clfqp-exact": "robust CLF-QP, exact",
-              "pd": "PD", "passive": "robust-passive", "phase-pd": "phase-PD reference",
+    labels = {"clfqp": "interaction-aware robust CLF-QP, relaxed",
+              "clfqp-exact": "interaction-aware robust CLF-QP, exact",
+              "clfqp-paper": "paper's robust CLF-QP, relaxed",
+              "clfqp-paper-exact": "paper's robust CLF-QP, exact", "pd": "PD",
+              "passive": "robust-passive", "phase-pd": "phase-PD reference",
               "piqp": "bare piqp update + solve (relaxed QPs)"}
     for n in [*CONTROLLERS, "piqp"]:
         r = rows[n]

@@ -113,15 +113,16 @@ def _diagnosis(m: Mapping[str, Any]) -> list[str]:
     ref = m.get("reference")
     n = m["nominal"]
     if ref:
-        run, rm = ref["run"], ref["return_map"]
+        from orchestrator.experiments import stability_text
+
+        run = ref["run"]
         out += [f"Reference controller `{ref['controller']}` (not in the paper: nominal stance "
                 "torque of the gait as feedforward, knee PD on the CLF-QP's state-based "
                 "phase, hip-velocity feedback through the ankle with the sign of the full "
                 "loop), nominal human: "
                 f"{run['steps_completed']}/{run['steps_requested']} steps"
                 + (f", fell: {run['reason']}" if run["failed"] else "")
-                + (f"; return-map spectral radius {rm['spectral_radius']:.3g}"
-                   if rm["computed"] else f"; return map not computed: {rm['why_not']}")
+                + f"; {stability_text(ref['stability'])}"
                 + f"; knee RMS in ps {_num(run['knee_rms_ps_rad'], 4)} rad.", ""]
     out += ["Socket force inside the tube (the premise of the robust CLF condition), share of "
             f"the ps samples in [tau_lo, tau_hi]: robust CLF-QP nominal run "

@@ -39,7 +39,7 @@ from prosthesis_controller.interface import (
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 from prosthesis_controller.polish import polish
-from prosthesis_controller.terms import ControllerTerms
+from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_SIGMA_UNIT, ControllerTerms
 
 PITCH_DEGREE = 5
 FEEDFORWARD_DEGREE = 9  # phase-PD nominal torque: fit RMS ~0.01 N m motor on the demo gait
@@ -158,8 +158,8 @@ class ControllerContext:
         self.clf_loop_params = T.clf_loop_layout.pack(
             theta=gait.theta("ps"), gains=gait.gains_array, P_eps=self.clf.P_eps,
             gamma_over_eps=c.gamma / c.eps, c_rho=c.c_rho,
-            rho_scale=c.rho_max if c.rho_max > 0 else 1.0, c_sigma=ct.c_sigma,
-            sigma_scale=ct.sigma_max, mu=ct.mu, f_min=ct.f_min,
+            rho_scale=LOOP_RHO_UNIT, c_sigma=ct.c_sigma, sigma_scale=LOOP_SIGMA_UNIT,
+            mu=ct.mu, f_min=ct.f_min,
             toe=ct.cop_fraction * toe, heel=ct.cop_fraction * heel, **self.margin)
         pc = cfg.passive
         self.passive_params = T.passive_layout.pack(

@@ -3,7 +3,7 @@ paper's prosthesis outputs, with the model of what the torque does in the human-
 loop (:mod:`hp_model.interaction`) instead of the subsystem with an exogenous socket force.
 
 Per stance tick one generated-C call (``terms.clf_qp_loop``) gives the QP in solver form over
-z = (u_k, u_a, rho / rho_scale, sigma / sigma_scale): the robust CLF row (margin: the
+z = (u_k, u_a, rho / LOOP_RHO_UNIT, sigma / LOOP_SIGMA_UNIT): the robust CLF row (margin: the
 characterised bound of the model error, when the tube carries one), five stance-foot contact
 rows (friction cone, normal force, centre of pressure), the cost |nu|^2 + c_rho rho +
 c_sigma sigma.  piqp (dense, set up once) solves it; the relaxed form bounds the torques by
@@ -14,7 +14,6 @@ clamped), and falls back when infeasible.  See the package README.
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -29,15 +28,11 @@ from prosthesis_controller.interface import (
     QP_SOLVED,
     Active,
 )
-from prosthesis_controller.polish import polish_active_set
-from prosthesis_controller.terms import LOOP_ROWS
+from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_ROWS, LOOP_SIGMA_UNIT
 
 _INF = math.inf
 _DUAL_TOL = 1e-7
-_SLACK_TOL = 1e-6  # second guess of the active set: multiplier AND this close (relative)
 _N_ROWS = len(LOOP_ROWS)
-_ROW_SETS = tuple(itertools.chain.from_iterable(
-    itertools.combinations(range(_N_ROWS), k) for k in (0, 1, 2)))
 
 
 class LoopClfQpController(BaseController):
@@ -54,16 +49,16 @@ class LoopClfQpController(BaseController):
         with_limits = c.limits_in_qp if relaxed else c.exact_limits_in_qp
         self._qlim = (lk, la) if with_limits else (_INF, _INF)
         self._du = float(c.delta_u) if relaxed else _INF
-        self._rho_scale = float(c.rho_max) if c.rho_max > 0 else 1.0
-        self._rho_on = 1.0 if c.rho_max > 0 else 0.0
-        self._sigma_scale = float(ctx.config.contact.sigma_max)
+        self._rho_scale, self._sigma_scale = LOOP_RHO_UNIT, LOOP_SIGMA_UNIT
         self._xl = np.full(n, -_INF)
         self._xu = np.full(n, _INF)
         if relaxed:
             self._xl[2:] = 0.0
-            self._xu[2], self._xu[3] = self._rho_on, 1.0
-        self._P = np.zeros((n, n), order="F")
-        self._G = np.zeros((_N_ROWS, n), order="F")
+            self._xu[2] = float(c.rho_max) / LOOP_RHO_UNIT
+            self._xu[3] = float(ctx.config.contact.sigma_max) / LOOP_SIGMA_UNIT
+        self._P = np.zeros((2, 2), order="F")  # the exact QP's blocks
+        self._G = np.zeros((_N_ROWS, 2), order="F")
+        self._c2 = np.zeros(2)
         self._hl = np.full(_N_ROWS, -_INF)
         self._solver = piqp.DenseSolver()
         self._eps = float(c.loop_solver_eps)
@@ -106,8 +101,8 @@ class LoopClfQpController(BaseController):
         """The last stance tick's QP as the solver got it (copies): (P, c, G, h, x_l, x_u),
         min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u."""
         n = self._n
-        return (self._P.copy(), np.array(self._oc[:n]), self._G.copy(), np.array(self._oh),
-                self._xl.copy(), self._xu.copy())
+        return (np.array(self._oP[:n, :n]), np.array(self._oc[:n]), np.array(self._oG[:, :n]),
+                np.array(self._oh), self._xl.copy(), self._xu.copy())
 
     def _bounds(self) -> None:
         du = self._du
@@ -131,56 +126,31 @@ class LoopClfQpController(BaseController):
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
         self._bounds()
         n = self._n
-        P, G = self._P, self._G
-        P[:, :] = self._oP[:n, :n]
-        G[:, :] = self._oG[:, :n]
+        if self.relaxed:  # the generated function's own (Fortran-ordered) buffers
+            P, G, c = self._oP, self._oG, self._oc
+        else:  # the (u, u) block and the torque columns
+            P, G, c = self._P, self._G, self._c2
+            P[:, :] = self._oP[:2, :2]
+            G[:, :] = self._oG[:, :2]
+            c[:] = self._oc[:2]
         s = self._solver
-        s.update(P=P, c=self._oc[:n], G=G, h_u=self._oh, x_l=self._xl, x_u=self._xu)
+        s.update(P=P, c=c, G=G, h_u=self._oh, x_l=self._xl, x_u=self._xu)
         if not self._solve():
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
         res = s.result
-        z = res.x
+        z = np.clip(res.x, self._xl, self._xu)  # piqp meets the bounds to its tolerance only
         uk, ua = float(z[0]), float(z[1])
-        rho = float(z[2]) * self._rho_scale if self.relaxed else 0.0
-        self.sigma = float(z[3]) * self._sigma_scale if self.relaxed else 0.0
+        rho = max(0.0, float(z[2])) * self._rho_scale if self.relaxed else 0.0
+        self.sigma = max(0.0, float(z[3])) * self._sigma_scale if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
         d = _DUAL_TOL
-        zbl, zbu = res.z_bl, res.z_bu
-        # polish (as OSQP): the exact optimum on piqp's active set, kept if it is the KKT
-        # point (|nu|^2 is flat along A's weak direction: cond(A^T A) up to ~1e4, where the
-        # interior point stops up to 1e-3 N m from the vertex)
-        rows = [i for i in range(_N_ROWS) if res.z_u[i] > d]
-        lower = [i for i in range(n) if zbl[i] > d]
-        upper = [i for i in range(n) if zbu[i] > d and i not in lower]
-        zp = polish_active_set(self._P, self._oc[:n], self._G, self._oh, self._xl,
-                               self._xu, rows, lower, upper)
-        if zp is None:  # a weak multiplier misread: keep only what is also tight
-            xl, xu, G, hq = self._xl, self._xu, self._G, self._oh
-            gz = G @ z
-            rows = [i for i in rows if hq[i] - gz[i] < _SLACK_TOL * (1.0 + abs(hq[i]))]
-            lower = [i for i in lower if z[i] - xl[i] < _SLACK_TOL * (1.0 + abs(xl[i]))]
-            upper = [i for i in upper if xu[i] - z[i] < _SLACK_TOL * (1.0 + abs(xu[i]))]
-            zp = polish_active_set(self._P, self._oc[:n], G, hq, xl, xu, rows, lower, upper)
-            # last: any one or two rows with those bounds (a KKT point of this convex QP is
-            # its optimum, so the first that passes is the answer)
-            for cand in (_ROW_SETS if zp is None else ()):
-                zp = polish_active_set(self._P, self._oc[:n], G, hq, xl, xu, cand, lower,
-                                       upper)
-                if zp is not None:
-                    rows = list(cand)
-                    break
-        if zp is not None:
-            z = zp
-            uk, ua = float(z[0]), float(z[1])
-            if self.relaxed:
-                rho = float(z[2]) * self._rho_scale
-                self.sigma = float(z[3]) * self._sigma_scale
-        active = int(Active.CLF) if 0 in rows else 0
-        if any(i in rows for i in range(1, _N_ROWS)):
+        active = int(Active.CLF) if res.z_u[0] > d else 0
+        if any(res.z_u[i] > d for i in range(1, _N_ROWS)):
             active |= int(Active.CONTACT)
+        zbl, zbu = res.z_bl, res.z_bu
         if zbl[0] > d:
             active |= int(Active.KNEE_LOWER)
         elif zbu[0] > d:

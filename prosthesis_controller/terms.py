@@ -199,6 +199,13 @@ def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
 
 #: QP rows of :func:`clf_qp_loop_function`: the CLF row, then the stance-foot contact rows
 LOOP_ROWS = ("clf", "friction_fwd", "friction_back", "normal_force", "cop_toe", "cop_heel")
+#: units of the relaxations in the solver's variables: rho = LOOP_RHO_UNIT z[2], sigma =
+#: LOOP_SIGMA_UNIT z[3].  They set how large the slacks' linear costs look to piqp: with rho
+#: in units of rho_max (1e4) and sigma of sigma_max those were ~1e4 against torque costs of ~1,
+#: and piqp needed 16 iterations (median; 160 at p99, 13 failures in 3000 ticks), in these
+#: units 10 (11 at p99, none) on the demo subject's nominal stance
+LOOP_RHO_UNIT = 100.0
+LOOP_SIGMA_UNIT = 1.0
 
 
 def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: int

@@ -91,8 +91,8 @@ def random_states(ctx, n, rng):
 @pytest.mark.parametrize("variant", ["exact", "exact-bounded", "relaxed"])
 def test_piqp_agrees_with_quadprog_on_random_instances(contexts, variant):
     ctx = contexts[variant]
-    ctl = make_controller("clfqp-paper" if variant == "relaxed" else "clfqp-paper-exact", None, None, None,
-                          context=ctx)
+    name = "clfqp-paper" if variant == "relaxed" else "clfqp-paper-exact"
+    ctl = make_controller(name, None, None, None, context=ctx)
     rng = np.random.default_rng({"exact": 1, "exact-bounded": 2, "relaxed": 3}[variant])
     lim = np.array(ctx.limits)
     counts = {"solved": 0, "infeasible": 0, "active_bound": 0}
