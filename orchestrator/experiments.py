@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -99,7 +100,8 @@ CONTRACTION_DELTA = (1e-2, 2e-1)
 
 
 def _cycle_map(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-               ctx: ControllerContext, controller: str, cycles: int = 1
+               ctx: ControllerContext, controller: str, cycles: int = 1,
+               closed_loop: ClosedLoop | None = None
                ) -> Callable[[np.ndarray], list[np.ndarray]]:
     """P: the post-impact ps joint state (12) -> the ones after each of ``cycles`` cycles
     (ps -> pns -> ps), the controller reset at the section."""
@@ -110,7 +112,7 @@ def _cycle_map(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     def P(s: np.ndarray) -> list[np.ndarray]:
         q, qd = sec.expand(s)
         r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, 2 * cycles),
-                         context=ctx, q0=q, qd0=qd)
+                         context=ctx, q0=q, qd0=qd, closed_loop=closed_loop)
         if r.failed or r.steps < 2 * cycles or len(r.post_impact) < cycles:
             raise RuntimeError(r.reason or "the cycles did not complete")
         return r.post_impact[:cycles]  # one per cycle: after each impact into ps
@@ -134,7 +136,8 @@ def _return_map_radius(P: Callable[[np.ndarray], list[np.ndarray]], x0: np.ndarr
 
 def orbit_stability(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                     ctx: ControllerContext, controller: str, x_star: np.ndarray,
-                    seed: int = 0) -> dict[str, Any]:
+                    seed: int = 0, closed_loop: ClosedLoop | None = None,
+                    fd: bool = True) -> dict[str, Any]:
     """Stability evidence for a sampled controller.
 
     - The return map's finite-difference spectral radius at the steps ``FD_STEPS``; they
@@ -148,11 +151,12 @@ def orbit_stability(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
       walks in).  The orbit counts as contracting when every perturbed start walks and the
       worst factor is < 1.
     """
-    P1 = _cycle_map(model, gait, tube, ctx, controller, 1)
-    radii = {f"{d:g}": _return_map_radius(P1, x_star, d) for d in FD_STEPS}
+    cl = closed_loop or ClosedLoop(model, gait.degree)
+    P1 = _cycle_map(model, gait, tube, ctx, controller, 1, cl)
+    radii = {f"{d:g}": _return_map_radius(P1, x_star, d) for d in FD_STEPS} if fd else {}
     vals = [v for v in radii.values() if v is not None]
-    agree = bool(len(vals) == len(FD_STEPS) and max(vals) <= 1.2 * min(vals))
-    PK = _cycle_map(model, gait, tube, ctx, controller, CONTRACTION_CYCLES)
+    agree = bool(fd and len(vals) == len(FD_STEPS) and max(vals) <= 1.2 * min(vals))
+    PK = _cycle_map(model, gait, tube, ctx, controller, CONTRACTION_CYCLES, cl)
     scale = np.r_[np.full(6, CONTRACTION_DELTA[0]), np.full(6, CONTRACTION_DELTA[1])]
     try:
         base = PK(x_star)  # the unperturbed continuation: the deviation is measured from it
@@ -184,11 +188,14 @@ def orbit_stability(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
 
 def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                     ctx: ControllerContext, steps: int, eigen: bool = True,
-                    controller: str = "clfqp") -> tuple[dict[str, Any], ScenarioResult]:
+                    controller: str = "clfqp", closed_loop: ClosedLoop | None = None,
+                    fd: bool = True) -> tuple[dict[str, Any], ScenarioResult]:
     """``steps`` steps of ``controller`` in ps (+ the shared swing controller) from the
     gait's start; stability by :func:`orbit_stability` about the last post-impact state
     (when the run completes), and the step-to-step deviation of the post-impact state."""
-    r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, steps), context=ctx)
+    cl = closed_loop or ClosedLoop(model, gait.degree)
+    r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, steps), context=ctx,
+                     closed_loop=cl)
     m: dict[str, Any] = {"controller": controller, "run": summary(r)}
     post = np.array(r.post_impact)
     dev = [float(np.abs(post[k + 1] - post[k]).max()) for k in range(len(post) - 1)]
@@ -197,7 +204,8 @@ def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                                   else None)
     stab, why = None, "the nominal run did not complete two cycles"
     if eigen and len(post) >= 2 and r.success:
-        stab, why = orbit_stability(model, gait, tube, ctx, controller, post[-1]), ""
+        stab, why = orbit_stability(model, gait, tube, ctx, controller, post[-1],
+                                    closed_loop=cl, fd=fd), ""
     elif not eigen:
         why = "skipped (--quick)"
     m["stability"] = {"computed": stab is not None, "why_not": why, **(stab or {})}
@@ -237,10 +245,10 @@ def fig7(runs: dict[str, ScenarioResult], gait: Gait) -> bytes:
 # ---------------------------------------------------------------- 2. exact vs relaxed
 
 def exact_vs_relaxed(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-                     ctx: ControllerContext, steps: int
+                     ctx: ControllerContext, steps: int, closed_loop: ClosedLoop | None = None
                      ) -> tuple[dict[str, Any], dict[str, ScenarioResult]]:
-    runs = {c: run_scenario(model, gait, tube, Scenario(c, NOMINAL, steps), context=ctx)
-            for c in ("clfqp-exact", "clfqp")}
+    runs = {c: run_scenario(model, gait, tube, Scenario(c, NOMINAL, steps), context=ctx,
+                            closed_loop=closed_loop) for c in ("clfqp-exact", "clfqp")}
     m: dict[str, Any] = {}
     for c, r in runs.items():
         ch = r.chatter_per_step()
@@ -282,7 +290,8 @@ def fig6(runs: dict[str, ScenarioResult]) -> bytes:
 # ---------------------------------------------------------------- 3. robustness
 
 def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-               ctx: ControllerContext, steps: int, progress: Progress | None = None
+               ctx: ControllerContext, steps: int, progress: Progress | None = None,
+               closed_loop: ClosedLoop | None = None
                ) -> tuple[dict[str, Any], dict[str, dict[str, ScenarioResult]]]:
     perts = select_perturbations(model, gait, 3, PERTURBATION_AMPLITUDE, steps=min(steps, 4))
     cases = {p.name: p for p in perts}
@@ -295,7 +304,7 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
             if progress:
                 progress(f"robustness: {c} on {name}")
             runs[name][c] = run_scenario(model, gait, tube, Scenario(c, p, steps, offset),
-                                         context=ctx)
+                                         context=ctx, closed_loop=closed_loop)
     m: dict[str, Any] = {"amplitude_rad": PERTURBATION_AMPLITUDE,
                          "knee_output_offset_rad": ROBUST_KNEE_OFFSET,
                          "initial_offset_rad": list(offset),
@@ -356,22 +365,23 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     out = os.fspath(out)
     os.makedirs(out, exist_ok=True)
     ctx = ControllerContext(gait, tube, model, None)
+    cl = ClosedLoop(model, gait.degree)  # compiled once, shared by every run
     say = progress or (lambda s: None)
     say("nominal walking (robust CLF-QP, relaxed)")
-    m1, r1 = nominal_walking(model, gait, tube, ctx, steps, eigen=eigen)
+    m1, r1 = nominal_walking(model, gait, tube, ctx, steps, eigen=eigen, closed_loop=cl)
     say(f"nominal walking ({REFERENCE_CONTROLLER} reference)")
     m1r, r1r = nominal_walking(model, gait, tube, ctx, steps, eigen=eigen,
-                               controller=REFERENCE_CONTROLLER)
+                               controller=REFERENCE_CONTROLLER, closed_loop=cl, fd=False)
     say(f"nominal walking ({PAPER_CONTROLLER}, the paper's literal formulation)")
     m1p, _ = nominal_walking(model, gait, tube, ctx, steps, eigen=False,
-                             controller=PAPER_CONTROLLER)
+                             controller=PAPER_CONTROLLER, closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig7_phase_portraits.png"),
                        fig7({"clfqp": r1, REFERENCE_CONTROLLER: r1r}, gait))
     say("exact vs relaxed robust CLF-QP")
-    m2, r2 = exact_vs_relaxed(model, gait, tube, ctx, min(steps, 5))
+    m2, r2 = exact_vs_relaxed(model, gait, tube, ctx, min(steps, 5), closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig6_torques.png"), fig6(r2))
     say("robustness")
-    m3, r3 = robustness(model, gait, tube, ctx, steps, progress=say)
+    m3, r3 = robustness(model, gait, tube, ctx, steps, progress=say, closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig8_robustness.png"), fig8(r3))
     say("diagnosis: input authority, reduced model vs full loop")
     auth = input_authority(model, gait, ctx)
@@ -463,12 +473,15 @@ def stability_text(st: dict[str, Any]) -> str:
     """One line of :func:`orbit_stability`'s evidence."""
     if not st.get("computed"):
         return f"stability not computed: {st.get('why_not', '')}"
-    fd = ", ".join(f"{_f(v)} (step {k})" for k, v in st["fd_spectral_radius"].items())
-    agree = "agree" if st["fd_steps_agree"] else "do NOT agree: not a derivative here"
-    return (f"contraction per cycle from {st['contraction_starts']} perturbed starts over "
+    text = (f"contraction per cycle from {st['contraction_starts']} perturbed starts over "
             f"{st['contraction_cycles']} cycles: worst {_f(st['contraction_worst'])} "
-            f"({'contracting' if st['contracting'] else 'NOT contracting'}); "
-            f"finite-difference return-map spectral radius {fd}: the steps {agree}")
+            f"({'contracting' if st['contracting'] else 'NOT contracting'}; the unperturbed "
+            f"orbit's cycle-to-cycle band {_f(st['orbit_band'])} in the same units)")
+    if st["fd_spectral_radius"]:
+        fd = ", ".join(f"{_f(v)} (step {k})" for k, v in st["fd_spectral_radius"].items())
+        agree = "agree" if st["fd_steps_agree"] else "do NOT agree: not a derivative here"
+        text += f"; finite-difference return-map spectral radius {fd}: the steps {agree}"
+    return text
 
 
 def _f(x: float | None) -> str:

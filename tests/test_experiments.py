@@ -111,51 +111,68 @@ def test_perturbation_changes_the_human_only(template_gait):
 
 
 @pytest.mark.slow
-def test_demo_quick_end_to_end(tmp_path):
+def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
+    """``hpcosim demo`` (the whole pipeline, 20 steps per run) and the numbers the README
+    states for it (section "Results on the demo subject").  Every stage is deterministic
+    (single-threaded IPOPT, fixed seeds), so the tolerances only absorb the last digits of
+    another libm or BLAS kernel: a change of the closed-loop results fails here."""
     from orchestrator.cli import main
 
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--quick"]) == 0
+    assert main(["demo", "--out", str(out)]) == 0
     for f in ("gait.json", "tube.json", "metrics.json", "report.md", "fig6_torques.png",
               "fig7_phase_portraits.png", "fig8_robustness.png"):
         assert (out / f).stat().st_size > 0, f
     m = json.loads((out / "metrics.json").read_text())
-    assert m["schema_version"] == 2 and m["steps"] == 3
-    run = m["nominal"]["run"]
-    assert run["success"] == (not run["failed"] and run["steps_completed"] >= 3)
+    assert m["schema_version"] == 2 and m["steps"] == 20
+    claims = {c["id"]: c for c in m["claims"]}
+    assert set(claims) == {"nominal_stable", "relaxed_smooth", "robust_order",
+                           "robust_success", "paper_literal"}
+    # README: clfqp walks 20 nominal steps, knee RMS 0.0014 rad, no fallback, every torque
+    # within the limits; its orbit contracts (worst factor 0.78 per cycle)
+    n = m["nominal"]
+    assert n["run"]["success"] and n["run"]["fallback_count"] == 0
+    assert n["run"]["knee_rms_ps_rad"] == pytest.approx(0.00143, rel=0.1)
+    assert n["stability"]["contracting"] and n["stability"]["contraction_worst"] < 0.9
+    assert claims["nominal_stable"]["reproduced"]
+    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies ~3x as
+    # fast (ratio 3.2, below the paper's 5x: claim not reproduced, explained in the README)
     e = m["exact_vs_relaxed"]
+    assert e["clfqp"]["run"]["success"] and e["clfqp-exact"]["run"]["success"]
     a, b = e["clfqp-exact"]["chatter_rate_Nm_per_s"], e["clfqp"]["chatter_rate_Nm_per_s"]
-    if a is not None and b:
-        assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
-    ref = m["reference"]
-    assert ref["controller"] == "phase-pd"
-    assert ref["run"]["success"] == (not ref["run"]["failed"]
-                                     and ref["run"]["steps_completed"] >= 3)
-    for a in m["diagnosis"]["input_authority"]:
-        full, red = np.array(a["full_A_per_motor_Nm"]), np.array(a["reduced_Am_per_motor_Nm"])
-        assert a["norm_ratio_reduced_over_full"] == pytest.approx(
-            np.linalg.norm(red) / np.linalg.norm(full), rel=1e-9)
+    assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
+    assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(3.17, rel=0.1)
+    assert not claims["relaxed_smooth"]["reproduced"]
+    # README: clfqp completes the three perturbed cases (knee RMS 0.003-0.005 rad); pd and
+    # passive fall at the end of the first stance in each, so the order is not reproduced
     rb = m["robustness"]
     assert len(rb["cases"]) == 3
     for cc in rb["cases"].values():
-        assert set(cc) == {"clfqp", "passive", "pd", "phase-pd"}
+        assert set(cc) == {"clfqp", "passive", "pd", "phase-pd", "clfqp-paper"}
+        assert cc["clfqp"]["success"] and cc["clfqp"]["knee_rms_ps_rad"] < 0.006
+        assert cc["pd"]["failed"] and cc["passive"]["failed"]
         for s in cc.values():
-            assert s["knee_rms_ps_rad"] is None or s["knee_rms_ps_rad"] >= 0
             if s["failed"]:
                 assert s["fail_tau"] is not None and s["reason"]
     order = [cc["clfqp"]["knee_rms_ps_rad"] < cc["passive"]["knee_rms_ps_rad"]
              < cc["pd"]["knee_rms_ps_rad"] for cc in rb["cases"].values()]
     assert rb["knee_rms_order_clfqp_lt_passive_lt_pd"] == order
-    done = [all(cc[c]["success"] for c in ("clfqp", "passive", "pd"))
-            for cc in rb["cases"].values()]
-    assert rb["knee_rms_order_all_completed"] == [o and d for o, d in zip(order, done, strict=True)]
-    assert rb["clfqp_succeeds_every_case"] == all(cc["clfqp"]["success"]
-                                                  for cc in rb["cases"].values())
-    claims = {c["id"]: c for c in m["claims"]}
-    assert set(claims) == {"nominal_stable", "relaxed_smooth", "robust_order",
-                           "robust_success"}
-    assert claims["robust_success"]["reproduced"] == rb["clfqp_succeeds_every_case"]
+    assert rb["knee_rms_order_all_completed"] == [False, False, False]
+    assert rb["clfqp_succeeds_every_case"] and claims["robust_success"]["reproduced"]
+    assert not claims["robust_order"]["reproduced"]
+    # README: the paper's literal formulation falls in the nominal run after 2 steps; its
+    # model's authority is 447-1820x the loop's
+    p = m["paper_literal"]["run"]
+    assert p["failed"] and p["steps_completed"] == 2
+    assert not claims["paper_literal"]["reproduced"]
+    ratios = [x["norm_ratio_reduced_over_full"] for x in m["diagnosis"]["input_authority"]]
+    assert min(ratios) > 100
+    for x in m["diagnosis"]["input_authority"]:
+        full, red = np.array(x["full_A_per_motor_Nm"]), np.array(x["reduced_Am_per_motor_Nm"])
+        assert x["norm_ratio_reduced_over_full"] == pytest.approx(
+            np.linalg.norm(red) / np.linalg.norm(full), rel=1e-9)
+    ref = m["reference"]
+    assert ref["controller"] == "phase-pd" and ref["run"]["success"]
     report = (out / "report.md").read_text()
     for c in m["claims"]:
         assert c["claim"] in report
-    assert "NOT reproduced" in report or all(c["reproduced"] for c in m["claims"])
