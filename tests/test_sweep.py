@@ -500,3 +500,16 @@ def test_ctrl_c_then_resume_without_redoing(reference, files, tmp_path):
     assert {k: rows[k] for k in stable(ref)} == stable(ref)  # draws 0-2 as the 3-draw sweep
     sessions = json.loads((out / "sweep.json").read_text())["sessions"]
     assert [s["status"] for s in sessions] == ["interrupted", "completed"]
+
+
+@pytest.mark.parametrize("spec_file", sorted((ROOT / "examples" / "sweep").glob("*.toml")),
+                         ids=lambda p: p.name)
+def test_example_specs_load_with_a_consistent_gait_and_tube(spec_file, model):
+    """The shipped example specs work as the README says: their gait is one of this model
+    and their tube was fitted for that gait (a regenerated gait needs a refitted tube)."""
+    from hp_model.force_tube import load_tube
+    from hp_model.gait_artifact import load_gait
+
+    spec = load_spec(spec_file)
+    gait = load_gait(spec.gait, model.parameter_hash())
+    load_tube(spec.tube, gait.hash())
