@@ -20,8 +20,9 @@ TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_ok
 
 @controller_app.command("serve")
 def serve(
-    controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
-                                            "passive, phase-pd.")],
+    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
+                                            "choice), clfqp-exact, clfqp-paper, "
+                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
     gait: GaitOpt,
     tube: TubeOpt,
     bus: Annotated[Path | None, typer.Option("--bus", help="Bus config (TOML/JSON): "
@@ -48,8 +49,9 @@ def serve(
 
 
 def run(
-    controller: Annotated[str, typer.Option("--controller", help="clfqp, clfqp-exact, pd, "
-                                            "passive, phase-pd.")],
+    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
+                                            "choice), clfqp-exact, clfqp-paper, "
+                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
     gait: GaitOpt,
     tube: TubeOpt,
     steps: Annotated[int, typer.Option(help="Stop after this many impacts.")] = 20,

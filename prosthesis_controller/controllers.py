@@ -174,17 +174,6 @@ def foot_extent(model: HumanProsthesisModel, side: str = "p") -> tuple[float, fl
     return float(frames[f"{side}_toe"].point[0]), float(-frames[f"{side}_heel"].point[0])
 
 
-def _phase(t: float, t0: float, T: float) -> tuple[float, float]:
-    """Time-based stance phase max((t - t0) / T, 0) and its rate.  Past 1 it keeps running:
-    the stance reference is continued linearly there (``terms.stance_ref``), so a late
-    touchdown of the human foot meets a reference that keeps moving at its final velocity
-    instead of one that stops dead (a torque step)."""
-    s = (t - t0) / T
-    if s <= 0.0:
-        return 0.0, 0.0
-    return s, 1.0 / T
-
-
 def _near(v: float, i: int, xl: np.ndarray, xu: np.ndarray, fix: int) -> int:
     """-1 / +1 if v is within the slack tolerance of its lower / upper bound, else ``fix``."""
     lo, hi = xl[i], xu[i]
@@ -230,6 +219,10 @@ class BaseController:
         self._load_on, self._load_off, self._dwell = d.load_on, d.load_off, d.min_dwell
         self._off_hold = d.off_hold
         self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
+        ps = ctx.gait.params["ps"]
+        ck, ca_ = ctx.terms.c_k, ctx.terms.c_a
+        dp = ps.p_max - ps.p_min
+        self._phase_row = (ck, ca_, ps.p_min, dp, ps.v_hip / dp)
         num = ctx.terms.numeric
         self._clf = num["clf_qp"]
         self._clf.inputs[1][:] = ctx.clf_params
@@ -298,10 +291,17 @@ class BaseController:
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
         self._clf.call_inplace()
 
+    def _stance_phase(self, qk: float, qa: float) -> tuple[float, float]:
+        """The state-based phase tau(th_pk, th_pa) of the gait's ps (the phase the paper's
+        trajectories are functions of) and its nominal rate v_hip* / (p_max - p_min)."""
+        ck, ca_, p_min, dp, rate = self._phase_row
+        return (ck * qk + ca_ * qa - p_min) / dp, rate
+
     def _pd_torque(self, t: float, qk: float, qa: float, vk: float, va: float
                    ) -> tuple[float, float]:
-        """Stance PD on the nominal trajectory at the time-based phase (motor N m)."""
-        tau, rate = _phase(t, self._t_switch, self._T_ps)  # type: ignore[arg-type]
+        """Stance PD on the nominal trajectory at the state-based phase, the reference
+        velocities at the nominal phase rate (motor N m)."""
+        tau, rate = self._stance_phase(qk, qa)
         f = self._sref
         f.inputs[0][0], f.inputs[1][0] = tau, rate
         f.call_inplace()
@@ -383,7 +383,7 @@ class BaseController:
 
 
 class PDController(BaseController):
-    """Joint PD on the nominal stance trajectory at the time-based phase."""
+    """Joint PD on the nominal stance trajectory at the state-based phase."""
 
     name = "pd"
 
@@ -430,7 +430,7 @@ class PassiveController(BaseController):
 
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
-        tau_h, rate = _phase(t, self._t_switch, self._T_ps)
+        tau_h, rate = self._stance_phase(qk, qa)
         f = self._pas
         x = f.inputs[0]
         x[0], x[1], x[2], x[3] = qk, qa, vk, va

@@ -135,25 +135,31 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     assert n["run"]["knee_rms_ps_rad"] == pytest.approx(0.00143, rel=0.1)
     assert n["stability"]["contracting"] and n["stability"]["contraction_worst"] < 0.9
     assert claims["nominal_stable"]["reproduced"]
-    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies ~3x as
-    # fast (ratio 3.2, below the paper's 5x: claim not reproduced, explained in the README)
+    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies 5.2x as
+    # fast (18 infeasible ticks falling back); the claim's "tracking converging" (last step's
+    # knee RMS <= the first's) fails because the run starts on the orbit (0.0002 rad)
     e = m["exact_vs_relaxed"]
     assert e["clfqp"]["run"]["success"] and e["clfqp-exact"]["run"]["success"]
     a, b = e["clfqp-exact"]["chatter_rate_Nm_per_s"], e["clfqp"]["chatter_rate_Nm_per_s"]
     assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
-    assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(3.17, rel=0.1)
+    assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(5.22, rel=0.1)
+    assert not e["relaxed_tracking_converging"]
     assert not claims["relaxed_smooth"]["reproduced"]
-    # README: clfqp completes the three perturbed cases (knee RMS 0.003-0.005 rad); pd and
-    # passive fall at the end of the first stance in each, so the order is not reproduced
+    # README: clfqp completes the three perturbed cases (knee RMS 0.003-0.005 rad); with the
+    # gains chosen on the nominal run, pd falls in every case (at the first tick from the
+    # knee offset in two), passive completes two, so the order is not reproduced
     rb = m["robustness"]
     assert len(rb["cases"]) == 3
     for cc in rb["cases"].values():
         assert set(cc) == {"clfqp", "passive", "pd", "phase-pd", "clfqp-paper"}
         assert cc["clfqp"]["success"] and cc["clfqp"]["knee_rms_ps_rad"] < 0.006
-        assert cc["pd"]["failed"] and cc["passive"]["failed"]
+        assert cc["pd"]["failed"]
+        if cc["passive"]["success"]:
+            assert cc["clfqp"]["knee_rms_ps_rad"] < cc["passive"]["knee_rms_ps_rad"]
         for s in cc.values():
             if s["failed"]:
                 assert s["fail_tau"] is not None and s["reason"]
+    assert sum(cc["passive"]["success"] for cc in rb["cases"].values()) == 2
     order = [cc["clfqp"]["knee_rms_ps_rad"] < cc["passive"]["knee_rms_ps_rad"]
              < cc["pd"]["knee_rms_ps_rad"] for cc in rb["cases"].values()]
     assert rb["knee_rms_order_clfqp_lt_passive_lt_pd"] == order
