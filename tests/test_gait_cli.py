@@ -95,7 +95,7 @@ def test_a_gait_that_does_not_walk_is_not_written(steps_file, tmp_path):
     the optimized gait fall: one line naming the failed checks with their numbers, exit 1, no
     file; --allow-unstable writes it, marked as not walking."""
     out = tmp_path / "soft.json"
-    args = ("gait", "fit", str(steps_file), "--out", str(out), "--nodes", "9",
+    args = ("gait", "fit", str(steps_file), "--out", str(out), "--nodes", "5",
             "--track-kp", "25", "--track-kd", "10", "--no-figure")
     r = run(*args)
     assert r.returncode == 1, r.stderr
