@@ -286,6 +286,20 @@ class BaseController:
         return self._domain
 
     # -- laws -------------------------------------------------------------------------
+    def _bounds(self) -> None:
+        """The torques' box of a QP controller for this tick, in ``self._xl/_xu[0:2]``:
+        max(-u_max, u_prev - du) <= u <= min(u_max, u_prev + du) (``self._qlim``,
+        ``self._du``; infinite when the QP has no such bound)."""
+        du = self._du
+        lk, la = self._qlim
+        xl, xu = self._xl, self._xu
+        a, b = self._u0 - du, self._u0 + du
+        xl[0] = -lk if a < -lk else a
+        xu[0] = lk if b > lk else b
+        a, b = self._u1 - du, self._u1 + du
+        xl[1] = -la if a < -la else a
+        xu[1] = la if b > la else b
+
     def _clf_terms(self, qk: float, qa: float, vk: float, va: float) -> None:
         x = self._clf_x
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
@@ -510,17 +524,6 @@ class ClfQpController(BaseController):
     def rho_scale(self) -> float:
         """rho = rho_scale z[2] (1 for the exact QP)."""
         return self._rho_scale if self.relaxed else 1.0
-
-    def _bounds(self) -> None:
-        du = self._du
-        lk, la = self._qlim
-        xl, xu = self._xl, self._xu
-        a, b = self._u0 - du, self._u0 + du
-        xl[0] = -lk if a < -lk else a
-        xu[0] = lk if b > lk else b
-        a, b = self._u1 - du, self._u1 + du
-        xl[1] = -la if a < -la else a
-        xu[1] = la if b > la else b
 
     def _stance(self, t, qk, qa, vk, va):
         self.qp_solution = None

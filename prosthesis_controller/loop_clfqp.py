@@ -104,17 +104,6 @@ class LoopClfQpController(BaseController):
         return (np.array(self._oP[:n, :n]), np.array(self._oc[:n]), np.array(self._oG[:, :n]),
                 np.array(self._oh), self._xl.copy(), self._xu.copy())
 
-    def _bounds(self) -> None:
-        du = self._du
-        lk, la = self._qlim
-        xl, xu = self._xl, self._xu
-        a, b = self._u0 - du, self._u0 + du
-        xl[0] = -lk if a < -lk else a
-        xu[0] = lk if b > lk else b
-        a, b = self._u1 - du, self._u1 + du
-        xl[1] = -la if a < -la else a
-        xu[1] = la if b > la else b
-
     def _stance(self, t, qk, qa, vk, va):
         self.qp_solution = None
         x = self._fx
