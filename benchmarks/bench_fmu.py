@@ -15,7 +15,7 @@ Targets (issue): doStep median <= 30 us; >= 10x faster than the Python simulator
 The machines are shared: quote ratios.
 
 Usage: PYTHONPATH=. python benchmarks/bench_fmu.py [--gait gait.json] [--periods 3000]
-       [--json out.json]   (without --gait, the test template gait is optimized first)
+       [--json out.json]   (without --gait, the tests' committed template gait)
 """
 
 from __future__ import annotations
@@ -43,21 +43,17 @@ SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot
 
 
 def template_gait(model, path: Path) -> None:
-    from characterization.gait_design import build_gait
-    from characterization.phzd import PHZDOptions, optimize_gait
-    from tests.gait_template import template_targets
+    """The tests' committed template gait (tests/data/gaits, see its NOTICE), written to
+    ``path``."""
+    from hp_model.gait_artifact import load_gait
+    from tests.committed_gaits import RECIPES, ROOT
 
-    opt = PHZDOptions(nodes=11)
-    targets = template_targets()
-    result = optimize_gait(model, targets, opt)
-    if not result.success:
-        raise SystemExit(f"template gait optimization failed: {result.status}")
-    save_gait(path, build_gait(model, result, targets, opt))
+    save_gait(path, load_gait(ROOT / RECIPES["template"].path, model.parameter_hash()))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--gait", type=Path, help="gait file (default: optimize the template)")
+    ap.add_argument("--gait", type=Path, help="gait file (default: the tests' template gait)")
     ap.add_argument("--periods", type=int, default=3000)
     ap.add_argument("--json", help="also write the figures to this JSON file")
     a = ap.parse_args()
@@ -67,7 +63,7 @@ def main() -> None:
         gait_path = a.gait
         if gait_path is None:
             gait_path = Path(tmp) / "gait.json"
-            print("optimizing the template gait ...", flush=True)
+            print("the tests' template gait (tests/data/gaits)", flush=True)
             template_gait(model, gait_path)
         gait = load_gait(gait_path, model.parameter_hash())
 
