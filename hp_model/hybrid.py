@@ -201,14 +201,18 @@ class HybridModel:
     def frame_index(self, name: str) -> int:
         return self.frame_names.index(name)
 
+    def stance_frame(self, domain: str) -> str:
+        """The frame the domain holds flat on the ground (its first frame constraint)."""
+        return str(next(c.target for c in self.domains[domain].constraints
+                        if c.kind == "frame"))
+
     def place_stance_foot(self, q: np.ndarray, domain: str, x: float = 0.0) -> np.ndarray:
         """A copy of ``q`` with the floating base moved so that the domain's stance frame
         (its first ``frame`` constraint) is flat (pitch 0) on the ground at (x, 0).
 
         Joint angles are kept; only the base pose (first three coordinates) changes.
         """
-        frame = next(c.target for c in self.domains[domain].constraints if c.kind == "frame")
-        i = self.frame_index(frame)  # type: ignore[arg-type]
+        i = self.frame_index(self.stance_frame(domain))
         frames = self.numeric()["frames"]
         out = np.array(q, dtype=float)
         out[0:3] = 0.0

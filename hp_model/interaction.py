@@ -49,11 +49,6 @@ from hp_model.outputs import STANCE, Y2_COORDS, VirtualConstraints, unpack_symbo
 DOMAIN = "ps"
 
 
-def stance_frame(model: HumanProsthesisModel, domain: str = DOMAIN) -> str:
-    """The frame the domain holds flat on the ground (its first frame constraint)."""
-    return next(str(c.target) for c in model.domains[domain].constraints if c.kind == "frame")
-
-
 def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_p: ca.SX,
                          theta: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
     """(q, qd, tau) of the walker in ``vc.domain`` = ps with the prosthesis at x_p and the
@@ -79,7 +74,7 @@ def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_
             q[i] = B[r]
         return ca.vertcat(*q)
 
-    frame = stance_frame(model)
+    frame = model.stance_frame(DOMAIN)
     # the sole's pitch is th_B plus joint angles (planar tree): flat -> th_B = -pitch at 0
     th_B = -model.frame_expr(frame, joints(ca.vertcat(0, 0, 0)))[2]
     pos = model.frame_expr(frame, joints(ca.vertcat(0, 0, th_B)))[0:2]

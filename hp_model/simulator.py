@@ -142,10 +142,10 @@ class HybridSimulator:
         self.mfs = model.numeric()
         self.nq = model.nq
         self._landing = {}
-        for d, dom in model.domains.items():
-            sole = next(c.target for c in dom.constraints if c.kind == "frame")
-            ankle = "th_pa" if str(sole).startswith("p_") else "th_la"
-            self._landing[d] = (model.frame_index(str(sole)), model.coord_names.index(ankle))
+        for d in model.domains:
+            sole = model.stance_frame(d)
+            ankle = "th_pa" if sole.startswith("p_") else "th_la"
+            self._landing[d] = (model.frame_index(sole), model.coord_names.index(ankle))
 
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float

@@ -40,7 +40,6 @@ from hp_model.compiled import densified, find_c_compiler, generate_c
 from hp_model.gait_artifact import Gait, load_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
-from human_fmu.initial import stance_frame
 from human_fmu.variables import UNITS, Variable, _Table, add_constants, build_table
 
 MODEL_IDENTIFIER = "hpcosim_human"
@@ -186,8 +185,8 @@ def _c_double(v: float) -> str:
 def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree: int,
                   n_theta: int, phase_rows: dict[str, np.ndarray]) -> str:
     names = model.coord_names
-    frames = [model.frame_index(stance_frame(model, d)) for d in DOMAIN_ORDER]
-    ankles = [names.index("th_pa" if stance_frame(model, d).startswith("p_") else "th_la")
+    frames = [model.frame_index(model.stance_frame(d)) for d in DOMAIN_ORDER]
+    ankles = [names.index("th_pa" if model.stance_frame(d).startswith("p_") else "th_la")
               for d in DOMAIN_ORDER]
     nxt = [DOMAIN_ORDER.index(model.domains[d].next) for d in DOMAIN_ORDER]
     lines = [

@@ -19,11 +19,6 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 KNEE, ANKLE = "th_pk", "th_pa"
 
 
-def stance_frame(model: HumanProsthesisModel, domain: str) -> str:
-    """Name of the frame held flat on the ground in ``domain``."""
-    return str(next(c.target for c in model.domains[domain].constraints if c.kind == "frame"))
-
-
 def initial_state(model: HumanProsthesisModel, q0: np.ndarray, qd0: np.ndarray, domain: str,
                   offset_knee: float = 0.0, offset_ankle: float = 0.0
                   ) -> tuple[np.ndarray, np.ndarray]:
@@ -38,7 +33,7 @@ def initial_state(model: HumanProsthesisModel, q0: np.ndarray, qd0: np.ndarray, 
     q[model.coord_names.index(KNEE)] += offset_knee
     q[model.coord_names.index(ANKLE)] += offset_ankle
     if domain == "ps":
-        i = model.frame_index(stance_frame(model, domain))
+        i = model.frame_index(model.stance_frame(domain))
         pose = frames(np.asarray(q0, dtype=float), zero)[0]
         x_f, z_f = float(pose[0, i]), float(pose[1, i])
         q[0:3] = 0.0

@@ -114,7 +114,7 @@ class ControllerContext:
                              f"({gait.hash()}); refit the tube or pass strict_tube=False")
         sub = subsystem or ProsthesisSubsystem(model)
         self.subsystem = sub
-        self.margin = _margin(tube)
+        self.margin = _margin()
         self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
                                      PITCH_DEGREE, backend, FEEDFORWARD_DEGREE,
                                      self.margin["margin_lower"].shape[1] - 1)
@@ -189,16 +189,11 @@ def _toward(u: float, target: float, step: float) -> float:
     return u + (step if d > step else -step if d < -step else d)
 
 
-def _margin(tube: ForceTube) -> dict[str, object]:
-    """The output-uncertainty margin of the tube (Bezier box of d over its phase interval),
-    or none (zeros) when the tube does not carry one."""
-    u = getattr(tube, "output_uncertainty", None)
-    if u is None:
-        z = np.zeros((2, 1))
-        return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0,
-                "margin_tau_hi": 1.0}
-    return {"margin_lower": u.lower, "margin_upper": u.upper, "margin_tau_lo": u.tau_lo,
-            "margin_tau_hi": u.tau_hi}
+def _margin() -> dict[str, object]:
+    """The margin of the interaction-aware CLF row: a Bezier box of the model error d over
+    the phase.  No artifact characterises d yet (open work, README), so it is zero."""
+    z = np.zeros((2, 1))
+    return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0, "margin_tau_hi": 1.0}
 
 
 class BaseController:
