@@ -75,6 +75,7 @@ def choose(results: Sequence[GainResult]) -> GainResult | None:
 
 def main(argv: list[str] | None = None) -> int:
     import hp_model
+    from hp_model.artifacts import ArtifactError
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import load_gait
 
@@ -84,8 +85,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tube", required=True)
     a = ap.parse_args(argv)
     model = hp_model.load_model()
-    gait = load_gait(a.gait, model.parameter_hash())
-    tube = load_tube(a.tube, gait.hash())
+    try:
+        gait = load_gait(a.gait, model.parameter_hash())
+        tube = load_tube(a.tube, gait.hash())
+    except (ArtifactError, FileNotFoundError) as e:
+        print(f"baseline_gains: error: {e}", file=sys.stderr)
+        return 2
     for controller, grid, names in (("pd", PD_GRID, ("kp", "kd")),
                                     ("passive", PASSIVE_GRID, ("Lambda", "K"))):
         res = grid_search(model, gait, tube, controller, grid)
