@@ -89,6 +89,8 @@ class VirtualConstraints:
         outputs_<d>(q, qd, theta)         -> y1, y2, dy2, tau
         fl_<d>(q, qd, theta, gains)       -> u, y1, y2, dy2, tau     gains = (eps, kp, kd)
         hfl_<d>(q, qd, theta, gains, u_p) -> u                       human side only
+        flv_<d>(q, qd, theta, v)          -> u    fl with the feedback term v (6) given
+        hflv_<d>(q, qd, theta, v_h, u_p)  -> u    hfl with the human rows' v_h (4) given
 
     ``hfl`` is the human's feedback linearization given the prosthesis motor torque u_p (2,)
     it cannot choose: the 4 human torques make the 4 human outputs (``HUMAN_OUTPUTS``: in ps
@@ -146,6 +148,11 @@ class VirtualConstraints:
         A_h, A_p = A[rows, 0:4], A[rows, 4:6]
         u_h = -ca.solve(A_h, Lf[rows] + v[rows] + A_p @ u_p)
         u_hfl = ca.vertcat(u_h, u_p)
+        # the same laws with the feedback term v given (a delayed human: hp_model.simulator)
+        v_in = ca.SX.sym("v", 6)
+        u_v = -ca.solve(A, Lf + v_in)
+        vh_in = ca.SX.sym("v_h", len(rows))
+        u_hv = ca.vertcat(-ca.solve(A_h, Lf[rows] + vh_in + A_p @ u_p), u_p)
 
         d = domain
         self.functions = {
@@ -157,6 +164,10 @@ class VirtualConstraints:
                                    ["u", "y1", "y2", "dy2", "tau"]),
             f"hfl_{d}": ca.Function(f"hfl_{d}", [q, qd, theta, gains, u_p], [u_hfl],
                                     ["q", "qd", "theta", "gains", "u_p"], ["u"]),
+            f"flv_{d}": ca.Function(f"flv_{d}", [q, qd, theta, v_in], [u_v],
+                                    ["q", "qd", "theta", "v"], ["u"]),
+            f"hflv_{d}": ca.Function(f"hflv_{d}", [q, qd, theta, vh_in, u_p], [u_hv],
+                                     ["q", "qd", "theta", "v_h", "u_p"], ["u"]),
         }
         self._numeric: FunctionSet | None = None
 
