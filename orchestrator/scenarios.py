@@ -37,7 +37,7 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
+from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult, SimState
 from human_fmu.perturbation import perturbed_thetas
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
@@ -257,6 +257,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                           options or SimOptions(), human_delay=human_delay)
     idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
     if scenario.controller == ORACLE:
+        sim.thetas = oracle_thetas(gait, sim.thetas)
         return _run_oracle(model, gait, tube, scenario, sim, idx, q0, qd0)
     ctx = context or ControllerContext(gait, tube, model, None)
     ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
@@ -285,6 +286,23 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     tq = np.array(torques[:n]) if torques else np.zeros((0, 2))
     return _result(model, gait, tube, scenario, r, idx, tq, modes[:n], np.array(Vs[:n]),
                    np.array(rhos[:n]), fallbacks[0])
+
+
+def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The outputs the oracle's walker tracks: the human's rows of ``thetas`` (the human's
+    possibly perturbed gait) and the prosthesis's rows of the nominal gait (what a prosthesis
+    controller is given)."""
+    m1 = gait.degree + 1
+    out = {}
+    for d in DOMAINS:
+        th = np.array(thetas[d], float)
+        nominal = gait.theta(d)
+        for r in range(len(Y2_COORDS[d])):
+            if r + 1 not in HUMAN_OUTPUTS[d]:  # rows of (y1, y2): y2 row r is r + 1
+                th[r * m1:(r + 1) * m1] = nominal[r * m1:(r + 1) * m1]
+        th[-3:] = nominal[-3:]  # v_hip, p_min, p_max: the phase is the prosthesis's
+        out[d] = th
+    return out
 
 
 def _run_oracle(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
