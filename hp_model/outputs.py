@@ -80,6 +80,10 @@ def unpack_symbolic(theta, degree: int):
     return alpha, theta[n], theta[n + 1], theta[n + 2]
 
 
+#: phase span over which the outputs come to rest past tau = 1 (VirtualConstraints)
+TAIL = 0.15
+
+
 class VirtualConstraints:
     """Phase variable, outputs and feedback linearization of one domain of the 12-DOF model.
 
@@ -124,9 +128,19 @@ class VirtualConstraints:
         cD, SD = ca.DM(c).T, ca.DM(S)
         tau = (cD @ q - p_min) / dp
         tau_d = (cD @ qd) / dp
-        Bd = bezier.evaluate(alpha, tau)
-        dB = bezier.evaluate(bezier.derivative(alpha), tau)
-        ddB = bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau)
+        # past tau = 1 (the designed touchdown) the curves come to rest instead of following
+        # the polynomials' extrapolation (which swings the legs away from the ground): a
+        # walker whose touchdown is late holds its end-of-step posture.  B(1) + B'(1) d
+        # tanh((tau - 1)/d): position and velocity continuous at tau = 1, settled within a
+        # few d (TAIL) of the phase
+        tau_c = ca.fmin(tau, 1)
+        th = ca.tanh(ca.fmax(tau - 1, 0) / TAIL)
+        live = ca.if_else(tau < 1, 1, 0)
+        B1 = bezier.evaluate(bezier.derivative(alpha), tau_c)
+        Bd = bezier.evaluate(alpha, tau_c) + B1 * TAIL * th
+        dB = B1 * (1 - th**2)
+        ddB = (live * bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau_c)
+               - B1 * (2 / TAIL) * th * (1 - th**2))
         y1 = cD @ qd - v_hip
         y2 = SD @ q - Bd
         dy2 = SD @ qd - dB * tau_d
