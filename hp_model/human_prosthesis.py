@@ -175,7 +175,7 @@ class HumanProsthesisModel(HybridModel):
     """
 
     def __init__(self, subject: SubjectConfig, device: DeviceConfig,
-                 body: BodyVariation = NOMINAL_BODY) -> None:
+                 body: BodyVariation = NOMINAL_BODY, backend: str = "auto") -> None:
         self.subject = subject
         self.device = device
         self.body = body
@@ -185,7 +185,7 @@ class HumanProsthesisModel(HybridModel):
         self.torque_limits = np.array(
             [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
         self.torque_limits.setflags(write=False)
-        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12")
+        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12", backend=backend)
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)

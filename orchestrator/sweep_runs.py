@@ -130,17 +130,18 @@ def scaled_tube(tube: ForceTube, scale: float) -> ForceTube:
 
 
 def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, com: float,
-                    body: BodyVariation | None = None) -> HumanProsthesisModel:
+                    body: BodyVariation | None = None, backend: str = "auto"
+                    ) -> HumanProsthesisModel:
     """The model with the prosthesis links' (top, shin, foot) masses, inertias and COM
     positions scaled (re-validated: a non-positive mass fails), and the human ``body`` (the
     model's own when None): the model the controller believes in (``model.*``), or the
-    plant the sweep simulates (``plant.*``)."""
+    plant the sweep simulates (``plant.*``); ``backend``: of its numeric functions."""
     from hp_model.config import DeviceConfig
 
     body = model.body if body is None else body
     if (mass, inertia, com) == (1.0, 1.0, 1.0):
         return model if body == model.body else \
-            HumanProsthesisModel(model.subject, model.device, body)
+            HumanProsthesisModel(model.subject, model.device, body, backend)
     doc = model.device.model_dump(mode="json")
     p = doc["prosthesis"]
     for link in ("top", "shin", "foot"):
@@ -149,7 +150,8 @@ def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, co
         for c in ("com", "com_x", "com_z"):
             if c in p[link]:
                 p[link][c]["value"] *= com
-    return HumanProsthesisModel(model.subject, DeviceConfig.model_validate(doc), body)
+    return HumanProsthesisModel(model.subject, DeviceConfig.model_validate(doc), body,
+                                backend)
 
 
 def human_gains(gait: Gait, draw: Draw) -> np.ndarray:
@@ -245,10 +247,11 @@ class Resources:
         if key in self._plants:
             self._plants.move_to_end(key)
             return self._plants[key]
-        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body)
+        # the model's own functions run a few times per step (impacts, start): interpreted;
+        # the closed loop runs every step: compiled
+        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body, backend="sx")
         cl = ClosedLoop(m, self.gait.degree)
         cl.numeric()
-        m.numeric()
         self._plants[key] = (m, cl)
         if len(self._plants) > PLANT_CACHE:
             self._plants.popitem(last=False)
