@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -366,32 +366,34 @@ def socket_force_in_tube(tube: ForceTube, tau: np.ndarray, force: np.ndarray
     return float(np.mean(tube.contains(tau[m], delta)))
 
 
-def human_gait_walks(model: HumanProsthesisModel, gait: Gait, pert: Perturbation,
-                     steps: int) -> tuple[bool, str]:
-    """Whether the perturbed human gait walks ``steps`` steps with the prosthesis under
-    feedback linearization too (mode full): a perturbed gait the walker itself cannot
-    complete is not a test of the prosthesis controller."""
-    base = make_simulator(model, gait)
-    sim = HybridSimulator(model, base.cl, pert.thetas(gait), gait.gains_array, base.opt)
-    q0, qd0 = initial_state(model, gait)
-    r = sim.run(q0, qd0, "ps", steps=steps)
-    return (not r.failed and r.steps >= steps), r.reason
+def oracle_walks(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
+                 closed_loop: ClosedLoop | None = None) -> tuple[bool, str]:
+    """Whether the :data:`ORACLE` (full-state feedback linearization of the prosthesis,
+    perfect knowledge and sensing) walks ``scenario`` (its human gait, steps and initial
+    offset; its controller is ignored): a case the walker itself cannot complete is not a
+    test of the prosthesis controller (the sweeps' walkability label)."""
+    r = run_scenario(model, gait, tube, replace(scenario, controller=ORACLE),
+                     closed_loop=closed_loop)
+    return r.success, r.reason
 
 
-def select_perturbations(model: HumanProsthesisModel, gait: Gait, n: int = 3,
-                         amplitude: float = 0.01, steps: int = 4, max_seed: int = 50
-                         ) -> list[Perturbation]:
-    """The first ``n`` seeds (0, 1, ...) whose perturbed human gait walks ``steps`` steps in
-    mode full (:func:`human_gait_walks`).  A fixed rule, independent of any controller."""
+def select_perturbations(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, n: int = 3,
+                         amplitude: float = 0.01, steps: int = 20,
+                         initial_offset: tuple[float, float] = (0.0, 0.0), max_seed: int = 50,
+                         closed_loop: ClosedLoop | None = None) -> list[Perturbation]:
+    """The first ``n`` seeds (0, 1, ...) whose perturbed human gait the oracle walks for
+    ``steps`` steps from ``initial_offset`` (:func:`oracle_walks`): the cases every controller
+    is then run on.  A fixed rule, independent of any prosthesis controller."""
     out: list[Perturbation] = []
     for seed in range(max_seed):
         p = Perturbation(f"human-{len(out) + 1} (seed {seed})", amplitude, seed)
-        if human_gait_walks(model, gait, p, steps)[0]:
+        sc = Scenario(ORACLE, p, steps, initial_offset)
+        if oracle_walks(model, gait, tube, sc, closed_loop)[0]:
             out.append(p)
             if len(out) == n:
                 return out
     raise RuntimeError(f"fewer than {n} of {max_seed} perturbed gaits (amplitude "
-                       f"{amplitude} rad) walk {steps} steps under full feedback linearization")
+                       f"{amplitude} rad) walk {steps} steps under the oracle")
 
 
 def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20,
