@@ -90,6 +90,32 @@ class ContactConfig(_Strict):
     c_sigma: Positive = 1.0e6
 
 
+class UncertaintyConfig(_Strict):
+    """The characterised model error of ``clfqp`` (the tube's ``model_error``, issue 17) and
+    its online estimate.
+
+    - ``margin``: put the bound into the robust CLF row (the worst case of d over it,
+      LGV c_d + |LGV| r_d) over its phase range, from ``exclude_after_touchdown`` after the
+      switch to stance on; off: the row is the nominal model's (the bound is still used by
+      the coverage monitor).  A tube without a model-error bound gives no margin either way.
+    - ``filter_time``: time constant T_f (s) of the causal first-order low-pass of the
+      disturbance estimate d_hat (a finite difference of the measured joint velocities,
+      compared with a + A u_prev of the previous tick): d_hat += dt / (T_f + dt) (d_raw -
+      d_hat).  Its lag on a ramp of d is T_f; velocity quantization q_v (1e-4 rad/s on the
+      bus) enters d_raw as about |Jv| q_v / dt per tick and leaves the filter reduced by
+      sqrt(dt / (2 T_f)).
+    - ``max_dt``: a tick more than this after the previous stance tick restarts the
+      estimator (no finite difference across a gap, a fault or swing).
+    - ``monitor_tolerance``: (dy1 [m/s^2], d2y2 [rad/s^2]) added to both sides of the bound
+      before a filtered estimate counts as outside (the estimate's own noise and lag).
+    """
+
+    margin: bool = True
+    filter_time: Positive = 0.005
+    max_dt: Positive = 0.005
+    monitor_tolerance: Pair = (0.05, 1.0)
+
+
 class PdConfig(_Strict):
     """Joint PD on the nominal prosthesis trajectory as a function of the state-based stance
     phase tau(th_pk, th_pa), reference velocities at the nominal phase rate (JOINT-side gains,
@@ -192,6 +218,7 @@ class ControllerConfig(_Strict):
 
     clf: ClfConfig = ClfConfig()
     contact: ContactConfig = ContactConfig()
+    uncertainty: UncertaintyConfig = UncertaintyConfig()
     pd: PdConfig = PdConfig()
     phase_pd: PhasePdConfig = PhasePdConfig()
     passive: PassiveConfig = PassiveConfig()

@@ -61,7 +61,14 @@ class Diagnostics:
     ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
     output or a faulty measurement); fault: the
     :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
-    domain: "ps" or "pns"; mode: see the MODE_* constants."""
+    domain: "ps" or "pns"; mode: see the MODE_* constants.
+
+    Model-error estimate and coverage monitor (``clfqp``, ``clfqp-exact``;
+    :mod:`prosthesis_controller.disturbance`; zero / False for the other controllers):
+    disturbance: (dy1 [m/s^2], d2y2 [rad/s^2]), the filtered estimate of d = nu - (a + A u)
+    (0 while not valid); disturbance_valid: the estimator has run long enough; coverage_flag:
+    this tick's estimate is outside the tube's characterised bound (never without one);
+    coverage_count: flagged ticks since ``reset``."""
 
     tau: float
     V: float
@@ -72,6 +79,10 @@ class Diagnostics:
     fault: int
     domain: str
     mode: str
+    disturbance: tuple[float, float] = (0.0, 0.0)
+    disturbance_valid: bool = False
+    coverage_flag: bool = False
+    coverage_count: int = 0
 
 
 @dataclass(frozen=True, slots=True)
