@@ -371,6 +371,7 @@ class BaseController:
     def tick(self, meas: ProsthesisMeasurement) -> ControlOutput:
         fault = validate(meas, self._t_prev, *self._vargs)
         active = 0
+        since = 0.0
         if fault:
             step = self._fb_step
             u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
@@ -384,6 +385,7 @@ class BaseController:
             vk, va = float(meas.knee_vel), float(meas.ankle_vel)
             if self._update_domain(t, bool(meas.contact), float(meas.foot_load)) == "ps":
                 u0, u1, tau, V, rho, status, active, mode = self._stance(t, qk, qa, vk, va)
+                since = t - self._t_switch  # type: ignore[operator]
             else:
                 u0, u1, tau = self._swing_torque(t, qk, qa, vk, va)
                 V = rho = 0.0
@@ -405,7 +407,7 @@ class BaseController:
         return ControlOutput(
             np.array((c0, c1)),
             Diagnostics(tau, V, rho, status, active, self.fallback_count, int(fault),
-                        self._domain, mode, est, valid, flag, count))
+                        self._domain, mode, est, valid, flag, count, since))
 
 
 class PDController(BaseController):

@@ -68,7 +68,8 @@ class Diagnostics:
     disturbance: (dy1 [m/s^2], d2y2 [rad/s^2]), the filtered estimate of d = nu - (a + A u)
     (0 while not valid); disturbance_valid: the estimator has run long enough; coverage_flag:
     this tick's estimate is outside the tube's characterised bound (never without one);
-    coverage_count: flagged ticks since ``reset``."""
+    coverage_count: flagged ticks since ``reset``; since_touchdown: time since the switch to
+    stance (s; 0 in swing and on a faulty tick)."""
 
     tau: float
     V: float
@@ -83,6 +84,7 @@ class Diagnostics:
     disturbance_valid: bool = False
     coverage_flag: bool = False
     coverage_count: int = 0
+    since_touchdown: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
