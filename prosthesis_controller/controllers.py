@@ -261,6 +261,9 @@ class BaseController:
     def _reset_estimator(self) -> None:
         """Model-error estimator state (controllers that have one)."""
 
+    def _estimator_gap(self) -> None:
+        """A tick without the stance law (fault, swing): no finite difference across it."""
+
     def _estimate(self) -> tuple[tuple[float, float], bool, bool, int]:
         """(disturbance, valid, coverage flag, coverage count) of this tick: none here."""
         return _NO_ESTIMATE
@@ -378,6 +381,7 @@ class BaseController:
             self.fallback_count += 1
             tau = V = rho = 0.0
             status, mode = QP_NOT_RUN, MODE_FAULT
+            self._estimator_gap()
         else:
             t = float(meas.t)
             self._t_prev = t
@@ -389,6 +393,7 @@ class BaseController:
             else:
                 u0, u1, tau = self._swing_torque(t, qk, qa, vk, va)
                 V = rho = 0.0
+                self._estimator_gap()
                 status, mode = QP_NOT_RUN, MODE_SWING
             if not (math.isfinite(u0) and math.isfinite(u1)):
                 step = self._fb_step

@@ -18,9 +18,9 @@ filter lags a ramp by T_f (|d_hat - d| <= T_f max|dd/dt| + (dt/2) max|dnu/dt| af
 T_f), and velocity quantization q_v adds about |Jv| q_v / dt per raw sample, reduced by the
 filter to |Jv| q_v / dt sqrt(dt / (2 T_f)).
 
-The estimator restarts (no finite difference) at the first stance tick, after a gap longer
-than ``max_dt`` (swing, a fault, a lost cycle) and on a non-finite value; until it has run
-for 3 T_f its estimate is not ``valid``.  Monitor: a valid estimate outside the
+The estimator restarts (no finite difference) at the first stance tick, after a swing or a
+faulty tick, after a gap longer than ``max_dt`` (a lost cycle) and on a non-finite value;
+until it has run for 3 T_f its estimate is not ``valid``.  Monitor: a valid estimate outside the
 characterised bound [lo - tol, hi + tol] (the tube's ``model_error`` at x_{k-1}, where it is
 defined: in its phase range and past the excluded time after touchdown) raises the flag and
 counts the tick.  With no bound in the tube nothing is ever flagged.  Every output is finite.

@@ -96,6 +96,10 @@ class LoopClfQpController(BaseController):
         self.estimator.reset()
         self._monitored = False
 
+    def _estimator_gap(self) -> None:
+        self.estimator.restart()
+        self._monitored = False
+
     def _estimate(self) -> tuple[tuple[float, float], bool, bool, int]:
         e = self.estimator
         if self._domain != "ps" or not e.valid:
@@ -133,7 +137,8 @@ class LoopClfQpController(BaseController):
         # after the switch to stance on, and over its phase range (in the generated call)
         late = t - self._t_switch >= self._exclude  # type: ignore[operator]
         self._monitored = late
-        self._pgate[0] = 1.0 if (late and self._margin_on) else 0.0
+        if self._margin_on:
+            self._pgate[0] = 1.0 if late else 0.0
         x = self._fx
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
         self._f.call_inplace()
