@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntFlag
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -51,9 +51,9 @@ MODE_FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward th
 MODE_FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
 
 
-@dataclass(frozen=True, slots=True)
-class Diagnostics:
-    """Per-tick diagnostics; every number is finite.
+class Diagnostics(NamedTuple):
+    """Per-tick diagnostics; every number is finite.  Immutable; a NamedTuple rather than a
+    frozen dataclass because it is built every tick (0.4 us against 1.5 us for 14 fields).
 
     tau: phase (state-based in ps, the time-based estimate in pns); V: CLF value V_eps
     (evaluated for every controller in ps, 0 in pns); rho: relaxation (0 unless relaxed
