@@ -29,6 +29,7 @@ from prosthesis_controller.config import ControllerConfig, UncertaintyConfig
 from tests.committed_gaits import ROOT
 
 DEMO_TUBE = ROOT / "tests/data/controller/tube_demo.json"
+DEMO_TUBE_V2 = ROOT / "tests/data/controller/tube_demo_v2.json"  # with the model error
 
 
 @pytest.fixture(scope="module")
@@ -253,3 +254,34 @@ def test_monitor_flags_and_counts_estimates_outside_the_bound(model, demo_gait, 
         assert all(math.isfinite(v) for v in g.disturbance)
     assert not any(flags[:30])  # within the excluded time and the filter's warm-up
     assert all(flags[35:]) and g.coverage_count == sum(flags)
+
+
+def test_clfqp_walks_with_the_margin_on(model, demo_gait, subsystem):
+    """With the demo subject's characterised bound in the CLF row (``uncertainty.margin``),
+    clfqp still walks 20 nominal steps inside the limits, no fallback, knee RMS <= 0.003 rad
+    (measured 0.00125 rad, 0.00143 without the margin); the bound is worth < 1 motor N m at
+    mid-stance (measured 0.5-0.7)."""
+    from characterization.model_error_fit import margin_torque
+    from orchestrator.scenarios import Scenario, run_scenario
+
+    tube = load_tube(DEMO_TUBE_V2, demo_gait.hash())
+    me = tube.model_error
+    assert me is not None and me.exclude_after_touchdown == pytest.approx(0.03)
+    assert me.credibility["samples_inside_fraction"] == 1.0 and me.n_steps == 20
+    ctx = ControllerContext(demo_gait, tube, model, ControllerConfig(
+        uncertainty=UncertaintyConfig(margin=True)), subsystem=subsystem)
+    r = run_scenario(model, demo_gait, tube, Scenario("clfqp", NOMINAL, 20), context=ctx)
+    assert r.success, r.reason
+    assert r.knee_rms("ps") <= 0.003 and r.fallback_count == 0
+    assert np.all(np.abs(r.torque) <= np.array(ctx.limits) + 1e-12)
+    f = ctx.terms.numeric["clf_qp_loop"]
+    f.inputs[1][:] = ctx.clf_loop_params
+    o = dict(zip(f.function.name_out(), f.outputs, strict=True))
+    tr = demo_gait.trajectory["ps"]
+    i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
+    for k in range(0, tr["q"].shape[1], 3):
+        f.inputs[0][:] = np.r_[tr["q"][i, k], tr["qd"][i, k]]
+        f.call_inplace()
+        tau = float(o["tau"][0])
+        if 0.3 <= tau <= 0.7:
+            assert 0 < margin_torque(me, tau, o["A"]) < 1.0
