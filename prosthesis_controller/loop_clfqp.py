@@ -76,7 +76,6 @@ class LoopClfQpController(BaseController):
         self.estimator = DisturbanceEstimator(un.filter_time, un.max_dt,
                                               un.monitor_tolerance)
         me = ctx.tube.model_error
-        self._has_bound = me is not None
         self._exclude = float(me.exclude_after_touchdown) if me is not None else _INF
         self._margin_on = bool(un.margin) and me is not None
         self._monitored = False  # the previous stance tick's state is where the bound is
