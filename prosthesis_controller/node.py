@@ -289,9 +289,12 @@ def _summary(node: ControllerNode, why: str, cycle: Durations, usage: Usage
     """What the node did; ``timing_us``: ``controller_tick`` (controller.tick alone) and
     ``cycle`` (first frame of a cycle received -> its TorqueCmd sent: frame checks, the
     tick, encoding, sending); ``usage``: the process's CPU time and context switches
-    while serving (all threads, zenoh's included)."""
+    while serving (all threads, zenoh's included); ``coverage_count``: ticks whose
+    model-error estimate left the tube's characterised bound (0 without one)."""
+    d = node._last_diag
     return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
             "safe_entries": node.safe_entries,
+            "coverage_count": int(d.coverage_count) if d is not None else 0,
             "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"},
             "timing_us": {"controller_tick": node.tick_time.summary(),
                           "cycle": cycle.summary()},
