@@ -14,7 +14,6 @@ last domain switch, fallback count).  ``tick`` never raises on a bad measurement
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from enum import IntFlag
 from typing import NamedTuple, Protocol, runtime_checkable
 
@@ -87,9 +86,9 @@ class Diagnostics(NamedTuple):
     since_touchdown: float = 0.0
 
 
-@dataclass(frozen=True, slots=True)
-class ControlOutput:
-    """Motor torques (knee, ankle) in N m and the diagnostics of the tick."""
+class ControlOutput(NamedTuple):
+    """Motor torques (knee, ankle) in N m and the diagnostics of the tick (immutable; a
+    NamedTuple for the same reason as :class:`Diagnostics`)."""
 
     torque: np.ndarray
     diagnostics: Diagnostics
