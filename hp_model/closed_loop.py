@@ -16,6 +16,14 @@ Functions, with x = (q, qd) (24,):
 ``rk4`` is built in MX around one call of ``xdot`` so the generated C contains the vector
 field once; the in-process simulator and the FMU's C code call these same functions, so
 the two integrate with identical arithmetic.
+
+The delayed human (:mod:`hp_model.simulator`) needs the same laws with the feedback term
+given instead of computed from the state (compiled separately, on first use, by
+:meth:`ClosedLoop.delayed`):
+
+    mode "dfull":  xdot_dfull_<d>(x, theta, v (6))          all 6 torques from ``flv_<d>``
+    mode "dhuman": xdot_dhuman_<d>(x, theta, v_h (4), u_p)  human torques from ``hflv_<d>``
+    and rk4_dfull_<d>(x, theta, v, h), rk4_dhuman_<d>(x, theta, v_h, u_p, h)
 """
 
 from __future__ import annotations
@@ -27,6 +35,53 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints
 
 MODES = ("full", "human")
+
+
+def _rk4_of(f: ca.Function, name: str, nx: int, extra: list[tuple[str, int]],
+            height: ca.Function) -> ca.Function:
+    """RK4 in MX around one call of ``f(x, *extra)`` (the first output is xdot)."""
+    X = ca.MX.sym("x", nx)
+    E = [ca.MX.sym(n, k) for n, k in extra]
+    H = ca.MX.sym("h")
+
+    def fx(xx):
+        return f(xx, *E)[0]
+
+    k1 = fx(X)
+    k2 = fx(X + H / 2 * k1)
+    k3 = fx(X + H / 2 * k2)
+    k4 = fx(X + H * k3)
+    Xn = X + H / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return ca.Function(name, [X, *E, H], [Xn, height(Xn)], ["x", *(n for n, _ in extra), "h"],
+                       ["x_next", "height"])
+
+
+def delayed_functions(model: HumanProsthesisModel, vc: VirtualConstraints
+                      ) -> list[ca.Function]:
+    """xdot and rk4 of modes dfull and dhuman of one domain (module docstring)."""
+    d, nq = vc.domain, model.nq
+    x = ca.SX.sym("x", 2 * nq)
+    q, qd = x[:nq], x[nq:]
+    theta = ca.SX.sym("theta", vc.n_params)
+    v = ca.SX.sym("v", 6)
+    v_h = ca.SX.sym("v_h", 4)
+    u_p = ca.SX.sym("u_p", 2)
+    dyn = model.function(f"dyn_{d}")
+    swing = model.domains[d].swing_frame
+    height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
+    out: list[ca.Function] = []
+    for mode, u, extra in (
+            ("dfull", vc.functions[f"flv_{d}"](q, qd, theta, v), [("v", v)]),
+            ("dhuman", vc.functions[f"hflv_{d}"](q, qd, theta, v_h, u_p),
+             [("v_h", v_h), ("u_p", u_p)])):
+        qdd, lam = dyn(q, qd, u)
+        f = ca.Function(f"xdot_{mode}_{d}", [x, theta, *(s for _, s in extra)],
+                        [ca.vertcat(qd, qdd), u, lam],
+                        ["x", "theta", *(n for n, _ in extra)], ["xdot", "u", "lam"],
+                        {"cse": True})
+        dims = [("theta", vc.n_params)] + [(n, s.numel()) for n, s in extra]
+        out += [f, _rk4_of(f, f"rk4_{mode}_{d}", 2 * nq, dims, height)]
+    return out
 
 
 def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
@@ -85,9 +140,20 @@ class ClosedLoop:
             fns += [vc.functions[f"outputs_{d}"]]
         self.functions = {f.name(): f for f in fns}
         self._numeric: FunctionSet | None = None
+        self._delayed: FunctionSet | None = None
 
     def numeric(self) -> FunctionSet:
         if self._numeric is None:
             self._numeric = FunctionSet(list(self.functions.values()),
                                         f"{self.model.name}_cl_m{self.degree}")
         return self._numeric
+
+    def delayed(self) -> FunctionSet:
+        """The compiled functions of the delayed human (module docstring), built on first
+        use (most runs never need them)."""
+        if self._delayed is None:
+            fns: list[ca.Function] = []
+            for vc in self.vcs.values():
+                fns += delayed_functions(self.model, vc)
+            self._delayed = FunctionSet(fns, f"{self.model.name}_cld_m{self.degree}")
+        return self._delayed

@@ -23,6 +23,7 @@ Coordinates, exactly as the paper:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields
 
 import casadi as ca
 import numpy as np
@@ -51,8 +52,39 @@ def _lump(parts: Sequence[Part]) -> Part:
     return m, (cx, cz), inertia
 
 
-def build_tree(subject: SubjectConfig, device: DeviceConfig) -> PlanarTree:
-    """The kinematic tree with segment parameters from the subject and device configs.
+@dataclass(frozen=True)
+class BodyVariation:
+    """A body that differs from the subject's anthropometric estimate: dimensionless factors
+    (1 = as the tables give) on the human segments' masses (inertia about the COM scales
+    with the mass: same radius of gyration), on the HAT's COM distance from the hip, and on
+    the iWalk's mass.  The robustness sweeps give the simulated human such a body while the
+    controller keeps the nominal one (``plant.*`` quantities of a sweep spec)."""
+
+    hat_mass: float = 1.0
+    thigh_mass: float = 1.0
+    shank_mass: float = 1.0
+    foot_mass: float = 1.0
+    hat_com: float = 1.0
+    iwalk_mass: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"body variation {f.name} must be finite and > 0, got {v}")
+
+    @property
+    def is_nominal(self) -> bool:
+        return self == BodyVariation()
+
+
+NOMINAL_BODY = BodyVariation()
+
+
+def build_tree(subject: SubjectConfig, device: DeviceConfig,
+               body: BodyVariation = NOMINAL_BODY) -> PlanarTree:
+    """The kinematic tree with segment parameters from the subject and device configs (and
+    a :class:`BodyVariation` of the human segments).
 
     The right thigh body lumps: the human thigh; the shank folded backward at 90 deg onto
     the iWalk platform (COM behind the knee); the foot at the end of that shank (COM half an
@@ -60,14 +92,20 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig) -> PlanarTree:
     """
     L = subject.lengths
     sex, tab, M = subject.sex, subject.radii_of_gyration, subject.body_mass
-    m_hat, c_hat, I_hat = anth.segment("hat", sex, tab, M, L.trunk)
-    m_th, c_th, I_th = anth.segment("thigh", sex, tab, M, L.thigh)
-    m_sh, c_sh, I_sh = anth.segment("shank", sex, tab, M, L.shank)
-    m_ft, _, I_ft = anth.segment("foot", sex, tab, M, L.foot)
+
+    def seg(name: str, length: float, k: float) -> tuple[float, float, float]:
+        m, c, inertia = anth.segment(name, sex, tab, M, length)
+        return m * k, c, inertia * k
+
+    m_hat, c_hat, I_hat = seg("hat", L.trunk, body.hat_mass)
+    c_hat *= body.hat_com
+    m_th, c_th, I_th = seg("thigh", L.thigh, body.thigh_mass)
+    m_sh, c_sh, I_sh = seg("shank", L.shank, body.shank_mass)
+    m_ft, _, I_ft = seg("foot", L.foot, body.foot_mass)
     foot_com = (L.foot / 2 - L.heel, -L.ankle_height / 2)
 
     iw = device.iwalk
-    m_iw, l_iw = iw.mass.value, iw.length.value
+    m_iw, l_iw = iw.mass.value * body.iwalk_mass, iw.length.value
     r_thigh = _lump([
         (m_th, (0.0, -c_th), I_th),
         (m_sh, (-c_sh, -L.thigh), I_sh),
@@ -136,16 +174,18 @@ class HumanProsthesisModel(HybridModel):
     which equals the socket rows of ``dyn_<d>``'s lam.
     """
 
-    def __init__(self, subject: SubjectConfig, device: DeviceConfig) -> None:
+    def __init__(self, subject: SubjectConfig, device: DeviceConfig,
+                 body: BodyVariation = NOMINAL_BODY, backend: str = "auto") -> None:
         self.subject = subject
         self.device = device
-        tree = build_tree(subject, device)
+        self.body = body
+        tree = build_tree(subject, device, body)
         p = device.prosthesis
         ratios = (1.0, 1.0, 1.0, 1.0, p.knee.gear_ratio.value, p.ankle.gear_ratio.value)
         self.torque_limits = np.array(
             [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
         self.torque_limits.setflags(write=False)
-        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12")
+        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12", backend=backend)
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)
@@ -164,8 +204,11 @@ class HumanProsthesisModel(HybridModel):
         """Hash of every subject and device parameter; artifacts record the model they were
         made for with it (``hp_model.artifacts.canonical_hash``)."""
         from hp_model.artifacts import canonical_hash
-        return canonical_hash({"subject": self.subject.model_dump(mode="json"),
-                               "device": self.device.model_dump(mode="json")})
+        doc = {"subject": self.subject.model_dump(mode="json"),
+               "device": self.device.model_dump(mode="json")}
+        if not self.body.is_nominal:  # the nominal body keeps the hashes of existing files
+            doc["body_variation"] = asdict(self.body)
+        return canonical_hash(doc)
 
     @property
     def prosthesis_mass(self) -> float:

@@ -93,9 +93,11 @@ class HybridModel:
         gear_ratios: Sequence[float],
         domains: Sequence[Domain],
         name: str,
+        backend: str = "auto",
     ) -> None:
         if len(actuated) != len(gear_ratios):
             raise ModelError("one gear ratio per actuated coordinate")
+        self.backend = backend
         self.tree = tree
         self.name = name
         self.nq = tree.nq
@@ -190,8 +192,12 @@ class HybridModel:
             raise KeyError(f"{self.name}: no function '{name}'; have {have}") from None
 
     # -- numeric ------------------------------------------------------------------------------
-    def numeric(self, backend: str = "auto") -> FunctionSet:
-        """All functions compiled to C (or interpreted) and bound to reusable buffers."""
+    def numeric(self, backend: str | None = None) -> FunctionSet:
+        """All functions compiled to C (or interpreted) and bound to reusable buffers;
+        ``backend`` defaults to the model's (``"auto"``; ``"sx"`` for a model built for a
+        few calls, e.g. a sweep's perturbed plant, whose compilation would cost more than
+        interpreting)."""
+        backend = backend or self.backend
         if backend not in self._numeric:
             fs = FunctionSet(list(self.functions.values()), self.name, backend)
             self._numeric[backend] = fs

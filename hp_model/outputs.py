@@ -80,6 +80,10 @@ def unpack_symbolic(theta, degree: int):
     return alpha, theta[n], theta[n + 1], theta[n + 2]
 
 
+#: phase span over which the outputs come to rest past tau = 1 (VirtualConstraints)
+TAIL = 0.15
+
+
 class VirtualConstraints:
     """Phase variable, outputs and feedback linearization of one domain of the 12-DOF model.
 
@@ -89,6 +93,8 @@ class VirtualConstraints:
         outputs_<d>(q, qd, theta)         -> y1, y2, dy2, tau
         fl_<d>(q, qd, theta, gains)       -> u, y1, y2, dy2, tau     gains = (eps, kp, kd)
         hfl_<d>(q, qd, theta, gains, u_p) -> u                       human side only
+        flv_<d>(q, qd, theta, v)          -> u    fl with the feedback term v (6) given
+        hflv_<d>(q, qd, theta, v_h, u_p)  -> u    hfl with the human rows' v_h (4) given
 
     ``hfl`` is the human's feedback linearization given the prosthesis motor torque u_p (2,)
     it cannot choose: the 4 human torques make the 4 human outputs (``HUMAN_OUTPUTS``: in ps
@@ -122,9 +128,19 @@ class VirtualConstraints:
         cD, SD = ca.DM(c).T, ca.DM(S)
         tau = (cD @ q - p_min) / dp
         tau_d = (cD @ qd) / dp
-        Bd = bezier.evaluate(alpha, tau)
-        dB = bezier.evaluate(bezier.derivative(alpha), tau)
-        ddB = bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau)
+        # past tau = 1 (the designed touchdown) the curves come to rest instead of following
+        # the polynomials' extrapolation (which swings the legs away from the ground): a
+        # walker whose touchdown is late holds its end-of-step posture.  B(1) + B'(1) d
+        # tanh((tau - 1)/d): position and velocity continuous at tau = 1, settled within a
+        # few d (TAIL) of the phase
+        tau_c = ca.fmin(tau, 1)
+        th = ca.tanh(ca.fmax(tau - 1, 0) / TAIL)
+        live = ca.if_else(tau < 1, 1, 0)
+        B1 = bezier.evaluate(bezier.derivative(alpha), tau_c)
+        Bd = bezier.evaluate(alpha, tau_c) + B1 * TAIL * th
+        dB = B1 * (1 - th**2)
+        ddB = (live * bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau_c)
+               - B1 * (2 / TAIL) * th * (1 - th**2))
         y1 = cD @ qd - v_hip
         y2 = SD @ q - Bd
         dy2 = SD @ qd - dB * tau_d
@@ -146,6 +162,11 @@ class VirtualConstraints:
         A_h, A_p = A[rows, 0:4], A[rows, 4:6]
         u_h = -ca.solve(A_h, Lf[rows] + v[rows] + A_p @ u_p)
         u_hfl = ca.vertcat(u_h, u_p)
+        # the same laws with the feedback term v given (a delayed human: hp_model.simulator)
+        v_in = ca.SX.sym("v", 6)
+        u_v = -ca.solve(A, Lf + v_in)
+        vh_in = ca.SX.sym("v_h", len(rows))
+        u_hv = ca.vertcat(-ca.solve(A_h, Lf[rows] + vh_in + A_p @ u_p), u_p)
 
         d = domain
         self.functions = {
@@ -157,6 +178,10 @@ class VirtualConstraints:
                                    ["u", "y1", "y2", "dy2", "tau"]),
             f"hfl_{d}": ca.Function(f"hfl_{d}", [q, qd, theta, gains, u_p], [u_hfl],
                                     ["q", "qd", "theta", "gains", "u_p"], ["u"]),
+            f"flv_{d}": ca.Function(f"flv_{d}", [q, qd, theta, v_in], [u_v],
+                                    ["q", "qd", "theta", "v"], ["u"]),
+            f"hflv_{d}": ca.Function(f"hflv_{d}", [q, qd, theta, vh_in, u_p], [u_hv],
+                                     ["q", "qd", "theta", "v_h", "u_p"], ["u"]),
         }
         self._numeric: FunctionSet | None = None
 

@@ -31,10 +31,22 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   back, would otherwise be simulated forever); a non-finite state or a generalized speed
   above ``max_speed`` (the state diverging, e.g. a knee snapping through its straight
   posture: ended before it turns non-finite and poisons the logged impacts).
+- A delayed human (``human_delay`` given, s): the human's feedback on its output errors
+  arrives late, its internal model does not.  The feedback term v = (eps y1, kp y2 + kd dy2)
+  is computed once per period, at its start, and the human's rows of it are applied
+  ``round(human_delay / dt)`` periods later, held over the period, while the inverse
+  dynamics that turns v into torques is evaluated continuously at the current state
+  (``rk4_d<mode>_<d>`` of :meth:`hp_model.closed_loop.ClosedLoop.delayed`).  A touchdown
+  restarts the pipeline: errors measured in the previous domain (other outputs) are dropped
+  and the first error of the new domain is used until the delayed ones arrive (likewise at
+  the start).  In mode full the prosthesis rows of v are not delayed (sampled at 1/dt).
+  With a delay of 0 this is the human's feedback sampled at 1/dt (close to, not equal to,
+  the continuous human).
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
@@ -42,6 +54,7 @@ import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import HUMAN_OUTPUTS
 
 #: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period
 Policy = Callable[[float, "SimState"], np.ndarray]
@@ -129,16 +142,26 @@ class HybridSimulator:
     ``thetas`` are the packed gait parameters per domain the human side tracks (the nominal
     gait, or a perturbed one); ``gains`` = (eps, kp, kd).  With ``prosthesis_policy`` absent
     the prosthesis torques also come from feedback linearization (mode "full").
+    ``human_delay`` (s): None for the continuous human, else the delayed human of the module
+    docstring.
     """
 
     def __init__(self, model: HumanProsthesisModel, closed_loop: ClosedLoop,
                  thetas: Mapping[str, np.ndarray], gains: np.ndarray,
-                 options: SimOptions | None = None) -> None:
+                 options: SimOptions | None = None, human_delay: float | None = None
+                 ) -> None:
+        if closed_loop.model is not model:
+            raise ValueError("closed_loop was built for another model")
+        if human_delay is not None and not (np.isfinite(human_delay) and human_delay >= 0):
+            raise ValueError(f"human_delay must be finite and >= 0 s, got {human_delay}")
+        self.human_delay = human_delay
+        self._vhold: np.ndarray | None = None  # the feedback term held over the period
         self.model, self.cl = model, closed_loop
         self.thetas = {d: np.asarray(thetas[d], dtype=float) for d in model.domains}
         self.gains = np.asarray(gains, dtype=float)
         self.opt = options or SimOptions()
         self.fs = closed_loop.numeric()
+        self.dfs = closed_loop.delayed() if human_delay is not None else None
         self.mfs = model.numeric()
         self.nq = model.nq
         self._landing = {}
@@ -150,6 +173,13 @@ class HybridSimulator:
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float
              ) -> tuple[np.ndarray, float]:
+        if self._vhold is not None:
+            f = self.dfs[f"rk4_d{mode}_{d}"]
+            if mode == "full":
+                xn, z = f(x, self.thetas[d], self._vhold, h)
+            else:
+                xn, z = f(x, self.thetas[d], self._vhold, u_p, h)
+            return xn.copy(), float(z[0])
         f = self.fs[f"rk4_{mode}_{d}"]
         if mode == "full":
             xn, z = f(x, self.thetas[d], self.gains, h)
@@ -157,8 +187,33 @@ class HybridSimulator:
             xn, z = f(x, self.thetas[d], self.gains, u_p, h)
         return xn.copy(), float(z[0])
 
+    def _feedback(self, d: str, x: np.ndarray) -> np.ndarray:
+        """The feedback term v (6) of the outputs at state x: (eps y1, kp y2 + kd dy2)."""
+        y1, y2, dy2, _ = self.fs[f"outputs_{d}"](x[:self.nq], x[self.nq:], self.thetas[d])
+        g = self.gains
+        return np.r_[g[0] * y1, g[1] * y2 + g[2] * dy2]
+
+    def _hold(self, mode: str, d: str, pipeline: deque[np.ndarray], v_now: np.ndarray
+              ) -> None:
+        """Set the feedback held over the period: the human rows from the pipeline's
+        oldest entry, in mode full the prosthesis rows of ``v_now``."""
+        rows = list(HUMAN_OUTPUTS[d])
+        if mode == "full":
+            v = v_now.copy()
+            v[rows] = pipeline[0][rows]
+            self._vhold = v
+        else:
+            self._vhold = pipeline[0][rows].copy()
+
     def _eval(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
+        if self._vhold is not None:
+            f = self.dfs[f"xdot_d{mode}_{d}"]
+            if mode == "full":
+                _, u, lam = f(x, self.thetas[d], self._vhold)
+            else:
+                _, u, lam = f(x, self.thetas[d], self._vhold, u_p)
+            return u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
         if mode == "full":
             _, u, lam = f(x, self.thetas[d], self.gains)
@@ -231,9 +286,19 @@ class HybridSimulator:
         z_prev = float(self.mfs[f"guard_{d}"](x[:nq], x[nq:])[0][0])
         n_periods = int(np.floor(t_end / opt.dt + 1e-9)) if np.isfinite(t_end) else None
         k = 0
+        self._vhold = None
+        pipeline: deque[np.ndarray] = deque()
+        n_delay = (round(self.human_delay / opt.dt) if self.human_delay is not None
+                   else None)
         while True:
             q, qd = x[:nq], x[nq:]
             tau = self.phase(d, q)
+            if n_delay is not None:  # the delayed human (module docstring)
+                v_now = self._feedback(d, x)
+                pipeline.append(v_now)
+                while len(pipeline) > n_delay + 1:
+                    pipeline.popleft()
+                self._hold(mode, d, pipeline, v_now)
             state_u, lam = self._eval(mode, d, x, u_p)
             if policy is not None:
                 st = SimState(t, d, q.copy(), qd.copy(), tau, lam, len(impacts))
@@ -295,6 +360,11 @@ class HybridSimulator:
                                                     f"{pitch:.3f} rad)")
                         x = np.r_[qe, qdp]
                         d = nxt
+                        if n_delay is not None:  # the pipeline restarts at touchdown
+                            pipeline.clear()
+                            v_now = self._feedback(d, x)
+                            pipeline.append(v_now)
+                            self._hold(mode, d, pipeline, v_now)
                         z_prev = float(self.mfs[f"guard_{d}"](qe, qdp)[0][0])
                         tau_peak = -np.inf
                         t_step = impacts[-1].t
@@ -306,6 +376,7 @@ class HybridSimulator:
                     rest = 0.0
             t = (k + 1) * opt.dt
             k += 1
+        self._vhold = None
         return SimResult(t=np.array(log_t), q=np.array(log_q), qd=np.array(log_qd),
                          u=np.array(log_u), lam=np.array(log_lam), tau=np.array(log_tau),
                          domain=np.array(log_d), impacts=impacts, failed=failed, reason=reason)

@@ -10,6 +10,13 @@ prosthesis controller at 1 kHz (zero-order hold) fed ONLY prosthesis measurement
 
 Falls detected by the simulator end a run as a failure with its reason, time and tau.
 
+The plant need not be the controller's model: ``run_scenario`` takes the plant's model
+(e.g. another human body) and the controller's context separately, the human's tracking
+gains and feedback delay, and an :class:`Encoder` (noise and quantization of what AMPRO3
+senses).  The controller name :data:`ORACLE` runs the prosthesis under full-state feedback
+linearization with perfect knowledge of the plant and perfect sensing instead of a
+controller: the controller-independent rule that labels a perturbed case walkable.
+
 Perturbed human gaits come from :func:`human_fmu.perturbation.perturbed_thetas` (the
 generator the FMU uses), so the in-process and FMU runs of a case agree.
 """
@@ -30,12 +37,15 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
-from hp_model.simulator import HybridSimulator, SimOptions, SimState
+from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
+from hp_model.simulator import HybridSimulator, SimOptions, SimResult, SimState
 from human_fmu.perturbation import perturbed_thetas
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 
 DOMAINS = ("ps", "pns")
+#: not a prosthesis controller: full-state feedback linearization of the whole walker with
+#: perfect knowledge (the walkability label of a perturbed case)
+ORACLE = "oracle"
 #: row of th_pk / th_pa in the y2 outputs of each domain (hp_model.outputs.OUTPUTS)
 KNEE_ROW = {"ps": 4, "pns": 3}
 
@@ -165,13 +175,59 @@ def initial_state(model: HumanProsthesisModel, gait: Gait,
     return q, qd
 
 
-def measurement(model_idx: tuple[int, int], t: float, st: SimState) -> ProsthesisMeasurement:
+@dataclass(frozen=True)
+class Encoder:
+    """AMPRO3's joint encoders: zero-mean white noise (standard deviations) and
+    quantization steps (round to the nearest multiple; 0: none) on the angles (rad) and
+    velocities (rad/s); ``seed`` makes the noise of a run reproducible."""
+
+    angle_noise: float = 0.0
+    velocity_noise: float = 0.0
+    angle_resolution: float = 0.0
+    velocity_resolution: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("angle_noise", "velocity_noise", "angle_resolution",
+                     "velocity_resolution"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"encoder {name} must be finite and >= 0, got {v}")
+
+    @property
+    def ideal(self) -> bool:
+        return (self.angle_noise, self.velocity_noise, self.angle_resolution,
+                self.velocity_resolution) == (0.0, 0.0, 0.0, 0.0)
+
+    def read(self, rng: np.random.Generator, angles: np.ndarray, vel: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """(angles, velocities) as the encoders report them."""
+        a = angles + self.angle_noise * rng.standard_normal(2)
+        v = vel + self.velocity_noise * rng.standard_normal(2)
+        if self.angle_resolution > 0:
+            a = np.round(a / self.angle_resolution) * self.angle_resolution
+        if self.velocity_resolution > 0:
+            v = np.round(v / self.velocity_resolution) * self.velocity_resolution
+        return a, v
+
+
+IDEAL_ENCODER = Encoder()
+
+
+def measurement(model_idx: tuple[int, int], t: float, st: SimState,
+                encoder: Encoder = IDEAL_ENCODER, rng: np.random.Generator | None = None
+                ) -> ProsthesisMeasurement:
     """What AMPRO3 senses, from the simulator state (module docstring)."""
     pk, pa = model_idx
     load = max(float(st.lam[1]), 0.0) if st.domain == "ps" else 0.0
-    return ProsthesisMeasurement(t=float(t), knee_angle=float(st.q[pk]),
-                                 ankle_angle=float(st.q[pa]), knee_vel=float(st.qd[pk]),
-                                 ankle_vel=float(st.qd[pa]), foot_load=load,
+    ang = np.array([st.q[pk], st.q[pa]], float)
+    vel = np.array([st.qd[pk], st.qd[pa]], float)
+    if not encoder.ideal:
+        ang, vel = encoder.read(rng if rng is not None
+                                else np.random.default_rng(encoder.seed), ang, vel)
+    return ProsthesisMeasurement(t=float(t), knee_angle=float(ang[0]),
+                                 ankle_angle=float(ang[1]), knee_vel=float(vel[0]),
+                                 ankle_vel=float(vel[1]), foot_load=load,
                                  contact=st.domain == "ps")
 
 
@@ -182,20 +238,31 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                  scenario: Scenario, *, context: ControllerContext | None = None,
                  options: SimOptions | None = None,
                  q0: np.ndarray | None = None, qd0: np.ndarray | None = None,
-                 closed_loop: ClosedLoop | None = None) -> ScenarioResult:
-    """Run one scenario on the full hybrid model (module docstring).  ``closed_loop``: the
-    compiled closed-loop functions of the gait's degree, to reuse between runs (building
-    them costs about 0.5 s); built here when absent."""
+                 closed_loop: ClosedLoop | None = None,
+                 human_gains: np.ndarray | None = None, human_delay: float | None = None,
+                 encoder: Encoder = IDEAL_ENCODER) -> ScenarioResult:
+    """Run one scenario on the full hybrid model (module docstring).  ``model`` is the
+    plant's; the controller's comes from ``context`` (default: the plant's).
+    ``closed_loop``: the compiled closed-loop functions of the plant and the gait's degree,
+    to reuse between runs (building them costs about 0.5 s); built here when absent.
+    ``human_gains``: the human's (eps, kp, kd) (default: the gait's); ``human_delay``: s,
+    None for the continuous human (:class:`hp_model.simulator.HybridSimulator`);
+    ``encoder``: what the controller's measurements go through (the oracle ignores it)."""
     if closed_loop is None:
         closed_loop = ClosedLoop(model, gait.degree)
     elif closed_loop.degree != gait.degree or closed_loop.model is not model:
         raise ValueError("closed_loop was built for another model or Bezier degree")
-    sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait),
-                          gait.gains_array, options or SimOptions())
+    gains = gait.gains_array if human_gains is None else np.asarray(human_gains, float)
+    sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
+                          options or SimOptions(), human_delay=human_delay)
+    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
+    if scenario.controller == ORACLE:
+        sim.thetas = oracle_thetas(gait, sim.thetas)
+        return _run_oracle(model, gait, tube, scenario, sim, idx, q0, qd0)
     ctx = context or ControllerContext(gait, tube, model, None)
     ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
     ctrl.reset()
-    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
+    rng = np.random.default_rng(encoder.seed)
     torques: list[np.ndarray] = []
     modes: list[str] = []
     Vs: list[float] = []
@@ -203,7 +270,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     fallbacks = [0]
 
     def policy(t: float, st: SimState) -> np.ndarray:
-        out = ctrl.tick(measurement(idx, t, st))
+        out = ctrl.tick(measurement(idx, t, st, encoder, rng))
         dg = out.diagnostics
         torques.append(np.array(out.torque, float))
         modes.append(str(dg.mode))
@@ -217,6 +284,45 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     r = sim.run(q0, qd0, "ps", steps=scenario.steps, policy=policy)
     n = r.t.size
     tq = np.array(torques[:n]) if torques else np.zeros((0, 2))
+    return _result(model, gait, tube, scenario, r, idx, tq, modes[:n], np.array(Vs[:n]),
+                   np.array(rhos[:n]), fallbacks[0])
+
+
+def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The outputs the oracle's walker tracks: the human's rows of ``thetas`` (the human's
+    possibly perturbed gait) and the prosthesis's rows of the nominal gait (what a prosthesis
+    controller is given)."""
+    m1 = gait.degree + 1
+    out = {}
+    for d in DOMAINS:
+        th = np.array(thetas[d], float)
+        nominal = gait.theta(d)
+        for r in range(len(Y2_COORDS[d])):
+            if r + 1 not in HUMAN_OUTPUTS[d]:  # rows of (y1, y2): y2 row r is r + 1
+                th[r * m1:(r + 1) * m1] = nominal[r * m1:(r + 1) * m1]
+        th[-3:] = nominal[-3:]  # v_hip, p_min, p_max: the phase is the prosthesis's
+        out[d] = th
+    return out
+
+
+def _run_oracle(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
+                sim: HybridSimulator, idx: tuple[int, int], q0: np.ndarray | None,
+                qd0: np.ndarray | None) -> ScenarioResult:
+    """The :data:`ORACLE` run: no controller, the plant's own feedback linearization of the
+    prosthesis outputs too (mode full)."""
+    if q0 is None or qd0 is None:
+        q0, qd0 = initial_state(model, gait, scenario.initial_offset)
+    r = sim.run(q0, qd0, "ps", steps=scenario.steps)
+    n = r.t.size
+    return _result(model, gait, tube, scenario, r, idx, np.array(r.u[:, 4:6]),
+                   [ORACLE] * n, np.zeros(n), np.zeros(n), 0)
+
+
+def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
+            r: SimResult, idx: tuple[int, int], tq: np.ndarray, modes: list[str],
+            V: np.ndarray, rho: np.ndarray, fallback_count: int) -> ScenarioResult:
+    """The :class:`ScenarioResult` of a finished simulation."""
+    n = r.t.size
     ref = np.array([knee_reference(gait, "ps" if dd == 0 else "pns", ta)
                     for dd, ta in zip(r.domain, r.tau, strict=True)])
     bounds, i0 = [], None
@@ -240,8 +346,8 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     return ScenarioResult(
         scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
         q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
-        mode=modes[:n], V=np.array(Vs[:n]), rho=np.array(rhos[:n]),
-        fallback_count=fallbacks[0], steps=r.steps, failed=r.failed, reason=r.reason,
+        mode=modes, V=V, rho=rho, fallback_count=fallback_count, steps=r.steps,
+        failed=r.failed, reason=r.reason,
         fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
         socket_force=r.lam[:, 3:6].copy(),
         fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),

@@ -109,7 +109,8 @@ def run(
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out}: not a folder")
     console = Console()
-    console.print(f"sweep [bold]{sp.name}[/]: {len(sp.controllers)} controllers x "
+    label = " (+ the walkability oracle)" if sp.label_walkable else ""
+    console.print(f"sweep [bold]{sp.name}[/]: {len(sp.controllers)} controllers{label} x "
                   f"{len(sp.families)} families x {sp.draws} draws = {sp.n_runs} runs, "
                   f"{sp.steps} steps each, backend {sp.backend}")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),

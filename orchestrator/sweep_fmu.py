@@ -25,10 +25,16 @@ from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from human_fmu import FALL_CODES
 from human_fmu.instance import FmuInstance
-from orchestrator.scenarios import Scenario, ScenarioResult, knee_reference
+from orchestrator.scenarios import (
+    Scenario,
+    ScenarioResult,
+    knee_reference,
+    socket_force_in_tube,
+)
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 
-SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau")
+SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
+           "socket_Fx", "socket_Fz", "socket_My")
 CONE_FALL = 5  # reported one period late (module docstring)
 DOMAINS = ("ps", "pns")
 
@@ -87,6 +93,7 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
     dom_log: list[int] = []
     q_log: list[tuple[float, float]] = []
     qd_log: list[tuple[float, float]] = []
+    fs_log: list[tuple[float, float, float]] = []
     torques: list[np.ndarray] = []
     modes: list[str] = []
     Vs: list[float] = []
@@ -117,6 +124,7 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
         dom_log.append(dom)
         q_log.append((y[0], y[1]))
         qd_log.append((y[2], y[3]))
+        fs_log.append((y[6], y[7], y[8]))
         if fell or steps >= scenario.steps:
             break
         f.setReal(plant._u, [float(u[0]), float(u[1])])
@@ -144,7 +152,10 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
             i0 = None
     if i0 is not None:
         bounds.append((i0, n))
+    fs = np.array(fs_log, float).reshape(n, 3)
+    ps = domain == 0
     return ScenarioResult(
+        socket_force=fs, fs_in_tube=socket_force_in_tube(ctx.tube, tau[ps], fs[ps]),
         scenario=scenario, t=np.array(t_log), tau=tau, domain=domain,
         q_p=np.array(q_log).reshape(n, 2), qd_p=np.array(qd_log).reshape(n, 2),
         torque=np.array(torques).reshape(n, 2), knee_ref=ref, mode=modes, V=np.array(Vs),

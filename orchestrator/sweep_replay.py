@@ -28,6 +28,9 @@ class Replay:
 #: columns computed from the phase tau, which the FMU's C evaluates with another summation
 #: order than numpy (the last bit may differ; human_fmu README)
 TAU_COLUMNS = ("fail_tau", "knee_rms_ps_rad", "knee_rms_all_rad")
+#: share of ps samples whose socket force may fall on the other side of the tube's edge
+#: between the backends (_same_across_backends)
+SOCKET_SHARE_TOL = 0.02
 
 
 def _same_across_backends(k: str, a: Any, b: Any) -> bool:
@@ -35,6 +38,10 @@ def _same_across_backends(k: str, a: Any, b: Any) -> bool:
         return True
     if k in TAU_COLUMNS and a is not None and b is not None:
         return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
+    if k == "socket_force_in_tube" and a is not None and b is not None:
+        # the FMU outputs the socket force under the previous period's motor torque, the
+        # simulator logs it under the new one: samples at the tube's edge may differ
+        return abs(a - b) <= SOCKET_SHARE_TOL
     if k == "reason" and a and b:  # the simulator words a fall with numbers, the FMU by code
         return a.split(":")[0] == b.split(":")[0]
     return a == b
@@ -62,9 +69,9 @@ def replay_run(out: str | Path, key: str, backend: str | None = None) -> Replay:
     store = ResultStore(Path(out))
     spec = store.spec()
     k = RunKey.parse(key)
-    if k.controller not in spec.controllers:
+    if k.controller not in spec.run_controllers:
         raise ValueError(f"controller '{k.controller}' is not in the sweep "
-                         f"({', '.join(spec.controllers)})")
+                         f"({', '.join(spec.run_controllers)})")
     if k.draw >= spec.draws:
         raise ValueError(f"draw {k.draw} is beyond the sweep's {spec.draws} draws")
     other = backend is not None and backend != spec.backend

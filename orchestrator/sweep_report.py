@@ -6,6 +6,10 @@ B_pk(tau) over the run's ps samples, rad) distribution, steps and time walked, f
 reasons, the worst cases with the command that reproduces each; paired comparisons of the
 first controller with each other (the controllers meet the same draws: exact McNemar test on
 the discordant draws); throughput (runs per minute and workers, per session).
+
+With the walkability label (the ``oracle`` runs, ``orchestrator.scenarios.ORACLE``) a draw is
+*walkable* when the oracle walks it, and every rate, interval and paired test is also given
+among the walkable draws: a draw no controller could walk says nothing about a controller.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
-from orchestrator.sweep_draws import HUMAN_JOINTS, Draw
+from orchestrator.sweep_draws import ORACLE, Draw
 from orchestrator.sweep_store import ResultStore, read_results
 
 Z95 = 1.959963984540054  # standard normal quantile 0.975
@@ -76,7 +80,7 @@ def cosim_command(out: Path, row: dict[str, Any]) -> str | None:
     """The single co-simulation run of a draw that only perturbs the human's Bezier
     coefficients (the FMU's own generator); None for other draws."""
     d = draw_of(row)
-    if not d.is_bezier_only:
+    if not d.is_bezier_only or row["controller"] == ORACLE:
         return None
     pert = f" --perturb human:{d.bezier_amplitude!r}:{d.bezier_seed}" \
         if d.bezier_amplitude > 0 else ""
@@ -86,11 +90,7 @@ def cosim_command(out: Path, row: dict[str, Any]) -> str | None:
 
 def draw_of(row: dict[str, Any]) -> Draw:
     """The draw stored in a results row."""
-    return Draw(row["family"], int(row["draw"]), row["draw_bezier_amplitude"],
-                int(row["draw_bezier_seed"]),
-                tuple(row[f"draw_offset_{j}"] for j in HUMAN_JOINTS),
-                row["draw_tube_scale"], row["draw_mass_scale"], row["draw_inertia_scale"],
-                row["draw_com_scale"], row["draw_knee_offset"], row["draw_ankle_offset"])
+    return Draw.from_columns(row["family"], int(row["draw"]), row)
 
 
 def _worst_order(r: dict[str, Any]) -> tuple:
@@ -115,10 +115,14 @@ def summarize(out: str | Path) -> dict[str, Any]:
             controllers.append(r["controller"])
         if r["family"] not in families:
             families.append(r["family"])
+    if any(r["controller"] == ORACLE for r in rows) and ORACLE not in controllers:
+        controllers.insert(0, ORACLE)
     cells = []
     by_cell: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in rows:
         by_cell.setdefault((r["controller"], r["family"]), []).append(r)
+    walkable = {(r["family"], r["draw"]): bool(r["success"]) for r in rows
+                if r["controller"] == ORACLE and r["error"] is None}
     for f in families:
         for c in controllers:
             rs = by_cell.get((c, f), [])
@@ -128,7 +132,13 @@ def summarize(out: str | Path) -> dict[str, Any]:
             rms = [r["knee_rms_ps_rad"] for r in ok if r["knee_rms_ps_rad"] is not None]
             dur = [r["duration_s"] for r in ok]
             worst = sorted(ok, key=_worst_order)[:N_WORST]
+            wk = [r for r in ok if walkable.get((f, r["draw"]))]
+            kw = sum(bool(r["success"]) for r in wk)
+            wlo, whi = wilson_interval(kw, len(wk))
             cells.append({
+                "walkable_runs": len(wk), "walkable_successes": kw,
+                "walkable_rate": kw / len(wk) if wk else None,
+                "walkable_wilson95": [wlo, whi] if wk else None,
                 "controller": c, "family": f, "runs": len(rs), "errors": len(rs) - len(ok),
                 "error_examples": sorted({r["error"] for r in rs if r["error"]})[:3],
                 "successes": k, "success_rate": k / len(ok) if ok else None,
@@ -150,10 +160,11 @@ def summarize(out: str | Path) -> dict[str, Any]:
                            "replay": replay_command(out, r["key"]),
                            "cosim": cosim_command(out, r)} for r in worst]})
     paired = []
-    if len(controllers) > 1:
-        a = controllers[0]
+    ctrl_only = [c for c in controllers if c != ORACLE]
+    if len(ctrl_only) > 1:
+        a = ctrl_only[0]
         for f in families:
-            for b in controllers[1:]:
+            for b in ctrl_only[1:]:
                 sa = {r["draw"]: bool(r["success"]) for r in by_cell.get((a, f), [])
                       if r["error"] is None}
                 sb = {r["draw"]: bool(r["success"]) for r in by_cell.get((b, f), [])
@@ -161,17 +172,26 @@ def summarize(out: str | Path) -> dict[str, Any]:
                 common = sorted(set(sa) & set(sb))
                 a_only = sum(sa[i] and not sb[i] for i in common)
                 b_only = sum(sb[i] and not sa[i] for i in common)
-                paired.append({"family": f, "a": a, "b": b, "pairs": len(common),
-                               "a_only": a_only, "b_only": b_only,
-                               "mcnemar_p": mcnemar_exact(a_only, b_only)})
+                entry = {"family": f, "a": a, "b": b, "pairs": len(common),
+                         "a_only": a_only, "b_only": b_only,
+                         "mcnemar_p": mcnemar_exact(a_only, b_only)}
+                if walkable:
+                    cw = [i for i in common if walkable.get((f, i))]
+                    wa = sum(sa[i] and not sb[i] for i in cw)
+                    wb = sum(sb[i] and not sa[i] for i in cw)
+                    entry.update(walkable_pairs=len(cw), walkable_a_only=wa,
+                                 walkable_b_only=wb,
+                                 walkable_mcnemar_p=mcnemar_exact(wa, wb))
+                paired.append(entry)
     sessions = man.get("sessions", [])
     total_done = sum(s.get("runs_done", 0) for s in sessions)
     total_wall = sum(s.get("wall_s", 0.0) for s in sessions)
-    expected = len(spec["controllers"]) * len(spec["families"]) * spec["draws"]
+    n_ctrl = len(spec["controllers"]) + (1 if spec.get("label_walkable", False) else 0)
+    expected = n_ctrl * len(spec["families"]) * spec["draws"]
     return {"kind": KIND, "schema_version": 1, "out": str(out), "spec": spec,
             "artifact_hashes": man["artifact_hashes"], "runs_expected": expected,
             "runs_stored": len(rows), "complete": len(rows) >= expected,
-            "cells": cells, "paired": paired,
+            "walkability_labelled": bool(walkable), "cells": cells, "paired": paired,
             "throughput": {"sessions": sessions, "runs_done": total_done,
                            "wall_s": total_wall,
                            "runs_per_min": 60 * total_done / total_wall if total_wall else None}}
@@ -284,27 +304,37 @@ def markdown(s: dict[str, Any], figs: list[str]) -> str:
     L += ["", "## Success rate and tracking", "",
           "A run succeeds when it completes the requested steps without a fall. Interval: "
           "Wilson score, 95 %. Knee RMS: th_pk - B_pk(tau) over the run's ps samples, until "
-          "the run ended (a fall shortens it).", "",
-          "| family | controller | runs | errors | success | rate | 95 % interval | steps "
-          "(mean) | time walked median (s) | knee RMS median / p90 / max (deg) |",
-          "|---|---|---:|---:|---:|---:|---|---:|---:|---|"]
+          "the run ended (a fall shortens it). Walkable: the draws the `oracle` (full-state "
+          "feedback linearization of the prosthesis with perfect knowledge and sensing) "
+          "walks; the oracle's own row is the fraction of walkable draws.", "",
+          "| family | controller | runs | errors | success | rate | 95 % interval | "
+          "walkable: success / runs | rate | 95 % interval | steps (mean) | time walked "
+          "median (s) | knee RMS median / p90 / max (deg) |",
+          "|---|---|---:|---:|---:|---:|---|---:|---:|---|---:|---:|---|"]
     for c in s["cells"]:
         k = c["knee_rms_ps_rad"]
         deg = [None if k[x] is None else math.degrees(k[x]) for x in ("median", "p90", "max")]
-        ci = c["wilson95"]
+        ci, wci = c["wilson95"], c["walkable_wilson95"]
         L.append(f"| {c['family']} | {c['controller']} | {c['runs']} | {c['errors']} | "
                  f"{c['successes']} | {_f(c['success_rate'], '.3f')} | "
                  + (f"[{ci[0]:.3f}, {ci[1]:.3f}]" if ci else "-")
+                 + f" | {c['walkable_successes']} / {c['walkable_runs']} | "
+                 f"{_f(c['walkable_rate'], '.3f')} | "
+                 + (f"[{wci[0]:.3f}, {wci[1]:.3f}]" if wci else "-")
                  + f" | {_f(c['steps_completed_mean'], '.2f')} | "
                  f"{_f(c['duration_s_median'], '.3f')} | "
                  + " / ".join(_f(d, ".2f") for d in deg) + " |")
     if s["paired"]:
         L += ["", "## Paired comparison (same draws)", "",
+              "All draws, then (W) the walkable draws only.", "",
               "| family | A | B | pairs | A succeeds, B falls | B succeeds, A falls | exact "
-              "McNemar p |", "|---|---|---|---:|---:|---:|---:|"]
+              "McNemar p | W pairs | W: A only | W: B only | W: p |",
+              "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
         for p in s["paired"]:
+            w = (f"{p['walkable_pairs']} | {p['walkable_a_only']} | {p['walkable_b_only']} | "
+                 f"{p['walkable_mcnemar_p']:.3g}") if "walkable_pairs" in p else "- | - | - | -"
             L.append(f"| {p['family']} | {p['a']} | {p['b']} | {p['pairs']} | {p['a_only']} "
-                     f"| {p['b_only']} | {p['mcnemar_p']:.3g} |")
+                     f"| {p['b_only']} | {p['mcnemar_p']:.3g} | {w} |")
     L += ["", "## Failure reasons", ""]
     for c in s["cells"]:
         if c["failure_reasons"]:

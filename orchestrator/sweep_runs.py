@@ -30,9 +30,11 @@ import numpy as np
 from hp_model.artifacts import canonical_hash
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
-from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.outputs import Y2_COORDS
 from orchestrator.scenarios import (
+    ORACLE,
+    Encoder,
     Perturbation,
     Scenario,
     ScenarioResult,
@@ -45,6 +47,8 @@ from orchestrator.sweep_spec import SweepSpec
 
 #: contexts (controller model x tube) kept per worker; a continuous tube_scale misses
 CONTEXT_CACHE = 16
+#: plants (model + compiled closed loop) kept per worker: the runs of a draw come together
+PLANT_CACHE = 4
 
 
 @dataclass(frozen=True)
@@ -125,14 +129,19 @@ def scaled_tube(tube: ForceTube, scale: float) -> ForceTube:
     return replace(tube, lower=tube.lower / scale, upper=tube.upper / scale)
 
 
-def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, com: float
+def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, com: float,
+                    body: BodyVariation | None = None, backend: str = "auto"
                     ) -> HumanProsthesisModel:
-    """The model the controller believes in: the prosthesis links' (top, shin, foot)
-    masses, inertias and COM positions scaled (re-validated: a non-positive mass fails)."""
+    """The model with the prosthesis links' (top, shin, foot) masses, inertias and COM
+    positions scaled (re-validated: a non-positive mass fails), and the human ``body`` (the
+    model's own when None): the model the controller believes in (``model.*``), or the
+    plant the sweep simulates (``plant.*``); ``backend``: of its numeric functions."""
     from hp_model.config import DeviceConfig
 
+    body = model.body if body is None else body
     if (mass, inertia, com) == (1.0, 1.0, 1.0):
-        return model
+        return model if body == model.body else \
+            HumanProsthesisModel(model.subject, model.device, body, backend)
     doc = model.device.model_dump(mode="json")
     p = doc["prosthesis"]
     for link in ("top", "shin", "foot"):
@@ -141,7 +150,22 @@ def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, co
         for c in ("com", "com_x", "com_z"):
             if c in p[link]:
                 p[link][c]["value"] *= com
-    return HumanProsthesisModel(model.subject, DeviceConfig.model_validate(doc))
+    return HumanProsthesisModel(model.subject, DeviceConfig.model_validate(doc), body,
+                                backend)
+
+
+def human_gains(gait: Gait, draw: Draw) -> np.ndarray:
+    """The human's (eps, kp, kd) in a draw: the bandwidth scaled by ``human_stiffness`` s,
+    (s eps, s^2 kp, s kd) (same damping ratio)."""
+    s = draw.human_stiffness
+    if not (math.isfinite(s) and s > 0):
+        raise ValueError(f"human stiffness must be finite and > 0, got {s}")
+    return gait.gains_array * np.array([s, s * s, s])
+
+
+def encoder_of(draw: Draw) -> Encoder:
+    """What the prosthesis's encoders do to its measurements in a draw."""
+    return Encoder(*draw.encoder, seed=draw.sensor_seed)
 
 
 # ------------------------------------------------------------------ per-worker resources
@@ -184,6 +208,8 @@ class Resources:
         self.context0 = ControllerContext(self.gait, self.tube, self.model)
         self._contexts: OrderedDict[tuple[float, ...], Any] = OrderedDict()
         self._models: dict[tuple[float, ...], HumanProsthesisModel] = {}
+        self._plants: OrderedDict[tuple[Any, ...], tuple[HumanProsthesisModel, Any]] = \
+            OrderedDict()
         self.fmu = None
         if paths["fmu"] is not None:
             from orchestrator.sweep_fmu import FmuPlant
@@ -208,6 +234,28 @@ class Resources:
         if len(self._contexts) > CONTEXT_CACHE:
             self._contexts.popitem(last=False)
         return ctx
+
+    def plant(self, draw: Draw) -> tuple[HumanProsthesisModel, Any]:
+        """The simulated walker of a draw and its compiled closed loop (the nominal ones
+        unless the draw has ``plant.*`` quantities; compiled once per worker, the library
+        cached on disk by its source)."""
+        from hp_model.closed_loop import ClosedLoop
+
+        key = (draw.body, draw.plant_prosthesis)
+        if key == (self.model.body, (1.0, 1.0, 1.0)):
+            return self.model, self.closed_loop
+        if key in self._plants:
+            self._plants.move_to_end(key)
+            return self._plants[key]
+        # the model's own functions run a few times per step (impacts, start): interpreted;
+        # the closed loop runs every step: compiled
+        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body, backend="sx")
+        cl = ClosedLoop(m, self.gait.degree)
+        cl.numeric()
+        self._plants[key] = (m, cl)
+        if len(self._plants) > PLANT_CACHE:
+            self._plants.popitem(last=False)
+        return m, cl
 
     def close(self) -> None:
         """Free the FMU instance and remove the files written for this set-up."""
@@ -241,7 +289,9 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
             "fault_ticks": int(s["modes"].get("fault", 0)),
             "max_torque_knee": _finite(peak[0]) if finite else None,
             "max_torque_ankle": _finite(peak[1]) if finite else None,
-            "torque_finite": finite}
+            "torque_finite": finite,
+            "socket_force_in_tube": _finite(r.fs_in_tube) if r.fs_in_tube is not None
+            else None}
 
 
 EMPTY_RESULT: dict[str, Any] = {
@@ -249,7 +299,7 @@ EMPTY_RESULT: dict[str, Any] = {
     "fail_t": None, "fail_tau": None, "fail_domain": None, "duration_s": None,
     "knee_rms_ps_rad": None, "knee_rms_all_rad": None, "fallback_count": None,
     "fallback_ticks": None, "fault_ticks": None, "max_torque_knee": None,
-    "max_torque_ankle": None, "torque_finite": None}
+    "max_torque_ankle": None, "torque_finite": None, "socket_force_in_tube": None}
 
 
 def base_row(spec: SweepSpec, artifacts_digest: str, key: RunKey, draw: Draw | None
@@ -272,9 +322,11 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
         scenario = Scenario(key.controller, DrawPerturbation(
             f"{key.family}/{key.draw}", draw.bezier_amplitude, draw.bezier_seed, draw),
             spec.steps, (draw.knee_offset, draw.ankle_offset))
-        if spec.backend == "simulator":
-            r = run_scenario(res.model, res.gait, ctx.tube, scenario, context=ctx,
-                             closed_loop=res.closed_loop)
+        if spec.backend == "simulator" or key.controller == ORACLE:
+            model, cl = res.plant(draw)
+            r = run_scenario(model, res.gait, ctx.tube, scenario, context=ctx,
+                             closed_loop=cl, human_gains=human_gains(res.gait, draw),
+                             human_delay=draw.human_delay, encoder=encoder_of(draw))
         else:
             from orchestrator.sweep_fmu import run_fmu_scenario
 

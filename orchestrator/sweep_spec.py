@@ -20,6 +20,30 @@ quantity given as a number (fixed) or a distribution::
     model.com_scale        = 1.0                                          # links (fixed/choice)
     initial.knee           = {dist = "uniform", low = -0.05, high = 0.05} # rad, prosthesis
     initial.ankle          = 0.0                                          # initial offsets
+    human.stiffness        = {dist = "uniform", low = 0.5, high = 1.0}    # the human's
+                            # tracking bandwidth: (eps, kp, kd) -> (s eps, s^2 kp, s kd)
+    human.delay            = {dist = "uniform", low = 0.0, high = 0.03}   # s, the human's
+                            # feedback delay (hp_model.simulator); absent: continuous human
+    plant.segment_mass     = {dist = "uniform", low = 0.8, high = 1.2}    # the simulated
+                            # human's segment masses (hat, thigh, shank, foot, each drawn)
+    plant.hat_com          = 1.0      # HAT COM distance from the hip, factor
+    plant.iwalk_mass       = 1.0      # factor
+    plant.prosthesis_mass  = 1.0      # the plant's prosthesis links (the controller keeps
+    plant.prosthesis_inertia = 1.0    # the nominal ones): mass, inertia, COM factors
+    plant.prosthesis_com   = 1.0
+    sensor.angle_noise     = 0.0      # rad, std of white noise on the encoder angles
+    sensor.velocity_noise  = 0.0      # rad/s, std on the joint velocities
+    sensor.angle_resolution = 0.0     # rad, quantization step (0: none)
+    sensor.velocity_resolution = 0.0  # rad/s
+
+``plant.*`` and ``human.stiffness`` / ``human.delay`` change the simulated walker, not the
+controller: the controller keeps the nominal model.  Each distinct plant body compiles its
+model once per worker (about 7 s; the compiled library is cached on disk by its source).
+With ``label_walkable`` (default true) each draw is also run once by the ``oracle``, the
+controller-independent walkability rule: the prosthesis under full-state feedback
+linearization with perfect knowledge of the plant and perfect sensing
+(:func:`orchestrator.scenarios.run_scenario`); a draw is walkable when the oracle walks it,
+and the report gives every controller's success among walkable draws.
 
 Distributions: a number, ``{dist = "fixed", value}``, ``{dist = "uniform", low, high}``,
 ``{dist = "normal", mean, std}``, ``{dist = "choice", values = [...]}``.  Model errors take
@@ -135,11 +159,18 @@ class HumanGroup(_Group):
 
     bezier_amplitude: Dist | None = None
     output_offset: Dist | None = None
+    stiffness: Dist | None = None
+    delay: Dist | None = None
 
-    @field_validator("bezier_amplitude")
+    @field_validator("bezier_amplitude", "delay")
     @classmethod
     def _nonnegative(cls, d: Any) -> Any:
         return _check_range(d, 0.0, strict=False)
+
+    @field_validator("stiffness")
+    @classmethod
+    def _positive(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=True)
 
 
 class SocketGroup(_Group):
@@ -169,11 +200,53 @@ class ModelGroup(_Group):
         return _check_range(d, 0.0, strict=info.field_name != "com_scale")
 
 
+class PlantGroup(_Group):
+    """The simulated walker's parameters (factors; the controller keeps the nominal)."""
+
+    segment_mass: Dist | None = None
+    hat_com: Dist | None = None
+    iwalk_mass: Dist | None = None
+    prosthesis_mass: Dist | None = None
+    prosthesis_inertia: Dist | None = None
+    prosthesis_com: Dist | None = None
+
+    @field_validator("segment_mass", "hat_com", "iwalk_mass", "prosthesis_mass",
+                     "prosthesis_inertia")
+    @classmethod
+    def _positive(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=True)
+
+    @field_validator("prosthesis_com")
+    @classmethod
+    def _nonnegative(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=False)
+
+
+class SensorGroup(_Group):
+    """AMPRO3's encoders: white noise (standard deviations) and quantization steps."""
+
+    angle_noise: Dist | None = None
+    velocity_noise: Dist | None = None
+    angle_resolution: Dist | None = None
+    velocity_resolution: Dist | None = None
+
+    @field_validator("angle_noise", "velocity_noise", "angle_resolution",
+                     "velocity_resolution")
+    @classmethod
+    def _nonnegative(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=False)
+
+
 class InitialGroup(_Group):
     """Offsets (rad) of the prosthesis knee and ankle from the gait's initial state."""
 
     knee: Dist | None = None
     ankle: Dist | None = None
+
+
+GROUPS = ("human", "socket", "model", "initial", "plant", "sensor")
+#: quantities only the in-process simulator models (the FMU backend refuses them)
+SIMULATOR_ONLY = ("plant.", "sensor.", "human.stiffness", "human.delay")
 
 
 class Family(_Strict):
@@ -183,11 +256,13 @@ class Family(_Strict):
     socket: SocketGroup = SocketGroup()
     model: ModelGroup = ModelGroup()
     initial: InitialGroup = InitialGroup()
+    plant: PlantGroup = PlantGroup()
+    sensor: SensorGroup = SensorGroup()
 
     def quantities(self) -> dict[str, Any]:
         """The given quantities by dotted name (``human.bezier_amplitude``, ...)."""
         out = {}
-        for g in ("human", "socket", "model", "initial"):
+        for g in GROUPS:
             for k, v in getattr(self, g):
                 if v is not None:
                     out[f"{g}.{k}"] = v
@@ -211,6 +286,7 @@ class SweepSpec(_Strict):
     backend: Literal["simulator", "fmu"] = "simulator"
     fmu: Path | None = None
     batch: int = Field(25, ge=1)
+    label_walkable: bool = True
 
     @field_validator("controllers")
     @classmethod
@@ -235,11 +311,26 @@ class SweepSpec(_Strict):
     def _fmu(self) -> SweepSpec:
         if self.fmu is not None and self.backend != "fmu":
             raise ValueError("'fmu' is given but backend is not 'fmu'")
+        if self.backend == "fmu":
+            for name, fam in self.families.items():
+                bad = [k for k in fam.quantities() if k.startswith(SIMULATOR_ONLY)]
+                if bad:
+                    raise ValueError(f"family '{name}': {', '.join(bad)} change the simulated "
+                                     "walker, which the FMU does not model; use backend "
+                                     "'simulator'")
         return self
 
     @property
+    def run_controllers(self) -> tuple[str, ...]:
+        """The runs of each draw: the oracle (with ``label_walkable``), then the
+        controllers."""
+        from orchestrator.sweep_draws import ORACLE
+
+        return ((ORACLE,) if self.label_walkable else ()) + self.controllers
+
+    @property
     def n_runs(self) -> int:
-        return len(self.controllers) * len(self.families) * self.draws
+        return len(self.run_controllers) * len(self.families) * self.draws
 
     def identity(self) -> dict[str, Any]:
         """What a run's result depends on besides its controller, family and draw index

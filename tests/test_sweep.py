@@ -47,6 +47,7 @@ draws = {draws}
 seed = 7
 steps = 1
 batch = 4
+label_walkable = false  # the oracle has its own tests (test_sweep_families.py)
 
 [families.nominal]
 
@@ -279,7 +280,8 @@ def test_fmu_backend_equals_simulator(resources, tmp_path):
             assert a["error"] is None and b["error"] is None, (a["error"], b["error"])
             assert compare_rows(a, b, across_backends=True) == {}
             exact = {k for k in a if k not in VOLATILE and a[k] != b[k]}
-            assert exact <= {"backend", "run_hash", "reason", *TAU_COLUMNS}, exact
+            assert exact <= {"backend", "run_hash", "reason", "socket_force_in_tube",
+                             *TAU_COLUMNS}, exact
             assert a["fail_t"] == b["fail_t"] and a["steps_completed"] == b["steps_completed"]
     finally:
         fres.close()
