@@ -46,6 +46,7 @@ from bus_schemas.protocol import (
 
 __all__ = [
     "AnkleFeedback",
+    "CtrlDisturbance",
     "CtrlHeartbeat",
     "CtrlRejects",
     "CtrlStatus",
@@ -60,6 +61,7 @@ __all__ = [
     "decode",
     "decode_cantools",
     "encode_cantools",
+    "encode_disturbance",
     "encode_feedback",
     "encode_frame",
     "encode_heartbeat",
@@ -122,6 +124,17 @@ class CtrlStatus(NamedTuple):
     qp_iterations: int
     fallback_count: int
     active_constraints: int  # ActiveConstraint
+    coverage_flag: int  # 1: the model-error estimate left the characterised bound
+    coverage_count: int  # flagged ticks, saturating at 127
+
+
+class CtrlDisturbance(NamedTuple):
+    dy1: float  # m/s^2, estimated model error of dy1
+    d2y2: float  # rad/s^2, estimated model error of d2y2
+    tau: float  # stance phase of the estimate
+    valid: int  # 1: the estimate has settled
+    flag: int  # 1: outside the characterised bound
+    since_touchdown: float  # s, since the switch to stance, saturating at 0.255
 
 
 class CtrlRejects(NamedTuple):
@@ -141,6 +154,7 @@ PAYLOAD_TYPES: Mapping[int, type[NamedTuple]] = {
     FrameId.FOOT_LOAD: FootLoad,
     FrameId.CTRL_STATUS: CtrlStatus,
     FrameId.CTRL_REJECTS: CtrlRejects,
+    FrameId.CTRL_DISTURBANCE: CtrlDisturbance,
 }
 
 
@@ -255,21 +269,34 @@ def encode_status(fault_flags: FaultFlag | int = 0, qp_status: QpStatus | int = 
                   qp_iterations: int = 0, fallback_count: int = 0,
                   active_constraints: int = 0,
                   rejects: Mapping[FrameStatus | str, int] | None = None, *,
+                  coverage_flag: bool = False, coverage_count: int = 0,
                   timestamp: float = 0.0) -> list[can.Message]:
     """CtrlStatus and CtrlRejects frames (unprotected diagnostics). Counts saturate at the
-    signal maximum (FallbackCount 65535, QpIterations 255, rejection counts 4095);
-    ``rejects`` maps a :class:`FrameStatus` (or its string) to a count."""
+    signal maximum (FallbackCount 65535, QpIterations 255, rejection counts 4095,
+    CoverageCount 127); ``rejects`` maps a :class:`FrameStatus` (or its string) to a count;
+    ``coverage_flag``/``coverage_count``: the model-error coverage monitor."""
     r = {FrameStatus(k): int(v) for k, v in (rejects or {}).items()}
     specs = _SPEC()
     status = _frame(specs[FrameId.CTRL_STATUS],
                     (int(fault_flags), int(qp_status), qp_iterations, fallback_count,
-                     int(active_constraints)), None, timestamp)
+                     int(active_constraints), 1 if coverage_flag else 0,
+                     max(0, int(coverage_count))), None, timestamp)
     rej = _frame(specs[FrameId.CTRL_REJECTS],
                  tuple(r.get(s, 0) for s in (FrameStatus.BAD_CHECKSUM,
                                              FrameStatus.BAD_COUNTER, FrameStatus.BAD_LENGTH,
                                              FrameStatus.DUPLICATE, FrameStatus.UNKNOWN_ID)),
                  None, timestamp)
     return [status, rej]
+
+
+def encode_disturbance(dy1: float, d2y2: float, tau: float, valid: bool, flag: bool,
+                       since_touchdown: float, *, timestamp: float = 0.0) -> can.Message:
+    """CtrlDisturbance frame (unprotected diagnostic): the model-error estimate (m/s^2,
+    rad/s^2), its phase, validity, coverage flag and the time since touchdown (s); values
+    clamp to the signal ranges (a non-finite value raises, as every encoder)."""
+    return _frame(_SPEC()[FrameId.CTRL_DISTURBANCE],
+                  (dy1, d2y2, tau, 1 if valid else 0, 1 if flag else 0, since_touchdown),
+                  None, timestamp)
 
 
 # --------------------------------------------------------------------------- decode

@@ -128,8 +128,23 @@ CONTROLLER_DIAGNOSTICS = _schema(
         "fallback_count": _int("control periods on the fallback controller"),
         "fault_flags": _int("FaultFlag bits"),
         "solve_time_us": _num("QP solve time [us]"),
+        "coverage_flag": {"type": "boolean", "description": "the model-error estimate was "
+                          "outside the characterised bound on the last tick"},
+        "coverage_count": _int("ticks flagged by the coverage monitor (saturating, 127)"),
     }, ["t", "tau", "V", "rho", "u", "qp_status", "active_constraints", "fallback_count",
         "fault_flags"])
+
+CONTROLLER_DISTURBANCE = _schema(
+    "hpcosim.ControllerDisturbance", "The controller's online model-error estimate "
+    "(CtrlDisturbance frame): d = nu - (a + A u) of the interaction-aware CLF-QP.", {
+        "t": _num("controller time of the tick [s] (the frame's timestamp)"),
+        "d": _vec(2, "estimated model error (dy1 [m/s^2], d2y2 [rad/s^2]), as on the bus"),
+        "tau": _num("stance phase of the tick [1]"),
+        "valid": {"type": "boolean", "description": "the estimate has settled"},
+        "flag": {"type": "boolean",
+                 "description": "outside the characterised bound (coverage monitor)"},
+        "since_touchdown": _num("time since the switch to stance [s], saturating at 0.255"),
+    }, ["t", "d", "tau", "valid", "flag", "since_touchdown"])
 
 #: topic -> JSON schema
 CHANNELS: dict[str, dict[str, Any]] = {
@@ -139,6 +154,7 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/prosthesis/torque_command": TORQUE_COMMAND,
     "/ground_truth": GROUND_TRUTH,
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
+    "/controller/disturbance": CONTROLLER_DISTURBANCE,
 }
 
 

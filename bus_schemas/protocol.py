@@ -42,6 +42,7 @@ class FrameId(enum.IntEnum):
     FOOT_LOAD = 0x110
     CTRL_STATUS = 0x300
     CTRL_REJECTS = 0x301
+    CTRL_DISTURBANCE = 0x302
 
 
 #: frames the plant (prosthesis hardware side) sends and the controller receives
@@ -49,7 +50,7 @@ PLANT_TO_CTRL = frozenset({FrameId.SIM_TIME, FrameId.KNEE_FEEDBACK, FrameId.ANKL
                            FrameId.FOOT_LOAD})
 #: frames the controller sends and the plant receives
 CTRL_TO_PLANT = frozenset({FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.CTRL_STATUS,
-                           FrameId.CTRL_REJECTS})
+                           FrameId.CTRL_REJECTS, FrameId.CTRL_DISTURBANCE})
 
 
 class CtrlState(enum.IntEnum):

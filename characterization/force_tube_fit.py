@@ -362,6 +362,15 @@ def _solve(B: np.ndarray, y: np.ndarray, side: str, what: str, method: str = "hi
     return a
 
 
+def fit_bound_curve(B: np.ndarray, y: np.ndarray, side: str, s: np.ndarray | None = None,
+                    what: str = "bound") -> np.ndarray:
+    """One curve of the paper's LPs for any scalar samples: the Bezier coefficients of the
+    tightest (least integral) curve with basis rows ``B`` above (``side = "upper"``) or below
+    (``"lower"``) every sample ``y`` (scale y to O(1) first: the LP tolerances are absolute);
+    ``s``: the samples' phases, for constraint generation.  Raises :class:`TubeFitError`."""
+    return _solve(np.asarray(B, float), np.asarray(y, float), side, what, s=s)
+
+
 def fit_bounds(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int = 3,
                method: str = "highs", reduce: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """The paper's two LPs for each component: (lower, upper), each (3, degree + 1).

@@ -63,6 +63,7 @@ import numpy as np
 from characterization.bezier_fit import FitError
 from characterization.force_tube_fit import (
     Profile,
+    TubeFitError,
     credibility_markdown,
     deviation_profiles,
     fit_tube,
@@ -72,11 +73,16 @@ from characterization.force_tube_fit import (
     tube_interval,
 )
 from characterization.gait_fit import regress_domain
+from characterization.model_error_fit import (
+    fit_model_error,
+    playback_error_samples,
+)
+from characterization.model_error_fit import markdown as model_error_markdown
 from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
-from hp_model.force_tube import COMPONENTS, ForceTube, save_tube
+from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, save_tube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS, GaitParams, VirtualConstraints
@@ -385,12 +391,21 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
                    degree: int = 3, n_steps: int | None = None,
                    options: PlaybackOptions | None = None, progress: Progress | None = None,
                    src: str = "steps", beta: float = 0.05,
-                   allowance: float = DEFAULT_ALLOWANCE) -> TubeResult:
+                   allowance: float = DEFAULT_ALLOWANCE, model_error: bool = True,
+                   error_degree: int = 3,
+                   exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN) -> TubeResult:
     """Playback of the ps steps, their deviations from F*, the single-support interval by
     the foot-marker rule, and the certified force tube (module docstring).
 
     ``allowance``: the tube's widening for the playback's estimation error, as a fraction of
-    each component's peak |F_s| over the played-back window (0: the paper's bare tube)."""
+    each component's peak |F_s| over the played-back window (0: the paper's bare tube).
+
+    ``model_error``: also characterise what the nominal-human model of ``clfqp`` does not
+    explain along the same playbacks (:mod:`characterization.model_error_fit`), bounded by
+    degree-``error_degree`` curves over the tube's single support in the gait's phase with the
+    first ``exclude_after_touchdown`` s after touchdown excluded, stored in the tube
+    (``model_error``); when those samples cannot determine a bound, the tube carries none and
+    ``source["model_error"]`` says why."""
     t0 = time.perf_counter()
     check_inputs(model, gait, steps, src)
     idx = ps_steps(steps, n_steps, src)
@@ -450,12 +465,45 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
     }
     tube = fit_tube(profiles, nominal, tau_lo, tau_hi, degree, gait_hash=gait.hash(),
                     source=source, beta=beta, allowance=allowance * np.asarray(peak))
+    if model_error:
+        if progress is not None:
+            progress("model error of the nominal-human model", 0, 1)
+        tube = with_model_error(tube, model, gait, good, error_degree,
+                                exclude_after_touchdown, opt.tube_phase == "gait", src, beta)
     t2 = time.perf_counter()
     if progress is not None:
         progress("force tube done", 1, 1)
     return TubeResult(tube, profiles, pb, [s.step for s in good],
                       {"playback": t1 - t0, "tube": t2 - t1, "total": t2 - t0},
                       opt.tube_phase, gait_ps if opt.tube_phase == "gait" else None)
+
+
+def with_model_error(tube: ForceTube, model: HumanProsthesisModel, gait: Gait,
+                     steps: list[StepPlayback], degree: int = 3,
+                     exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN,
+                     within_tube: bool = True, src: str = "steps", beta: float = 0.05
+                     ) -> ForceTube:
+    """``tube`` with the model-error bound of the played-back ``steps`` (each in its own
+    phase; d is evaluated at the gait's phase), over the tube's [tau_lo, tau_hi] when
+    ``within_tube`` (the tube is in the gait's phase); on a failure the tube unchanged, the
+    reason in ``source["model_error"]``."""
+    samples = playback_error_samples(model, gait, steps)
+    try:
+        bound = fit_model_error(
+            samples, error_degree_checked(degree), exclude_after_touchdown,
+            (tube.tau_lo, tube.tau_hi) if within_tube else None,
+            {"steps_file": src, "steps": [s.step for s in steps],
+             "method_d": "nu_true from the playback's constrained dynamics (dyn_ps) minus "
+                         "a + A u_p of the interaction model (model_error_ps)"}, beta)
+    except (TubeFitError, FitError) as e:
+        return replace(tube, source={**tube.source, "model_error": f"not fitted: {e}"})
+    return replace(tube, model_error=bound)
+
+
+def error_degree_checked(degree: int) -> int:
+    if isinstance(degree, bool) or int(degree) != degree or not 0 <= degree <= 20:
+        raise PlaybackError(f"--error-degree must be an integer in [0, 20], got {degree}")
+    return int(degree)
 
 
 # ------------------------------------------------------------------- report, files
@@ -507,6 +555,10 @@ def report_markdown(res: TubeResult, steps_src: str = "steps", gait_src: str = "
     lines += ["", f"Certificate: every sample inside: {cert.get('inside')}; optimal (KKT): "
               f"{cert.get('optimal')}; tight: {cert.get('tight')}.", "",
               credibility_markdown(t.credibility)]
+    if t.model_error is not None:
+        lines += ["", model_error_markdown(t.model_error)]
+    elif "model_error" in t.source:
+        lines += ["", f"Model error of the nominal-human model: {t.source['model_error']}."]
     return "\n".join(lines)
 
 

@@ -56,8 +56,10 @@ def save_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> None:
     atomic_write_text(path, json.dumps(to_jsonable(doc), indent=1) + "\n")
 
 
-def load_json(path: str | os.PathLike[str], kind: str, version: int) -> dict[str, Any]:
-    """Read a JSON artifact of the given ``kind`` and schema ``version``."""
+def load_json(path: str | os.PathLike[str], kind: str, version: int | tuple[int, ...]
+              ) -> dict[str, Any]:
+    """Read a JSON artifact of the given ``kind`` and schema ``version`` (or one of the
+    versions given as a tuple)."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such file")
@@ -68,9 +70,10 @@ def load_json(path: str | os.PathLike[str], kind: str, version: int) -> dict[str
     if not isinstance(doc, dict) or doc.get("kind") != kind:
         raise ArtifactError(f"{p}: not a {kind} file (field 'kind' is not '{kind}')")
     ver = doc.get("schema_version")
-    if ver != version:
+    versions = version if isinstance(version, tuple) else (version,)
+    if isinstance(ver, bool) or ver not in versions:
         raise ArtifactError(f"{p}: field 'schema_version': version {ver} is not supported "
-                            f"(this program reads {version})")
+                            f"(this program reads {', '.join(map(str, versions))})")
     return doc
 
 

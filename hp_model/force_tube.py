@@ -15,13 +15,26 @@ with F*, dF_lo and dF_hi Bezier curves in s (coefficients stored).  Outside [tau
 dF_lo - allowance <= dF <= dF_hi + allowance.  (A constant added to every Bezier coefficient
 shifts the curve by that constant.)
 
-File layout (``kind = "hpcosim-tube"``, ``schema_version = 1``): gait_hash, tau_lo, tau_hi,
+The tube may also carry the characterised **model error** of the interaction-aware
+controller (``clfqp``, :class:`ModelErrorBound`): bounds on d = nu_true - (a + A u_p), what the
+nominal-human model (:mod:`hp_model.interaction`) does not explain, per output acceleration
+(dy1 [m/s^2], d2y2 [rad/s^2]) as Bezier curves in s = (tau - tau_lo) / (tau_hi - tau_lo) over
+the mid-stance range [tau_lo, tau_hi] of the gait's ps phase, valid from
+``exclude_after_touchdown`` seconds after the prosthesis's touchdown on (the impact transient
+before that is left to the CLF relaxation); outside its range the bound is not defined (the
+controller's margin is zero there).
+
+File layout (``kind = "hpcosim-tube"``, ``schema_version = 2``): gait_hash, tau_lo, tau_hi,
 degree, nominal (3, k+1), lower (3, m+1), upper (3, m+1), allowance (3,) (optional, default
-0), n_steps, credibility {...}, source {...}.
+0), n_steps, credibility {...}, source {...}, and optionally ``model_error`` {components,
+units, tau_lo, tau_hi, degree, lower (2, n+1), upper (2, n+1), exclude_after_touchdown (s),
+n_steps, credibility {...}, source {...}}.  Schema 1 (no ``model_error``) is still read: no
+model-error bound, the controller's margin is zero.  Other versions are refused.
 """
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,8 +46,81 @@ from hp_model import bezier
 from hp_model.artifacts import ArtifactError, FieldReader, load_json, save_json
 
 KIND = "hpcosim-tube"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+READABLE_VERSIONS = (1, 2)
 COMPONENTS = ("F_x", "F_z", "M_y")
+ERROR_COMPONENTS = ("dy1", "d2y2")  # model error d: output accelerations
+ERROR_UNITS = ("m/s^2", "rad/s^2")
+#: default time after the prosthesis's touchdown excluded from the model-error bound (s)
+EXCLUDE_AFTER_TOUCHDOWN = 0.03
+
+
+@dataclass(frozen=True)
+class ModelErrorBound:
+    """Bezier bounds of the model error d = nu_true - (a + A u_p) (module docstring):
+    d(tau) in [lower(s), upper(s)], s = (tau - tau_lo) / (tau_hi - tau_lo), for tau in
+    [tau_lo, tau_hi] and t - t_touchdown >= ``exclude_after_touchdown`` (s)."""
+
+    tau_lo: float
+    tau_hi: float
+    lower: np.ndarray  # (2, n+1): dy1 [m/s^2], d2y2 [rad/s^2]
+    upper: np.ndarray  # (2, n+1)
+    exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN
+    n_steps: int = 0
+    credibility: Mapping[str, Any] = field(default_factory=dict)
+    source: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.tau_lo) and math.isfinite(self.tau_hi)
+                and self.tau_hi > self.tau_lo):
+            raise ValueError(f"model error: need finite tau_lo < tau_hi, got "
+                             f"[{self.tau_lo}, {self.tau_hi}]")
+        if not (math.isfinite(self.exclude_after_touchdown)
+                and self.exclude_after_touchdown >= 0):
+            raise ValueError("model error: exclude_after_touchdown must be finite and >= 0")
+        for name in ("lower", "upper"):
+            a = np.array(getattr(self, name), dtype=float)
+            if a.ndim != 2 or a.shape[0] != 2 or not np.all(np.isfinite(a)):
+                raise ValueError(f"model error: {name} must be finite with shape (2, n+1), "
+                                 f"got {a.shape}")
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        if self.lower.shape != self.upper.shape:
+            raise ValueError("model error: lower and upper bounds must have the same degree")
+
+    @property
+    def degree(self) -> int:
+        return self.lower.shape[1] - 1
+
+    def phase(self, tau: float | np.ndarray) -> np.ndarray:
+        """s(tau) clipped to [0, 1]."""
+        return np.clip((np.asarray(tau, dtype=float) - self.tau_lo)
+                       / (self.tau_hi - self.tau_lo), 0.0, 1.0)
+
+    def bounds(self, tau: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of d at tau: (2,) each for a scalar, (n, 2) for an array."""
+        s = self.phase(tau)
+        return bezier.evaluate(self.lower, s), bezier.evaluate(self.upper, s)
+
+    def in_range(self, tau: np.ndarray, since_touchdown: np.ndarray) -> np.ndarray:
+        """Per sample, whether the bound is defined there (phase range, excluded time)."""
+        tau = np.asarray(tau, float)
+        return ((tau >= self.tau_lo) & (tau <= self.tau_hi)
+                & (np.asarray(since_touchdown, float) >= self.exclude_after_touchdown))
+
+    def contains(self, tau: np.ndarray, d: np.ndarray, tol: float | np.ndarray = 0.0
+                 ) -> np.ndarray:
+        """Per sample, whether both components of d (n, 2) lie inside the bound (+- tol)."""
+        lo, hi = self.bounds(np.asarray(tau, float))
+        return np.all((d >= lo - tol) & (d <= hi + tol), axis=1)
+
+    def to_document(self) -> dict[str, Any]:
+        return {"components": list(ERROR_COMPONENTS), "units": list(ERROR_UNITS),
+                "tau_lo": self.tau_lo, "tau_hi": self.tau_hi, "degree": self.degree,
+                "lower": self.lower, "upper": self.upper,
+                "exclude_after_touchdown": self.exclude_after_touchdown,
+                "n_steps": self.n_steps, "credibility": dict(self.credibility),
+                "source": dict(self.source)}
 
 
 @dataclass(frozen=True)
@@ -51,6 +137,7 @@ class ForceTube:
     credibility: Mapping[str, Any] = field(default_factory=dict)
     source: Mapping[str, Any] = field(default_factory=dict)
     allowance: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (N, N, N m)
+    model_error: ModelErrorBound | None = None  # the clfqp's characterised model error
 
     def __post_init__(self) -> None:
         if not self.tau_hi > self.tau_lo:
@@ -122,6 +209,7 @@ def to_document(t: ForceTube) -> dict[str, Any]:
         "degree": t.degree, "nominal": t.nominal, "lower": t.lower, "upper": t.upper,
         "allowance": t.allowance, "n_steps": t.n_steps, "credibility": dict(t.credibility),
         "source": dict(t.source),
+        **({"model_error": t.model_error.to_document()} if t.model_error is not None else {}),
     }
 
 
@@ -133,7 +221,7 @@ def save_tube(path: str | os.PathLike[str], t: ForceTube) -> None:
 def load_tube(path: str | os.PathLike[str], gait_hash: str | None = None) -> ForceTube:
     """Read and validate a tube file; with ``gait_hash``, refuse a tube for another gait."""
     src = str(path)
-    r = FieldReader(src, load_json(path, KIND, SCHEMA_VERSION))
+    r = FieldReader(src, load_json(path, KIND, READABLE_VERSIONS))
     tau_lo, tau_hi = r.number("tau_lo", -0.5, 1.5), r.number("tau_hi", -0.5, 1.5)
     if not tau_hi > tau_lo:
         raise r.fail("tau_hi", f"must exceed tau_lo ({tau_lo})")
@@ -149,8 +237,38 @@ def load_tube(path: str | os.PathLike[str], gait_hash: str | None = None) -> For
     t = ForceTube(gait_hash=r.string("gait_hash"), tau_lo=tau_lo, tau_hi=tau_hi,
                   nominal=nominal, lower=lower, upper=upper, allowance=allowance,
                   n_steps=int(r.number("n_steps", 0, 1e9)),
-                  credibility=dict(r.get("credibility")), source=dict(r.get("source")))
+                  credibility=dict(r.get("credibility")), source=dict(r.get("source")),
+                  model_error=_read_model_error(r) if "model_error" in r.doc else None)
     if gait_hash is not None and gait_hash != t.gait_hash:
         raise ArtifactError(f"{src}: field 'gait_hash': the tube was made for gait "
                             f"{t.gait_hash}, not for this gait ({gait_hash}); refit the tube")
     return t
+
+
+def _read_model_error(r: FieldReader) -> ModelErrorBound:
+    """The optional ``model_error`` section (schema 2), validated field by field."""
+    if int(r.number("schema_version")) < 2:
+        raise r.fail("model_error", "not part of schema 1 (write schema_version 2)")
+    if not isinstance(r.get("model_error"), Mapping):
+        raise r.fail("model_error", "not an object")
+    if list(r.get("model_error.components")) != list(ERROR_COMPONENTS):
+        raise r.fail("model_error.components", f"expected {list(ERROR_COMPONENTS)}")
+    lo_t = r.number("model_error.tau_lo", -0.5, 1.5)
+    hi_t = r.number("model_error.tau_hi", -0.5, 1.5)
+    if not hi_t > lo_t:
+        raise r.fail("model_error.tau_hi", f"must exceed tau_lo ({lo_t})")
+    n = int(r.number("model_error.degree", 0, 30))
+    lower = r.array("model_error.lower", (2, n + 1))
+    upper = r.array("model_error.upper", (2, n + 1))
+    s = np.linspace(0, 1, 201)
+    if np.any(bezier.evaluate(lower, s) > bezier.evaluate(upper, s) + 1e-12):
+        raise r.fail("model_error.lower", "the lower bound exceeds the upper bound somewhere")
+    cred = r.get("model_error.credibility")
+    source = r.get("model_error.source")
+    if not isinstance(cred, Mapping) or not isinstance(source, Mapping):
+        raise r.fail("model_error", "credibility and source must be objects")
+    return ModelErrorBound(
+        tau_lo=lo_t, tau_hi=hi_t, lower=lower, upper=upper,
+        exclude_after_touchdown=r.number("model_error.exclude_after_touchdown", 0.0, 10.0),
+        n_steps=int(r.number("model_error.n_steps", 0, 1e9)), credibility=dict(cred),
+        source=dict(source))

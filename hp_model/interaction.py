@@ -30,6 +30,15 @@ Functions (``InteractionModel.functions``; compiled by ``numeric()``):
 
     walker_ps(x_p, theta)                  -> q (12), qd (12), tau
     interaction_ps(x_p, theta, gains)      -> f (4), g (4, 2), w0 (3), W (3, 2), tau
+    model_error_ps(x_p, theta, gains, qdd_p, u_p) -> d (2), nu (2), a (2), A (2, 2), tau
+
+``model_error_ps``: with the paper's prosthesis outputs (:func:`prosthesis_outputs`: y1 the
+hip velocity error, y2 the knee's deviation from its Bezier curve) and Jo = d(y1, dy2)/dx_p,
+the output accelerations nu = (dy1 [m/s^2], d2y2 [rad/s^2]) of a state x_p moving with the
+prosthesis joint accelerations ``qdd_p`` (rad/s^2, e.g. the full loop's) are
+nu = Jo (dth_p, qdd_p); the model's are a + A u_p (a = Jo f, A = Jo g); the model error is
+d = nu - (a + A u_p): what the nominal-human model does not explain (zero wherever the human
+is on its nominal outputs, e.g. along the gait).
 
 ``gains`` = (eps, kp, kd) of the human's tracking (the gait's); on the nominal human its
 outputs are zero and the gains do not enter, but they are kept as inputs so that the same
@@ -47,6 +56,21 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS, VirtualConstraints, unpack_symbolic
 
 DOMAIN = "ps"
+
+
+def prosthesis_outputs(x: ca.SX, alpha: ca.SX, v_hip: ca.SX, p_min: ca.SX, p_max: ca.SX,
+                       ck: float, ca_: float) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
+    """tau, tau_dot and the paper's prosthesis outputs y1 = c_k dth_pk + c_a dth_pa - v_hip*
+    (m/s), y2 = th_pk - B_pk(tau) (rad), dy2 (rad/s) at x = (th_pk, th_pa, dth_pk, dth_pa)
+    (B_pk, the knee row ``alpha`` of the ps gait, continued linearly outside [0, 1]).  The
+    one definition of the outputs the controllers and the model-error characterisation use."""
+    th, dth = x[0:2], x[2:4]
+    dp = p_max - p_min
+    tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
+    tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
+    B, dB, _ = bezier.evaluate_continued(alpha, tau)
+    y1 = ck * dth[0] + ca_ * dth[1] - v_hip
+    return tau, tau_dot, y1, th[0] - B, dth[0] - dB * tau_dot
 
 
 def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_p: ca.SX,
@@ -114,12 +138,25 @@ class InteractionModel:
         g = ca.jacobian(xdot, u_p)
         w0 = ca.substitute(wrench, u_p, zero)
         W = ca.jacobian(wrench, u_p)
+        alpha, v_hip, p_min, p_max = unpack_symbolic(theta, degree)
+        alpha_pk = alpha[Y2_COORDS[DOMAIN].index("th_pk"), :]
+        ck, ca_ = model.hip_progress_coefficients(DOMAIN)
+        _, _, y1, _, dy2 = prosthesis_outputs(x_p, alpha_pk, v_hip, p_min, p_max, ck, ca_)
+        Jo = ca.jacobian(ca.vertcat(y1, dy2), x_p)
+        qdd_p = ca.SX.sym("qdd_p", 2)
+        nu = Jo @ ca.vertcat(x_p[2], x_p[3], qdd_p)
+        a_o, A_o = Jo @ f, Jo @ g
+        d_o = nu - a_o - A_o @ u_p
         self.functions = {
             "walker_ps": ca.Function("walker_ps", [x_p, theta], [q, qd, tau],
                                      ["x_p", "theta"], ["q", "qd", "tau"]),
             "interaction_ps": ca.Function(
                 "interaction_ps", [x_p, theta, gains], [f, g, w0, W, tau],
                 ["x_p", "theta", "gains"], ["f", "g", "w0", "W", "tau"], {"cse": True}),
+            "model_error_ps": ca.Function(
+                "model_error_ps", [x_p, theta, gains, qdd_p, u_p], [d_o, nu, a_o, A_o, tau],
+                ["x_p", "theta", "gains", "qdd_p", "u_p"], ["d", "nu", "a", "A", "tau"],
+                {"cse": True}),
         }
         self._numeric: FunctionSet | None = None
 

@@ -526,6 +526,12 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         if v.frame_id == FrameId.TORQUE_CMD:
             rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
                            v.counter, msg.timestamp, ratio)
+        elif v.frame_id == FrameId.CTRL_DISTURBANCE:
+            e = v.value
+            rec.defer("/controller/disturbance", {
+                "t": msg.timestamp, "d": [e.dy1, e.d2y2], "tau": e.tau,
+                "valid": bool(e.valid), "flag": bool(e.flag),
+                "since_touchdown": e.since_touchdown}, ns)
         elif v.frame_id == FrameId.CTRL_STATUS:
             s = v.value
             rec.defer("/controller/diagnostics", {
@@ -535,6 +541,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
                 "active_constraints": [a.name for a in type(s.active_constraints)
                                        if a in s.active_constraints and a.name],
                 "fallback_count": s.fallback_count, "fault_flags": int(s.fault_flags),
+                "coverage_flag": bool(s.coverage_flag), "coverage_count": s.coverage_count,
                 "solve_time_us": None, "source": "CtrlStatus frame",
                 "ctrl_rejects": plant.ctrl_rejects}, ns)
         return v

@@ -149,12 +149,29 @@ def refit(
     out: Annotated[Path, typer.Option("--out", help="Tube file to write.", dir_okay=False)],
     old: Annotated[Path | None, typer.Option("--old", help="Tube to report coverage of "
                                              "(default: the first recording's).")] = None,
+    model_error: Annotated[bool, typer.Option(
+        "--model-error", help="Refit the model-error bound of clfqp's nominal-human model "
+        "(the tube's model_error) from the controller's recorded online estimates "
+        "(/controller/disturbance) instead of the socket-force tube; the socket-force tube is "
+        "kept from --old (default: the first recording's).")] = False,
+    degree: Annotated[int, typer.Option("--degree", min=0, max=20,
+                                        help="Bezier degree of the refitted bounds.")] = 3,
+    exclude_ms: Annotated[float | None, typer.Option(
+        "--exclude-ms", min=0.0, max=255.0,
+        help="--model-error: time after touchdown left out of the bound (ms; default: the "
+        "old bound's, else 30).")] = None,
 ) -> None:
-    """Refit the force tube from recorded ground-truth socket force (ps portions)."""
-    from orchestrator.recording import refit_tube
+    """Refit the force tube from recorded ground-truth socket force (ps portions), or with
+    --model-error the model-error bound from the controller's recorded estimates."""
+    from orchestrator.recording import refit_model_error, refit_tube
 
     paths = [p for r in recordings for p in (sorted(glob.glob(r)) or [r])]
-    rep = refit_tube(paths, gait, out, old_tube=old)
+    if model_error:
+        rep = refit_model_error(paths, gait, out, old_tube=old, degree=degree,
+                                exclude_after_touchdown=None if exclude_ms is None
+                                else exclude_ms * 1e-3)
+    else:
+        rep = refit_tube(paths, gait, out, old_tube=old, degree=degree)
     Console().print(rep)
 
 

@@ -11,7 +11,7 @@ import json
 import tempfile
 import time
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -194,7 +194,7 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
     fraction of samples and of steps inside it."""
     import hp_model
     from characterization.force_tube_fit import fit_tube, nominal_coefficients
-    from hp_model.force_tube import load_tube, save_tube
+    from hp_model.force_tube import save_tube
     from hp_model.gait_artifact import load_gait
 
     model = model or hp_model.load_model()
@@ -215,18 +215,12 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
         profiles.append((tau[keep], fs[keep] - gait.socket_force(tau[keep])))
     tube = fit_tube(profiles, nominal, tau_lo, tau_hi, degree=degree, gait_hash=gait.hash(),
                     source={"recordings": [str(p) for p in paths]})
+    old = _old_tube(paths[0], old_tube, gait.hash())
+    if old is not None and old.model_error is not None:  # the socket force only is refitted
+        tube = replace(tube, model_error=old.model_error)
     save_tube(out, tube)
     report: dict[str, Any] = {"steps": len(steps), "tau_lo": tau_lo, "tau_hi": tau_hi,
                               "out": str(out)}
-    old = None
-    if old_tube is not None:
-        old = load_tube(old_tube, gait.hash())
-    else:
-        rec = read_recording(paths[0], messages=False)
-        if "tube.json" in rec.attachments:
-            with tempfile.TemporaryDirectory() as td:
-                (Path(td) / "t.json").write_bytes(rec.attachments["tube.json"])
-                old = load_tube(Path(td) / "t.json", gait.hash())
     if old is not None:
         inside_s, n_s, inside_steps = 0, 0, 0
         for tau, fs in steps:
@@ -236,4 +230,111 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
             inside_steps += bool(ok.all())
         report["old_coverage_samples"] = inside_s / max(1, n_s)
         report["old_coverage_steps"] = inside_steps / len(steps)
+    return report
+
+
+def _old_tube(first: Path, old_tube: str | Path | None, gait_hash: str) -> Any:
+    """The tube to compare with: ``old_tube``, else the one attached to the recording
+    ``first`` (None when it has none)."""
+    from hp_model.force_tube import load_tube
+
+    if old_tube is not None:
+        return load_tube(old_tube, gait_hash)
+    rec = read_recording(first, messages=False)
+    if "tube.json" not in rec.attachments:
+        return None
+    with tempfile.TemporaryDirectory() as td:
+        (Path(td) / "tube.json").write_bytes(rec.attachments["tube.json"])
+        return load_tube(Path(td) / "tube.json", gait_hash)
+
+
+# ----------------------------------------------------------- model-error refit
+
+#: a gap between two recorded estimates longer than this starts a new stance (s)
+STANCE_GAP = 0.005
+
+
+def disturbance_samples(path: str | Path) -> list[Any]:
+    """The controller's recorded model-error estimates (``/controller/disturbance``, valid
+    ones only) of a recording, one :class:`characterization.model_error_fit.ErrorSamples`
+    per stance (a new stance where the time since touchdown drops or the ticks are more
+    than :data:`STANCE_GAP` apart)."""
+    from characterization.model_error_fit import ErrorSamples
+
+    rows = [o for _, _, o in read_messages(path, ["/controller/disturbance"])
+            if o.get("valid")]
+    rows.sort(key=lambda o: o["t"])
+    out: list[Any] = []
+    cur: list[tuple[float, float, float, float]] = []
+    prev: dict[str, Any] | None = None
+    for o in rows:
+        if prev is not None and (o["t"] - prev["t"] > STANCE_GAP
+                                 or o["since_touchdown"] < prev["since_touchdown"]):
+            out.append(cur)
+            cur = []
+        cur.append((o["tau"], o["since_touchdown"], o["d"][0], o["d"][1]))
+        prev = o
+    if cur:
+        out.append(cur)
+    res = []
+    for c in out:
+        a = np.array(c, float)
+        res.append(ErrorSamples(a[:, 0], a[:, 1], a[:, 2:4]))
+    return res
+
+
+def refit_model_error(paths: Iterable[str | Path], gait_path: str | Path, out: str | Path, *,
+                      old_tube: str | Path | None = None, degree: int = 3,
+                      exclude_after_touchdown: float | None = None, model: Any = None
+                      ) -> dict[str, Any]:
+    """Refit the tube's model-error bound (schema 2, ``model_error``) from the controller's
+    recorded online estimates (``CtrlDisturbance``) of ``paths``; the socket-force tube is
+    kept from ``old_tube`` (default: the tube attached to the first recording).  Reports the
+    coverage of the old bound (fraction of the recorded estimates where it is defined that
+    lie inside it; None without one).  ``exclude_after_touchdown`` defaults to the old
+    bound's, else 30 ms.  Writes ``out`` atomically."""
+    import hp_model
+    from characterization.force_tube_fit import TubeFitError
+    from characterization.model_error_fit import fit_model_error
+    from hp_model.force_tube import EXCLUDE_AFTER_TOUCHDOWN, save_tube
+    from hp_model.gait_artifact import load_gait
+
+    model = model or hp_model.load_model()
+    gait = load_gait(gait_path, model.parameter_hash())
+    paths = [Path(p) for p in paths]
+    old = _old_tube(paths[0], old_tube, gait.hash())
+    if old is None:
+        raise RecordingError(f"{paths[0]}: no tube attached; pass the tube to refit with "
+                             "--tube")
+    samples = []
+    for p in paths:
+        samples.extend(disturbance_samples(p))
+    if not samples:
+        raise RecordingError(f"no model-error estimates in {len(paths)} recording(s) (a "
+                             "controller without an estimator, e.g. not clfqp?)")
+    ex = (exclude_after_touchdown if exclude_after_touchdown is not None
+          else old.model_error.exclude_after_touchdown if old.model_error is not None
+          else EXCLUDE_AFTER_TOUCHDOWN)
+    report: dict[str, Any] = {"stances": len(samples), "out": str(out)}
+    if old.model_error is not None:
+        me = old.model_error
+        inside = n = 0
+        for e in samples:
+            m = me.in_range(e.tau, e.since_touchdown)
+            inside += int(me.contains(e.tau[m], e.d[m]).sum())
+            n += int(m.sum())
+        report["old_coverage_samples"] = inside / n if n else None
+    else:
+        report["old_coverage_samples"] = None
+    try:
+        bound = fit_model_error(samples, degree, ex, source={
+            "recordings": [str(p) for p in paths],
+            "method_d": "the controller's online estimate (CtrlDisturbance): filtered finite "
+                        "difference of the measured joint velocities vs a + A u_prev"})
+    except TubeFitError as e:
+        raise RecordingError(f"model-error refit: {e}") from None
+    save_tube(out, replace(old, model_error=bound))
+    report.update({"tau_lo": bound.tau_lo, "tau_hi": bound.tau_hi,
+                   "n_samples": bound.source["n_samples"],
+                   "samples_inside": bound.credibility["samples_inside_fraction"]})
     return report

@@ -121,7 +121,8 @@ class DrawPerturbation(Perturbation):
 
 def scaled_tube(tube: ForceTube, scale: float) -> ForceTube:
     """The tube the controller is given when the socket-force deviations exceed ``tube`` by
-    ``scale``: deviation bounds divided by it (about the nominal F*)."""
+    ``scale``: deviation bounds divided by it (about the nominal F*).  A model-error bound
+    (tube schema 2) is kept as it is: it bounds the model's error, not the socket force."""
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"tube_scale must be finite and > 0, got {scale}")
     if scale == 1.0:

@@ -48,11 +48,22 @@ def fit(
         "--phase", help="The tube's tau: 'gait' = the gait's phase of each sample (the phase "
         "the controllers compute; default), 'step' = each step's own phase (the paper's "
         "per-step normalization).")] = "gait",
+    model_error: Annotated[bool, typer.Option(
+        "--model-error/--no-model-error",
+        help="Also characterise what clfqp's nominal-human model does not explain along the "
+        "playbacks and store its mid-stance bound in the tube (model_error).")] = True,
+    error_degree: Annotated[int, typer.Option(
+        "--error-degree", min=0, max=20, help="Bezier degree of the model-error bound.")] = 3,
+    exclude_ms: Annotated[float, typer.Option(
+        "--exclude-ms", min=0.0, max=255.0,
+        help="Time after the prosthesis's touchdown left out of the model-error bound (ms); "
+        "the impact transient is left to the CLF relaxation.")] = 30.0,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
     """Play back every prosthesis-stance step on the full model, estimate the socket force,
-    and fit the certified force tube around its deviation from the gait's nominal F*."""
+    and fit the certified force tube around its deviation from the gait's nominal F*; with
+    it (default) the mid-stance bound of clfqp's model error along the same playbacks."""
     import hp_model
     from characterization.playback import (
         PlaybackError,
@@ -86,7 +97,9 @@ def fit(
                                  stop_at_touchdown=stop_at_touchdown,
                                  fit_margin=None if whole_step_fit else fit_margin,
                                  tube_phase=phase),
-                             progress=progress, src=str(steps), allowance=allowance)
+                             progress=progress, src=str(steps), allowance=allowance,
+                             model_error=model_error, error_degree=error_degree,
+                             exclude_after_touchdown=exclude_ms * 1e-3)
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility
     console.print(f"[bold]{steps}[/]: {len(res.playback.steps)} ps steps played back in "
@@ -109,4 +122,17 @@ def fit(
                   f"{cred['certificate']['optimal']}; a posteriori k = {post['k_tube']}, "
                   f"eps = {post['epsilon_tube']:.3f} at {cred['confidence']:.0%}; leave-one-out "
                   f"coverage {cred['leave_one_out']['coverage']:.2f}")
+    me = t.model_error
+    if me is not None:
+        mc = me.credibility
+        loo = mc["leave_one_out"]["step_coverage"]
+        console.print(f"model error: tau in [{me.tau_lo:.3f}, {me.tau_hi:.3f}], first "
+                      f"{me.exclude_after_touchdown * 1e3:.0f} ms after touchdown excluded; "
+                      f"max |d| = {me.source['max_abs'][0]:.3g} m/s^2 (dy1), "
+                      f"{me.source['max_abs'][1]:.3g} rad/s^2 (d2y2); a posteriori k = "
+                      f"{mc['a_posteriori']['k']}, eps = {mc['a_posteriori']['epsilon']:.3f}; "
+                      "leave-one-out coverage "
+                      + ("-" if loo is None else f"{loo:.2f}"))
+    elif model_error:
+        console.print(f"[yellow]model error[/]: {t.source.get('model_error', 'not fitted')}")
     console.print(f"wrote {paths['tube']}, {paths['figure'].name}, {paths['report'].name}")

@@ -51,6 +51,7 @@ _ACTIVE_CLF, _ACTIVE_RHO = int(Active.CLF), int(Active.RHO_MAX)
 _ACTIVE_KL, _ACTIVE_KU = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
 _ACTIVE_AL, _ACTIVE_AU = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
 _ACTIVE_CLAMP = int(Active.OUTPUT_CLAMP)
+_NO_ESTIMATE = ((0.0, 0.0), False, False, 0)
 
 
 def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITCH_DEGREE
@@ -114,7 +115,7 @@ class ControllerContext:
                              f"({gait.hash()}); refit the tube or pass strict_tube=False")
         sub = subsystem or ProsthesisSubsystem(model)
         self.subsystem = sub
-        self.margin = _margin()
+        self.margin = _margin(tube)
         self.terms = ControllerTerms(sub, gait.degree, tube.nominal.shape[1] - 1, tube.degree,
                                      PITCH_DEGREE, backend, FEEDFORWARD_DEGREE,
                                      self.margin["margin_lower"].shape[1] - 1)
@@ -189,11 +190,18 @@ def _toward(u: float, target: float, step: float) -> float:
     return u + (step if d > step else -step if d < -step else d)
 
 
-def _margin() -> dict[str, object]:
-    """The margin of the interaction-aware CLF row: a Bezier box of the model error d over
-    the phase.  No artifact characterises d yet (open work, README), so it is zero."""
-    z = np.zeros((2, 1))
-    return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0, "margin_tau_hi": 1.0}
+def _margin(tube: ForceTube) -> dict[str, object]:
+    """The bound of the interaction-aware CLF row's model error d (``clf_qp_loop``'s
+    parameters): the tube's ``model_error`` Bezier box over its phase range, or a zero box
+    (no margin, nothing to monitor) when the tube carries none (schema 1).  Whether it
+    enters the row is decided per tick (``margin_gate``, config ``uncertainty.margin``)."""
+    me = tube.model_error
+    if me is None:
+        z = np.zeros((2, 1))
+        return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0,
+                "margin_tau_hi": 1.0, "margin_gate": 0.0}
+    return {"margin_lower": me.lower, "margin_upper": me.upper, "margin_tau_lo": me.tau_lo,
+            "margin_tau_hi": me.tau_hi, "margin_gate": 0.0}
 
 
 class BaseController:
@@ -248,6 +256,17 @@ class BaseController:
         self._t_unloaded: float | None = None  # since when load <= load_off with contact
         self._t_prev = -_INF
         self.fallback_count = 0
+        self._reset_estimator()
+
+    def _reset_estimator(self) -> None:
+        """Model-error estimator state (controllers that have one)."""
+
+    def _estimator_gap(self) -> None:
+        """A tick without the stance law (fault, swing): no finite difference across it."""
+
+    def _estimate(self) -> tuple[tuple[float, float], bool, bool, int]:
+        """(disturbance, valid, coverage flag, coverage count) of this tick: none here."""
+        return _NO_ESTIMATE
 
     @property
     def domain(self) -> str:
@@ -355,12 +374,14 @@ class BaseController:
     def tick(self, meas: ProsthesisMeasurement) -> ControlOutput:
         fault = validate(meas, self._t_prev, *self._vargs)
         active = 0
+        since = 0.0
         if fault:
             step = self._fb_step
             u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
             self.fallback_count += 1
             tau = V = rho = 0.0
             status, mode = QP_NOT_RUN, MODE_FAULT
+            self._estimator_gap()
         else:
             t = float(meas.t)
             self._t_prev = t
@@ -368,9 +389,11 @@ class BaseController:
             vk, va = float(meas.knee_vel), float(meas.ankle_vel)
             if self._update_domain(t, bool(meas.contact), float(meas.foot_load)) == "ps":
                 u0, u1, tau, V, rho, status, active, mode = self._stance(t, qk, qa, vk, va)
+                since = t - self._t_switch  # type: ignore[operator]
             else:
                 u0, u1, tau = self._swing_torque(t, qk, qa, vk, va)
                 V = rho = 0.0
+                self._estimator_gap()
                 status, mode = QP_NOT_RUN, MODE_SWING
             if not (math.isfinite(u0) and math.isfinite(u1)):
                 step = self._fb_step
@@ -385,10 +408,11 @@ class BaseController:
         if c0 != u0 or c1 != u1:
             active |= _ACTIVE_CLAMP
         self._u0, self._u1 = c0, c1
+        est, valid, flag, count = self._estimate()
         return ControlOutput(
             np.array((c0, c1)),
             Diagnostics(tau, V, rho, status, active, self.fallback_count, int(fault),
-                        self._domain, mode))
+                        self._domain, mode, est, valid, flag, count, since))
 
 
 class PDController(BaseController):

@@ -14,9 +14,8 @@ last domain switch, fallback count).  ``tick`` never raises on a bad measurement
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from enum import IntFlag
-from typing import Protocol, runtime_checkable
+from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -51,9 +50,9 @@ MODE_FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward th
 MODE_FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
 
 
-@dataclass(frozen=True, slots=True)
-class Diagnostics:
-    """Per-tick diagnostics; every number is finite.
+class Diagnostics(NamedTuple):
+    """Per-tick diagnostics; every number is finite.  Immutable; a NamedTuple rather than a
+    frozen dataclass because it is built every tick (0.4 us against 1.5 us for 14 fields).
 
     tau: phase (state-based in ps, the time-based estimate in pns); V: CLF value V_eps
     (evaluated for every controller in ps, 0 in pns); rho: relaxation (0 unless relaxed
@@ -61,7 +60,15 @@ class Diagnostics:
     ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
     output or a faulty measurement); fault: the
     :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
-    domain: "ps" or "pns"; mode: see the MODE_* constants."""
+    domain: "ps" or "pns"; mode: see the MODE_* constants.
+
+    Model-error estimate and coverage monitor (``clfqp``, ``clfqp-exact``;
+    :mod:`prosthesis_controller.disturbance`; zero / False for the other controllers):
+    disturbance: (dy1 [m/s^2], d2y2 [rad/s^2]), the filtered estimate of d = nu - (a + A u)
+    (0 while not valid); disturbance_valid: the estimator has run long enough; coverage_flag:
+    this tick's estimate is outside the tube's characterised bound (never without one);
+    coverage_count: flagged ticks since ``reset``; since_touchdown: time since the switch to
+    stance (s; 0 in swing and on a faulty tick)."""
 
     tau: float
     V: float
@@ -72,11 +79,16 @@ class Diagnostics:
     fault: int
     domain: str
     mode: str
+    disturbance: tuple[float, float] = (0.0, 0.0)
+    disturbance_valid: bool = False
+    coverage_flag: bool = False
+    coverage_count: int = 0
+    since_touchdown: float = 0.0
 
 
-@dataclass(frozen=True, slots=True)
-class ControlOutput:
-    """Motor torques (knee, ankle) in N m and the diagnostics of the tick."""
+class ControlOutput(NamedTuple):
+    """Motor torques (knee, ankle) in N m and the diagnostics of the tick (immutable; a
+    NamedTuple for the same reason as :class:`Diagnostics`)."""
 
     torque: np.ndarray
     diagnostics: Diagnostics

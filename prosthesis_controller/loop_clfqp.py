@@ -20,6 +20,7 @@ import numpy as np
 import piqp
 
 from prosthesis_controller.controllers import BaseController, ControllerContext
+from prosthesis_controller.disturbance import DisturbanceEstimator
 from prosthesis_controller.interface import (
     MODE_FALLBACK,
     MODE_STANCE,
@@ -71,6 +72,13 @@ class LoopClfQpController(BaseController):
         self.name = "clfqp" if relaxed else "clfqp-exact"
         self.qp_solution: np.ndarray | None = None
         self.sigma = 0.0  # contact relaxation of the last solve (torque-equivalent units)
+        un = ctx.config.uncertainty
+        self.estimator = DisturbanceEstimator(un.filter_time, un.max_dt,
+                                              un.monitor_tolerance)
+        me = ctx.tube.model_error
+        self._exclude = float(me.exclude_after_touchdown) if me is not None else _INF
+        self._margin_on = bool(un.margin) and me is not None
+        self._monitored = False  # the previous stance tick's state is where the bound is
         super().__init__(ctx)
         f = ctx.terms.numeric["clf_qp_loop"]
         f.inputs[1][:] = ctx.clf_loop_params
@@ -80,6 +88,22 @@ class LoopClfQpController(BaseController):
         self.terms_out = o
         self._oP, self._oc, self._oG, self._oh = o["P"], o["c"], o["G"], o["h"]
         self._ochk, self._otau, self._oV = o["check"], o["tau"], o["V"]
+        self._oest = o["estimator"]
+        self._pgate = f.inputs[1][ctx.terms.clf_loop_layout.offset("margin_gate"):][:1]
+
+    def _reset_estimator(self) -> None:
+        self.estimator.reset()
+        self._monitored = False
+
+    def _estimator_gap(self) -> None:
+        self.estimator.restart()
+        self._monitored = False
+
+    def _estimate(self) -> tuple[tuple[float, float], bool, bool, int]:
+        e = self.estimator
+        if self._domain != "ps" or not e.valid:
+            return (0.0, 0.0), False, False, e.count
+        return (e.d0, e.d1), True, e.flag, e.count
 
     def _set_eps(self, eps: float) -> None:
         st = self._solver.settings
@@ -106,10 +130,22 @@ class LoopClfQpController(BaseController):
 
     def _stance(self, t, qk, qa, vk, va):
         self.qp_solution = None
+        est = self.estimator
+        est.update(t, vk, va, self._u0, self._u1, self._monitored)
+        # the bound is defined (and, if configured, in the CLF row) from the excluded time
+        # after the switch to stance on, and over its phase range (in the generated call)
+        late = t - self._t_switch >= self._exclude  # type: ignore[operator]
+        self._monitored = late
+        if self._margin_on:
+            self._pgate[0] = 1.0 if late else 0.0
         x = self._fx
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
         self._f.call_inplace()
         tau, V = float(self._otau[0]), float(self._oV[0])
+        if math.isfinite(self._ochk[0]):
+            est.store(t, vk, va, self._oest.tolist())
+        else:
+            est.restart()
         if not math.isfinite(self._ochk[0]):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK

@@ -5,7 +5,8 @@ Per control cycle the plant sends ``KneeFeedback``, ``AnkleFeedback``, ``FootLoa
 (:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter; rejects are counted and
 reported in ``CtrlRejects``), collects the cycle, and on ``SimTime`` ticks the controller and
 answers with (heartbeat every ``heartbeat_every`` ticks, ``CtrlStatus`` + ``CtrlRejects``
-every ``status_every`` ticks, then) one ``TorqueCmd``. The torque frame's timestamp echoes
+every ``status_every`` ticks, ``CtrlDisturbance`` on every tick with a valid model-error
+estimate (``clfqp``'s stance), then) one ``TorqueCmd``. The torque frame's timestamp echoes
 the ``SimTime`` frame's timestamp, so the plant knows which cycle a reply answers (lockstep
 plants stamp frames with simulation time). A feedback frame missing from a cycle (dropped,
 corrupted, late) is replaced by its last accepted value and flagged ``stale_feedback``; before
@@ -70,6 +71,13 @@ def _active_bits(a: int) -> int:
     if a & Active.RHO_MAX:
         out |= 16
     return out
+
+
+def _disturbance_frame(d: Any, ts: float) -> can.Message:
+    """``CtrlDisturbance`` of a tick's diagnostics (model-error estimate, coverage flag)."""
+    e = d.disturbance
+    return codec.encode_disturbance(e[0], e[1], d.tau, d.disturbance_valid, d.coverage_flag,
+                                    d.since_touchdown, timestamp=ts)
 
 
 class ControllerNode:
@@ -155,6 +163,8 @@ class ControllerNode:
             out.append(self._heartbeat(v.timestamp))
         if self.ticks % self.status_every == 0:
             out.extend(self.status_frames(v.timestamp))
+        if d.disturbance_valid:
+            out.append(_disturbance_frame(d, v.timestamp))
         self.ticks += 1
         u = res.torque
         out.append(codec.encode_torque(float(u[0]), float(u[1]), self._next(), enable=True,
@@ -177,7 +187,10 @@ class ControllerNode:
         frames = codec.encode_status(self._flags, qp, 0,
                                      min(d.fallback_count, 65535) if d is not None else 0,
                                      _active_bits(d.active) if d is not None else 0,
-                                     self.checker.counts, timestamp=ts)
+                                     self.checker.counts,
+                                     coverage_flag=bool(d is not None and d.coverage_flag),
+                                     coverage_count=min(d.coverage_count, 127)
+                                     if d is not None else 0, timestamp=ts)
         self._flags = FaultFlag.NONE
         return frames
 
@@ -276,9 +289,12 @@ def _summary(node: ControllerNode, why: str, cycle: Durations, usage: Usage
     """What the node did; ``timing_us``: ``controller_tick`` (controller.tick alone) and
     ``cycle`` (first frame of a cycle received -> its TorqueCmd sent: frame checks, the
     tick, encoding, sending); ``usage``: the process's CPU time and context switches
-    while serving (all threads, zenoh's included)."""
+    while serving (all threads, zenoh's included); ``coverage_count``: ticks whose
+    model-error estimate left the tube's characterised bound (0 without one)."""
+    d = node._last_diag
     return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
             "safe_entries": node.safe_entries,
+            "coverage_count": int(d.coverage_count) if d is not None else 0,
             "rejects": {str(k): v for k, v in node.checker.counts.items() if str(k) != "ok"},
             "timing_us": {"controller_tick": node.tick_time.summary(),
                           "cycle": cycle.summary()},

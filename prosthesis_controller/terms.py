@@ -71,6 +71,7 @@ from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.interaction import InteractionModel
+from hp_model.interaction import prosthesis_outputs as stance_outputs
 from hp_model.outputs import Y2_COORDS, unpack_symbolic
 from hp_model.prosthesis import ProsthesisSubsystem
 from hp_model.tree import PlanarTree, frame_pose
@@ -94,6 +95,15 @@ class Layout:
             return ca.reshape(s, shape[1], shape[0]).T
         return s
 
+    def offset(self, name: str) -> int:
+        """Index of the first element of ``name`` in the packed vector."""
+        k = 0
+        for n, _, s in self._items:
+            if n == name:
+                return k
+            k += s.numel()
+        raise KeyError(f"no parameter '{name}' in the layout")
+
     @property
     def symbol(self) -> ca.SX:
         return ca.vertcat(*[s for _, _, s in self._items])
@@ -115,20 +125,6 @@ class Layout:
                 raise ValueError(f"parameter '{name}': expected shape {shape}, got {a.size}")
             out.append(a)
         return np.concatenate(out)
-
-
-def stance_outputs(x: ca.SX, alpha: ca.SX, v_hip: ca.SX, p_min: ca.SX, p_max: ca.SX,
-                   ck: float, ca_: float) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """tau, tau_dot and the paper's prosthesis outputs y1 = c_k dth_pk + c_a dth_pa - v_hip*,
-    y2 = th_pk - B_pk(tau), dy2 at x = (th_pk, th_pa, dth_pk, dth_pa) (B_pk continued
-    linearly outside [0, 1])."""
-    th, dth = x[0:2], x[2:4]
-    dp = p_max - p_min
-    tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
-    tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
-    B, dB, _ = bezier.evaluate_continued(alpha, tau)
-    y1 = ck * dth[0] + ca_ * dth[1] - v_hip
-    return tau, tau_dot, y1, th[0] - B, dth[0] - dB * tau_dot
 
 
 def reduced_lagrangian(sub: ProsthesisSubsystem, tree: PlanarTree | None = None
@@ -197,6 +193,9 @@ def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
     return ca.horzcat(*cols), links
 
 
+#: the ``estimator`` output of :func:`clf_qp_loop_function`, in order
+ESTIMATOR_TERMS = ("b0", "b1", "Jv00", "Jv01", "Jv10", "Jv11", "A00", "A01", "A10", "A11",
+                   "lo0", "lo1", "hi0", "hi1", "in_range")
 #: QP rows of :func:`clf_qp_loop_function`: the CLF row, then the stance-foot contact rows
 LOOP_ROWS = ("clf", "friction_fwd", "friction_back", "normal_force", "cop_toe", "cop_heel")
 #: units of the relaxations in the solver's variables: rho = LOOP_RHO_UNIT z[2], sigma =
@@ -225,8 +224,16 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
         cost:     |a + A u|^2 + c_rho rho + c_sigma sigma
 
     with [c_d - r_d, c_d + r_d] the characterised bound of what the nominal-human model does
-    not explain, d = nu_true - (a + A u), a Bezier box over the phase s in [tau_lo, tau_hi]
-    (zero: no margin).  Decision variables z = (u_k, u_a, rho / rho_scale, sigma /
+    not explain, d = nu_true - (a + A u) (:mod:`characterization.model_error_fit`), a Bezier
+    box over the
+    phase s in [tau_lo, tau_hi], zero outside that range and when ``margin_gate`` is 0 (the
+    controller sets it per tick: 0 within the excluded time after touchdown, whose transient
+    is left to the relaxation; zero coefficients: no margin).  Outputs for the disturbance
+    estimator, packed in one vector ``estimator`` (:data:`ESTIMATOR_TERMS`, read with one
+    ``tolist``): b = Jo[:, 0:2] dth - a and Jv = Jo[:, 2:4] (row by row), so that a measured
+    joint acceleration ddth gives d = b + Jv ddth - A u; A row by row; for the coverage
+    monitor the bound itself (lower (2), upper (2), ungated) and 1 inside its phase range.
+    Decision variables z = (u_k, u_a, rho / rho_scale, sigma /
     sigma_scale); each row is divided by the norm of its torque part, so sigma is the
     violation of a contact row in torque-equivalent units, and the cost by trace(A^T A).
     The exact form uses the (u, u) block and the first two columns of the rows."""
@@ -243,6 +250,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     d_lo = L.add("margin_lower", (2, margin_degree + 1))
     d_hi = L.add("margin_upper", (2, margin_degree + 1))
     tau_lo, tau_hi = L.add("margin_tau_lo"), L.add("margin_tau_hi")
+    gate = L.add("margin_gate")
     mu, f_min = L.add("mu"), L.add("f_min")
     toe, heel = L.add("toe"), L.add("heel")
     x = ca.SX.sym("x", 4)
@@ -259,7 +267,14 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     LGV = 2 * eta.T @ P_eps @ G
     s = ca.fmin(ca.fmax((tau - tau_lo) / ca.fmax(tau_hi - tau_lo, 1e-9), 0), 1)
     lo, hi = bezier.evaluate(d_lo, s), bezier.evaluate(d_hi, s)
-    c_d, r_d = 0.5 * (lo + hi), 0.5 * ca.fmax(hi - lo, 0)
+    in_range = (tau >= tau_lo) * (tau <= tau_hi)  # the bound's phase range
+    on = gate * in_range  # gated in time (and off) by the controller
+    c_d, r_d = on * 0.5 * (lo + hi), on * 0.5 * ca.fmax(hi - lo, 0)
+    # the disturbance estimator's terms: nu = Jo (dth, ddth) = b + a + Jv ddth
+    b_est = Jo[:, 0:2] @ x[2:4] - a
+    Jv = Jo[:, 2:4]
+    est = ca.vertcat(b_est, Jv[0, 0], Jv[0, 1], Jv[1, 0], Jv[1, 1], A[0, 0], A[0, 1],
+                     A[1, 0], A[1, 1], lo, hi, in_range)
     h_clf = -g_over_eps * V - LFV - LGV @ a - LGV @ c_d - ca.fabs(LGV) @ r_d
     g_clf = LGV @ A
     fx0, fz0, my0 = w0[0], w0[1], w0[2]
@@ -283,9 +298,10 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     chk = ca.sum1(ca.sum2(Pq)) + ca.sum1(cq) + ca.sum1(ca.sum2(Gq)) + ca.sum1(hq) + V
     fn = ca.Function(
         "clf_qp_loop", [x, L.symbol],
-        [Pq, cq, Gq, hq, chk, eta, tau, V, a, A, w0, W, c_d, r_d],
+        [Pq, cq, Gq, hq, chk, eta, tau, V, a, A, w0, W, c_d, r_d, est],
         ["x", "p"],
-        ["P", "c", "G", "h", "check", "eta", "tau", "V", "a", "A", "w0", "W", "c_d", "r_d"],
+        ["P", "c", "G", "h", "check", "eta", "tau", "V", "a", "A", "w0", "W", "c_d", "r_d",
+         "estimator"],
         {"cse": True})
     return L, fn
 

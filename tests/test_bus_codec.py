@@ -36,7 +36,7 @@ def test_dbc_frames_ids_senders():
     assert {m.frame_id: m.name for m in db.messages} == {
         0x010: "TorqueCmd", 0x020: "CtrlHeartbeat", 0x080: "SimTime",
         0x101: "KneeFeedback", 0x102: "AnkleFeedback", 0x110: "FootLoad",
-        0x300: "CtrlStatus", 0x301: "CtrlRejects"}
+        0x300: "CtrlStatus", 0x301: "CtrlRejects", 0x302: "CtrlDisturbance"}
     assert {int(i) for i in FrameId} == {m.frame_id for m in db.messages}
     for m in db.messages:
         assert m.length == 8 and not m.is_extended_frame and not m.is_fd
@@ -165,6 +165,31 @@ def test_heartbeat_status_rejects():
     assert codec.decode(status).counter is None
     # an unknown QpStatus value from the wire is passed through as an int
     assert codec.decode(codec.encode_status(qp_status=9)[0]).value.qp_status == 9
+    # the model-error coverage monitor: flag and a count saturating at 127
+    assert (s.coverage_flag, s.coverage_count) == (0, 0)
+    s = codec.decode(codec.encode_status(coverage_flag=True, coverage_count=5)[0]).value
+    assert (s.coverage_flag, s.coverage_count) == (1, 5)
+    s = codec.decode(codec.encode_status(coverage_count=10_000)[0]).value
+    assert (s.coverage_flag, s.coverage_count) == (0, 127)
+    assert codec.decode_cantools(codec.encode_status(coverage_flag=True)[0])["CoverageFlag"] == 1
+
+
+def test_disturbance_frame():
+    """CtrlDisturbance: the online model-error estimate, quantized as the DBC says (1e-3
+    m/s^2, 1e-2 rad/s^2, 1e-4 in tau, 1 ms), clamped to its ranges; unprotected."""
+    m = codec.encode_disturbance(0.1234, -5.678, 0.4321, True, True, 0.0314)
+    v = codec.decode(m)
+    assert v.ok and v.name == "CtrlDisturbance" and v.counter is None
+    d = v.value
+    assert d.dy1 == pytest.approx(0.123, abs=1e-9) and d.d2y2 == pytest.approx(-5.68, abs=1e-9)
+    assert d.tau == pytest.approx(0.4321, abs=1e-9) and (d.valid, d.flag) == (1, 1)
+    assert d.since_touchdown == pytest.approx(0.031, abs=1e-9)
+    assert codec.decode_cantools(m)["DistD2y2"] == pytest.approx(-5.68)
+    big = codec.decode(codec.encode_disturbance(1e3, -1e4, 9.0, False, False, 7.0)).value
+    assert (big.dy1, big.d2y2, big.tau, big.since_touchdown) == pytest.approx(
+        (32.0, -320.0, 3.2, 0.255))
+    with pytest.raises(ValueError, match="NaN"):
+        codec.encode_disturbance(math.nan, 0.0, 0.0, True, False, 0.0)
 
 
 def test_sim_time_wraps_at_2_to_32():

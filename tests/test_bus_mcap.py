@@ -71,7 +71,10 @@ def test_schemas_are_valid_and_examples_conform():
         "/prosthesis/torque_command": {"knee": 1.0, "ankle": -1.0, "knee_joint": 50.0,
                                        "ankle_joint": -50.0, "enable": True, "counter": 2},
         "/ground_truth": ground_truth(2),
-        "/controller/diagnostics": diagnostics(0),
+        "/controller/diagnostics": diagnostics(0) | {"coverage_flag": True,
+                                                     "coverage_count": 3},
+        "/controller/disturbance": {"t": 0.5, "d": [0.01, -0.2], "tau": 0.4, "valid": True,
+                                    "flag": False, "since_touchdown": 0.255},
     }
     assert examples.keys() == CHANNELS.keys()
     for topic, schema in CHANNELS.items():

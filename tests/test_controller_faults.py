@@ -36,7 +36,7 @@ def _check_output(out, limits):
     assert u.shape == (2,) and np.all(np.isfinite(u))
     assert abs(u[0]) <= limits[0] and abs(u[1]) <= limits[1]
     d = out.diagnostics
-    for v in (d.tau, d.V, d.rho):
+    for v in (d.tau, d.V, d.rho, *d.disturbance, d.since_touchdown):
         assert math.isfinite(v)
     assert d.domain in ("ps", "pns")
 

@@ -4,6 +4,7 @@ All zenoh sessions are loopback-only (ZenohBus/make_config) and closed by the ru
 
 from __future__ import annotations
 
+import math
 import os
 import signal
 import subprocess
@@ -186,6 +187,40 @@ def test_refit_tube(lockstep, files, model):
     rep = refit_tube([path], files["gait"], out, model=model)
     assert out.is_file() and rep["steps"] >= 4
     assert 0.0 <= rep["old_coverage_samples"] <= 1.0
+
+
+def test_recorded_model_error_estimates_and_refit(lockstep, files, tmp_path):
+    """clfqp's online model-error estimates travel in CtrlDisturbance frames, are recorded
+    (/controller/disturbance, finite, with phase and time since touchdown), the status
+    carries the coverage flag (never set: this tube has no bound), and `hpcosim tube refit
+    --model-error` turns them into a valid schema-2 tube keeping the socket-force tube."""
+    import json
+
+    from hp_model.force_tube import load_tube
+    from orchestrator.cli import main
+
+    _, path = lockstep
+    est = [o for _, _, o in read_messages(path, ["/controller/disturbance"])]
+    assert len(est) > 1000 and all(o["valid"] for o in est)
+    assert all(math.isfinite(v) for o in est for v in (*o["d"], o["tau"]))
+    assert not any(o["flag"] for o in est)
+    assert min(o["since_touchdown"] for o in est) < 0.03 <= max(o["since_touchdown"] for o in est)
+    diag = [o for _, _, o in read_messages(path, ["/controller/diagnostics"])]
+    assert diag and not any(o["coverage_flag"] or o["coverage_count"] for o in diag)
+    out = tmp_path / "refit_me.json"
+    assert main(["tube", "refit", str(path), "--gait", str(files["gait"]), "--out", str(out),
+                 "--model-error", "--degree", "2"]) == 0
+    assert json.loads(out.read_text())["schema_version"] == 2
+    gait = load_gait(files["gait"])
+    t, old = load_tube(out, gait.hash()), load_tube(files["tube"], gait.hash())
+    np.testing.assert_array_equal(t.upper, old.upper)
+    me = t.model_error
+    assert me is not None and me.degree == 2 and me.exclude_after_touchdown == 0.03
+    assert me.credibility["samples_inside_fraction"] == 1.0 and me.n_steps >= 4
+    # a recording without estimates is one line and exit code 2
+    assert main(["tube", "refit", str(files["dir"] / "missing.mcap"), "--gait",
+                 str(files["gait"]), "--out", str(tmp_path / "x.json"), "--model-error"]) == 2
+    assert not (tmp_path / "x.json").exists()
 
 
 # --------------------------------------------------------------------------- faults
