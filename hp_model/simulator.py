@@ -56,7 +56,8 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS
 
-#: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period
+#: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period (the plant
+#: clamps it to the device's motor limits, ``model.torque_limits``)
 Policy = Callable[[float, "SimState"], np.ndarray]
 
 
@@ -157,6 +158,7 @@ class HybridSimulator:
         self.human_delay = human_delay
         self._vhold: np.ndarray | None = None  # the feedback term held over the period
         self.model, self.cl = model, closed_loop
+        self._u_limit = np.asarray(model.torque_limits[4:6], dtype=float)  # motor N m
         self.thetas = {d: np.asarray(thetas[d], dtype=float) for d in model.domains}
         self.gains = np.asarray(gains, dtype=float)
         self.opt = options or SimOptions()
@@ -302,7 +304,9 @@ class HybridSimulator:
             state_u, lam = self._eval(mode, d, x, u_p)
             if policy is not None:
                 st = SimState(t, d, q.copy(), qd.copy(), tau, lam, len(impacts))
-                u_p = np.asarray(policy(t, st), dtype=float).reshape(2)
+                # bounded at the plant whatever the policy computed (the FMU does the same)
+                u_p = np.clip(np.asarray(policy(t, st), dtype=float).reshape(2),
+                              -self._u_limit, self._u_limit)
                 state_u, lam = self._eval(mode, d, x, u_p)
             log_t.append(t)
             log_q.append(q.copy())

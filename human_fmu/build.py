@@ -202,6 +202,9 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
         f"#define HPFMU_IDX_PK {names.index('th_pk')}",
         f"#define HPFMU_IDX_PA {names.index('th_pa')}",
         f"#define HPFMU_SOCKET_FIRST {names.index('x_f')}", "",
+        "/* the device's motor torque limits (knee, ankle; N m): inputs are clamped to them */",
+        "static const double HPFMU_TORQUE_LIMIT[2] = {"
+        + ", ".join(_c_double(float(v)) for v in model.torque_limits[4:6]) + "};", "",
         "/* domains: 0 = ps, 1 = pns */",
         'static const char *const HPFMU_DOMAIN_NAME[2] = {"ps", "pns"};',
         f"static const int HPFMU_NEXT[2] = {{{nxt[0]}, {nxt[1]}}};",

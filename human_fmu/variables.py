@@ -157,6 +157,8 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("fall", "Boolean", "output", "the walker fell (integration stopped)")
     t.add("fall_code", "Integer", "output",
           "why: " + "; ".join(f"{k} {v}" for k, v in FALL_CODES.items()))
+    t.add("torque_clamped", "Integer", "output",
+          "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains
     for d in ("ps", "pns"):
         desc, units = theta_descriptions(d, degree)

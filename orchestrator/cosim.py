@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import os
 import platform
 import signal
@@ -116,6 +117,7 @@ class CosimResult:
     node: dict[str, Any] = field(default_factory=dict)  # the controller node's summary
     usage: dict[str, float] = field(default_factory=dict)  # plant process over the loop
     reply_early: float = 0.0  # see reply_early_share
+    torque_clamped: int = 0  # torque commands the plant clamped to the device's limits
     record: str | None = None
     run_id: str = ""
 
@@ -308,14 +310,39 @@ def _pct(a: list[float], q: float) -> float:
 # --------------------------------------------------------------------------- the run
 
 
-class Plant:
-    """The plant side of one run: rx frame checking and the controller state it implies."""
+#: TorqueCmd's signal step (N m): a command at a limit decodes to within it of the limit
+TORQUE_RESOLUTION = 1e-6
 
-    def __init__(self) -> None:
+
+class Plant:
+    """The plant side of one run: rx frame checking, the controller state it implies, and
+    the bound on what it applies: every torque command is clamped to the device's motor
+    limits ``limits`` (knee, ankle; N m) whatever the sender computed or encoded (the DBC
+    admits +-5 N m), and counted when it had to be."""
+
+    def __init__(self, limits: tuple[float, float]) -> None:
+        if not all(math.isfinite(x) and x > 0 for x in limits):
+            raise ValueError(f"torque limits must be finite and > 0, got {limits}")
+        self.limits = (float(limits[0]), float(limits[1]))
         self.checker = codec.FrameChecker(accept=CTRL_TO_PLANT)
         self.ctrl_state: int | None = None
         self.ctrl_rejects: dict[str, int] = {}
         self.last_status: Any = None
+        self.torque_clamped = 0  # commands with a torque outside the limits
+
+    def command(self, c: Any) -> tuple[float, float]:
+        """The motor torques to apply for a decoded TorqueCmd ``c``: zero unless enabled,
+        each clamped to +-limit (a non-finite value is applied as zero and counted)."""
+        if not c.enable:
+            return 0.0, 0.0
+        out, over = [], False
+        for x, lim in zip((float(c.knee), float(c.ankle)), self.limits, strict=True):
+            out.append(min(max(x, -lim), lim) if math.isfinite(x) else 0.0)
+            # a command at the limit decodes to within the signal's resolution of it
+            over = over or not (abs(x) <= lim + TORQUE_RESOLUTION)
+        if over:
+            self.torque_clamped += 1
+        return out[0], out[1]
 
     def on_rx(self, msg: can.Message) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
@@ -426,7 +453,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if not bus.wait_for_peer(10.0):
             raise CosimError("controller alive but not subscribed")
         say("controller alive")
-        _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, progress)
+        limits = (float(model.torque_limits[4]), float(model.torque_limits[5]))
+        _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, limits, progress)
     finally:
         if affinity is not None:
             os.sched_setaffinity(0, affinity)
@@ -485,12 +513,13 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
 
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc: Any,
           lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
+          limits: tuple[float, float],
           progress: Callable[[int, float, int], None] | None) -> None:
     """The tick loop (module docstring). Recording is deferred: the tick's frames and
     signals are queued as they happen and serialized while the plant waits for the
     controller's reply (after sending), so MCAP writing overlaps the round trip."""
     port = FmuPort(fmu.fmu, fmu.vr)
-    plant = Plant()
+    plant = Plant(limits)
     dt = cfg.dt
     realtime = cfg.mode == "realtime"
     n_max = round(cfg.max_time / dt)
@@ -602,8 +631,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
                 continue
             v = on_rx(msg, t)
             if v.ok and v.frame_id == FrameId.TORQUE_CMD:
-                c = v.value
-                u = (c.knee, c.ankle) if c.enable else (0.0, 0.0)
+                u = plant.command(v.value)
                 if abs(msg.timestamp - t) <= rtol:
                     got = True
                     break
@@ -668,6 +696,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     res.wall_time = time.perf_counter() - wall0
     res.injected = injected
     res.plant_rejects = {str(s): n for s, n in plant.checker.counts.items() if str(s) != "ok"}
+    res.torque_clamped = plant.torque_clamped
     res.ctrl_rejects = plant.ctrl_rejects
     if lat:
         a = [x * 1e6 for x in lat]

@@ -104,6 +104,7 @@ def run(
         t.add_row("controller node us (mean)", ", ".join(
             f"{k.replace('_', ' ')} {v.get('mean_us', 0):.0f}" for k, v in nt.items()))
     t.add_row("rejects plant / controller", f"{res.plant_rejects} / {res.ctrl_rejects}")
+    t.add_row("torque commands clamped to the device limits", str(res.torque_clamped))
     t.add_row("injected", str(res.injected))
     if record:
         t.add_row("recording", str(record))

@@ -77,6 +77,7 @@ def test_lockstep_run_completes(lockstep):
     res, _ = lockstep
     assert not res.faulted and not res.fell, res
     assert res.steps == 10 and res.missed == 0
+    assert res.torque_clamped == 0  # the controller bounds its own torques
     assert res.frames_tx == 4 * res.ticks
     assert all(v == 0 for v in res.plant_rejects.values())
     # the node's own summary, read back from its stderr: one controller tick per cycle
@@ -358,7 +359,7 @@ def test_node_bad_cpu_is_one_line(files):
 
 
 def test_plant_rejects_bad_controller_frames():
-    p = Plant()
+    p = Plant((2.4, 2.4))
     good = codec.encode_torque(0.1, 0.2, 0)
     bad = bytearray(good.data)
     bad[0] ^= 4
@@ -369,6 +370,26 @@ def test_plant_rejects_bad_controller_frames():
     c = p.checker.counts
     assert c["ok"] == 1 and c["duplicate"] == 1 and c["bad_checksum"] == 1
     assert c["unknown_id"] == 1
+
+
+def test_plant_bounds_an_out_of_range_torque_frame(model):
+    """A TorqueCmd inside the DBC's range (+-5 N m) but beyond the device's motor limits is
+    applied at the limits and counted; a disabled command applies zero; in range passes."""
+    lim = tuple(float(x) for x in model.torque_limits[4:6])
+    assert all(0 < x < 5 for x in lim)  # the DBC admits more than the device takes
+    p = Plant(lim)
+    applied = []
+    for k, (kn, an, en) in enumerate([(4.9, -4.9, True), (0.5 * lim[0], -0.5 * lim[1], True),
+                                      (4.9, 0.0, False)]):
+        v = p.on_rx(codec.encode_torque(kn, an, k, enable=en))
+        assert v.ok and v.value.knee == pytest.approx(kn, abs=1e-3)  # decoded as sent
+        applied.append(p.command(v.value))
+    assert applied[0] == (lim[0], -lim[1])
+    assert applied[1] == pytest.approx((0.5 * lim[0], -0.5 * lim[1]), abs=1e-3)
+    assert applied[2] == (0.0, 0.0)
+    assert p.torque_clamped == 1
+    with pytest.raises(ValueError, match="torque limits"):
+        Plant((float("inf"), 1.0))
 
 
 def test_fault_plan_parse():

@@ -267,3 +267,24 @@ def test_bad_calls_are_errors_not_crashes(fmu_path):
         bad.instantiate(callbacks=log.callbacks)
     assert any("GUID" in m for m in log.errors())
     bad.freeLibrary()
+
+
+def test_torque_inputs_are_bounded_by_the_device_limits(fmu_path, model):
+    """A master that bypasses the bus is bounded too: torque inputs beyond the device's motor
+    limits are applied at the limits (the ``u`` outputs) and counted (``torque_clamped``);
+    inputs within them pass unchanged."""
+    lim = [float(x) for x in model.torque_limits[4:6]]
+    h = HumanFMU(str(fmu_path))
+    f = h.fmu
+    h.setup()
+    uv, out = h.vrs(["u_knee", "u_ankle"]), h.vrs(["u[5]", "u[6]"])
+    count = h.vrs(["torque_clamped"])
+    f.setReal(uv, [10 * lim[0], -10 * lim[1]])
+    assert f.getReal(out) == pytest.approx([lim[0], -lim[1]], abs=1e-12)
+    assert f.getInteger(count) == [2]  # each input value beyond its limit
+    f.doStep(0.0, 1e-3)
+    f.setReal(uv, [0.5 * lim[0], -0.25 * lim[1]])
+    assert f.getReal(out) == pytest.approx([0.5 * lim[0], -0.25 * lim[1]], abs=1e-12)
+    f.doStep(1e-3, 1e-3)
+    assert f.getInteger(count) == [2]
+    h.free()

@@ -72,6 +72,7 @@ typedef struct {
     int steps;
     int failed;
     int fall_code;
+    int torque_clamped; /* torque inputs set outside HPFMU_TORQUE_LIMIT */
     int heel;        /* a touchdown with too much foot pitch happened in this step */
     double t_impact;
     double t_step;   /* start of the current step: the start time, then the last impact */
@@ -227,6 +228,18 @@ static const char *fall_reason(int code) {
     }
 }
 
+/* a prosthesis torque input bounded to the device's limit (counted when it had to be); a
+   non-finite value is kept, and fmi2DoStep refuses it */
+static double bounded_torque(Data *s, int k, double v) {
+    const double lim = HPFMU_TORQUE_LIMIT[k];
+    if (!isfinite(v)) return v;
+    if (v > lim || v < -lim) {
+        s->torque_clamped++;
+        return v > lim ? lim : -lim;
+    }
+    return v;
+}
+
 static void set_fall(Inst *c, int code) {
     Data *s = &c->s;
     s->failed = 1;
@@ -326,6 +339,7 @@ static void update_outputs(Inst *c) {
     s->i[VR_DOMAIN] = s->d;
     s->i[VR_STEPS] = s->steps;
     s->i[VR_FALL_CODE] = s->fall_code;
+    s->i[VR_TORQUE_CLAMPED] = s->torque_clamped;
     s->b[VR_FALL] = s->failed;
     s->outputs_valid = 1;
 }
@@ -439,8 +453,9 @@ static fmi2Status setup(Inst *c) {
     }
     for (k = 0; k < NQ; k++) { s->x[k] = q[k]; s->x[NQ + k] = qd[k]; }
     s->d = d;
-    s->up[0] = r[VR_U_KNEE];
-    s->up[1] = r[VR_U_ANKLE];
+    s->torque_clamped = 0;
+    s->up[0] = bounded_torque(s, 0, r[VR_U_KNEE]);
+    s->up[1] = bounded_torque(s, 1, r[VR_U_ANKLE]);
     s->z_prev = guard(c, d, q, qd);
     s->tau_peak = -INFINITY;
     s->bad_cone = 0;
@@ -691,8 +706,8 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     }
     for (k = 0; k < nvr; k++) {
         c->s.r[vr[k]] = value[k];
-        if (vr[k] == VR_U_KNEE) c->s.up[0] = value[k];
-        if (vr[k] == VR_U_ANKLE) c->s.up[1] = value[k];
+        if (vr[k] == VR_U_KNEE) c->s.up[0] = bounded_torque(&c->s, 0, value[k]);
+        if (vr[k] == VR_U_ANKLE) c->s.up[1] = bounded_torque(&c->s, 1, value[k]);
     }
     c->s.outputs_valid = 0;
     return fmi2OK;
