@@ -7,6 +7,7 @@ a check that runs but fails exits with status 1.
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -128,6 +129,20 @@ def model_check(
         raise typer.Exit(1)
 
 
+def _click_exceptions() -> tuple[type[BaseException], ...]:
+    """Usage-error classes of every click a CLI may raise: typer >= 0.16 vendors its own
+    (``typer._click``) beside an installed click."""
+    out: list[type[BaseException]] = []
+    for mod in ("typer._click.exceptions", "click.exceptions"):
+        with contextlib.suppress(ImportError):
+            out.append(__import__(mod, fromlist=["ClickException"]).ClickException)
+    return tuple(out)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning user errors into one-line messages."""
     try:
@@ -145,14 +160,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hpcosim: check failed: {e}", file=sys.stderr)
         return 1
     except Exception as e:  # click usage errors carry their own exit code
-        try:
-            from click import ClickException
-        except ImportError:  # recent typer vendors click as typer._click
-            from typer._click.exceptions import ClickException
-
-        if isinstance(e, ClickException):
-            e.show()
-            return e.exit_code
+        if isinstance(e, _click_exceptions()):
+            print(f"hpcosim: error: {_one_line(e.format_message())}", file=sys.stderr)
+            return int(getattr(e, "exit_code", 2))
         raise
     return rc if isinstance(rc, int) else 0
 

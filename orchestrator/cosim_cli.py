@@ -36,7 +36,7 @@ def serve(
                       ] = None,
     connect: Annotated[str | None, typer.Option(help="Override: zenoh connect endpoints.")
                        ] = None,
-    watchdog_ms: Annotated[float, typer.Option(help="Safe state after this long without "
+    watchdog_ms: Annotated[float, typer.Option(min=0.1, help="Safe state after this long without "
                                                "measurements.")] = 50.0,
 ) -> None:
     """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
@@ -54,7 +54,7 @@ def run(
                                             "clfqp-paper-exact, pd, passive, phase-pd.")],
     gait: GaitOpt,
     tube: TubeOpt,
-    steps: Annotated[int, typer.Option(help="Stop after this many impacts.")] = 20,
+    steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "
                                          "kill, hang (CASE[:start[:every[:count]]]), "
@@ -64,7 +64,8 @@ def run(
                       ] = None,
     fmu: Annotated[Path | None, typer.Option(help="Human FMU (default: built and cached "
                                              "for the gait).", dir_okay=False)] = None,
-    max_time: Annotated[float, typer.Option(help="Simulation time limit [s].")] = 60.0,
+    max_time: Annotated[float, typer.Option(min=0.001, help="Simulation time limit [s].")
+                        ] = 60.0,
     pin: Annotated[bool, typer.Option(help="Run the plant and the controller each on its "
                                       "own CPU.")] = True,
 ) -> None:
@@ -119,7 +120,7 @@ def replay_cmd(
                           ] = None,
     to_bus: Annotated[Path | None, typer.Option("--to-bus", help="Play the recorded frames "
                                                 "onto this bus config instead.")] = None,
-    speed: Annotated[float, typer.Option(help="Playback speed for --to-bus (0: fast).")
+    speed: Annotated[float, typer.Option(min=0.0, help="Playback speed for --to-bus (0: fast).")
                      ] = 1.0,
 ) -> None:
     """Replay recorded measurements through a controller and report the largest torque

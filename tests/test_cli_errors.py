@@ -1,0 +1,100 @@
+"""Every verb of ``hpcosim`` with bad arguments: one line ``hpcosim: error: ...`` on stderr
+naming what is wrong, a non-zero exit, never a traceback and nothing on stdout."""
+
+from __future__ import annotations
+
+import pytest
+import typer.main
+
+from orchestrator.cli import app, main
+
+
+def _leaves(cmd, path=()):
+    subs = getattr(cmd, "commands", None)
+    if subs:
+        for name, sub in subs.items():
+            yield from _leaves(sub, (*path, name))
+    else:
+        yield path, cmd
+
+
+LEAVES = dict(_leaves(typer.main.get_command(app)))
+
+
+OUTPUTS = {"out"}  # parameters naming what a verb writes (a new path is fine there)
+
+
+def _required(cmd, value: str, out: str) -> list[str]:
+    """Every required argument and option of ``cmd``: inputs given ``value``, outputs
+    ``out``."""
+    args: list[str] = []
+    for p in cmd.params:
+        if not p.required:
+            continue
+        v = out if p.name in OUTPUTS else value
+        args += [v] if p.param_type_name == "argument" else [p.opts[0], v]
+    return args
+
+
+def _has_input(cmd) -> bool:
+    return any(p.required and p.name not in OUTPUTS for p in cmd.params)
+
+
+WITH_INPUT = sorted(p for p, c in LEAVES.items() if _has_input(c))
+
+
+def _one_line_error(capsys, argv: list[str], *words: str) -> str:
+    rc = main(argv)
+    cap = capsys.readouterr()
+    assert rc != 0, argv
+    lines = cap.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hpcosim: error: "), (argv, cap.err)
+    assert "Traceback" not in cap.err and not cap.out.strip(), (argv, cap)
+    for w in words:
+        assert w in lines[0], (argv, lines[0])
+    return lines[0]
+
+
+def test_every_verb_is_reached():
+    names = {" ".join(p) for p in LEAVES}
+    assert {"run", "replay", "demo", "experiments", "gait fit", "tube fit", "tube refit",
+            "mocap process", "mocap synth", "fmu build", "sweep run", "sweep report",
+            "sweep replay", "model check", "controller serve"} <= names
+
+
+@pytest.mark.parametrize("path", sorted(LEAVES), ids=" ".join)
+def test_unknown_option(capsys, path):
+    _one_line_error(capsys, [*path, "--no-such-option"], "--no-such-option")
+
+
+@pytest.mark.parametrize("path", WITH_INPUT, ids=" ".join)
+def test_missing_file(capsys, path, tmp_path):
+    args = _required(LEAVES[path], str(tmp_path / "missing" / "file.json"),
+                     str(tmp_path / "out"))
+    _one_line_error(capsys, [*path, *args])
+
+
+@pytest.mark.parametrize("path", WITH_INPUT, ids=" ".join)
+def test_directory_instead_of_a_file(capsys, path, tmp_path):
+    d = tmp_path / "a_directory"
+    d.mkdir()
+    _one_line_error(capsys, [*path, *_required(LEAVES[path], str(d), str(tmp_path / "out"))])
+
+
+NUMBERS = [(("run",), "--steps"), (("run",), "--max-time"), (("demo",), "--steps"),
+           (("experiments",), "--steps"), (("mocap", "synth"), "--steps"),
+           (("tube", "fit"), "--degree"), (("gait", "fit"), "--degree"),
+           (("sweep", "run"), "--workers"), (("replay",), "--speed")]
+
+
+BAD_VALUES = ["abc", "0", "-1", "nan"]
+#: valid zeros: degree 0 (a constant curve), replay speed 0 (as fast as possible)
+VALID = {("--degree", "0"), ("--speed", "0")}
+CASES = [(p, o, v) for p, o in NUMBERS for v in BAD_VALUES if (o, v) not in VALID]
+
+
+@pytest.mark.parametrize(("path", "opt", "value"), CASES,
+                         ids=[f"{' '.join(p)} {o} {v}" for p, o, v in CASES])
+def test_bad_numbers(capsys, path, opt, value, tmp_path):
+    args = _required(LEAVES[path], "x", str(tmp_path / "out"))
+    _one_line_error(capsys, [*path, *args, opt, value], opt)
