@@ -139,6 +139,21 @@ def _click_exceptions() -> tuple[type[BaseException], ...]:
     return tuple(out)
 
 
+#: user errors of modules the CLI loads only when a verb needs them: (module, class)
+LAZY_USER_ERRORS = (("orchestrator.recording", "RecordingError"),)
+
+
+def _loaded_user_errors() -> tuple[type[BaseException], ...]:
+    """The classes of :data:`LAZY_USER_ERRORS` whose module is loaded (an exception of one
+    can only come from a loaded module)."""
+    out = []
+    for mod, name in LAZY_USER_ERRORS:
+        m = sys.modules.get(mod)
+        if m is not None:
+            out.append(getattr(m, name))
+    return tuple(out)
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -160,6 +175,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hpcosim: check failed: {e}", file=sys.stderr)
         return 1
     except Exception as e:  # click usage errors carry their own exit code
+        if isinstance(e, _loaded_user_errors()):
+            print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
+            return 2
         if isinstance(e, _click_exceptions()):
             print(f"hpcosim: error: {_one_line(e.format_message())}", file=sys.stderr)
             return int(getattr(e, "exit_code", 2))

@@ -200,6 +200,7 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
     model = model or hp_model.load_model()
     gait = load_gait(gait_path, model.parameter_hash())
     paths = [Path(p) for p in paths]
+    _check_gait(paths, gait, gait_path, model)
     steps: list[tuple[np.ndarray, np.ndarray]] = []
     for p in paths:
         steps.extend(ps_profiles(p))
@@ -231,6 +232,29 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
         report["old_coverage_samples"] = inside_s / max(1, n_s)
         report["old_coverage_steps"] = inside_steps / len(steps)
     return report
+
+
+def _check_gait(paths: Iterable[Path], gait: Any, gait_path: str | Path, model: Any) -> None:
+    """Every recording was made with ``gait`` (its attached gait has the same hash): a tube
+    refitted against another gait's phase and nominal force would be mislabelled."""
+    from hp_model.artifacts import ArtifactError
+    from hp_model.gait_artifact import load_gait
+
+    for p in paths:
+        rec = read_recording(p, messages=False)
+        if "gait.json" not in rec.attachments:
+            raise RecordingError(f"{p}: attachment gait.json missing")
+        with tempfile.TemporaryDirectory() as td:
+            f = Path(td) / "gait.json"
+            f.write_bytes(rec.attachments["gait.json"])
+            try:
+                h = load_gait(f, model.parameter_hash()).hash()
+            except ArtifactError as e:
+                raise RecordingError(f"{p}: its gait does not fit this model "
+                                     f"({str(e).replace(str(f), 'gait.json')})") from None
+        if h != gait.hash():
+            raise RecordingError(f"{p}: recorded with gait {h}, not with {gait_path} "
+                                 f"({gait.hash()})")
 
 
 def _old_tube(first: Path, old_tube: str | Path | None, gait_hash: str) -> Any:
@@ -302,10 +326,11 @@ def refit_model_error(paths: Iterable[str | Path], gait_path: str | Path, out: s
     model = model or hp_model.load_model()
     gait = load_gait(gait_path, model.parameter_hash())
     paths = [Path(p) for p in paths]
+    _check_gait(paths, gait, gait_path, model)
     old = _old_tube(paths[0], old_tube, gait.hash())
     if old is None:
         raise RecordingError(f"{paths[0]}: no tube attached; pass the tube to refit with "
-                             "--tube")
+                             "--old")
     samples = []
     for p in paths:
         samples.extend(disturbance_samples(p))

@@ -430,3 +430,29 @@ def test_recording_interrupted_by_signal_is_readable(files, sig):
     r = read_recording(rec, messages=False)
     assert "signal" in r.metadata
     assert sum(1 for _ in read_messages(rec)) > 0
+
+
+def test_refit_refuses_another_gait_and_writes_nothing(lockstep, files, model, tmp_path,
+                                                       template_gait):
+    """A recording made with one gait refitted against another: one line naming the
+    recording and both gaits' hashes, exit 2, no tube written."""
+    from dataclasses import replace as dc_replace
+
+    from hp_model.gait_artifact import save_gait
+    from orchestrator.cli import main
+
+    _, path = lockstep
+    other = tmp_path / "other_gait.json"
+    p = template_gait.params["ps"]
+    save_gait(other, dc_replace(template_gait, params={
+        **template_gait.params, "ps": dc_replace(p, v_hip=p.v_hip * 1.01)}))
+    out = tmp_path / "refit.json"
+    for extra in ([], ["--model-error"]):
+        assert main(["tube", "refit", str(path), "--gait", str(other), "--out", str(out),
+                     *extra]) == 2
+        assert not out.exists()
+    bad = tmp_path / "garbage.mcap"
+    bad.write_bytes(b"not an mcap file")
+    assert main(["tube", "refit", str(bad), "--gait", str(files["gait"]), "--out",
+                 str(out)]) == 2
+    assert not out.exists()
