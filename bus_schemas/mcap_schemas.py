@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import fcntl
 import json
 import math
 import os
@@ -265,6 +266,28 @@ def _compression(name: str) -> CompressionType:
     raise ValueError(f"compression {name!r}: expected zstd, lz4 or none")
 
 
+class RecordingInUseError(ValueError):
+    """Another process is writing the same recording."""
+
+
+def _locked_part(path: Path, part: Path) -> Any:
+    """The ``.part`` file of ``path`` opened for writing under an exclusive lock (released
+    when it is closed): a second run given the same recording path fails at once instead of
+    writing into the first's file; a part left by a killed run (not locked) is reused."""
+    fd = os.open(part, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise RecordingInUseError(f"{path}: another run is writing this recording (its "
+                                  f"{part.name} is locked)") from None
+    except BaseException:
+        os.close(fd)
+        raise
+    os.ftruncate(fd, 0)
+    return os.fdopen(fd, "wb")
+
+
 class Recorder:
     """Writes a run to MCAP: chunked, zstd-compressed (lz4 or none when zstd is missing).
 
@@ -283,7 +306,7 @@ class Recorder:
         self.path = Path(path)
         self.part_path = self.path.with_name(f".{self.path.name}.part")
         self.compression = _compression(compression)
-        self._file = open(self.part_path, "wb")  # noqa: SIM115 - closed in finish()
+        self._file = _locked_part(self.path, self.part_path)  # closed in finish()
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
         self._append = supports(self._writer)  # the one-pack path (mcap_append)
@@ -442,10 +465,11 @@ class Recorder:
                 self._writer.finish()
                 self._file.flush()
                 os.fsync(self._file.fileno())
+                # renamed while still locked: no other run can take the part in between
+                os.replace(self.part_path, self.path)
             finally:
                 self._file.close()
                 self.restore_signal_handlers()
-            os.replace(self.part_path, self.path)
         return self.path
 
     def __enter__(self) -> Recorder:

@@ -294,3 +294,46 @@ def test_subprocess_interrupted_mid_recording_leaves_a_complete_file(tmp_path, s
     assert int(meta["signal"]["messages"]) == n
     gts = [o for _, ch, _, o in msgs if ch.topic == "/ground_truth"]
     assert [g["t"] for g in gts] == pytest.approx([k * 1e-3 for k in range(len(gts))])
+
+
+def test_two_runs_never_write_the_same_recording(tmp_path):
+    """A second writer of the same path (here another process) fails at once with a clear
+    error while the first goes on and completes; a part file left by a killed run is not
+    locked and is reused."""
+    import textwrap
+
+    from bus_schemas.mcap_schemas import RecordingInUseError
+
+    path = tmp_path / "run.mcap"
+    code = textwrap.dedent(f"""
+        import sys
+        from bus_schemas.mcap_schemas import Recorder
+        rec = Recorder({str(path)!r})
+        rec.register_all()
+        print("open", flush=True)
+        sys.stdin.readline()
+        rec.finish()
+        """)
+    p = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "open"
+        with pytest.raises(RecordingInUseError, match="another run is writing"):
+            Recorder(path)
+        p.stdin.write("\n")
+        p.stdin.flush()
+        assert p.wait(30) == 0
+    finally:
+        p.kill()
+    assert _summary(path) is not None  # the first run's file is complete
+    # a stale part (its writer killed) is not locked: a new run takes it
+    stale = path.with_name(f".{path.name}.part")
+    stale.write_bytes(b"half a file")
+    with Recorder(path) as rec:
+        rec.register_all()
+    assert not stale.exists() and _summary(path) is not None
+
+
+def _summary(path):
+    with open(path, "rb") as f:
+        return make_reader(f).get_summary()
