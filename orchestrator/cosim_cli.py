@@ -13,6 +13,7 @@ from rich.table import Table
 from orchestrator.tube_cli import tube_app  # `tube refit` joins `tube fit`
 
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
+recording_app = typer.Typer(help="Co-simulation recordings (MCAP).", no_args_is_help=True)
 
 GaitOpt = Annotated[Path, typer.Option("--gait", help="Gait file.", dir_okay=False)]
 TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_okay=False)]
@@ -177,8 +178,27 @@ def refit(
     Console().print(rep)
 
 
+@recording_app.command("recover")
+def recover_cmd(
+    part: Annotated[Path, typer.Argument(help="The .part file a killed run left.",
+                                         dir_okay=False)],
+    out: Annotated[Path | None, typer.Option("--out", help="Recording to write (default: the "
+                                             "part's name without the leading dot and "
+                                             ".part).", dir_okay=False)] = None,
+) -> None:
+    """Restore every completely written chunk of a killed run's recording into a complete
+    MCAP file that replay and tube refit read."""
+    from orchestrator.recording import recover
+
+    rep = recover(part, out)
+    ended = "the whole recording" if rep["complete_input"] else \
+        f"up to the first incomplete record ({rep['stopped_at']})"
+    Console().print(f"recovered {rep['messages']} messages, {ended}: {rep['out']}")
+
+
 def register(app: typer.Typer) -> None:
     """Add the co-simulation verbs to the ``hpcosim`` app."""
     app.add_typer(controller_app, name="controller")
+    app.add_typer(recording_app, name="recording")
     app.command("run")(run)
     app.command("replay")(replay_cmd)
