@@ -118,6 +118,7 @@ class CosimResult:
     usage: dict[str, float] = field(default_factory=dict)  # plant process over the loop
     reply_early: float = 0.0  # see reply_early_share
     torque_clamped: int = 0  # torque commands the plant clamped to the device's limits
+    interrupted: str = ""  # the signal (SIGINT, SIGTERM) that ended the run early
     record: str | None = None
     run_id: str = ""
 
@@ -391,8 +392,17 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     proc = None
     fmu = None
     lost = threading.Event()
+    stop = threading.Event()  # a signal asked the run to end (install_signal_handlers)
     sub = None
     affinity: set[int] | None = None  # to restore after pinning the plant loop
+    old_handlers: dict[int, Any] = {}
+    if install_signal_handlers:
+        def _on_signal(signum: int, _frame: Any) -> None:  # a flag only: the loop ends
+            res.interrupted = signal.Signals(signum).name
+            stop.set()
+
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            old_handlers[sig] = signal.signal(sig, _on_signal)
     try:
         real = {}
         integer = {}
@@ -403,8 +413,6 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if cfg.record is not None:
             Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
             rec = Recorder(cfg.record, metadata={"run_id": run_id})
-            if install_signal_handlers:
-                rec.install_signal_handlers()
             rec.register_all()
             rec.add_metadata("config", cfg.to_dict())
             rec.add_metadata("versions", versions())
@@ -444,17 +452,20 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                                 cwd=str(ROOT))
         deadline = time.monotonic() + cfg.start_timeout
         while not alive.wait(0.05):
+            if stop.is_set():
+                break
             if proc.poll() is not None:
                 err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
                 raise CosimError(f"controller process exited ({proc.returncode}) before it "
                                  f"was alive: {err.strip().splitlines()[-1:]}")
             if time.monotonic() > deadline:
                 raise CosimError(f"controller not alive after {cfg.start_timeout} s")
-        if not bus.wait_for_peer(10.0):
+        if not stop.is_set() and not bus.wait_for_peer(10.0):
             raise CosimError("controller alive but not subscribed")
-        say("controller alive")
-        limits = (float(model.torque_limits[4]), float(model.torque_limits[5]))
-        _loop(cfg, plan, fmu, bus, rec, proc, lost, res, ratio, limits, progress)
+        if not stop.is_set():
+            say("controller alive")
+            limits = (float(model.torque_limits[4]), float(model.torque_limits[5]))
+            _loop(cfg, plan, fmu, bus, rec, proc, lost, stop, res, ratio, limits, progress)
     finally:
         if affinity is not None:
             os.sched_setaffinity(0, affinity)
@@ -484,9 +495,14 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
             fmu.free()
         if rec is not None and not rec.finished:
             try:
+                if res.interrupted:
+                    rec.add_metadata("signal", {"signal": res.interrupted,
+                                                "messages": str(rec.message_count)})
                 rec.add_metadata("summary", _summary_dict(res))
             finally:
                 rec.finish()
+        for sig, h in old_handlers.items():
+            signal.signal(sig, h)
     return res
 
 
@@ -512,8 +528,8 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
 
 
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc: Any,
-          lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
-          limits: tuple[float, float],
+          lost: threading.Event, stop: threading.Event, res: CosimResult,
+          ratio: tuple[float, float], limits: tuple[float, float],
           progress: Callable[[int, float, int], None] | None) -> None:
     """The tick loop (module docstring). Recording is deferred: the tick's frames and
     signals are queued as they happen and serialized while the plant waits for the
@@ -582,7 +598,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     # controller); before it, the first reply must come within reply_timeout of the start.
     # Lockstep waits reply_timeout for every reply, so it is armed from the first period.
     armed = not realtime
-    while True:
+    while not stop.is_set():  # a signal ends the run between ticks (its summary complete)
         tick0 = clock()
         t = k * dt
         y, state, (dom, steps, code), fell = port.read()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import sys
 from pathlib import Path
 from typing import Annotated
 
@@ -84,10 +85,17 @@ def run(
             res = run_cosim(cfg, say=lambda m: status.update(m),
                             progress=lambda k, t, s: status.update(
                                 f"t = {t:.2f} s, {s}/{steps} steps"),
-                            install_signal_handlers=record is not None)
+                            install_signal_handlers=True)
         except (CosimError, ValueError) as e:
             Console(stderr=True).print(f"hpcosim: error: {e}")
             raise typer.Exit(2) from None
+    if res.interrupted:
+        import signal as _signal
+
+        where = f"; recording complete: {record}" if record else ""
+        print(f"hpcosim: interrupted by {res.interrupted} at t = {res.sim_time:.3f} s after "
+              f"{res.steps} of {steps} steps{where}", file=sys.stderr)
+        raise typer.Exit(128 + int(_signal.Signals[res.interrupted]))
     t = Table(title=f"co-simulation {res.run_id} ({mode})")
     t.add_column("item")
     t.add_column("value")
