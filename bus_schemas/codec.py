@@ -467,22 +467,31 @@ class FrameChecker:
 
     Checks in order: id (in the DBC, standard id, data frame, and in ``accept`` if given),
     length (classic frame, DLC and data length 8), checksum, then the rolling counter per
-    frame id: the first frame of an id synchronizes; afterwards a counter equal to the last
-    accepted one is a ``duplicate`` (state kept), an advance of 1..``max_gap`` is ok (the
-    skipped frames are added to :attr:`lost`), anything else is ``bad_counter`` and
-    resynchronizes on the new value, so the next consecutive frame is ok again.
-    Unprotected frames (CtrlStatus, CtrlRejects) have no counter check. Never raises.
+    frame id.  Session start: the first frame of an id must carry ``first`` (0: both sides
+    start their counters there; None accepts any).  Afterwards a counter equal to the last
+    accepted one is a ``duplicate``, an advance of 1..``max_gap`` is ok (the skipped frames
+    are added to :attr:`lost`), anything else is ``bad_counter`` and leaves the state as it
+    was, so one stray or replayed frame never invalidates the next genuine one.  The checker
+    resynchronizes only when two consecutive frames agree on a new sequence (a rejected
+    counter c followed by c + 1: lost frames or a sender restart), counted in
+    :attr:`resyncs`.  Unprotected frames (CtrlStatus, CtrlRejects) have no counter check.
+    Never raises.
     """
 
-    def __init__(self, accept: Any = None, *, max_gap: int = 1) -> None:
+    def __init__(self, accept: Any = None, *, max_gap: int = 1, first: int | None = 0) -> None:
         if not 1 <= max_gap <= 14:
             raise ValueError("max_gap must be in 1..14")
+        if first is not None and not 0 <= first <= 15:
+            raise ValueError("first must be a counter value 0..15 or None")
         self.accept = None if accept is None else frozenset(int(i) for i in accept)
         self.max_gap = max_gap
+        self.first = first
         self._last: dict[int, int] = {}
+        self._candidate: dict[int, int] = {}  # the last rejected counter per id
         self._ok = 0
         self._counts = dict.fromkeys(FrameStatus, 0)  # rejections (OK counted in _ok)
         self.lost = 0
+        self.resyncs = 0
 
     @property
     def counts(self) -> dict[FrameStatus, int]:
@@ -496,11 +505,38 @@ class FrameChecker:
         return sum(n for s, n in self._counts.items() if s is not _OK)
 
     def reset(self) -> None:
-        """Forget counter state and counts."""
+        """Forget counter state and counts (a new session: the first frame again)."""
         self._last.clear()
+        self._candidate.clear()
         self._ok = 0
         self._counts = dict.fromkeys(FrameStatus, 0)
         self.lost = 0
+        self.resyncs = 0
+
+    def _counter_ok(self, fid: int, c: int) -> tuple[bool, str]:
+        """Advance the counter state of ``fid`` by the counter ``c``: (ok, why not)."""
+        last = self._last.get(fid)
+        cand = self._candidate.get(fid)
+        if last is not None:
+            delta = (c - last) % 16
+            if delta == 0:
+                return False, "duplicate"
+            if delta <= self.max_gap:
+                self.lost += delta - 1
+                self._last[fid] = c
+                self._candidate.pop(fid, None)
+                return True, ""
+        elif self.first is None or c == self.first:
+            self._last[fid] = c
+            return True, ""
+        if cand is not None and c == (cand + 1) % 16:  # two frames agree: resynchronize
+            self._last[fid] = c
+            self._candidate.pop(fid, None)
+            self.resyncs += 1
+            return True, ""
+        self._candidate[fid] = c
+        return False, (f"counter {c} after {last}" if last is not None
+                       else f"counter {c} at the session start (expected {self.first})")
 
     def check(self, msg: can.Message) -> Verdict:
         v = decode(msg)
@@ -512,22 +548,13 @@ class FrameChecker:
             v = Verdict(_UNKNOWN_ID, fid, v.name, timestamp=v.timestamp,
                         detail="not accepted by this receiver")
         elif v.counter is not None:
-            last = self._last.get(fid)  # type: ignore[arg-type]
-            if last is not None:
-                delta = (v.counter - last) % 16
-                if delta == 0:
-                    v = Verdict(_DUPLICATE, fid, v.name, v.counter,
-                                timestamp=v.timestamp, detail=f"counter {v.counter} again")
-                elif delta > self.max_gap:
-                    self._last[fid] = v.counter  # type: ignore[index]
-                    v = Verdict(_BAD_COUNTER, fid, v.name, v.counter,
-                                timestamp=v.timestamp,
-                                detail=f"counter {v.counter} after {last}")
-                else:
-                    self.lost += delta - 1
-                    self._last[fid] = v.counter  # type: ignore[index]
-            else:
-                self._last[fid] = v.counter  # type: ignore[index]
+            ok, why = self._counter_ok(int(fid), int(v.counter))  # type: ignore[arg-type]
+            if why == "duplicate":
+                v = Verdict(_DUPLICATE, fid, v.name, v.counter, timestamp=v.timestamp,
+                            detail=f"counter {v.counter} again")
+            elif not ok:
+                v = Verdict(_BAD_COUNTER, fid, v.name, v.counter, timestamp=v.timestamp,
+                            detail=why)
         if v.status is _OK:
             self._ok += 1
         else:

@@ -268,21 +268,60 @@ def test_checker_counter_sequence():
     got = [ck.check(_fb(c)).status for c in seq]
     assert got == [FrameStatus.OK, FrameStatus.OK, FrameStatus.DUPLICATE, FrameStatus.OK,
                    FrameStatus.BAD_COUNTER, FrameStatus.OK, FrameStatus.BAD_COUNTER]
-    # counters wrap mod 16, per frame id
-    assert ck.check(_fb(0)).ok and ck.check(_fb(9, frame=1)).ok
+    # counters wrap mod 16, per frame id (each id's session starts at counter 0)
+    assert ck.check(_fb(0)).ok and ck.check(_fb(0, frame=1)).ok
     assert ck.counts[FrameStatus.OK] == 6 and ck.counts[FrameStatus.BAD_COUNTER] == 2
     assert ck.counts[FrameStatus.DUPLICATE] == 1 and ck.rejected == 3 and ck.lost == 0
+    assert ck.resyncs == 2  # 5 -> 6 and 15 -> 0: two consecutive frames agreed
     ck.reset()
-    assert ck.rejected == 0 and ck.check(_fb(3)).ok
+    assert ck.rejected == 0 and ck.check(_fb(0)).ok
 
 
 def test_checker_max_gap_counts_lost_frames():
-    ck = FrameChecker(max_gap=3)
+    ck = FrameChecker(max_gap=3, first=14)
     assert [ck.check(_fb(c)).status for c in (14, 1, 5)] == [
         FrameStatus.OK, FrameStatus.OK, FrameStatus.BAD_COUNTER]
     assert ck.lost == 2
     with pytest.raises(ValueError):
         FrameChecker(max_gap=0)
+    with pytest.raises(ValueError):
+        FrameChecker(first=16)
+
+
+def test_checker_session_starts_at_the_expected_counter():
+    """The first frame of a session must carry counter 0: an intruder's (or a stale
+    sender's) frame with another counter does not set the sequence; a session whose first
+    frame was lost synchronizes once two consecutive frames agree."""
+    ck = FrameChecker()
+    assert ck.check(_fb(7)).status == FrameStatus.BAD_COUNTER
+    assert [ck.check(_fb(c)).status for c in (0, 1, 2)] == [FrameStatus.OK] * 3
+    lost_first = FrameChecker()
+    assert [lost_first.check(_fb(c)).status for c in (1, 2, 3)] == [
+        FrameStatus.BAD_COUNTER, FrameStatus.OK, FrameStatus.OK]
+    assert FrameChecker(first=None).check(_fb(9)).ok
+
+
+def test_checker_a_stray_frame_never_invalidates_the_next_genuine_one():
+    ck = FrameChecker()
+    got = []
+    for c in (0, 1, 2, 9, 3, 4, 13, 5):  # 9 and 13 from someone else
+        got.append(ck.check(_fb(c)).status)
+    assert got == [FrameStatus.OK] * 3 + [FrameStatus.BAD_COUNTER] + [FrameStatus.OK] * 2 \
+        + [FrameStatus.BAD_COUNTER, FrameStatus.OK]
+    assert ck.resyncs == 0 and ck.lost == 0
+
+
+def test_checker_rejects_replayed_frames():
+    """Copies of a recorded frame played back later: each rejected (bad counter or
+    duplicate), the genuine stream goes on unharmed."""
+    ck = FrameChecker()
+    old = _fb(4)
+    statuses = [ck.check(_fb(c)).status for c in range(0, 10)]
+    assert statuses == [FrameStatus.OK] * 10
+    assert [ck.check(old).status for _ in range(3)] == [FrameStatus.BAD_COUNTER] * 3
+    assert ck.check(_fb(10)).ok and ck.check(_fb(11)).ok
+    assert ck.check(_fb(11)).status == FrameStatus.DUPLICATE
+    assert ck.resyncs == 0
 
 
 def test_checker_classifies_every_bad_frame():
