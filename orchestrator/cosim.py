@@ -47,6 +47,7 @@ import numpy as np
 from bus_schemas import codec, keys
 from bus_schemas.bus_config import send_frames
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
+from bus_schemas.run_auth import RunCredentials
 from bus_schemas.zenoh_config import loopback_endpoint
 from human_fmu.instance import FmuInstance
 from orchestrator.fmu_port import FmuPort
@@ -291,7 +292,7 @@ def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
             "--gait", str(cfg.gait), "--tube", str(cfg.tube), "--run-id", run_id,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
-            "--status-every", str(cfg.status_every)] + (
+            "--status-every", str(cfg.status_every), "--auth-stdin"] + (
                 ["--low-latency"] if cfg.low_latency else []) + (
                 ["--cpu", str(cpu)] if cpu is not None else []) + (
                 ["--poll-us", str(bus_poll_us(cfg))] if bus_poll_us(cfg) else [])
@@ -396,6 +397,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     sub = None
     affinity: set[int] | None = None  # to restore after pinning the plant loop
     old_handlers: dict[int, Any] = {}
+    creds: RunCredentials | None = None
     if install_signal_handlers:
         def _on_signal(signum: int, _frame: Any) -> None:  # a flag only: the loop ends
             res.interrupted = signal.Signals(signum).name
@@ -434,8 +436,9 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         plant_cpu, node_cpu = cpu_plan(cfg)
         if plant_cpu is not None:  # before the bus: zenoh threads started now inherit it
             affinity = pin_thread(plant_cpu)
+        creds = RunCredentials()  # only this run's controller can join the link
         bus = ZenohBus(f"{run_id}/plant", listen=endpoint, low_latency=cfg.low_latency,
-                       poll_us=bus_poll_us(cfg))
+                       poll_us=bus_poll_us(cfg), zenoh_options=creds.zenoh_options("plant"))
         alive = threading.Event()
 
         def _on_live(sample: Any) -> None:  # sets flags only; nothing blocks here
@@ -448,8 +451,12 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                                                           _on_live, history=True)
         say(f"starting controller {cfg.controller} (run {run_id})")
         proc = subprocess.Popen(controller_command(cfg, run_id, endpoint, node_cpu), env=_env(),
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                cwd=str(ROOT))
+                                stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, cwd=str(ROOT))
+        assert proc.stdin is not None
+        with contextlib.suppress(BrokenPipeError):  # the secret through a pipe, then EOF
+            proc.stdin.write(f"{creds.secret}\n".encode())
+            proc.stdin.close()
         deadline = time.monotonic() + cfg.start_timeout
         while not alive.wait(0.05):
             if stop.is_set():
@@ -503,6 +510,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                 rec.finish()
         for sig, h in old_handlers.items():
             signal.signal(sig, h)
+        if creds is not None:
+            creds.close()
     return res
 
 

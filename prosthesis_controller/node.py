@@ -51,6 +51,7 @@ from bus_schemas.bus_config import (
     send_frames,
 )
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
+from bus_schemas.run_auth import RunCredentials
 from prosthesis_controller.interface import Active, Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.timing import Durations, Usage, pin_thread
@@ -354,12 +355,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--status-every", type=int, default=100)
     p.add_argument("--subject")
     p.add_argument("--device")
+    p.add_argument("--auth-stdin", action="store_true",
+                   help="zenoh: read the run's secret from the first line of stdin and "
+                   "authenticate the link with it (bus_schemas.run_auth)")
     a = p.parse_args(argv)
     cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
                                channel=a.channel, listen=a.listen, connect=a.connect)
     if cfg.interface == "zenoh" and (a.low_latency or a.poll_us):
         cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": a.low_latency,
                                                 "poll_us": a.poll_us})
+    creds = None
+    if a.auth_stdin:
+        if cfg.interface != "zenoh":
+            print("controller node: error: --auth-stdin needs the zenoh interface",
+                  file=sys.stderr)
+            return 2
+        try:
+            creds = RunCredentials(sys.stdin.readline().strip())
+        except ValueError as e:
+            print(f"controller node: error: {e}", file=sys.stderr)
+            return 2
+        zo = {**cfg.options.get("zenoh_options", {}), **creds.zenoh_options("ctrl")}
+        cfg = dataclasses.replace(cfg, options={**cfg.options, "zenoh_options": zo})
     try:
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
                      status_every=a.status_every, subject=a.subject, device=a.device,
@@ -369,6 +386,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:  # a bad option value (e.g. --cpu): one line, no traceback
         print(f"controller node: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        if creds is not None:
+            creds.close()
     print(f"{SUMMARY_PREFIX}{json.dumps(s)}", file=sys.stderr)
     return 0
 

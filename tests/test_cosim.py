@@ -464,3 +464,39 @@ def test_refit_refuses_another_gait_and_writes_nothing(lockstep, files, model, t
     assert main(["tube", "refit", str(bad), "--gait", str(files["gait"]), "--out",
                  str(out)]) == 2
     assert not out.exists()
+
+
+def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model, lockstep,
+                                                                    monkeypatch):
+    """Another process joins the run's link as a controller would (same run id, the plant's
+    endpoint, torque frames at the limits, liveliness token) but without the run's secret:
+    zenoh refuses it at the transport, nothing it sends reaches the plant and nothing the
+    plant sends reaches it; the run walks exactly as the undisturbed lockstep run."""
+    import orchestrator.cosim as cosim_mod
+    from bus_schemas.zenoh_config import loopback_endpoint
+
+    endpoint = loopback_endpoint()
+    monkeypatch.setattr(cosim_mod, "loopback_endpoint", lambda: endpoint)
+    run_id = f"intruded-{os.getpid()}"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    intruder = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_intruder_node.py"),
+                                 run_id, endpoint, "15"], env=env, cwd=str(ROOT),
+                                stdout=subprocess.PIPE, text=True)
+    try:
+        assert intruder.stdout is not None and intruder.stdout.readline().strip() == "ready"
+        rec = files["dir"] / "intruded.mcap"
+        res = run_cosim(cfg(files, steps=2, run_id=run_id, record=rec), model=model)
+        out, _ = intruder.communicate(timeout=60)
+    finally:
+        if intruder.poll() is None:
+            intruder.kill()
+            intruder.wait()
+    sent, received = (int(w) for w in out.split()[1::2])
+    assert sent > 1000 and received == 0, out
+    assert not res.faulted and not res.fell and res.steps == 2, res
+    assert all(v == 0 for v in res.plant_rejects.values()) and res.torque_clamped == 0
+    # the same motion as the run without the intruder (deterministic lockstep)
+    _, clean = lockstep
+    a = [o["q"] for _, _, o in read_messages(rec, ["/ground_truth"])]
+    b = [o["q"] for _, _, o in read_messages(clean, ["/ground_truth"])][:len(a)]
+    assert len(a) == res.ticks and a == b
