@@ -34,6 +34,10 @@ from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_ROWS, LOOP_SIGMA_UNI
 _INF = math.inf
 _DUAL_TOL = 1e-7
 _N_ROWS = len(LOOP_ROWS)
+_CLF, _CONTACT = int(Active.CLF), int(Active.CONTACT)
+_KNEE_LOWER, _KNEE_UPPER = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
+_ANKLE_LOWER, _ANKLE_UPPER = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
+_RHO_MAX = int(Active.RHO_MAX)
 
 
 class LoopClfQpController(BaseController):
@@ -70,7 +74,7 @@ class LoopClfQpController(BaseController):
                            G=np.asfortranarray(np.ones((_N_ROWS, n))), h_l=self._hl,
                            h_u=np.ones(_N_ROWS), x_l=xl0, x_u=xu0)
         self.name = "clfqp" if relaxed else "clfqp-exact"
-        self.qp_solution: np.ndarray | None = None
+        self._qp_x: list[float] | None = None
         self.sigma = 0.0  # contact relaxation of the last solve (torque-equivalent units)
         un = ctx.config.uncertainty
         self.estimator = DisturbanceEstimator(un.filter_time, un.max_dt,
@@ -121,6 +125,12 @@ class LoopClfQpController(BaseController):
         finally:
             self._set_eps(self._eps)
 
+    @property
+    def qp_solution(self) -> np.ndarray | None:
+        """The last stance tick's QP solution z (clamped to its bounds), None when the tick
+        solved no QP."""
+        return None if self._qp_x is None else np.array(self._qp_x)
+
     def qp_data(self) -> tuple[np.ndarray, ...]:
         """The last stance tick's QP as the solver got it (copies): (P, c, G, h, x_l, x_u),
         min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u."""
@@ -129,7 +139,7 @@ class LoopClfQpController(BaseController):
                 np.array(self._oh), self._xl.copy(), self._xu.copy())
 
     def _stance(self, t, qk, qa, vk, va):
-        self.qp_solution = None
+        self._qp_x = None
         est = self.estimator
         est.update(t, vk, va, self._u0, self._u1, self._monitored)
         # the bound is defined (and, if configured, in the CLF row) from the excluded time
@@ -164,27 +174,31 @@ class LoopClfQpController(BaseController):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
         res = s.result
-        z = np.clip(res.x, self._xl, self._xu)  # piqp meets the bounds to its tolerance only
-        uk, ua = float(z[0]), float(z[1])
-        rho = max(0.0, float(z[2])) * self._rho_scale if self.relaxed else 0.0
-        self.sigma = max(0.0, float(z[3])) * self._sigma_scale if self.relaxed else 0.0
+        # plain floats from here (numpy scalars cost ~0.1 us each); piqp meets the bounds
+        # to its tolerance only: clamp
+        x, xl, xu = res.x.tolist(), self._xl.tolist(), self._xu.tolist()
+        z = [min(max(x[i], xl[i]), xu[i]) for i in range(n)]
+        uk, ua = z[0], z[1]
+        rho = max(0.0, z[2]) * self._rho_scale if self.relaxed else 0.0
+        self.sigma = max(0.0, z[3]) * self._sigma_scale if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
             return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
         d = _DUAL_TOL
-        active = int(Active.CLF) if res.z_u[0] > d else 0
-        if any(res.z_u[i] > d for i in range(1, _N_ROWS)):
-            active |= int(Active.CONTACT)
-        zbl, zbu = res.z_bl, res.z_bu
+        zu = res.z_u.tolist()
+        active = _CLF if zu[0] > d else 0
+        if any(v > d for v in zu[1:_N_ROWS]):
+            active |= _CONTACT
+        zbl, zbu = res.z_bl.tolist(), res.z_bu.tolist()
         if zbl[0] > d:
-            active |= int(Active.KNEE_LOWER)
+            active |= _KNEE_LOWER
         elif zbu[0] > d:
-            active |= int(Active.KNEE_UPPER)
+            active |= _KNEE_UPPER
         if zbl[1] > d:
-            active |= int(Active.ANKLE_LOWER)
+            active |= _ANKLE_LOWER
         elif zbu[1] > d:
-            active |= int(Active.ANKLE_UPPER)
+            active |= _ANKLE_UPPER
         if self.relaxed and zbu[2] > d:
-            active |= int(Active.RHO_MAX)
-        self.qp_solution = np.array(z[:n])
+            active |= _RHO_MAX
+        self._qp_x = z
         return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
