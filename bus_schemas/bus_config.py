@@ -30,6 +30,10 @@ import can
 ROLES = ("plant", "ctrl", "monitor")
 
 
+class BusConfigError(ValueError):
+    """A bus config that cannot be read or opened (the message names the file or field)."""
+
+
 @dataclass(frozen=True)
 class BusConfig:
     interface: str = "zenoh"
@@ -50,7 +54,7 @@ def bus_config_from_dict(d: dict[str, Any], src: str = "bus config") -> BusConfi
     known = {"interface", "run_id", "channel", "listen", "connect", "allow_remote", "options"}
     extra = set(d) - known
     if extra:
-        raise ValueError(f"{src}: unknown keys {sorted(extra)} (known: {sorted(known)})")
+        raise BusConfigError(f"{src}: unknown keys {sorted(extra)} (known: {sorted(known)})")
 
     def eps(v: Any) -> tuple[str, ...]:
         if v is None:
@@ -70,10 +74,15 @@ def bus_config_from_dict(d: dict[str, Any], src: str = "bus config") -> BusConfi
 def load_bus_config(path: str | Path) -> BusConfig:
     """Read a TOML (``.toml``) or JSON bus config file."""
     p = Path(path)
-    text = p.read_text()
-    d = tomllib.loads(text) if p.suffix == ".toml" else json.loads(text)
+    try:
+        text = p.read_text()
+        d = tomllib.loads(text) if p.suffix == ".toml" else json.loads(text)
+    except FileNotFoundError:
+        raise
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, ValueError) as e:
+        raise BusConfigError(f"{p}: {e}") from None
     if not isinstance(d, dict):
-        raise ValueError(f"{p}: expected a table/object")
+        raise BusConfigError(f"{p}: expected a table/object")
     return bus_config_from_dict(d, str(p))
 
 
@@ -81,6 +90,14 @@ def make_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
     """Open the bus of ``cfg`` for ``role`` (plant / ctrl / monitor)."""
     if role not in ROLES:
         raise ValueError(f"role {role!r}: expected one of {ROLES}")
+    try:
+        return _open_bus(cfg, role, **extra)
+    except can.CanError as e:
+        raise BusConfigError(f"bus (interface {cfg.interface!r}, channel "
+                             f"{cfg.channel or cfg.run_id!r}): {e}") from None
+
+
+def _open_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
     if cfg.interface == "zenoh":
         from bus_schemas.zenoh_can import ZenohBus
 

@@ -140,7 +140,9 @@ def _click_exceptions() -> tuple[type[BaseException], ...]:
 
 
 #: user errors of modules the CLI loads only when a verb needs them: (module, class)
-LAZY_USER_ERRORS = (("orchestrator.recording", "RecordingError"),)
+LAZY_USER_ERRORS = (("orchestrator.recording", "RecordingError"),
+                    ("orchestrator.cosim", "CosimError"),
+                    ("bus_schemas.bus_config", "BusConfigError"))
 
 
 def _loaded_user_errors() -> tuple[type[BaseException], ...]:
@@ -169,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         print("hpcosim: aborted", file=sys.stderr)
         return 130
     except USER_ERRORS as e:
-        print(f"hpcosim: error: {e}", file=sys.stderr)
+        print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
         return 2
     except CHECK_FAILURES as e:
         print(f"hpcosim: check failed: {e}", file=sys.stderr)

@@ -139,6 +139,12 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
     if fmu is not None:
         if not Path(fmu).is_file():
             raise FileNotFoundError(f"{fmu}: no such FMU")
+        from fmpy import read_model_description
+
+        try:
+            read_model_description(str(fmu))
+        except Exception as e:  # fmpy raises zip, XML and schema errors alike
+            raise CosimError(f"{fmu}: not an FMU ({type(e).__name__}: {e})") from None
         return Path(fmu)
     from hp_model.compiled import cache_root
     from human_fmu import build_fmu

@@ -87,7 +87,7 @@ def run(
                                 f"t = {t:.2f} s, {s}/{steps} steps"),
                             install_signal_handlers=True)
         except (CosimError, ValueError) as e:
-            Console(stderr=True).print(f"hpcosim: error: {e}")
+            print(f"hpcosim: error: {e}", file=sys.stderr)
             raise typer.Exit(2) from None
     if res.interrupted:
         import signal as _signal

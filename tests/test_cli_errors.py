@@ -3,6 +3,8 @@ naming what is wrong, a non-zero exit, never a traceback and nothing on stdout."
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 import typer.main
 
@@ -98,3 +100,29 @@ CASES = [(p, o, v) for p, o in NUMBERS for v in BAD_VALUES if (o, v) not in VALI
 def test_bad_numbers(capsys, path, opt, value, tmp_path):
     args = _required(LEAVES[path], "x", str(tmp_path / "out"))
     _one_line_error(capsys, [*path, *args, opt, value], opt)
+
+
+DATA = Path(__file__).resolve().parent / "data" / "controller"
+GAIT, TUBE = str(DATA / "gait_demo.json"), str(DATA / "tube_demo.json")
+BAD_BUS = {"unknown interface": 'interface = "no-such-can"\n',
+           "unknown key": 'interface = "zenoh"\nbogus = 1\n',
+           "not TOML": "interface = \n"}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_BUS))
+@pytest.mark.parametrize("verb", ["serve", "replay"])
+def test_bad_bus_configs(capsys, tmp_path, case, verb):
+    bus = tmp_path / "bus.toml"
+    bus.write_text(BAD_BUS[case])
+    argv = (["controller", "serve", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE,
+             "--bus", str(bus)] if verb == "serve"
+            else ["replay", str(DATA / "NOTICE.md"), "--to-bus", str(bus)])
+    line = _one_line_error(capsys, argv)
+    assert str(bus) in line or "no-such-can" in line
+
+
+def test_a_file_that_is_not_an_fmu(capsys, tmp_path):
+    fmu = tmp_path / "human.fmu"
+    fmu.write_text("garbage")
+    _one_line_error(capsys, ["run", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE,
+                             "--fmu", str(fmu), "--steps", "1"], str(fmu), "not an FMU")
