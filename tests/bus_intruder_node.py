@@ -2,6 +2,8 @@
 
     python tests/bus_intruder_node.py <run_id> <endpoint> <seconds>
 
+(until a line on stdin, at most ``seconds``)
+
 Joins the run's CAN-over-zenoh link without its secret, as the controller would (liveliness
 token, torque frames at the device limit with a running counter every 0.5 ms) and listens
 for the plant's frames; prints ``ready`` once its session is open, and at the end
@@ -10,6 +12,7 @@ for the plant's frames; prints ``ready`` once its session is open, and at the en
 
 from __future__ import annotations
 
+import select
 import sys
 import time
 
@@ -24,7 +27,7 @@ def main() -> int:
     sent = received = 0
     end = time.monotonic() + seconds
     try:
-        while time.monotonic() < end:
+        while time.monotonic() < end and not select.select([sys.stdin], [], [], 0)[0]:
             bus.send(codec.encode_torque(2.4, -3.0, sent % 16))
             sent += 1
             while bus.recv(0.0) is not None:

@@ -480,13 +480,13 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
     run_id = f"intruded-{os.getpid()}"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     intruder = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_intruder_node.py"),
-                                 run_id, endpoint, "15"], env=env, cwd=str(ROOT),
-                                stdout=subprocess.PIPE, text=True)
+                                 run_id, endpoint, "60"], env=env, cwd=str(ROOT),
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         assert intruder.stdout is not None and intruder.stdout.readline().strip() == "ready"
         rec = files["dir"] / "intruded.mcap"
         res = run_cosim(cfg(files, steps=2, run_id=run_id, record=rec), model=model)
-        out, _ = intruder.communicate(timeout=60)
+        out, _ = intruder.communicate("stop\n", timeout=60)
     finally:
         if intruder.poll() is None:
             intruder.kill()
