@@ -650,7 +650,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         # -- wait for this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt
         # into the tick's slot, or 0.8 dt after sending when the plant itself runs behind
         # (a late plant must not count its own lateness as the controller's missed reply)
-        got = False
+        got = answered = False
         deadline = (max(wall0 + (k + 0.8) * dt, s0 * 1e-9 + 0.8 * dt) if realtime
                     else s0 * 1e-9 + cfg.reply_timeout)
         while True:
@@ -663,6 +663,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             v = on_rx(msg, t)
             if v.ok and v.frame_id == FrameId.TORQUE_CMD:
                 u = plant.command(v.value)
+                answered = True
                 if abs(msg.timestamp - t) <= rtol:
                     got = True
                     break
@@ -674,6 +675,12 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             missed_run = 0
             fault_first_miss = -1
             armed = True
+        elif realtime and answered:
+            # realtime: a reply to an earlier tick arrived (and is applied): the controller
+            # is alive but behind; counted late, not missing (the watchdog is for silence)
+            res.late += 1
+            missed_run = 0
+            fault_first_miss = -1
         else:
             if realtime:
                 res.late += 1

@@ -406,6 +406,16 @@ def test_realtime_mode_reports_latency(files, model):
     assert res.latency_us["n"] > 0 and res.latency_us["median"] > 0
 
 
+def test_realtime_watchdog_is_five_periods(files, model):
+    """Real time: a controller killed at period 100 leaves the plant on safe torque after 5
+    silent periods, as in lockstep (a late reply to an earlier period counts as late, not
+    as silence)."""
+    res = run_cosim(cfg(files, mode="realtime", perturb="kill:100", max_time=1.0, steps=5,
+                        dt=2e-3), model=model)
+    assert res.faulted, res
+    assert res.detection_periods <= 5 and 100 < res.ticks <= 106, res
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_recording_interrupted_by_signal_is_readable(files, sig):
     rec = files["dir"] / f"sig{int(sig)}.mcap"
