@@ -46,7 +46,14 @@ import numpy as np
 
 from bus_schemas import codec, keys
 from bus_schemas.bus_config import send_frames
-from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState, FrameId, frame_specs
+from bus_schemas.protocol import (
+    CTRL_TO_PLANT,
+    PLANT_TO_CTRL,
+    TORQUE_STEP,
+    CtrlState,
+    FrameId,
+    frame_specs,
+)
 from bus_schemas.run_auth import RunCredentials
 from bus_schemas.zenoh_config import loopback_endpoint
 from human_fmu.instance import FmuInstance
@@ -318,10 +325,6 @@ def _pct(a: list[float], q: float) -> float:
 # --------------------------------------------------------------------------- the run
 
 
-#: TorqueCmd's signal step (N m): a command at a limit decodes to within it of the limit
-TORQUE_RESOLUTION = 1e-6
-
-
 class Plant:
     """The plant side of one run: rx frame checking, the controller state it implies, and
     the bound on what it applies: every torque command is clamped to the device's motor
@@ -347,7 +350,7 @@ class Plant:
         for x, lim in zip((float(c.knee), float(c.ankle)), self.limits, strict=True):
             out.append(min(max(x, -lim), lim) if math.isfinite(x) else 0.0)
             # a command at the limit decodes to within the signal's resolution of it
-            over = over or not (abs(x) <= lim + TORQUE_RESOLUTION)
+            over = over or not (abs(x) <= lim + TORQUE_STEP)
         if over:
             self.torque_clamped += 1
         return out[0], out[1]
@@ -459,10 +462,10 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         proc = subprocess.Popen(controller_command(cfg, run_id, endpoint, node_cpu), env=_env(),
                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.PIPE, cwd=str(ROOT))
-        assert proc.stdin is not None
-        with contextlib.suppress(BrokenPipeError):  # the secret through a pipe, then EOF
-            proc.stdin.write(f"{creds.secret}\n".encode())
-            proc.stdin.close()
+        if proc.stdin is not None:  # the secret through a pipe, then EOF
+            with contextlib.suppress(BrokenPipeError):
+                proc.stdin.write(f"{creds.secret}\n".encode())
+                proc.stdin.close()
         deadline = time.monotonic() + cfg.start_timeout
         while not alive.wait(0.05):
             if stop.is_set():

@@ -268,12 +268,18 @@ def test_signal_in_process_finishes_without_exit(tmp_path):
     assert meta["signal"] == {"signal": "SIGTERM", "messages": "5"}
 
 
+def _recorder_process(path: Path, ready_after: int) -> subprocess.Popen:
+    """``tests/bus_record_node.py`` recording to ``path`` in its own OS process."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_record_node.py"),
+                             str(path), str(ready_after)], stdout=subprocess.PIPE, text=True,
+                            env=env)
+
+
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_subprocess_interrupted_mid_recording_leaves_a_complete_file(tmp_path, sig, code):
     path = tmp_path / "killed.mcap"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_record_node.py"),
-                             str(path), "200"], stdout=subprocess.PIPE, text=True, env=env)
+    proc = _recorder_process(path, 200)
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
         proc.send_signal(sig)
@@ -347,9 +353,7 @@ def test_a_killed_runs_recording_is_recovered(tmp_path, capsys):
 
     path = tmp_path / "killed.mcap"
     part = tmp_path / ".killed.mcap.part"
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "bus_record_node.py"),
-                             str(path), "8000"], stdout=subprocess.PIPE, text=True, env=env)
+    proc = _recorder_process(path, 8000)
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
         proc.kill()
