@@ -234,3 +234,15 @@ class HumanProsthesisModel(HybridModel):
         grad = ca.Function("g", [q], [ca.gradient(rel_flat, q)])(np.zeros(self.nq))
         g = grad.full().ravel()
         return float(g[ik]), float(g[ia])
+
+    def pitch_row(self, frame: str) -> np.ndarray:
+        """(nq,) row c with the world pitch of ``frame`` = c . q (rad): exact, the pitch of
+        a planar tree's frame is the sum of the pitch coordinates above it.  ``socket``:
+        what AMPRO3's IMU on the prosthesis top link measures."""
+        pitch = self.frame_expr(frame)[2]
+        c = ca.Function("c", [self.q], [ca.gradient(pitch, self.q)])(np.zeros(self.nq))
+        row = c.full().ravel()
+        if not np.allclose(ca.Function("p", [self.q], [pitch])(np.ones(self.nq)).full(),
+                           row.sum()):
+            raise ValueError(f"the pitch of frame {frame!r} is not linear in q")
+        return row

@@ -23,6 +23,7 @@ generator the FMU uses), so the in-process and FMU runs of a case agree.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -215,9 +216,10 @@ IDEAL_ENCODER = Encoder()
 
 
 def measurement(model_idx: tuple[int, int], t: float, st: SimState,
-                encoder: Encoder = IDEAL_ENCODER, rng: np.random.Generator | None = None
-                ) -> ProsthesisMeasurement:
-    """What AMPRO3 senses, from the simulator state (module docstring)."""
+                encoder: Encoder = IDEAL_ENCODER, rng: np.random.Generator | None = None,
+                pitch_row: np.ndarray | None = None) -> ProsthesisMeasurement:
+    """What AMPRO3 senses, from the simulator state (module docstring); ``pitch_row``: the
+    model's ``pitch_row("socket")`` for the IMU's socket pitch (NaN without it)."""
     pk, pa = model_idx
     load = max(float(st.lam[1]), 0.0) if st.domain == "ps" else 0.0
     ang = np.array([st.q[pk], st.q[pa]], float)
@@ -228,7 +230,9 @@ def measurement(model_idx: tuple[int, int], t: float, st: SimState,
     return ProsthesisMeasurement(t=float(t), knee_angle=float(ang[0]),
                                  ankle_angle=float(ang[1]), knee_vel=float(vel[0]),
                                  ankle_vel=float(vel[1]), foot_load=load,
-                                 contact=st.domain == "ps")
+                                 contact=st.domain == "ps",
+                                 socket_pitch=math.nan if pitch_row is None
+                                 else float(pitch_row @ st.q))
 
 
 _REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")
@@ -263,6 +267,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
     ctrl.reset()
     rng = np.random.default_rng(encoder.seed)
+    pitch_row = model.pitch_row("socket")
     torques: list[np.ndarray] = []
     modes: list[str] = []
     Vs: list[float] = []
@@ -270,7 +275,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     fallbacks = [0]
 
     def policy(t: float, st: SimState) -> np.ndarray:
-        out = ctrl.tick(measurement(idx, t, st, encoder, rng))
+        out = ctrl.tick(measurement(idx, t, st, encoder, rng, pitch_row))
         dg = out.diagnostics
         torques.append(np.array(out.torque, float))
         modes.append(str(dg.mode))

@@ -169,7 +169,17 @@ class SwingConfig(_Strict):
     fraction landing_reach (tau_hat - landing_start) / (1 - landing_start) of its angle,
     capped at 1 (it keeps reaching when the touchdown is late), and the ankle turns the foot
     flat (world pitch 0 at the nominal socket pitch) over the next ``landing_flatten`` of
-    tau_hat.  ``landing_reach = 0`` only flattens the foot."""
+    tau_hat.  ``landing_reach = 0`` only flattens the foot.
+
+    Thigh lead (``thigh_lead``, needs the socket IMU's pitch in the measurement): the human's
+    swing is not the nominal one, and a foot that lands while the knee is still flexed
+    slips.  Where the gait's nominal pns socket pitch falls monotonically (the thigh swinging
+    forward) the measured pitch gives a phase s_thigh; while both s_thigh and tau_hat lie in
+    ``lead_window`` the lead s_thigh - tau_hat is low-pass filtered (time constant
+    ``lead_time_constant``, s) and, when positive, added to tau_hat (held for the rest of
+    the swing, reset at lift-off).  It only advances the swing: a human slower than the
+    nominal finds the prosthesis ready early and waiting.  Without a pitch (NaN) or a
+    monotonic branch the swing runs on the clock alone."""
 
     kp: Pair = (2000.0, 135.0)
     kd: Pair = (24.0, 1.6)
@@ -177,6 +187,16 @@ class SwingConfig(_Strict):
     landing_reach: float = Field(0.1, ge=0, le=1)
     landing_start: float = Field(0.8, gt=0, lt=1)
     landing_flatten: Positive = 0.05
+    thigh_lead: bool = True
+    lead_window: tuple[float, float] = (0.2, 0.65)
+    lead_time_constant: Positive = 0.03
+
+    @model_validator(mode="after")
+    def _window(self) -> SwingConfig:
+        lo, hi = self.lead_window
+        if not 0.0 <= lo < hi <= 1.0:
+            raise ValueError("lead_window must be 0 <= low < high <= 1")
+        return self
 
 
 class DomainConfig(_Strict):

@@ -76,6 +76,29 @@ def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITC
     return coef[None, :]
 
 
+def thigh_phase_table(pitch: np.ndarray, window: tuple[float, float], min_span: float = 0.2,
+                      n: int = 401) -> tuple[np.ndarray, np.ndarray] | None:
+    """(pitch ascending, swing phase) over the part inside ``window`` of the longest branch
+    on which the nominal pns socket pitch (Bezier ``pitch`` over t / T_pns) falls strictly
+    (the thigh swinging forward), for ``np.interp``; None when that part spans less than
+    ``min_span`` of the phase."""
+    s = np.linspace(0.0, 1.0, n)
+    p = bezier.evaluate(np.asarray(pitch, float).reshape(1, -1), s).ravel()
+    inside = (s >= window[0]) & (s <= window[1])
+    falls = np.r_[np.diff(p) < 0, False] & inside  # p falls from s[i] to s[i+1]
+    best, start = (0, 0), None
+    for i, f in enumerate(falls):
+        if f and start is None:
+            start = i
+        if not f and start is not None:
+            best = max(best, (start, i), key=lambda r: r[1] - r[0])
+            start = None
+    a, b = best  # samples a..b, p strictly falling
+    if s[b] - s[a] < min_span:
+        return None
+    return p[a:b + 1][::-1].copy(), s[a:b + 1][::-1].copy()
+
+
 def stance_torque_fit(gait: Gait, model: HumanProsthesisModel,
                       degree: int = FEEDFORWARD_DEGREE) -> np.ndarray:
     """Bezier coefficients (2, degree+1) of the nominal prosthesis MOTOR torques (knee, ankle)
@@ -144,8 +167,12 @@ class ControllerContext:
                                                   p_max=ps.p_max)
         rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]
         sw = cfg.swing
+        pitch = socket_pitch_fit(gait, model)
+        #: the socket-pitch branch the swing's thigh lead reads (None: clock only)
+        self.thigh_table = thigh_phase_table(pitch, sw.lead_window) if sw.thigh_lead \
+            else None
         self.swing_params = T.swing_layout.pack(
-            alpha=pns.alpha[rows], pitch=socket_pitch_fit(gait, model),
+            alpha=pns.alpha[rows], pitch=pitch,
             landing_reach=sw.landing_reach, landing_start=sw.landing_start,
             landing_flatten=sw.landing_flatten)
         pp = cfg.phase_pd
@@ -241,6 +268,8 @@ class BaseController:
         self._pd_kd = tuple(cfg.pd.kd)
         self._sw_kp, self._sw_kd = tuple(cfg.swing.kp), tuple(cfg.swing.kd)
         self._sw_grav = 1.0 if cfg.swing.gravity else 0.0
+        self._thigh = ctx.thigh_table
+        self._lead_tc = float(cfg.swing.lead_time_constant)
         self.reset()
 
     # -- state ------------------------------------------------------------------------
@@ -256,6 +285,8 @@ class BaseController:
         self._t_unloaded: float | None = None  # since when load <= load_off with contact
         self._t_prev = -_INF
         self.fallback_count = 0
+        self._lead = 0.0  # the swing's thigh lead (phase units) and the last swing tick
+        self._t_lead: float | None = None
         self._reset_estimator()
 
     def _reset_estimator(self) -> None:
@@ -297,6 +328,7 @@ class BaseController:
                 self._domain, self._t_switch = "ps", t
             elif self._domain == "ps" and swing:
                 self._domain, self._t_switch = "pns", t
+                self._lead, self._t_lead = 0.0, None
         return self._domain
 
     # -- laws -------------------------------------------------------------------------
@@ -339,14 +371,27 @@ class BaseController:
         ua = kp[1] * (qd[1] - qa) + kd[1] * (vd[1] - va)
         return uk / self._gear[0], ua / self._gear[1]
 
-    def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float
-                      ) -> tuple[float, float, float]:
-        """Shared swing law: PD + gravity on the swing target (the pns Bezier rows at tau_hat
-        and the landing offset, ``terms.swing_ref``), motor N m."""
+    def _swing_phase(self, t: float, pitch: float) -> float:
+        """tau_hat = (t - t_liftoff) / T_pns advanced by the thigh lead (``SwingConfig``):
+        ``pitch`` is the socket IMU's world pitch (rad), NaN without one."""
+        s = (t - self._t_switch) / self._T_pns  # type: ignore[operator]
+        dt = 0.0 if self._t_lead is None else t - self._t_lead
+        self._t_lead = t
+        tab = self._thigh
+        if tab is not None and tab[0][0] <= pitch <= tab[0][-1] \
+                and tab[1][-1] <= s <= tab[1][0]:  # both on the branch: low-pass from 0
+            s_thigh = float(np.interp(pitch, tab[0], tab[1]))
+            self._lead += min(dt / self._lead_tc, 1.0) * ((s_thigh - s) - self._lead)
+        return s + (self._lead if self._lead > 0.0 else 0.0)
+
+    def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float,
+                      pitch: float = math.nan) -> tuple[float, float, float]:
+        """Shared swing law: PD + gravity on the swing target (the pns Bezier rows at the
+        swing phase and the landing offset, ``terms.swing_ref``), motor N m."""
         f = self._swing
         x = f.inputs[0]
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
-        f.inputs[1][0] = (t - self._t_switch) / self._T_pns  # type: ignore[operator]
+        f.inputs[1][0] = self._swing_phase(t, pitch)
         f.inputs[2][0] = 1.0 / self._T_pns
         f.call_inplace()
         qd, vd, _, g, tau_o = f.outputs
@@ -391,7 +436,7 @@ class BaseController:
                 u0, u1, tau, V, rho, status, active, mode = self._stance(t, qk, qa, vk, va)
                 since = t - self._t_switch  # type: ignore[operator]
             else:
-                u0, u1, tau = self._swing_torque(t, qk, qa, vk, va)
+                u0, u1, tau = self._swing_torque(t, qk, qa, vk, va, float(meas.socket_pitch))
                 V = rho = 0.0
                 self._estimator_gap()
                 status, mode = QP_NOT_RUN, MODE_SWING

