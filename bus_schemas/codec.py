@@ -55,6 +55,7 @@ __all__ = [
     "FrameStatus",
     "KneeFeedback",
     "SimTime",
+    "SocketImu",
     "TorqueCmd",
     "Verdict",
     "database",
@@ -71,6 +72,7 @@ __all__ = [
     "quantize",
     "quantize_angle",
     "quantize_load",
+    "quantize_pitch",
     "quantize_torque",
     "quantize_velocity",
 ]
@@ -118,6 +120,11 @@ class FootLoad(NamedTuple):
     contact: int  # 1: in contact
 
 
+class SocketImu(NamedTuple):
+    pitch: float  # rad, world pitch of the prosthesis top link
+    valid: int  # 1: a measurement
+
+
 class CtrlStatus(NamedTuple):
     fault_flags: int  # FaultFlag
     qp_status: int  # QpStatus (an int outside the enum is passed through)
@@ -152,6 +159,7 @@ PAYLOAD_TYPES: Mapping[int, type[NamedTuple]] = {
     FrameId.KNEE_FEEDBACK: KneeFeedback,
     FrameId.ANKLE_FEEDBACK: AnkleFeedback,
     FrameId.FOOT_LOAD: FootLoad,
+    FrameId.SOCKET_IMU: SocketImu,
     FrameId.CTRL_STATUS: CtrlStatus,
     FrameId.CTRL_REJECTS: CtrlRejects,
     FrameId.CTRL_DISTURBANCE: CtrlDisturbance,
@@ -226,9 +234,10 @@ _SPEC = frame_specs  # short alias for the hot helpers below
 
 def encode_feedback(knee_angle: float, knee_vel: float, ankle_angle: float,
                     ankle_vel: float, load: float, contact: bool, counter: int, *,
-                    sim_time_us: int | None = None,
+                    sim_time_us: int | None = None, socket_pitch: float | None = None,
                     timestamp: float = 0.0) -> list[can.Message]:
-    """The plant's frames of one cycle: KneeFeedback, AnkleFeedback, FootLoad and, if
+    """The plant's frames of one cycle: KneeFeedback, AnkleFeedback, FootLoad, SocketImu
+    if ``socket_pitch`` is given (a NaN pitch is sent with ImuValid 0) and, if
     ``sim_time_us`` is given, SimTime; all with the same rolling ``counter`` (mod 16).
     Angles rad, velocities rad/s, load N."""
     specs = _SPEC()
@@ -237,6 +246,10 @@ def encode_feedback(knee_angle: float, knee_vel: float, ankle_angle: float,
         _frame(specs[FrameId.ANKLE_FEEDBACK], (ankle_angle, ankle_vel), counter, timestamp),
         _frame(specs[FrameId.FOOT_LOAD], (load, 1 if contact else 0), counter, timestamp),
     ]
+    if socket_pitch is not None:
+        ok = math.isfinite(socket_pitch)
+        out.append(_frame(specs[FrameId.SOCKET_IMU], (socket_pitch if ok else 0.0,
+                                                      1 if ok else 0), counter, timestamp))
     if sim_time_us is not None:
         out.append(encode_sim_time(sim_time_us, counter, timestamp=timestamp))
     return out
@@ -456,6 +469,11 @@ def quantize_torque(x: Any) -> Any:
 def quantize_load(x: Any) -> Any:
     """Foot normal load as decoded (step 0.1 N, clamped to [-1000, 3000] N)."""
     return quantize(FrameId.FOOT_LOAD, "FootNormalLoad", x)
+
+
+def quantize_pitch(x: Any) -> Any:
+    """Socket pitch as decoded (step 1e-5 rad, clamped to +-3.2 rad)."""
+    return quantize(FrameId.SOCKET_IMU, "SocketPitch", x)
 
 
 # --------------------------------------------------------------------------- checker

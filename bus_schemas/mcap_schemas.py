@@ -86,6 +86,8 @@ PROSTHESIS_MEASUREMENTS = _schema(
         "ankle_angle": _num("th_pa [rad]"), "ankle_velocity": _num("d th_pa / dt [rad/s]"),
         "foot_load": _num("foot normal load [N]"),
         "contact": {"type": "boolean", "description": "foot in contact"},
+        "socket_pitch": _num("world pitch of the prosthesis top link from the IMU [rad]; "
+                             "null: no valid IMU reading"),
         "sim_time_us": _int("plant sim time [us], mod 2^32"),
         "counter": _int("rolling counter of the frames"),
     }, ["knee_angle", "knee_velocity", "ankle_angle", "ankle_velocity", "foot_load",

@@ -40,6 +40,7 @@ class FrameId(enum.IntEnum):
     KNEE_FEEDBACK = 0x101
     ANKLE_FEEDBACK = 0x102
     FOOT_LOAD = 0x110
+    SOCKET_IMU = 0x111
     CTRL_STATUS = 0x300
     CTRL_REJECTS = 0x301
     CTRL_DISTURBANCE = 0x302
@@ -47,7 +48,7 @@ class FrameId(enum.IntEnum):
 
 #: frames the plant (prosthesis hardware side) sends and the controller receives
 PLANT_TO_CTRL = frozenset({FrameId.SIM_TIME, FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK,
-                           FrameId.FOOT_LOAD})
+                           FrameId.FOOT_LOAD, FrameId.SOCKET_IMU})
 #: frames the controller sends and the plant receives
 CTRL_TO_PLANT = frozenset({FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.CTRL_STATUS,
                            FrameId.CTRL_REJECTS, FrameId.CTRL_DISTURBANCE})

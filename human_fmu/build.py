@@ -211,6 +211,9 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
         "/* frame held flat in the domain (= the frame that lands when entering it) */",
         f"static const int HPFMU_STANCE_FRAME[2] = {{{frames[0]}, {frames[1]}}};",
         f"static const int HPFMU_LANDING_ANKLE[2] = {{{ankles[0]}, {ankles[1]}}};",
+        "/* socket_pitch = row . q: the world pitch of the prosthesis top link */",
+        f"static const double HPFMU_SOCKET_PITCH_ROW[{model.nq}] = {{"
+        + ", ".join(_c_double(v) for v in model.pitch_row("socket")) + "};",
         "/* tau = (row . q - p_min) / (p_max - p_min): row = d delta_p_hip / dq */",
         f"static const double HPFMU_PHASE_ROW[2][{model.nq}] = {{",
     ]

@@ -131,6 +131,8 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("foot_load", "Real", "output",
           "prosthesis foot normal force (N) in ps, 0 in pns", unit="N", feedthrough=True)
     t.add("foot_contact", "Boolean", "output", "prosthesis foot on the ground (domain ps)")
+    t.add("socket_pitch", "Real", "output",
+          "world pitch of the prosthesis top link (AMPRO3's IMU), about +y", unit="rad")
     # outputs: ground truth
     t.add("socket_Fx", "Real", "output", "socket force F_x (human on prosthesis, top-link frame)",
           unit="N", feedthrough=True)

@@ -631,7 +631,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
             proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
         t_us = round(t * 1e6)
         frames = codec.encode_feedback(y[0], y[2], y[1], y[3], y[4], dom == 0, k % 16,
-                                       sim_time_us=t_us, timestamp=t)
+                                       sim_time_us=t_us, socket_pitch=y[6], timestamp=t)
         if rec is not None:
             ns = log_ns(t)
             for m in frames:
@@ -751,12 +751,14 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
 def measurement_record(y: list[float], contact: bool, t_us: int, counter: int
                        ) -> dict[str, Any]:
     """``/prosthesis/measurements``: the sensor outputs ``y`` (knee, ankle angle; knee,
-    ankle velocity; load) as the controller decodes them (codec quantization)."""
+    ankle velocity; load; :data:`fmu_port.SENSORS`) as the controller decodes them (codec
+    quantization)."""
     return {"knee_angle": codec.quantize_angle(y[0]),
             "knee_velocity": codec.quantize_velocity(y[2]),
             "ankle_angle": codec.quantize_angle(y[1]),
             "ankle_velocity": codec.quantize_velocity(y[3]),
             "foot_load": codec.quantize_load(y[4]), "contact": contact,
+            "socket_pitch": codec.quantize_pitch(y[6]) if math.isfinite(y[6]) else None,
             "sim_time_us": t_us % (1 << 32), "counter": counter}
 
 

@@ -13,8 +13,9 @@ from typing import Any
 
 from fmpy.fmi2 import fmi2Boolean, fmi2Integer, fmi2Real, fmi2True, fmi2ValueReference
 
-#: sensor outputs in the order the plant reads them (rad, rad/s, N, phase tau)
-SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau")
+#: sensor outputs in the order the plant reads them (rad, rad/s, N, phase tau, rad)
+SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
+           "socket_pitch")
 FORCES = ("socket_Fx", "socket_Fz", "socket_My")
 STATE = tuple(f"q[{i}]" for i in range(1, 13)) + tuple(f"qd[{i}]" for i in range(1, 13))
 COUNTS = ("domain", "steps", "fall_code")
@@ -31,7 +32,7 @@ class _Vars:
 class FmuPort:
     """Reads and writes of one co-simulation tick on an instantiated ``FMU2Slave``.
 
-    :meth:`read` -> sensors (6, :data:`SENSORS`), state (24: q then qd, model
+    :meth:`read` -> sensors (7, :data:`SENSORS`), state (24: q then qd, model
     coordinates), (domain 0 ps / 1 pns, step count, fall code), fall flag;
     :meth:`set_torque` the knee and ankle motor torques [N m]; :meth:`forces` the
     socket force (Fx, Fz [N], My [N m]) for the torque just set; :meth:`step`.
@@ -53,7 +54,8 @@ class FmuPort:
         f.fmi2GetInteger(c, i.refs, i.n, i.values)
         f.fmi2GetBoolean(c, b.refs, b.n, b.values)
         v = s.values[:]
-        return v[:6], v[6:], i.values[:], b.values[0] != 0
+        n = len(SENSORS)
+        return v[:n], v[n:], i.values[:], b.values[0] != 0
 
     def set_torque(self, knee: float, ankle: float) -> None:
         u = self._u

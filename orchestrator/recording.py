@@ -8,6 +8,7 @@ versions and hashes as metadata (README, "Co-simulation").
 from __future__ import annotations
 
 import json
+import math
 import struct
 import tempfile
 import time
@@ -92,6 +93,11 @@ class ReplayResult:
     max_diff_cycle_us: int | None
 
 
+def _pitch(v: Any) -> float:
+    """A recorded socket pitch: null (or absent: recordings before the IMU) is NaN."""
+    return math.nan if v is None else float(v)
+
+
 def replay(path: str | Path, controller: str | None = None, *, model: Any = None,
            tube: str | Path | None = None) -> ReplayResult:
     """Feed the recorded measurements (as the controller decoded them) to ``controller``
@@ -120,7 +126,8 @@ def replay(path: str | Path, controller: str | None = None, *, model: Any = None
     for m in rec.measurements:
         meas = ProsthesisMeasurement(m["sim_time_us"] * 1e-6, m["knee_angle"],
                                      m["ankle_angle"], m["knee_velocity"],
-                                     m["ankle_velocity"], m["foot_load"], bool(m["contact"]))
+                                     m["ankle_velocity"], m["foot_load"], bool(m["contact"]),
+                                     _pitch(m.get("socket_pitch")))
         u = ctrl.tick(meas).torque
         r = by_cycle.get(int(m["sim_time_us"]))
         if r is None:

@@ -34,7 +34,7 @@ from orchestrator.scenarios import (
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
-           "socket_Fx", "socket_Fz", "socket_My")
+           "socket_Fx", "socket_Fz", "socket_My", "socket_pitch")
 CONE_FALL = 5  # reported one period late (module docstring)
 DOMAINS = ("ps", "pns")
 
@@ -110,7 +110,8 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
         ps = dom == 0
         m = ProsthesisMeasurement(t=float(t), knee_angle=y[0], ankle_angle=y[1],
                                   knee_vel=y[2], ankle_vel=y[3],
-                                  foot_load=max(float(y[4]), 0.0) if ps else 0.0, contact=ps)
+                                  foot_load=max(float(y[4]), 0.0) if ps else 0.0, contact=ps,
+                                  socket_pitch=y[9])
         out = ctrl.tick(m)
         dg = out.diagnostics
         u = np.array(out.torque, float)

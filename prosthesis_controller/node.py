@@ -1,16 +1,20 @@
 """The controller node: a prosthesis controller behind the AMPRO3 CAN port.
 
-Per control cycle the plant sends ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad`` and, last,
-``SimTime``, all with the same rolling counter. The node checks every frame
-(:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter; rejects are counted and
-reported in ``CtrlRejects``), collects the cycle, and on ``SimTime`` ticks the controller and
-answers with (heartbeat every ``heartbeat_every`` ticks, ``CtrlStatus`` + ``CtrlRejects``
-every ``status_every`` ticks, ``CtrlDisturbance`` on every tick with a valid model-error
-estimate (``clfqp``'s stance), then) one ``TorqueCmd``. The torque frame's timestamp echoes
-the ``SimTime`` frame's timestamp, so the plant knows which cycle a reply answers (lockstep
-plants stamp frames with simulation time). A feedback frame missing from a cycle (dropped,
-corrupted, late) is replaced by its last accepted value and flagged ``stale_feedback``; before
-the first complete cycle the node answers with torque disabled.
+Per control cycle the plant sends ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad``, if it
+has an IMU ``SocketImu``, and, last, ``SimTime``, all with the same rolling counter. The
+node checks every frame (:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter;
+rejects are counted and reported in ``CtrlRejects``), collects the cycle, and on ``SimTime``
+ticks the controller and answers with (heartbeat every ``heartbeat_every`` ticks,
+``CtrlStatus`` + ``CtrlRejects`` every ``status_every`` ticks, ``CtrlDisturbance`` on every
+tick with a valid model-error estimate (``clfqp``'s stance), then) one ``TorqueCmd``. The
+torque frame's timestamp echoes the ``SimTime`` frame's timestamp, so the plant knows which
+cycle a reply answers (lockstep plants stamp frames with simulation time). A feedback frame
+missing from a cycle (dropped, corrupted, late) is replaced by its last accepted value and
+flagged ``stale_feedback``; before the first complete cycle the node answers with torque
+disabled. The IMU is optional: the socket pitch is the cycle's ``SocketImu`` value when it
+came with the cycle's counter and ``ImuValid``, NaN otherwise (the controller's swing then
+runs on its clock; a cycle that lacks an IMU frame after one was seen is flagged
+``stale_feedback`` too).
 
 Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
 zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
@@ -34,6 +38,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import math
 import signal
 import sys
 import time
@@ -98,6 +103,7 @@ class ControllerNode:
         self.state = CtrlState.INIT
         self.ticks = 0
         self.stale_cycles = 0
+        self.imu_seen = False  # a SocketImu frame came with a cycle
         self.safe_entries = 0
         self._counter = 0  # TorqueCmd rolling counter
         self._hb_counter = 0
@@ -116,7 +122,7 @@ class ControllerNode:
         if not v.ok:
             self._flags |= FaultFlag.BAD_FRAMES
             return []
-        if v.frame_id in FEEDBACK:
+        if v.frame_id in FEEDBACK or v.frame_id == FrameId.SOCKET_IMU:
             self.pending[v.frame_id] = (v.counter, v.value)
             return []
         if v.frame_id == FrameId.SIM_TIME:
@@ -138,6 +144,14 @@ class ControllerNode:
                 self.last[f] = p[1]
             else:
                 fresh = False
+        imu = self.pending.pop(FrameId.SOCKET_IMU, None)
+        pitch = math.nan
+        if imu is not None and imu[0] == v.counter:
+            self.imu_seen = True
+            if imu[1].valid:
+                pitch = imu[1].pitch
+        elif self.imu_seen:
+            fresh = False
         t = self._time(v.value.us)
         out: list[can.Message] = []
         if not fresh:
@@ -149,7 +163,7 @@ class ControllerNode:
             return out
         k, a, ld = (self.last[f] for f in FEEDBACK)
         meas = ProsthesisMeasurement(t, k.angle, a.angle, k.velocity, a.velocity, ld.load,
-                                     bool(ld.contact))
+                                     bool(ld.contact), pitch)
         t0 = time.perf_counter_ns()
         res = self.controller.tick(meas)
         self.tick_time.add(time.perf_counter_ns() - t0)

@@ -19,7 +19,8 @@ from bus_schemas.crc8 import crc8, frame_checksum
 from bus_schemas.protocol import CtrlState, FaultFlag, FrameId, QpStatus
 
 PROTECTED = {FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.SIM_TIME,
-             FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD}
+             FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD,
+             FrameId.SOCKET_IMU}
 
 
 def bits(x: float) -> bytes:
@@ -36,7 +37,7 @@ def test_dbc_frames_ids_senders():
     assert {m.frame_id: m.name for m in db.messages} == {
         0x010: "TorqueCmd", 0x020: "CtrlHeartbeat", 0x080: "SimTime",
         0x101: "KneeFeedback", 0x102: "AnkleFeedback", 0x110: "FootLoad",
-        0x300: "CtrlStatus", 0x301: "CtrlRejects", 0x302: "CtrlDisturbance"}
+        0x111: "SocketImu", 0x300: "CtrlStatus", 0x301: "CtrlRejects", 0x302: "CtrlDisturbance"}
     assert {int(i) for i in FrameId} == {m.frame_id for m in db.messages}
     for m in db.messages:
         assert m.length == 8 and not m.is_extended_frame and not m.is_fd
@@ -55,6 +56,7 @@ def test_quantization_constants_match_dbc():
         ("TorqueCmd", "KneeTorqueCmd", protocol.TORQUE_STEP, protocol.TORQUE_RANGE),
         ("TorqueCmd", "AnkleTorqueCmd", protocol.TORQUE_STEP, protocol.TORQUE_RANGE),
         ("FootLoad", "FootNormalLoad", protocol.LOAD_STEP, protocol.LOAD_RANGE),
+        ("SocketImu", "SocketPitch", protocol.ANGLE_STEP, protocol.ANGLE_RANGE),
     ]:
         s = spec(frame).signal(sig)
         assert (s.scale, s.offset, (s.minimum, s.maximum)) == (step, 0, rng)
@@ -64,9 +66,9 @@ def test_quantization_constants_match_dbc():
 
 def test_bus_load_of_dbc_cycle_times():
     assert protocol.frame_bits() == 111 and protocol.frame_bits(worst_case=True) == 135
-    # 5 frames every 2 ms, heartbeat 10 ms, 2 status frames 100 ms: 2620 frames/s
-    assert protocol.bus_load() == pytest.approx(2620 * 111 / 500_000)
-    assert protocol.bus_load(worst_case=True) == pytest.approx(0.7074)
+    # 6 frames every 2 ms, heartbeat 10 ms, 2 status frames 100 ms: 3120 frames/s
+    assert protocol.bus_load() == pytest.approx(3120 * 111 / 500_000)
+    assert protocol.bus_load(worst_case=True) == pytest.approx(3120 * 135 / 500_000)
     one_khz = {i: 1000.0 for i in PROTECTED - {FrameId.CTRL_HEARTBEAT}}
     assert protocol.bus_load(one_khz) > 1.0  # 1 kHz exchange does not fit 500 kbit/s
 
@@ -115,7 +117,7 @@ def test_payload_on_the_wrong_id_fails_the_checksum():
 def test_feedback_round_trip_values():
     msgs = codec.encode_feedback(0.5, -1.25, -0.123456, 3.3, 812.34, True, 7,
                                  sim_time_us=123_456, timestamp=1.5)
-    assert [m.arbitration_id for m in msgs] == [0x101, 0x102, 0x110, 0x080]
+    assert [m.arbitration_id for m in msgs] == [0x101, 0x102, 0x110, 0x080]  # no IMU
     assert all(m.dlc == 8 and len(m.data) == 8 and not m.is_extended_id for m in msgs)
     v = [codec.decode(m) for m in msgs]
     assert all(x.ok and x.counter == 7 and x.timestamp == 1.5 for x in v)

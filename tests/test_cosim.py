@@ -78,7 +78,7 @@ def test_lockstep_run_completes(lockstep):
     assert not res.faulted and not res.fell, res
     assert res.steps == 10 and res.missed == 0
     assert res.torque_clamped == 0  # the controller bounds its own torques
-    assert res.frames_tx == 4 * res.ticks
+    assert res.frames_tx == 5 * res.ticks  # knee, ankle, load, IMU, sim time
     assert all(v == 0 for v in res.plant_rejects.values())
     # the node's own summary, read back from its stderr: one controller tick per cycle
     assert res.node["ticks"] == res.ticks and res.node["reason"] == "plant gone"
@@ -117,8 +117,9 @@ def test_recording_reads_back_every_channel_decodes(lockstep):
 
 
 def test_lockstep_equals_in_process_simulation(lockstep, files, model):
-    """Same scenario in process: the controller fed codec-quantized measurements, its
-    torque quantized as on the bus; prosthesis angles agree to 1e-6 rad."""
+    """Same scenario in process: the controller fed codec-quantized measurements (the IMU's
+    socket pitch included), its torque quantized as on the bus; prosthesis angles agree to
+    1e-6 rad."""
     res, path = lockstep
     gait = load_gait(files["gait"], model.parameter_hash())
     from hp_model.force_tube import load_tube
@@ -127,12 +128,14 @@ def test_lockstep_equals_in_process_simulation(lockstep, files, model):
     ctrl.reset()
     qa, qv, ql, qt = (codec.quantize_angle, codec.quantize_velocity, codec.quantize_load,
                       codec.quantize_torque)
+    pitch = model.pitch_row("socket")
 
     def policy(t, st):
         us = round(t * 1e6)
         ps = st.domain == "ps"
         m = ProsthesisMeasurement(us * 1e-6, qa(st.q[10]), qa(st.q[11]), qv(st.qd[10]),
-                                  qv(st.qd[11]), ql(st.lam[1] if ps else 0.0), ps)
+                                  qv(st.qd[11]), ql(st.lam[1] if ps else 0.0), ps,
+                                  codec.quantize_pitch(float(pitch @ st.q)))
         u = ctrl.tick(m).torque
         return np.array([qt(float(u[0])), qt(float(u[1]))])
 
@@ -298,6 +301,47 @@ def test_node_rejects_bad_frames_and_goes_safe(ctx):
     safe = node.poll(now=1.0)
     assert node.state == CtrlState.SAFE
     assert codec.decode(safe[-1]).value.enable == 0
+
+
+class _Spy:
+    """A controller that records what the node hands it."""
+
+    def __init__(self, inner):
+        self.inner, self.seen = inner, []
+
+    def reset(self):
+        self.inner.reset()
+
+    def tick(self, m):
+        self.seen.append(m)
+        return self.inner.tick(m)
+
+
+def test_node_hands_the_imu_pitch_to_the_controller(ctx):
+    """SocketImu with the cycle's counter and ImuValid: the measurement's socket_pitch (as
+    quantized); ImuValid 0 or no IMU: NaN; an IMU frame missing after one was seen is a
+    stale cycle (and, as for every protected frame, the next one after the gap is rejected
+    by the rolling-counter check until the sequence is confirmed)."""
+
+    def node_and_cycle():
+        spy = _Spy(make_controller("pd", None, None, None, context=ctx))
+        node = ControllerNode(spy, watchdog=10.0)
+
+        def cycle(k, pitch):
+            for m in codec.encode_feedback(0.1, 0.0, 0.2, 0.0, 500.0, True, k % 16,
+                                           sim_time_us=k * 1000, socket_pitch=pitch):
+                node.handle(m, now=k * 1e-3)
+            return spy.seen[-1].socket_pitch
+        return node, cycle
+
+    node, cycle = node_and_cycle()  # a plant without an IMU
+    assert all(math.isnan(cycle(k, None)) for k in range(3)) and node.stale_cycles == 0
+    node, cycle = node_and_cycle()
+    assert cycle(0, 0.123456) == codec.quantize_pitch(0.123456) == pytest.approx(0.12346)
+    assert math.isnan(cycle(1, math.nan)) and node.stale_cycles == 0  # ImuValid 0
+    assert math.isnan(cycle(2, None)) and node.stale_cycles == 1
+    assert math.isnan(cycle(3, 0.2)) and node.stale_cycles == 2  # counter gap: rejected
+    assert cycle(4, -5.0) == -3.2 and node.stale_cycles == 2  # resynchronized; clamped
 
 
 def test_node_watchdog_is_armed_by_the_first_cycle(ctx):

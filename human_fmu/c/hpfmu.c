@@ -323,6 +323,8 @@ static void update_outputs(Inst *c) {
     s->r[VR_ANKLE_VELOCITY] = s->x[NQ + HPFMU_IDX_PA];
     s->r[VR_FOOT_LOAD] = s->d == PS ? c->lam[1] : 0.0;
     s->b[VR_FOOT_CONTACT] = s->d == PS;
+    s->r[VR_SOCKET_PITCH] = 0.0;
+    for (k = 0; k < NQ; k++) s->r[VR_SOCKET_PITCH] += HPFMU_SOCKET_PITCH_ROW[k] * s->x[k];
     s->r[VR_STANCE_FX] = c->lam[0];
     s->r[VR_STANCE_FZ] = c->lam[1];
     s->r[VR_STANCE_MY] = c->lam[2];
