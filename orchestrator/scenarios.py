@@ -178,27 +178,39 @@ def initial_state(model: HumanProsthesisModel, gait: Gait,
 
 @dataclass(frozen=True)
 class Encoder:
-    """AMPRO3's joint encoders: zero-mean white noise (standard deviations) and
-    quantization steps (round to the nearest multiple; 0: none) on the angles (rad) and
-    velocities (rad/s); ``seed`` makes the noise of a run reproducible."""
+    """AMPRO3's sensors: on the joint encoders zero-mean white noise (standard deviations)
+    and quantization steps (round to the nearest multiple; 0: none) on the angles (rad) and
+    velocities (rad/s); on the IMU's socket pitch a constant ``imu_bias`` and white noise
+    ``imu_noise`` (rad); ``seed`` makes the noise of a run reproducible."""
 
     angle_noise: float = 0.0
     velocity_noise: float = 0.0
     angle_resolution: float = 0.0
     velocity_resolution: float = 0.0
+    imu_bias: float = 0.0
+    imu_noise: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("angle_noise", "velocity_noise", "angle_resolution",
-                     "velocity_resolution"):
+                     "velocity_resolution", "imu_noise"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"encoder {name} must be finite and >= 0, got {v}")
+        if not np.isfinite(self.imu_bias):
+            raise ValueError(f"encoder imu_bias must be finite, got {self.imu_bias}")
 
     @property
     def ideal(self) -> bool:
         return (self.angle_noise, self.velocity_noise, self.angle_resolution,
-                self.velocity_resolution) == (0.0, 0.0, 0.0, 0.0)
+                self.velocity_resolution, self.imu_bias, self.imu_noise) == (0.0,) * 6
+
+    def pitch(self, rng: np.random.Generator, pitch: float) -> float:
+        """The socket pitch (rad) as the IMU reports it (the noise drawn only when there
+        is some, so the encoders' noise sequence does not depend on the IMU)."""
+        if self.imu_noise > 0:
+            pitch += self.imu_noise * float(rng.standard_normal())
+        return pitch + self.imu_bias
 
     def read(self, rng: np.random.Generator, angles: np.ndarray, vel: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray]:
@@ -224,15 +236,16 @@ def measurement(model_idx: tuple[int, int], t: float, st: SimState,
     load = max(float(st.lam[1]), 0.0) if st.domain == "ps" else 0.0
     ang = np.array([st.q[pk], st.q[pa]], float)
     vel = np.array([st.qd[pk], st.qd[pa]], float)
+    pitch = math.nan if pitch_row is None else float(pitch_row @ st.q)
     if not encoder.ideal:
-        ang, vel = encoder.read(rng if rng is not None
-                                else np.random.default_rng(encoder.seed), ang, vel)
+        g = rng if rng is not None else np.random.default_rng(encoder.seed)
+        ang, vel = encoder.read(g, ang, vel)
+        if pitch_row is not None:
+            pitch = encoder.pitch(g, pitch)
     return ProsthesisMeasurement(t=float(t), knee_angle=float(ang[0]),
                                  ankle_angle=float(ang[1]), knee_vel=float(vel[0]),
                                  ankle_vel=float(vel[1]), foot_load=load,
-                                 contact=st.domain == "ps",
-                                 socket_pitch=math.nan if pitch_row is None
-                                 else float(pitch_row @ st.q))
+                                 contact=st.domain == "ps", socket_pitch=pitch)
 
 
 _REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")

@@ -79,6 +79,9 @@ class Draw:
     angle_resolution: float = 0.0  # rad, quantization step
     velocity_resolution: float = 0.0  # rad/s, quantization step
     sensor_seed: int = 0
+    # AMPRO3's IMU on the top link (socket pitch)
+    imu_bias: float = 0.0  # rad
+    imu_noise: float = 0.0  # rad, standard deviation
 
     def columns(self) -> dict[str, Any]:
         """The draw as flat result columns (``draw_`` prefix, offsets and segment masses one
@@ -128,9 +131,10 @@ class Draw:
         return self.prosthesis_mass, self.prosthesis_inertia, self.prosthesis_com
 
     @property
-    def encoder(self) -> tuple[float, float, float, float]:
+    def encoder(self) -> tuple[float, float, float, float, float, float]:
+        """:class:`orchestrator.scenarios.Encoder`'s fields (but the seed), in order."""
         return (self.angle_noise, self.velocity_noise, self.angle_resolution,
-                self.velocity_resolution)
+                self.velocity_resolution, self.imu_bias, self.imu_noise)
 
 
 def _crc(text: str) -> int:
@@ -190,7 +194,7 @@ def make_draw(spec: SweepSpec, family: str, index: int) -> Draw:
                 get("human.stiffness", 1.0), get("human.delay", None),
                 get("sensor.angle_noise", 0.0), get("sensor.velocity_noise", 0.0),
                 get("sensor.angle_resolution", 0.0), get("sensor.velocity_resolution", 0.0),
-                sensor_seed)
+                sensor_seed, get("sensor.imu_bias", 0.0), get("sensor.imu_noise", 0.0))
 
 
 def run_keys(spec: SweepSpec) -> Iterator[RunKey]:

@@ -35,6 +35,8 @@ quantity given as a number (fixed) or a distribution::
     sensor.velocity_noise  = 0.0      # rad/s, std on the joint velocities
     sensor.angle_resolution = 0.0     # rad, quantization step (0: none)
     sensor.velocity_resolution = 0.0  # rad/s
+    sensor.imu_bias        = 0.0      # rad, constant error of the IMU's socket pitch
+    sensor.imu_noise       = 0.0      # rad, std of white noise on the socket pitch
 
 ``plant.*`` and ``human.stiffness`` / ``human.delay`` change the simulated walker, not the
 controller: the controller keeps the nominal model.  Each distinct plant body compiles its
@@ -223,15 +225,18 @@ class PlantGroup(_Group):
 
 
 class SensorGroup(_Group):
-    """AMPRO3's encoders: white noise (standard deviations) and quantization steps."""
+    """AMPRO3's encoders: white noise (standard deviations) and quantization steps; its IMU:
+    a constant bias and white noise on the socket pitch."""
 
     angle_noise: Dist | None = None
     velocity_noise: Dist | None = None
     angle_resolution: Dist | None = None
     velocity_resolution: Dist | None = None
+    imu_bias: Dist | None = None
+    imu_noise: Dist | None = None
 
     @field_validator("angle_noise", "velocity_noise", "angle_resolution",
-                     "velocity_resolution")
+                     "velocity_resolution", "imu_noise")
     @classmethod
     def _nonnegative(cls, d: Any) -> Any:
         return _check_range(d, 0.0, strict=False)

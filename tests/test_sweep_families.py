@@ -56,6 +56,7 @@ sensor.angle_noise = {{ dist = "uniform", low = 0.0, high = 5e-4 }}
 sensor.velocity_noise = 0.05
 sensor.angle_resolution = {{ dist = "choice", values = [3.835e-4, 9.59e-5] }}
 sensor.velocity_resolution = 0.01
+sensor.imu_bias = {{ dist = "uniform", low = -0.035, high = 0.035 }}
 """
 
 
@@ -159,6 +160,28 @@ def test_encoder_quantizes_and_adds_noise_of_the_given_spread():
         Encoder(angle_noise=-1.0)
 
 
+def test_imu_bias_and_noise_on_the_socket_pitch_leave_the_encoder_noise_alone():
+    imu = Encoder(imu_bias=0.02, imu_noise=3e-3)
+    rng = np.random.default_rng(1)
+    p = np.array([imu.pitch(rng, 0.3) for _ in range(4000)])
+    # the sample mean of 4000 draws: 3e-3 / sqrt(4000) = 4.7e-5 (5 sigma: 2.4e-4)
+    assert abs(p.mean() - 0.32) < 2.4e-4 and p.std() == pytest.approx(3e-3, rel=0.06)
+    assert not imu.ideal and not Encoder(imu_bias=-0.01).ideal
+    assert Encoder(imu_bias=0.01).pitch(np.random.default_rng(0), 0.3) == 0.31  # no draw
+    # a noiseless IMU draws nothing: the encoders' noise sequence is that of no IMU
+    enc = dict(angle_noise=2e-4, velocity_noise=0.05)
+    a = Encoder(**enc, imu_bias=0.05)
+    r1, r2 = np.random.default_rng(5), np.random.default_rng(5)
+    for _ in range(3):
+        a.pitch(r1, 0.0)
+        assert np.array_equal(np.r_[a.read(r1, np.zeros(2), np.zeros(2))],
+                              np.r_[Encoder(**enc).read(r2, np.zeros(2), np.zeros(2))])
+    with pytest.raises(ValueError, match="imu_noise"):
+        Encoder(imu_noise=-1.0)
+    with pytest.raises(ValueError, match="imu_bias"):
+        Encoder(imu_bias=math.inf)
+
+
 # ------------------------------------------------------------------ draws and spec
 
 def test_plant_and_sensor_draws_stay_in_their_ranges(spec_file):
@@ -174,6 +197,9 @@ def test_plant_and_sensor_draws_stay_in_their_ranges(spec_file):
     se = [make_draw(spec, "sensor", i) for i in range(200)]
     assert {d.angle_resolution for d in se} == {3.835e-4, 9.59e-5}
     assert len({d.sensor_seed for d in se}) == 200
+    bias = np.array([d.imu_bias for d in se])
+    assert -0.035 <= bias.min() < -0.03 and 0.03 < bias.max() <= 0.035
+    assert all(d.imu_noise == 0.0 for d in se)
     row = se[3].columns()
     assert Draw.from_columns("sensor", 3, row) == se[3]
 
