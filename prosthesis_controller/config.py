@@ -178,8 +178,9 @@ class SwingConfig(_Strict):
     ``lead_window`` the lead s_thigh - tau_hat is low-pass filtered (time constant
     ``lead_time_constant``, s) and, when positive, added to tau_hat (held for the rest of
     the swing, reset at lift-off).  It only advances the swing: a human slower than the
-    nominal finds the prosthesis ready early and waiting.  Without a pitch (NaN) or a
-    monotonic branch the swing runs on the clock alone."""
+    nominal finds the prosthesis ready early and waiting.  ``lead_deadband`` (phase units) is
+    taken off the lead first (an IMU bias of b rad moves the lead by about b / 1.3).  Without
+    a pitch (NaN) or a monotonic branch the swing runs on the clock alone."""
 
     kp: Pair = (2000.0, 135.0)
     kd: Pair = (24.0, 1.6)
@@ -190,6 +191,7 @@ class SwingConfig(_Strict):
     thigh_lead: bool = True
     lead_window: tuple[float, float] = (0.2, 0.65)
     lead_time_constant: Positive = 0.03
+    lead_deadband: float = Field(0.0, ge=0, lt=1)
 
     @model_validator(mode="after")
     def _window(self) -> SwingConfig:

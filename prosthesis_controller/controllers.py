@@ -269,6 +269,7 @@ class BaseController:
         self._sw_kp, self._sw_kd = tuple(cfg.swing.kp), tuple(cfg.swing.kd)
         self._sw_grav = 1.0 if cfg.swing.gravity else 0.0
         self._thigh = ctx.thigh_table
+        self._lead_db = float(cfg.swing.lead_deadband)
         self._lead_tc = float(cfg.swing.lead_time_constant)
         self.reset()
 
@@ -382,7 +383,8 @@ class BaseController:
                 and tab[1][-1] <= s <= tab[1][0]:  # both on the branch: low-pass from 0
             s_thigh = float(np.interp(pitch, tab[0], tab[1]))
             self._lead += min(dt / self._lead_tc, 1.0) * ((s_thigh - s) - self._lead)
-        return s + (self._lead if self._lead > 0.0 else 0.0)
+        lead = self._lead - self._lead_db
+        return s + (lead if lead > 0.0 else 0.0)
 
     def _swing_torque(self, t: float, qk: float, qa: float, vk: float, va: float,
                       pitch: float = math.nan) -> tuple[float, float, float]:

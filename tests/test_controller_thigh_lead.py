@@ -137,6 +137,26 @@ def test_without_thigh_lead_the_pitch_is_ignored(model, subsystem, playback_gait
         assert _swing_tau(ctl, ctx, 0.0, T, float(s), p) == pytest.approx(s, abs=1e-12)
 
 
+def test_the_deadband_is_taken_off_the_lead(model, subsystem, playback_gait):
+    """``lead_deadband`` d0: the phase advances by max(lead - d0, 0) (an IMU bias below
+    d0 times the pitch slope moves nothing)."""
+    ctx = ControllerContext(playback_gait, tube_about_nominal(playback_gait, (40, 60, 8)),
+                            model, ControllerConfig(swing=SwingConfig(lead_deadband=0.03)),
+                            subsystem=subsystem)
+    T = ctx.durations["pns"]
+    pitch_c = socket_pitch_fit(playback_gait, model)
+    s_lo = float(ctx.thigh_table[1][-1])
+    for d, expect in ((0.02, 0.0), (0.08, 0.05)):
+        ctl = make_controller("clfqp", None, None, None, context=ctx)
+        ctl.reset()
+        ctl.tick(ProsthesisMeasurement(0.0, 0.1, 0.1, 0.0, 0.0, 0.0, False))
+        for k in range(1, math.ceil((s_lo + 0.3) * T / 1e-3)):
+            s = k * 1e-3 / T
+            tau = _swing_tau(ctl, ctx, 0.0, T, s, float(bezier.evaluate(pitch_c, s + d)[0]))
+        # settled: 0.3 of the phase is ~8 time constants
+        assert tau == pytest.approx(s + expect, abs=3e-3)
+
+
 def test_lead_window_is_validated():
     with pytest.raises(ValueError, match="lead_window"):
         SwingConfig(lead_window=(0.6, 0.3))
