@@ -179,7 +179,8 @@ class SwingConfig(_Strict):
     ``lead_time_constant``, s) and, when positive, added to tau_hat (held for the rest of
     the swing, reset at lift-off).  It only advances the swing: a human slower than the
     nominal finds the prosthesis ready early and waiting.  ``lead_deadband`` (phase units) is
-    taken off the lead first (an IMU bias of b rad moves the lead by about b / 1.3).  Without
+    taken off the lead first (an IMU bias of b rad moves the lead by b over the slope of
+    the nominal pitch, about 1.3 rad per unit phase on the synthetic subject).  Without
     a pitch (NaN) or a monotonic branch the swing runs on the clock alone."""
 
     kp: Pair = (2000.0, 135.0)
