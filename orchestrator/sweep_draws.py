@@ -110,8 +110,9 @@ class Draw:
                                    for j in HUMAN_JOINTS)
             elif f.name == "segment_mass":
                 kw[f.name] = tuple(float(row.get(f"draw_{s}_mass", 1.0)) for s in SEGMENTS)
-            else:
-                kw[f.name] = row.get(f"draw_{f.name}", f.default)
+            else:  # a column absent or null in an older sweep's row: the nominal value
+                v = row.get(f"draw_{f.name}")
+                kw[f.name] = f.default if v is None else v
         return cls(family, index, **kw)
 
     @property

@@ -55,6 +55,7 @@ COLUMNS = pa.schema([
     ("draw_human_delay", pa.float64()), ("draw_angle_noise", pa.float64()),
     ("draw_velocity_noise", pa.float64()), ("draw_angle_resolution", pa.float64()),
     ("draw_velocity_resolution", pa.float64()), ("draw_sensor_seed", pa.int64()),
+    ("draw_imu_bias", pa.float64()), ("draw_imu_noise", pa.float64()),
     ("steps_completed", pa.int64()), ("success", pa.bool_()), ("failed", pa.bool_()),
     ("reason", pa.string()), ("fail_t", pa.float64()), ("fail_tau", pa.float64()),
     ("fail_domain", pa.string()), ("duration_s", pa.float64()),

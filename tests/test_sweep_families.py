@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -202,6 +203,9 @@ def test_plant_and_sensor_draws_stay_in_their_ranges(spec_file):
     assert all(d.imu_noise == 0.0 for d in se)
     row = se[3].columns()
     assert Draw.from_columns("sensor", 3, row) == se[3]
+    # a row of an older sweep (no IMU columns, or nulls) reads as an ideal IMU
+    old = {k: v for k, v in row.items() if k != "draw_imu_bias"} | {"draw_imu_noise": None}
+    assert Draw.from_columns("sensor", 3, old) == replace(se[3], imu_bias=0.0)
 
 
 def test_the_fmu_backend_refuses_what_it_does_not_model(tmp_path, spec_file):
