@@ -65,10 +65,7 @@ def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITC
     q, t = np.asarray(tr["q"]), np.asarray(tr["t"], dtype=float)
     if t[-1] <= t[0]:
         return np.zeros((1, degree + 1))
-    frames = model.numeric()["frames"]
-    i = model.frame_index("socket")
-    zero = np.zeros(model.nq)
-    pitch = np.array([frames(q[:, k], zero)[0][2, i] for k in range(q.shape[1])])
+    pitch = model.pitch_row("socket") @ q  # what the IMU reads (the same row as the plant's)
     s = (t - t[0]) / (t[-1] - t[0])
     if len(s) <= degree:
         return np.full((1, degree + 1), pitch.mean())
