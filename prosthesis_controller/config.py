@@ -193,6 +193,7 @@ class SwingConfig(_Strict):
     lead_window: tuple[float, float] = (0.2, 0.65)
     lead_time_constant: Positive = 0.03
     lead_deadband: float = Field(0.0, ge=0, lt=1)
+    lead_min_slope: float = Field(0.75, ge=0, lt=1)
 
     @model_validator(mode="after")
     def _window(self) -> SwingConfig:

@@ -74,26 +74,39 @@ def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITC
 
 
 def thigh_phase_table(pitch: np.ndarray, window: tuple[float, float], min_span: float = 0.2,
-                      n: int = 401) -> tuple[np.ndarray, np.ndarray] | None:
-    """(pitch ascending, swing phase) over the part inside ``window`` of the longest branch
-    on which the nominal pns socket pitch (Bezier ``pitch`` over t / T_pns) falls strictly
-    (the thigh swinging forward), for ``np.interp``; None when that part spans less than
-    ``min_span`` of the phase."""
+                      min_slope: float = 0.0, n: int = 401
+                      ) -> tuple[np.ndarray, np.ndarray] | None:
+    """(pitch ascending, swing phase) for ``np.interp``: the part inside ``window`` of the
+    longest branch on which the nominal pns socket pitch (Bezier ``pitch`` over t / T_pns)
+    falls strictly (the thigh swinging forward), narrowed to the longest stretch where the
+    slope |d pitch / d s| is at least ``min_slope`` times its steepest value there (a pitch
+    offset of delta rad reads as a phase error delta / |slope|: the flat ends mislead);
+    None when the result spans less than ``min_span`` of the phase."""
     s = np.linspace(0.0, 1.0, n)
     p = bezier.evaluate(np.asarray(pitch, float).reshape(1, -1), s).ravel()
     inside = (s >= window[0]) & (s <= window[1])
     falls = np.r_[np.diff(p) < 0, False] & inside  # p falls from s[i] to s[i+1]
+    a, b = _longest_run(falls)  # samples a..b, p strictly falling
+    if b > a and min_slope > 0.0:
+        slope = -np.diff(p[a:b + 1])  # > 0 on the branch, per sample step
+        a2, b2 = _longest_run(np.r_[slope >= min_slope * slope.max(), False])
+        a, b = a + a2, a + b2
+    if s[b] - s[a] < min_span:
+        return None
+    return p[a:b + 1][::-1].copy(), s[a:b + 1][::-1].copy()
+
+
+def _longest_run(flags: np.ndarray) -> tuple[int, int]:
+    """(i, j) of the longest run of True in ``flags[:-1]``, as samples i..j (j = i + run
+    length); (0, 0) when there is none. ``flags[-1]`` must be False."""
     best, start = (0, 0), None
-    for i, f in enumerate(falls):
+    for i, f in enumerate(flags):
         if f and start is None:
             start = i
         if not f and start is not None:
             best = max(best, (start, i), key=lambda r: r[1] - r[0])
             start = None
-    a, b = best  # samples a..b, p strictly falling
-    if s[b] - s[a] < min_span:
-        return None
-    return p[a:b + 1][::-1].copy(), s[a:b + 1][::-1].copy()
+    return best
 
 
 def stance_torque_fit(gait: Gait, model: HumanProsthesisModel,
@@ -166,7 +179,8 @@ class ControllerContext:
         sw = cfg.swing
         pitch = socket_pitch_fit(gait, model)
         #: the socket-pitch branch the swing's thigh lead reads (None: clock only)
-        self.thigh_table = thigh_phase_table(pitch, sw.lead_window) if sw.thigh_lead \
+        self.thigh_table = thigh_phase_table(pitch, sw.lead_window, min_slope=sw.lead_min_slope) \
+            if sw.thigh_lead \
             else None
         self.swing_params = T.swing_layout.pack(
             alpha=pns.alpha[rows], pitch=pitch,
