@@ -149,6 +149,15 @@ CONTROLLER_DISTURBANCE = _schema(
         "since_touchdown": _num("time since the switch to stance [s], saturating at 0.255"),
     }, ["t", "d", "tau", "valid", "flag", "since_touchdown"])
 
+PLANT_TIMING = _schema(
+    "hpcosim.PlantTiming", "A realtime plant tick begun a period or more behind its "
+    "wall-clock slot (an overrun), and the slots skipped to catch up.", {
+        "t": _num("simulation time of the tick [s]"),
+        "tick": _int("tick index"),
+        "lag": _num("wall-clock lag behind the tick's slot at its start [s]"),
+        "skipped": _int("wall-clock slots skipped at this tick (lag past max_lag), 0 if none"),
+    }, ["t", "tick", "lag", "skipped"])
+
 #: topic -> JSON schema
 CHANNELS: dict[str, dict[str, Any]] = {
     "/can/tx": CAN_FRAME,
@@ -158,6 +167,7 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/ground_truth": GROUND_TRUTH,
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
     "/controller/disturbance": CONTROLLER_DISTURBANCE,
+    "/cosim/timing": PLANT_TIMING,
 }
 
 
@@ -268,6 +278,42 @@ def _compression(name: str) -> CompressionType:
     raise ValueError(f"compression {name!r}: expected zstd, lz4 or none")
 
 
+def _naming(e: OSError, path: Path) -> OSError:
+    """``e`` (same class and errno) naming the recording instead of whatever it named."""
+    return type(e)(e.errno, e.strerror or str(e), str(path))
+
+
+class _GuardedFile:
+    """The recording's part file as the MCAP writer's stream: a failed write (a full disk,
+    a file-size limit) is kept in :attr:`error` and raised naming the recording."""
+
+    def __init__(self, f: Any, path: Path) -> None:
+        self._f, self._path = f, path
+        self.error: OSError | None = None
+
+    def _guard(self, op: Callable[..., Any], *a: Any) -> Any:
+        try:
+            return op(*a)
+        except OSError as e:
+            self.error = self.error or e
+            raise _naming(e, self._path) from None
+
+    def write(self, data: Any) -> int:
+        return self._guard(self._f.write, data)
+
+    def flush(self) -> None:
+        self._guard(self._f.flush)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def fileno(self) -> int:
+        return self._f.fileno()
+
+    def close(self) -> None:
+        self._f.close()
+
+
 class RecordingInUseError(ValueError):
     """Another process is writing the same recording."""
 
@@ -308,7 +354,7 @@ class Recorder:
         self.path = Path(path)
         self.part_path = self.path.with_name(f".{self.path.name}.part")
         self.compression = _compression(compression)
-        self._file = _locked_part(self.path, self.part_path)  # closed in finish()
+        self._file = _GuardedFile(_locked_part(self.path, self.part_path), self.path)
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
         self._append = supports(self._writer)  # the one-pack path (mcap_append)
@@ -469,16 +515,39 @@ class Recorder:
                 os.fsync(self._file.fileno())
                 # renamed while still locked: no other run can take the part in between
                 os.replace(self.part_path, self.path)
+            except OSError as e:  # a full disk: no partial file, an error naming the file
+                self.part_path.unlink(missing_ok=True)
+                raise _naming(e, self.path) from None
             finally:
-                self._file.close()
+                with contextlib.suppress(OSError):  # closing flushes: the disk may be full
+                    self._file.close()
                 self.restore_signal_handlers()
         return self.path
+
+    @property
+    def write_failed(self) -> bool:
+        """A write to the file failed (a full disk, a file-size limit): :meth:`abort`."""
+        return self._file.error is not None
+
+    def abort(self) -> None:
+        """Close without finishing and delete the ``.part`` file (a write failed: the disk
+        is full or the file too large); nothing is left under either name. Idempotent."""
+        if self.finished:
+            return
+        self.finished = True
+        self.part_path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):
+            self._file.close()
+        self.restore_signal_handlers()
 
     def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self.finish()
+        if self.write_failed:
+            self.abort()  # finishing would fail the same way
+        else:
+            self.finish()
 
     # -- signals
     def install_signal_handlers(self, signals: Iterable[int] = (signal.SIGTERM,

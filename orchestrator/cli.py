@@ -156,6 +156,12 @@ def _loaded_user_errors() -> tuple[type[BaseException], ...]:
     return tuple(out)
 
 
+def _os_error(e: OSError) -> str:
+    """``FILE: reason`` of an operating-system error (the file it names, if any)."""
+    what = e.strerror or str(e)
+    return _one_line(f"{e.filename}: {what}" if e.filename else what)
+
+
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -176,6 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     except CHECK_FAILURES as e:
         print(f"hpcosim: check failed: {e}", file=sys.stderr)
         return 1
+    except OSError as e:  # the environment: a full disk, a read-only folder, a size limit
+        print(f"hpcosim: error: {_os_error(e)}", file=sys.stderr)
+        return 2
     except Exception as e:  # click usage errors carry their own exit code
         if isinstance(e, _loaded_user_errors()):
             print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)

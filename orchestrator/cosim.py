@@ -62,10 +62,13 @@ from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
 PERTURB_CASES = ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
-                 "corrupt-length", "kill", "hang", "human")
+                 "corrupt-length", "kill", "hang", "stall", "human")
 #: the controller-process cases: SIGKILL it (dies, liveliness goes) or SIGSTOP it (hangs
 #: alive: only the missing replies show it)
 PROCESS_CASES = ("kill", "hang")
+#: the plant's own lateness: before tick START the plant loop sleeps MS ms (a page fault, a
+#: GC pause, a descheduled process), ``stall:START[:MS]`` (MS 50 by default)
+PLANT_CASES = ("stall",)
 
 
 class CosimError(RuntimeError):
@@ -97,6 +100,10 @@ class CosimConfig:
     # starts them (the first zenoh session of the process), stay on the plant's CPU.
     pin_cpus: bool = True
     poll_us: float = 300.0  # lockstep: both sides poll this long before blocking on a frame
+    # realtime: a plant more than this far behind its wall-clock schedule moves the schedule
+    # forward (the wall slots in between are skipped, counted and recorded; simulation time
+    # never skips) instead of bursting through the backlog
+    max_lag: float = 0.02  # s
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
@@ -126,6 +133,9 @@ class CosimResult:
     usage: dict[str, float] = field(default_factory=dict)  # plant process over the loop
     reply_early: float = 0.0  # see reply_early_share
     torque_clamped: int = 0  # torque commands the plant clamped to the device's limits
+    overruns: int = 0  # realtime: ticks the plant began a period or more behind its slot
+    skipped_slots: int = 0  # realtime: wall-clock slots skipped to catch up (max_lag)
+    max_lag_ms: float = 0.0  # realtime: the plant's largest lag behind its schedule
     interrupted: str = ""  # the signal (SIGINT, SIGTERM) that ended the run early
     record: str | None = None
     run_id: str = ""
@@ -192,6 +202,7 @@ class FaultPlan:
     count: int = 5
     amplitude: float = 0.0  # human perturbation
     seed: int = 0
+    stall_ms: float = 50.0  # stall: the plant's sleep
 
     @classmethod
     def parse(cls, text: str | None) -> FaultPlan:
@@ -204,6 +215,9 @@ class FaultPlan:
         if case == "human":
             amp = float(parts[1]) if len(parts) > 1 else 0.001
             return cls(case, amplitude=amp, seed=int(parts[2]) if len(parts) > 2 else 0)
+        if case == "stall":
+            return cls(case, start=int(parts[1]) if len(parts) > 1 else 100, count=1,
+                       stall_ms=float(parts[2]) if len(parts) > 2 else 50.0)
         nums = [int(p) for p in parts[1:]]
         plan = cls(case)
         for name, v in zip(("start", "every", "count"), nums, strict=False):
@@ -218,7 +232,7 @@ class FaultPlan:
 
     def apply(self, k: int, frames: list[can.Message]) -> tuple[list[can.Message], str | None]:
         """Frames to send this tick (SimTime last unless delayed) and the fault applied."""
-        if not self.hits(k) or self.case in PROCESS_CASES:
+        if not self.hits(k) or self.case in PROCESS_CASES + PLANT_CASES:
             return frames, None
         knee = frames[0]
         rest = frames[1:]
@@ -509,7 +523,9 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                 proc.stderr.close()
         if fmu is not None:
             fmu.free()
-        if rec is not None and not rec.finished:
+        if rec is not None and rec.write_failed:
+            rec.abort()  # a full disk: no partial file (the write's error names the file)
+        elif rec is not None and not rec.finished:
             try:
                 if res.interrupted:
                     rec.add_metadata("signal", {"signal": res.interrupted,
@@ -570,6 +586,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     t_wait: list[int] = []
     usage = Usage()
     wall0 = time.perf_counter()
+    sched0 = wall0  # realtime: tick k's wall slot starts at sched0 + k dt (moves on a skip)
     rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
     injected: dict[str, int] = {}
     names = {fid: frame_specs()[fid].name for fid in PLANT_TO_CTRL}
@@ -617,8 +634,13 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     # Lockstep waits reply_timeout for every reply, so it is armed from the first period.
     armed = not realtime
     while not stop.is_set():  # a signal ends the run between ticks (its summary complete)
+        if plan.case in PLANT_CASES and plan.hits(k):
+            time.sleep(plan.stall_ms * 1e-3)
+            injected[plan.case] = injected.get(plan.case, 0) + 1
         tick0 = clock()
         t = k * dt
+        if realtime:
+            sched0 = _catch_up(res, rec, t, k, dt, sched0, cfg.max_lag, log_ns)
         y, state, (dom, steps, code), fell = port.read()
         fmu_ns = clock() - tick0
         res.steps = steps
@@ -654,7 +676,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         # into the tick's slot, or 0.8 dt after sending when the plant itself runs behind
         # (a late plant must not count its own lateness as the controller's missed reply)
         got = answered = False
-        deadline = (max(wall0 + (k + 0.8) * dt, s0 * 1e-9 + 0.8 * dt) if realtime
+        deadline = (max(sched0 + (k + 0.8) * dt, s0 * 1e-9 + 0.8 * dt) if realtime
                     else s0 * 1e-9 + cfg.reply_timeout)
         while True:
             left = deadline - time.perf_counter()
@@ -721,7 +743,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         if progress is not None and k % 100 == 0:
             progress(k, t, steps)
         if realtime:  # pace to the wall clock; take late replies meanwhile
-            end = wall0 + k * dt
+            end = sched0 + k * dt
             while True:
                 left = end - time.perf_counter()
                 if left <= 0:
@@ -746,6 +768,26 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
     res.timing_us = tick_breakdown(t_tick, t_fmu, t_rt, t_rec, t_wait)
     res.reply_early = reply_early_share(t_wait) if rec is not None else 0.0
     res.usage = usage.since()
+
+
+def _catch_up(res: CosimResult, rec: Any, t: float, k: int, dt: float, sched0: float,
+              max_lag: float, log_ns: Callable[[float], int]) -> float:
+    """Realtime: the plant's lag behind tick ``k``'s wall slot. A tick begun a period or
+    more late is an overrun (counted; recorded on ``/cosim/timing``); past ``max_lag`` the
+    schedule moves forward by whole periods (the slots skipped counted and recorded), so a
+    plant that fell behind resumes pacing instead of bursting through the backlog.
+    Returns the (possibly moved) schedule origin."""
+    lag = time.perf_counter() - (sched0 + k * dt)
+    if lag < dt:
+        return sched0
+    res.overruns += 1
+    res.max_lag_ms = max(res.max_lag_ms, lag * 1e3)
+    skip = int(lag // dt) if lag > max_lag else 0
+    res.skipped_slots += skip
+    if rec is not None:
+        rec.defer("/cosim/timing", {"t": t, "tick": k, "lag": lag, "skipped": skip},
+                  log_ns(t))
+    return sched0 + skip * dt
 
 
 def measurement_record(y: list[float], contact: bool, t_us: int, counter: int

@@ -60,6 +60,7 @@ def run(
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "
                                          "kill, hang (CASE[:start[:every[:count]]]), "
+                                         "stall[:START[:MS]] (the plant sleeps MS ms), "
                                          "human[:AMPLITUDE[:SEED]].")] = "none",
     mode: Annotated[str, typer.Option(help="lockstep or realtime.")] = "lockstep",
     record: Annotated[Path | None, typer.Option(help="MCAP file to write.", dir_okay=False)
@@ -106,6 +107,9 @@ def run(
     t.add_row("real-time factor", f"{res.real_time_factor:.2f}")
     t.add_row("frames tx / rx", f"{res.frames_tx} / {res.frames_rx}")
     t.add_row("missed / late replies", f"{res.missed} / {res.late}")
+    if mode == "realtime":
+        t.add_row("plant overruns / slots skipped (max lag)",
+                  f"{res.overruns} / {res.skipped_slots} ({res.max_lag_ms:.1f} ms)")
     t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"
                                                          for k, v in res.latency_us.items()))
     t.add_row("per tick us", ", ".join(f"{k} {v:.0f}" for k, v in res.timing_us.items()))

@@ -126,3 +126,16 @@ def test_a_file_that_is_not_an_fmu(capsys, tmp_path):
     fmu.write_text("garbage")
     _one_line_error(capsys, ["run", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE,
                              "--fmu", str(fmu), "--steps", "1"], str(fmu), "not an FMU")
+
+
+#: a folder nobody may create, root included (sysfs refuses it): a read-only output
+READ_ONLY_OUT = "/sys/hpcosim-read-only/out"
+WRITERS = {"mocap synth": ["mocap", "synth", "--out", READ_ONLY_OUT],
+           "demo": ["demo", "--out", READ_ONLY_OUT],
+           "experiments": ["experiments", "--gait", GAIT, "--tube", TUBE, "--out",
+                           READ_ONLY_OUT]}
+
+
+@pytest.mark.parametrize("verb", sorted(WRITERS))
+def test_read_only_output(capsys, verb):
+    _one_line_error(capsys, WRITERS[verb], "/sys/hpcosim-read-only")

@@ -40,6 +40,7 @@ from prosthesis_controller.controllers import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
 from tests.fmu_support import built_fmu, simulator, start_state
+from tests.full_disk import run_with_file_limit
 
 ROOT = Path(__file__).resolve().parents[1]
 CTRL = "clfqp"  # the default controller: walks the template gait
@@ -554,3 +555,39 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
     a = [o["q"] for _, _, o in read_messages(rec, ["/ground_truth"])]
     b = [o["q"] for _, _, o in read_messages(clean, ["/ground_truth"])][:len(a)]
     assert len(a) == res.ticks and a == b
+
+
+def test_realtime_plant_that_falls_behind_skips_and_records(files, model):
+    """Real time: a plant stalled for 60 ms (30 periods of 2 ms) does not burst through the backlog nor fault on its own lateness: its schedule moves
+    forward past ``max_lag``, the slots skipped are counted and recorded (/cosim/timing),
+    and the run completes."""
+    rec = files["dir"] / "stall.mcap"
+    dt, stall = 2e-3, 60.0
+    res = run_cosim(cfg(files, mode="realtime", perturb=f"stall:50:{stall:g}", max_time=0.3,
+                        steps=5, dt=dt, record=rec), model=model)
+    assert not res.faulted, res
+    assert res.ticks == 150 and res.injected == {"stall": 1}
+    assert res.overruns >= 1 and res.max_lag_ms >= stall
+    # everything past max_lag (20 ms) is skipped at once: at least (60 - 20) / 2 slots
+    assert (stall - 20.0) / 2.0 <= res.skipped_slots <= (res.max_lag_ms + 1) / 2.0
+    rows = [o for _, _, o in read_messages(rec, ["/cosim/timing"])]
+    assert len(rows) == res.overruns and sum(r["skipped"] for r in rows) == res.skipped_slots
+    assert max(r["lag"] for r in rows) * 1e3 == pytest.approx(res.max_lag_ms)
+    # caught up: the wall time is the simulation time plus the slots skipped
+    assert res.wall_time == pytest.approx(res.sim_time + res.skipped_slots * dt, abs=0.03)
+
+
+def test_a_full_disk_is_one_line_and_no_partial_recording(files, model):
+    """``hpcosim run --record`` whose recording cannot grow past 1 MB (a full disk): one
+    line naming the recording, exit 2, neither the file nor its ``.part`` left."""
+    run_cosim(cfg(files, max_time=0.01), model=model)  # compiled code cached before the cap
+    rec = files["dir"] / "full" / "run.mcap"
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    r = run_with_file_limit(
+        [sys.executable, "-m", "orchestrator.cli", "run", "--controller", CTRL, "--gait",
+         str(files["gait"]), "--tube", str(files["tube"]), "--fmu", str(files["fmu"]),
+         "--steps", "20", "--record", str(rec)], 1 << 20, env=env, cwd=str(ROOT), timeout=300)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr[-3000:]
+    assert lines[0] == f"hpcosim: error: {rec}: File too large", lines
+    assert list(rec.parent.iterdir()) == []
