@@ -558,9 +558,9 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
 
 
 def test_realtime_plant_that_falls_behind_skips_and_records(files, model):
-    """Real time: a plant stalled for 60 ms (30 periods of 2 ms) does not burst through the backlog nor fault on its own lateness: its schedule moves
-    forward past ``max_lag``, the slots skipped are counted and recorded (/cosim/timing),
-    and the run completes."""
+    """Real time: a plant stalled for 60 ms (30 periods of 2 ms) neither bursts through the
+    backlog nor faults on its own lateness: its schedule moves forward past ``max_lag``,
+    the slots skipped are counted and recorded (/cosim/timing), and the run completes."""
     rec = files["dir"] / "stall.mcap"
     dt, stall = 2e-3, 60.0
     res = run_cosim(cfg(files, mode="realtime", perturb=f"stall:50:{stall:g}", max_time=0.3,
