@@ -134,6 +134,8 @@ def read_toml(path: Path | str, error: type[Exception] = ValueError) -> dict[str
         text = path.read_text(encoding="utf-8")
     except OSError as e:
         raise error(f"{path}: cannot read: {e.strerror or e}") from None
+    except UnicodeDecodeError as e:
+        raise error(f"{path}: not a TOML text file (not UTF-8 at byte {e.start})") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

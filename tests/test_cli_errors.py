@@ -139,3 +139,12 @@ WRITERS = {"mocap synth": ["mocap", "synth", "--out", READ_ONLY_OUT],
 @pytest.mark.parametrize("verb", sorted(WRITERS))
 def test_read_only_output(capsys, verb):
     _one_line_error(capsys, WRITERS[verb], "/sys/hpcosim-read-only")
+
+
+@pytest.mark.parametrize("path", WITH_INPUT, ids=" ".join)
+def test_unreadable_file(capsys, path, tmp_path):
+    """Every input given a file that is not what the verb reads (binary garbage, not UTF-8,
+    not JSON, TOML, C3D, MCAP, NPZ or an FMU)."""
+    bad = tmp_path / "garbage.bin"
+    bad.write_bytes(bytes(range(256)) * 4)
+    _one_line_error(capsys, [*path, *_required(LEAVES[path], str(bad), str(tmp_path / "o"))])
