@@ -7,9 +7,31 @@ must run in a Python where this project cannot be imported.)
 
 from __future__ import annotations
 
+import ctypes
 import shutil
 from collections.abc import Iterable, Mapping
 from pathlib import Path
+from typing import Any
+
+
+def step_or_end(slave: Any, component: Any, t: float, dt: float) -> bool:
+    """``slave.fmi2DoStep(component, t, dt, fmi2True)`` on an fmpy ``FMU2Slave``: True on
+    success, False when the FMU discards the step and reports itself terminated (the end of
+    the walk), else the ``FMICallException`` propagates."""
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import fmi2Boolean, fmi2Discard, fmi2Terminated, fmi2True
+
+    try:
+        slave.fmi2DoStep(component, t, dt, fmi2True)
+        return True
+    except FMICallException as e:
+        if e.status != fmi2Discard:
+            raise
+    done = fmi2Boolean()
+    slave.fmi2GetBooleanStatus(component, fmi2Terminated, ctypes.byref(done))
+    if not done.value:
+        raise FMICallException(function="fmi2DoStep", status=fmi2Discard)
+    return False
 
 
 class FmuInstance:
@@ -46,6 +68,12 @@ class FmuInstance:
             f.setInteger(self.vrs(integer), [int(v) for v in integer.values()])
         f.enterInitializationMode()
         f.exitInitializationMode()
+
+    def do_step(self, t: float, dt: float) -> bool:
+        """fmi2DoStep(t, dt): True while the walk goes on, False once the FMU has ended it
+        (fmi2Discard with fmi2Terminated: a fall; the outputs hold the last valid state).
+        Any other failure raises fmpy's ``FMICallException``."""
+        return step_or_end(self.fmu, self.fmu.component, t, dt)
 
     def free(self) -> None:
         """Terminate and free the instance, then remove the extracted files."""

@@ -734,7 +734,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
         if rec is not None:
             rec.defer_call("/ground_truth", log_ns(t), ground_truth_record, t, port.forces(),
                            state, dom, y[5], steps, u)
-        port.step(t, dt)
+        port.step(t, dt)  # False at a fall (fmi2Discard): the next read ends the run
         t_fmu.append(fmu_ns + clock() - f0)
         if res.faulted:
             k += 1

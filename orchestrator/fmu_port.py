@@ -11,7 +11,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from fmpy.fmi2 import fmi2Boolean, fmi2Integer, fmi2Real, fmi2True, fmi2ValueReference
+from fmpy.fmi2 import fmi2Boolean, fmi2Integer, fmi2Real, fmi2ValueReference
+
+from human_fmu.instance import step_or_end
 
 #: sensor outputs in the order the plant reads them (rad, rad/s, N, phase tau, rad)
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
@@ -67,5 +69,6 @@ class FmuPort:
         self._f.fmi2GetReal(self._c, g.refs, g.n, g.values)
         return g.values[:]
 
-    def step(self, t: float, dt: float) -> None:
-        self._f.fmi2DoStep(self._c, t, dt, fmi2True)
+    def step(self, t: float, dt: float) -> bool:
+        """doStep(t, dt): False once the FMU has ended the walk (a fall: fmi2Discard)."""
+        return step_or_end(self._f, self._c, t, dt)

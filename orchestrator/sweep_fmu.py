@@ -129,7 +129,7 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
         if fell or steps >= scenario.steps:
             break
         f.setReal(plant._u, [float(u[0]), float(u[1])])
-        f.doStep(t, dt)
+        plant.do_step(t, dt)  # False at a fall: the next read sees it and ends the run
         k += 1
     domain = np.array(dom_log, int)
     tau = np.array(tau_log)

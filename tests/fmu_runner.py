@@ -17,7 +17,8 @@ import sys
 
 import numpy as np
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave, fmi2Discard
 
 DOMAINS = ("ps", "pns")
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load",
@@ -137,7 +138,11 @@ def stepper(h: HumanFMU, policy: NominalPD, periods: int, dt: float, tau_from: s
         f.setReal(uv, u.tolist())
         log["forces"].append(f.getReal(fv))
         if k < periods - 1:
-            f.doStep(k * dt, dt)
+            try:
+                f.doStep(k * dt, dt)
+            except FMICallException as e:  # a fall: fmi2Discard, seen on the next read
+                if e.status != fmi2Discard:
+                    raise
         yield k
 
 

@@ -21,7 +21,10 @@ from fmpy.fmi2 import (
     fmi2CallbackFreeMemoryTYPE,
     fmi2CallbackFunctions,
     fmi2CallbackLoggerTYPE,
+    fmi2Discard,
     fmi2Error,
+    fmi2LastSuccessfulTime,
+    fmi2Terminated,
 )
 
 from tests.fmu_runner import HumanFMU, NominalPD, run, stepper
@@ -287,4 +290,57 @@ def test_torque_inputs_are_bounded_by_the_device_limits(fmu_path, model):
     assert f.getReal(out) == pytest.approx([0.5 * lim[0], -0.25 * lim[1]], abs=1e-12)
     f.doStep(1e-3, 1e-3)
     assert f.getInteger(count) == [2]
+    h.free()
+
+
+# -- the end of the walk --------------------------------------------------------------------------
+OUTPUTS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load",
+           "socket_pitch", "tau", "stance_Fx", "stance_Fz", "socket_Fx", "socket_Fz",
+           *(f"q[{i}]" for i in range(1, 13)), *(f"qd[{i}]" for i in range(1, 13)))
+
+
+def _walk_to_the_end(h: HumanFMU, torque: float, periods: int = 3000):
+    """Step with a constant knee torque until doStep discards: (period, time before the
+    discarded step, the outputs before it)."""
+    f = h.fmu
+    f.setReal(h.vrs(["u_knee", "u_ankle"]), [torque, 0.0])
+    out = h.vrs(OUTPUTS)
+    for k in range(periods):
+        before = f.getReal(out)
+        try:
+            f.doStep(k * 1e-3, 1e-3)
+        except FMICallException as e:
+            assert e.status == fmi2Discard
+            return k, k * 1e-3, before
+    raise AssertionError("the walker did not fall")
+
+
+@pytest.mark.parametrize(("params", "code"), [({}, None), ({"max_speed": 0.5}, 8)])
+def test_a_fall_ends_the_walk_through_fmi(fmu_path, params, code):
+    """A fall (no prosthesis torque: the knee buckles; or a speed bound the first step
+    exceeds: code 8) ends the walk the FMI 2.0 way: the step returns fmi2Discard, and so
+    does every later one; fmi2Terminated is true; fmi2LastSuccessfulTime is the time of the
+    state held; every output is finite (for code 8 the state before the step)."""
+    h = HumanFMU(str(fmu_path))
+    h.setup(params)
+    f = h.fmu
+    _k, t0, before = _walk_to_the_end(h, 0.0)
+    fall_code = f.getInteger(h.vrs(["fall_code"]))[0]
+    assert f.getBoolean(h.vrs(["fall"]))[0] and fall_code > 0
+    if code is not None:
+        assert fall_code == code
+    assert f.getBooleanStatus(fmi2Terminated)
+    after = f.getReal(h.vrs(OUTPUTS))
+    assert all(math.isfinite(v) for v in after)
+    last = f.getRealStatus(fmi2LastSuccessfulTime)
+    if fall_code in (1, 5, 8):  # the state at the start of the step is held
+        assert last == t0 and after[len(OUTPUTS) - 24:] == before[len(OUTPUTS) - 24:]
+    else:
+        assert last == pytest.approx(t0 + 1e-3, abs=1e-12)
+    for j in range(1, 4):  # ended: every later step is discarded, nothing moves
+        with pytest.raises(FMICallException) as e:
+            f.doStep(t0 + j * 1e-3, 1e-3)
+        assert e.value.status == fmi2Discard
+    assert f.getReal(h.vrs(OUTPUTS)) == after
+    assert f.getRealStatus(fmi2LastSuccessfulTime) == last
     h.free()

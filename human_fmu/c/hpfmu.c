@@ -14,7 +14,12 @@
  *       event_iters iterations); the landing foot is rotated flat about its ankle; the impact
  *       map of the next domain gives qd+; the rest (1 - s) h is integrated in the new domain;
  *     - state checks at the end (non-finite, speed, hip height, tau backward, tau_max, stall) and the
- *       touchdown-pitch check; a fall freezes the state and raises the `fall` output.
+ *       touchdown-pitch check; a fall ends the walk: the `fall` output is raised, doStep
+ *       returns fmi2Discard (then and on every later call), fmi2GetBooleanStatus
+ *       (fmi2Terminated) is true and fmi2GetRealStatus(fmi2LastSuccessfulTime) is the time
+ *       of the state held: the end of the step, or its start when the step ended non-finite
+ *       or blown up (codes 1, 8) or the friction cone ended it before integrating (code 5),
+ *       so every output stays finite and physical.
  *
  * No global mutable state: any number of instances may live in one process.
  *
@@ -838,9 +843,10 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
         return fail(c, "fmi2DoStep: %s", "the step size must be >= 0 and the time finite");
     if (!isfinite(s->up[0]) || !isfinite(s->up[1]))
         return fail(c, "fmi2DoStep: %s", "the prosthesis torque inputs are not finite");
+    if (s->failed) return fmi2Discard; /* the walk has ended: the state stays at the fall */
     if (communicationStepSize == 0) return fmi2OK;
     s->time = currentCommunicationPoint;
-    if (!s->failed) {
+    {
         /* friction-cone check with the torques held over this step (the vector field is
            already evaluated if the outputs were read after the inputs were set) */
         double fz, fx;
@@ -848,18 +854,34 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
         fz = c->lam[1];
         fx = c->lam[0];
         s->bad_cone = (fz < s->min_normal_force || fabs(fx) > s->mu * fz) ? s->bad_cone + 1 : 0;
-        if (s->bad_cone >= s->cone_periods) set_fall(c, 5);
+        if (s->bad_cone >= s->cone_periods) {
+            set_fall(c, 5);  /* decided before integrating: the state of time t is held */
+            return fmi2Discard;
+        }
     }
-    if (!s->failed) {
+    {
+        /* the state at the start of the step, held if the step ends non-finite or blown up */
+        double x0[NX], z0 = s->z_prev, peak0 = s->tau_peak, ti0 = s->t_impact, ts0 = s->t_step;
+        int d0 = s->d, steps0 = s->steps;
+        memcpy(x0, s->x, sizeof x0);
         s->heel = 0;
         integrate(c, currentCommunicationPoint, communicationStepSize);
         s->time = currentCommunicationPoint + communicationStepSize;
         state_checks(c);
-    } else {
-        s->time = currentCommunicationPoint + communicationStepSize;
+        s->outputs_valid = 0;
+        if (!s->failed) return fmi2OK;
+        if (s->fall_code == 1 || s->fall_code == 8) {
+            memcpy(s->x, x0, sizeof x0);
+            s->d = d0;
+            s->steps = steps0;
+            s->z_prev = z0;
+            s->tau_peak = peak0;
+            s->t_impact = ti0;
+            s->t_step = ts0;
+            s->time = currentCommunicationPoint;
+        }
+        return fmi2Discard;
     }
-    s->outputs_valid = 0;
-    return fmi2OK;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component comp) {
@@ -875,7 +897,7 @@ fmi2Status fmi2GetStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Status 
 fmi2Status fmi2GetRealStatus(fmi2Component comp, const fmi2StatusKind s, fmi2Real *value) {
     Inst *c = (Inst *)comp;
     if (c == NULL) return fmi2Error;
-    if (s == fmi2LastSuccessfulTime) {
+    if (s == fmi2LastSuccessfulTime) {  /* after a fall: the time of the state held */
         *value = c->s.time;
         return fmi2OK;
     }
