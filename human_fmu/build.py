@@ -6,7 +6,8 @@ FMU layout (FMI 2.0 co-simulation, model identifier ``hpcosim_human``):
     modelDescription.xml
     binaries/linux64/hpcosim_human.so
     sources/hpfmu.c             the FMI wrapper and the hybrid integration (hand-written)
-    sources/hpfmu_casadi.c      the plant and the human's controller (CasADi-generated)
+    sources/hpfmu_casadi.inc    the plant and the human's controller (CasADi-generated,
+                                included by hpfmu.c: every function in it static)
     sources/hpfmu_config.h      variables, start values and model constants (generated)
     sources/fmi2*.h             the FMI 2.0 headers
     sources/buildDescription.xml
@@ -19,7 +20,7 @@ import hashlib
 import json
 import os
 import platform
-import shutil
+import re
 import subprocess
 import tempfile
 import time
@@ -79,6 +80,55 @@ def fmi_header_dir() -> Path:
     if not (d / "fmi2Functions.h").is_file():
         raise FmuBuildError(f"FMI 2.0 headers not found in {d} (fmpy installation)")
     return d
+
+
+#: fmpy's fmi2Functions.h always exports and never prefixes; FMI 2.0's own header exports
+#: only without FMI2_FUNCTION_PREFIX and prefixes every API function with it (static linking
+#: of source FMUs, several in one program)
+_FMPY_EXPORT = re.compile(
+    r"/\*\s*\nExport FMI2 API functions.*?#define fmi2FullName\(name\) name\n", re.S)
+_STANDARD_EXPORT = """/* FMI 2.0: without FMI2_FUNCTION_PREFIX (a shared library) the API functions
+   are exported under their own names; with it (a source FMU linked statically) each is
+   named FMI2_FUNCTION_PREFIX ## name and not exported. */
+#if !defined(FMI2_FUNCTION_PREFIX)
+  #if !defined(FMI2_Export)
+    #if defined _WIN32 || defined __CYGWIN__
+      #define FMI2_Export __declspec(dllexport)
+    #elif __GNUC__ >= 4
+      #define FMI2_Export __attribute__ ((visibility ("default")))
+    #else
+      #define FMI2_Export
+    #endif
+  #endif
+  #define fmi2FullName(name) name
+#else
+  #if !defined(FMI2_Export)
+    #define FMI2_Export
+  #endif
+  #define fmi2Paste(a, b) a ## b
+  #define fmi2PasteB(a, b) fmi2Paste(a, b)
+  #define fmi2FullName(name) fmi2PasteB(FMI2_FUNCTION_PREFIX, name)
+#endif
+"""
+
+
+def standard_fmi2_functions_h(text: str) -> str:
+    """fmpy's ``fmi2Functions.h`` with FMI 2.0's export and prefix rules restored."""
+    out, n = _FMPY_EXPORT.subn(lambda _m: _STANDARD_EXPORT, text)
+    if n != 1:
+        raise FmuBuildError("fmi2Functions.h of this fmpy does not have the expected export "
+                            "block; cannot restore FMI2_FUNCTION_PREFIX")
+    return out
+
+
+_HELPER = re.compile(r"^(casadi_real|casadi_int|void|int) (casadi_\w+)\(", re.M)
+
+
+def private_helpers(src: str) -> str:
+    """CasADi's runtime helpers (``casadi_sq``, ``casadi_copy``, ...) made ``static``: with
+    the generated functions (``CASADI_SYMBOL_EXPORT static``) nothing of the generated code
+    is global, so two FMUs' sources link into one program."""
+    return _HELPER.sub(r"static \1 \2(", src)
 
 
 def fmu_functions(model: HumanProsthesisModel, cl: ClosedLoop) -> list[ca.Function]:
@@ -161,7 +211,8 @@ def build_description(flags: Sequence[str]) -> str:
     root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
     bc = ET.SubElement(root, "BuildConfiguration", {
         "modelIdentifier": MODEL_IDENTIFIER,
-        "description": "one translation unit (hpfmu.c includes hpfmu_casadi.c); link libm"})
+        "description": "one translation unit (hpfmu.c includes hpfmu_casadi.inc); link "
+                       "libm; define FMI2_FUNCTION_PREFIX for a static library"})
     sfs = ET.SubElement(bc, "SourceFileSet", {
         "language": "C99", "compilerOptions": " ".join(f for f in flags
                                                        if f not in ("-shared", "-fPIC"))})
@@ -329,7 +380,7 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
     t_model = time.perf_counter()
 
     say("generating C")
-    casadi_src = generate_c(fmu_functions(model, cl), "hpfmu_casadi")
+    casadi_src = private_helpers(generate_c(fmu_functions(model, cl), "hpfmu_casadi"))
     wrapper_src = (C_DIR / "hpfmu.c").read_text()
     table_key = json.dumps([(v.name, v.type, v.causality, v.vr, _fmt(v.start)
                              if v.start is not None else None) for v in table.vars])
@@ -355,11 +406,13 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
         res = root / "resources"
         for p in (src, binp, res):
             p.mkdir(parents=True)
-        (src / "hpfmu_casadi.c").write_text(casadi_src)
+        (src / "hpfmu_casadi.inc").write_text(casadi_src)
         (src / "hpfmu.c").write_text(wrapper_src)
         (src / "hpfmu_config.h").write_text(header)
         for h in FMI_HEADERS:
-            shutil.copyfile(headers / h, src / h)
+            text = (headers / h).read_text()
+            (src / h).write_text(standard_fmi2_functions_h(text) if h == "fmi2Functions.h"
+                                 else text)
         (src / "buildDescription.xml").write_text(build_description(FMU_CFLAGS))
         (root / "modelDescription.xml").write_text(md)
         _compile(cc, src, binp / f"{MODEL_IDENTIFIER}.so")

@@ -2,7 +2,7 @@
  * hpfmu.c: FMI 2.0 co-simulation interface of the hpcosim human side.
  *
  * The plant (12-DOF hybrid human-prosthesis model) and the human-side controller (feedback
- * linearization of the human outputs) are CasADi-generated C (hpfmu_casadi.c, included
+ * linearization of the human outputs) are CasADi-generated C (hpfmu_casadi.inc, included
  * below); this file is the hybrid integration algorithm of hp_model/simulator.py
  * (HybridSimulator.run, mode "human") and the FMI 2.0 API around it:
  *
@@ -39,7 +39,7 @@
 
 /* the generated functions are private to this translation unit */
 #define CASADI_SYMBOL_EXPORT static
-#include "hpfmu_casadi.c"
+#include "hpfmu_casadi.inc"
 #include "hpfmu_config.h"
 
 #define NQ HPFMU_NQ
