@@ -237,9 +237,9 @@ def _margin(tube: ForceTube) -> dict[str, object]:
     if me is None:
         z = np.zeros((2, 1))
         return {"margin_lower": z, "margin_upper": z, "margin_tau_lo": 0.0,
-                "margin_tau_hi": 1.0, "margin_gate": 0.0}
+                "margin_tau_hi": 1.0, "margin_gate": 0.0, "d_hat": np.zeros(2)}
     return {"margin_lower": me.lower, "margin_upper": me.upper, "margin_tau_lo": me.tau_lo,
-            "margin_tau_hi": me.tau_hi, "margin_gate": 0.0}
+            "margin_tau_hi": me.tau_hi, "margin_gate": 0.0, "d_hat": np.zeros(2)}
 
 
 class BaseController:

@@ -83,6 +83,14 @@ class LoopClfQpController(BaseController):
         self._exclude = float(me.exclude_after_touchdown) if me is not None else _INF
         self._margin_on = bool(un.margin) and me is not None
         self._monitored = False  # the previous stance tick's state is where the bound is
+        # the online compensation's d_hat: a view into the generated call's parameters
+        self._compensate = bool(un.compensate)
+        self._comp_after = float(un.compensate_after)
+        self._comp_tc = float(un.compensate_filter)
+        self._comp_max_dt = float(un.max_dt)
+        self._t_comp: float | None = None
+        self._pdhat = ctx.terms.numeric["clf_qp_loop"].inputs[1][
+            ctx.terms.clf_loop_layout.offset("d_hat"):][:2]
         super().__init__(ctx)
         f = ctx.terms.numeric["clf_qp_loop"]
         f.inputs[1][:] = ctx.clf_loop_params
@@ -97,6 +105,8 @@ class LoopClfQpController(BaseController):
 
     def _reset_estimator(self) -> None:
         self.estimator.reset()
+        self._pdhat[:] = 0.0
+        self._t_comp = None
         self._monitored = False
 
     def _estimator_gap(self) -> None:
@@ -148,6 +158,15 @@ class LoopClfQpController(BaseController):
         self._monitored = late
         if self._margin_on:
             self._pgate[0] = 1.0 if late else 0.0
+        if self._compensate:  # the estimate, low-passed again (T_c), once settled
+            if t - self._t_switch >= self._comp_after and est.valid:  # type: ignore[operator]
+                dt = t - self._t_comp if self._t_comp is not None else 0.0
+                g = dt / (self._comp_tc + dt) if 0.0 < dt <= self._comp_max_dt else 0.0
+                self._pdhat[0] += g * (est.d0 - self._pdhat[0])
+                self._pdhat[1] += g * (est.d1 - self._pdhat[1])
+                self._t_comp = t
+            else:
+                self._t_comp = None
         x = self._fx
         x[0], x[1], x[2], x[3] = qk, qa, vk, va
         self._f.call_inplace()

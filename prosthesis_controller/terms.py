@@ -251,6 +251,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     d_hi = L.add("margin_upper", (2, margin_degree + 1))
     tau_lo, tau_hi = L.add("margin_tau_lo"), L.add("margin_tau_hi")
     gate = L.add("margin_gate")
+    d_hat = L.add("d_hat", (2,))
     mu, f_min = L.add("mu"), L.add("f_min")
     toe, heel = L.add("toe"), L.add("heel")
     x = ca.SX.sym("x", 4)
@@ -275,7 +276,8 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     Jv = Jo[:, 2:4]
     est = ca.vertcat(b_est, Jv[0, 0], Jv[0, 1], Jv[1, 0], Jv[1, 1], A[0, 0], A[0, 1],
                      A[1, 0], A[1, 1], lo, hi, in_range)
-    h_clf = -g_over_eps * V - LFV - LGV @ a - LGV @ c_d - ca.fabs(LGV) @ r_d
+    a_c = a + d_hat  # the drift with the online estimate of the model error (0: off)
+    h_clf = -g_over_eps * V - LFV - LGV @ a_c - LGV @ c_d - ca.fabs(LGV) @ r_d
     g_clf = LGV @ A
     fx0, fz0, my0 = w0[0], w0[1], w0[2]
     Wx, Wz, Wm = W[0, :], W[1, :], W[2, :]
@@ -294,7 +296,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     sc = ca.trace(H)
     Pq = ca.SX.zeros(4, 4)
     Pq[0:2, 0:2] = 2 * H / sc
-    cq = ca.vertcat(2 * A.T @ a / sc, c_rho * rho_scale / sc, c_sigma * sigma_scale / sc)
+    cq = ca.vertcat(2 * A.T @ a_c / sc, c_rho * rho_scale / sc, c_sigma * sigma_scale / sc)
     chk = ca.sum1(ca.sum2(Pq)) + ca.sum1(cq) + ca.sum1(ca.sum2(Gq)) + ca.sum1(hq) + V
     fn = ca.Function(
         "clf_qp_loop", [x, L.symbol],

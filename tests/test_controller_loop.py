@@ -140,3 +140,34 @@ def test_clfqp_walks_the_full_loop_on_the_default_subject(model, demo_ctx, demo_
     assert np.all(np.abs(r.torque) <= np.array(demo_ctx.limits) + 1e-12)
     assert r.fallback_count == 0
     assert set(r.mode) == {"stance", "swing"}
+
+
+def test_the_compensated_drift_shifts_the_clf_row_and_the_cost_by_d(demo_ctx, demo_gait,
+                                                                     model):
+    """``uncertainty.compensate``: the generated QP with the model-error estimate d_c in its
+    parameters is the QP of the drift a + d_c: the CLF row's right side moves by
+    -LGV d_c (LGV = the row's torque part times A^-1, both normalised alike) and the
+    cost's torque gradient by 2 A^T d_c / trace(A^T A)."""
+    f = demo_ctx.terms.numeric["clf_qp_loop"]
+    k = demo_ctx.terms.clf_loop_layout.offset("d_hat")
+    d = np.array([0.3, -40.0])  # (dy1 m/s^2, d2y2 rad/s^2)
+    for x in _states(demo_gait, model, 20, np.random.default_rng(9)):
+        out = []
+        for dh in (np.zeros(2), d):
+            f.inputs[0][:] = x
+            f.inputs[1][:] = demo_ctx.clf_loop_params
+            f.inputs[1][k:k + 2] = dh
+            f.call_inplace()
+            o = dict(zip(f.function.name_out(), f.outputs, strict=True))
+            out.append({n: np.array(o[n], copy=True) for n in ("G", "h", "c", "A")})
+        (z, w) = out
+        A = z["A"].reshape(2, 2, order="F") if z["A"].size == 4 else z["A"]
+        assert np.array_equal(z["G"], w["G"]) and np.array_equal(z["A"], w["A"])
+        G0 = z["G"].reshape(-1, 4, order="F")[0, :2] if z["G"].ndim == 1 else z["G"][0, :2]
+        lgv = G0 @ np.linalg.inv(A)  # LGV / n_clf
+        assert z["h"].ravel()[0] - w["h"].ravel()[0] == pytest.approx(lgv @ d, rel=1e-9,
+                                                                        abs=1e-9)
+        sc = np.trace(A.T @ A)
+        np.testing.assert_allclose(w["c"].ravel()[:2] - z["c"].ravel()[:2],
+                                   2 * A.T @ d / sc, rtol=1e-9, atol=1e-12)
+    f.inputs[1][:] = demo_ctx.clf_loop_params
