@@ -103,19 +103,19 @@ class UncertaintyConfig(_Strict):
       0.00125 vs 0.00143 rad, perturbed cases 0.0027/0.0052/0.0033 vs 0.0029/0.0050/0.0033
       rad, but the orbit's worst contraction factor 0.86 vs 0.78 per cycle and the exact
       law's torque chatter 12.4x the relaxed law's vs 5.2x (package README).
-    - ``compensate`` (on by default): the online estimate enters the law.  The drift of the
-      CLF row and of the cost becomes a + d_c, d_c the estimate d_hat low-passed again
+    - ``compensate`` (off by default): the online estimate enters the law.  The drift of
+      the CLF row and of the cost becomes a + d_c, d_c the estimate d_hat low-passed again
       (``compensate_filter`` T_c, s), updated from ``compensate_after`` (s) after the switch
       to stance (the impact transient) and held in swing, reset with the controller: a
       disturbance observer on what the nominal-human model does not explain (a human that
       tracks its outputs less stiffly or late shifts d for whole steps).  Measured on the
-      robustness sweep's walkable draws: tracking 139/142 (138 without; the draw it adds
-      slowed by ~0.1 s per step until the human's foot slipped), the other five families
-      unchanged; with T_c = 5 ms (d_hat itself) the sensor family's velocity noise and
-      quantization (0.1 rad/s, 0.01 rad/s) reach the law and 55 of 200 draws fall; with
-      T_c = 100 ms the tracking draw is not saved.  Demo subject, 20 steps: knee RMS
-      0.0013 nominal (0.0014 without), 0.0026 / 0.0054 / 0.0034 rad in the perturbed cases
-      (0.0029 / 0.0051 / 0.0036).
+      robustness sweep's walkable draws: tracking 139/142 (138 without), the other five
+      families unchanged; with T_c = 5 ms (d_hat itself) the sensor family's velocity noise
+      and quantization reach the law and 55 of 200 draws fall; with T_c = 100 ms the
+      tracking draw is not saved.  Off by default because on the demo subject it costs more
+      than it gives: knee RMS 0.0013 nominal (0.0014 without), 0.0026 / 0.0054 / 0.0034 rad
+      in the perturbed cases (0.0029 / 0.0051 / 0.0036), but the orbit's worst contraction
+      per cycle 0.92 (0.78 without) and the relaxed law's torque variation 14.5 N m/s (13.3).
     - ``filter_time``: time constant T_f (s) of the causal first-order low-pass of the
       disturbance estimate d_hat (a finite difference of the measured joint velocities,
       compared with a + A u_prev of the previous tick): d_hat += dt / (T_f + dt) (d_raw -
@@ -129,7 +129,7 @@ class UncertaintyConfig(_Strict):
     """
 
     margin: bool = False
-    compensate: bool = True
+    compensate: bool = False
     compensate_after: float = Field(0.03, ge=0)
     compensate_filter: Positive = 0.02
     filter_time: Positive = 0.005

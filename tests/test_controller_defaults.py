@@ -45,15 +45,7 @@ def run_ticks(ctl, meas, u0):
 def test_defaults_keep_every_controller_in_stance_on_the_default_subject(model, subsystem,
                                                                         demo, name):
     gait, tube = demo
-    cfg = ControllerConfig()
-    if name == "clfqp-exact":
-        # open-loop playback: the measured accelerations do not answer the torque, so the
-        # online model-error estimate would feed the law's own torque deviation back
-        # through the hard CLF row (42 fallbacks in 2000 with it); in the closed loop the
-        # demo's runs walk with it either way (tests/test_experiments.py)
-        cfg = cfg.model_copy(update={"uncertainty": cfg.uncertainty.model_copy(
-            update={"compensate": False})})
-    ctx = ControllerContext(gait, tube, model, cfg, subsystem=subsystem)
+    ctx = ControllerContext(gait, tube, model, subsystem=subsystem)
     ctl = make_controller(name, None, None, None, context=ctx)
     outs, modes = run_ticks(ctl, *stance_ticks(model, gait, TICKS))
     if name == "clfqp-exact":
