@@ -11,3 +11,15 @@ SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).", dir_okay=False)]
 DeviceOpt = Annotated[Path | None, typer.Option(
     "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).", dir_okay=False)]
+
+
+def check_output_file(out: Path, option: str = "--out") -> None:
+    """Before any long work: the folder of the file ``out`` exists and is writable (one-line
+    errors naming it; the write itself stays atomic and may still fail, e.g. a full disk)."""
+    import os
+
+    folder = out.parent
+    if not folder.is_dir():
+        raise FileNotFoundError(f"{folder}: no such folder for {option}")
+    if not os.access(folder, os.W_OK):
+        raise PermissionError(f"{folder}: folder not writable for {option}")

@@ -60,8 +60,10 @@ def fit(
     from characterization.phzd import PHZDOptions
     from characterization.steps_artifact import load_steps
     from hp_model.gait_artifact import save_gait
+    from orchestrator.cli_options import check_output_file
 
     console = Console(stderr=True)
+    check_output_file(out)
     data = load_steps(steps)
     model = hp_model.load_model(str(subject) if subject else None,
                                 str(device) if device else None)

@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from orchestrator.cli_options import DeviceOpt, SubjectOpt
+from orchestrator.cli_options import DeviceOpt, SubjectOpt, check_output_file
 
 tube_app = typer.Typer(help="The socket-force tube: playback of the recorded steps (paper "
                        "Sec. IV-B).", no_args_is_help=True)
@@ -77,8 +77,7 @@ def fit(
     console = Console()
     if out.suffix != ".json":
         raise PlaybackError(f"{out}: the tube file must end in .json")
-    if not out.parent.is_dir():
-        raise FileNotFoundError(f"{out.parent}: no such folder for --out")
+    check_output_file(out)
     with console.status("loading the model (compiled once, then cached)"):
         model = hp_model.load_model(str(subject) if subject else None,
                                     str(device) if device else None)

@@ -130,10 +130,19 @@ def test_a_file_that_is_not_an_fmu(capsys, tmp_path):
 
 #: a folder nobody may create, root included (sysfs refuses it): a read-only output
 READ_ONLY_OUT = "/sys/hpcosim-read-only/out"
+#: every verb that writes, with inputs it accepts: the output is checked before any work
 WRITERS = {"mocap synth": ["mocap", "synth", "--out", READ_ONLY_OUT],
            "demo": ["demo", "--out", READ_ONLY_OUT],
            "experiments": ["experiments", "--gait", GAIT, "--tube", TUBE, "--out",
-                           READ_ONLY_OUT]}
+                           READ_ONLY_OUT],
+           "gait fit": ["gait", "fit", GAIT, "--out", READ_ONLY_OUT + ".json"],
+           "tube fit": ["tube", "fit", GAIT, "--gait", GAIT, "--out", READ_ONLY_OUT + ".json"],
+           "fmu build": ["fmu", "build", "--gait", GAIT, "--out", READ_ONLY_OUT + ".fmu"],
+           "run": ["run", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE, "--steps",
+                   "1", "--record", READ_ONLY_OUT + ".mcap"],
+           "sweep run": ["sweep", "run", str(Path(__file__).resolve().parents[1] / "examples"
+                                             / "sweep" / "quick.toml"),
+                         "--out", READ_ONLY_OUT, "--workers", "1"]}
 
 
 @pytest.mark.parametrize("verb", sorted(WRITERS))
