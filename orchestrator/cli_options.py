@@ -23,3 +23,21 @@ def check_output_file(out: Path, option: str = "--out") -> None:
         raise FileNotFoundError(f"{folder}: no such folder for {option}")
     if not os.access(folder, os.W_OK):
         raise PermissionError(f"{folder}: folder not writable for {option}")
+
+
+def check_output_folder(out: Path, option: str = "--out") -> None:
+    """Before any long work: the folder ``out`` can be created (or written into), checked
+    by making and removing a temporary folder in its nearest existing ancestor; nothing is
+    left behind.  One-line errors naming ``out``."""
+    import tempfile
+
+    a = out
+    while not a.exists() and a != a.parent:
+        a = a.parent
+    if not a.is_dir():
+        raise NotADirectoryError(f"{out}: {a} is not a folder (for {option})")
+    try:
+        tempfile.TemporaryDirectory(dir=a).cleanup()
+    except OSError as e:
+        raise PermissionError(f"{out}: cannot write there for {option} ({a}: "
+                              f"{e.strerror or e})") from None

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from orchestrator.cli_options import check_output_file
+from orchestrator.cli_options import check_output_folder
 from orchestrator.tube_cli import tube_app  # `tube refit` joins `tube fit`
 
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
@@ -78,8 +78,7 @@ def run(
 
     console = Console()
     if record is not None:  # before the FMU build and the controller start
-        record.parent.mkdir(parents=True, exist_ok=True)
-        check_output_file(record, "--record")
+        check_output_folder(record.parent, "--record")
     cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
                       perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time,
                       pin_cpus=pin)

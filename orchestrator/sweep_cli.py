@@ -96,7 +96,7 @@ def run(
         TimeRemainingColumn,
     )
 
-    from orchestrator.cli_options import check_output_file
+    from orchestrator.cli_options import check_output_folder
     from orchestrator.sweep_engine import SweepError, run_sweep
     from orchestrator.sweep_report import write_report
     from orchestrator.sweep_spec import load_spec
@@ -109,8 +109,7 @@ def run(
     sp = load_spec(spec, over)
     if out.exists() and not out.is_dir():
         raise _fail(f"--out {out}: not a folder")
-    out.mkdir(parents=True, exist_ok=True)  # a read-only place fails here, before any work
-    check_output_file(out / "sweep.json")
+    check_output_folder(out)  # a read-only place fails here, before any work
     console = Console()
     label = " (+ the walkability oracle)" if sp.label_walkable else ""
     console.print(f"sweep [bold]{sp.name}[/]: {len(sp.controllers)} controllers{label} x "

@@ -23,6 +23,8 @@ import contextlib
 import itertools
 import logging
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -148,8 +150,10 @@ class _Parts:
 def _consume(client: Any, plugin: str, spec: SweepSpec, digest: str, session: str,
              todo: list[RunKey], parts: _Parts, outcome: SweepOutcome, window: int,
              on_result: Callable[[dict[str, Any]], None] | None,
-             progress: Progress | None) -> None:
-    """Submit ``todo`` (at most ``window`` in flight) and store each result as it comes."""
+             progress: Progress | None, stop: threading.Event | None = None) -> None:
+    """Submit ``todo`` (at most ``window`` in flight) and store each result as it comes;
+    ``stop`` set (Ctrl-C) ends it with KeyboardInterrupt after the result in hand is
+    stored."""
     from distributed import as_completed
 
     pending = iter(todo)
@@ -184,6 +188,25 @@ def _consume(client: Any, plugin: str, spec: SweepSpec, digest: str, session: st
             on_result(row)
         if progress is not None:
             progress(outcome.done, len(todo), outcome.errors, outcome.runs_per_min)
+        if stop is not None and stop.is_set():
+            raise KeyboardInterrupt
+    if stop is not None and stop.is_set():
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def _interrupt_flag(stop: threading.Event) -> Iterator[None]:
+    """While running: SIGINT sets ``stop`` instead of raising wherever the main thread is
+    (inside a Dask call a KeyboardInterrupt can cancel the runs in flight, which then
+    count as errors, and the sweep goes on); outside the main thread, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, lambda _s, _f: stop.set())
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
@@ -224,9 +247,11 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
         store.write_manifest(manifest)
         say(f"{outcome.workers} workers ready; {len(todo)} runs to do")
         parts = _Parts(store, session, spec.batch, flush_s)
+        stop = threading.Event()
         try:
-            _consume(client, plugin.name, spec, digest, session, todo, parts, outcome,
-                     window or max(32, 8 * outcome.workers), on_result, progress)
+            with _interrupt_flag(stop):
+                _consume(client, plugin.name, spec, digest, session, todo, parts, outcome,
+                         window or max(32, 8 * outcome.workers), on_result, progress, stop)
             outcome.status = "completed"
         except KeyboardInterrupt:
             outcome.status = "interrupted"

@@ -75,6 +75,7 @@ def test_schemas_are_valid_and_examples_conform():
                                                      "coverage_count": 3},
         "/controller/disturbance": {"t": 0.5, "d": [0.01, -0.2], "tau": 0.4, "valid": True,
                                     "flag": False, "since_touchdown": 0.255},
+        "/cosim/timing": {"t": 0.05, "tick": 50, "lag": 0.061, "skipped": 20},
     }
     assert examples.keys() == CHANNELS.keys()
     for topic, schema in CHANNELS.items():
