@@ -6,6 +6,8 @@ FMU layout (FMI 2.0 co-simulation, model identifier ``hpcosim_human``):
     modelDescription.xml
     binaries/linux64/hpcosim_human.so
     sources/hpfmu.c             the FMI wrapper and the hybrid integration (hand-written)
+    sources/hpfmu_core.inc      the hybrid integration, checks and outputs, independent of
+                                the FMI version (included by hpfmu.c)
     sources/hpfmu_casadi.inc    the plant and the human's controller (CasADi-generated,
                                 included by hpfmu.c: every function in it static)
     sources/hpfmu_config.h      variables, start values and model constants (generated)
@@ -382,9 +384,10 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
     say("generating C")
     casadi_src = private_helpers(generate_c(fmu_functions(model, cl), "hpfmu_casadi"))
     wrapper_src = (C_DIR / "hpfmu.c").read_text()
+    core_src = (C_DIR / "hpfmu_core.inc").read_text()
     table_key = json.dumps([(v.name, v.type, v.causality, v.vr, _fmt(v.start)
                              if v.start is not None else None) for v in table.vars])
-    guid = _guid(casadi_src, wrapper_src, table_key, model_hash, gait_hash)
+    guid = _guid(casadi_src, wrapper_src + core_src, table_key, model_hash, gait_hash)
     rows = {d: cl.vcs[d].c_row for d in DOMAIN_ORDER}
     header = config_header(table, model, guid, g.degree, n_theta, rows)
     generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -408,6 +411,7 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
             p.mkdir(parents=True)
         (src / "hpfmu_casadi.inc").write_text(casadi_src)
         (src / "hpfmu.c").write_text(wrapper_src)
+        (src / "hpfmu_core.inc").write_text(core_src)
         (src / "hpfmu_config.h").write_text(header)
         for h in FMI_HEADERS:
             text = (headers / h).read_text()
