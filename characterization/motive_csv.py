@@ -14,6 +14,9 @@ Rotation Type is ``Quaternion`` (X, Y, Z, W: scalar last) or an Euler order such
 (three columns in degrees, read as intrinsic rotations in that order).  Length Units:
 Meters, Centimeters or Millimeters.  Empty cell = tracking lost.  Quality columns (Mean
 Marker Error, Marker Quality) are optional.  Only ``Global`` coordinate space is accepted.
+An export with timecode has a third column ``TimeCode`` (``Frame,Time (Seconds),TimeCode,
+X,...``, values ``hh:mm:ss:ff``): it is dropped, its first value kept as the ``TimeCode
+start`` metadata.
 """
 
 from __future__ import annotations
@@ -97,6 +100,15 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
                          f"'{rate_s}'") from None
 
     rows, data_start = _split_header(lines, src)
+    body = lines[data_start:]
+    tc = [j for j, c in enumerate(rows["axis"]) if c.strip().lower() == "timecode"]
+    if tc:  # Motive's optional SMPTE TimeCode column (hh:mm:ss:ff): kept as metadata only
+        j = tc[0]
+        rows = {k: r[:j] + r[j + 1:] for k, r in rows.items()}
+        body = [_drop_cell(ln, j) for ln in body]
+        first = next((ln for ln in lines[data_start:] if ln.strip()), "")
+        cells = first.split(",")
+        meta = {**meta, "TimeCode start": cells[j].strip() if len(cells) > j else ""}
     for need in ("Type", "Name", "quantity"):
         if need not in rows:
             raise MocapError(f"{src}: header row '{need}' missing")
@@ -105,7 +117,7 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
         if len(r) != ncol:
             raise MocapError(f"{src}: header row '{k}' has {len(r)} cells, the 'Frame' row "
                              f"has {ncol}")
-    data = _parse_data(lines[data_start:], ncol, data_start, src)
+    data = _parse_data(body, ncol, data_start, src)
     if data.shape[0] == 0:
         raise MocapError(f"{src}: no data rows")
     time = data[:, 1]
@@ -169,6 +181,12 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
             v[~np.all(np.isfinite(v), axis=1)] = np.nan
     return Take(source=src, frame_rate=rate, time=time, markers=markers, rigid_bodies=bodies,
                 rigid_body_markers=rb_markers, up_axis="+y", metadata=meta)
+
+
+def _drop_cell(line: str, j: int) -> str:
+    """``line`` without its comma-separated cell ``j`` (unchanged when it has none)."""
+    cells = line.split(",")
+    return ",".join(cells[:j] + cells[j + 1:]) if len(cells) > j else line
 
 
 def _parse_data(lines: list[str], ncol: int, offset: int, src: str) -> np.ndarray:

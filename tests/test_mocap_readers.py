@@ -226,3 +226,32 @@ def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
     # walking the other way round flips every pitch's sign
     back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
     np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
+
+
+def test_a_motive_export_with_timecode_reads_the_same(synth, files, tmp_path) -> None:
+    """Motive's optional TimeCode column (third, ``hh:mm:ss:ff``, an empty cell in every
+    descriptor row) was refused ("not a number"); it is dropped and its first value kept."""
+    lines = files["csv"].read_text().splitlines()
+    out = []
+    for i, ln in enumerate(lines):
+        cells = ln.split(",")
+        if i == 0 or not ln.strip():
+            out.append(ln)
+            continue
+        if cells[0] == "Frame":
+            extra = "TimeCode"
+        elif cells[0] == "":
+            extra = ""
+        else:
+            k = int(cells[0])
+            extra = f"00:00:{k // 120:02d}:{k % 120 // 4:02d}.{k % 4}"
+        out.append(",".join([*cells[:2], extra, *cells[2:]]))
+    p = tmp_path / "timecode.csv"
+    p.write_text("\n".join(out) + "\n")
+    ref, got = read_motive_csv(files["csv"]), read_motive_csv(p)
+    np.testing.assert_array_equal(got.time, ref.time)
+    for k, v in ref.markers.items():
+        np.testing.assert_array_equal(got.markers[k], v)
+    for k, rb in ref.rigid_bodies.items():
+        np.testing.assert_array_equal(got.rigid_bodies[k].quaternion, rb.quaternion)
+    assert got.metadata["TimeCode start"] == "00:00:00:00.0"
