@@ -8,7 +8,9 @@ missing sample is NaN or has a negative residual.  C3D files are Z-up by convent
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -30,14 +32,34 @@ def read_c3d(path: str | os.PathLike[str]) -> Take:
     except Exception as e:  # ezc3d raises plain RuntimeError/IndexError on bad files
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise MocapError(f"{src}: not a readable C3D file ({first})") from None
-    par = c["parameters"]["POINT"]
+    return take_from_c3d(c, src)
+
+
+def point_labels(par: Mapping[str, Any], n_points: int) -> list[str]:
+    """The labels of the ``n_points`` stored markers: POINT:LABELS continued by LABELS2,
+    LABELS3, ... (files with more than 255 markers), cut to POINT:USED when the file names
+    spare labels beyond the markers it stores (e.g. the c3d.org gait samples)."""
     labels = [str(s).strip() for s in par["LABELS"]["value"]]
+    k = 2
+    while f"LABELS{k}" in par:
+        labels += [str(s).strip() for s in par[f"LABELS{k}"]["value"]]
+        k += 1
+    used = int(np.ravel(par["USED"]["value"])[0]) if "USED" in par else len(labels)
+    if len(labels) > n_points and used == n_points:
+        labels = labels[:n_points]
+    return labels
+
+
+def take_from_c3d(c: Any, src: str) -> Take:
+    """A :class:`Take` from an ezc3d ``c3d`` object (its parameters and data)."""
+    par = c["parameters"]["POINT"]
+    pts = np.asarray(c["data"]["points"], dtype=float)
+    labels = point_labels(par, pts.shape[1] if pts.ndim == 3 else -1)
     unit = str(par["UNITS"]["value"][0]).strip().lower() if "UNITS" in par else "mm"
     if unit not in UNITS:
         raise MocapError(f"{src}: parameter POINT:UNITS: unknown units '{unit}' "
                          f"(expected one of {', '.join(UNITS)})")
     rate = float(np.ravel(par["RATE"]["value"])[0])
-    pts = np.asarray(c["data"]["points"], dtype=float)
     if pts.ndim != 3 or pts.shape[1] != len(labels):
         raise MocapError(f"{src}: POINT data has {pts.shape[1] if pts.ndim == 3 else '?'} "
                          f"markers but POINT:LABELS names {len(labels)}")

@@ -255,3 +255,33 @@ def test_a_motive_export_with_timecode_reads_the_same(synth, files, tmp_path) ->
     for k, rb in ref.rigid_bodies.items():
         np.testing.assert_array_equal(got.rigid_bodies[k].quaternion, rb.quaternion)
     assert got.metadata["TimeCode start"] == "00:00:00:00.0"
+
+
+def test_c3d_labels_beyond_point_used_are_spare(files) -> None:
+    """POINT:LABELS may name more markers than the file stores (POINT:USED; the c3d.org gait
+    samples do): the labels of the stored markers are read, the spare ones ignored; LABELS2
+    continues LABELS.  Before, such files were refused (markers != labels)."""
+    import ezc3d
+
+    from characterization.c3d_io import point_labels, take_from_c3d
+
+    c = ezc3d.c3d(str(files["c3d"]))
+    ref = read_c3d(files["c3d"])
+    names = list(c["parameters"]["POINT"]["LABELS"]["value"])
+    n = len(names)
+    # the parsed file with two spare labels and POINT:USED as stored
+    par = {"LABELS": {"value": [*names, "Spare1", "Spare2"]}, "USED": {"value": [n]},
+           "UNITS": c["parameters"]["POINT"]["UNITS"], "RATE": c["parameters"]["POINT"]["RATE"]}
+    parsed = {"parameters": {"POINT": par}, "data": c["data"], "header": c["header"]}
+    got = take_from_c3d(parsed, "spare.c3d")
+    assert list(got.markers) == list(ref.markers)
+    for k, v in ref.markers.items():
+        np.testing.assert_array_equal(got.markers[k], v)
+    # LABELS2 continues LABELS; more labels than markers with USED saying so is still an error
+    split = {"LABELS": {"value": names[:3]}, "LABELS2": {"value": names[3:]},
+             "USED": {"value": [n]}}
+    assert point_labels(split, n) == [s.strip() for s in names]
+    bad = dict(par, USED={"value": [n + 2]})
+    with pytest.raises(MocapError, match="POINT:LABELS names"):
+        take_from_c3d({"parameters": {"POINT": bad}, "data": c["data"],
+                       "header": c["header"]}, "bad.c3d")
