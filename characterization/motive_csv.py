@@ -38,6 +38,10 @@ EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 _EMPTY = re.compile(r"(?<=,)(?=,|$)", re.MULTILINE)
 
 
+#: frame times further apart than this many frame periods are a jump, not dropped frames
+MAX_GAP_PERIODS = 10
+
+
 def _metadata(first: str, src: str) -> dict[str, str]:
     cells = [c.strip() for c in first.split(",")]
     if len(cells) < 2 or cells[0] != "Format Version":
@@ -127,6 +131,16 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
                          "times must be present and increasing")
     if not np.isfinite(rate) or rate <= 0:
         rate = 1.0 / float(np.median(np.diff(time))) if len(time) > 1 else float("nan")
+    if len(time) > 1:  # one continuous take: no jump in the frame times
+        dt = np.diff(time)
+        period = float(np.median(dt))
+        jump = np.flatnonzero(dt > MAX_GAP_PERIODS * period)
+        if jump.size:
+            i = int(jump[0])
+            raise MocapError(f"{src}: column 'Time (Seconds)', data rows {data_start + i + 1}-"
+                             f"{data_start + i + 2}: the time jumps by {dt[i]:.3f} s "
+                             f"({dt[i] / period:.0f} frame periods of {period * 1e3:.2f} ms): "
+                             "not one continuous take (export one take per file)")
 
     groups: dict[tuple[str, str], dict[tuple[str, str], int]] = {}
     for j in range(2, ncol):

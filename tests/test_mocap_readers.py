@@ -285,3 +285,25 @@ def test_c3d_labels_beyond_point_used_are_spare(files) -> None:
     with pytest.raises(MocapError, match="POINT:LABELS names"):
         take_from_c3d({"parameters": {"POINT": bad}, "data": c["data"],
                        "header": c["header"]}, "bad.c3d")
+
+
+def test_a_jump_in_the_frame_times_is_refused(files, tmp_path) -> None:
+    """Frame times that jump (35 s after data row 100; a concatenation of takes) were read
+    as continuous frames; now one line names the rows and the jump.  A few dropped frames
+    (3 periods) are not a jump."""
+    lines = files["csv"].read_text().splitlines()
+    start = next(i for i, ln in enumerate(lines) if ln.startswith("Frame,")) + 1
+
+    def shifted(k0: int, by: float) -> Path:
+        out = list(lines)
+        for i in range(start + k0, len(out)):
+            cells = out[i].split(",")
+            cells[1] = f"{float(cells[1]) + by:.6f}"
+            out[i] = ",".join(cells)
+        p = tmp_path / f"jump{by:g}.csv"
+        p.write_text("\n".join(out) + "\n")
+        return p
+
+    with pytest.raises(MocapError, match=r"rows \d+-\d+: the time jumps by 35\.0\d* s"):
+        read_motive_csv(shifted(100, 35.0))
+    assert read_motive_csv(shifted(100, 2 / 120)).time[101] == pytest.approx(101 / 120 + 2 / 120)
