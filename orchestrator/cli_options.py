@@ -14,15 +14,12 @@ DeviceOpt = Annotated[Path | None, typer.Option(
 
 
 def check_output_file(out: Path, option: str = "--out") -> None:
-    """Before any long work: the folder of the file ``out`` exists and is writable (one-line
-    errors naming it; the write itself stays atomic and may still fail, e.g. a full disk)."""
-    import os
-
-    folder = out.parent
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder}: no such folder for {option}")
-    if not os.access(folder, os.W_OK):
-        raise PermissionError(f"{folder}: folder not writable for {option}")
+    """Before any long work: the folder of the file ``out`` exists and can be written into
+    (one-line errors naming it; the write itself stays atomic and may still fail, e.g. on a
+    full disk)."""
+    if not out.parent.is_dir():
+        raise FileNotFoundError(f"{out.parent}: no such folder for {option}")
+    check_output_folder(out.parent, option)
 
 
 def check_output_folder(out: Path, option: str = "--out") -> None:

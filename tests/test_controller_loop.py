@@ -160,14 +160,11 @@ def test_the_compensated_drift_shifts_the_clf_row_and_the_cost_by_d(demo_ctx, de
             f.call_inplace()
             o = dict(zip(f.function.name_out(), f.outputs, strict=True))
             out.append({n: np.array(o[n], copy=True) for n in ("G", "h", "c", "A")})
-        (z, w) = out
-        A = z["A"].reshape(2, 2, order="F") if z["A"].size == 4 else z["A"]
-        assert np.array_equal(z["G"], w["G"]) and np.array_equal(z["A"], w["A"])
-        G0 = z["G"].reshape(-1, 4, order="F")[0, :2] if z["G"].ndim == 1 else z["G"][0, :2]
-        lgv = G0 @ np.linalg.inv(A)  # LGV / n_clf
-        assert z["h"].ravel()[0] - w["h"].ravel()[0] == pytest.approx(lgv @ d, rel=1e-9,
-                                                                        abs=1e-9)
-        sc = np.trace(A.T @ A)
-        np.testing.assert_allclose(w["c"].ravel()[:2] - z["c"].ravel()[:2],
-                                   2 * A.T @ d / sc, rtol=1e-9, atol=1e-12)
-    f.inputs[1][:] = demo_ctx.clf_loop_params
+        (z, w) = out  # A (2, 2), G (rows, 4), h (rows,), c (4,)
+        A = z["A"]
+        assert np.array_equal(z["G"], w["G"]) and np.array_equal(A, w["A"])
+        lgv = z["G"][0, :2] @ np.linalg.inv(A)  # LGV / n_clf
+        assert z["h"][0] - w["h"][0] == pytest.approx(lgv @ d, rel=1e-9, abs=1e-9)
+        np.testing.assert_allclose(w["c"][:2] - z["c"][:2], 2 * A.T @ d / np.trace(A.T @ A),
+                                   rtol=1e-9, atol=1e-12)
+    f.inputs[1][:] = demo_ctx.clf_loop_params  # the shared buffer as the controllers set it
