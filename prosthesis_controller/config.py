@@ -81,11 +81,18 @@ class ContactConfig(_Strict):
     together by sigma in [0, ``sigma_max``] (torque-equivalent units, N m motor per row) at
     the linear cost ``c_sigma``: zero whenever they can hold (an exact penalty).
 
-    ``mu`` 0.5 leaves a margin to the simulated ground's 0.8 (and the gait design's 0.6)."""
+    ``mu`` 0.5 leaves a margin to the simulated ground's 0.8 (and the gait design's 0.6).
+    ``cop_fraction`` is 1 (the whole sole) because the CoP is where the nominal-human model is
+    least right: the ankle moment M_y carries the human's posture, so a human that tracks
+    its outputs less stiffly or late moves the true CoP where the rows do not see it.  At
+    0.8 the CoP rows were active on 59-97 % of the early-stance ticks of such a human
+    (robustness sweep, tracking draw 83) and starved the CLF row until the stances
+    lengthened (0.81, 0.87, 0.99 s) and the human's foot slipped; at 1.0 it walks, and the
+    other 1077 walkable draws of the sweep and the demo's runs are unchanged (package README)."""
 
     mu: Positive = 0.5
     f_min: NonNegative = 30.0
-    cop_fraction: float = Field(0.8, gt=0, le=1)
+    cop_fraction: float = Field(1.0, gt=0, le=1)
     sigma_max: Positive = 100.0
     c_sigma: Positive = 1.0e6
 
@@ -94,28 +101,28 @@ class UncertaintyConfig(_Strict):
     """The characterised model error of ``clfqp`` (the tube's ``model_error``, issue 17) and
     its online estimate.
 
-    - ``margin``: put the bound into the robust CLF row (the worst case of d over it,
-      LGV c_d + |LGV| r_d) over its phase range, from ``exclude_after_touchdown`` after the
-      switch to stance on; off (default): the row is the nominal model's, the bound serves
-      the coverage monitor only.  A tube without a model-error bound gives no margin either
-      way.  Off by default because on the demo subject it changes little and not only for
-      the better (measured, 20 nominal steps, margin ~0.5 motor N m at mid-stance): knee RMS
-      0.00125 vs 0.00143 rad, perturbed cases 0.0027/0.0052/0.0033 vs 0.0029/0.0050/0.0033
-      rad, but the orbit's worst contraction factor 0.86 vs 0.78 per cycle and the exact
-      law's torque chatter 12.4x the relaxed law's vs 5.2x (package README).
+    - ``margin`` (on by default): the bound in the robust CLF row, the worst case of d over
+      it, LGV c_d + |LGV| r_d, over its phase range, from ``exclude_after_touchdown`` after
+      the switch to stance on: the paper's robust term with the interaction model's error
+      in place of the socket-force tube (the first 30 ms after touchdown are left to the
+      relaxation).  Off: the row is the nominal model's and the bound serves the coverage
+      monitor only.  A tube without a model-error bound gives no margin either way.
+      Measured (demo subject, 20 steps, margin on vs off): knee RMS 0.0013 rad either
+      way, perturbed cases 0.0027 / 0.0053 / 0.0036 vs 0.0028 / 0.0053 / 0.0036 rad,
+      worst orbit contraction per cycle 0.81 either way; the robustness sweep's 1078
+      walkable draws the same; the exact law's torque chatter 246 vs 23 N m/s (the
+      paper's Fig. 6: the worst-case term is what makes the exact law chatter).
     - ``compensate`` (off by default): the online estimate enters the law.  The drift of
       the CLF row and of the cost becomes a + d_c, d_c the estimate d_hat low-passed again
       (``compensate_filter`` T_c, s), updated from ``compensate_after`` (s) after the switch
       to stance (the impact transient) and held in swing, reset with the controller: a
       disturbance observer on what the nominal-human model does not explain (a human that
-      tracks its outputs less stiffly or late shifts d for whole steps).  Measured on the
-      robustness sweep's walkable draws: tracking 139/142 (138 without), the other five
-      families unchanged; with T_c = 5 ms (d_hat itself) the sensor family's velocity noise
-      and quantization reach the law and 55 of 200 draws fall; with T_c = 100 ms the
-      tracking draw is not saved.  Off by default because on the demo subject it costs more
-      than it gives: knee RMS 0.0013 nominal (0.0014 without), 0.0026 / 0.0054 / 0.0034 rad
-      in the perturbed cases (0.0029 / 0.0051 / 0.0036), but the orbit's worst contraction
-      per cycle 0.92 (0.78 without) and the relaxed law's torque variation 14.5 N m/s (13.3).
+      tracks its outputs less stiffly or late shifts d for whole steps).  With T_c = 5 ms
+      (d_hat itself) the sensor family's velocity noise and quantization reach the law (55
+      of 200 draws fell).  Off by default: on the demo subject it changes little (knee RMS
+      0.0012 vs 0.0013 rad nominal, worst contraction 0.82 vs 0.81, relaxed torque
+      variation 20.3 vs 16.5 N m/s) and the sweep draw it once saved walks without it
+      (package README, "Compensation").
     - ``filter_time``: time constant T_f (s) of the causal first-order low-pass of the
       disturbance estimate d_hat (a finite difference of the measured joint velocities,
       compared with a + A u_prev of the previous tick): d_hat += dt / (T_f + dt) (d_raw -
@@ -128,7 +135,7 @@ class UncertaintyConfig(_Strict):
       before a filtered estimate counts as outside (the estimate's own noise and lag).
     """
 
-    margin: bool = False
+    margin: bool = True
     compensate: bool = False
     compensate_after: float = Field(0.03, ge=0)
     compensate_filter: Positive = 0.02

@@ -141,6 +141,12 @@ class LoopClfQpController(BaseController):
         solved no QP."""
         return None if self._qp_x is None else np.array(self._qp_x)
 
+    @property
+    def qp_duality_gap(self) -> float:
+        """piqp's duality gap at the last solve: by weak duality the solution's cost exceeds
+        the QP's optimum by at most this much."""
+        return float(self._solver.result.info.duality_gap)
+
     def qp_data(self) -> tuple[np.ndarray, ...]:
         """The last stance tick's QP as the solver got it (copies): (P, c, G, h, x_l, x_u),
         min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u."""

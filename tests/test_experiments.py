@@ -128,28 +128,31 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     claims = {c["id"]: c for c in m["claims"]}
     assert set(claims) == {"nominal_stable", "relaxed_smooth", "robust_order",
                            "robust_success", "paper_literal"}
-    # README: clfqp walks 20 nominal steps, knee RMS 0.0014 rad, no fallback, every torque
-    # within the limits; its orbit contracts (worst factor 0.78 per cycle)
+    # README: clfqp walks 20 nominal steps, knee RMS 0.0013 rad, no fallback, every torque
+    # within the limits; its orbit contracts (worst factor 0.81 per cycle)
     n = m["nominal"]
     assert n["run"]["success"] and n["run"]["fallback_count"] == 0
-    assert n["run"]["knee_rms_ps_rad"] == pytest.approx(0.00143, rel=0.1)
+    assert n["run"]["knee_rms_ps_rad"] == pytest.approx(0.00131, rel=0.1)
     assert n["stability"]["contracting"] and n["stability"]["contraction_worst"] < 0.9
     assert claims["nominal_stable"]["reproduced"]
-    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies 5.2x as
-    # fast (18 infeasible ticks falling back); the relaxed run's knee RMS per step settles
-    # (0.0002, 0.0014, 0.0014 rad) while the exact law's grows
+    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies 14.9x as
+    # fast (its worst-case margin term flips the torque, as in the paper); the relaxed run's
+    # knee RMS per step settles (0.0001, 0.0013, 0.0014 rad) while the exact law's grows
     e = m["exact_vs_relaxed"]
     assert e["clfqp"]["run"]["success"] and e["clfqp-exact"]["run"]["success"]
     a, b = e["clfqp-exact"]["chatter_rate_Nm_per_s"], e["clfqp"]["chatter_rate_Nm_per_s"]
     assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
-    assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(5.22, rel=0.1)
+    # the exact law's sign flips are sensitive to the last digits (a chattering law): the
+    # claim's threshold, and the README's figure to 20 %
+    assert e["chatter_ratio_exact_over_relaxed"] >= 5
+    assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(14.9, rel=0.2)
     kr = e["clfqp"]["knee_rms_per_step_rad"]
     assert e["relaxed_tracking_converging"] == (abs(kr[-1] - kr[-2]) <= 0.1 * kr[-2])
     assert e["relaxed_tracking_converging"] and claims["relaxed_smooth"]["reproduced"]
     kx = e["clfqp-exact"]["knee_rms_per_step_rad"]
     assert kx[-1] > kr[-1]
     # README: the cases are the first three seeds the oracle walks (20 steps, knee offset):
-    # 0, 2, 7.  clfqp completes all three (knee RMS 0.0029, 0.0051, 0.0036 rad) below each
+    # 0, 2, 7.  clfqp completes all three (knee RMS 0.0027, 0.0053, 0.0036 rad) below each
     # baseline wherever that baseline completes; pd falls at the first tick from the knee
     # offset in human-1, -2; passive falls in human-2
     rb = m["robustness"]

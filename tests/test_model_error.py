@@ -257,10 +257,10 @@ def test_monitor_flags_and_counts_estimates_outside_the_bound(model, demo_gait, 
 
 
 def test_clfqp_walks_with_the_margin_on(model, demo_gait, subsystem):
-    """With the demo subject's characterised bound in the CLF row (``uncertainty.margin``),
-    clfqp still walks 20 nominal steps inside the limits, no fallback, knee RMS <= 0.003 rad
-    (measured 0.00125 rad, 0.00143 without the margin); the bound is worth < 1 motor N m at
-    mid-stance (measured 0.5-0.7)."""
+    """With the demo subject's characterised bound in the CLF row (``uncertainty.margin``,
+    the default), clfqp walks 20 nominal steps inside the limits, no fallback, knee RMS
+    <= 0.003 rad (measured 0.0013 rad, the same without the margin); the bound is worth < 1
+    motor N m at mid-stance (measured 0.5-0.7)."""
     from characterization.model_error_fit import margin_torque
     from orchestrator.scenarios import Scenario, run_scenario
 
