@@ -1,11 +1,13 @@
 """Build the human-side FMU: generate C from the CasADi model, write modelDescription.xml and
 the C configuration from one variable table, compile, and zip (atomically).
 
-FMU layout (FMI 2.0 co-simulation, model identifier ``hpcosim_human``):
+FMU layout (FMI 2.0 co-simulation, model identifier ``hpcosim_human``; FMI 3.0 with
+``fmi_version=3``: ``binaries/x86_64-linux``, ``sources/hpfmu3.c`` and the ``fmi3*.h``
+headers, the same core and generated C, :mod:`human_fmu.fmi3`):
 
     modelDescription.xml
     binaries/linux64/hpcosim_human.so
-    sources/hpfmu.c             the FMI wrapper and the hybrid integration (hand-written)
+    sources/hpfmu.c             the FMI 2.0 API (hand-written)
     sources/hpfmu_core.inc      the hybrid integration, checks and outputs, independent of
                                 the FMI version (included by hpfmu.c)
     sources/hpfmu_casadi.inc    the plant and the human's controller (CasADi-generated,
@@ -43,6 +45,7 @@ from hp_model.compiled import densified, find_c_compiler, generate_c
 from hp_model.gait_artifact import Gait, load_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
+from human_fmu.fmi3 import PLATFORM_TUPLE, config_macros, model_description_3
 from human_fmu.variables import UNITS, Variable, _Table, add_constants, build_table
 
 MODEL_IDENTIFIER = "hpcosim_human"
@@ -53,6 +56,9 @@ FMU_CFLAGS = ("-shared", "-fPIC", "-O2", "-fno-math-errno", "-ffp-contract=off",
               "-fvisibility=hidden")
 C_DIR = Path(__file__).parent / "c"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+#: per FMI version: the API source file, its headers and the binaries folder
+API = {2: ("hpfmu.c", FMI_HEADERS, PLATFORM), 3: ("hpfmu3.c", FMI3_HEADERS, PLATFORM_TUPLE)}
 CASADI_FUNCTIONS = ("rk4_human_ps", "rk4_human_pns", "xdot_human_ps", "xdot_human_pns")
 MODEL_FUNCTIONS = ("impact_ps", "impact_pns", "guard_ps", "guard_pns", "frames")
 DOMAIN_ORDER = ("ps", "pns")
@@ -209,16 +215,18 @@ def model_description(table: _Table, guid: str, *, description: str, generated: 
         + "\n"
 
 
-def build_description(flags: Sequence[str]) -> str:
+def build_description(flags: Sequence[str], fmi_version: int = 2) -> str:
+    source = API[fmi_version][0]
     root = ET.Element("fmiBuildDescription", {"fmiVersion": "3.0"})
     bc = ET.SubElement(root, "BuildConfiguration", {
         "modelIdentifier": MODEL_IDENTIFIER,
-        "description": "one translation unit (hpfmu.c includes hpfmu_casadi.inc); link "
-                       "libm; define FMI2_FUNCTION_PREFIX for a static library"})
+        "description": f"one translation unit ({source} includes hpfmu_core.inc and "
+                       f"hpfmu_casadi.inc); link libm; define FMI{fmi_version}_FUNCTION_PREFIX "
+                       "for a static library"})
     sfs = ET.SubElement(bc, "SourceFileSet", {
         "language": "C99", "compilerOptions": " ".join(f for f in flags
                                                        if f not in ("-shared", "-fPIC"))})
-    ET.SubElement(sfs, "SourceFile", {"name": "hpfmu.c"})
+    ET.SubElement(sfs, "SourceFile", {"name": source})
     ET.SubElement(bc, "Library", {"name": "m"})
     ET.indent(root, space="  ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") \
@@ -264,6 +272,7 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
         "/* frame held flat in the domain (= the frame that lands when entering it) */",
         f"static const int HPFMU_STANCE_FRAME[2] = {{{frames[0]}, {frames[1]}}};",
         f"static const int HPFMU_LANDING_ANKLE[2] = {{{ankles[0]}, {ankles[1]}}};",
+        *config_macros(),
         "/* socket_pitch = row . q: the world pitch of the prosthesis top link */",
         f"static const double HPFMU_SOCKET_PITCH_ROW[{model.nq}] = {{"
         + ", ".join(_c_double(v) for v in model.pitch_row("socket")) + "};",
@@ -334,8 +343,8 @@ def load_checked_gait(gait: str | os.PathLike[str], model: HumanProsthesisModel)
     return g
 
 
-def _compile(cc: str, src_dir: Path, out: Path) -> None:
-    cmd = [cc, *FMU_CFLAGS, "-I", str(src_dir), str(src_dir / "hpfmu.c"), "-o", str(out), "-lm"]
+def _compile(cc: str, src_dir: Path, out: Path, source: str = "hpfmu.c") -> None:
+    cmd = [cc, *FMU_CFLAGS, "-I", str(src_dir), str(src_dir / source), "-o", str(out), "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         err = [ln for ln in proc.stderr.splitlines() if "error" in ln] or \
@@ -347,12 +356,17 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
               subject: str | os.PathLike[str] | None = None,
               device: str | os.PathLike[str] | None = None, *,
               model: HumanProsthesisModel | None = None,
-              progress: Callable[[str], None] | None = None) -> BuildInfo:
+              progress: Callable[[str], None] | None = None,
+              fmi_version: int = 2) -> BuildInfo:
     """Build ``out`` (.fmu) for the gait file and the subject/device configs (defaults: the
-    shipped example files); ``model`` reuses an already built model of those configs."""
+    shipped example files); ``model`` reuses an already built model of those configs.
+    ``fmi_version``: 2 (FMI 2.0) or 3 (FMI 3.0), the same generated C and core."""
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
     out = Path(out)
+    if fmi_version not in API:
+        raise FmuBuildError(f"FMI version {fmi_version}: only 2 and 3 are built")
+    api_src, api_headers, bin_dir = API[fmi_version]
     if out.suffix != ".fmu":
         raise FmuBuildError(f"{out}: the output file must end in .fmu")
     if not out.parent.is_dir():
@@ -383,46 +397,53 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
 
     say("generating C")
     casadi_src = private_helpers(generate_c(fmu_functions(model, cl), "hpfmu_casadi"))
-    wrapper_src = (C_DIR / "hpfmu.c").read_text()
+    wrapper_src = (C_DIR / api_src).read_text()
     core_src = (C_DIR / "hpfmu_core.inc").read_text()
     table_key = json.dumps([(v.name, v.type, v.causality, v.vr, _fmt(v.start)
                              if v.start is not None else None) for v in table.vars])
-    guid = _guid(casadi_src, wrapper_src + core_src, table_key, model_hash, gait_hash)
+    guid = _guid(casadi_src, wrapper_src + core_src, table_key, model_hash, gait_hash,
+                 f"fmi{fmi_version}")
     rows = {d: cl.vcs[d].c_row for d in DOMAIN_ORDER}
     header = config_header(table, model, guid, g.degree, n_theta, rows)
     generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     annotations = {"model_hash": model_hash, "gait_hash": gait_hash,
                    "gait_file": Path(gait).name, "degree": str(g.degree),
                    "subject": model.subject.name, "device": model.device.name}
-    md = model_description(
-        table, guid, generated=generated, annotations=annotations,
-        description=("hpcosim human side: 12-DOF human-prosthesis hybrid dynamics with the "
-                     "human's feedback linearization along the gait; inputs: prosthesis motor "
-                     "torques; outputs: AMPRO3 sensors and ground truth"))
+    about = ("hpcosim human side: 12-DOF human-prosthesis hybrid dynamics with the human's "
+             "feedback linearization along the gait; inputs: prosthesis motor torques; "
+             "outputs: AMPRO3 sensors and ground truth")
+    if fmi_version == 3:
+        md = model_description_3(table, guid, model_identifier=MODEL_IDENTIFIER,
+                                 description=about, generated=generated,
+                                 annotations=annotations)
+    else:
+        md = model_description(table, guid, generated=generated, annotations=annotations,
+                               description=about)
     t_gen = time.perf_counter()
 
     say("compiling")
     with tempfile.TemporaryDirectory(prefix="hpfmu_") as tmp:
         root = Path(tmp) / "fmu"
         src = root / "sources"
-        binp = root / "binaries" / PLATFORM
+        binp = root / "binaries" / bin_dir
         res = root / "resources"
         for p in (src, binp, res):
             p.mkdir(parents=True)
         (src / "hpfmu_casadi.inc").write_text(casadi_src)
-        (src / "hpfmu.c").write_text(wrapper_src)
+        (src / api_src).write_text(wrapper_src)
         (src / "hpfmu_core.inc").write_text(core_src)
         (src / "hpfmu_config.h").write_text(header)
-        for h in FMI_HEADERS:
+        for h in api_headers:
             text = (headers / h).read_text()
             (src / h).write_text(standard_fmi2_functions_h(text) if h == "fmi2Functions.h"
                                  else text)
-        (src / "buildDescription.xml").write_text(build_description(FMU_CFLAGS))
+        (src / "buildDescription.xml").write_text(build_description(FMU_CFLAGS, fmi_version))
         (root / "modelDescription.xml").write_text(md)
-        _compile(cc, src, binp / f"{MODEL_IDENTIFIER}.so")
+        _compile(cc, src, binp / f"{MODEL_IDENTIFIER}.so", api_src)
         t_cc = time.perf_counter()
         seconds = {"model": t_model - t0, "codegen": t_gen - t_model, "compile": t_cc - t_gen}
-        info = {"model_identifier": MODEL_IDENTIFIER, "guid": guid, "model_hash": model_hash,
+        info = {"model_identifier": MODEL_IDENTIFIER, "fmi_version": f"{fmi_version}.0",
+                "guid": guid, "model_hash": model_hash,
                 "gait_hash": gait_hash, "gait_file": Path(gait).name, "degree": g.degree,
                 "generated": generated, "compiler": cc, "cflags": list(FMU_CFLAGS),
                 "casadi": ca.__version__, "hpcosim": hp_model.__version__,

@@ -23,13 +23,14 @@ PD_GAINS = {"ps": (1000.0, 30.0), "pns": (200.0, 4.0)}
 _BUILT: dict[str, Path] = {}
 
 
-def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait) -> tuple[Path, Path]:
-    """(fmu path, gait path), built once per process for this gait."""
-    key = gait.hash()
+def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait,
+              fmi_version: int = 2) -> tuple[Path, Path]:
+    """(fmu path, gait path), built once per process for this gait and FMI version."""
+    key = f"{gait.hash()}-fmi{fmi_version}"
     if key not in _BUILT:
-        d = tmp_path_factory.mktemp("fmu")
+        d = tmp_path_factory.mktemp(f"fmu{fmi_version}")
         save_gait(d / "gait.json", gait)
-        build_fmu(d / "gait.json", d / "human.fmu", model=model)
+        build_fmu(d / "gait.json", d / "human.fmu", model=model, fmi_version=fmi_version)
         _BUILT[key] = d
     d = _BUILT[key]
     return d / "human.fmu", d / "gait.json"

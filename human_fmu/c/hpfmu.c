@@ -46,15 +46,11 @@
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
-static void *xalloc(size_t n, size_t size) { return calloc(n == 0 ? 1 : n, size); }
-
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation,
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
     Inst *c;
-    casadi_int n_arg = 0, n_res = 0, n_iw = 0, n_w = 0;
-    int f;
     (void)fmuResourceLocation;
     (void)visible;
     if (functions == NULL || functions->logger == NULL) return NULL;
@@ -69,45 +65,19 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                           "GUID mismatch: the binary does not belong to this modelDescription");
         return NULL;
     }
-    c = (Inst *)xalloc(1, sizeof(Inst));
-    if (c == NULL) return NULL;
-    c->logger = functions->logger;
-    c->env = functions->componentEnvironment;
-    c->logging_on = loggingOn ? 1 : 0;
-    c->name = (char *)xalloc(strlen(instanceName ? instanceName : "") + 1, 1);
-    if (c->name) strcpy(c->name, instanceName ? instanceName : "");
-    for (f = 0; f < N_FN; f++) {
-        casadi_int a, r, iw, w;
-        FN_WORK[f](&a, &r, &iw, &w);
-        if (a > n_arg) n_arg = a;
-        if (r > n_res) n_res = r;
-        if (iw > n_iw) n_iw = iw;
-        if (w > n_w) n_w = w;
-    }
-    c->arg = (const casadi_real **)xalloc((size_t)n_arg, sizeof(casadi_real *));
-    c->res = (casadi_real **)xalloc((size_t)n_res, sizeof(casadi_real *));
-    c->iw = (casadi_int *)xalloc((size_t)n_iw, sizeof(casadi_int));
-    c->w = (casadi_real *)xalloc((size_t)n_w, sizeof(casadi_real));
-    if (!c->name || !c->arg || !c->res || !c->iw || !c->w) {
-        free(c->name); free((void *)c->arg); free(c->res); free(c->iw); free(c->w); free(c);
+    c = hp_alloc(instanceName);
+    if (c == NULL) {
         functions->logger(functions->componentEnvironment, instanceName, fmi2Error,
                           "logStatusError", "out of memory");
         return NULL;
     }
-    set_defaults(&c->s);
+    c->logger = functions->logger;
+    c->env = functions->componentEnvironment;
+    c->logging_on = loggingOn ? 1 : 0;
     return c;
 }
 
-void fmi2FreeInstance(fmi2Component comp) {
-    Inst *c = (Inst *)comp;
-    if (c == NULL) return;
-    free(c->name);
-    free((void *)c->arg);
-    free(c->res);
-    free(c->iw);
-    free(c->w);
-    free(c);
-}
+void fmi2FreeInstance(fmi2Component comp) { hp_free((Inst *)comp); }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component comp, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
@@ -145,7 +115,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component comp) {
     if (c == NULL) return fmi2Error;
     if (c->s.mode != MODE_INIT)
         return fail(c, "%s: not in initialization mode", "fmi2ExitInitializationMode");
-    if (setup(c) != fmi2OK) {
+    if (setup(c) != HP_OK) {
         c->s.mode = MODE_ERROR;
         return fmi2Error;
     }
@@ -169,17 +139,6 @@ fmi2Status fmi2Reset(fmi2Component comp) {
 }
 
 /* -- get/set ---------------------------------------------------------------------------------- */
-static int can_get(Inst *c) { return c->s.mode == MODE_INIT || c->s.mode == MODE_STEP ||
-                                     c->s.mode == MODE_TERMINATED; }
-
-static fmi2Status prepare_outputs(Inst *c) {
-    if (c->s.mode == MODE_INIT) {  /* initial unknowns: evaluate at the initial state */
-        if (setup(c) != fmi2OK) return fmi2Error;
-    }
-    update_outputs(c);
-    return fmi2OK;
-}
-
 fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                        fmi2Real value[]) {
     Inst *c = (Inst *)comp;
@@ -192,7 +151,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     }
     if (need) {
         if (!can_get(c)) return fail(c, "fmi2GetReal: %s", "outputs need initialization mode");
-        if (prepare_outputs(c) != fmi2OK) return fmi2Error;
+        if (prepare_outputs(c) != HP_OK) return fmi2Error;
     }
     for (k = 0; k < nvr; k++) value[k] = c->s.r[vr[k]];
     return fmi2OK;
@@ -211,7 +170,7 @@ fmi2Status fmi2GetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
     }
     if (need) {
         if (!can_get(c)) return fail(c, "fmi2GetInteger: %s", "outputs need initialization mode");
-        if (prepare_outputs(c) != fmi2OK) return fmi2Error;
+        if (prepare_outputs(c) != HP_OK) return fmi2Error;
     }
     for (k = 0; k < nvr; k++) value[k] = c->s.i[vr[k]];
     return fmi2OK;
@@ -230,7 +189,7 @@ fmi2Status fmi2GetBoolean(fmi2Component comp, const fmi2ValueReference vr[], siz
     }
     if (need) {
         if (!can_get(c)) return fail(c, "fmi2GetBoolean: %s", "outputs need initialization mode");
-        if (prepare_outputs(c) != fmi2OK) return fmi2Error;
+        if (prepare_outputs(c) != HP_OK) return fmi2Error;
     }
     for (k = 0; k < nvr; k++) value[k] = c->s.b[vr[k]] ? fmi2True : fmi2False;
     return fmi2OK;
@@ -248,16 +207,6 @@ fmi2Status fmi2GetString(fmi2Component comp, const fmi2ValueReference vr[], size
     return fmi2OK;
 }
 
-/* may variable kind `kind` be set in the current mode? */
-static fmi2Status check_set(Inst *c, char kind, const char *name) {
-    int before_init = c->s.mode == MODE_INSTANTIATED || c->s.mode == MODE_INIT;
-    if (kind == 'i' && (before_init || c->s.mode == MODE_STEP)) return fmi2OK;
-    if (kind == 'p' && before_init) return fmi2OK;
-    if (kind == 'p')
-        return fail(c, "parameter %s can only be set before fmi2ExitInitializationMode", name);
-    return fail(c, "variable %s cannot be set (output or constant)", name);
-}
-
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[]) {
     Inst *c = (Inst *)comp;
@@ -265,14 +214,10 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
     if (c == NULL) return fmi2Error;
     for (k = 0; k < nvr; k++) {
         if (vr[k] >= HPFMU_N_REAL) return fail(c, "fmi2SetReal: %s", "unknown value reference");
-        if (check_set(c, HPFMU_REAL_KIND[vr[k]], HPFMU_REAL_NAME[vr[k]]) != fmi2OK)
+        if (check_set(c, HPFMU_REAL_KIND[vr[k]], HPFMU_REAL_NAME[vr[k]]) != HP_OK)
             return fmi2Error;
     }
-    for (k = 0; k < nvr; k++) {
-        c->s.r[vr[k]] = value[k];
-        if (vr[k] == VR_U_KNEE) c->s.up[0] = bounded_torque(&c->s, 0, value[k]);
-        if (vr[k] == VR_U_ANKLE) c->s.up[1] = bounded_torque(&c->s, 1, value[k]);
-    }
+    for (k = 0; k < nvr; k++) set_real(c, vr[k], value[k]);
     c->s.outputs_valid = 0;
     return fmi2OK;
 }
@@ -285,7 +230,7 @@ fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
     for (k = 0; k < nvr; k++) {
         if (vr[k] >= HPFMU_N_INTEGER)
             return fail(c, "fmi2SetInteger: %s", "unknown value reference");
-        if (check_set(c, HPFMU_INTEGER_KIND[vr[k]], HPFMU_INTEGER_NAME[vr[k]]) != fmi2OK)
+        if (check_set(c, HPFMU_INTEGER_KIND[vr[k]], HPFMU_INTEGER_NAME[vr[k]]) != HP_OK)
             return fmi2Error;
     }
     for (k = 0; k < nvr; k++) c->s.i[vr[k]] = value[k];
@@ -301,7 +246,7 @@ fmi2Status fmi2SetBoolean(fmi2Component comp, const fmi2ValueReference vr[], siz
     for (k = 0; k < nvr; k++) {
         if (vr[k] >= HPFMU_N_BOOLEAN)
             return fail(c, "fmi2SetBoolean: %s", "unknown value reference");
-        if (check_set(c, HPFMU_BOOLEAN_KIND[vr[k]], HPFMU_BOOLEAN_NAME[vr[k]]) != fmi2OK)
+        if (check_set(c, HPFMU_BOOLEAN_KIND[vr[k]], HPFMU_BOOLEAN_NAME[vr[k]]) != HP_OK)
             return fmi2Error;
     }
     for (k = 0; k < nvr; k++) c->s.b[vr[k]] = value[k] ? 1 : 0;
@@ -391,15 +336,11 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component comp, const fmi2ValueRefer
 fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     Inst *c = (Inst *)comp;
-    Data *s;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (c == NULL) return fmi2Error;
-    s = &c->s;
-    if (s->mode != MODE_STEP) return fail(c, "fmi2DoStep: %s", "not in step mode");
-    if (!(communicationStepSize >= 0) || !isfinite(currentCommunicationPoint))
-        return fail(c, "fmi2DoStep: %s", "the step size must be >= 0 and the time finite");
-    if (!isfinite(s->up[0]) || !isfinite(s->up[1]))
-        return fail(c, "fmi2DoStep: %s", "the prosthesis torque inputs are not finite");
+    if (hp_check_step(c, "fmi2DoStep", currentCommunicationPoint, communicationStepSize)
+        != HP_OK)
+        return fmi2Error;
     return (fmi2Status)hp_do_step(c, currentCommunicationPoint, communicationStepSize);
 }
 
