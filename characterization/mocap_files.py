@@ -57,7 +57,7 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
     take = read_take(take_path)
     model = hp_model.load_model(subject, device)
     coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
-    processed = process_take(take, m, coef)
+    processed = process_take(take, m, coef, model.subject.lengths)
     files = render_report(outp, processed, with_figures)
     files[outp] = steps_bytes(outp, to_artifact(processed))
     for path, data in files.items():  # the steps file last

@@ -19,6 +19,16 @@ import numpy as np
 
 from characterization.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
+from characterization.mocap_checks import (
+    check_forward,
+    check_joint_angles,
+    check_joint_residuals,
+    check_units,
+    check_up,
+    feet_forward,
+    infer_up,
+    trunk_trajectory,
+)
 from characterization.mocap_mapping import JOINTS, LIMBS, MocapMapping
 from characterization.mocap_take import MocapError, Take
 from characterization.sagittal import SagittalFrame, auto_forward, axis_vector
@@ -30,6 +40,7 @@ from characterization.step_segmentation import (
 )
 from characterization.steps_artifact import StepsArtifact
 from hp_model import COORDS
+from hp_model.config import SubjectLengths, default_subject_path, load_subject
 
 #: coordinate -> (distal limb, proximal limb or None)
 ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
@@ -78,22 +89,66 @@ class ProcessedTake:
     notes: tuple[str, ...]
 
 
-def resolve_frame(take: Take, mapping: MocapMapping) -> SagittalFrame:
-    """The sagittal frame: up from the mapping (or the format's default), forward from the
-    mapping or detected from the trunk's net travel."""
-    up = axis_vector(take.up_axis if mapping.up == "auto" else mapping.up)
+def resolve_frame(take: Take, mapping: MocapMapping, notes: list[str] | None = None,
+                  hip_height: float | None = None) -> SagittalFrame:
+    """The sagittal frame, checked against the data (:mod:`characterization.mocap_checks`).
+
+    up: the mapping's axis; with ``"auto"`` the lab axis the data show (the trunk above the
+    feet), else the format's default.  forward: the mapping's axis; with ``"auto"`` the
+    trunk's net travel, else (a treadmill) the feet's heel -> toe direction.  Notes on what
+    was inferred go to ``notes``; ``hip_height`` (m, default the shipped subject's) scales
+    the checks."""
+    say = notes.append if notes is not None else (lambda _m: None)
+    if hip_height is None:
+        hip_height = _hip_height(load_subject(default_subject_path()).lengths)
+    ev = infer_up(take, mapping)
+    if mapping.up != "auto":
+        up, given = axis_vector(mapping.up), f"the mapping gives up = {_spec(mapping.up)}"
+    elif ev is not None:
+        up, given = axis_vector(ev.axis), ""
+        say(f"up axis {ev.axis} from the data (trunk {np.linalg.norm(ev.vector):.2f} m above "
+            f"the feet, {ev.angle_deg:.0f} deg off the axis)")
+    else:
+        up = axis_vector(take.up_axis)
+        given = f"the file format's default is up = {take.up_axis}"
+        say(f"up axis {take.up_axis}: the file format's default (the mapping has no trunk "
+            "and feet to check it against)")
+    check_up(take, up, given, ev, hip_height)
+    feet = feet_forward(take, mapping, up)
     if mapping.forward != "auto":
-        return SagittalFrame(forward=axis_vector(mapping.forward), up=up)
-    hat = mapping.limbs.get("hat")
-    traj = None
-    if hat is not None and hat.rigid_body and hat.rigid_body in take.rigid_bodies:
-        traj = take.rigid_bodies[hat.rigid_body].position
-    if (traj is None or not np.isfinite(traj).any()) and hat is not None and hat.markers:
-        traj = take.marker(hat.markers[0])
+        frame = SagittalFrame(forward=axis_vector(mapping.forward), up=up)
+        check_forward(take, frame.forward,
+                      f"the mapping gives forward = {_spec(mapping.forward)}", feet)
+        return frame
+    traj = trunk_trajectory(take, mapping)
     if traj is None:
-        raise MocapError(f"{take.source}: set 'forward' in the mapping (no trunk to detect "
-                         "the walking direction from)")
-    return SagittalFrame(forward=auto_forward(traj, up, take.source, "hat"), up=up)
+        if feet is None:
+            raise MocapError(f"{take.source}: set 'forward' in the mapping (no trunk or feet "
+                             "to detect the walking direction from)")
+        say("walking direction from the feet's heel -> toe direction (no trunk)")
+        return SagittalFrame(forward=feet, up=up)
+    try:
+        fwd = auto_forward(traj, up, take.source, "hat")
+    except MocapError:
+        if feet is None:
+            raise
+        say("walking direction from the feet's heel -> toe direction (the trunk does not "
+            "travel: a treadmill?)")
+        return SagittalFrame(forward=feet, up=up)
+    check_forward(take, fwd, "the trunk travels along " + _vec3(fwd), feet)
+    return SagittalFrame(forward=fwd, up=up)
+
+
+def _hip_height(lengths: SubjectLengths) -> float:
+    return lengths.thigh + lengths.shank + lengths.ankle_height
+
+
+def _spec(a: object) -> str:
+    return f'"{a}"' if isinstance(a, str) else str(list(a))  # type: ignore[call-overload]
+
+
+def _vec3(v: np.ndarray) -> str:
+    return "(" + ", ".join(f"{x:.2f}" for x in v) + ")"
 
 
 def limb_pitches(take: Take, mapping: MocapMapping, frame: SagittalFrame,
@@ -144,6 +199,14 @@ def joint_coordinates(pitches: dict[str, LimbPitch], hip_xz: np.ndarray) -> np.n
     return q
 
 
+def joint_segment_lengths(lengths: SubjectLengths) -> dict[str, float]:
+    """Joint -> the shorter of its two segments (m; the trunk for the hips, the foot's heel
+    to toe for the ankles)."""
+    th, sh, ft, tr = lengths.thigh, lengths.shank, lengths.foot, lengths.trunk
+    return {"hip_l": min(tr, th), "hip_r": min(tr, th), "knee_l": min(th, sh),
+            "knee_p": min(th, sh), "ankle_l": min(sh, ft), "ankle_p": min(sh, ft)}
+
+
 def fit_joints(take: Take, mapping: MocapMapping, frame: SagittalFrame,
                pitches: dict[str, LimbPitch]) -> dict[str, JointCentreFit]:
     """The paper's joint-centre least squares for every joint in the mapping."""
@@ -166,25 +229,35 @@ def _gap_reason(pitches: dict[str, LimbPitch], s: int, e: int, rate: float,
     return "missing hip joint centre"
 
 
-def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficients
-                 ) -> ProcessedTake:
+def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficients,
+                 lengths: SubjectLengths | None = None) -> ProcessedTake:
     """Limb pitches, joint angles, joint centres and steps of one take.
 
     ``coefficients``: {"ps": (c_k, c_a), "pns": (c_k, c_a)} from
-    ``model.hip_progress_coefficients``.  Raises :class:`MocapError` if no complete step.
+    ``model.hip_progress_coefficients``; ``lengths``: the subject's segment lengths (the
+    units and joint-centre checks; default: the shipped subject's).  Raises
+    :class:`MocapError` if no complete step or a plausibility check fails
+    (:mod:`characterization.mocap_checks`).
     """
     if mapping.segmentation is None:
         raise MocapError("mapping: section [segmentation] is required to find steps")
     if "hip_l" not in mapping.joints and "hip_r" not in mapping.joints:
         raise MocapError("mapping: joint 'hip_l' or 'hip_r' is required (hip position)")
-    frame = resolve_frame(take, mapping)
+    if lengths is None:
+        lengths = load_subject(default_subject_path()).lengths
+    checks: list[str] = []
+    frame = resolve_frame(take, mapping, checks, _hip_height(lengths))
+    check_units(take, frame, infer_up(take, mapping), _hip_height(lengths))
     pitches = limb_pitches(take, mapping, frame)
     joints = fit_joints(take, mapping, frame, pitches)
-    notes = [f.message for f in joints.values()]
+    check_joint_residuals(take.source, {j: f.residual_rms for j, f in joints.items()},
+                          joint_segment_lengths(lengths))
+    notes = [*checks, *(f.message for f in joints.values())]
     hips = np.stack([joints[j].position for j in ("hip_l", "hip_r") if j in joints])
     cnt = np.isfinite(hips).sum(axis=0)
     hip = np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
     q = joint_coordinates(pitches, hip)
+    check_joint_angles(take.source, q, COORDS)
     ck, ca = coefficients["ps"]
     delta = ck * q[:, COORDS.index("th_pk")] + ca * q[:, COORDS.index("th_pa")]
     seg = mapping.segmentation

@@ -223,9 +223,15 @@ def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
     # e x (the pair's lateral noise / its length), 1e-6 rad: 1e-5 allowed
     for limb in LIMBS:
         np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-5)
-    # walking the other way round flips every pitch's sign
-    back = _pitches(c3d, m.model_copy(update={"forward": "+x"}))
+    # walking the other way round flips every pitch's sign (the frame made directly) ...
+    from characterization.sagittal import sagittal_frame
+
+    back = limb_pitches(c3d, m, sagittal_frame("+z", "+x"))
     np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
+    # ... which is why a mapping that says so, against the feet, is refused
+    with pytest.raises(MocapError, match=r"take.c3d: walking direction: the mapping gives "
+                       r"forward = \"\+x\" but the feet point the other way"):
+        resolve_frame(c3d, m.model_copy(update={"forward": "+x"}))
 
 
 def test_a_motive_export_with_timecode_reads_the_same(synth, files, tmp_path) -> None:

@@ -1,0 +1,138 @@
+"""Plausibility checks of the mocap stage (issue 19): files that look plausible but are wrong
+(another up axis, other units, the walking direction's sign, not a walking take) are an
+error naming the check and the numbers, never steps with exit 0; the right axes are
+inferred from the data where the mapping leaves them to it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import hp_model
+from characterization.c3d_io import write_c3d
+from characterization.mocap_checks import ANATOMICAL_DEG, check_joint_angles
+from characterization.mocap_mapping import default_mapping
+from characterization.mocap_pipeline import process_take
+from characterization.mocap_take import MocapError
+from characterization.synthetic_subject import SynthOptions, synthesize
+from hp_model import COORDS
+
+
+@pytest.fixture(scope="module")
+def model():
+    return hp_model.load_model()
+
+
+@pytest.fixture(scope="module")
+def coef(model):
+    return {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+
+
+@pytest.fixture(scope="module")
+def take(model):
+    """The synthetic subject's C3D take (Z up, walking along lab -x), 6 strides."""
+    return synthesize(model, SynthOptions(n_strides=6, seed=3)).take_c3d
+
+
+@pytest.fixture(scope="module")
+def reference(take, coef):
+    return process_take(take, default_mapping(), coef)
+
+
+def _map(take, f):
+    """The take with every position p (n, 3) replaced by f(p)."""
+    return take.replace(markers={k: f(v) for k, v in take.markers.items()},
+                        rigid_body_markers={k: f(v) for k, v in take.rigid_body_markers.items()})
+
+
+def test_a_y_up_c3d_is_processed_on_the_data_up_axis(take, coef, reference):
+    """The same walk with Y up in a C3D (whose default is Z up): with ``up = "auto"`` the
+    trunk-above-the-feet axis is used and the result is the Z-up take's; told Z explicitly,
+    the check refuses it (before: trunk pitch 75-107 deg, knee -297 to -127 deg, exit 0)."""
+    R = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])  # lab z -> y
+    y_up = _map(take, lambda p: p @ R.T)
+    assert y_up.up_axis == "+z"
+    p = process_take(y_up, default_mapping(), coef)
+    assert any(n.startswith("up axis +y from the data") for n in p.notes)
+    assert len(p.steps) == len(reference.steps)
+    np.testing.assert_allclose(p.q, reference.q, atol=1e-9)
+    with pytest.raises(MocapError, match=r"up axis: the mapping gives up = \"\+z\" but the trunk "
+                       r"lies above the feet along \+y .*set up = \"\+y\""):
+        process_take(y_up, default_mapping().model_copy(update={"up": "+z"}), coef)
+
+
+def test_millimetres_labelled_metres_are_an_error(take, coef, tmp_path, capsys):
+    mm = _map(take, lambda p: 1000.0 * p)
+    with pytest.raises(MocapError, match=r"units: the trunk is [89]\d\d m above the feet, the "
+                       r"subject's hip height is 0\.87 m .*about 1000x: millimetres"):
+        process_take(mm, default_mapping(), coef)
+    # through the CLI: one line, exit 2, no file
+    from orchestrator.cli import main
+
+    src = tmp_path / "mm.c3d"
+    write_c3d(src, mm)
+    out = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(src), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "units:" in err[0] and "millimetres" in err[0]
+    assert not out.exists()
+
+
+def test_a_walking_direction_against_the_feet_is_an_error(take, coef):
+    """The walk goes along lab -x; a mapping that says +x flipped the knee's sign and swapped
+    ps and pns before."""
+    with pytest.raises(MocapError, match=r"walking direction: the mapping gives forward = "
+                       r"\"\+x\" but the feet point the other way"):
+        process_take(take, default_mapping().model_copy(update={"forward": "+x"}), coef)
+    p = process_take(take, default_mapping().model_copy(update={"forward": "-x"}), coef)
+    assert len(p.steps) > 0
+
+
+def test_a_treadmill_take_finds_the_walking_direction_from_the_feet(take, coef, reference):
+    """The trunk's net travel removed (a treadmill): forward comes from the feet's heel -> toe
+    direction, noted, and the joint angles are the walking take's."""
+    hip = take.marker("HAT:Marker1")
+    ok = np.all(np.isfinite(hip), axis=1)
+    t = take.time
+    vx = np.polyfit(t[ok], hip[ok, 0], 1)[0]  # m/s along lab x
+    belt = _map(take, lambda p: p - np.outer(vx * (t - t[0]), [1.0, 0.0, 0.0]))
+    p = process_take(belt, default_mapping(), coef)
+    assert any("heel -> toe" in n and "treadmill" in n for n in p.notes)
+    assert p.frame.forward @ np.array([-1.0, 0, 0]) > 0.99
+    for c in ("th_lk", "th_pk", "th_la", "th_pa", "th_lh", "th_rh"):
+        i = COORDS.index(c)
+        assert np.nanmax(np.abs(p.q[:, i] - reference.q[:, i])) < np.radians(1.0), c
+
+
+def test_a_flying_object_is_not_a_walking_take(take, coef):
+    """Every marker on one tumbling rigid object (the real Motive export of the issue, with
+    markers added, gave 26 "steps" with 0.6-0.9 m joint residuals and exit 0)."""
+    t = take.time
+    path = np.column_stack([0.5 * np.sin(t), 0.3 * np.cos(0.7 * t), 1.0 + 0.2 * np.sin(1.3 * t)])
+    spin = Rotation.from_rotvec(np.column_stack([2 * np.sin(0.9 * t), 1.5 * np.cos(1.1 * t),
+                                                 3 * np.sin(0.5 * t)]))
+    rng = np.random.default_rng(0)
+    mk = {k: path + spin.apply(rng.normal(size=3) * 0.3) for k in take.markers}
+    flying = take.replace(markers=mk, rigid_body_markers={})
+    m = default_mapping().model_copy(update={"forward": "+x"})
+    with pytest.raises(MocapError, match=r"up axis: the trunk is only 0\.\d\d m from the feet "
+                       r".*not a person walking"):
+        process_take(flying, m, coef)
+    # with its "trunk" markers lifted 1 m above the others it passes the up and units checks,
+    # and the joint centres say it is no body
+    lifted = take.replace(markers={k: v + (1.0 * np.eye(3)[2] if k.startswith("HAT") else 0)
+                                   for k, v in mk.items()}, rigid_body_markers={})
+    with pytest.raises(MocapError, match=r"joint 'hip_\w': least-squares residual \d\.\d+ m RMS, "
+                       r"\d+ % of its shorter segment"):
+        process_take(lifted, m, coef)
+
+
+def test_joint_angles_outside_anatomy_are_an_error():
+    q = np.zeros((100, len(COORDS)))
+    check_joint_angles("take.c3d", q, COORDS)  # standing: fine
+    q[:, COORDS.index("th_lk")] = np.radians(np.linspace(-297, -127, 100))
+    lo, hi = ANATOMICAL_DEG["th_lk"]
+    with pytest.raises(MocapError, match=rf"take.c3d: joint angles: th_lk \(left knee\) spans "
+                       rf"-29\d to -1\d\d deg, outside the plausible {lo:.0f} to {hi:.0f} deg"):
+        check_joint_angles("take.c3d", q, COORDS)
