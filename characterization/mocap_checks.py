@@ -73,6 +73,15 @@ def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
+def _maybe_marker(take: Take, name: str) -> np.ndarray | None:
+    """The marker (matched as :meth:`Take.marker` does), None if absent or empty."""
+    try:
+        p = take.marker(name)
+    except MocapError:
+        return None
+    return p if np.isfinite(p).any() else None
+
+
 def trunk_trajectory(take: Take, mapping: MocapMapping) -> np.ndarray | None:
     """The trunk's lab trajectory (n, 3): its rigid body, else its first marker."""
     hat = mapping.limbs.get("hat")
@@ -82,25 +91,14 @@ def trunk_trajectory(take: Take, mapping: MocapMapping) -> np.ndarray | None:
         p = take.rigid_bodies[hat.rigid_body].position
         if np.isfinite(p).any():
             return p
-    if hat.markers:
-        name = hat.markers[0]
-        if name in take.markers or name in take.rigid_body_markers:
-            p = take.marker(name)
-            if np.isfinite(p).any():
-                return p
-    return None
+    return _maybe_marker(take, hat.markers[0]) if hat.markers else None
 
 
 def _foot_markers(take: Take, mapping: MocapMapping) -> list[np.ndarray]:
     seg = mapping.segmentation
     names = [] if seg is None else [seg.human_foot_marker, seg.prosthesis_foot_marker]
-    out = []
-    for n in names:
-        if n in take.markers or n in take.rigid_body_markers:
-            p = take.marker(n)
-            if np.isfinite(p).any():
-                out.append(p)
-    return out
+    found = [_maybe_marker(take, n) for n in names]
+    return [p for p in found if p is not None]
 
 
 def infer_up(take: Take, mapping: MocapMapping) -> UpEvidence | None:
@@ -157,9 +155,10 @@ def feet_forward(take: Take, mapping: MocapMapping, up: np.ndarray) -> np.ndarra
         cfg = mapping.limbs.get(limb)
         if cfg is None or cfg.markers is None or cfg.pair_axis != "forward":
             continue
-        if not all(m in take.markers or m in take.rigid_body_markers for m in cfg.markers):
+        heel, toe = (_maybe_marker(take, m) for m in cfg.markers)
+        if heel is None or toe is None:
             continue
-        d = take.marker(cfg.markers[1]) - take.marker(cfg.markers[0])
+        d = toe - heel
         d = d[np.all(np.isfinite(d), axis=1)]
         if len(d):
             dirs.append(d)

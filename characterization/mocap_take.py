@@ -11,6 +11,7 @@ Arrays are read-only; a :class:`Take` is never modified, derive a new one with
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
@@ -88,19 +89,32 @@ class Take:
         return int(self.time.shape[0])
 
     def marker(self, name: str) -> np.ndarray:
-        """A marker by name: reconstructed markers first, then rigid-body markers."""
-        if name in self.markers:
-            return self.markers[name]
-        if name in self.rigid_body_markers:
-            return self.rigid_body_markers[name]
-        raise MocapError(f"{self.source}: no marker column '{name}'")
+        """A marker by name: reconstructed markers first, then rigid-body markers; a name
+        that matches one marker only when case is ignored is that marker; else a
+        :class:`MocapError` with the closest names ("did you mean")."""
+        for d in (self.markers, self.rigid_body_markers):
+            if name in d:
+                return d[name]
+        key = _lookup(name, [*self.markers, *self.rigid_body_markers], self.source, "marker")
+        return self.markers[key] if key in self.markers else self.rigid_body_markers[key]
 
     def rigid_body(self, name: str) -> RigidBodyTrack:
-        try:
+        """A rigid body by name (case-insensitive when unambiguous, as :meth:`marker`)."""
+        if name in self.rigid_bodies:
             return self.rigid_bodies[name]
-        except KeyError:
-            raise MocapError(f"{self.source}: no rigid body column '{name}'") from None
+        return self.rigid_bodies[_lookup(name, list(self.rigid_bodies), self.source,
+                                         "rigid body")]
 
     def replace(self, **changes: object) -> Take:
         """A copy with some fields replaced (e.g. markers with a gap cut in)."""
         return replace(self, **changes)
+
+
+def _lookup(name: str, names: list[str], source: str, what: str) -> str:
+    """The one name equal to ``name`` ignoring case, else a MocapError naming the closest."""
+    same = [n for n in names if n.casefold() == name.casefold()]
+    if len(same) == 1:
+        return same[0]
+    close = same or difflib.get_close_matches(name, names, n=3, cutoff=0.6)
+    hint = f" (did you mean {', '.join(repr(c) for c in close)}?)" if close else ""
+    raise MocapError(f"{source}: no {what} column '{name}'{hint}")

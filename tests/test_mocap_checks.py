@@ -136,3 +136,12 @@ def test_joint_angles_outside_anatomy_are_an_error():
     with pytest.raises(MocapError, match=rf"take.c3d: joint angles: th_lk \(left knee\) spans "
                        rf"-29\d to -1\d\d deg, outside the plausible {lo:.0f} to {hi:.0f} deg"):
         check_joint_angles("take.c3d", q, COORDS)
+
+
+def test_marker_names_match_ignoring_case_and_suggest_the_closest(take):
+    np.testing.assert_array_equal(take.marker("hat:marker1"), take.marker("HAT:Marker1"))
+    with pytest.raises(MocapError, match=r"synthetic.c3d: no marker column 'HAT:Marker9' "
+                       r"\(did you mean 'HAT:Marker\d', "):
+        take.marker("HAT:Marker9")
+    with pytest.raises(MocapError, match=r"no marker column 'Pelvis'$"):
+        take.marker("Pelvis")
