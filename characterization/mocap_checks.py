@@ -231,3 +231,25 @@ def check_joint_angles(source: str, q: np.ndarray, coords: Sequence[str]) -> Non
                              f"{a:.0f} to {b:.0f} deg, outside the plausible {lo:.0f} to "
                              f"{hi:.0f} deg: check the up and forward axes and the marker "
                              "mapping")
+
+
+def check_names(take: Take, mapping: MocapMapping) -> None:
+    """Every column the mapping names exists in the take (matched as :meth:`Take.marker`
+    does): else one error naming the mapping entry and the closest names."""
+    entries: list[tuple[str, str, bool]] = []  # (entry, name, is a rigid body)
+    for limb, cfg in mapping.limbs.items():
+        if cfg.rigid_body is not None and take.rigid_bodies:
+            entries.append((f"limbs.{limb}.rigid_body", cfg.rigid_body, True))
+        for m in cfg.markers or ():
+            entries.append((f"limbs.{limb}.markers", m, False))
+    for j, jm in mapping.joints.items():
+        entries += [(f"joints.{j}.markers", m, False) for m in jm.markers]
+    seg = mapping.segmentation
+    if seg is not None:
+        entries += [("segmentation.human_foot_marker", seg.human_foot_marker, False),
+                    ("segmentation.prosthesis_foot_marker", seg.prosthesis_foot_marker, False)]
+    for entry, name, rb in entries:
+        try:
+            take.rigid_body(name) if rb else take.marker(name)
+        except MocapError as e:
+            raise MocapError(f"{e} (mapping entry {entry})") from None

@@ -23,6 +23,7 @@ from characterization.mocap_checks import (
     check_forward,
     check_joint_angles,
     check_joint_residuals,
+    check_names,
     check_units,
     check_up,
     feet_forward,
@@ -243,6 +244,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
         raise MocapError("mapping: section [segmentation] is required to find steps")
     if "hip_l" not in mapping.joints and "hip_r" not in mapping.joints:
         raise MocapError("mapping: joint 'hip_l' or 'hip_r' is required (hip position)")
+    check_names(take, mapping)
     if lengths is None:
         lengths = load_subject(default_subject_path()).lengths
     checks: list[str] = []

@@ -53,6 +53,45 @@ def process(
     console.print(f"wrote {r.steps_path} and " + ", ".join(x.name for x in r.report_paths))
 
 
+@mocap_app.command("inspect")
+def inspect(
+    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv) or C3D (.c3d) take.",
+                                         dir_okay=False)],
+    mapping_out: Annotated[Path | None, typer.Option(
+        "--mapping-out", help="Write a mapping skeleton (TOML) to edit for this take's "
+        "names.", dir_okay=False)] = None,
+) -> None:
+    """What a take holds (markers, rigid bodies, rate, length, gaps, an axes guess), and
+    optionally a mapping to start from."""
+    from characterization.mocap_files import read_take
+    from characterization.mocap_inspect import mapping_skeleton, summarize
+    from hp_model.atomic_io import atomic_write_bytes
+    from orchestrator.cli_options import check_output_file
+
+    if mapping_out is not None:
+        check_output_file(mapping_out, "--mapping-out")
+    t = read_take(take)
+    s = summarize(t)
+    console = Console()
+    console.print(f"[bold]{take}[/]: {s.n_frames} frames at {s.frame_rate:g} Hz "
+                  f"({s.duration:.2f} s); the format's up axis {s.format_up}")
+    if s.up_axis:
+        console.print(f"axes guess: up {s.up_axis} (the markers span {s.up_span:.2f} m along "
+                      f"it per frame; sign from the format), walking "
+                      + (f"{s.walk_axis} ({s.walk_travel:.2f} m of travel)" if s.walk_axis
+                         else "unknown"))
+    tab = Table(title="columns")
+    for c in ("kind", "name", "valid %", "longest gap (frames)"):
+        tab.add_column(c)
+    for c in s.columns:
+        tab.add_row(c.kind, c.name, f"{100 * c.valid:.1f}", str(c.longest_gap))
+    console.print(tab)
+    if mapping_out is not None:
+        atomic_write_bytes(mapping_out, mapping_skeleton(t).encode())
+        console.print(f"wrote {mapping_out}: edit every entry, then hpcosim mocap process "
+                      f"{take} --mapping {mapping_out} --out steps.npz")
+
+
 @mocap_app.command("synth")
 def synth(
     out: Annotated[Path, typer.Option("--out", help="Output folder.", file_okay=False)],

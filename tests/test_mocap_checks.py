@@ -145,3 +145,40 @@ def test_marker_names_match_ignoring_case_and_suggest_the_closest(take):
         take.marker("HAT:Marker9")
     with pytest.raises(MocapError, match=r"no marker column 'Pelvis'$"):
         take.marker("Pelvis")
+
+
+def test_inspect_prints_the_take_and_writes_a_mapping_that_processes(model, tmp_path, capsys):
+    """``hpcosim mocap inspect``: the columns, rate and axes guess; the skeleton it writes
+    guesses every limb, joint and foot of the synthetic naming and processes the take."""
+    from characterization.mocap_inspect import TODO, summarize
+    from characterization.synthetic_subject import write_synthetic
+    from orchestrator.cli import main
+
+    opts = SynthOptions(n_strides=4, seed=5)
+    paths = write_synthetic(tmp_path / "take", synthesize(model, opts), opts)
+    c3d = paths["c3d"]
+    skeleton = tmp_path / "mapping.toml"
+    assert main(["mocap", "inspect", str(c3d), "--mapping-out", str(skeleton)]) == 0
+    out = capsys.readouterr().out
+    assert "120 Hz" in out and "up +z" in out and "walking -x" in out and "HAT:Marker1" in out
+    text = skeleton.read_text()
+    assert TODO not in text.split("schema_version")[1]  # every entry guessed from the names
+    steps = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(c3d), "--mapping", str(skeleton), "--out",
+                 str(steps)]) == 0
+    assert steps.exists()
+    from characterization.c3d_io import read_c3d
+
+    s = summarize(read_c3d(c3d))
+    assert s.n_frames > 0 and all(0.9 < c.valid <= 1.0 for c in s.columns)
+    # unreadable names: TODO where the names tell nothing, and the mapping says which
+    bad = tmp_path / "renamed.c3d"
+    t = read_c3d(c3d)
+    write_c3d(bad, t.replace(markers={f"M{i}": v for i, v in enumerate(t.markers.values())}))
+    assert main(["mocap", "inspect", str(bad), "--mapping-out", str(skeleton)]) == 0
+    assert f'markers = ["{TODO}", "{TODO}"]' in skeleton.read_text()
+    capsys.readouterr()
+    assert main(["mocap", "process", str(bad), "--mapping", str(skeleton), "--out",
+                 str(tmp_path / "s2.npz")]) == 2
+    err = capsys.readouterr().err
+    assert f"no marker column '{TODO}' (mapping entry limbs.hat.markers)" in err
