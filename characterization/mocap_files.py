@@ -8,7 +8,12 @@ from pathlib import Path
 
 from characterization.c3d_io import read_c3d
 from characterization.mocap_mapping import MocapMapping, default_mapping, load_mapping
-from characterization.mocap_pipeline import ProcessedTake, process_take, to_artifact
+from characterization.mocap_pipeline import (
+    ProcessedTake,
+    process_take,
+    static_offsets,
+    to_artifact,
+)
 from characterization.mocap_report import render_report
 from characterization.mocap_take import MocapError, Take
 from characterization.motive_csv import read_motive_csv
@@ -57,7 +62,11 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
     take = read_take(take_path)
     model = hp_model.load_model(subject, device)
     coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
-    processed = process_take(take, m, coef, model.subject.lengths)
+    offsets = None
+    if m.calibration is not None:
+        offsets = static_offsets(read_take(m.calibration.static_trial), m,
+                                 model.subject.lengths)
+    processed = process_take(take, m, coef, model.subject.lengths, offsets)
     files = render_report(outp, processed, with_figures)
     files[outp] = steps_bytes(outp, to_artifact(processed))
     for path, data in files.items():  # the steps file last

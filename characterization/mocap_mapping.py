@@ -28,6 +28,10 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     [processing]
     max_gap = 0.1          # s: longest gap with neither pitch source that is interpolated
     lowpass_hz = 15.0      # zero-phase Butterworth on limb pitches; 0 = off
+    [calibration]
+    static_trial = "static.c3d"  # standing in the neutral posture: per-limb pitch offsets
+
+A limb may also state an offset: ``offset_deg = 5.0`` (its measured pitch at zero pitch).
 """
 
 from __future__ import annotations
@@ -73,6 +77,9 @@ class LimbSource(_Strict):
     markers: tuple[str, str] | None = None
     pair_axis: Axis = "up"
     rigid_body_axis: Axis = "up"
+    #: deg: the limb's measured pitch when it is at zero pitch (subtracted; on top of a
+    #: static trial's offset)
+    offset_deg: float = 0.0
 
     @model_validator(mode="after")
     def _one_source(self) -> LimbSource:
@@ -100,6 +107,14 @@ class Processing(_Strict):
     min_joint_rotation_deg: Annotated[float, Field(gt=0)] = 5.0
 
 
+class Calibration(_Strict):
+    """Anatomical calibration: a static trial of the subject standing in the neutral
+    posture (every joint angle and the trunk pitch zero); each limb's median pitch in it is
+    that limb's offset.  The path is relative to the mapping file."""
+
+    static_trial: str
+
+
 class MocapMapping(_Strict):
     """The whole mapping config."""
 
@@ -110,6 +125,7 @@ class MocapMapping(_Strict):
     joints: dict[str, JointMarkers] = Field(default_factory=dict)
     segmentation: Segmentation | None = None
     processing: Processing = Processing()
+    calibration: Calibration | None = None
 
     @field_validator("limbs")
     @classmethod
@@ -140,11 +156,15 @@ def load_mapping(path: str | Path) -> MocapMapping:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise MocapError(f"{p}: not valid TOML ({e})") from None
     try:
-        return MocapMapping.model_validate(raw)
+        m = MocapMapping.model_validate(raw)
     except ValidationError as e:
         err = e.errors()[0]
         loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
         raise MocapError(f"{p}: field '{loc}': {err['msg']}") from None
+    if m.calibration is not None:  # relative to the mapping file
+        trial = p.parent / m.calibration.static_trial
+        m = m.model_copy(update={"calibration": Calibration(static_trial=str(trial))})
+    return m
 
 
 def synthetic_names() -> dict[str, str]:

@@ -13,6 +13,7 @@ joint angle is the distal limb's pitch minus the proximal limb's pitch,
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -140,6 +141,12 @@ def resolve_frame(take: Take, mapping: MocapMapping, notes: list[str] | None = N
     return SagittalFrame(forward=fwd, up=up)
 
 
+def _shifted(lp: LimbPitch, offset: float) -> LimbPitch:
+    th = lp.theta - offset
+    th.setflags(write=False)
+    return LimbPitch(lp.limb, th, lp.source, lp.pair_offset, lp.gaps)
+
+
 def _hip_height(lengths: SubjectLengths) -> float:
     return lengths.thigh + lengths.shank + lengths.ankle_height
 
@@ -230,13 +237,34 @@ def _gap_reason(pitches: dict[str, LimbPitch], s: int, e: int, rate: float,
     return "missing hip joint centre"
 
 
+def static_offsets(static: Take, mapping: MocapMapping,
+                   lengths: SubjectLengths | None = None) -> dict[str, float]:
+    """Each limb's median pitch (rad) in a static trial of the neutral posture (the
+    mapping's calibration): its offset.  The trial is checked as a walking take's axes are
+    (the trunk above the feet; forward from the feet when the trunk does not travel)."""
+    if lengths is None:
+        lengths = load_subject(default_subject_path()).lengths
+    check_names(static, mapping)
+    frame = resolve_frame(static, mapping, None, _hip_height(lengths))
+    out = {}
+    for limb, lp in limb_pitches(static, mapping, frame).items():
+        th = lp.theta[np.isfinite(lp.theta)]
+        if th.size == 0:
+            raise MocapError(f"{static.source}: static trial: limb '{limb}' has no pitch")
+        out[limb] = float(np.median(th))
+    return out
+
+
 def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficients,
-                 lengths: SubjectLengths | None = None) -> ProcessedTake:
+                 lengths: SubjectLengths | None = None,
+                 offsets: Mapping[str, float] | None = None) -> ProcessedTake:
     """Limb pitches, joint angles, joint centres and steps of one take.
 
     ``coefficients``: {"ps": (c_k, c_a), "pns": (c_k, c_a)} from
     ``model.hip_progress_coefficients``; ``lengths``: the subject's segment lengths (the
-    units and joint-centre checks; default: the shipped subject's).  Raises
+    units and joint-centre checks; default: the shipped subject's); ``offsets``: per-limb
+    pitch offsets (rad, :func:`static_offsets`), subtracted with the mapping's
+    ``offset_deg``.  Raises
     :class:`MocapError` if no complete step or a plausibility check fails
     (:mod:`characterization.mocap_checks`).
     """
@@ -251,6 +279,12 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     frame = resolve_frame(take, mapping, checks, _hip_height(lengths))
     check_units(take, frame, infer_up(take, mapping), _hip_height(lengths))
     pitches = limb_pitches(take, mapping, frame)
+    calib = {k: (offsets or {}).get(k, 0.0) + np.radians(mapping.limbs[k].offset_deg)
+             for k in pitches}
+    if any(calib.values()):
+        pitches = {k: _shifted(lp, calib[k]) for k, lp in pitches.items()}
+        checks.append("calibration (pitch offsets subtracted, deg): " + ", ".join(
+            f"{k} {np.degrees(v):+.2f}" for k, v in calib.items()))
     joints = fit_joints(take, mapping, frame, pitches)
     check_joint_residuals(take.source, {j: f.residual_rms for j, f in joints.items()},
                           joint_segment_lengths(lengths))

@@ -231,25 +231,15 @@ def _model_motion(model: HumanProsthesisModel, opts: SynthOptions,
     return t, q, ev, float(np.mean(np.diff(p_land)))
 
 
-def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
-               ) -> SyntheticTake:
-    """Generate the synthetic take and its truth.
-
-    Truth keys (positions in the sagittal projection of the lab frame): source, time, q (n, 12),
-    limb_pitch (n, 7), joint_position (n, 6, 2), joint_lambda (6, 2, 2), delta_ps (n,),
-    step_domain/step_start/step_end (truth steps from the extrema of the noise-free
-    delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
-    support), p_land/p_lift/h_lift/h_land (contact event times, s).
-    """
-    if opts.source not in SOURCES:
-        raise MocapError(f"synthetic subject: source must be one of {SOURCES}, got "
-                         f"{opts.source!r}")
-    rng = np.random.default_rng(opts.seed)
+def _markers(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, opts: SynthOptions,
+             rng: np.random.Generator) -> tuple[Take, Take, dict[str, np.ndarray],
+                                                np.ndarray, dict[str, np.ndarray]]:
+    """The markers and rigid bodies of the motion q (n, 12) at times t, with noise and
+    dropouts: (Motive take, C3D take, limb poses (x, z, pitch), joint positions, exact
+    markers in the model frame)."""
     fs = model.numeric()
     fr = fs["frames"]
     names = model.frame_names
-    motion = _template_motion if opts.source == "template" else _model_motion
-    t, q, ev, stride_time = motion(model, opts, rng)
     n = t.size
     poses = np.empty((n, 3, len(names)))
     zero = np.zeros(model.nq)
@@ -264,7 +254,6 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
         if coords:
             p[:, 2] = q[:, [ci[c] for c in coords]].sum(1)
         limb_pose[limb] = p
-    limb_pitch = np.column_stack([limb_pose[k][:, 2] for k in LIMBS])
     joint_pos = np.stack([poses[:, :2, fi[JOINT_FRAMES[j]]] for j in JOINTS], axis=1)
 
     # markers in the model frame (x, y, z), exact
@@ -316,6 +305,46 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
                 rigid_bodies=bodies, rigid_body_markers=rb_markers, up_axis="+y")
     take_c3d = Take(source="synthetic.c3d", frame_rate=opts.rate, time=t - t[0],
                     markers={k: v @ C3D_FROM_CSV.T for k, v in markers.items()}, up_axis="+z")
+
+    return take, take_c3d, limb_pose, joint_pos, exact
+
+
+def static_trial(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions(),
+                 seconds: float = 2.0) -> SyntheticTake:
+    """The synthetic subject standing still in the neutral posture (every joint angle and
+    the trunk pitch zero, both soles on the ground) for ``seconds``: a static calibration
+    trial with the same markers, noise and dropouts as :func:`synthesize`.  Truth: time, q
+    and limb_pitch (zero)."""
+    rng = np.random.default_rng(opts.seed)
+    z0 = model.numeric()["frames"](np.zeros(model.nq), np.zeros(model.nq))[0]
+    sole = z0[1, model.frame_names.index("l_sole")]
+    t = np.arange(round(seconds * opts.rate) + 1) / opts.rate
+    q = np.zeros((t.size, model.nq))
+    q[:, model.coord_names.index("z_B")] = -sole
+    take, take_c3d, limb_pose, _, _ = _markers(model, t, q, opts, rng)
+    pitch = np.column_stack([limb_pose[k][:, 2] for k in LIMBS])
+    return SyntheticTake(take, take_c3d, {"time": t, "q": q, "limb_pitch": pitch})
+
+
+def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
+               ) -> SyntheticTake:
+    """Generate the synthetic take and its truth.
+
+    Truth keys (positions in the sagittal projection of the lab frame): source, time, q (n, 12),
+    limb_pitch (n, 7), joint_position (n, 6, 2), joint_lambda (6, 2, 2), delta_ps (n,),
+    step_domain/step_start/step_end (truth steps from the extrema of the noise-free
+    delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
+    support), p_land/p_lift/h_lift/h_land (contact event times, s).
+    """
+    if opts.source not in SOURCES:
+        raise MocapError(f"synthetic subject: source must be one of {SOURCES}, got "
+                         f"{opts.source!r}")
+    rng = np.random.default_rng(opts.seed)
+    motion = _template_motion if opts.source == "template" else _model_motion
+    t, q, ev, stride_time = motion(model, opts, rng)
+    take, take_c3d, limb_pose, joint_pos, exact = _markers(model, t, q, opts, rng)
+    limb_pitch = np.column_stack([limb_pose[k][:, 2] for k in LIMBS])
+    ci = {c: k for k, c in enumerate(model.coord_names)}
 
     # truth
     ck, ca = model.hip_progress_coefficients("ps")
