@@ -95,8 +95,12 @@ class JointMarkers(_Strict):
 
 
 class Segmentation(_Strict):
+    """``method``: "paper" (the turning points of delta_p_hip, the paper's rule) or
+    "contact" (each foot's touchdowns from its markers, :mod:`foot_contact`)."""
+
     human_foot_marker: str
     prosthesis_foot_marker: str
+    method: Literal["paper", "contact"] = "paper"
     foot_speed_threshold: Annotated[float, Field(gt=0)] = 0.25  # m/s: foot "moving"
     min_excursion: Annotated[float, Field(gt=0)] = 0.05  # m: delta_p_hip turning hysteresis
 

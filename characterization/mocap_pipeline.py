@@ -13,11 +13,13 @@ joint angle is the distal limb's pitch minus the proximal limb's pitch,
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from characterization.foot_contact import FootContact, foot_contact
 from characterization.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap_checks import (
@@ -89,6 +91,42 @@ class ProcessedTake:
     steps: tuple[Step, ...]
     dropped: tuple[DroppedStep, ...]
     notes: tuple[str, ...]
+    #: "human" / "prosthesis" foot: its stance from the markers (:mod:`foot_contact`)
+    contacts: dict[str, FootContact] = field(default_factory=dict)
+    segmentation: str = "paper"
+
+
+def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
+                  ) -> dict[str, FootContact]:
+    """Each foot's contact from its heel -> toe pair (limbs ``l_foot``, ``p_foot`` with
+    ``pair_axis = "forward"``), else from the segmentation's foot marker alone."""
+    seg = mapping.segmentation
+    out = {}
+    for foot, limb, single in (("human", "l_foot", seg.human_foot_marker if seg else None),
+                               ("prosthesis", "p_foot",
+                                seg.prosthesis_foot_marker if seg else None)):
+        cfg = mapping.limbs.get(limb)
+        if cfg is not None and cfg.markers is not None and cfg.pair_axis == "forward":
+            heel, toe = (frame.project(take.marker(m)) for m in cfg.markers)
+        elif single is not None:
+            heel = toe = frame.project(take.marker(single))
+        else:
+            continue
+        out[foot] = foot_contact(heel, toe, take.time)
+    return out
+
+
+def contact_steps(contacts: dict[str, FootContact], n: int) -> list[StepBounds]:
+    """Steps from the feet's touchdowns: ps from a prosthesis touchdown to the frame before
+    the next human touchdown, pns from a human touchdown to the frame before the next
+    prosthesis touchdown."""
+    ev = sorted([(f, "ps") for f in contacts["prosthesis"].touchdowns]
+                + [(f, "pns") for f in contacts["human"].touchdowns])
+    out = []
+    for (a, d), (b, d2) in itertools.pairwise(ev):
+        if d != d2 and b - 1 > a:
+            out.append(StepBounds(d, a, min(b - 1, n - 1)))
+    return out
 
 
 def resolve_frame(take: Take, mapping: MocapMapping, notes: list[str] | None = None,
@@ -297,7 +335,13 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     ck, ca = coefficients["ps"]
     delta = ck * q[:, COORDS.index("th_pk")] + ca * q[:, COORDS.index("th_pa")]
     seg = mapping.segmentation
-    bounds = segment_steps(delta, seg.min_excursion)
+    contacts = foot_contacts(take, mapping, frame)
+    if seg.method == "contact":
+        if set(contacts) != {"human", "prosthesis"}:
+            raise MocapError(f"{take.source}: segmentation 'contact' needs both feet")
+        bounds = contact_steps(contacts, len(q))
+    else:
+        bounds = segment_steps(delta, seg.min_excursion)
     rate = take.frame_rate
     foot_x = {"ps": frame.project(take.marker(seg.human_foot_marker))[:, 0],
               "pns": frame.project(take.marker(seg.prosthesis_foot_marker))[:, 0]}
@@ -313,13 +357,16 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
                 pitches, b.start, b.end, rate, mapping.processing.max_gap)))
     if not steps:
         why = (f"{len(dropped)} found but dropped: {dropped[0].reason}" if dropped else
-               "delta_p_hip(th_pk, th_pa) has fewer than two turning points")
+               "delta_p_hip(th_pk, th_pa) has fewer than two turning points"
+               if seg.method == "paper" else "no touchdown of one foot between two of the "
+               "other's")
         raise MocapError(f"{take.source}: no complete step ({why})")
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
                      f"{bounds[-1].end} are not complete steps")
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
-                         dict(coefficients), tuple(steps), tuple(dropped), tuple(notes))
+                         dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
+                         contacts, seg.method)
 
 
 def _make_step(b: StepBounds, q: np.ndarray, coefficients: HipCoefficients,

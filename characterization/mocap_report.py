@@ -49,6 +49,12 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
                     for d in p.dropped],
         "limbs": limbs, "joints": joints, "notes": list(p.notes),
+        "segmentation": p.segmentation,
+        "step_intervals": [{"domain": st.domain, "start": st.start, "end": st.end,
+                            "t_start_s": float(p.time[st.start]),
+                            "t_end_s": float(p.time[st.end])} for st in p.steps],
+        "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
+                         "ground_speed_m_s": c.ground_speed} for f, c in p.contacts.items()},
     }
 
 
@@ -80,6 +86,14 @@ def qa_markdown(summary: dict) -> str:
     for j, v in s["joints"].items():
         lines.append(f"| {j} | {v['residual_mm']:.2f} | {v['rotation_sd_deg']:.1f} | "
                      f"{v['frames']} | {'yes' if v['well_posed'] else 'NO'} |")
+    lines += ["", f"## Steps (segmentation: {s['segmentation']})", "",
+              "| step | domain | frames | time (s) |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['domain']} | {v['start']}-{v['end']} | {v['t_start_s']:.3f}-"
+              f"{v['t_end_s']:.3f} |" for k, v in enumerate(s["step_intervals"])]
+    if s["contacts"]:
+        lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
+        lines += [f"- {f}: touchdowns {c['touchdowns']}, lift-offs {c['liftoffs']} (ground "
+                  f"{c['ground_speed_m_s']:+.2f} m/s)" for f, c in s["contacts"].items()]
     lines += ["", "## Notes", ""] + [f"- {n}" for n in s["notes"]]
     return "\n".join(lines) + "\n"
 

@@ -68,3 +68,25 @@ def test_hip_and_ankle_follow_the_reference_convention(gatk) -> None:
     ankle = lp["foot"] - lp["shank"]
     err = np.degrees(ankle - np.pi / 2 - ref[:, 2])
     assert np.sqrt(np.mean(err**2)) < 1.5
+
+
+def test_foot_contact_against_the_force_plate(gatk) -> None:
+    """Stance of the right foot from its heel and 5th-metatarsal markers (treadmill: the
+    ground moves at the belt's speed) against the force plate's vertical force above 20 N:
+    every touchdown within 2 frames (20 ms); lift-offs early by at most 9 frames, as the
+    metatarsal head rises while the toes still push (measured 8; a toe-tip marker would see
+    the lift-off), never late."""
+    from characterization.foot_contact import foot_contact
+
+    t, mk, _ = gatk
+    raw = np.genfromtxt(DATA / "rawdata.txt", skip_header=1)
+    on = raw[:, 14] > 20.0  # FP2 vertical force, N
+    d = np.diff(on.astype(int))
+    td_fp, lo_fp = np.flatnonzero(d == 1) + 1, np.flatnonzero(d == -1) + 1
+    assert list(td_fp) == [21, 141, 260] and list(lo_fp) == [99, 218]
+    c = foot_contact(mk["RHEE"], mk["RMT5"], t)
+    assert c.ground_speed == pytest.approx(-0.98, abs=0.05)  # the belt
+    assert len(c.touchdowns) == 3 and len(c.liftoffs) == 2
+    assert np.max(np.abs(np.array(c.touchdowns) - td_fp)) <= 2
+    early = lo_fp - np.array(c.liftoffs)
+    assert np.all((early >= 0) & (early <= 9)), early
