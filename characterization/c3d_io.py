@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from characterization.mocap_take import MocapError, Take
+from characterization.mocap_take import LabEvent, MocapError, Take
 from hp_model.atomic_io import atomic_write_with
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -80,7 +80,31 @@ def take_from_c3d(c: Any, src: str) -> Take:
     first = int(c["header"]["points"]["first_frame"])
     time = (first + np.arange(n)) / rate
     return Take(source=src, frame_rate=rate, time=time, markers=markers, up_axis="+z",
-                metadata={"format": "c3d"})
+                metadata={"format": "c3d"}, events=lab_events(c["parameters"], src))
+
+
+def lab_events(params: Mapping[str, Any], src: str) -> tuple[LabEvent, ...]:
+    """The EVENT group's events (LABELS, CONTEXTS, TIMES = [minutes; seconds]), the first
+    USED of them; none without the group."""
+    ev = params.get("EVENT") if hasattr(params, "get") else None
+    if not ev or "TIMES" not in ev or "LABELS" not in ev:
+        return ()
+    times = np.asarray(ev["TIMES"]["value"], dtype=float)
+    if times.ndim == 1:
+        times = times.reshape(2, -1) if times.size % 2 == 0 else np.zeros((2, 0))
+    labels = [str(x).strip() for x in ev["LABELS"]["value"]]
+    contexts = ([str(x).strip() for x in ev["CONTEXTS"]["value"]] if "CONTEXTS" in ev
+                else [""] * len(labels))
+    n = min(len(labels), times.shape[1] if times.ndim == 2 else 0, len(contexts))
+    if "USED" in ev:
+        n = min(n, int(np.ravel(ev["USED"]["value"])[0]))
+    out = []
+    for k in range(n):
+        t = 60.0 * times[0, k] + times[1, k]
+        if not np.isfinite(t):
+            raise MocapError(f"{src}: parameter EVENT:TIMES: event {k + 1} has no time")
+        out.append(LabEvent(labels[k], contexts[k], float(t)))
+    return tuple(sorted(out, key=lambda e: e.time))
 
 
 def write_c3d(path: str | os.PathLike[str], take: Take, *, units: str = "mm") -> None:
@@ -98,4 +122,10 @@ def write_c3d(path: str | os.PathLike[str], take: Take, *, units: str = "mm") ->
         pts[:3, i, :] = xyz.T
         pts[:, i, ~np.all(np.isfinite(xyz), axis=1)] = np.nan
     c["data"]["points"] = pts
+    if take.events:
+        c.add_parameter("EVENT", "USED", [len(take.events)])
+        c.add_parameter("EVENT", "LABELS", [e.label for e in take.events])
+        c.add_parameter("EVENT", "CONTEXTS", [e.context for e in take.events])
+        c.add_parameter("EVENT", "TIMES", np.array([[0.0] * len(take.events),
+                                                    [e.time for e in take.events]]))
     atomic_write_with(path, lambda tmp: c.write(tmp), suffix=".c3d")

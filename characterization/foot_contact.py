@@ -17,11 +17,13 @@ head rises while the toes still push (a marker on the toe tip would see the lift
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from characterization.limb_angles import lowpass
+from characterization.mocap_take import LabEvent
 
 
 @dataclass(frozen=True)
@@ -82,3 +84,45 @@ def foot_contact(heel: np.ndarray, toe: np.ndarray, time: np.ndarray, *, tol: fl
     d = np.diff(on.astype(np.int8))
     return FootContact(on, tuple(int(k) + 1 for k in np.flatnonzero(d == 1)),
                        tuple(int(k) + 1 for k in np.flatnonzero(d == -1)), ground)
+
+
+#: C3D event labels (lower case) of a touchdown and of a lift-off
+TOUCHDOWN_LABELS = ("foot strike", "heel strike", "foot contact", "initial contact")
+LIFTOFF_LABELS = ("foot off", "toe off")
+
+
+def compare_events(contacts: dict[str, FootContact], events: Sequence[LabEvent],
+                   time: np.ndarray, sides: dict[str, str]) -> dict[str, dict[str, object]]:
+    """The found touchdowns and lift-offs against the lab's events in the file.
+
+    ``events``: the file's (label, context, time);
+    ``sides``: foot ("human", "prosthesis") -> the lab's context ("Left", "Right").  Per foot
+    and kind ("touchdown", "liftoff"): the number of lab events inside the take, and for
+    each the signed difference in frames of the nearest found event (found - lab; None if
+    that foot has none)."""
+    out: dict[str, dict[str, object]] = {}
+    rate = 1.0 / float(np.median(np.diff(time)))
+    for foot, side in sides.items():
+        c = contacts.get(foot)
+        for kind, labels in (("touchdown", TOUCHDOWN_LABELS), ("liftoff", LIFTOFF_LABELS)):
+            lab = [e.time for e in events
+                   if e.label.lower() in labels and e.context.lower() == side.lower()
+                   and time[0] <= e.time <= time[-1]]
+            if not lab:
+                continue
+            found = np.array((c.touchdowns if kind == "touchdown" else c.liftoffs)
+                             if c is not None else (), dtype=int)
+            diffs: list[float | None] = []
+            for t in lab:
+                if found.size == 0:
+                    diffs.append(None)
+                    continue
+                f_lab = (t - time[0]) * rate
+                d = found - f_lab
+                diffs.append(float(d[np.argmin(np.abs(d))]))
+            ok = [abs(d) for d in diffs if d is not None]
+            out.setdefault(foot, {})[kind] = {
+                "lab_events": len(lab), "diff_frames": diffs,
+                "max_abs_frames": max(ok) if ok else None,
+                "median_abs_frames": float(np.median(ok)) if ok else None}
+    return out

@@ -101,6 +101,9 @@ class Segmentation(_Strict):
     human_foot_marker: str
     prosthesis_foot_marker: str
     method: Literal["paper", "contact"] = "paper"
+    #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
+    human_side: str = "Left"
+    prosthesis_side: str = "Right"
     foot_speed_threshold: Annotated[float, Field(gt=0)] = 0.25  # m/s: foot "moving"
     min_excursion: Annotated[float, Field(gt=0)] = 0.05  # m: delta_p_hip turning hysteresis
 

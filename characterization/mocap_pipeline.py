@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from characterization.foot_contact import FootContact, foot_contact
+from characterization.foot_contact import FootContact, compare_events, foot_contact
 from characterization.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap_checks import (
@@ -94,6 +94,8 @@ class ProcessedTake:
     #: "human" / "prosthesis" foot: its stance from the markers (:mod:`foot_contact`)
     contacts: dict[str, FootContact] = field(default_factory=dict)
     segmentation: str = "paper"
+    #: the found events against the lab's in the file (:func:`foot_contact.compare_events`)
+    lab_events: dict[str, dict[str, object]] = field(default_factory=dict)
 
 
 def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
@@ -364,9 +366,16 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
                      f"{bounds[-1].end} are not complete steps")
+    lab = compare_events(contacts, take.events, take.time,
+                         {"human": seg.human_side, "prosthesis": seg.prosthesis_side})
+    for foot, kinds in lab.items():
+        for kind, v in kinds.items():
+            notes.append(f"lab events, {foot} foot {kind}s: {v['lab_events']} in the file, "
+                         f"found within {v['max_abs_frames']} frames (median "
+                         f"{v['median_abs_frames']})")
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
                          dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
-                         contacts, seg.method)
+                         contacts, seg.method, lab)
 
 
 def _make_step(b: StepBounds, q: np.ndarray, coefficients: HipCoefficients,

@@ -55,6 +55,7 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
                             "t_end_s": float(p.time[st.end])} for st in p.steps],
         "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
                          "ground_speed_m_s": c.ground_speed} for f, c in p.contacts.items()},
+        "lab_events": p.lab_events,
     }
 
 
@@ -94,6 +95,13 @@ def qa_markdown(summary: dict) -> str:
         lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
         lines += [f"- {f}: touchdowns {c['touchdowns']}, lift-offs {c['liftoffs']} (ground "
                   f"{c['ground_speed_m_s']:+.2f} m/s)" for f, c in s["contacts"].items()]
+    if s["lab_events"]:
+        lines += ["", "## Found events against the lab's (frames, found - lab)", "",
+                  "| foot | event | in the file | max abs | median abs |", "|---|---|---|---|---|"]
+        for foot, kinds in s["lab_events"].items():
+            for kind, v in kinds.items():
+                lines.append(f"| {foot} | {kind} | {v['lab_events']} | {v['max_abs_frames']} "
+                             f"| {v['median_abs_frames']} |")
     lines += ["", "## Notes", ""] + [f"- {n}" for n in s["notes"]]
     return "\n".join(lines) + "\n"
 

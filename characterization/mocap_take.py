@@ -52,6 +52,16 @@ class RigidBodyTrack:
 
 
 @dataclass(frozen=True)
+class LabEvent:
+    """A gait event the lab put in the file (C3D EVENT): label (e.g. "Foot Strike",
+    "Foot Off"), context (e.g. "Left", "Right"), time (s, on the take's time axis)."""
+
+    label: str
+    context: str
+    time: float
+
+
+@dataclass(frozen=True)
 class Take:
     """A take: frame times, markers and rigid bodies.
 
@@ -68,6 +78,7 @@ class Take:
     rigid_body_markers: Mapping[str, np.ndarray] = field(default_factory=dict)
     up_axis: str = "+y"
     metadata: Mapping[str, str] = field(default_factory=dict)
+    events: tuple[LabEvent, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "time", _frozen(self.time))

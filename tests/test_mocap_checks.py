@@ -234,3 +234,40 @@ def test_a_static_trial_calibrates_a_misplaced_skin_marker(model, coef, tmp_path
     qa = json.loads((tmp_path / "steps.qa.json").read_text())
     assert any("calibration" in n and "l_shank" in n for n in qa["notes"])
     capsys.readouterr()
+
+
+def test_lab_events_in_a_c3d_are_read_and_the_found_ones_compared(model, coef, tmp_path):
+    """A C3D with the lab's gait events (EVENT:LABELS "Foot Strike"/"Foot Off", CONTEXTS
+    "Left" = the human foot, "Right" = the prosthesis, TIMES [min; s]): read back exactly,
+    and the QA data say how far the found touchdowns and lift-offs are from them (the
+    synthetic truth's contact events: within 6 frames, as the contact test finds)."""
+    import json
+
+    from characterization.c3d_io import read_c3d
+    from characterization.mocap_take import LabEvent
+    from orchestrator.cli import main
+
+    s = synthesize(model, SynthOptions(n_strides=4, seed=7))
+    tr = s.truth
+    ev = [LabEvent("Foot Strike", "Left", float(t)) for t in tr["h_land"]]
+    ev += [LabEvent("Foot Off", "Left", float(t)) for t in tr["h_lift"]]
+    ev += [LabEvent("Foot Strike", "Right", float(t)) for t in tr["p_land"]]
+    ev += [LabEvent("Foot Off", "Right", float(t)) for t in tr["p_lift"]]
+    ev.sort(key=lambda e: e.time)
+    path = tmp_path / "events.c3d"
+    write_c3d(path, s.take_c3d.replace(events=tuple(ev)))
+    back = read_c3d(path)
+    assert [(e.label, e.context) for e in back.events] == [(e.label, e.context) for e in ev]
+    np.testing.assert_allclose([e.time for e in back.events], [e.time for e in ev], atol=1e-6)
+    p = process_take(back, default_mapping(), coef)
+    inside = {k: sum(back.time[0] <= t <= back.time[-1] for t in tr[k])
+              for k in ("h_land", "h_lift", "p_land", "p_lift")}
+    for foot, land, lift in (("human", "h_land", "h_lift"), ("prosthesis", "p_land", "p_lift")):
+        td, lo = p.lab_events[foot]["touchdown"], p.lab_events[foot]["liftoff"]
+        assert td["lab_events"] == inside[land] and lo["lab_events"] == inside[lift]
+        assert td["max_abs_frames"] <= 6 and lo["max_abs_frames"] <= 6
+    steps = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(path), "--out", str(steps), "--no-figures"]) == 0
+    qa = json.loads((tmp_path / "steps.qa.json").read_text())
+    assert set(qa["lab_events"]) == {"human", "prosthesis"}
+    assert "Found events against the lab's" in (tmp_path / "steps.qa.md").read_text()
