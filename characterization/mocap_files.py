@@ -18,19 +18,20 @@ from characterization.mocap_report import render_report
 from characterization.mocap_take import MocapError, Take
 from characterization.motive_csv import read_motive_csv
 from characterization.steps_artifact import StepsFileError, steps_bytes
+from characterization.trc_io import read_trc
 from hp_model.atomic_io import atomic_write_bytes
 
-READERS = {".csv": read_motive_csv, ".c3d": read_c3d}
+READERS = {".csv": read_motive_csv, ".c3d": read_c3d, ".trc": read_trc}
 
 
 def read_take(path: str | os.PathLike[str]) -> Take:
-    """Read a Motive CSV (.csv) or C3D (.c3d) take."""
+    """Read a Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take."""
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such file")
     reader = READERS.get(p.suffix.lower())
     if reader is None:
-        raise MocapError(f"{p}: unknown take format '{p.suffix}' (expected .csv or .c3d)")
+        raise MocapError(f"{p}: unknown take format '{p.suffix}' (expected .csv, .c3d or .trc)")
     return reader(p)
 
 

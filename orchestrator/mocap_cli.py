@@ -17,7 +17,7 @@ mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectori
 
 @mocap_app.command("process")
 def process(
-    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv) or C3D (.c3d) take.",
+    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take.",
                                          dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Steps file to write (.npz or .json); "
                                       "the QA report and figures go next to it.",
@@ -55,7 +55,7 @@ def process(
 
 @mocap_app.command("inspect")
 def inspect(
-    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv) or C3D (.c3d) take.",
+    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take.",
                                          dir_okay=False)],
     mapping_out: Annotated[Path | None, typer.Option(
         "--mapping-out", help="Write a mapping skeleton (TOML) to edit for this take's "

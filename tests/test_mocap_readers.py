@@ -313,3 +313,38 @@ def test_a_jump_in_the_frame_times_is_refused(files, tmp_path) -> None:
     with pytest.raises(MocapError, match=r"rows \d+-\d+: the time jumps by 35\.0\d* s"):
         read_motive_csv(shifted(100, 35.0))
     assert read_motive_csv(shifted(100, 2 / 120)).time[101] == pytest.approx(101 / 120 + 2 / 120)
+
+
+def test_trc_round_trip_and_processing(synth, tmp_path) -> None:
+    """OpenSim's TRC (tab separated, mm, Y up): the synthetic take written and read back
+    (to the 1e-6 mm the writer prints), lost samples kept lost; processed end to end through
+    the CLI; bad files are one-line errors naming the line."""
+    from characterization.trc_io import read_trc, write_trc
+    from orchestrator.cli import main
+
+    take = synth.take.replace(rigid_bodies={}, rigid_body_markers={})
+    p = tmp_path / "walk.trc"
+    write_trc(p, take)
+    back = read_trc(p)
+    assert back.frame_rate == take.frame_rate and back.up_axis == "+y"
+    assert list(back.markers) == list(take.markers)
+    for k, v in take.markers.items():
+        np.testing.assert_array_equal(np.isnan(back.markers[k]), np.isnan(v))
+        np.testing.assert_allclose(back.markers[k], v, atol=1e-9, equal_nan=True)
+    out = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(p), "--out", str(out), "--no-figures"]) == 0
+    text = p.read_text().splitlines()
+    cases = {
+        "header": (["PathFileTypo", *text[1:]], r"line 1: not a TRC file"),
+        "units": ([*text[:2], text[2].replace("\tmm\t", "\tinch\t"), *text[3:]],
+                  r"line 3: unknown Units 'inch'"),
+        "number": ([*text[:8], text[8].replace(text[8].split("\t")[3], "x1.2", 1), *text[9:]],
+                   r"line 9: not a number 'x1.2'"),
+        "jump": ([*text[:8], text[8].replace(text[8].split("\t")[1], "99.0", 1), *text[9:]],
+                 r"data rows \d+-\d+: the time"),
+    }
+    for name, (lines, msg) in cases.items():
+        bad = tmp_path / f"{name}.trc"
+        bad.write_text("\n".join(lines) + "\n")
+        with pytest.raises(MocapError, match=msg):
+            read_trc(bad)
