@@ -19,7 +19,7 @@ from __future__ import annotations
 import io
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -376,6 +376,32 @@ def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
 
 # ---------------------------------------------------------------- all
 
+#: seconds of each run the animations show (the nominal run, each robustness case)
+ANIMATION_SECONDS = {"nominal": 6.0, "case": 4.0}
+
+
+def write_animations(model: HumanProsthesisModel, out: str, nominal: ScenarioResult,
+                     cases: Mapping[str, Mapping[str, ScenarioResult]]) -> dict[str, str]:
+    """GIFs of the walker (:mod:`orchestrator.animation`): the nominal `clfqp` run and
+    `clfqp` in each robustness case, the first seconds of each; name -> file in ``out``."""
+    from orchestrator.animation import walker_gif
+
+    runs = [("nominal", "walker_nominal.gif", nominal, "clfqp, nominal human",
+             ANIMATION_SECONDS["nominal"])]
+    for k, (case, rs) in enumerate(cases.items(), start=1):
+        if "clfqp" in rs:
+            runs.append((case, f"walker_case{k}.gif", rs["clfqp"], f"clfqp, {case}",
+                         ANIMATION_SECONDS["case"]))
+    files = {}
+    for name, fname, r, title, secs in runs:
+        if r.q is None or r.t.size == 0:
+            continue
+        atomic_write_bytes(os.path.join(out, fname), walker_gif(
+            model, r.t, r.q, r.domain, r.tau, r.socket_force, title=title, max_seconds=secs))
+        files[name] = fname
+    return files
+
+
 def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                     out: str | os.PathLike[str], steps: int = 20, *, eigen: bool = True,
                     progress: Progress | None = None) -> dict[str, Any]:
@@ -402,6 +428,8 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     say("robustness")
     m3, r3 = robustness(model, gait, tube, ctx, steps, progress=say, closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig8_robustness.png"), fig8(r3))
+    say("animating the walker")
+    animations = write_animations(model, out, r1, r3)
     say("diagnosis: input authority, reduced model vs full loop")
     auth = input_authority(model, gait, ctx)
     w = tube.box(0.5)[1]
@@ -422,6 +450,7 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         "diagnosis": {"input_authority": auth},
         "figures": {"fig6": "fig6_torques.png", "fig7": "fig7_phase_portraits.png",
                     "fig8": "fig8_robustness.png"},
+        "animations": animations,
     }
     metrics["claims"] = claims(metrics)
     atomic_write_bytes(os.path.join(out, "metrics.json"),

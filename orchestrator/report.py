@@ -89,6 +89,9 @@ def render(metrics: Mapping[str, Any], stages: Sequence[Mapping[str, Any]] = (),
     lines += ["", "## Figures", ""]
     for k, f in m["figures"].items():
         lines.append(f"![{k}]({f})")
+    if m.get("animations"):
+        lines += ["", "## The walker (human blue, prosthesis orange, socket force red)", ""]
+        lines += [f"![walker, {k}]({f})" for k, f in m["animations"].items()]
     lines += ["", "## Deviations from the paper", ""]
     lines += [f"- {d}" for d in (*DEVIATIONS, *extra_deviations)]
     lines.append("")

@@ -112,6 +112,7 @@ class ScenarioResult:
     socket_force: np.ndarray | None = None  # (n, 3) F_s (ground truth, never fed back)
     fs_in_tube: float | None = None  # fraction of ps samples in [tau_lo, tau_hi] with F_s in tube
     touchdown_pitch: list[float] = field(default_factory=list)  # rad, landing-foot correction
+    q: np.ndarray | None = None  # (n, 12) the full configuration (animation)
 
     @property
     def success(self) -> bool:
@@ -369,7 +370,7 @@ def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: 
         fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
         socket_force=r.lam[:, 3:6].copy(),
         fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
-        touchdown_pitch=[float(im.foot_pitch) for im in r.impacts])
+        touchdown_pitch=[float(im.foot_pitch) for im in r.impacts], q=r.q)
 
 
 def socket_force_in_tube(tube: ForceTube, tau: np.ndarray, force: np.ndarray

@@ -188,3 +188,11 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     report = (out / "report.md").read_text()
     for c in m["claims"]:
         assert c["claim"] in report
+    # the walker animated: the nominal run and clfqp in each case, linked from the report
+    from PIL import Image
+
+    assert set(m["animations"]) == {"nominal", *rb["cases"]}
+    for f in m["animations"].values():
+        assert f"({f})" in report
+        with Image.open(out / f) as im:
+            assert im.format == "GIF" and im.n_frames >= 4 * 25

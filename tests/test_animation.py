@@ -1,0 +1,39 @@
+"""The walker animation (``orchestrator.animation.walker_gif``): one frame per 1/fps s of the
+run, the figure following the hip, the stick figure where the model's frames are."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from orchestrator.animation import walker_gif
+from orchestrator.scenarios import NOMINAL, Scenario, run_scenario
+from tests.controller_support import tube_about_nominal
+
+
+def test_walker_gif_of_a_short_run(model, template_gait):
+    tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
+    r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 2))
+    assert r.q is not None and r.q.shape == (r.t.size, model.nq)
+    data = walker_gif(model, r.t, r.q, r.domain, r.tau, r.socket_force, fps=20.0,
+                      title="test")
+    with Image.open(io.BytesIO(data)) as im:
+        n = im.n_frames
+        size = im.size
+        im.seek(0)
+        first = np.asarray(im.convert("RGB"))
+        im.seek(n - 1)
+        last = np.asarray(im.convert("RGB"))
+    assert n == int(np.floor((r.t[-1] - r.t[0]) * 20.0 + 1e-9)) + 1
+    assert size == (384, 256)
+    # the figure is drawn (human blue, prosthesis orange pixels) and changes over the run
+    for img in (first, last):
+        assert np.any((img[..., 2] > 150) & (img[..., 0] < 80))  # blue
+        assert np.any((img[..., 0] > 200) & (img[..., 1] > 90) & (img[..., 2] < 60))  # orange
+    assert np.abs(first.astype(int) - last.astype(int)).sum() > 0
+    with pytest.raises(ValueError, match="empty run"):
+        walker_gif(model, r.t[:0], r.q[:0], r.domain[:0], r.tau[:0])
+
