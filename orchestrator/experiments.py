@@ -470,7 +470,10 @@ def claims(m: dict[str, Any]) -> list[dict[str, Any]]:
           + f"; knee RMS in ps {_f(run['knee_rms_ps_rad'])} rad; "
           + stability_text(n["stability"])
           + f"; fallback ticks {run['fallback_count']}"
-          + f"; F_s inside the tube {_pct(run['socket_force_in_tube'])} of the ps samples"}
+          + f"; F_s inside the tube {_pct(run['socket_force_in_tube'])} of the ps samples",
+          "headline": f"{run['steps_completed']}/{run['steps_requested']} steps, knee RMS "
+          f"{_f(run['knee_rms_ps_rad'])} rad, contraction "
+          f"{_f(n['stability'].get('contraction_worst'))}/cycle"}
     ratio = e["chatter_ratio_exact_over_relaxed"]
     c2 = {"id": "relaxed_smooth", "claim": "relaxed CLF-QP chatter >= 5x lower than exact, "
           "with its tracking settling onto the periodic orbit",
@@ -481,7 +484,8 @@ def claims(m: dict[str, Any]) -> list[dict[str, Any]]:
                       f"{_f(e['clfqp']['chatter_rate_Nm_per_s'])} N m/s (ratio {_f(ratio)}); "
                       f"exact run: {_ended(e['clfqp-exact']['run'])}; relaxed run: "
                       f"{_ended(e['clfqp']['run'])}; relaxed knee RMS per step (rad) "
-                      + ", ".join(f"{x:.4f}" for x in e["clfqp"]["knee_rms_per_step_rad"]))}
+                      + ", ".join(f"{x:.4f}" for x in e["clfqp"]["knee_rms_per_step_rad"])),
+          "headline": f"chatter exact / relaxed {_f(ratio)}x"}
     rows = []
     for case, cc in r["cases"].items():
         rows.append(f"{case}: " + ", ".join(
@@ -492,11 +496,15 @@ def claims(m: dict[str, Any]) -> list[dict[str, Any]]:
           "baseline's (passive, pd) in every case where that baseline completes",
           "reproduced": bool(all(r["clfqp_below_each_completed_baseline"])),
           "numbers": "; ".join(rows) + f"; the paper's passive < pd found in {sum(both)} of "
-          f"{len(both)} cases where both complete"}
+          f"{len(both)} cases where both complete",
+          "headline": f"below in {sum(r['clfqp_below_each_completed_baseline'])} of "
+          f"{len(r['clfqp_below_each_completed_baseline'])} cases"}
     c4 = {"id": "robust_success", "claim": "clfqp succeeds in every perturbed case",
           "reproduced": bool(r["clfqp_succeeds_every_case"]),
           "numbers": "; ".join(f"{case}: {_ended(cc['clfqp'])}"
-                               for case, cc in r["cases"].items())}
+                               for case, cc in r["cases"].items()),
+          "headline": f"{sum(cc['clfqp']['success'] for cc in r['cases'].values())} of "
+          f"{len(r['cases'])} cases"}
     out = [c1, c2, c3, c4]
     p = m.get("paper_literal")
     if p is not None:
@@ -515,7 +523,10 @@ def claims(m: dict[str, Any]) -> list[dict[str, Any]]:
                     "reproduced": bool(pr["success"] and all(
                         cc[PAPER_CONTROLLER]["success"] for cc in r["cases"].values()
                         if PAPER_CONTROLLER in cc)),
-                    "numbers": f"nominal: {_ended(pr)}; {paper_cases}{why}"})
+                    "numbers": f"nominal: {_ended(pr)}; {paper_cases}{why}",
+                    "headline": f"nominal: {_ended(pr)}" + (
+                        f"; authority {_f(min(ratios))}-{_f(max(ratios))}x the loop's"
+                        if ratios else "")})
     return out
 
 

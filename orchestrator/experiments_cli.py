@@ -8,18 +8,19 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 STAGES = ("synthetic subject", "mocap processing", "gait fit", "tube fit", "experiments",
           "report")
 
 
 def _claims_table(console: Console, metrics: dict[str, Any]) -> None:
-    t = Table("claim", "result", "numbers", title="paper Sec. V claims")
+    """One line per claim: reproduced or not, the claim's id and its key number (the full
+    numbers are in report.md)."""
+    console.print("[bold]paper Sec. V claims[/] (numbers in report.md):")
     for c in metrics["claims"]:
-        t.add_row(c["claim"], "[green]reproduced[/]" if c["reproduced"]
-                  else "[red]NOT reproduced[/]", c["numbers"])
-    console.print(t)
+        mark = "[green]reproduced    [/]" if c["reproduced"] else "[red]NOT reproduced[/]"
+        console.print(f"  {mark} {c['id']:15s} {c.get('headline', '')}", overflow="ellipsis",
+                      no_wrap=True)
 
 
 def experiments(
