@@ -46,3 +46,32 @@ def test_missing_file_is_a_one_line_error(tmp_path):
     r = run("model", "check", "--device", str(tmp_path / "nope.toml"))
     assert r.returncode == 2
     assert len(r.stderr.strip().splitlines()) == 1 and "nope.toml" in r.stderr
+
+
+def _verbs(group, prefix=()):
+    """Every command path of a typer group (nested groups included)."""
+    for name, cmd in group.commands.items():
+        path = (*prefix, name)
+        if getattr(cmd, "commands", None):
+            yield from _verbs(cmd, path)
+        else:
+            yield path
+
+
+def test_every_verb_answers_help_and_is_in_the_readme(capsys):
+    """Each command of ``hpcosim`` (walked from the app itself, not a hand list) prints its
+    help with exit 0, and the README's command line section names it."""
+    from pathlib import Path
+
+    import typer.main
+
+    from orchestrator.cli import app, main
+
+    verbs = sorted(_verbs(typer.main.get_group(app)))
+    assert len(verbs) >= 17, verbs
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    for v in verbs:
+        assert main([*v, "--help"]) == 0, v
+        out = capsys.readouterr().out
+        assert "Usage" in out, v
+        assert f"hpcosim {' '.join(v)}" in readme, f"README does not name 'hpcosim {' '.join(v)}'"
