@@ -296,7 +296,7 @@ def cpu_plan(cfg: CosimConfig) -> tuple[int | None, int | None]:
     small shared machine, letting the scheduler place them makes each wake-up (the reply
     arriving, the next cycle's frames) land on a CPU busy with the other process or other
     jobs. Each process on its own CPU, with its zenoh threads, keeps those hand-offs local
-    (measured: README, co-simulation). Realtime mode idles between ticks and is better
+    (measured: docs/cosim.md). Realtime mode idles between ticks and is better
     served by any free CPU: pinned, a pinned process stuck behind another job missed 50
     periods in a row in 2 of 6 runs at the 2 ms cycle, unpinned in none.
     """

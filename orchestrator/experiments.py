@@ -1,4 +1,4 @@
-"""The paper's Sec. V experiments on the closed loop (README, "Closed-loop experiments"):
+"""The paper's Sec. V experiments on the closed loop (docs/experiments.md):
 
 1. nominal walking (robust CLF-QP, relaxed, in ps + the shared swing controller in pns):
    phase portraits of the prosthesis knee and ankle (Fig. 7) and convergence to a periodic

@@ -2,7 +2,7 @@
 play frames onto a CAN bus, refit the force tube from recorded ground truth.
 
 A recording carries what it needs: the gait and tube as attachments, the run config,
-versions and hashes as metadata (README, "Co-simulation").
+versions and hashes as metadata (docs/cosim.md).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ DEVIATIONS = (
     "The socket-force tube comes from playback of the recorded steps (paper Sec. IV-B) with "
     "each step's Bezier fit taken over its single support +/- 0.1 in tau (the paper fits the "
     "whole step; on a model-generated subject that made M_y 8-11 % wrong, "
-    "README, section Socket-force playback); playback holds each step's hip velocity "
+    "docs/force-tube.md); playback holds each step's hip velocity "
     "constant.",
     "AMPRO3 masses, lengths and inertias are estimates (hp_model/configs/device_ampro3.toml); "
     "the estimated top-link inertia is tiny (0.0017 kg m^2 about the knee), which makes the "
@@ -111,7 +111,7 @@ def _fmt_list(v: Sequence[float]) -> str:
 
 
 def _diagnosis(m: Mapping[str, Any]) -> list[str]:
-    """The reference run and the input-authority comparison (README, closed loop)."""
+    """The reference run and the input-authority comparison (docs/experiments.md)."""
     out = ["## Diagnosis", ""]
     ref = m.get("reference")
     n = m["nominal"]

@@ -112,7 +112,7 @@ def test_perturbation_changes_the_human_only(template_gait):
 
 @pytest.mark.slow
 def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
-    """``hpcosim demo`` (the whole pipeline, 20 steps per run) and the numbers the README
+    """``hpcosim demo`` (the whole pipeline, 20 steps per run) and the numbers the docs
     states for it (section "Results on the demo subject").  Every stage is deterministic
     (single-threaded IPOPT, fixed seeds), so the tolerances only absorb the last digits of
     another libm or BLAS kernel: a change of the closed-loop results fails here."""
@@ -128,14 +128,14 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     claims = {c["id"]: c for c in m["claims"]}
     assert set(claims) == {"nominal_stable", "relaxed_smooth", "robust_order",
                            "robust_success", "paper_literal"}
-    # README: clfqp walks 20 nominal steps, knee RMS 0.0013 rad, no fallback, every torque
+    # docs: clfqp walks 20 nominal steps, knee RMS 0.0013 rad, no fallback, every torque
     # within the limits; its orbit contracts (worst factor 0.81 per cycle)
     n = m["nominal"]
     assert n["run"]["success"] and n["run"]["fallback_count"] == 0
     assert n["run"]["knee_rms_ps_rad"] == pytest.approx(0.00131, rel=0.1)
     assert n["stability"]["contracting"] and n["stability"]["contraction_worst"] < 0.9
     assert claims["nominal_stable"]["reproduced"]
-    # README: exact and relaxed both walk the 5 steps; the exact law's torque varies 14.9x as
+    # docs: exact and relaxed both walk the 5 steps; the exact law's torque varies 14.9x as
     # fast (its worst-case margin term flips the torque, as in the paper); the relaxed run's
     # knee RMS per step settles (0.0001, 0.0013, 0.0014 rad) while the exact law's grows
     e = m["exact_vs_relaxed"]
@@ -143,7 +143,7 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     a, b = e["clfqp-exact"]["chatter_rate_Nm_per_s"], e["clfqp"]["chatter_rate_Nm_per_s"]
     assert math.isclose(e["chatter_ratio_exact_over_relaxed"], a / b, rel_tol=1e-9)
     # the exact law's sign flips are sensitive to the last digits (a chattering law): the
-    # claim's threshold, and the README's figure to 20 %
+    # claim's threshold, and docs/experiments.md's figure to 20 %
     assert e["chatter_ratio_exact_over_relaxed"] >= 5
     assert e["chatter_ratio_exact_over_relaxed"] == pytest.approx(14.9, rel=0.2)
     kr = e["clfqp"]["knee_rms_per_step_rad"]
@@ -151,7 +151,7 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     assert e["relaxed_tracking_converging"] and claims["relaxed_smooth"]["reproduced"]
     kx = e["clfqp-exact"]["knee_rms_per_step_rad"]
     assert kx[-1] > kr[-1]
-    # README: the cases are the first three seeds the oracle walks (20 steps, knee offset):
+    # docs: the cases are the first three seeds the oracle walks (20 steps, knee offset):
     # 0, 2, 7.  clfqp completes all three (knee RMS 0.0027, 0.0053, 0.0036 rad) below each
     # baseline wherever that baseline completes; pd falls at the first tick from the knee
     # offset in human-1, -2; passive falls in human-2
@@ -172,7 +172,7 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     assert rb["passive_lt_pd_where_both_complete"] == [None, None, True]
     assert rb["clfqp_succeeds_every_case"] and claims["robust_success"]["reproduced"]
     assert claims["robust_order"]["reproduced"]
-    # README: the paper's literal formulation falls in the nominal run; its model's
+    # docs: the paper's literal formulation falls in the nominal run; its model's
     # authority is 447-1820x the loop's
     p = m["paper_literal"]["run"]
     assert p["failed"] and p["steps_completed"] < 20
