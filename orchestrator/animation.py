@@ -105,4 +105,31 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
     return data
 
 
-__all__ = ["FORCE_SCALE", "walker_gif"]
+
+
+def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float = 25.0,
+                  max_seconds: float | None = None) -> bytes:
+    """GIF of a co-simulation recording's walk, from its ``/ground_truth`` channel (q, domain,
+    tau, socket force every tick).  A recording without it is a
+    :class:`~orchestrator.recording.RecordingError`."""
+    from bus_schemas.mcap_schemas import read_messages
+    from orchestrator.recording import RecordingError, read_recording
+
+    rec = read_recording(path, messages=False)
+    rows = [o for _, _, o in read_messages(path, ["/ground_truth"])]
+    if len(rows) < 2:
+        raise RecordingError(f"{path}: {len(rows)} /ground_truth messages: nothing to animate")
+    t = np.array([o["t"] for o in rows], float)
+    q = np.array([o["q"] for o in rows], float)
+    if q.shape[1] != model.nq:
+        raise RecordingError(f"{path}: /ground_truth q has {q.shape[1]} coordinates, the "
+                             f"model {model.nq}")
+    dom = np.array([0 if o["domain"] == "ps" else 1 for o in rows])
+    tau = np.array([o["tau"] for o in rows], float)
+    fs = np.array([[o["socket_force"][k] for k in ("Fx", "Fz", "My")] for o in rows], float)
+    ctrl = rec.config.get("controller", "")
+    return walker_gif(model, t, q, dom, tau, fs, fps=fps, max_seconds=max_seconds,
+                      title=f"{Path(path).name}" + (f" ({ctrl})" if ctrl else ""))
+
+
+__all__ = ["FORCE_SCALE", "recording_gif", "walker_gif"]

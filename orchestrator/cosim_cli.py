@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from orchestrator.cli_options import check_output_folder
+from orchestrator.cli_options import DeviceOpt, SubjectOpt, check_output_folder
 from orchestrator.tube_cli import tube_app  # `tube refit` joins `tube fit`
 
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
@@ -211,9 +211,37 @@ def recover_cmd(
     Console().print(f"recovered {rep['messages']} messages, {ended}: {rep['out']}")
 
 
+def animate_cmd(
+    recording: Annotated[Path, typer.Argument(help="MCAP recording (hpcosim run --record).",
+                                              dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="GIF to write.", dir_okay=False)],
+    seconds: Annotated[float | None, typer.Option(
+        "--seconds", min=0.04, help="Animate the first SECONDS of the run (default: all).")
+    ] = None,
+    fps: Annotated[float, typer.Option("--fps", min=1.0, max=100.0,
+                                       help="Frames per second.")] = 25.0,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+) -> None:
+    """The walker of a recorded run, animated (stick figure from the model's frames: human
+    blue, prosthesis orange, socket force red) as a GIF."""
+    import hp_model
+    from hp_model.atomic_io import atomic_write_bytes
+    from orchestrator.animation import recording_gif
+    from orchestrator.cli_options import check_output_file
+
+    check_output_file(out)
+    model = hp_model.load_model(str(subject) if subject else None,
+                                str(device) if device else None)
+    data = recording_gif(recording, model, fps=fps, max_seconds=seconds)
+    atomic_write_bytes(out, data)
+    Console().print(f"wrote {out} ({len(data) / 1024:.0f} KiB)")
+
+
 def register(app: typer.Typer) -> None:
     """Add the co-simulation verbs to the ``hpcosim`` app."""
     app.add_typer(controller_app, name="controller")
     app.add_typer(recording_app, name="recording")
     app.command("run")(run)
     app.command("replay")(replay_cmd)
+    app.command("animate")(animate_cmd)

@@ -37,3 +37,33 @@ def test_walker_gif_of_a_short_run(model, template_gait):
     with pytest.raises(ValueError, match="empty run"):
         walker_gif(model, r.t[:0], r.q[:0], r.domain[:0], r.tau[:0])
 
+
+
+def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
+    """``hpcosim animate RUN.mcap``: the walker of a recording's /ground_truth channel (here
+    written by the recorder from an in-process run, as the co-simulation writes it)."""
+    from bus_schemas.mcap_schemas import Recorder
+    from orchestrator.cli import main
+    from orchestrator.cosim import ground_truth_record
+
+    tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
+    r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 2))
+    path = tmp_path / "run.mcap"
+    with Recorder(path) as rec:
+        rec.register_all()
+        for k in range(r.t.size):
+            rec.write("/ground_truth", ground_truth_record(
+                float(r.t[k]), r.socket_force[k].tolist(), [*r.q[k], *np.zeros(12)],
+                int(r.domain[k]), float(r.tau[k]), 0, (0.0, 0.0)), int(r.t[k] * 1e9))
+    out = tmp_path / "walker.gif"
+    assert main(["animate", str(path), "--out", str(out), "--seconds", "0.5", "--fps",
+                 "20"]) == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 11
+    empty = tmp_path / "empty.mcap"
+    with Recorder(empty) as rec:
+        rec.register_all()
+    capsys.readouterr()
+    assert main(["animate", str(empty), "--out", str(tmp_path / "e.gif")]) == 2
+    assert "0 /ground_truth messages" in capsys.readouterr().err
+    assert not (tmp_path / "e.gif").exists()
