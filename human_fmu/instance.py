@@ -45,6 +45,12 @@ class FmuInstance:
 
         self.path = Path(path)
         self.md = read_model_description(str(path))
+        if self.md.fmiVersion != "2.0":
+            from human_fmu.build import FmuBuildError
+
+            raise FmuBuildError(f"{path}: an FMI {self.md.fmiVersion} FMU; the co-simulation "
+                                "and the sweeps drive FMI 2.0 FMUs (hpcosim fmu build "
+                                "without --fmi 3; the two are bit-identical)")
         self.unzipdir = Path(extract(str(path),
                                      unzipdir=None if unzipdir is None else str(unzipdir)))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
