@@ -36,7 +36,7 @@ import threading
 import time
 import uuid
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import can
@@ -256,6 +256,42 @@ class _Receiver:
         self._thread.join(timeout=1.0)
 
 
+class PeerWatch:
+    """The other node's liveliness token, watched (:meth:`ZenohBus.watch_peer`): with a
+    callback it is called with True (alive) / False (gone) from zenoh's thread (it must
+    not block); without one :meth:`poll` returns the changes seen since the last call."""
+
+    def __init__(self, session: zenoh.Session, key: str,
+                 callback: Callable[[bool], None] | None) -> None:
+        if callback is not None:
+            cb = callback
+
+            def on_sample(sample: zenoh.Sample) -> None:
+                cb(sample.kind == zenoh.SampleKind.PUT)
+
+            self._sub = session.liveliness().declare_subscriber(key, on_sample, history=True)
+            self._polled = False
+        else:
+            self._sub = session.liveliness().declare_subscriber(
+                key, zenoh.handlers.FifoChannel(64), history=True)
+            self._polled = True
+
+    def poll(self) -> list[bool]:
+        """The changes since the last call (True: alive, False: gone), oldest first."""
+        if not self._polled:
+            raise RuntimeError("this watch calls back; it has nothing to poll")
+        out = []
+        s = self._sub.try_recv()
+        while s is not None:
+            out.append(s.kind == zenoh.SampleKind.PUT)
+            s = self._sub.try_recv()
+        return out
+
+    def close(self) -> None:
+        with contextlib.suppress(Exception):
+            self._sub.undeclare()
+
+
 class ZenohBus(can.BusABC):
     """CAN over zenoh between processes (see the module docstring).
 
@@ -406,6 +442,20 @@ class ZenohBus(can.BusABC):
                 return False
             time.sleep(0.005)
         return True
+
+    def watch_peer(self, callback: Callable[[bool], None] | None = None) -> PeerWatch:
+        """Watch the other node's liveliness token (:class:`PeerWatch`; its current state
+        first); a monitor bus has no peer (ValueError)."""
+        if self.peer_node is None:
+            raise ValueError(f"ZenohBus {self.channel!r}: a monitor has no peer to watch")
+        return PeerWatch(self._session, keys.alive_key(self.run_id, self.peer_node), callback)
+
+    def announce_alive(self) -> None:
+        """Declare this node's liveliness token now (for a bus opened with
+        ``declare_alive=False``: a node that first has to get ready); idempotent."""
+        if self._token is None and self.node is not None:
+            self._token = self._session.liveliness().declare_token(
+                keys.alive_key(self.run_id, self.node))
 
     def peer_alive(self, node: str, timeout: float = 1.0) -> bool:
         """True if the liveliness token of ``node`` (``ctrl``/``plant``) of this run exists

@@ -387,7 +387,6 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
               install_signal_handlers: bool = False) -> CosimResult:
     """Run one co-simulation (module docstring). Returns the summary; the recording (if any)
     is complete and readable whatever happens."""
-    import zenoh
 
     import hp_model
     from bus_schemas.mcap_schemas import Recorder
@@ -464,14 +463,13 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
                        poll_us=bus_poll_us(cfg), zenoh_options=creds.zenoh_options("plant"))
         alive = threading.Event()
 
-        def _on_live(sample: Any) -> None:  # sets flags only; nothing blocks here
-            if sample.kind == zenoh.SampleKind.PUT:
+        def _on_live(is_alive: bool) -> None:  # sets flags only; nothing blocks here
+            if is_alive:
                 alive.set()
             else:
                 lost.set()
 
-        sub = bus.session.liveliness().declare_subscriber(keys.ctrl_alive_key(run_id),
-                                                          _on_live, history=True)
+        sub = bus.watch_peer(_on_live)
         say(f"starting controller {cfg.controller} (run {run_id})")
         proc = subprocess.Popen(controller_command(cfg, run_id, endpoint, node_cpu), env=_env(),
                                 stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
@@ -500,8 +498,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if affinity is not None:
             os.sched_setaffinity(0, affinity)
         if sub is not None:
-            with contextlib.suppress(Exception):
-                sub.undeclare()
+            sub.close()
         if bus is not None:
             bus.shutdown()
         if proc is not None:

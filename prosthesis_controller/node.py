@@ -35,7 +35,6 @@ Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import math
@@ -246,17 +245,10 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
           exit_with_plant: bool = True, on_ready: Any = None) -> dict[str, Any]:
     """Serve until ``stop`` (a threading.Event) is set, SIGTERM/SIGINT, or (zenoh) the
     plant's liveliness token disappears after having been seen. Returns counts."""
-    import zenoh
-
-    from bus_schemas import keys
-
-    token = plant_sub = None
-    session = getattr(bus, "session", None)
-    run_id = getattr(bus, "run_id", None)
-    if session is not None and run_id is not None:
-        plant_sub = session.liveliness().declare_subscriber(
-            keys.plant_alive_key(run_id), zenoh.handlers.FifoChannel(64), history=True)
-        token = session.liveliness().declare_token(keys.ctrl_alive_key(run_id))
+    # a bus with liveliness (CAN over zenoh): watch the plant, then say this node is alive
+    plant_watch = bus.watch_peer() if hasattr(bus, "watch_peer") else None
+    if hasattr(bus, "announce_alive"):
+        bus.announce_alive()
     if on_ready is not None:
         on_ready()
     plant_seen = False
@@ -281,21 +273,17 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
             if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:
                 cycle.add(time.perf_counter_ns() - first)
                 first = None
-            if plant_sub is not None:
-                s = plant_sub.try_recv()
-                while s is not None:
-                    if s.kind == zenoh.SampleKind.PUT:
+            if plant_watch is not None:
+                for alive in plant_watch.poll():
+                    if alive:
                         plant_seen = True
                     elif plant_seen and exit_with_plant:
                         return _summary(node, "plant gone", cycle, usage)
-                    s = plant_sub.try_recv()
     except can.CanOperationError:
         return _summary(node, "bus closed", cycle, usage)
     finally:
-        for obj in (token, plant_sub):
-            if obj is not None:
-                with contextlib.suppress(Exception):
-                    obj.undeclare()
+        if plant_watch is not None:
+            plant_watch.close()
     return _summary(node, "stopped", cycle, usage)
 
 

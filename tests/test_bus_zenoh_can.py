@@ -375,3 +375,50 @@ def test_cross_process_echo():
     assert checker.counts["ok"] == n
     med = statistics.median(rtt[20:]) * 1e6
     print(f"\nZenohBus cross-process round trip: median {med:.0f} us over {n - 20} frames")
+
+
+def test_liveliness_through_the_bus_api():
+    """The nodes' liveliness without reaching into the zenoh session: a node opened with
+    ``declare_alive=False`` says it is alive when ready (``announce_alive``); the other
+    watches it (``watch_peer``: polled or called back) and sees it come and go."""
+    ep = loopback_endpoint()
+    seen: list[bool] = []
+    changed = threading.Event()
+
+    def on_change(alive: bool) -> None:
+        seen.append(alive)
+        changed.set()
+
+    with ZenohBus("t9/plant", listen=ep) as plant:
+        ctrl = ZenohBus("t9/ctrl", connect=ep, declare_alive=False)
+        polled = plant.watch_peer()
+        called = plant.watch_peer(on_change)
+        try:
+            time.sleep(0.2)
+            assert polled.poll() == [] and seen == []  # not alive yet
+            ctrl.announce_alive()
+            ctrl.announce_alive()  # idempotent
+            assert changed.wait(5.0) and seen == [True]
+            deadline = time.monotonic() + 5.0
+            got: list[bool] = []
+            while not got and time.monotonic() < deadline:
+                got = polled.poll()
+                time.sleep(0.01)
+            assert got == [True]
+            back = ctrl.watch_peer()  # the controller watches the plant, alive already
+            deadline = time.monotonic() + 5.0
+            got = []
+            while not got and time.monotonic() < deadline:
+                got = back.poll()
+                time.sleep(0.01)
+            back.close()
+            assert got == [True]
+            changed.clear()
+            ctrl.shutdown()
+            assert changed.wait(5.0) and seen == [True, False]
+        finally:
+            polled.close()
+            called.close()
+        with ZenohBus("t9/monitor", connect=ep) as monitor, \
+                pytest.raises(ValueError, match="monitor"):
+            monitor.watch_peer()
