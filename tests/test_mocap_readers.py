@@ -348,3 +348,24 @@ def test_trc_round_trip_and_processing(synth, tmp_path) -> None:
         bad.write_text("\n".join(lines) + "\n")
         with pytest.raises(MocapError, match=msg):
             read_trc(bad)
+
+
+def test_motive_exports_with_markers_only_or_rigid_bodies_only(synth, tmp_path) -> None:
+    """Motive exports either kind alone.  Markers only: every pitch from the marker pairs,
+    every step kept.  Rigid bodies only (their solved markers still exported): a
+    rigid-body loss has no marker pair to fall back on, so the steps it spans are dropped,
+    each with the limb and the frames in the reason."""
+    from characterization.mocap_pipeline import process_take
+
+    coef = {d: hp_model.load_model().hip_progress_coefficients(d) for d in ("ps", "pns")}
+    full = process_take(synth.take, default_mapping(), coef)
+    p = tmp_path / "markers.csv"
+    write_motive_csv(p, synth.take.replace(rigid_bodies={}, rigid_body_markers={}))
+    mk = process_take(read_motive_csv(p), default_mapping(), coef)
+    assert len(mk.steps) >= len(full.steps) - 1 and not mk.dropped
+    p = tmp_path / "bodies.csv"
+    write_motive_csv(p, synth.take.replace(markers={}))
+    rb = process_take(read_motive_csv(p), default_mapping(), coef)
+    assert rb.steps and rb.dropped
+    for d in rb.dropped:
+        assert "has no pitch source for" in d.reason and "frames" in d.reason
