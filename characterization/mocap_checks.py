@@ -120,8 +120,10 @@ def infer_up(take: Take, mapping: MocapMapping) -> UpEvidence | None:
 
 def check_up(take: Take, up: np.ndarray, given: str, ev: UpEvidence | None,
              hip_height: float) -> None:
-    """The chosen up axis against the data's (``given`` says where it came from); the
-    subject's hip height (m) tells a trunk that is not above the feet at all."""
+    """The chosen up axis against the data's (``given`` says where it came from, empty when
+    it is the data's own nearest lab axis: then no lab axis may be more than
+    ``UP_TOLERANCE_DEG`` off the data; a given axis or vector may be anything within that of
+    the data); the subject's hip height (m) tells a trunk that is not above the feet."""
     if ev is None:
         return
     dist = float(np.linalg.norm(ev.vector))
@@ -130,17 +132,18 @@ def check_up(take: Take, up: np.ndarray, given: str, ev: UpEvidence | None,
                          f"feet (median over the take; the subject's hip height is "
                          f"{hip_height:.2f} m): not a person walking, or the trunk and foot "
                          "markers are not the mapping's")
-    if ev.angle_deg > UP_TOLERANCE_DEG:
+    if not given and ev.angle_deg > UP_TOLERANCE_DEG:  # inferred: no lab axis fits
         raise MocapError(f"{take.source}: up axis: the trunk-foot direction "
                          f"{_vec(ev.vector)} m is {ev.angle_deg:.0f} deg from every lab axis: "
                          "set 'up' in the mapping (a vector is allowed)")
     a = _angle_deg(up, ev.vector)
     if a > UP_TOLERANCE_DEG:
         h = float(up @ ev.vector)
+        fix = (f'set up = "{ev.axis}" in the mapping' if ev.angle_deg <= UP_TOLERANCE_DEG
+               else f"set up to the vector {_vec(ev.vector / dist)} in the mapping")
         raise MocapError(f"{take.source}: up axis: {given} but the trunk lies above the feet "
-                         f"along {ev.axis} ({np.linalg.norm(ev.vector):.2f} m; {h:.2f} m along "
-                         f"the chosen axis, {a:.0f} deg off): set up = \"{ev.axis}\" in the "
-                         "mapping")
+                         f"along {ev.axis} (direction {_vec(ev.vector / dist)}, {dist:.2f} m; "
+                         f"{h:.2f} m along the chosen axis, {a:.0f} deg off): {fix}")
 
 
 def _vec(v: np.ndarray) -> str:

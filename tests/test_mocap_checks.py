@@ -271,3 +271,18 @@ def test_lab_events_in_a_c3d_are_read_and_the_found_ones_compared(model, coef, t
     qa = json.loads((tmp_path / "steps.qa.json").read_text())
     assert set(qa["lab_events"]) == {"human", "prosthesis"}
     assert "Found events against the lab's" in (tmp_path / "steps.qa.md").read_text()
+
+
+def test_a_tilted_lab_frame_works_with_an_explicit_up_vector(take, coef, reference):
+    """A lab frame tilted 40 deg about its x axis: the data's up is 40 deg from every lab
+    axis.  With ``up = "auto"`` that is an error asking for ``up``; given the tilted vector
+    (within the tolerance of the data's) it processes to the untilted take's angles."""
+    c, s_ = np.cos(np.radians(40)), np.sin(np.radians(40))
+    R = np.array([[1.0, 0, 0], [0, c, -s_], [0, s_, c]])
+    tilted = _map(take, lambda p: p @ R.T)
+    with pytest.raises(MocapError, match=r"deg from every lab axis: set 'up' in the mapping"):
+        process_take(tilted, default_mapping(), coef)
+    up = (R @ np.array([0.0, 0.0, 1.0])).tolist()
+    p = process_take(tilted, default_mapping().model_copy(update={"up": up}), coef)
+    assert len(p.steps) == len(reference.steps)
+    np.testing.assert_allclose(p.q[:, 2:], reference.q[:, 2:], atol=1e-9)
