@@ -46,7 +46,14 @@ from hp_model.gait_artifact import Gait, load_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
 from human_fmu.fmi3 import PLATFORM_TUPLE, config_macros, model_description_3
-from human_fmu.variables import UNITS, Variable, _Table, add_constants, build_table
+from human_fmu.variables import (
+    Variable,
+    _Table,
+    add_common_elements,
+    add_constants,
+    build_table,
+    fmt_value,
+)
 
 MODEL_IDENTIFIER = "hpcosim_human"
 PLATFORM = "linux64"
@@ -146,14 +153,6 @@ def fmu_functions(model: HumanProsthesisModel, cl: ClosedLoop) -> list[ca.Functi
 
 
 # -- modelDescription.xml -----------------------------------------------------------------------
-def _fmt(v: float | int | bool | str) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(float(v))
-    return str(v)
-
-
 def model_description(table: _Table, guid: str, *, description: str, generated: str,
                       annotations: dict[str, str]) -> str:
     root = ET.Element("fmiModelDescription", {
@@ -172,17 +171,7 @@ def model_description(table: _Table, guid: str, *, description: str, generated: 
         "canSerializeFMUstate": "false", "providesDirectionalDerivative": "false"})
     sf = ET.SubElement(cs, "SourceFiles")
     ET.SubElement(sf, "File", {"name": "hpfmu.c"})
-    used = sorted({v.unit for v in table.vars if v.unit})
-    ud = ET.SubElement(root, "UnitDefinitions")
-    for u in used:
-        ET.SubElement(ET.SubElement(ud, "Unit", {"name": u}), "BaseUnit",
-                      {k: str(e) for k, e in UNITS[u].items()})
-    lc = ET.SubElement(root, "LogCategories")
-    for name, desc in (("logEvents", "impacts and falls"),
-                       ("logStatusError", "errors: bad parameters, calls in the wrong state")):
-        ET.SubElement(lc, "Category", {"name": name, "description": desc})
-    ET.SubElement(root, "DefaultExperiment",
-                  {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"})
+    add_common_elements(root, table)
     va = ET.SubElement(root, "VendorAnnotations")
     ET.SubElement(ET.SubElement(va, "Tool", {"name": "hpcosim"}), "Build", annotations)
     mv = ET.SubElement(root, "ModelVariables")
@@ -198,7 +187,7 @@ def model_description(table: _Table, guid: str, *, description: str, generated: 
         if v.unit:
             tattrs["unit"] = v.unit
         if v.start is not None:
-            tattrs["start"] = _fmt(v.start)
+            tattrs["start"] = fmt_value(v.start)
         ET.SubElement(sv, v.type, tattrs)
     ms = ET.SubElement(root, "ModelStructure")
     inputs = " ".join(str(index[v.name]) for v in table.vars if v.causality == "input")
@@ -399,7 +388,7 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
     casadi_src = private_helpers(generate_c(fmu_functions(model, cl), "hpfmu_casadi"))
     wrapper_src = (C_DIR / api_src).read_text()
     core_src = (C_DIR / "hpfmu_core.inc").read_text()
-    table_key = json.dumps([(v.name, v.type, v.causality, v.vr, _fmt(v.start)
+    table_key = json.dumps([(v.name, v.type, v.causality, v.vr, fmt_value(v.start)
                              if v.start is not None else None) for v in table.vars])
     guid = _guid(casadi_src, wrapper_src + core_src, table_key, model_hash, gait_hash,
                  f"fmi{fmi_version}")

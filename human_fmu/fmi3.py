@@ -16,7 +16,7 @@ from xml.etree import ElementTree as ET
 import casadi as ca
 
 import hp_model
-from human_fmu.variables import UNITS, Variable, _Table
+from human_fmu.variables import Variable, _Table, add_common_elements, fmt_value
 
 #: FMI 3.0 value reference = FMI 2.0 reference (per type, from 0) + the type's base
 VR_BASE = {"Real": 0, "Integer": 10_000, "Boolean": 20_000, "String": 30_000}
@@ -50,14 +50,6 @@ def config_macros() -> list[str]:
     return lines
 
 
-def _fmt(v: float | int | bool | str) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return repr(float(v))
-    return str(v)
-
-
 def model_description_3(table: _Table, token: str, *, model_identifier: str,
                         description: str, generated: str,
                         annotations: dict[str, str]) -> str:
@@ -77,17 +69,7 @@ def model_description_3(table: _Table, token: str, *, model_identifier: str,
         "providesIntermediateUpdate": "false", "mightReturnEarlyFromDoStep": "false",
         "canReturnEarlyAfterIntermediateUpdate": "false", "hasEventMode": "false",
         "providesEvaluateDiscreteStates": "false"})
-    used = sorted({v.unit for v in table.vars if v.unit})
-    ud = ET.SubElement(root, "UnitDefinitions")
-    for u in used:
-        ET.SubElement(ET.SubElement(ud, "Unit", {"name": u}), "BaseUnit",
-                      {k: str(e) for k, e in UNITS[u].items()})
-    lc = ET.SubElement(root, "LogCategories")
-    for name, desc in (("logEvents", "impacts and falls"),
-                       ("logStatusError", "errors: bad parameters, calls in the wrong state")):
-        ET.SubElement(lc, "Category", {"name": name, "description": desc})
-    ET.SubElement(root, "DefaultExperiment",
-                  {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"})
+    add_common_elements(root, table)
     mv = ET.SubElement(root, "ModelVariables")
     ET.SubElement(mv, "Float64", {"name": "time", "valueReference": str(VR_TIME),
                                   "causality": "independent", "variability": "continuous",
@@ -100,7 +82,7 @@ def model_description_3(table: _Table, token: str, *, model_identifier: str,
         if v.unit and v.type == "Real":
             attrs["unit"] = v.unit
         if v.start is not None and v.type != "String":
-            attrs["start"] = _fmt(v.start)
+            attrs["start"] = fmt_value(v.start)
         el = ET.SubElement(mv, TYPE3[v.type], attrs)
         if v.start is not None and v.type == "String":
             ET.SubElement(el, "Start", {"value": str(v.start)})

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from xml.etree import ElementTree as ET
 
 import numpy as np
 
@@ -225,3 +226,28 @@ def add_constants(t: _Table, model_hash: str, gait_hash: str) -> None:
           start=model_hash)
     t.add("gait_hash", "String", "local", "hash of the gait the FMU was built from",
           start=gait_hash)
+
+
+def fmt_value(v: float | int | bool | str) -> str:
+    """A start value as modelDescription.xml writes it (both FMI versions)."""
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(float(v))
+    return str(v)
+
+
+def add_common_elements(root: ET.Element, table: _Table) -> None:
+    """The modelDescription elements both FMI versions share, in the schemas' order after
+    the interface element: UnitDefinitions (the table's units), LogCategories,
+    DefaultExperiment."""
+    ud = ET.SubElement(root, "UnitDefinitions")
+    for u in sorted({v.unit for v in table.vars if v.unit}):
+        ET.SubElement(ET.SubElement(ud, "Unit", {"name": u}), "BaseUnit",
+                      {k: str(e) for k, e in UNITS[u].items()})
+    lc = ET.SubElement(root, "LogCategories")
+    for name, desc in (("logEvents", "impacts and falls"),
+                       ("logStatusError", "errors: bad parameters, calls in the wrong state")):
+        ET.SubElement(lc, "Category", {"name": name, "description": desc})
+    ET.SubElement(root, "DefaultExperiment",
+                  {"startTime": "0.0", "stopTime": "10.0", "stepSize": "0.001"})
