@@ -1,17 +1,49 @@
-"""One instance of a co-simulation FMU loaded through fmpy, with name-based value references.
+"""The one Python wrapper of the human FMU: an fmpy ``FMU2Slave`` with name-based value
+references and the per-tick exchange through preallocated fmi2 value buffers.
 
-Shared by the co-simulation master (:mod:`orchestrator.cosim`) and the sweep's FMU backend
-(:mod:`orchestrator.sweep_fmu`).  (``tests/fmu_runner.py`` keeps its own copy on purpose: it
-must run in a Python where this project cannot be imported.)
+The co-simulation master, the sweeps' FMU backend and the closed loop's FMU plant all drive
+the FMU through :class:`HumanFmu`.  (``tests/fmu_runner.py`` is a deliberately independent
+importer: it runs in a Python where this project cannot be imported, as a user with only
+fmpy would.)
+
+fmpy's ``getReal``/``setReal`` build new ctypes arrays on every call (2-4 us each); a loop
+reads and writes the same variables every 1 ms tick, so the value-reference and value
+arrays are allocated once and fmpy's checked ``fmi2GetReal`` etc. are called on them (a
+status above warning raises fmpy's ``FMICallException``).
 """
 
 from __future__ import annotations
 
 import ctypes
+import json
 import shutil
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
+
+import numpy as np
+
+#: sensor outputs in the order :meth:`HumanFmu.read` returns them (rad, rad/s, N, phase, rad)
+SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
+           "socket_pitch")
+#: the socket force (N, N, N m): depends on the torque inputs (read after setting them)
+FORCES = ("socket_Fx", "socket_Fz", "socket_My")
+#: the full state: q then qd in the model's coordinate order
+STATE = tuple(f"q[{i}]" for i in range(1, 13)) + tuple(f"qd[{i}]" for i in range(1, 13))
+COUNTS = ("domain", "steps", "fall_code")
+INPUTS = ("u_knee", "u_ankle")
+DOMAINS = ("ps", "pns")
+
+
+class FmuReading(NamedTuple):
+    """One read of the FMU's outputs at the start of a period."""
+
+    sensors: list[float]  # SENSORS
+    state: list[float]  # STATE (q, qd)
+    domain: int  # 0 ps, 1 pns
+    steps: int  # impacts so far
+    fall_code: int  # hp_model.falls.FallReason value (0: walking)
+    fell: bool
 
 
 def step_or_end(slave: Any, component: Any, t: float, dt: float) -> bool:
@@ -34,14 +66,27 @@ def step_or_end(slave: Any, component: Any, t: float, dt: float) -> bool:
     return False
 
 
-class FmuInstance:
-    """An fmpy ``FMU2Slave`` of the FMU at ``path``, extracted into ``unzipdir`` (a fresh
-    temporary folder by default, removed by :meth:`free`) and instantiated once."""
+class _Buffer:
+    """Preallocated value references and values of one fmi2 type."""
+
+    def __init__(self, vr: Mapping[str, int], names: Sequence[str], ctype: Any) -> None:
+        from fmpy.fmi2 import fmi2ValueReference
+
+        self.n = len(names)
+        self.refs = (fmi2ValueReference * self.n)(*(vr[n] for n in names))
+        self.values = (ctype * self.n)()
+
+
+class HumanFmu:
+    """The human FMU at ``path``, extracted into ``unzipdir`` (a fresh temporary folder by
+    default; removed by :meth:`free`) and instantiated once; :meth:`start` (re)initialises
+    it for a run.  Refuses an FMI 3.0 FMU (the loops drive FMI 2.0; the two are
+    bit-identical)."""
 
     def __init__(self, path: str | Path, *, unzipdir: str | Path | None = None,
                  instance: str = "human") -> None:
         from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave
+        from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Integer, fmi2Real
 
         self.path = Path(path)
         self.md = read_model_description(str(path))
@@ -53,20 +98,41 @@ class FmuInstance:
                                 "without --fmi 3; the two are bit-identical)")
         self.unzipdir = Path(extract(str(path),
                                      unzipdir=None if unzipdir is None else str(unzipdir)))
+        info = self.unzipdir / "resources" / "build_info.json"
+        self.build_info: dict[str, Any] = json.loads(info.read_text()) if info.is_file() else {}
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.n_theta = sum(1 for n in self.vr if n.startswith("theta_ps["))
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(self.unzipdir),
                              modelIdentifier=self.md.coSimulation.modelIdentifier,
                              instanceName=instance)
         self.fmu.instantiate()
+        self._c = self.fmu.component
+        self._out = _Buffer(self.vr, SENSORS + STATE, fmi2Real)
+        self._ints = _Buffer(self.vr, COUNTS, fmi2Integer)
+        self._fall = _Buffer(self.vr, ("fall",), fmi2Boolean)
+        self._u = _Buffer(self.vr, INPUTS, fmi2Real)
+        self._forces = _Buffer(self.vr, FORCES, fmi2Real)
+        self._started = False
 
+    # -- set-up ------------------------------------------------------------------------------
     def vrs(self, names: Iterable[str]) -> list[int]:
         """Value references of ``names`` (KeyError for an unknown name)."""
         return [self.vr[n] for n in names]
 
-    def initialize(self, real: Mapping[str, float] | None = None,
-                   integer: Mapping[str, int] | None = None) -> None:
-        """setupExperiment(t = 0), set the start values, enter and exit initialization."""
+    def check_gait(self, gait_hash: str) -> None:
+        """Refuse an FMU built for another gait (its build_info gait hash)."""
+        h = self.build_info.get("gait_hash")
+        if h is not None and h != gait_hash:
+            raise ValueError(f"the FMU was built for gait {h}, not for this gait "
+                             f"({gait_hash})")
+
+    def start(self, real: Mapping[str, float] | None = None,
+              integer: Mapping[str, int] | None = None) -> None:
+        """(Reset if already started,) setupExperiment(t = 0), set the start values, enter
+        and exit initialization."""
         f = self.fmu
+        if self._started:
+            f.reset()
         f.setupExperiment(startTime=0.0)
         if real:
             f.setReal(self.vrs(real), [float(v) for v in real.values()])
@@ -74,12 +140,57 @@ class FmuInstance:
             f.setInteger(self.vrs(integer), [int(v) for v in integer.values()])
         f.enterInitializationMode()
         f.exitInitializationMode()
+        self._started = True
 
-    def do_step(self, t: float, dt: float) -> bool:
+    def start_walk(self, thetas: Mapping[str, np.ndarray], q0: np.ndarray, qd0: np.ndarray
+                   ) -> None:
+        """Start a run where the human tracks ``thetas`` (packed gait per domain) from
+        (q0, qd0) in ps, with no FMU-side perturbation or offset: the state the in-process
+        simulator starts from."""
+        real: dict[str, float] = {}
+        for d in DOMAINS:
+            th = np.asarray(thetas[d], float)
+            if th.size != self.n_theta:
+                raise ValueError(f"theta_{d} of size {th.size}; the FMU has {self.n_theta}")
+            real.update({f"theta_{d}[{i + 1}]": float(v) for i, v in enumerate(th)})
+        real.update({f"q0[{i + 1}]": float(v) for i, v in enumerate(q0)})
+        real.update({f"qd0[{i + 1}]": float(v) for i, v in enumerate(qd0)})
+        real.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
+        self.start(real, {"human_seed": 0, "initial_domain": 0})
+
+    def model_description_xml(self) -> bytes:
+        return (self.unzipdir / "modelDescription.xml").read_bytes()
+
+    # -- the per-tick exchange -------------------------------------------------------------
+    def read(self) -> FmuReading:
+        """The outputs at the start of the current period."""
+        f, c = self.fmu, self._c
+        s, i, b = self._out, self._ints, self._fall
+        f.fmi2GetReal(c, s.refs, s.n, s.values)
+        f.fmi2GetInteger(c, i.refs, i.n, i.values)
+        f.fmi2GetBoolean(c, b.refs, b.n, b.values)
+        v = s.values[:]
+        n = len(SENSORS)
+        dom, steps, code = i.values[:]
+        return FmuReading(v[:n], v[n:], dom, steps, code, b.values[0] != 0)
+
+    def set_torque(self, knee: float, ankle: float) -> None:
+        """The prosthesis motor torques held over the next step [N m]."""
+        u = self._u
+        u.values[0], u.values[1] = knee, ankle
+        self.fmu.fmi2SetReal(self._c, u.refs, u.n, u.values)
+
+    def forces(self) -> list[float]:
+        """The socket force (Fx, Fz [N], My [N m]) under the torque just set."""
+        g = self._forces
+        self.fmu.fmi2GetReal(self._c, g.refs, g.n, g.values)
+        return g.values[:]
+
+    def step(self, t: float, dt: float) -> bool:
         """fmi2DoStep(t, dt): True while the walk goes on, False once the FMU has ended it
         (fmi2Discard with fmi2Terminated: a fall; the outputs hold the last valid state).
         Any other failure raises fmpy's ``FMICallException``."""
-        return step_or_end(self.fmu, self.fmu.component, t, dt)
+        return step_or_end(self.fmu, self._c, t, dt)
 
     def free(self) -> None:
         """Terminate and free the instance, then remove the extracted files."""

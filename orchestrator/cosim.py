@@ -56,8 +56,8 @@ from bus_schemas.protocol import (
 )
 from bus_schemas.run_auth import RunCredentials
 from bus_schemas.zenoh_config import loopback_endpoint
-from human_fmu.instance import FmuInstance
-from orchestrator.fmu_port import FmuPort
+from human_fmu.instance import HumanFmu
+from orchestrator.loop import Command, FmuPlant, Observation, Sensed, Truth, run_loop
 from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -174,18 +174,6 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
         out.parent.mkdir(parents=True, exist_ok=True)
         build_fmu(gait_path, out, model=model, progress=progress)
     return out
-
-
-class Fmu(FmuInstance):
-    """The human FMU of a run: instantiated and initialized with the run's start values."""
-
-    def __init__(self, path: Path, real: dict[str, float] | None = None,
-                 integer: dict[str, int] | None = None) -> None:
-        super().__init__(path, instance="human")
-        self.initialize(real, integer)
-
-    def model_description_xml(self) -> bytes:
-        return (self.unzipdir / "modelDescription.xml").read_bytes()
 
 
 # --------------------------------------------------------------------------- faults
@@ -433,7 +421,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if plan.case == "human":
             real["human_perturbation"] = plan.amplitude
             integer["human_seed"] = plan.seed
-        fmu = Fmu(fmu_path, real, integer)
+        fmu = HumanFmu(fmu_path)
+        fmu.start(real, integer)
         if cfg.record is not None:
             Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
             rec = Recorder(cfg.record, metadata={"run_id": run_id})
@@ -558,51 +547,61 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
     return d
 
 
-def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc: Any,
-          lost: threading.Event, stop: threading.Event, res: CosimResult,
-          ratio: tuple[float, float], limits: tuple[float, float],
-          progress: Callable[[int, float, int], None] | None) -> None:
-    """The tick loop (module docstring). Recording is deferred: the tick's frames and
-    signals are queued as they happen and serialized while the plant waits for the
-    controller's reply (after sending), so MCAP writing overlaps the round trip."""
-    port = FmuPort(fmu.fmu, fmu.vr)
-    plant = Plant(limits)
-    dt = cfg.dt
-    realtime = cfg.mode == "realtime"
-    n_max = round(cfg.max_time / dt)
-    u = (0.0, 0.0)
-    missed_run = 0
-    lat: list[float] = []
-    clock = time.perf_counter_ns
-    # per tick [ns]: whole tick, FMU calls, send -> reply in hand, MCAP serialization
-    # (inside the round trip), blocked waiting after it
-    t_tick: list[int] = []
-    t_fmu: list[int] = []
-    t_rt: list[int] = []
-    t_rec: list[int] = []
-    t_wait: list[int] = []
-    usage = Usage()
-    wall0 = time.perf_counter()
-    sched0 = wall0  # realtime: tick k's wall slot starts at sched0 + k dt (moves on a skip)
-    rtol = max(1e-7, dt * 1e-3)  # matching a reply's echoed timestamp
-    injected: dict[str, int] = {}
-    names = {fid: frame_specs()[fid].name for fid in PLANT_TO_CTRL}
+class CanLink:
+    """The controller in its own process, over CAN frames on a python-can ``bus`` (AMPRO3's
+    protocol; module docstring, steps 2-3): per period the plant's frames go out through the
+    fault ``plan``, the controller's frames are checked and recorded, and this cycle's
+    ``TorqueCmd`` is awaited (lockstep: up to ``reply_timeout``; realtime: until 0.8 dt
+    into the tick's wall slot).  A missing reply holds the last torque; the watchdog, a
+    lost liveliness token or a SAFE/FAULT heartbeat give the safe torque (zero) and a
+    :attr:`Command.fault`.  Recording is deferred: the tick's frames are queued as they
+    happen and serialized while the plant waits for the reply."""
 
-    def log_ns(t: float) -> int:
-        return round((time.perf_counter() - wall0 if realtime else t) * 1e9)
+    def __init__(self, cfg: CosimConfig, plan: FaultPlan, bus: Any, rec: Any, proc: Any,
+                 lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
+                 limits: tuple[float, float]) -> None:
+        self.cfg, self.plan, self.bus, self.rec, self.proc = cfg, plan, bus, rec, proc
+        self.lost, self.res, self.ratio = lost, res, ratio
+        self.plant = Plant(limits)
+        self.dt = cfg.dt
+        self.realtime = cfg.mode == "realtime"
+        self.u = (0.0, 0.0)
+        self.missed_run = 0
+        self.fault_first_miss = -1
+        self.lat: list[float] = []
+        # per tick [ns]: send -> reply in hand, MCAP serialization (inside the round trip),
+        # blocked waiting after it
+        self.t_rt: list[int] = []
+        self.t_rec: list[int] = []
+        self.t_wait: list[int] = []
+        self.injected: dict[str, int] = {}
+        self.wall0 = time.perf_counter()
+        self.sched0 = self.wall0  # realtime: tick k's slot starts at sched0 + k dt
+        self.rtol = max(1e-7, self.dt * 1e-3)  # matching a reply's echoed timestamp
+        self.names = {fid: frame_specs()[fid].name for fid in PLANT_TO_CTRL}
+        # realtime: the missed-reply watchdog is armed by the first reply (a process
+        # scheduled late at its start, measured up to 10 ms on a loaded 2-core machine, is
+        # not a dead controller); before it, the first reply must come within
+        # reply_timeout of the start.  Lockstep waits reply_timeout for every reply, so it
+        # is armed from the first period.
+        self.armed = not self.realtime
 
-    def on_rx(msg: can.Message, t: float) -> codec.Verdict:
-        v = plant.on_rx(msg)
-        res.frames_rx += 1
+    def log_ns(self, t: float) -> int:
+        return round((time.perf_counter() - self.wall0 if self.realtime else t) * 1e9)
+
+    def on_rx(self, msg: can.Message, t: float) -> codec.Verdict:
+        v = self.plant.on_rx(msg)
+        self.res.frames_rx += 1
+        rec = self.rec
         if rec is None:
             return v
-        ns = log_ns(t)
+        ns = self.log_ns(t)
         rec.defer_can(msg, "rx", ns, name=v.name, status=str(v.status))
         if not v.ok:
             return v
         if v.frame_id == FrameId.TORQUE_CMD:
             rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
-                           v.counter, msg.timestamp, ratio)
+                           v.counter, msg.timestamp, self.ratio)
         elif v.frame_id == FrameId.CTRL_DISTURBANCE:
             e = v.value
             rec.defer("/controller/disturbance", {
@@ -610,160 +609,178 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: Fmu, bus: Any, rec: Any, proc:
                 "valid": bool(e.valid), "flag": bool(e.flag),
                 "since_touchdown": e.since_touchdown}, ns)
         elif v.frame_id == FrameId.CTRL_STATUS:
-            s = v.value
+            st = v.value
+            u, r = self.u, self.ratio
             rec.defer("/controller/diagnostics", {
-                "t": msg.timestamp, "controller": cfg.controller, "domain": None, "tau": None,
-                "V": None, "rho": None, "u": [u[0] * ratio[0], u[1] * ratio[1]],
-                "qp_status": getattr(s.qp_status, "name", str(s.qp_status)),
-                "active_constraints": [a.name for a in type(s.active_constraints)
-                                       if a in s.active_constraints and a.name],
-                "fallback_count": s.fallback_count, "fault_flags": int(s.fault_flags),
-                "coverage_flag": bool(s.coverage_flag), "coverage_count": s.coverage_count,
+                "t": msg.timestamp, "controller": self.cfg.controller, "domain": None,
+                "tau": None, "V": None, "rho": None, "u": [u[0] * r[0], u[1] * r[1]],
+                "qp_status": getattr(st.qp_status, "name", str(st.qp_status)),
+                "active_constraints": [a.name for a in type(st.active_constraints)
+                                       if a in st.active_constraints and a.name],
+                "fallback_count": st.fallback_count, "fault_flags": int(st.fault_flags),
+                "coverage_flag": bool(st.coverage_flag), "coverage_count": st.coverage_count,
                 "solve_time_us": None, "source": "CtrlStatus frame",
-                "ctrl_rejects": plant.ctrl_rejects}, ns)
+                "ctrl_rejects": self.plant.ctrl_rejects}, ns)
         return v
 
-    k = 0
-    fault_first_miss = -1
-    # realtime: the missed-reply watchdog is armed by the first reply (a process scheduled
-    # late at its start, measured up to 10 ms on a loaded 2-core machine, is not a dead
-    # controller); before it, the first reply must come within reply_timeout of the start.
-    # Lockstep waits reply_timeout for every reply, so it is armed from the first period.
-    armed = not realtime
-    while not stop.is_set():  # a signal ends the run between ticks (its summary complete)
+    def _inject(self, what: str) -> None:
+        self.injected[what] = self.injected.get(what, 0) + 1
+
+    def exchange(self, obs: Observation) -> Command:
+        cfg, plan, rec, res, k, t = self.cfg, self.plan, self.rec, self.res, obs.k, obs.t
         if plan.case in PLANT_CASES and plan.hits(k):
             time.sleep(plan.stall_ms * 1e-3)
-            injected[plan.case] = injected.get(plan.case, 0) + 1
-        tick0 = clock()
-        t = k * dt
-        if realtime:
-            sched0 = _catch_up(res, rec, t, k, dt, sched0, cfg.max_lag, log_ns)
-        y, state, (dom, steps, code), fell = port.read()
-        fmu_ns = clock() - tick0
-        res.steps = steps
-        if fell:
-            res.fell, res.fall_code = True, code
-            break
-        if steps >= cfg.steps or k >= n_max:
-            break
-        if plan.case in PROCESS_CASES and k == plan.start and proc.poll() is None:
-            proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
+            self._inject(plan.case)
+        if self.realtime:
+            self.sched0 = _catch_up(res, rec, t, k, self.dt, self.sched0, cfg.max_lag,
+                                    self.log_ns)
+        if plan.case in PROCESS_CASES and k == plan.start and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
+        s = obs.sensed
         t_us = round(t * 1e6)
-        frames = codec.encode_feedback(y[0], y[2], y[1], y[3], y[4], dom == 0, k % 16,
-                                       sim_time_us=t_us, socket_pitch=y[6], timestamp=t)
+        frames = codec.encode_feedback(s.knee_angle, s.knee_velocity, s.ankle_angle,
+                                       s.ankle_velocity, s.foot_load, s.contact, k % 16,
+                                       sim_time_us=t_us, socket_pitch=s.socket_pitch,
+                                       timestamp=t)
         if rec is not None:
-            ns = log_ns(t)
+            ns = self.log_ns(t)
             for m in frames:
-                rec.defer_can(m, "tx", ns, name=names[m.arbitration_id])
-            rec.defer_call("/prosthesis/measurements", ns, measurement_record, y, dom == 0,
-                           t_us, k % 16)
+                rec.defer_can(m, "tx", ns, name=self.names[m.arbitration_id])
+            rec.defer_call("/prosthesis/measurements", ns, measurement_record, s, t_us,
+                           k % 16)
         send, what = plan.apply(k, frames)
         if what:
-            injected[what] = injected.get(what, 0) + 1
+            self._inject(what)
+        clock = time.perf_counter_ns
         s0 = clock()
-        send_frames(bus, send)
+        send_frames(self.bus, send)
         res.frames_tx += len(send)
-        # -- while the controller works: serialize what this tick and the last recorded
-        if rec is not None:
+        if rec is not None:  # while the controller works: serialize what is queued
             r0 = clock()
             rec.write_deferred()
-            t_rec.append(clock() - r0)
+            self.t_rec.append(clock() - r0)
         w0 = clock()
-        # -- wait for this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt
-        # into the tick's slot, or 0.8 dt after sending when the plant itself runs behind
-        # (a late plant must not count its own lateness as the controller's missed reply)
+        # this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt into the
+        # tick's slot, or 0.8 dt after sending when the plant itself runs behind (a late
+        # plant must not count its own lateness as the controller's missed reply)
         got = answered = False
-        deadline = (max(sched0 + (k + 0.8) * dt, s0 * 1e-9 + 0.8 * dt) if realtime
-                    else s0 * 1e-9 + cfg.reply_timeout)
+        deadline = (max(self.sched0 + (k + 0.8) * self.dt, s0 * 1e-9 + 0.8 * self.dt)
+                    if self.realtime else s0 * 1e-9 + cfg.reply_timeout)
         while True:
             left = deadline - time.perf_counter()
-            if left <= 0 or lost.is_set():
+            if left <= 0 or self.lost.is_set():
                 break
-            msg = bus.recv(min(left, 0.005))
+            msg = self.bus.recv(min(left, 0.005))
             if msg is None:
                 continue
-            v = on_rx(msg, t)
+            v = self.on_rx(msg, t)
             if v.ok and v.frame_id == FrameId.TORQUE_CMD:
-                u = plant.command(v.value)
+                self.u = self.plant.command(v.value)
                 answered = True
-                if abs(msg.timestamp - t) <= rtol:
+                if abs(msg.timestamp - t) <= self.rtol:
                     got = True
                     break
         if got:
             r1 = clock()
-            lat.append((r1 - s0) * 1e-9)
-            t_rt.append(r1 - s0)
-            t_wait.append(r1 - w0)
-            missed_run = 0
-            fault_first_miss = -1
-            armed = True
-        elif realtime and answered:
-            # realtime: a reply to an earlier tick arrived (and is applied): the controller
-            # is alive but behind; counted late, not missing (the watchdog is for silence)
+            self.lat.append((r1 - s0) * 1e-9)
+            self.t_rt.append(r1 - s0)
+            self.t_wait.append(r1 - w0)
+            self.missed_run, self.fault_first_miss, self.armed = 0, -1, True
+        elif self.realtime and answered:
+            # a reply to an earlier tick arrived (and is applied): the controller is alive
+            # but behind; counted late, not missing (the watchdog is for silence)
             res.late += 1
-            missed_run = 0
-            fault_first_miss = -1
+            self.missed_run, self.fault_first_miss = 0, -1
         else:
-            if realtime:
+            if self.realtime:
                 res.late += 1
             res.missed += 1
-            if armed:
-                missed_run += 1
-            if fault_first_miss < 0:
-                fault_first_miss = k
-        reason = ""
-        if lost.is_set():
-            reason = "controller liveliness token lost"
-        elif missed_run >= cfg.watchdog_periods:
-            reason = f"{missed_run} control periods without a torque reply"
-        elif not armed and time.perf_counter() - wall0 > cfg.reply_timeout:
-            reason = (f"no torque reply within {cfg.reply_timeout} s of the start "
-                      f"({k + 1} periods)")
-        elif plant.ctrl_state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 \
-                and not got:
-            reason = f"controller reports state {CtrlState(plant.ctrl_state).name}"
+            if self.armed:
+                self.missed_run += 1
+            if self.fault_first_miss < 0:
+                self.fault_first_miss = k
+        reason = self._fault(k, got)
         if reason:
-            u = (0.0, 0.0)
-            res.faulted, res.fault_reason = True, reason
-            res.detection_periods = k - (fault_first_miss if fault_first_miss >= 0 else k) + 1
-        f0 = clock()
-        port.set_torque(*u)
-        if rec is not None:
-            rec.defer_call("/ground_truth", log_ns(t), ground_truth_record, t, port.forces(),
-                           state, dom, y[5], steps, u)
-        port.step(t, dt)  # False at a fall (fmi2Discard): the next read ends the run
-        t_fmu.append(fmu_ns + clock() - f0)
-        if res.faulted:
-            k += 1
-            break
-        k += 1
-        if progress is not None and k % 100 == 0:
-            progress(k, t, steps)
-        if realtime:  # pace to the wall clock; take late replies meanwhile
-            end = sched0 + k * dt
-            while True:
-                left = end - time.perf_counter()
-                if left <= 0:
-                    break
-                msg = bus.recv(left)
-                if msg is not None:
-                    v = on_rx(msg, t)
-                    if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
-                        u = (v.value.knee, v.value.ankle)
-        t_tick.append(clock() - tick0)
-    res.ticks = k
-    res.sim_time = k * dt
-    res.wall_time = time.perf_counter() - wall0
-    res.injected = injected
-    res.plant_rejects = {str(s): n for s, n in plant.checker.counts.items() if str(s) != "ok"}
-    res.torque_clamped = plant.torque_clamped
-    res.ctrl_rejects = plant.ctrl_rejects
-    if lat:
-        a = [x * 1e6 for x in lat]
+            self.u = (0.0, 0.0)
+            first = self.fault_first_miss if self.fault_first_miss >= 0 else k
+            res.detection_periods = k - first + 1
+        return Command(np.array(self.u), fault=reason)
+
+    def _fault(self, k: int, got: bool) -> str:
+        """Why the plant stops trusting the controller this period ("" while it does)."""
+        if self.lost.is_set():
+            return "controller liveliness token lost"
+        if self.missed_run >= self.cfg.watchdog_periods:
+            return f"{self.missed_run} control periods without a torque reply"
+        if not self.armed and time.perf_counter() - self.wall0 > self.cfg.reply_timeout:
+            return (f"no torque reply within {self.cfg.reply_timeout} s of the start "
+                    f"({k + 1} periods)")
+        state = self.plant.ctrl_state
+        if state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 and not got:
+            return f"controller reports state {CtrlState(state).name}"
+        return ""
+
+    def pace(self, k: int) -> None:
+        """Realtime: wait for tick ``k``'s wall slot, taking late replies meanwhile."""
+        if not self.realtime:
+            return
+        end = self.sched0 + k * self.dt
+        t = (k - 1) * self.dt
+        while True:
+            left = end - time.perf_counter()
+            if left <= 0:
+                break
+            msg = self.bus.recv(left)
+            if msg is not None:
+                v = self.on_rx(msg, t)
+                if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
+                    self.u = (v.value.knee, v.value.ankle)
+
+
+class GroundTruthRecorder:
+    """``/ground_truth`` of every period (deferred: serialized during the next round
+    trip)."""
+
+    def __init__(self, rec: Any, link: CanLink) -> None:
+        self.rec, self.link = rec, link
+
+    def record(self, obs: Observation, cmd: Command, truth: Truth) -> None:
+        self.rec.defer_call("/ground_truth", self.link.log_ns(obs.t), ground_truth_record,
+                            obs, truth)
+
+
+def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, proc: Any,
+          lost: threading.Event, stop: threading.Event, res: CosimResult,
+          ratio: tuple[float, float], limits: tuple[float, float],
+          progress: Callable[[int, float, int], None] | None) -> None:
+    """The tick loop (module docstring): :func:`orchestrator.loop.run_loop` of the FMU
+    plant and the CAN link, and the run's summary from it."""
+    link = CanLink(cfg, plan, bus, rec, proc, lost, res, ratio, limits)
+    usage = Usage()
+    log = run_loop(FmuPlant(fmu, cfg.dt), link, steps=cfg.steps,
+                   periods=round(cfg.max_time / cfg.dt), stop=stop, progress=progress,
+                   recorder=None if rec is None else GroundTruthRecorder(rec, link),
+                   timed=True)
+    res.steps = log.steps
+    if log.fall is not None:
+        res.fell, res.fall_code = True, log.fall.code
+    if log.fault:
+        res.faulted, res.fault_reason = True, log.fault
+    res.ticks = log.periods
+    res.sim_time = log.periods * cfg.dt
+    res.wall_time = time.perf_counter() - link.wall0
+    res.injected = link.injected
+    res.plant_rejects = {str(s): n for s, n in link.plant.checker.counts.items()
+                         if str(s) != "ok"}
+    res.torque_clamped = link.plant.torque_clamped
+    res.ctrl_rejects = link.plant.ctrl_rejects
+    if link.lat:
+        a = [x * 1e6 for x in link.lat]
         res.latency_us = {"median": _pct(a, 50), "p99": _pct(a, 99), "max": max(a),
                           "n": len(a)}
-    res.timing_us = tick_breakdown(t_tick, t_fmu, t_rt, t_rec, t_wait)
-    res.reply_early = reply_early_share(t_wait) if rec is not None else 0.0
+    res.timing_us = tick_breakdown(log.tick_ns, log.plant_ns, link.t_rt, link.t_rec,
+                                   link.t_wait)
+    res.reply_early = reply_early_share(link.t_wait) if rec is not None else 0.0
     res.usage = usage.since()
 
 
@@ -787,17 +804,16 @@ def _catch_up(res: CosimResult, rec: Any, t: float, k: int, dt: float, sched0: f
     return sched0 + skip * dt
 
 
-def measurement_record(y: list[float], contact: bool, t_us: int, counter: int
-                       ) -> dict[str, Any]:
-    """``/prosthesis/measurements``: the sensor outputs ``y`` (knee, ankle angle; knee,
-    ankle velocity; load; :data:`fmu_port.SENSORS`) as the controller decodes them (codec
-    quantization)."""
-    return {"knee_angle": codec.quantize_angle(y[0]),
-            "knee_velocity": codec.quantize_velocity(y[2]),
-            "ankle_angle": codec.quantize_angle(y[1]),
-            "ankle_velocity": codec.quantize_velocity(y[3]),
-            "foot_load": codec.quantize_load(y[4]), "contact": contact,
-            "socket_pitch": codec.quantize_pitch(y[6]) if math.isfinite(y[6]) else None,
+def measurement_record(s: Sensed, t_us: int, counter: int) -> dict[str, Any]:
+    """``/prosthesis/measurements``: what AMPRO3 senses (``s``) as the controller decodes it
+    (codec quantization)."""
+    return {"knee_angle": codec.quantize_angle(s.knee_angle),
+            "knee_velocity": codec.quantize_velocity(s.knee_velocity),
+            "ankle_angle": codec.quantize_angle(s.ankle_angle),
+            "ankle_velocity": codec.quantize_velocity(s.ankle_velocity),
+            "foot_load": codec.quantize_load(s.foot_load), "contact": s.contact,
+            "socket_pitch": (codec.quantize_pitch(s.socket_pitch)
+                             if math.isfinite(s.socket_pitch) else None),
             "sim_time_us": t_us % (1 << 32), "counter": counter}
 
 
@@ -810,13 +826,15 @@ def torque_record(c: codec.TorqueCmd, counter: int | None, timestamp: float,
             "cycle_time_us": round(timestamp * 1e6)}
 
 
-def ground_truth_record(t: float, fs: list[float], state: list[float], dom: int, tau: float,
-                        steps: int, u: tuple[float, float]) -> dict[str, Any]:
-    """``/ground_truth`` at sim time ``t`` [s]: socket force (Fx, Fz [N], My [N m]) under
-    the applied motor torques ``u``, q and qd (``state``, 12 + 12), domain 0 ps / 1 pns."""
-    return {"t": t, "socket_force": {"Fx": fs[0], "Fz": fs[1], "My": fs[2]},
-            "q": state[:12], "qd": state[12:], "domain": ("ps", "pns")[dom], "tau": tau,
-            "step": steps, "fallen": False, "u_applied": list(u)}
+def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
+    """``/ground_truth`` of one period: socket force (Fx, Fz [N], My [N m]) under the
+    applied motor torques, q and qd, domain, phase and step count."""
+    fs, u = truth.socket_force, truth.torque
+    return {"t": obs.t, "socket_force": {"Fx": float(fs[0]), "Fz": float(fs[1]),
+                                         "My": float(fs[2])},
+            "q": truth.q.tolist(), "qd": truth.qd.tolist(), "domain": obs.domain,
+            "tau": obs.tau, "step": obs.steps, "fallen": False,
+            "u_applied": [float(u[0]), float(u[1])]}
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],

@@ -39,14 +39,17 @@ from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
-from hp_model.simulator import HybridSimulator, SimOptions, SimResult, SimState
+from hp_model.simulator import HybridSimulator, Impact, SimOptions, SimResult, SimState
 from human_fmu.perturbation import perturbed_thetas
+from orchestrator.loop import LoopLog
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 
 DOMAINS = ("ps", "pns")
 #: not a prosthesis controller: full-state feedback linearization of the whole walker with
 #: perfect knowledge (the walkability label of a perturbed case)
 ORACLE = "oracle"
+#: the six actuated joints (the post-impact states of ScenarioResult)
+JOINTS = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 #: row of th_pk / th_pa in the y2 outputs of each domain (hp_model.outputs.OUTPUTS)
 KNEE_ROW = {"ps": 4, "pns": 3}
 
@@ -371,6 +374,48 @@ def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: 
         socket_force=r.lam[:, 3:6].copy(),
         fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
         touchdown_pitch=[float(im.foot_pitch) for im in r.impacts], q=r.q)
+
+
+def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
+                    scenario: Scenario, log: LoopLog, impacts: Sequence[Impact] = ()
+                    ) -> ScenarioResult:
+    """The :class:`ScenarioResult` of a closed loop's log (:func:`orchestrator.loop.run_loop`,
+    any plant); ``impacts``: the simulator's impact records (joint states after the ps
+    impacts, touchdown pitch), when the plant has them."""
+    n = log.periods
+    domain = np.array(log.domain, int)
+    tau = np.array(log.tau, float)
+    ref = np.array([knee_reference(gait, DOMAINS[d], ta)
+                    for d, ta in zip(domain, tau, strict=True)])
+    bounds, i0 = [], None
+    for i, d in enumerate(domain):
+        if d == 0 and i0 is None:
+            i0 = i
+        if d != 0 and i0 is not None:
+            bounds.append((i0, i))
+            i0 = None
+    if i0 is not None:
+        bounds.append((i0, n))
+    q = np.array(log.q, float).reshape(n, -1)
+    qd = np.array(log.qd, float).reshape(n, -1)
+    fs = np.array(log.socket_force, float).reshape(n, 3)
+    ps = domain == 0
+    names = model.coord_names
+    j = [names.index(c) for c in JOINTS]
+    pk, pa = names.index("th_pk"), names.index("th_pa")
+    post = [np.r_[im.q[j], im.qd_plus[j]] for im in impacts if im.into == "ps"]
+    fall = log.fall
+    return ScenarioResult(
+        scenario=scenario, t=np.array(log.t, float), tau=tau, domain=domain,
+        q_p=q[:, [pk, pa]], qd_p=qd[:, [pk, pa]], torque=np.array(log.torque).reshape(n, 2),
+        knee_ref=ref, mode=list(log.mode), V=np.array(log.V), rho=np.array(log.rho),
+        fallback_count=log.fallback_count, steps=int(log.steps), failed=fall is not None,
+        reason=fall.message() if fall else "",
+        fail_t=float(f"{fall.t:.3f}") if fall else None,
+        fail_tau=float(f"{fall.tau:.3f}") if fall else None,
+        fail_domain=fall.domain if fall else None, post_impact=post, step_bounds=bounds,
+        socket_force=fs, fs_in_tube=socket_force_in_tube(tube, tau[ps], fs[ps]),
+        touchdown_pitch=[float(im.foot_pitch) for im in impacts], q=q)
 
 
 def socket_force_in_tube(tube: ForceTube, tau: np.ndarray, force: np.ndarray

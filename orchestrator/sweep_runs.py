@@ -213,10 +213,9 @@ class Resources:
             OrderedDict()
         self.fmu = None
         if paths["fmu"] is not None:
-            from orchestrator.sweep_fmu import FmuPlant
+            from orchestrator.sweep_fmu import open_fmu
 
-            self.fmu = FmuPlant(Path(paths["fmu"]), self.workdir)
-            self.fmu.check_gait(self.gait)
+            self.fmu = open_fmu(Path(paths["fmu"]), self.workdir, self.gait)
 
     def context(self, draw: Draw) -> Any:
         """The controller context of a draw: its model errors and its tube scale."""
@@ -335,7 +334,8 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
                 raise ValueError("backend fmu but no FMU was given to the worker")
             q0, qd0 = initial_state(res.model, res.gait, scenario.initial_offset)
             r = run_fmu_scenario(res.fmu, res.model, res.gait, ctx, scenario,
-                                 human_thetas(res.gait, draw), q0, qd0)
+                                 human_thetas(res.gait, draw), q0, qd0,
+                                 encoder=encoder_of(draw))
         row.update(result_columns(r))
         row.update(error=None, error_kind=None)
     except Exception as e:  # a run's own failure is a result, not a crash of the sweep

@@ -251,7 +251,7 @@ class InitialGroup(_Group):
 
 GROUPS = ("human", "socket", "model", "initial", "plant", "sensor")
 #: quantities only the in-process simulator models (the FMU backend refuses them)
-SIMULATOR_ONLY = ("plant.", "sensor.", "human.stiffness", "human.delay")
+SIMULATOR_ONLY = ("plant.", "human.stiffness", "human.delay")
 
 
 class Family(_Strict):

@@ -26,14 +26,13 @@ from hp_model.gait_artifact import load_gait
 from orchestrator.cosim import (
     CosimConfig,
     FaultPlan,
-    Fmu,
     Plant,
     cpu_plan,
     node_summary,
     run_cosim,
     tick_breakdown,
 )
-from orchestrator.fmu_port import FORCES, INPUTS, SENSORS, STATE, FmuPort
+from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
 from orchestrator.recording import play_to_bus, read_recording, refit_tube, replay
 from prosthesis_controller import ProsthesisMeasurement
 from prosthesis_controller.controllers import make_controller
@@ -375,22 +374,25 @@ def test_node_summary_cpu_plan_and_tick_breakdown():
     assert b["overhead"] == pytest.approx(2.0 - 0.2 - 1.3)
 
 
-def test_fmu_port_matches_fmpy(files):
-    """The preallocated-buffer port reads and writes what fmpy's getReal/setReal do."""
-    fmu = Fmu(files["fmu"])
+def test_fmu_buffers_match_fmpy(files):
+    """HumanFmu's preallocated buffers read and write what fmpy's getReal/setReal do."""
+    fmu = HumanFmu(files["fmu"])
     try:
-        f, port = fmu.fmu, FmuPort(fmu.fmu, fmu.vr)
-        state0 = port.read()[1]
+        fmu.start()
+        f = fmu.fmu
+        state0 = fmu.read().state
         for k in range(20):
-            y, state, ints, fell = port.read()
-            assert y == f.getReal(fmu.vrs(SENSORS)) and state == f.getReal(fmu.vrs(STATE))
-            assert ints == f.getInteger(fmu.vrs(["domain", "steps", "fall_code"]))
-            assert fell == f.getBoolean(fmu.vrs(["fall"]))[0]
-            port.set_torque(0.01 * k, -0.02 * k)
+            r = fmu.read()
+            assert r.sensors == f.getReal(fmu.vrs(SENSORS))
+            assert r.state == f.getReal(fmu.vrs(STATE))
+            assert [r.domain, r.steps, r.fall_code] == f.getInteger(
+                fmu.vrs(["domain", "steps", "fall_code"]))
+            assert r.fell == f.getBoolean(fmu.vrs(["fall"]))[0]
+            fmu.set_torque(0.01 * k, -0.02 * k)
             assert f.getReal(fmu.vrs(INPUTS)) == [0.01 * k, -0.02 * k]
-            assert port.forces() == f.getReal(fmu.vrs(FORCES))
-            port.step(k * 1e-3, 1e-3)
-        assert port.read()[1] != state0  # the steps moved the state on
+            assert fmu.forces() == f.getReal(fmu.vrs(FORCES))
+            fmu.step(k * 1e-3, 1e-3)
+        assert fmu.read().state != state0  # the steps moved the state on
     finally:
         fmu.free()
 

@@ -280,7 +280,7 @@ def test_fmu_backend_equals_simulator(resources, tmp_path):
             assert a["error"] is None and b["error"] is None, (a["error"], b["error"])
             assert compare_rows(a, b, across_backends=True) == {}
             exact = {k for k in a if k not in VOLATILE and a[k] != b[k]}
-            assert exact <= {"backend", "run_hash", "reason", "socket_force_in_tube",
+            assert exact <= {"backend", "run_hash", "reason",
                              *TAU_COLUMNS}, exact
             assert a["fail_t"] == b["fail_t"] and a["steps_completed"] == b["steps_completed"]
     finally:

@@ -1,0 +1,18 @@
+"""The one closed loop of plant, link and recorder (:func:`run_loop`), the plants (the
+in-process simulator, the human FMU) and the in-process links; see ``run.py``."""
+
+from orchestrator.loop.link import (
+    IDEAL_ENCODER,
+    Command,
+    ControllerLink,
+    Encoder,
+    Link,
+    OracleLink,
+    measurement,
+)
+from orchestrator.loop.plant import FmuPlant, Observation, Plant, Sensed, SimulatorPlant, Truth
+from orchestrator.loop.run import LoopLog, Recorder, run_loop
+
+__all__ = ["IDEAL_ENCODER", "Command", "ControllerLink", "Encoder", "FmuPlant", "Link",
+           "LoopLog", "Observation", "OracleLink", "Plant", "Recorder", "Sensed",
+           "SimulatorPlant", "Truth", "measurement", "run_loop"]

@@ -1,0 +1,186 @@
+"""The plant side of the closed loop: what the prosthesis senses, ground truth, how a walk
+ends; one interface, two implementations (the in-process simulator, the human FMU).
+
+A plant is stepped one control period at a time by :func:`orchestrator.loop.run_loop`:
+
+    obs = plant.observe()        # the period's start: sensors, domain, steps, (a fall)
+    truth = plant.actuate(u)     # hold the motor torque u over the period (None: the
+                                 # plant's own feedback linearization, the oracle); the
+                                 # ground truth under it; plant.fall may now be set
+    plant.advance()              # integrate the period
+
+What AMPRO3 senses (:func:`sensed`, the one sensor map): knee and ankle angle (rad) and
+velocity (rad/s); the foot load cell, the ground normal force on the prosthesis foot in ps,
+clipped at 0 (a load cell does not pull), 0 in pns; contact = the domain is ps; the socket
+IMU's pitch (rad; NaN without one).  The FMU computes the same outputs in its generated C
+(q, qd of th_pk, th_pa; lam[1]); :class:`FmuPlant` applies the same clipping and contact
+rule to them through :func:`sensed`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from hp_model.falls import Fall, FallReason
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.simulator import HybridSimulator
+from human_fmu.instance import DOMAINS, HumanFmu
+
+
+@dataclass(frozen=True)
+class Sensed:
+    """What the prosthesis's own sensors see (before encoder noise and quantization)."""
+
+    knee_angle: float  # rad
+    ankle_angle: float  # rad
+    knee_velocity: float  # rad/s
+    ankle_velocity: float  # rad/s
+    foot_load: float  # N, >= 0
+    contact: bool
+    socket_pitch: float  # rad, NaN without an IMU row
+
+
+def sensed(domain: str, angles: tuple[float, float], velocities: tuple[float, float],
+           normal_force: float, socket_pitch: float) -> Sensed:
+    """The one map from the plant's state to what AMPRO3 senses (module docstring);
+    ``normal_force``: the ground's normal force on the prosthesis foot (N) when in ps."""
+    ps = domain == "ps"
+    return Sensed(float(angles[0]), float(angles[1]), float(velocities[0]),
+                  float(velocities[1]), max(float(normal_force), 0.0) if ps else 0.0, ps,
+                  float(socket_pitch))
+
+
+@dataclass(frozen=True)
+class Observation:
+    """The plant at the start of period ``k`` (t = k dt)."""
+
+    k: int
+    t: float  # s
+    domain: str  # "ps" / "pns"
+    steps: int  # impacts so far
+    tau: float  # the plant's phase (ground truth, not a sensor)
+    sensed: Sensed
+    #: the plant ended the walk during the previous period and holds that period's state:
+    #: nothing new to observe (the FMU's friction-cone, non-finite and diverged falls)
+    held: bool = False
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth of a period under the applied motor torque (for logs and recordings)."""
+
+    q: np.ndarray  # (12,) rad / m, model coordinates
+    qd: np.ndarray  # (12,)
+    socket_force: np.ndarray  # (3,) F_x, F_z (N), M_y (N m) on the socket
+    torque: np.ndarray  # (2,) motor torques applied (N m, after the plant's bound)
+
+
+class Plant(Protocol):
+    """What :func:`orchestrator.loop.run_loop` drives (module docstring)."""
+
+    dt: float
+
+    def observe(self) -> Observation: ...
+
+    def actuate(self, torque: np.ndarray | None) -> Truth: ...
+
+    def advance(self) -> None: ...
+
+    @property
+    def fall(self) -> Fall | None: ...
+
+
+class SimulatorPlant:
+    """The in-process hybrid simulator (:class:`HybridSimulator`) as a plant, started from
+    (q0, qd0) in ``domain``; ``mode`` "human" (the prosthesis torque comes from the loop)
+    or "full" (the plant's own feedback linearization of all six torques: the oracle)."""
+
+    def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
+                 domain: str = "ps", *, mode: str = "human") -> None:
+        self.sim = sim
+        self.model: HumanProsthesisModel = sim.model
+        self.dt = sim.opt.dt
+        self.run = sim.start(q0, qd0, domain, mode=mode)
+        names = self.model.coord_names
+        self._pk, self._pa = names.index("th_pk"), names.index("th_pa")
+        self._pitch = self.model.pitch_row("socket")
+        self._k = 0
+
+    @property
+    def fall(self) -> Fall | None:
+        return self.run.fall
+
+    def observe(self) -> Observation:
+        st = self.run.observe()
+        pk, pa = self._pk, self._pa
+        s = sensed(st.domain, (st.q[pk], st.q[pa]), (st.qd[pk], st.qd[pa]),
+                   float(st.lam[1]), float(self._pitch @ st.q))
+        return Observation(self._k, st.t, st.domain, st.steps, st.tau, s)
+
+    def actuate(self, torque: np.ndarray | None) -> Truth:
+        self.run.apply(torque)
+        r = self.run
+        return Truth(r.last_q, r.last_qd, r.last_lam[3:6], r.last_torque)
+
+    def advance(self) -> None:
+        self.run.advance()
+        self._k += 1
+
+
+#: falls the FMU decides before integrating a step, or undoes: its outputs then hold the
+#: previous period's state (README of human_fmu), which the loop has already observed
+HELD = frozenset({FallReason.NON_FINITE, FallReason.FRICTION_CONE, FallReason.DIVERGED})
+
+
+class FmuPlant:
+    """The human FMU (:class:`HumanFmu`, already started) as a plant; the step size is
+    ``dt``.  A fall reported by the FMU becomes a :class:`Fall` at the observed time,
+    domain and phase (the FMU reports its code, not the event's numbers)."""
+
+    def __init__(self, fmu: HumanFmu, dt: float) -> None:
+        self.fmu, self.dt = fmu, float(dt)
+        self._k = 0
+        self._fall: Fall | None = None
+        self._obs: Observation | None = None
+        self._state: list[float] = []
+        self.last_reading = None
+
+    @property
+    def fall(self) -> Fall | None:
+        return self._fall
+
+    def observe(self) -> Observation:
+        r = self.fmu.read()
+        self.last_reading = r
+        y = r.sensors
+        dom = DOMAINS[r.domain]
+        s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
+        held = False
+        if r.fell:
+            reason = FallReason(r.fall_code)
+            held = reason in HELD and self._obs is not None
+            prev = self._obs if held and self._obs is not None else None
+            t = prev.t if prev is not None else self._k * self.dt
+            self._fall = Fall(reason, t, prev.domain if prev else dom,
+                              prev.tau if prev else float(y[5]))
+        self._state = r.state
+        obs = Observation(self._k, self._k * self.dt, dom, r.steps, float(y[5]), s, held)
+        if not held:
+            self._obs = obs
+        return obs
+
+    def actuate(self, torque: np.ndarray | None) -> Truth:
+        if torque is None:
+            raise ValueError("the FMU plant needs a prosthesis torque (no oracle mode)")
+        u0, u1 = float(torque[0]), float(torque[1])
+        self.fmu.set_torque(u0, u1)
+        st = self._state
+        return Truth(np.asarray(st[:12]), np.asarray(st[12:]), np.asarray(self.fmu.forces()),
+                     np.array([u0, u1]))
+
+    def advance(self) -> None:
+        self.fmu.step(self._k * self.dt, self.dt)  # False at a fall: the next read shows it
+        self._k += 1

@@ -1,0 +1,121 @@
+"""The one closed loop: a plant, a link, an optional recorder, wired once.
+
+Per period k (t = k dt):
+
+1. ``obs = plant.observe()``; a plant that holds the previous period's state after ending
+   the walk (``obs.held``) has nothing new: the loop ends without a sample;
+2. ``cmd = link.exchange(obs)`` (the controller's torque for the period);
+3. ``truth = plant.actuate(cmd.torque)``; the sample (obs, cmd, truth) is logged and
+   recorded;
+4. the loop ends on a fall (``plant.fall``), a link fault, ``steps`` impacts, ``periods``
+   periods, or ``stop``; else ``plant.advance()`` and ``link.pace(k)``.
+
+The experiments, the sweeps (both backends) and the co-simulation all run through
+:func:`run_loop`; the order above is :meth:`hp_model.simulator.HybridSimulator.run`'s, so
+every plant logs the same samples.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+
+from hp_model.falls import Fall
+from orchestrator.loop.link import Command, Link
+from orchestrator.loop.plant import Observation, Plant, Truth
+
+
+class Recorder(Protocol):
+    def record(self, obs: Observation, cmd: Command, truth: Truth) -> None: ...
+
+
+@dataclass
+class LoopLog:
+    """Per-period samples of one run and how it ended."""
+
+    t: list[float] = field(default_factory=list)
+    tau: list[float] = field(default_factory=list)
+    domain: list[int] = field(default_factory=list)  # 0 ps, 1 pns
+    q: list[np.ndarray] = field(default_factory=list)  # (12,) ground truth
+    qd: list[np.ndarray] = field(default_factory=list)
+    torque: list[np.ndarray] = field(default_factory=list)  # (2,) motor torques applied
+    socket_force: list[np.ndarray] = field(default_factory=list)  # (3,)
+    mode: list[str] = field(default_factory=list)
+    V: list[float] = field(default_factory=list)
+    rho: list[float] = field(default_factory=list)
+    fallback_count: int = 0
+    steps: int = 0
+    fall: Fall | None = None
+    fault: str = ""  # the link's failure that ended the run
+    #: per period (ns), when ``timed``: the plant's calls, the link's exchange, whole tick
+    plant_ns: list[int] = field(default_factory=list)
+    link_ns: list[int] = field(default_factory=list)
+    tick_ns: list[int] = field(default_factory=list)
+
+    @property
+    def periods(self) -> int:
+        return len(self.t)
+
+    def add(self, obs: Observation, cmd: Command, truth: Truth) -> None:
+        self.t.append(obs.t)
+        self.tau.append(obs.tau)
+        self.domain.append(0 if obs.domain == "ps" else 1)
+        self.q.append(truth.q)
+        self.qd.append(truth.qd)
+        self.torque.append(truth.torque if cmd.torque is None else
+                           np.asarray(cmd.torque, float))
+        self.socket_force.append(truth.socket_force)
+        self.mode.append(cmd.mode)
+        self.V.append(cmd.V)
+        self.rho.append(cmd.rho)
+        self.fallback_count = cmd.fallback_count
+
+
+def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None,
+             recorder: Recorder | None = None, stop: threading.Event | None = None,
+             progress: Callable[[int, float, int], None] | None = None,
+             timed: bool = False) -> LoopLog:
+    """Run the closed loop (module docstring) until a fall, a link fault, ``steps``
+    impacts, ``periods`` periods (None: no limit) or ``stop``; ``progress(k, t, steps)``
+    every 100 periods; ``timed``: per-period timings in the log."""
+    log = LoopLog()
+    clock = time.perf_counter_ns
+    k = 0
+    while stop is None or not stop.is_set():
+        t0 = clock()
+        obs = plant.observe()
+        t1 = clock()
+        if obs.held:
+            break
+        cmd = link.exchange(obs)
+        t2 = clock()
+        truth = plant.actuate(cmd.torque)
+        log.add(obs, cmd, truth)
+        log.steps = obs.steps
+        if recorder is not None:
+            recorder.record(obs, cmd, truth)
+        t3 = clock()
+        if cmd.fault:
+            log.fault = cmd.fault
+        done = (plant.fall is not None or bool(cmd.fault) or obs.steps >= steps
+                or (periods is not None and k + 1 >= periods))
+        if not done:
+            plant.advance()
+        t4 = clock()
+        if timed:
+            log.plant_ns.append((t1 - t0) + (t4 - t3) + (t3 - t2))
+            log.link_ns.append(t2 - t1)
+            log.tick_ns.append(t4 - t0)
+        if done:
+            break
+        k += 1
+        link.pace(k)
+        if progress is not None and k % 100 == 0:
+            progress(k, obs.t, obs.steps)
+    log.fall = plant.fall
+    return log
