@@ -1,14 +1,10 @@
 """Closed-loop scenarios: the full hybrid human-prosthesis model on the one simulator
 (:class:`hp_model.simulator.HybridSimulator`, mode ``human``), the human side tracking its
 outputs by feedback linearization (along perturbed thetas for perturbation cases), and a
-prosthesis controller at 1 kHz (zero-order hold) fed ONLY prosthesis measurements:
-
-    knee/ankle angle and velocity  = q, qd of th_pk, th_pa
-    foot load                      = lam[1] (ground normal force on the prosthesis foot) in
-                                     ps, else 0 (clipped at 0: a load cell does not pull)
-    contact                        = domain == "ps"
-
-Falls detected by the simulator end a run as a failure with its reason, time and tau.
+prosthesis controller at 1 kHz (zero-order hold) fed ONLY what AMPRO3 senses
+(:func:`orchestrator.loop.plant.sensed`), all through the one closed loop
+(:func:`orchestrator.loop.run_loop`).  Falls detected by the simulator end a run as a
+failure with its :class:`hp_model.falls.Fall`.
 
 The plant need not be the controller's model: ``run_scenario`` takes the plant's model
 (e.g. another human body) and the controller's context separately, the human's tracking
@@ -23,8 +19,6 @@ generator the FMU uses), so the in-process and FMU runs of a case agree.
 
 from __future__ import annotations
 
-import math
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -39,10 +33,19 @@ from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
-from hp_model.simulator import HybridSimulator, Impact, SimOptions, SimResult, SimState
+from hp_model.simulator import HybridSimulator, Impact, SimOptions
 from human_fmu.perturbation import perturbed_thetas
-from orchestrator.loop import LoopLog
-from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
+from orchestrator.loop import (
+    IDEAL_ENCODER,
+    ControllerLink,
+    Encoder,
+    Link,
+    LoopLog,
+    OracleLink,
+    SimulatorPlant,
+    run_loop,
+)
+from prosthesis_controller import ControllerContext, make_controller
 
 DOMAINS = ("ps", "pns")
 #: not a prosthesis controller: full-state feedback linearization of the whole walker with
@@ -180,81 +183,6 @@ def initial_state(model: HumanProsthesisModel, gait: Gait,
     return q, qd
 
 
-@dataclass(frozen=True)
-class Encoder:
-    """AMPRO3's sensors: on the joint encoders zero-mean white noise (standard deviations)
-    and quantization steps (round to the nearest multiple; 0: none) on the angles (rad) and
-    velocities (rad/s); on the IMU's socket pitch a constant ``imu_bias`` and white noise
-    ``imu_noise`` (rad); ``seed`` makes the noise of a run reproducible."""
-
-    angle_noise: float = 0.0
-    velocity_noise: float = 0.0
-    angle_resolution: float = 0.0
-    velocity_resolution: float = 0.0
-    imu_bias: float = 0.0
-    imu_noise: float = 0.0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        for name in ("angle_noise", "velocity_noise", "angle_resolution",
-                     "velocity_resolution", "imu_noise"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ValueError(f"encoder {name} must be finite and >= 0, got {v}")
-        if not np.isfinite(self.imu_bias):
-            raise ValueError(f"encoder imu_bias must be finite, got {self.imu_bias}")
-
-    @property
-    def ideal(self) -> bool:
-        return (self.angle_noise, self.velocity_noise, self.angle_resolution,
-                self.velocity_resolution, self.imu_bias, self.imu_noise) == (0.0,) * 6
-
-    def pitch(self, rng: np.random.Generator, pitch: float) -> float:
-        """The socket pitch (rad) as the IMU reports it (the noise drawn only when there
-        is some, so the encoders' noise sequence does not depend on the IMU)."""
-        if self.imu_noise > 0:
-            pitch += self.imu_noise * float(rng.standard_normal())
-        return pitch + self.imu_bias
-
-    def read(self, rng: np.random.Generator, angles: np.ndarray, vel: np.ndarray
-             ) -> tuple[np.ndarray, np.ndarray]:
-        """(angles, velocities) as the encoders report them."""
-        a = angles + self.angle_noise * rng.standard_normal(2)
-        v = vel + self.velocity_noise * rng.standard_normal(2)
-        if self.angle_resolution > 0:
-            a = np.round(a / self.angle_resolution) * self.angle_resolution
-        if self.velocity_resolution > 0:
-            v = np.round(v / self.velocity_resolution) * self.velocity_resolution
-        return a, v
-
-
-IDEAL_ENCODER = Encoder()
-
-
-def measurement(model_idx: tuple[int, int], t: float, st: SimState,
-                encoder: Encoder = IDEAL_ENCODER, rng: np.random.Generator | None = None,
-                pitch_row: np.ndarray | None = None) -> ProsthesisMeasurement:
-    """What AMPRO3 senses, from the simulator state (module docstring); ``pitch_row``: the
-    model's ``pitch_row("socket")`` for the IMU's socket pitch (NaN without it)."""
-    pk, pa = model_idx
-    load = max(float(st.lam[1]), 0.0) if st.domain == "ps" else 0.0
-    ang = np.array([st.q[pk], st.q[pa]], float)
-    vel = np.array([st.qd[pk], st.qd[pa]], float)
-    pitch = math.nan if pitch_row is None else float(pitch_row @ st.q)
-    if not encoder.ideal:
-        g = rng if rng is not None else np.random.default_rng(encoder.seed)
-        ang, vel = encoder.read(g, ang, vel)
-        if pitch_row is not None:
-            pitch = encoder.pitch(g, pitch)
-    return ProsthesisMeasurement(t=float(t), knee_angle=float(ang[0]),
-                                 ankle_angle=float(ang[1]), knee_vel=float(vel[0]),
-                                 ankle_vel=float(vel[1]), foot_load=load,
-                                 contact=st.domain == "ps", socket_pitch=pitch)
-
-
-_REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")
-
-
 def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                  scenario: Scenario, *, context: ControllerContext | None = None,
                  options: SimOptions | None = None,
@@ -276,38 +204,20 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     gains = gait.gains_array if human_gains is None else np.asarray(human_gains, float)
     sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
                           options or SimOptions(), human_delay=human_delay)
-    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
-    if scenario.controller == ORACLE:
-        sim.thetas = oracle_thetas(gait, sim.thetas)
-        return _run_oracle(model, gait, tube, scenario, sim, idx, q0, qd0)
-    ctx = context or ControllerContext(gait, tube, model, None)
-    ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
-    ctrl.reset()
-    rng = np.random.default_rng(encoder.seed)
-    pitch_row = model.pitch_row("socket")
-    torques: list[np.ndarray] = []
-    modes: list[str] = []
-    Vs: list[float] = []
-    rhos: list[float] = []
-    fallbacks = [0]
-
-    def policy(t: float, st: SimState) -> np.ndarray:
-        out = ctrl.tick(measurement(idx, t, st, encoder, rng, pitch_row))
-        dg = out.diagnostics
-        torques.append(np.array(out.torque, float))
-        modes.append(str(dg.mode))
-        Vs.append(float(dg.V))
-        rhos.append(float(dg.rho))
-        fallbacks[0] = int(dg.fallback_count)
-        return out.torque
-
     if q0 is None or qd0 is None:
         q0, qd0 = initial_state(model, gait, scenario.initial_offset)
-    r = sim.run(q0, qd0, "ps", steps=scenario.steps, policy=policy)
-    n = r.t.size
-    tq = np.array(torques[:n]) if torques else np.zeros((0, 2))
-    return _result(model, gait, tube, scenario, r, idx, tq, modes[:n], np.array(Vs[:n]),
-                   np.array(rhos[:n]), fallbacks[0])
+    link: Link
+    if scenario.controller == ORACLE:
+        sim.thetas = oracle_thetas(gait, sim.thetas)
+        plant = SimulatorPlant(sim, q0, qd0, mode="full")
+        link = OracleLink()
+    else:
+        ctx = context or ControllerContext(gait, tube, model, None)
+        ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
+        plant = SimulatorPlant(sim, q0, qd0)
+        link = ControllerLink(ctrl, encoder)
+    log = run_loop(plant, link, steps=scenario.steps)
+    return scenario_result(model, gait, tube, scenario, log, plant.run.impacts)
 
 
 def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -325,55 +235,6 @@ def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.
         th[-3:] = nominal[-3:]  # v_hip, p_min, p_max: the phase is the prosthesis's
         out[d] = th
     return out
-
-
-def _run_oracle(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
-                sim: HybridSimulator, idx: tuple[int, int], q0: np.ndarray | None,
-                qd0: np.ndarray | None) -> ScenarioResult:
-    """The :data:`ORACLE` run: no controller, the plant's own feedback linearization of the
-    prosthesis outputs too (mode full)."""
-    if q0 is None or qd0 is None:
-        q0, qd0 = initial_state(model, gait, scenario.initial_offset)
-    r = sim.run(q0, qd0, "ps", steps=scenario.steps)
-    n = r.t.size
-    return _result(model, gait, tube, scenario, r, idx, np.array(r.u[:, 4:6]),
-                   [ORACLE] * n, np.zeros(n), np.zeros(n), 0)
-
-
-def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,
-            r: SimResult, idx: tuple[int, int], tq: np.ndarray, modes: list[str],
-            V: np.ndarray, rho: np.ndarray, fallback_count: int) -> ScenarioResult:
-    """The :class:`ScenarioResult` of a finished simulation."""
-    n = r.t.size
-    ref = np.array([knee_reference(gait, "ps" if dd == 0 else "pns", ta)
-                    for dd, ta in zip(r.domain, r.tau, strict=True)])
-    bounds, i0 = [], None
-    for i, dd in enumerate(r.domain):
-        if dd == 0 and i0 is None:
-            i0 = i
-        if dd != 0 and i0 is not None:
-            bounds.append((i0, i))
-            i0 = None
-    if i0 is not None:
-        bounds.append((i0, n))
-    j = [model.coord_names.index(c) for c in
-         ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")]
-    post = [np.r_[im.q[j], im.qd_plus[j]] for im in r.impacts if im.into == "ps"]
-    ft = ftau = fd = None
-    if r.failed:
-        m = _REASON.search(r.reason)
-        if m:
-            ft, fd, ftau = float(m.group(1)), m.group(2), float(m.group(3))
-    ps = r.domain == 0
-    return ScenarioResult(
-        scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
-        q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
-        mode=modes, V=V, rho=rho, fallback_count=fallback_count, steps=r.steps,
-        failed=r.failed, reason=r.reason,
-        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
-        socket_force=r.lam[:, 3:6].copy(),
-        fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
-        touchdown_pitch=[float(im.foot_pitch) for im in r.impacts], q=r.q)
 
 
 def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,

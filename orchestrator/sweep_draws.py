@@ -133,7 +133,7 @@ class Draw:
 
     @property
     def encoder(self) -> tuple[float, float, float, float, float, float]:
-        """:class:`orchestrator.scenarios.Encoder`'s fields (but the seed), in order."""
+        """:class:`orchestrator.loop.Encoder`'s fields (but the seed), in order."""
         return (self.angle_noise, self.velocity_noise, self.angle_resolution,
                 self.velocity_resolution, self.imu_bias, self.imu_noise)
 

@@ -32,9 +32,9 @@ from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.outputs import Y2_COORDS
+from orchestrator.loop import Encoder
 from orchestrator.scenarios import (
     ORACLE,
-    Encoder,
     Perturbation,
     Scenario,
     ScenarioResult,

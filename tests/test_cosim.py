@@ -23,6 +23,7 @@ from bus_schemas.mcap_schemas import CHANNELS, JsonDecoderFactory, read_messages
 from bus_schemas.protocol import CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
+from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
 from orchestrator.cosim import (
     CosimConfig,
     FaultPlan,
@@ -32,9 +33,8 @@ from orchestrator.cosim import (
     run_cosim,
     tick_breakdown,
 )
-from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
+from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
 from orchestrator.recording import play_to_bus, read_recording, refit_tube, replay
-from prosthesis_controller import ProsthesisMeasurement
 from prosthesis_controller.controllers import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
@@ -127,22 +127,11 @@ def test_lockstep_equals_in_process_simulation(lockstep, files, model):
     from hp_model.force_tube import load_tube
 
     ctrl = make_controller(CTRL, gait, load_tube(files["tube"], gait.hash()), model)
-    ctrl.reset()
-    qa, qv, ql, qt = (codec.quantize_angle, codec.quantize_velocity, codec.quantize_load,
-                      codec.quantize_torque)
-    pitch = model.pitch_row("socket")
-
-    def policy(t, st):
-        us = round(t * 1e6)
-        ps = st.domain == "ps"
-        m = ProsthesisMeasurement(us * 1e-6, qa(st.q[10]), qa(st.q[11]), qv(st.qd[10]),
-                                  qv(st.qd[11]), ql(st.lam[1] if ps else 0.0), ps,
-                                  codec.quantize_pitch(float(pitch @ st.q)))
-        u = ctrl.tick(m).torque
-        return np.array([qt(float(u[0])), qt(float(u[1]))])
-
     q0, qd0 = start_state(gait)
-    sim = simulator(model, gait).run(q0, qd0, "ps", steps=10, policy=policy)
+    plant = SimulatorPlant(simulator(model, gait), q0, qd0)
+    log = run_loop(plant, ControllerLink(ctrl, quantize=True), steps=10)
+    sim = plant.run.result()
+    assert log.periods == len(sim.q)
     # both runs walk all their steps: the comparison covers the whole run, impacts included
     assert not res.fell and res.steps == 10, res
     assert not sim.failed and sim.steps == 10, sim.reason

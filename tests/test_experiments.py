@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from hp_model.simulator import SimState
+from orchestrator.loop import measurement, observe_state
 from orchestrator.scenarios import (
     NOMINAL,
     Perturbation,
     Scenario,
     initial_state,
-    measurement,
     run_scenario,
     simulated_tube,
     socket_force_in_tube,
@@ -32,10 +32,10 @@ def tube(model, template_gait):
 def test_measurement_is_prosthesis_only():
     q, qd = np.arange(12.0), -np.arange(12.0)
     lam = np.array([1.0, 700.0, 0, 5, 6, 7])
-    m = measurement((10, 11), 0.5, SimState(0.5, "ps", q, qd, 0.3, lam, 0))
+    m = measurement(observe_state(0, SimState(0.5, "ps", q, qd, 0.3, lam, 0), (10, 11)))
     assert (m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel) == (10, 11, -10, -11)
     assert m.foot_load == 700.0 and m.contact
-    m = measurement((10, 11), 0.5, SimState(0.5, "pns", q, qd, 0.3, lam, 0))
+    m = measurement(observe_state(0, SimState(0.5, "pns", q, qd, 0.3, lam, 0), (10, 11)))
     assert m.foot_load == 0.0 and not m.contact
 
 

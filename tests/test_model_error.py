@@ -23,7 +23,8 @@ from hp_model.artifacts import ArtifactError
 from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ModelErrorBound, load_tube, save_tube
 from hp_model.simulator import HybridSimulator, SimOptions
-from orchestrator.scenarios import NOMINAL, initial_state, measurement
+from orchestrator.loop import measurement, observe_state
+from orchestrator.scenarios import NOMINAL, initial_state
 from prosthesis_controller import ControllerContext, make_controller
 from prosthesis_controller.config import ControllerConfig, UncertaintyConfig
 from tests.committed_gaits import ROOT
@@ -196,7 +197,7 @@ def closed_loop_run(model, demo_gait, demo_tube, subsystem):
     diag = []
 
     def policy(t, st):
-        out = ctrl.tick(measurement(idx, t, st))
+        out = ctrl.tick(measurement(observe_state(0, st, idx)))
         diag.append(out.diagnostics)
         return out.torque
 

@@ -16,9 +16,9 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
+from orchestrator.loop import Encoder
 from orchestrator.scenarios import (
     ORACLE,
-    Encoder,
     Scenario,
     initial_state,
     oracle_thetas,

@@ -10,9 +10,17 @@ from orchestrator.loop.link import (
     OracleLink,
     measurement,
 )
-from orchestrator.loop.plant import FmuPlant, Observation, Plant, Sensed, SimulatorPlant, Truth
+from orchestrator.loop.plant import (
+    FmuPlant,
+    Observation,
+    Plant,
+    Sensed,
+    SimulatorPlant,
+    Truth,
+    observe_state,
+)
 from orchestrator.loop.run import LoopLog, Recorder, run_loop
 
 __all__ = ["IDEAL_ENCODER", "Command", "ControllerLink", "Encoder", "FmuPlant", "Link",
            "LoopLog", "Observation", "OracleLink", "Plant", "Recorder", "Sensed",
-           "SimulatorPlant", "Truth", "measurement", "run_loop"]
+           "SimulatorPlant", "Truth", "measurement", "observe_state", "run_loop"]

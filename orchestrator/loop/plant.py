@@ -19,6 +19,7 @@ rule to them through :func:`sensed`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -26,7 +27,7 @@ import numpy as np
 
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.simulator import HybridSimulator
+from hp_model.simulator import HybridSimulator, SimState
 from human_fmu.instance import DOMAINS, HumanFmu
 
 
@@ -93,6 +94,18 @@ class Plant(Protocol):
     def fall(self) -> Fall | None: ...
 
 
+def observe_state(k: int, st: SimState, knee_ankle: tuple[int, int],
+                  pitch_row: np.ndarray | None = None) -> Observation:
+    """The observation of the simulator's state ``st`` at period ``k``: the model
+    coordinates ``knee_ankle`` of th_pk, th_pa; ``pitch_row``: the model's
+    ``pitch_row("socket")`` for the IMU's socket pitch (NaN without it)."""
+    pk, pa = knee_ankle
+    pitch = math.nan if pitch_row is None else float(pitch_row @ st.q)
+    s = sensed(st.domain, (st.q[pk], st.q[pa]), (st.qd[pk], st.qd[pa]), float(st.lam[1]),
+               pitch)
+    return Observation(k, st.t, st.domain, st.steps, st.tau, s)
+
+
 class SimulatorPlant:
     """The in-process hybrid simulator (:class:`HybridSimulator`) as a plant, started from
     (q0, qd0) in ``domain``; ``mode`` "human" (the prosthesis torque comes from the loop)
@@ -114,16 +127,12 @@ class SimulatorPlant:
         return self.run.fall
 
     def observe(self) -> Observation:
-        st = self.run.observe()
-        pk, pa = self._pk, self._pa
-        s = sensed(st.domain, (st.q[pk], st.q[pa]), (st.qd[pk], st.qd[pa]),
-                   float(st.lam[1]), float(self._pitch @ st.q))
-        return Observation(self._k, st.t, st.domain, st.steps, st.tau, s)
+        return observe_state(self._k, self.run.observe(), (self._pk, self._pa), self._pitch)
 
     def actuate(self, torque: np.ndarray | None) -> Truth:
         self.run.apply(torque)
-        r = self.run
-        return Truth(r.last_q, r.last_qd, r.last_lam[3:6], r.last_torque)
+        q, qd, u, lam = self.run.last_sample()
+        return Truth(q, qd, lam[3:6], u[4:6])
 
     def advance(self) -> None:
         self.run.advance()
