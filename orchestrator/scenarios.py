@@ -8,7 +8,8 @@ prosthesis controller at 1 kHz (zero-order hold) fed ONLY prosthesis measurement
                                      ps, else 0 (clipped at 0: a load cell does not pull)
     contact                        = domain == "ps"
 
-Falls detected by the simulator end a run as a failure with its reason, time and tau.
+Falls detected by the simulator end a run as a failure: its :class:`hp_model.falls.Fall`
+(reason, time, domain, tau and the event's numbers).
 
 The plant need not be the controller's model: ``run_scenario`` takes the plant's model
 (e.g. another human body) and the controller's context separately, the human's tracking
@@ -24,7 +25,6 @@ generator the FMU uses), so the in-process and FMU runs of a case agree.
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -35,6 +35,7 @@ from characterization.force_tube_fit import deviation_profiles, fit_tube, nomina
 from characterization.gait_verification import make_simulator
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop
+from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -102,11 +103,7 @@ class ScenarioResult:
     rho: np.ndarray
     fallback_count: int
     steps: int
-    failed: bool
-    reason: str
-    fail_t: float | None
-    fail_tau: float | None
-    fail_domain: str | None
+    fall: Fall | None  # how the run ended (None: no fall)
     post_impact: list[np.ndarray] = field(default_factory=list)  # joint states after ps impacts
     step_bounds: list[tuple[int, int]] = field(default_factory=list)  # ps segments [i0, i1)
     socket_force: np.ndarray | None = None  # (n, 3) F_s (ground truth, never fed back)
@@ -117,6 +114,28 @@ class ScenarioResult:
     @property
     def success(self) -> bool:
         return not self.failed and self.steps >= self.scenario.steps
+
+    @property
+    def failed(self) -> bool:
+        return self.fall is not None
+
+    @property
+    def reason(self) -> str:
+        """The fall's one-line message ("" without a fall)."""
+        return self.fall.message() if self.fall is not None else ""
+
+    @property
+    def fail_t(self) -> float | None:
+        """Time of the fall (s)."""
+        return None if self.fall is None else self.fall.t
+
+    @property
+    def fail_tau(self) -> float | None:
+        return None if self.fall is None else self.fall.tau
+
+    @property
+    def fail_domain(self) -> str | None:
+        return None if self.fall is None else self.fall.domain
 
     def knee_rms(self, domain: str | None = "ps") -> float:
         """RMS of th_pk - B_pk(tau) over the samples of ``domain`` (None: all), rad."""
@@ -249,9 +268,6 @@ def measurement(model_idx: tuple[int, int], t: float, st: SimState,
                                  contact=st.domain == "ps", socket_pitch=pitch)
 
 
-_REASON = re.compile(r"t = ([-0-9.]+) s, (\w+), tau = ([-0-9.]+)")
-
-
 def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                  scenario: Scenario, *, context: ControllerContext | None = None,
                  options: SimOptions | None = None,
@@ -356,18 +372,12 @@ def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: 
     j = [model.coord_names.index(c) for c in
          ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")]
     post = [np.r_[im.q[j], im.qd_plus[j]] for im in r.impacts if im.into == "ps"]
-    ft = ftau = fd = None
-    if r.failed:
-        m = _REASON.search(r.reason)
-        if m:
-            ft, fd, ftau = float(m.group(1)), m.group(2), float(m.group(3))
     ps = r.domain == 0
     return ScenarioResult(
         scenario=scenario, t=r.t, tau=r.tau, domain=r.domain,
         q_p=r.q[:, list(idx)], qd_p=r.qd[:, list(idx)], torque=tq, knee_ref=ref,
         mode=modes, V=V, rho=rho, fallback_count=fallback_count, steps=r.steps,
-        failed=r.failed, reason=r.reason,
-        fail_t=ft, fail_tau=ftau, fail_domain=fd, post_impact=post, step_bounds=bounds,
+        fall=r.fall, post_impact=post, step_bounds=bounds,
         socket_force=r.lam[:, 3:6].copy(),
         fs_in_tube=socket_force_in_tube(tube, r.tau[ps], r.lam[ps, 3:6]),
         touchdown_pitch=[float(im.foot_pitch) for im in r.impacts], q=r.q)
@@ -455,6 +465,7 @@ def summary(r: ScenarioResult) -> dict[str, Any]:
             "initial_offset_rad": list(r.scenario.initial_offset),
             "steps_requested": r.scenario.steps, "steps_completed": r.steps,
             "success": r.success, "failed": r.failed, "reason": r.reason,
+            "fall_reason": r.fall.reason.label if r.fall is not None else None,
             "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
             "duration_s": float(r.t[-1]) if r.t.size else 0.0,
             "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),

@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hp_model.falls import Fall, FallReason
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from human_fmu import FALL_CODES
 from human_fmu.instance import FmuInstance
 from orchestrator.scenarios import (
     Scenario,
@@ -35,7 +35,7 @@ from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make
 
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
            "socket_Fx", "socket_Fz", "socket_My", "socket_pitch")
-CONE_FALL = 5  # reported one period late (module docstring)
+CONE_FALL = FallReason.FRICTION_CONE  # reported one period late (module docstring)
 DOMAINS = ("ps", "pns")
 
 
@@ -134,14 +134,9 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
     domain = np.array(dom_log, int)
     tau = np.array(tau_log)
     n = domain.size
-    failed = code != 0
-    fail_t = fail_tau = fail_d = None
-    reason = ""
-    if failed and n:  # worded, and rounded, as the simulator's reason (scenarios._REASON)
-        fail_d = DOMAINS[domain[-1]]
-        reason = (f"t = {t_log[-1]:.3f} s, {fail_d}, tau = {tau[-1]:.3f}: "
-                  f"{FALL_CODES.get(code, f'fall code {code}')}")
-        fail_t, fail_tau = float(f"{t_log[-1]:.3f}"), float(f"{tau[-1]:.3f}")
+    # the FMU's reason at the simulator's fall sample (the last one logged)
+    fall = (Fall(FallReason(code), t_log[-1], DOMAINS[domain[-1]], float(tau[-1]))
+            if code != FallReason.NONE else None)
     ref = np.array([knee_reference(gait, DOMAINS[d], ta) for d, ta in zip(domain, tau,
                                                                            strict=True)])
     bounds, i0 = [], None
@@ -160,6 +155,5 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
         scenario=scenario, t=np.array(t_log), tau=tau, domain=domain,
         q_p=np.array(q_log).reshape(n, 2), qd_p=np.array(qd_log).reshape(n, 2),
         torque=np.array(torques).reshape(n, 2), knee_ref=ref, mode=modes, V=np.array(Vs),
-        rho=np.array(rhos), fallback_count=fallbacks, steps=int(steps), failed=failed,
-        reason=reason, fail_t=fail_t, fail_tau=fail_tau, fail_domain=fail_d,
+        rho=np.array(rhos), fallback_count=fallbacks, steps=int(steps), fall=fall,
         step_bounds=bounds)
