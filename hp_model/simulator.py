@@ -158,9 +158,11 @@ def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau
                t_step: float, bad_cone: int, lam: np.ndarray, heel_pitch: float | None
                ) -> Fall | None:
     """The fall at the start of a period (t s, domain d, state x, phase tau), if any: the
-    checks of the module docstring in order, given the running phase peak, the start of the
-    step t_step (s), the periods the friction cone has been left (bad_cone), the stance
-    wrench lam and the pitch (rad) of a touchdown on heel or toe in the last period."""
+    checks of the module docstring, first found in the order non-finite, diverged, hip
+    height, phase backward, tau_max, stalled, friction cone, heel or toe; given the running
+    phase peak, the start of the step t_step (s), the periods the friction cone has been left
+    (bad_cone), the stance wrench lam and the pitch (rad) of a touchdown on heel or toe in
+    the last period."""
     nq = x.size // 2
     q, qd = x[:nq], x[nq:]
     fz, fx = float(lam[1]), float(lam[0])
@@ -194,8 +196,8 @@ class HybridSimulator:
     feedback linearization; see the module docstring.
 
     ``thetas`` are the packed gait parameters per domain the human side tracks (the nominal
-    gait, or a perturbed one); ``gains`` = (eps, kp, kd).  With ``prosthesis_policy`` absent
-    the prosthesis torques also come from feedback linearization (mode "full").
+    gait, or a perturbed one); ``gains`` = (eps, kp, kd).  Without a prosthesis policy the
+    prosthesis torques also come from feedback linearization (mode "full").
     ``human_delay`` (s): None for the continuous human, else the delayed human of the module
     docstring.  The configuration of runs: :meth:`start` (one period at a time) and
     :meth:`run` keep the state of a run out of it.
