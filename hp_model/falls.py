@@ -67,7 +67,7 @@ class Fall:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "reason", FallReason(self.reason))
-        object.__setattr__(self, "values", dict(self.values))
+        object.__setattr__(self, "values", {k: float(x) for k, x in self.values.items()})
 
     @property
     def code(self) -> int:
@@ -79,11 +79,11 @@ class Fall:
         r = self.reason
         try:
             if r is FallReason.HIP_LOW:
-                return f"hip height {v['hip_height']:.3f} m below {v['limit']:g} m"
+                return f"hip height {v['hip_height']:.3f} m below {v['limit']} m"
             if r is FallReason.PHASE_BACKWARD:
                 return f"phase ran backward (tau {self.tau:.3f}, peak {v['tau_peak']:.3f})"
             if r is FallReason.NO_TOUCHDOWN:
-                return f"no touchdown by tau = {v['limit']:g}"
+                return f"no touchdown by tau = {v['limit']}"
             if r is FallReason.PHASE_STALLED:
                 return f"phase stalled (no touchdown within {v['limit']:g} s)"
             if r is FallReason.FRICTION_CONE:

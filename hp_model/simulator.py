@@ -22,7 +22,9 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   (the foot slap that follows a heel-first touchdown), i.e. that ankle angle changes by
   minus the foot pitch; a residual pitch above ``max_touchdown_pitch`` ends the run as a
   fall ("landed on heel or toe").  The correction is logged with the impact.
-- Fall detection (checked at every period; ends the run as a failure with its reason): hip
+- Fall detection (checked at every period; ends the run with a :class:`hp_model.falls.Fall`:
+  its :class:`~hp_model.falls.FallReason`, time, domain, phase and the numbers of the
+  event; a touchdown on heel or toe is reported at the start of the next period): hip
   height below ``min_hip_height``; phase tau running backward more than ``tau_backward``;
   the stance foot pulling on the ground or slipping (normal force below ``min_normal_force``
   or |F_x| > mu F_z, sustained over ``cone_periods`` periods); no touchdown by
@@ -42,6 +44,13 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   the start).  In mode full the prosthesis rows of v are not delayed (sampled at 1/dt).
   With a delay of 0 this is the human's feedback sampled at 1/dt (close to, not equal to,
   the continuous human).
+
+Stepping: :meth:`HybridSimulator.start` returns a :class:`SimulationRun`, the run's mutable
+state, advanced one period at a time by ``observe()`` (the state at the period's start, under
+the torque held so far), ``apply(u_p)`` (the period's motor torque; logs the period's sample
+and runs the fall checks) and ``advance()`` (integrates the period).
+:meth:`HybridSimulator.run` is that loop with a policy: observe, policy, apply, stop at a
+fall or when the steps or the duration are reached, advance.
 """
 
 from __future__ import annotations
@@ -53,6 +62,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS
 
@@ -122,8 +132,16 @@ class SimResult:
     tau: np.ndarray
     domain: np.ndarray  # (n,) 0 = ps, 1 = pns
     impacts: list[Impact] = field(default_factory=list)
-    failed: bool = False
-    reason: str = ""
+    fall: Fall | None = None  # how the run ended (None: steps or duration reached)
+
+    @property
+    def failed(self) -> bool:
+        return self.fall is not None
+
+    @property
+    def reason(self) -> str:
+        """The fall's one-line message ("" without a fall)."""
+        return self.fall.message() if self.fall is not None else ""
 
     @property
     def steps(self) -> int:
@@ -136,15 +154,53 @@ class SimResult:
 DOMAIN_CODE = {"ps": 0, "pns": 1}
 
 
+def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau_peak: float,
+               t_step: float, bad_cone: int, lam: np.ndarray, heel_pitch: float | None
+               ) -> Fall | None:
+    """The fall at the start of a period (t s, domain d, state x, phase tau), if any: the
+    checks of the module docstring, first found in the order non-finite, diverged, hip
+    height, phase backward, tau_max, stalled, friction cone, heel or toe; given the running
+    phase peak, the start of the step t_step (s), the periods the friction cone has been left
+    (bad_cone), the stance wrench lam and the pitch (rad) of a touchdown on heel or toe in
+    the last period."""
+    nq = x.size // 2
+    q, qd = x[:nq], x[nq:]
+    fz, fx = float(lam[1]), float(lam[0])
+    if not np.all(np.isfinite(x)):
+        return Fall(FallReason.NON_FINITE, t, d, tau)
+    speed = float(np.max(np.abs(qd)))
+    if speed > opt.max_speed:
+        return Fall(FallReason.DIVERGED, t, d, tau, {"speed": speed, "limit": opt.max_speed})
+    if q[1] < opt.min_hip_height:
+        return Fall(FallReason.HIP_LOW, t, d, tau,
+                    {"hip_height": q[1], "limit": opt.min_hip_height})
+    if tau < tau_peak - opt.tau_backward:
+        return Fall(FallReason.PHASE_BACKWARD, t, d, tau,
+                    {"tau_peak": tau_peak, "limit": opt.tau_backward})
+    if tau > opt.tau_max:
+        return Fall(FallReason.NO_TOUCHDOWN, t, d, tau, {"limit": opt.tau_max})
+    if t - t_step > opt.max_step_time:
+        return Fall(FallReason.PHASE_STALLED, t, d, tau,
+                    {"step_time": t - t_step, "limit": opt.max_step_time})
+    if bad_cone >= opt.cone_periods:
+        return Fall(FallReason.FRICTION_CONE, t, d, tau,
+                    {"F_x": fx, "F_z": fz, "mu": opt.mu, "periods": bad_cone})
+    if heel_pitch is not None:
+        return Fall(FallReason.HEEL_OR_TOE, t, d, tau,
+                    {"pitch": heel_pitch, "limit": opt.max_touchdown_pitch})
+    return None
+
+
 class HybridSimulator:
     """Simulates the 12-DOF model under the human's (and optionally the prosthesis's)
     feedback linearization; see the module docstring.
 
     ``thetas`` are the packed gait parameters per domain the human side tracks (the nominal
-    gait, or a perturbed one); ``gains`` = (eps, kp, kd).  With ``prosthesis_policy`` absent
-    the prosthesis torques also come from feedback linearization (mode "full").
+    gait, or a perturbed one); ``gains`` = (eps, kp, kd).  Without a prosthesis policy the
+    prosthesis torques also come from feedback linearization (mode "full").
     ``human_delay`` (s): None for the continuous human, else the delayed human of the module
-    docstring.
+    docstring.  The configuration of runs: :meth:`start` (one period at a time) and
+    :meth:`run` keep the state of a run out of it.
     """
 
     def __init__(self, model: HumanProsthesisModel, closed_loop: ClosedLoop,
@@ -156,7 +212,6 @@ class HybridSimulator:
         if human_delay is not None and not (np.isfinite(human_delay) and human_delay >= 0):
             raise ValueError(f"human_delay must be finite and >= 0 s, got {human_delay}")
         self.human_delay = human_delay
-        self._vhold: np.ndarray | None = None  # the feedback term held over the period
         self.model, self.cl = model, closed_loop
         self._u_limit = np.asarray(model.torque_limits[4:6], dtype=float)  # motor N m
         self.thetas = {d: np.asarray(thetas[d], dtype=float) for d in model.domains}
@@ -173,14 +228,16 @@ class HybridSimulator:
             self._landing[d] = (model.frame_index(sole), model.coord_names.index(ankle))
 
     # -- pieces ------------------------------------------------------------------------------
-    def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float
-             ) -> tuple[np.ndarray, float]:
-        if self._vhold is not None:
+    def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float,
+             vhold: np.ndarray | None) -> tuple[np.ndarray, float]:
+        """One RK4 step of h s: the new state and the swing sole height (m) at its end;
+        ``vhold``: the delayed human's feedback held over the period (None: continuous)."""
+        if vhold is not None:
             f = self.dfs[f"rk4_d{mode}_{d}"]
             if mode == "full":
-                xn, z = f(x, self.thetas[d], self._vhold, h)
+                xn, z = f(x, self.thetas[d], vhold, h)
             else:
-                xn, z = f(x, self.thetas[d], self._vhold, u_p, h)
+                xn, z = f(x, self.thetas[d], vhold, u_p, h)
             return xn.copy(), float(z[0])
         f = self.fs[f"rk4_{mode}_{d}"]
         if mode == "full":
@@ -195,26 +252,27 @@ class HybridSimulator:
         g = self.gains
         return np.r_[g[0] * y1, g[1] * y2 + g[2] * dy2]
 
-    def _hold(self, mode: str, d: str, pipeline: deque[np.ndarray], v_now: np.ndarray
-              ) -> None:
-        """Set the feedback held over the period: the human rows from the pipeline's
-        oldest entry, in mode full the prosthesis rows of ``v_now``."""
+    @staticmethod
+    def _hold(mode: str, d: str, pipeline: deque[np.ndarray], v_now: np.ndarray
+              ) -> np.ndarray:
+        """The feedback held over the period: the human rows from the pipeline's oldest
+        entry, in mode full the prosthesis rows of ``v_now``."""
         rows = list(HUMAN_OUTPUTS[d])
         if mode == "full":
             v = v_now.copy()
             v[rows] = pipeline[0][rows]
-            self._vhold = v
-        else:
-            self._vhold = pipeline[0][rows].copy()
+            return v
+        return pipeline[0][rows].copy()
 
-    def _eval(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-        if self._vhold is not None:
+    def _eval(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray,
+              vhold: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The torques u (6, N m) and constraint wrenches lam (6) at state x."""
+        if vhold is not None:
             f = self.dfs[f"xdot_d{mode}_{d}"]
             if mode == "full":
-                _, u, lam = f(x, self.thetas[d], self._vhold)
+                _, u, lam = f(x, self.thetas[d], vhold)
             else:
-                _, u, lam = f(x, self.thetas[d], self._vhold, u_p)
+                _, u, lam = f(x, self.thetas[d], vhold, u_p)
             return u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
         if mode == "full":
@@ -240,14 +298,14 @@ class HybridSimulator:
         return pitch
 
     def _locate(self, mode: str, d: str, x0: np.ndarray, u_p: np.ndarray, h: float,
-                z0: float, z1: float) -> tuple[float, np.ndarray]:
+                vhold: np.ndarray | None, z0: float, z1: float) -> tuple[float, np.ndarray]:
         """s in (0, 1] with swing height of rk4(x0, s h) = 0 (Illinois method)."""
         a, b, fa, fb = 0.0, 1.0, z0, z1
         xs, side = None, 0
         s = 1.0
         for _ in range(self.opt.event_iters):
             s = (a * fb - b * fa) / (fb - fa)
-            xs, z = self._rk4(mode, d, x0, u_p, s * h)
+            xs, z = self._rk4(mode, d, x0, u_p, s * h, vhold)
             if abs(z) <= self.opt.event_tol:
                 break
             if z > 0:
@@ -263,124 +321,187 @@ class HybridSimulator:
         assert xs is not None
         return s, xs
 
-    # -- the run --------------------------------------------------------------------------------
+    # -- runs ---------------------------------------------------------------------------------
+    def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str, mode: str = "human"
+              ) -> SimulationRun:
+        """A run from (q0, qd0) in ``domain``, to be stepped one period at a time (module
+        docstring).  ``mode`` "human": the prosthesis motor torque comes from
+        :meth:`SimulationRun.apply`; "full": feedback linearization of all six torques."""
+        return SimulationRun(self, q0, qd0, domain, mode)
+
     def run(self, q0: np.ndarray, qd0: np.ndarray, domain: str, *, steps: int | None = None,
             duration: float | None = None, policy: Policy | None = None,
             progress: Callable[[float, int], None] | None = None) -> SimResult:
         """Simulate from (q0, qd0) in ``domain`` until ``steps`` impacts or ``duration`` s
-        (whichever comes first; at least one must be given), or a fall."""
+        (whichever comes first; at least one must be given), or a fall; ``policy`` gives the
+        prosthesis motor torque of each period (None: mode full)."""
         if steps is None and duration is None:
             raise ValueError("give steps or duration")
-        opt, nq = self.opt, self.nq
-        mode = "full" if policy is None else "human"
-        t_end = np.inf if duration is None else duration
         max_steps = np.inf if steps is None else steps
-        x = np.r_[np.asarray(q0, float), np.asarray(qd0, float)]
-        d = domain
-        t, h = 0.0, opt.dt / opt.substeps
-        u_p = np.zeros(2)
-        log_t, log_q, log_qd, log_u, log_lam, log_tau, log_d = [], [], [], [], [], [], []
-        impacts: list[Impact] = []
-        tau_peak = -np.inf
-        t_step = 0.0  # start of the current step: the start, then the last impact
-        bad_cone = 0
-        failed, reason = False, ""
-        z_prev = float(self.mfs[f"guard_{d}"](x[:nq], x[nq:])[0][0])
-        n_periods = int(np.floor(t_end / opt.dt + 1e-9)) if np.isfinite(t_end) else None
-        k = 0
-        self._vhold = None
-        pipeline: deque[np.ndarray] = deque()
-        n_delay = (round(self.human_delay / opt.dt) if self.human_delay is not None
-                   else None)
+        n_periods = (int(np.floor(duration / self.opt.dt + 1e-9))
+                     if duration is not None and np.isfinite(duration) else None)
+        r = self.start(q0, qd0, domain, mode="full" if policy is None else "human")
         while True:
-            q, qd = x[:nq], x[nq:]
-            tau = self.phase(d, q)
-            if n_delay is not None:  # the delayed human (module docstring)
-                v_now = self._feedback(d, x)
-                pipeline.append(v_now)
-                while len(pipeline) > n_delay + 1:
-                    pipeline.popleft()
-                self._hold(mode, d, pipeline, v_now)
-            state_u, lam = self._eval(mode, d, x, u_p)
-            if policy is not None:
-                st = SimState(t, d, q.copy(), qd.copy(), tau, lam, len(impacts))
-                # bounded at the plant whatever the policy computed (the FMU does the same)
-                u_p = np.clip(np.asarray(policy(t, st), dtype=float).reshape(2),
-                              -self._u_limit, self._u_limit)
-                state_u, lam = self._eval(mode, d, x, u_p)
-            log_t.append(t)
-            log_q.append(q.copy())
-            log_qd.append(qd.copy())
-            log_u.append(state_u)
-            log_lam.append(lam)
-            log_tau.append(tau)
-            log_d.append(DOMAIN_CODE[d])
-            # fall detection
-            tau_peak = max(tau_peak, tau)
-            fz, fx = lam[1], lam[0]
-            bad_cone = bad_cone + 1 if (fz < opt.min_normal_force or abs(fx) > opt.mu * fz) \
-                else 0
-            if not np.all(np.isfinite(x)):
-                failed, reason = True, "non-finite state"
-            elif np.max(np.abs(qd)) > opt.max_speed:
-                failed, reason = True, (f"state diverged (a speed above {opt.max_speed:g} "
-                                        f"m/s or rad/s)")
-            elif q[1] < opt.min_hip_height:
-                failed, reason = True, f"hip height {q[1]:.3f} m below {opt.min_hip_height} m"
-            elif tau < tau_peak - opt.tau_backward:
-                failed, reason = True, f"phase ran backward (tau {tau:.3f}, peak {tau_peak:.3f})"
-            elif tau > opt.tau_max:
-                failed, reason = True, f"no touchdown by tau = {opt.tau_max}"
-            elif t - t_step > opt.max_step_time:
-                failed, reason = True, (f"phase stalled (no touchdown within "
-                                        f"{opt.max_step_time:g} s)")
-            elif bad_cone >= opt.cone_periods:
-                failed, reason = True, (f"stance foot left the friction cone "
-                                        f"(F_x {fx:.0f} N, F_z {fz:.0f} N)")
-            if failed:
-                reason = f"t = {t:.3f} s, {d}, tau = {tau:.3f}: {reason}"
+            st = r.observe()
+            fall = r.apply(None if policy is None else policy(st.t, st))
+            if fall is not None or r.steps >= max_steps or \
+                    (n_periods is not None and r.periods >= n_periods):
                 break
-            if len(impacts) >= max_steps or (n_periods is not None and k >= n_periods):
-                break
-            if progress is not None and k % 100 == 0:
-                progress(t, len(impacts))
-            # one period: substeps RK4 steps with event location
-            for j in range(opt.substeps):
-                rest = h
-                while rest > 0:
-                    xn, z = self._rk4(mode, d, x, u_p, rest)
-                    armed = self.phase(d, x[:nq]) >= opt.guard_tau_min
-                    if armed and z_prev > 0 and z <= 0:
-                        s, xe = self._locate(mode, d, x, u_p, rest, z_prev, z)
-                        nxt = self.model.domains[d].next
-                        assert nxt is not None
-                        qe, qdm = xe[:nq].copy(), xe[nq:]
-                        pitch = self._flatten_landing_foot(nxt, qe)
-                        qdp, imp = self.mfs[f"impact_{nxt}"](qe, qdm)
-                        impacts.append(Impact(t + j * h + (h - rest) + s * rest, nxt, qe,
-                                              qdm.copy(), qdp.copy(), imp.copy(), pitch))
-                        if abs(pitch) > opt.max_touchdown_pitch:
-                            failed, reason = True, (f"landed on heel or toe (foot pitch "
-                                                    f"{pitch:.3f} rad)")
-                        x = np.r_[qe, qdp]
-                        d = nxt
-                        if n_delay is not None:  # the pipeline restarts at touchdown
-                            pipeline.clear()
-                            v_now = self._feedback(d, x)
-                            pipeline.append(v_now)
-                            self._hold(mode, d, pipeline, v_now)
-                        z_prev = float(self.mfs[f"guard_{d}"](qe, qdp)[0][0])
-                        tau_peak = -np.inf
-                        t_step = impacts[-1].t
-                        rest -= s * rest
-                        if rest <= 1e-15 * h:
-                            break
-                        continue
-                    x, z_prev = xn, z
-                    rest = 0.0
-            t = (k + 1) * opt.dt
-            k += 1
-        self._vhold = None
-        return SimResult(t=np.array(log_t), q=np.array(log_q), qd=np.array(log_qd),
-                         u=np.array(log_u), lam=np.array(log_lam), tau=np.array(log_tau),
-                         domain=np.array(log_d), impacts=impacts, failed=failed, reason=reason)
+            if progress is not None and r.periods % 100 == 0:
+                progress(r.t, r.steps)
+            r.advance()
+        return r.result()
+
+
+class SimulationRun:
+    """One run of a :class:`HybridSimulator`, stepped one period of ``dt`` at a time:
+    :meth:`observe`, :meth:`apply` (mode "human": the prosthesis motor torque; mode "full":
+    None), then :meth:`advance` unless :attr:`fall` is set.  Holds the run's mutable state
+    (hybrid state, log, impacts, fall-check counters, the delayed human's pipeline)."""
+
+    def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray, domain: str,
+                 mode: str = "human") -> None:
+        if mode not in ("human", "full"):
+            raise ValueError(f"mode must be 'human' or 'full', got {mode!r}")
+        if domain not in sim.model.domains:
+            raise ValueError(f"unknown domain {domain!r}")
+        self.sim, self.mode = sim, mode
+        self.domain = domain
+        self.t = 0.0  # s, start of the current period
+        self.periods = 0  # periods integrated
+        self.impacts: list[Impact] = []
+        self.fall: Fall | None = None
+        self._x = np.r_[np.asarray(q0, float), np.asarray(qd0, float)]
+        self._u_p = np.zeros(2)  # motor torque held (N m)
+        self._log: tuple[list, ...] = ([], [], [], [], [], [], [])  # t q qd u lam tau d
+        self._tau_peak = -np.inf
+        self._t_step = 0.0  # start of the current step: the start, then the last impact
+        self._bad_cone = 0
+        self._heel: float | None = None  # pitch (rad) of a touchdown on heel or toe
+        nq = sim.nq
+        self._z_prev = float(sim.mfs[f"guard_{domain}"](self._x[:nq], self._x[nq:])[0][0])
+        self._n_delay = (round(sim.human_delay / sim.opt.dt) if sim.human_delay is not None
+                         else None)
+        self._pipeline: deque[np.ndarray] = deque()
+        self._vhold: np.ndarray | None = None  # the delayed human's feedback held
+        self._obs: tuple[float, np.ndarray, np.ndarray] | None = None  # tau, u, lam
+        self._applied = False
+
+    @property
+    def steps(self) -> int:
+        """Impacts so far."""
+        return len(self.impacts)
+
+    def observe(self) -> SimState:
+        """The state at the start of the current period, with the constraint wrenches under
+        the torque held so far (the delayed human's pipeline takes this period's error;
+        observing again in the same period returns the same state)."""
+        sim, x, d = self.sim, self._x, self.domain
+        if self._obs is None:
+            tau = sim.phase(d, x[:sim.nq])
+            if self._n_delay is not None:  # the delayed human (module docstring)
+                v_now = sim._feedback(d, x)
+                self._pipeline.append(v_now)
+                while len(self._pipeline) > self._n_delay + 1:
+                    self._pipeline.popleft()
+                self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
+            u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            self._obs = (tau, u, lam)
+        tau, _, lam = self._obs
+        return SimState(self.t, d, x[:sim.nq].copy(), x[sim.nq:].copy(), tau, lam.copy(),
+                        self.steps)
+
+    def apply(self, u_p: np.ndarray | None) -> Fall | None:
+        """Hold the prosthesis motor torque ``u_p`` (2, N m; clamped to the device's limits,
+        ``model.torque_limits[4:6]``) over this period (mode full: None), log the period's
+        sample and run the fall checks: the fall, or None."""
+        if self.fall is not None:
+            raise RuntimeError(f"the run has ended: {self.fall.message()}")
+        if self._applied:
+            raise RuntimeError("apply() was already called in this period; advance() first")
+        sim, x, d = self.sim, self._x, self.domain
+        self.observe()
+        assert self._obs is not None
+        tau, u, lam = self._obs
+        if self.mode == "human":
+            if u_p is None:
+                raise ValueError("mode human: give the prosthesis motor torque (2,)")
+            lim = sim._u_limit  # bounded at the plant (the FMU does the same)
+            self._u_p = np.clip(np.asarray(u_p, dtype=float).reshape(2), -lim, lim)
+            u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+        elif u_p is not None:
+            raise ValueError("mode full: the torques come from feedback linearization; "
+                             "apply(None)")
+        self._applied = True
+        nq = sim.nq
+        for log, v in zip(self._log, (self.t, x[:nq].copy(), x[nq:].copy(), u, lam, tau,
+                                      DOMAIN_CODE[d]), strict=True):
+            log.append(v)
+        opt = sim.opt
+        self._tau_peak = max(self._tau_peak, tau)
+        fz, fx = lam[1], lam[0]
+        self._bad_cone = (self._bad_cone + 1
+                          if (fz < opt.min_normal_force or abs(fx) > opt.mu * fz) else 0)
+        self.fall = fall_check(opt, self.t, d, x, tau, self._tau_peak, self._t_step,
+                               self._bad_cone, lam, self._heel)
+        return self.fall
+
+    def advance(self) -> None:
+        """Integrate the current period (``substeps`` RK4 steps with event location and
+        impacts) under the torque applied; t advances by dt."""
+        if self.fall is not None:
+            raise RuntimeError(f"the run has ended: {self.fall.message()}")
+        if not self._applied:
+            raise RuntimeError("apply() the period's torque before advance()")
+        sim, opt, nq, mode = self.sim, self.sim.opt, self.sim.nq, self.mode
+        x, d, u_p, t = self._x, self.domain, self._u_p, self.t
+        h = opt.dt / opt.substeps
+        for j in range(opt.substeps):
+            rest = h
+            while rest > 0:
+                xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold)
+                armed = sim.phase(d, x[:nq]) >= opt.guard_tau_min
+                if armed and self._z_prev > 0 and z <= 0:
+                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z)
+                    nxt = sim.model.domains[d].next
+                    assert nxt is not None
+                    qe, qdm = xe[:nq].copy(), xe[nq:]
+                    pitch = sim._flatten_landing_foot(nxt, qe)
+                    qdp, imp = sim.mfs[f"impact_{nxt}"](qe, qdm)
+                    self.impacts.append(Impact(t + j * h + (h - rest) + s * rest, nxt, qe,
+                                               qdm.copy(), qdp.copy(), imp.copy(), pitch))
+                    if abs(pitch) > opt.max_touchdown_pitch:
+                        self._heel = pitch
+                    x = np.r_[qe, qdp]
+                    d = nxt
+                    if self._n_delay is not None:  # the pipeline restarts at touchdown
+                        self._pipeline.clear()
+                        v_now = sim._feedback(d, x)
+                        self._pipeline.append(v_now)
+                        self._vhold = sim._hold(mode, d, self._pipeline, v_now)
+                    self._z_prev = float(sim.mfs[f"guard_{d}"](qe, qdp)[0][0])
+                    self._tau_peak = -np.inf
+                    self._t_step = self.impacts[-1].t
+                    rest -= s * rest
+                    if rest <= 1e-15 * h:
+                        break
+                    continue
+                x, self._z_prev = xn, z
+                rest = 0.0
+        self._x, self.domain = x, d
+        self.periods += 1
+        self.t = self.periods * opt.dt
+        self._obs, self._applied = None, False
+
+    def last_sample(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q, qd, u, lam) of the last logged period (after :meth:`apply`): the state at its
+        start, the torques applied (6; the prosthesis's are motor torques) and the
+        constraint wrenches (foot, socket) under them."""
+        _, q, qd, u, lam, _, _ = (v[-1] for v in self._log)
+        return q, qd, u, lam
+
+    def result(self) -> SimResult:
+        """The log so far (one sample per applied period), the impacts and the fall."""
+        t, q, qd, u, lam, tau, d = (np.array(v) for v in self._log)
+        return SimResult(t=t, q=q, qd=qd, u=u, lam=lam, tau=tau, domain=d,
+                         impacts=list(self.impacts), fall=self.fall)

@@ -8,7 +8,6 @@ Depends only on :mod:`hp_model`.
 from human_fmu.build import MODEL_IDENTIFIER, BuildInfo, FmuBuildError, build_fmu
 from human_fmu.initial import initial_state
 from human_fmu.perturbation import perturbed_thetas
-from human_fmu.variables import FALL_CODES
 
-__all__ = ["FALL_CODES", "MODEL_IDENTIFIER", "BuildInfo", "FmuBuildError", "build_fmu",
+__all__ = ["MODEL_IDENTIFIER", "BuildInfo", "FmuBuildError", "build_fmu",
            "initial_state", "perturbed_thetas"]

@@ -12,7 +12,8 @@ headers, the same core and generated C, :mod:`human_fmu.fmi3`):
                                 the FMI version (included by hpfmu.c)
     sources/hpfmu_casadi.inc    the plant and the human's controller (CasADi-generated,
                                 included by hpfmu.c: every function in it static)
-    sources/hpfmu_config.h      variables, start values and model constants (generated)
+    sources/hpfmu_config.h      variables, start values, model constants and the fall codes
+                                (generated; the codes from hp_model.falls.FallReason)
     sources/fmi2*.h             the FMI 2.0 headers
     sources/buildDescription.xml
     resources/build_info.json   hashes, compiler flags, timings
@@ -42,6 +43,7 @@ import hp_model
 from hp_model.artifacts import ArtifactError
 from hp_model.closed_loop import ClosedLoop
 from hp_model.compiled import densified, find_c_compiler, generate_c
+from hp_model.falls import c_definitions
 from hp_model.gait_artifact import Gait, load_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
@@ -261,6 +263,8 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
         "/* frame held flat in the domain (= the frame that lands when entering it) */",
         f"static const int HPFMU_STANCE_FRAME[2] = {{{frames[0]}, {frames[1]}}};",
         f"static const int HPFMU_LANDING_ANKLE[2] = {{{ankles[0]}, {ankles[1]}}};",
+        "/* fall codes (the fall_code output) and messages: hp_model.falls.FallReason */",
+        *c_definitions().splitlines(),
         *config_macros(),
         "/* socket_pitch = row . q: the world pitch of the prosthesis top link */",
         f"static const double HPFMU_SOCKET_PITCH_ROW[{model.nq}] = {{"
@@ -390,8 +394,8 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
     core_src = (C_DIR / "hpfmu_core.inc").read_text()
     table_key = json.dumps([(v.name, v.type, v.causality, v.vr, fmt_value(v.start)
                              if v.start is not None else None) for v in table.vars])
-    guid = _guid(casadi_src, wrapper_src + core_src, table_key, model_hash, gait_hash,
-                 f"fmi{fmi_version}")
+    guid = _guid(casadi_src, wrapper_src + core_src + c_definitions(), table_key, model_hash,
+                 gait_hash, f"fmi{fmi_version}")
     rows = {d: cl.vcs[d].c_row for d in DOMAIN_ORDER}
     header = config_header(table, model, guid, g.degree, n_theta, rows)
     generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")

@@ -14,6 +14,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from hp_model.falls import FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import Y2_COORDS
 from hp_model.simulator import SimOptions
@@ -30,18 +31,6 @@ UNITS: dict[str, dict[str, int]] = {
     "N": {"kg": 1, "m": 1, "s": -2},
     "N.m": {"kg": 1, "m": 2, "s": -2},
     "N.s": {"kg": 1, "m": 1, "s": -1},
-}
-
-FALL_CODES = {
-    0: "walking (no fall)",
-    1: "non-finite state",
-    2: "hip height below min_hip_height",
-    3: "phase tau ran backward more than tau_backward",
-    4: "no touchdown by tau_max",
-    5: "stance foot left the friction cone for cone_periods steps",
-    6: "landed on heel or toe (touchdown pitch above max_touchdown_pitch)",
-    7: "phase stalled: no touchdown within max_step_time of the start or the last impact",
-    8: "state diverged: a generalized speed above max_speed",
 }
 
 
@@ -159,7 +148,7 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("steps", "Integer", "output", "impacts so far")
     t.add("fall", "Boolean", "output", "the walker fell (integration stopped)")
     t.add("fall_code", "Integer", "output",
-          "why: " + "; ".join(f"{k} {v}" for k, v in FALL_CODES.items()))
+          "why: " + "; ".join(f"{int(r)} {r.description}" for r in FallReason))
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains

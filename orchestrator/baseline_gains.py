@@ -21,6 +21,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -37,7 +38,16 @@ class GainResult:
     steps: int
     walks: bool
     knee_rms: float
-    reason: str
+    fall: Fall | None
+
+    @property
+    def end(self) -> str:
+        """How the run ended, for the table: walks, or the fall's reason and time."""
+        if self.walks:
+            return "walks"
+        if self.fall is None:
+            return f"stopped after {self.steps} steps"
+        return f"{self.fall.reason.label} at t = {self.fall.t:.3f} s"
 
 
 def _config(controller: str, stiffness: float, damping: float):
@@ -63,7 +73,7 @@ def grid_search(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, contro
         ctx = ControllerContext(gait, tube, model, _config(controller, kp, kd))
         r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, steps), context=ctx,
                          closed_loop=cl)
-        out.append(GainResult(kp, kd, r.steps, r.success, r.knee_rms("ps"), r.reason))
+        out.append(GainResult(kp, kd, r.steps, r.success, r.knee_rms("ps"), r.fall))
     return out
 
 
@@ -97,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n{controller}: | {names[0]} | {names[1]} | steps | knee RMS (rad) | end |")
         for r in res:
             print(f"| {r.stiffness:g} | {r.damping:g} | {r.steps} | {r.knee_rms:.4f} | "
-                  f"{'walks' if r.walks else r.reason[:50]} |")
+                  f"{r.end} |")
         best = choose(res)
         print(f"chosen: {best}" if best else "chosen: none walks")
     return 0

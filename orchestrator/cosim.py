@@ -56,6 +56,7 @@ from bus_schemas.protocol import (
 )
 from bus_schemas.run_auth import RunCredentials
 from bus_schemas.zenoh_config import loopback_endpoint
+from hp_model.falls import FallReason
 from human_fmu.instance import HumanFmu
 from orchestrator.loop import Command, FmuPlant, Observation, Sensed, Truth, run_loop
 from prosthesis_controller.timing import Usage, pin_thread
@@ -143,6 +144,16 @@ class CosimResult:
     @property
     def real_time_factor(self) -> float:
         return self.sim_time / self.wall_time if self.wall_time > 0 else 0.0
+
+    @property
+    def fall_reason(self) -> str:
+        """The fall's :class:`hp_model.falls.FallReason` label ("" without a fall)."""
+        if not self.fell:
+            return ""
+        try:
+            return FallReason(self.fall_code).label
+        except ValueError:  # an FMU with codes of its own
+            return f"code-{self.fall_code}"
 
 
 # --------------------------------------------------------------------------- FMU
@@ -544,6 +555,7 @@ def node_summary(stderr: str) -> dict[str, Any]:
 def _summary_dict(res: CosimResult) -> dict[str, Any]:
     d = asdict(res)
     d["real_time_factor"] = res.real_time_factor
+    d["fall_reason"] = res.fall_reason
     return d
 
 

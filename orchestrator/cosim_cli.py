@@ -104,7 +104,7 @@ def run(
     t.add_column("item")
     t.add_column("value")
     end = ("FAULTED: " + res.fault_reason) if res.faulted else \
-        (f"fell (code {res.fall_code})" if res.fell else "completed")
+        (f"fell ({res.fall_reason}, code {res.fall_code})" if res.fell else "completed")
     t.add_row("result", end)
     t.add_row("sim time / steps / ticks", f"{res.sim_time:.3f} s / {res.steps} / {res.ticks}")
     t.add_row("real-time factor", f"{res.real_time_factor:.2f}")

@@ -29,6 +29,7 @@ from characterization.force_tube_fit import deviation_profiles, fit_tube, nomina
 from characterization.gait_verification import make_simulator
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop
+from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -108,11 +109,7 @@ class ScenarioResult:
     rho: np.ndarray
     fallback_count: int
     steps: int
-    failed: bool
-    reason: str
-    fail_t: float | None
-    fail_tau: float | None
-    fail_domain: str | None
+    fall: Fall | None  # how the run ended (None: no fall)
     post_impact: list[np.ndarray] = field(default_factory=list)  # joint states after ps impacts
     step_bounds: list[tuple[int, int]] = field(default_factory=list)  # ps segments [i0, i1)
     socket_force: np.ndarray | None = None  # (n, 3) F_s (ground truth, never fed back)
@@ -123,6 +120,28 @@ class ScenarioResult:
     @property
     def success(self) -> bool:
         return not self.failed and self.steps >= self.scenario.steps
+
+    @property
+    def failed(self) -> bool:
+        return self.fall is not None
+
+    @property
+    def reason(self) -> str:
+        """The fall's one-line message ("" without a fall)."""
+        return self.fall.message() if self.fall is not None else ""
+
+    @property
+    def fail_t(self) -> float | None:
+        """Time of the fall (s)."""
+        return None if self.fall is None else self.fall.t
+
+    @property
+    def fail_tau(self) -> float | None:
+        return None if self.fall is None else self.fall.tau
+
+    @property
+    def fail_domain(self) -> str | None:
+        return None if self.fall is None else self.fall.domain
 
     def knee_rms(self, domain: str | None = "ps") -> float:
         """RMS of th_pk - B_pk(tau) over the samples of ``domain`` (None: all), rad."""
@@ -265,16 +284,12 @@ def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     j = [names.index(c) for c in JOINTS]
     pk, pa = names.index("th_pk"), names.index("th_pa")
     post = [np.r_[im.q[j], im.qd_plus[j]] for im in impacts if im.into == "ps"]
-    fall = log.fall
     return ScenarioResult(
         scenario=scenario, t=np.array(log.t, float), tau=tau, domain=domain,
         q_p=q[:, [pk, pa]], qd_p=qd[:, [pk, pa]], torque=np.array(log.torque).reshape(n, 2),
         knee_ref=ref, mode=list(log.mode), V=np.array(log.V), rho=np.array(log.rho),
-        fallback_count=log.fallback_count, steps=int(log.steps), failed=fall is not None,
-        reason=fall.message() if fall else "",
-        fail_t=float(f"{fall.t:.3f}") if fall else None,
-        fail_tau=float(f"{fall.tau:.3f}") if fall else None,
-        fail_domain=fall.domain if fall else None, post_impact=post, step_bounds=bounds,
+        fallback_count=log.fallback_count, steps=int(log.steps), fall=log.fall,
+        post_impact=post, step_bounds=bounds,
         socket_force=fs, fs_in_tube=socket_force_in_tube(tube, tau[ps], fs[ps]),
         touchdown_pitch=[float(im.foot_pitch) for im in impacts], q=q)
 
@@ -361,6 +376,7 @@ def summary(r: ScenarioResult) -> dict[str, Any]:
             "initial_offset_rad": list(r.scenario.initial_offset),
             "steps_requested": r.scenario.steps, "steps_completed": r.steps,
             "success": r.success, "failed": r.failed, "reason": r.reason,
+            "fall_reason": r.fall.reason.label if r.fall is not None else None,
             "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
             "duration_s": float(r.t[-1]) if r.t.size else 0.0,
             "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),

@@ -17,8 +17,8 @@ from __future__ import annotations
 import io
 import json
 import math
-import re
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -56,16 +56,14 @@ def mcnemar_exact(b: int, c: int) -> float:
     return min(1.0, 2 * tail)
 
 
-_PAREN = re.compile(r"\s*\([^)]*\)")
-_NUM = re.compile(r"\s*=?\s*[-+]?\d+(\.\d+)?(\s*(m|N|rad|s)\b)?")
+#: the fall reason of a failed run stored without one (a sweep from before the label)
+UNLABELLED = "unlabelled"
 
 
-def reason_class(reason: str | None) -> str:
-    """The kind of a fall, without the numbers ('stance foot left the friction cone')."""
-    if not reason:
-        return ""
-    text = reason.split(": ", 1)[1] if ": " in reason else reason
-    return " ".join(_NUM.sub("", _PAREN.sub("", text)).split()).strip(" ,=")
+def fall_label(row: Mapping[str, Any]) -> str:
+    """The kind of a failed run's fall: the :class:`hp_model.falls.FallReason` label stored
+    with it (``friction-cone``)."""
+    return row.get("fall_reason") or UNLABELLED
 
 
 def _q(a: list[float], p: float) -> float | None:
@@ -150,7 +148,7 @@ def summarize(out: str | Path) -> dict[str, Any]:
                                     "p90": _q(rms, 90),
                                     "max": float(max(rms)) if rms else None},
                 "torque_finite_all": all(bool(r["torque_finite"]) for r in ok),
-                "failure_reasons": dict(Counter(reason_class(r["reason"]) for r in ok
+                "failure_reasons": dict(Counter(fall_label(r) for r in ok
                                                 if r["failed"]).most_common()),
                 "worst": [{"key": r["key"], "success": r["success"],
                            "steps_completed": r["steps_completed"],

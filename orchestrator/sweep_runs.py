@@ -280,6 +280,7 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
     peak = np.abs(tq).max(axis=0) if tq.size else np.zeros(2)
     return {"steps_completed": int(s["steps_completed"]), "success": bool(s["success"]),
             "failed": bool(s["failed"]), "reason": str(s["reason"]),
+            "fall_reason": s["fall_reason"],
             "fail_t": _finite(s["fail_t"]), "fail_tau": _finite(s["fail_tau"]),
             "fail_domain": s["fail_domain"], "duration_s": float(s["duration_s"]),
             "knee_rms_ps_rad": _finite(s["knee_rms_ps_rad"]),
@@ -296,6 +297,7 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
 
 EMPTY_RESULT: dict[str, Any] = {
     "steps_completed": None, "success": False, "failed": None, "reason": None,
+    "fall_reason": None,
     "fail_t": None, "fail_tau": None, "fail_domain": None, "duration_s": None,
     "knee_rms_ps_rad": None, "knee_rms_all_rad": None, "fallback_count": None,
     "fallback_ticks": None, "fault_ticks": None, "max_torque_knee": None,

@@ -11,9 +11,11 @@ Layout of ``--out DIR``::
                              read together as a pyarrow dataset
     report.md, report.json, fig_*.png       hpcosim sweep report
 
-A row is one run (``COLUMNS``).  A key can appear twice only when an infrastructure error
-(a task lost by Dask) was retried later: readers keep the newest row of each key
-(:func:`read_results`).
+A row is one run (``COLUMNS``; a fall as ``fall_reason``, the
+:class:`hp_model.falls.FallReason` label, with ``fail_t``, ``fail_tau``, ``fail_domain``, and
+``reason``, its one-line message for humans).  A key can appear twice only when an
+infrastructure error (a task lost by Dask) was retried later: readers keep the newest row of
+each key (:func:`read_results`).
 """
 
 from __future__ import annotations
@@ -57,7 +59,8 @@ COLUMNS = pa.schema([
     ("draw_velocity_resolution", pa.float64()), ("draw_sensor_seed", pa.int64()),
     ("draw_imu_bias", pa.float64()), ("draw_imu_noise", pa.float64()),
     ("steps_completed", pa.int64()), ("success", pa.bool_()), ("failed", pa.bool_()),
-    ("reason", pa.string()), ("fail_t", pa.float64()), ("fail_tau", pa.float64()),
+    ("reason", pa.string()), ("fall_reason", pa.string()), ("fail_t", pa.float64()),
+    ("fail_tau", pa.float64()),
     ("fail_domain", pa.string()), ("duration_s", pa.float64()),
     ("knee_rms_ps_rad", pa.float64()), ("knee_rms_all_rad", pa.float64()),
     ("fallback_count", pa.int64()), ("fallback_ticks", pa.int64()),

@@ -17,6 +17,7 @@ from fmpy import read_model_description
 from fmpy.model_description import read_build_description
 from fmpy.validation import validate_fmu
 
+from hp_model.falls import FallReason
 from human_fmu import MODEL_IDENTIFIER, FmuBuildError, build_fmu
 from human_fmu.build import FMU_CFLAGS
 from tests.fmu_runner import HumanFMU, NominalPD, run
@@ -94,6 +95,26 @@ def test_model_description_variables(built, model, template_gait):
     info = json.loads(zipfile.ZipFile(built[0]).read("resources/build_info.json"))
     assert info["model_hash"] == model.parameter_hash()
     assert info["gait_hash"] == template_gait.hash()
+
+
+def test_fall_codes_and_messages_are_generated_from_fall_reason(built):
+    """Every FallReason is a C constant of its code with its description as the message in
+    the generated header, the core refers to the codes by name only, and the fall_code
+    output's description lists them."""
+    with zipfile.ZipFile(built[0]) as zf:
+        config = zf.read("sources/hpfmu_config.h").decode()
+        core = zf.read("sources/hpfmu_core.inc").decode()
+    md = read_model_description(str(built[0]))
+    fall_code = next(v for v in md.modelVariables if v.name == "fall_code")
+    for r in FallReason:
+        assert f"#define HP_FALL_{r.name} {int(r)}\n" in config, r
+        assert f"HP_FALL_{r.name}" in core, r  # every reason is decided or tested by name
+        assert f"{int(r)} {r.description}" in fall_code.description, r
+        if r is not FallReason.NONE:
+            assert f'case HP_FALL_{r.name}: return "{r.description}";' in config, r
+    assert "fall_reason(int code)" not in core and "fall_reason(code)" in core
+    for k in range(1, len(FallReason)):  # no bare code left in the core
+        assert f"set_fall(c, {k})" not in core and f"fall_code == {k}" not in core
 
 
 def test_hashes_readable_at_runtime(built, model, template_gait):

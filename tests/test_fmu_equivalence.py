@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from human_fmu import initial_state, perturbed_thetas
 from human_fmu.perturbation import splitmix64, uniform
@@ -15,10 +16,6 @@ from tests.fmu_support import built_fmu, policy_table, python_run, simulator, st
 
 DT = 1e-3
 H = DT / SimOptions().substeps  # one integration substep
-#: FMU fall code -> words of the simulator's reason
-FALL_MATCH = {1: "non-finite", 2: "hip height", 3: "backward", 4: "no touchdown",
-              5: "friction cone", 6: "heel or toe", 7: "phase stalled",
-              8: "state diverged"}
 
 
 @pytest.fixture(scope="module")
@@ -152,27 +149,34 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
     assert ref.failed
     log = fmu_run(fmu_path, pd, ref.t.size + 1, "q")
     assert log["fall"]
-    assert FALL_MATCH[log["fall_code"]] in ref.reason
-    lag = 1 if log["fall_code"] == 5 else 0
+    assert FallReason(log["fall_code"]) is ref.fall.reason
+    lag = 1 if log["fall_code"] == FallReason.FRICTION_CONE else 0
     assert log["fall_period"] == ref.t.size - 1 + lag
     print(f"x{factor}: {ref.reason}; FMU code {log['fall_code']} at sample "
           f"{log['fall_period']}")
 
 
-@pytest.mark.parametrize("option, code", [("max_step_time", 7), ("max_speed", 8)])
-def test_stall_and_divergence_are_detected_like_the_simulator(fmu_path, model, template_gait,
-                                                              nominal, option, code):
-    """A limit the nominal gait breaks -- ``max_step_time`` shorter than its first step, or
-    ``max_speed`` half its peak speed: both stop at the same sample with the same reason."""
+@pytest.mark.parametrize("option, reason", [
+    ("max_step_time", FallReason.PHASE_STALLED), ("max_speed", FallReason.DIVERGED),
+    ("min_hip_height", FallReason.HIP_LOW), ("tau_max", FallReason.NO_TOUCHDOWN),
+    ("max_touchdown_pitch", FallReason.HEEL_OR_TOE)])
+def test_forced_falls_are_detected_like_the_simulator(fmu_path, model, template_gait, nominal,
+                                                      option, reason):
+    """A limit the nominal gait breaks mid-walk -- ``max_step_time`` shorter than its first
+    step, ``max_speed`` half its peak speed, ``min_hip_height`` between the start's hip height
+    and the lowest, ``tau_max`` 0.5, ``max_touchdown_pitch`` below the first touchdown's
+    residual pitch: the FMU stops at the simulator's sample with the simulator's reason."""
     _, _, ref0 = nominal
-    limit = 0.1 if option == "max_step_time" else 0.5 * float(np.abs(ref0.qd).max())
+    limit = {"max_step_time": 0.1, "max_speed": 0.5 * float(np.abs(ref0.qd).max()),
+             "min_hip_height": 0.5 * float(ref0.q[0, 1] + ref0.q[:, 1].min()),
+             "tau_max": 0.5, "max_touchdown_pitch": 1e-7}[option]
     sim = simulator(model, template_gait, options=SimOptions(**{option: limit}))
     pd = NominalPD(policy_table(model, template_gait, sim))
     q0, qd0 = start_state(template_gait)
     ref = python_run(sim, pd, q0, qd0, steps=2)
-    assert ref.failed and FALL_MATCH[code] in ref.reason
+    assert ref.fall is not None and ref.fall.reason is reason and ref.t.size > 1
     log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={option: limit})
-    assert log["fall"] and log["fall_code"] == code
+    assert log["fall"] and FallReason(log["fall_code"]) is reason
     assert log["fall_period"] == ref.t.size - 1
 
 

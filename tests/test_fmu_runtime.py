@@ -27,6 +27,7 @@ from fmpy.fmi2 import (
     fmi2Terminated,
 )
 
+from hp_model.falls import FallReason
 from tests.fmu_runner import HumanFMU, NominalPD, run, stepper
 from tests.fmu_support import built_fmu, policy_table, python_run, simulator, start_state
 
@@ -315,13 +316,16 @@ def _walk_to_the_end(h: HumanFMU, torque: float, periods: int = 3000):
     raise AssertionError("the walker did not fall")
 
 
-@pytest.mark.parametrize(("params", "code"), [({}, None), ({"max_speed": 0.5}, 8)])
+@pytest.mark.parametrize(("params", "code"),
+                         [({}, None), ({"max_speed": 0.5}, FallReason.DIVERGED)])
 def test_a_fall_ends_the_walk_through_fmi(fmu_path, params, code):
     """A fall (no prosthesis torque: the knee buckles; or a speed bound the first step
     exceeds: code 8) ends the walk the FMI 2.0 way: the step returns fmi2Discard, and so
     does every later one; fmi2Terminated is true; fmi2LastSuccessfulTime is the time of the
-    state held; every output is finite (for code 8 the state before the step)."""
-    h = HumanFMU(str(fmu_path))
+    state held; every output is finite (for code 8 the state before the step); the warning
+    logged names the reason with the message generated from FallReason."""
+    log = Logger()
+    h = HumanFMU(str(fmu_path), callbacks=log.callbacks)
     h.setup(params)
     f = h.fmu
     _k, t0, before = _walk_to_the_end(h, 0.0)
@@ -329,11 +333,14 @@ def test_a_fall_ends_the_walk_through_fmi(fmu_path, params, code):
     assert f.getBoolean(h.vrs(["fall"]))[0] and fall_code > 0
     if code is not None:
         assert fall_code == code
+    why = f"(code {fall_code}: {FallReason(fall_code).description})"
+    assert [m for s, c, m in log.messages if c == "logEvents" and why in m], log.messages
     assert f.getBooleanStatus(fmi2Terminated)
     after = f.getReal(h.vrs(OUTPUTS))
     assert all(math.isfinite(v) for v in after)
     last = f.getRealStatus(fmi2LastSuccessfulTime)
-    if fall_code in (1, 5, 8):  # the state at the start of the step is held
+    if fall_code in (FallReason.NON_FINITE, FallReason.FRICTION_CONE, FallReason.DIVERGED):
+        # the state at the start of the step is held
         assert last == t0 and after[len(OUTPUTS) - 24:] == before[len(OUTPUTS) - 24:]
     else:
         assert last == pytest.approx(t0 + 1e-3, abs=1e-12)

@@ -18,11 +18,18 @@ import pytest
 from scipy.stats import binomtest
 
 from hp_model import bezier
+from hp_model.falls import Fall, FallReason
 from hp_model.force_tube import save_tube
 from hp_model.outputs import Y2_COORDS
 from orchestrator.sweep_draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
 from orchestrator.sweep_replay import TAU_COLUMNS, compare_rows
-from orchestrator.sweep_report import mcnemar_exact, reason_class, wilson_interval
+from orchestrator.sweep_report import (
+    UNLABELLED,
+    fall_label,
+    mcnemar_exact,
+    summarize,
+    wilson_interval,
+)
 from orchestrator.sweep_runs import (
     Artifacts,
     Resources,
@@ -32,7 +39,14 @@ from orchestrator.sweep_runs import (
     scaled_tube,
 )
 from orchestrator.sweep_spec import SpecError, load_spec
-from orchestrator.sweep_store import VOLATILE, ResultStore, done_keys, read_results
+from orchestrator.sweep_store import (
+    KIND,
+    SCHEMA_VERSION,
+    VOLATILE,
+    ResultStore,
+    done_keys,
+    read_results,
+)
 from tests.controller_support import tube_about_nominal
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -177,13 +191,29 @@ def test_mcnemar_exact_equals_binomial_test(b, c):
     assert abs(mcnemar_exact(b, c) - ref) < 1e-12
 
 
-def test_reason_class_drops_numbers():
-    r = "t = 0.538 s, ps, tau = 0.530: stance foot left the friction cone (F_x 516 N, F_z 4 N)"
-    assert reason_class(r) == "stance foot left the friction cone"
-    assert reason_class("t = 1.2 s, pns, tau = 1.301: no touchdown by tau = 1.3") == \
-        "no touchdown by tau"
-    assert reason_class("t = 1 s, ps, tau = 0.5: hip height 0.540 m below 0.55 m") == \
-        "hip height below"
+def test_report_counts_fall_reasons_from_the_stored_label(tmp_path):
+    """The report's failure reasons are the FallReason labels stored with the runs, never
+    parsed from the message (here deliberately misleading); a failed row stored before the
+    label existed counts as unlabelled."""
+    st = ResultStore(tmp_path)
+    st.write_manifest({"kind": KIND, "schema_version": SCHEMA_VERSION, "artifact_hashes": {},
+                       "spec": {"controllers": ["pd"], "families": {"f": {}}, "draws": 5},
+                       "sessions": []})
+    st.results.mkdir()
+    cone = Fall(FallReason.FRICTION_CONE, 0.25, "ps", 0.5, {"F_x": 300.0, "F_z": 10.0})
+    base = {"controller": "pd", "family": "f", "session": "s", "seq": 0, "success": False,
+            "failed": True, "steps_completed": 0, "duration_s": 0.2}
+    rows = [{**base, **Draw("f", i).columns(), "key": f"pd/f/{i}", "draw": i,
+             "reason": cone.message(), "fall_reason": label}
+            for i, label in enumerate(["hip-low", "hip-low", "friction-cone", None])]
+    rows.append({**base, **Draw("f", 4).columns(), "key": "pd/f/4", "draw": 4,
+                 "success": True, "failed": False, "reason": "", "fall_reason": None})
+    st.write_part(rows, "s", 0)
+    assert read_results(tmp_path)["fall_reason"].to_pylist()[:3] == \
+        ["hip-low", "hip-low", "friction-cone"]
+    cell = summarize(tmp_path)["cells"][0]
+    assert cell["failure_reasons"] == {"hip-low": 2, "friction-cone": 1, UNLABELLED: 1}
+    assert fall_label({"fall_reason": FallReason.DIVERGED.label}) == "diverged"
 
 
 # ------------------------------------------------------------------ applying a draw

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.falls import FallReason
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
@@ -130,7 +131,7 @@ def test_a_late_stiff_human_falls_where_a_soft_one_walks(model, playback_gait, l
     late_stiff = HybridSimulator(model, cl, th, g, human_delay=0.03).run(q0, qd0, "ps", steps=3)
     late_soft = HybridSimulator(model, cl, th, soft, human_delay=0.03).run(q0, qd0, "ps",
                                                                            steps=3)
-    assert late_stiff.failed and "friction cone" in late_stiff.reason
+    assert late_stiff.fall is not None and late_stiff.fall.reason is FallReason.FRICTION_CONE
     assert not late_soft.failed and late_soft.steps == 3
     with pytest.raises(ValueError, match="human_delay"):
         HybridSimulator(model, cl, th, g, human_delay=-0.01)
