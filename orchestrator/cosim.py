@@ -58,7 +58,8 @@ from bus_schemas.run_auth import RunCredentials
 from bus_schemas.zenoh_config import loopback_endpoint
 from hp_model.falls import FallReason
 from human_fmu.instance import HumanFmu
-from orchestrator.loop import Command, FmuPlant, Observation, Sensed, Truth, run_loop
+from orchestrator.loop import Command, FmuPlant, Observation, Sensed, run_loop
+from orchestrator.loop.recorder import GroundTruthRecorder
 from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -749,18 +750,6 @@ class CanLink:
                     self.u = (v.value.knee, v.value.ankle)
 
 
-class GroundTruthRecorder:
-    """``/ground_truth`` of every period (deferred: serialized during the next round
-    trip)."""
-
-    def __init__(self, rec: Any, link: CanLink) -> None:
-        self.rec, self.link = rec, link
-
-    def record(self, obs: Observation, cmd: Command, truth: Truth) -> None:
-        self.rec.defer_call("/ground_truth", self.link.log_ns(obs.t), ground_truth_record,
-                            obs, truth)
-
-
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, proc: Any,
           lost: threading.Event, stop: threading.Event, res: CosimResult,
           ratio: tuple[float, float], limits: tuple[float, float],
@@ -771,7 +760,8 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, 
     usage = Usage()
     log = run_loop(FmuPlant(fmu, cfg.dt), link, steps=cfg.steps,
                    periods=round(cfg.max_time / cfg.dt), stop=stop, progress=progress,
-                   recorder=None if rec is None else GroundTruthRecorder(rec, link),
+                   recorder=(None if rec is None else
+                             GroundTruthRecorder(rec, log_ns=link.log_ns, deferred=True)),
                    timed=True)
     res.steps = log.steps
     if log.fall is not None:
@@ -836,17 +826,6 @@ def torque_record(c: codec.TorqueCmd, counter: int | None, timestamp: float,
     return {"knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
             "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable), "counter": counter,
             "cycle_time_us": round(timestamp * 1e6)}
-
-
-def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
-    """``/ground_truth`` of one period: socket force (Fx, Fz [N], My [N m]) under the
-    applied motor torques, q and qd, domain, phase and step count."""
-    fs, u = truth.socket_force, truth.torque
-    return {"t": obs.t, "socket_force": {"Fx": float(fs[0]), "Fz": float(fs[1]),
-                                         "My": float(fs[2])},
-            "q": truth.q.tolist(), "qd": truth.qd.tolist(), "domain": obs.domain,
-            "tau": obs.tau, "step": obs.steps, "fallen": False,
-            "u_applied": [float(u[0]), float(u[1])]}
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],

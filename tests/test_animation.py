@@ -44,17 +44,19 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     written by the recorder from an in-process run, as the co-simulation writes it)."""
     from bus_schemas.mcap_schemas import Recorder
     from orchestrator.cli import main
-    from orchestrator.cosim import ground_truth_record
+    from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
+    from orchestrator.loop.recorder import GroundTruthRecorder
+    from prosthesis_controller import make_controller
+    from tests.fmu_support import simulator, start_state
 
     tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
-    r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 2))
+    plant = SimulatorPlant(simulator(model, template_gait), *start_state(template_gait))
+    link = ControllerLink(make_controller("phase-pd", template_gait, tube, model))
     path = tmp_path / "run.mcap"
     with Recorder(path) as rec:
         rec.register_all()
-        for k in range(r.t.size):
-            rec.write("/ground_truth", ground_truth_record(
-                float(r.t[k]), r.socket_force[k].tolist(), [*r.q[k], *np.zeros(12)],
-                int(r.domain[k]), float(r.tau[k]), 0, (0.0, 0.0)), int(r.t[k] * 1e9))
+        log = run_loop(plant, link, steps=2, recorder=GroundTruthRecorder(rec))
+    assert log.steps == 2 and log.fall is None
     out = tmp_path / "walker.gif"
     assert main(["animate", str(path), "--out", str(out), "--seconds", "0.5", "--fps",
                  "20"]) == 0

@@ -197,8 +197,8 @@ def test_fmpy_simulate_stops_at_the_fall(built3):
 def test_the_fmi2_drivers_refuse_an_fmi3_fmu_clearly(built3):
     """The co-simulation and the sweeps drive FMI 2.0; given the 3.0 FMU they say so."""
     from human_fmu import FmuBuildError
-    from human_fmu.instance import FmuInstance
+    from human_fmu.instance import HumanFmu
 
     with pytest.raises(FmuBuildError, match=r"an FMI 3.0 FMU; the co-simulation and the sweeps "
                        r"drive FMI 2.0 FMUs"):
-        FmuInstance(built3[0])
+        HumanFmu(built3[0])
