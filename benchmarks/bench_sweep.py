@@ -14,6 +14,7 @@ is printed with every measurement.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import statistics
 import tempfile
@@ -65,12 +66,25 @@ def main() -> None:
     p.add_argument("--draws", type=int, default=20)
     p.add_argument("--steps", type=int, default=3)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--serial-only", action="store_true",
+                   help="only the serial runs in this process (no Dask clusters)")
+    p.add_argument("--json", type=Path, help="also write the rates (runs/min) to this file")
     a = p.parse_args()
     spec = load_spec(a.spec, {"draws": a.draws, "steps": a.steps})
     print(f"{spec.n_runs} runs per sweep ({len(spec.controllers)} controllers x "
           f"{len(spec.families)} families x {spec.draws} draws, {spec.steps} steps)")
     rates: dict[str, list[float]] = {"serial": [], "dask 1 worker": [], "dask 2 workers": []}
     setups: dict[str, list[float]] = {k: [] for k in rates}
+    if a.serial_only:
+        for r in range(a.repeats):
+            rate, setup, _ = serial(spec)
+            rates["serial"].append(rate)
+            print(f"  repeat {r + 1} serial: {rate:.1f} runs/min (setup {setup:.1f} s, load "
+                  f"average {os.getloadavg()[0]:.1f})", flush=True)
+        print("runs per minute\n  " + summary("serial", rates["serial"]))
+        if a.json:
+            a.json.write_text(json.dumps({"runs_per_min": rates}, indent=1))
+        return
     with dask_client(None, 1) as c1, dask_client(None, 2) as c2:
         a1, a2 = c1.scheduler.address, c2.scheduler.address
         configs = [("serial", lambda: serial(spec)),
@@ -92,6 +106,8 @@ def main() -> None:
     over = [b / a for a, b in zip(rates["serial"], rates["dask 1 worker"], strict=True)]
     print("  " + summary("2 workers / 1 worker, per repeat (ideal 2.00 on 2 free cores)", ratio))
     print("  " + summary("dask 1 worker / serial in process, per repeat", over))
+    if a.json:
+        a.json.write_text(json.dumps({"runs_per_min": rates}, indent=1))
 
 
 if __name__ == "__main__":
