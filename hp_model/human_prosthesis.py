@@ -29,8 +29,9 @@ import casadi as ca
 import numpy as np
 
 from hp_model import anthropometry as anth
+from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
-from hp_model.hybrid import Constraint, Domain, HybridModel
+from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
 from hp_model.tree import Body, Frame, PlanarTree
 
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
@@ -156,12 +157,12 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
     return tree
 
 
-SOCKET = Constraint("socket", "coords", SOCKET_COORDS)
+SOCKET = Constraint("socket", ConstraintKind.COORDS, SOCKET_COORDS)
 DOMAIN_DEFS = (
-    Domain("ps", (Constraint("p_foot", "frame", "p_sole"), SOCKET), swing_frame="l_sole",
-           next="pns"),
-    Domain("pns", (Constraint("l_foot", "frame", "l_sole"), SOCKET), swing_frame="p_sole",
-           next="ps"),
+    Domain("ps", (Constraint("p_foot", ConstraintKind.FRAME, "p_sole"), SOCKET),
+           swing_frame="l_sole", next="pns"),
+    Domain("pns", (Constraint("l_foot", ConstraintKind.FRAME, "l_sole"), SOCKET),
+           swing_frame="p_sole", next="ps"),
 )
 
 
@@ -175,7 +176,8 @@ class HumanProsthesisModel(HybridModel):
     """
 
     def __init__(self, subject: SubjectConfig, device: DeviceConfig,
-                 body: BodyVariation = NOMINAL_BODY, backend: str = "auto") -> None:
+                 body: BodyVariation = NOMINAL_BODY,
+                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
         self.subject = subject
         self.device = device
         self.body = body

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from hp_model.artifacts import canonical_hash
+from hp_model.compiled import CompileBackend
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
@@ -131,7 +132,8 @@ def scaled_tube(tube: ForceTube, scale: float) -> ForceTube:
 
 
 def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, com: float,
-                    body: BodyVariation | None = None, backend: str = "auto"
+                    body: BodyVariation | None = None,
+                    backend: CompileBackend = CompileBackend.AUTO
                     ) -> HumanProsthesisModel:
     """The model with the prosthesis links' (top, shin, foot) masses, inertias and COM
     positions scaled (re-validated: a non-positive mass fails), and the human ``body`` (the
@@ -250,7 +252,8 @@ class Resources:
             return self._plants[key]
         # the model's own functions run a few times per step (impacts, start): interpreted;
         # the closed loop runs every step: compiled
-        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body, backend="sx")
+        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body,
+                            backend=CompileBackend.SX)
         cl = ClosedLoop(m, self.gait.degree)
         cl.numeric()
         self._plants[key] = (m, cl)

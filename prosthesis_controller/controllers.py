@@ -16,6 +16,7 @@ import numpy as np
 import piqp
 
 from hp_model import bezier
+from hp_model.compiled import CompileBackend
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -140,7 +141,7 @@ class ControllerContext:
     def __init__(self, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
                  config: ControllerConfig | None = None, *,
                  subsystem: ProsthesisSubsystem | None = None, strict_tube: bool = True,
-                 backend: str = "auto") -> None:
+                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
         cfg = config or ControllerConfig()
         self.config, self.gait, self.tube, self.model = cfg, gait, tube, model
         if strict_tube and tube.gait_hash != gait.hash():

@@ -1,0 +1,50 @@
+"""The string choices (:mod:`hp_model.choices`): each enum parses its words, refuses anything
+else in one line naming the choices, and serializes as the same strings as before."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from hp_model.choices import Choice
+from hp_model.compiled import CompileBackend, FunctionSet
+from hp_model.hybrid import Constraint, ConstraintKind
+
+#: every enum and the strings files and command lines spell (unchanged formats)
+CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
+    (CompileBackend, ("auto", "c", "sx")),
+    (ConstraintKind, ("frame", "coords")),
+]
+
+
+@pytest.mark.parametrize(("enum", "values"), CASES, ids=lambda c: getattr(c, "__name__", ""))
+def test_values_are_the_strings(enum, values):
+    assert tuple(m.value for m in enum) == values
+    for v in values:
+        m = enum(v)
+        assert m == v and str(m) == v and f"{m}" == v and m is enum(m)
+        assert json.dumps({m: [m]}) == json.dumps({v: [v]})
+
+
+@pytest.mark.parametrize(("enum", "values"), CASES, ids=lambda c: getattr(c, "__name__", ""))
+def test_other_input_is_a_one_line_error_listing_the_choices(enum, values):
+    with pytest.raises(ValueError) as e:
+        enum("nonsense")
+    msg = str(e.value)
+    assert "\n" not in msg and "'nonsense'" in msg and enum.label() in msg
+    assert msg.endswith("choose one of " + ", ".join(values))
+
+
+def test_label_splits_the_class_name():
+    assert CompileBackend.label() == "compile backend"
+    assert ConstraintKind.label() == "constraint kind"
+
+
+def test_function_set_and_constraint_parse_their_choice():
+    with pytest.raises(ValueError, match="unknown compile backend 'gcc'; choose one of auto"):
+        FunctionSet([], "none", backend="gcc")
+    with pytest.raises(ValueError, match="unknown constraint kind 'plane'"):
+        Constraint("c", "plane", "x")
+    c = Constraint("c", "frame", "p_sole")
+    assert c.kind is ConstraintKind.FRAME and c.size == 3
