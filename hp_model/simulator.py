@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hp_model.closed_loop import ClosedLoop
+from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS
 
@@ -177,13 +177,13 @@ class HybridSimulator:
              ) -> tuple[np.ndarray, float]:
         if self._vhold is not None:
             f = self.dfs[f"rk4_d{mode}_{d}"]
-            if mode == "full":
+            if mode == ClosedLoopMode.FULL:
                 xn, z = f(x, self.thetas[d], self._vhold, h)
             else:
                 xn, z = f(x, self.thetas[d], self._vhold, u_p, h)
             return xn.copy(), float(z[0])
         f = self.fs[f"rk4_{mode}_{d}"]
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             xn, z = f(x, self.thetas[d], self.gains, h)
         else:
             xn, z = f(x, self.thetas[d], self.gains, u_p, h)
@@ -200,7 +200,7 @@ class HybridSimulator:
         """Set the feedback held over the period: the human rows from the pipeline's
         oldest entry, in mode full the prosthesis rows of ``v_now``."""
         rows = list(HUMAN_OUTPUTS[d])
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             v = v_now.copy()
             v[rows] = pipeline[0][rows]
             self._vhold = v
@@ -211,13 +211,13 @@ class HybridSimulator:
               ) -> tuple[np.ndarray, np.ndarray]:
         if self._vhold is not None:
             f = self.dfs[f"xdot_d{mode}_{d}"]
-            if mode == "full":
+            if mode == ClosedLoopMode.FULL:
                 _, u, lam = f(x, self.thetas[d], self._vhold)
             else:
                 _, u, lam = f(x, self.thetas[d], self._vhold, u_p)
             return u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             _, u, lam = f(x, self.thetas[d], self.gains)
         else:
             _, u, lam = f(x, self.thetas[d], self.gains, u_p)
@@ -272,7 +272,7 @@ class HybridSimulator:
         if steps is None and duration is None:
             raise ValueError("give steps or duration")
         opt, nq = self.opt, self.nq
-        mode = "full" if policy is None else "human"
+        mode = ClosedLoopMode.FULL if policy is None else ClosedLoopMode.HUMAN
         t_end = np.inf if duration is None else duration
         max_steps = np.inf if steps is None else steps
         x = np.r_[np.asarray(q0, float), np.asarray(qd0, float)]

@@ -8,6 +8,7 @@ import json
 import pytest
 
 from hp_model.choices import Choice
+from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.hybrid import Constraint, ConstraintKind
 
@@ -15,10 +16,12 @@ from hp_model.hybrid import Constraint, ConstraintKind
 CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (CompileBackend, ("auto", "c", "sx")),
     (ConstraintKind, ("frame", "coords")),
+    (ClosedLoopMode, ("full", "human")),
 ]
+IDS = [e.__name__ for e, _ in CASES]
 
 
-@pytest.mark.parametrize(("enum", "values"), CASES, ids=lambda c: getattr(c, "__name__", ""))
+@pytest.mark.parametrize(("enum", "values"), CASES, ids=IDS)
 def test_values_are_the_strings(enum, values):
     assert tuple(m.value for m in enum) == values
     for v in values:
@@ -27,7 +30,7 @@ def test_values_are_the_strings(enum, values):
         assert json.dumps({m: [m]}) == json.dumps({v: [v]})
 
 
-@pytest.mark.parametrize(("enum", "values"), CASES, ids=lambda c: getattr(c, "__name__", ""))
+@pytest.mark.parametrize(("enum", "values"), CASES, ids=IDS)
 def test_other_input_is_a_one_line_error_listing_the_choices(enum, values):
     with pytest.raises(ValueError) as e:
         enum("nonsense")
