@@ -36,6 +36,7 @@ from hp_model.gait_artifact import Gait, load_gait
 from prosthesis_controller import (
     CONTROLLERS,
     ControllerContext,
+    QpOutcome,
     make_controller,
 )
 from tests.controller_support import stance_ticks
@@ -112,7 +113,7 @@ def main() -> None:
     qps = []
     for m in meas:
         out = rec.tick(m)
-        if out.diagnostics.qp_status in ("solved", "failed"):
+        if out.diagnostics.qp_status in (QpOutcome.SOLVED, QpOutcome.FAILED):
             qps.append(rec.qp_data())  # copies, Fortran-ordered matrices
 
     if a.no_gc:

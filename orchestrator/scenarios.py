@@ -41,7 +41,12 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult, SimState
 from human_fmu.perturbation import perturbed_thetas
-from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
+from prosthesis_controller import (
+    ControllerContext,
+    ControllerMode,
+    ProsthesisMeasurement,
+    make_controller,
+)
 
 DOMAINS = ("ps", "pns")
 #: not a prosthesis controller: full-state feedback linearization of the whole walker with
@@ -97,7 +102,7 @@ class ScenarioResult:
     qd_p: np.ndarray  # (n, 2)
     torque: np.ndarray  # (n, 2) motor torques the controller commanded
     knee_ref: np.ndarray  # (n,) nominal knee B_pk(tau) of the domain (gait, not perturbed)
-    mode: list[str]
+    mode: list[ControllerMode]
     V: np.ndarray
     rho: np.ndarray
     fallback_count: int
@@ -283,7 +288,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     rng = np.random.default_rng(encoder.seed)
     pitch_row = model.pitch_row("socket")
     torques: list[np.ndarray] = []
-    modes: list[str] = []
+    modes: list[ControllerMode] = []
     Vs: list[float] = []
     rhos: list[float] = []
     fallbacks = [0]
@@ -292,7 +297,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         out = ctrl.tick(measurement(idx, t, st, encoder, rng, pitch_row))
         dg = out.diagnostics
         torques.append(np.array(out.torque, float))
-        modes.append(str(dg.mode))
+        modes.append(dg.mode)
         Vs.append(float(dg.V))
         rhos.append(float(dg.rho))
         fallbacks[0] = int(dg.fallback_count)
@@ -334,7 +339,7 @@ def _run_oracle(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenar
     r = sim.run(q0, qd0, "ps", steps=scenario.steps)
     n = r.t.size
     return _result(model, gait, tube, scenario, r, idx, np.array(r.u[:, 4:6]),
-                   [ORACLE] * n, np.zeros(n), np.zeros(n), 0)
+                   [ControllerMode.ORACLE] * n, np.zeros(n), np.zeros(n), 0)
 
 
 def _result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scenario: Scenario,

@@ -116,7 +116,7 @@ def run_fmu_scenario(plant: FmuPlant, model: HumanProsthesisModel, gait: Gait,
         dg = out.diagnostics
         u = np.array(out.torque, float)
         torques.append(u)
-        modes.append(str(dg.mode))
+        modes.append(dg.mode)
         Vs.append(float(dg.V))
         rhos.append(float(dg.rho))
         fallbacks = int(dg.fallback_count)

@@ -45,6 +45,7 @@ from orchestrator.scenarios import (
 )
 from orchestrator.sweep_draws import HUMAN_JOINTS, Draw, RunKey
 from orchestrator.sweep_spec import SweepSpec
+from prosthesis_controller.interface import ControllerMode
 
 #: contexts (controller model x tube) kept per worker; a continuous tube_scale misses
 CONTEXT_CACHE = 16
@@ -289,8 +290,8 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
             "knee_rms_ps_rad": _finite(s["knee_rms_ps_rad"]),
             "knee_rms_all_rad": _finite(s["knee_rms_all_rad"]),
             "fallback_count": int(s["fallback_count"]),
-            "fallback_ticks": int(s["modes"].get("fallback", 0)),
-            "fault_ticks": int(s["modes"].get("fault", 0)),
+            "fallback_ticks": int(s["modes"].get(ControllerMode.FALLBACK, 0)),
+            "fault_ticks": int(s["modes"].get(ControllerMode.FAULT, 0)),
             "max_torque_knee": _finite(peak[0]) if finite else None,
             "max_torque_ankle": _finite(peak[1]) if finite else None,
             "torque_finite": finite,

@@ -26,8 +26,10 @@ from prosthesis_controller.controllers import (
 from prosthesis_controller.interface import (
     Active,
     Controller,
+    ControllerMode,
     ControlOutput,
     Diagnostics,
+    QpOutcome,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 
@@ -41,6 +43,7 @@ __all__ = [
     "Controller",
     "ControllerConfig",
     "ControllerContext",
+    "ControllerMode",
     "Diagnostics",
     "DomainConfig",
     "Fault",
@@ -51,6 +54,7 @@ __all__ = [
     "PhasePdConfig",
     "PhasePdController",
     "ProsthesisMeasurement",
+    "QpOutcome",
     "SafetyConfig",
     "SwingConfig",
     "make_controller",

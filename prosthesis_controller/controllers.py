@@ -25,18 +25,11 @@ from hp_model.prosthesis import ProsthesisSubsystem
 from prosthesis_controller.clf import ResClf, res_clf
 from prosthesis_controller.config import ControllerConfig
 from prosthesis_controller.interface import (
-    MODE_FALLBACK,
-    MODE_FAULT,
-    MODE_STANCE,
-    MODE_SWING,
-    QP_FAILED,
-    QP_INFEASIBLE,
-    QP_NONFINITE,
-    QP_NOT_RUN,
-    QP_SOLVED,
     Active,
+    ControllerMode,
     ControlOutput,
     Diagnostics,
+    QpOutcome,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 from prosthesis_controller.polish import polish
@@ -439,7 +432,7 @@ class BaseController:
             u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
             self.fallback_count += 1
             tau = V = rho = 0.0
-            status, mode = QP_NOT_RUN, MODE_FAULT
+            status, mode = QpOutcome.NOT_RUN, ControllerMode.FAULT
             self._estimator_gap()
         else:
             t = float(meas.t)
@@ -453,12 +446,12 @@ class BaseController:
                 u0, u1, tau = self._swing_torque(t, qk, qa, vk, va, float(meas.socket_pitch))
                 V = rho = 0.0
                 self._estimator_gap()
-                status, mode = QP_NOT_RUN, MODE_SWING
+                status, mode = QpOutcome.NOT_RUN, ControllerMode.SWING
             if not (math.isfinite(u0) and math.isfinite(u1)):
                 step = self._fb_step
                 u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
                 self.fallback_count += 1
-                mode = MODE_FALLBACK
+                mode = ControllerMode.FALLBACK
             if not (math.isfinite(tau) and math.isfinite(V) and math.isfinite(rho)):
                 tau = V = rho = 0.0
         lk, la = self._lim
@@ -482,8 +475,8 @@ class PDController(BaseController):
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
         uk, ua = self._pd_torque(t, qk, qa, vk, va)
-        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0,
-                MODE_STANCE)
+        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0,
+                ControllerMode.STANCE)
 
 
 class PhasePdController(BaseController):
@@ -507,7 +500,8 @@ class PhasePdController(BaseController):
         f.call_inplace()
         ff, fb = f.outputs[0], f.outputs[1]
         return (ff[0] + fb[0] / self._gear[0], ff[1] + fb[1] / self._gear[1],
-                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0,
+                ControllerMode.STANCE)
 
 
 class PassiveController(BaseController):
@@ -530,7 +524,7 @@ class PassiveController(BaseController):
         f.call_inplace()
         uj = f.outputs[0]
         return (uj[0] / self._gear[0], uj[1] / self._gear[1], float(self._o_tau[0]),
-                float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+                float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0, ControllerMode.STANCE)
 
 
 class ClfQpController(BaseController):
@@ -609,7 +603,7 @@ class ClfQpController(BaseController):
         tau, V = float(self._o_tau[0]), float(self._o_V[0])
         if not math.isfinite(self._o_check[0]):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         self._bounds()
         xl, xu = self._xl, self._xu
         n = self._n
@@ -635,7 +629,7 @@ class ClfQpController(BaseController):
         h = float(hu[0])
         if lo > h + 1e-9:
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_INFEASIBLE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.INFEASIBLE, 0, ControllerMode.FALLBACK
         s = self._solver
         P = self._o_Pu
         if n == 3:
@@ -647,14 +641,14 @@ class ClfQpController(BaseController):
             s.update(P=P2, c=self._c2, G=G2, h_u=hu, x_l=xl, x_u=xu)
         if s.solve() != _SOLVED:
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.FAILED, 0, ControllerMode.FALLBACK
         res = s.result
         z = res.x
         uk, ua = float(z[0]), float(z[1])
         rho = float(z[2]) if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         # active set from the solver's multipliers
         d = _DUAL_TOL
         row = res.z_u[0] > d
@@ -684,7 +678,7 @@ class ClfQpController(BaseController):
         self.qp_solution = np.array((uk, ua, rho)[:n])
         if n == 3:
             rho *= self._rho_scale
-        return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
+        return uk, ua, tau, V, rho, QpOutcome.SOLVED, active, ControllerMode.STANCE
 
 
 CONTROLLERS = ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd", "passive",

@@ -11,12 +11,15 @@ from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.hybrid import Constraint, ConstraintKind
+from prosthesis_controller.interface import ControllerMode, QpOutcome
 
 #: every enum and the strings files and command lines spell (unchanged formats)
 CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (CompileBackend, ("auto", "c", "sx")),
     (ConstraintKind, ("frame", "coords")),
     (ClosedLoopMode, ("full", "human")),
+    (QpOutcome, ("not_run", "solved", "infeasible", "failed", "nonfinite")),
+    (ControllerMode, ("stance", "swing", "fallback", "fault", "oracle")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 
@@ -51,3 +54,23 @@ def test_function_set_and_constraint_parse_their_choice():
         Constraint("c", "plane", "x")
     c = Constraint("c", "frame", "p_sole")
     assert c.kind is ConstraintKind.FRAME and c.size == 3
+
+
+def test_qp_outcome_maps_to_the_bus_status_unchanged():
+    from bus_schemas.protocol import QpStatus
+    from prosthesis_controller.node import QP_STATUS
+
+    assert set(QP_STATUS) == set(QpOutcome)
+    wire = {k.value: int(v) for k, v in QP_STATUS.items()}
+    assert wire == {"not_run": 7, "solved": 0, "infeasible": 3, "failed": 6, "nonfinite": 5}
+    assert all(isinstance(v, QpStatus) for v in QP_STATUS.values())
+    assert {o for o in QpOutcome if o.is_failure} == {"infeasible", "failed", "nonfinite"}
+
+
+def test_mode_counts_serialize_as_the_words():
+    from orchestrator.scenarios import as_jsonable
+
+    modes = [ControllerMode.STANCE] * 3 + [ControllerMode("fallback")]
+    counts = {m: modes.count(m) for m in sorted(set(modes))}
+    assert json.dumps(as_jsonable({"modes": counts})) == '{"modes": {"fallback": 1, "stance": 3}}'
+    assert counts.get("fallback") == 1 and {"stance": 3}.get(ControllerMode.STANCE) == 3
