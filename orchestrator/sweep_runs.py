@@ -33,6 +33,7 @@ from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.outputs import Y2_COORDS
+from orchestrator.modes import SweepBackend
 from orchestrator.scenarios import (
     ORACLE,
     Encoder,
@@ -71,7 +72,7 @@ class Artifacts:
             return Path(p).read_bytes() if p is not None else None
 
         return cls(spec.gait.read_bytes(), spec.tube.read_bytes(),
-                   read(fmu or spec.fmu) if spec.backend == "fmu" else None,
+                   read(fmu or spec.fmu) if spec.backend == SweepBackend.FMU else None,
                    read(spec.subject), read(spec.device))
 
     def hashes(self) -> dict[str, str | None]:
@@ -327,7 +328,7 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
         scenario = Scenario(key.controller, DrawPerturbation(
             f"{key.family}/{key.draw}", draw.bezier_amplitude, draw.bezier_seed, draw),
             spec.steps, (draw.knee_offset, draw.ankle_offset))
-        if spec.backend == "simulator" or key.controller == ORACLE:
+        if spec.backend == SweepBackend.SIMULATOR or key.controller == ORACLE:
             model, cl = res.plant(draw)
             r = run_scenario(model, res.gait, ctx.tube, scenario, context=ctx,
                              closed_loop=cl, human_gains=human_gains(res.gait, draw),

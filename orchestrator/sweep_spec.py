@@ -75,6 +75,7 @@ from pydantic import (
 
 from hp_model.artifacts import canonical_hash
 from hp_model.config import ConfigError, read_toml
+from orchestrator.modes import SweepBackend
 from prosthesis_controller import CONTROLLERS
 
 SCHEMA_VERSION = 1
@@ -288,7 +289,7 @@ class SweepSpec(_Strict):
     draws: int = Field(ge=1)
     seed: int = Field(ge=0)
     steps: int = Field(10, ge=1)
-    backend: Literal["simulator", "fmu"] = "simulator"
+    backend: SweepBackend = SweepBackend.SIMULATOR
     fmu: Path | None = None
     batch: int = Field(25, ge=1)
     label_walkable: bool = True
@@ -314,9 +315,9 @@ class SweepSpec(_Strict):
 
     @model_validator(mode="after")
     def _fmu(self) -> SweepSpec:
-        if self.fmu is not None and self.backend != "fmu":
+        if self.fmu is not None and self.backend != SweepBackend.FMU:
             raise ValueError("'fmu' is given but backend is not 'fmu'")
-        if self.backend == "fmu":
+        if self.backend == SweepBackend.FMU:
             for name, fam in self.families.items():
                 bad = [k for k in fam.quantities() if k.startswith(SIMULATOR_ONLY)]
                 if bad:

@@ -11,6 +11,7 @@ from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.hybrid import Constraint, ConstraintKind
+from orchestrator.modes import CosimMode, SweepBackend
 from prosthesis_controller.interface import ControllerMode, QpOutcome
 
 #: every enum and the strings files and command lines spell (unchanged formats)
@@ -20,6 +21,8 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (ClosedLoopMode, ("full", "human")),
     (QpOutcome, ("not_run", "solved", "infeasible", "failed", "nonfinite")),
     (ControllerMode, ("stance", "swing", "fallback", "fault", "oracle")),
+    (CosimMode, ("lockstep", "realtime")),
+    (SweepBackend, ("simulator", "fmu")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 
@@ -74,3 +77,28 @@ def test_mode_counts_serialize_as_the_words():
     counts = {m: modes.count(m) for m in sorted(set(modes))}
     assert json.dumps(as_jsonable({"modes": counts})) == '{"modes": {"fallback": 1, "stance": 3}}'
     assert counts.get("fallback") == 1 and {"stance": 3}.get(ControllerMode.STANCE) == 3
+
+
+def test_cosim_config_parses_its_mode_and_records_the_word(tmp_path):
+    from orchestrator.cosim import CosimConfig
+
+    cfg = CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="realtime")
+    assert cfg.mode is CosimMode.REALTIME
+    assert json.dumps(cfg.to_dict()["mode"]) == '"realtime"'
+    with pytest.raises(ValueError, match="unknown cosim mode 'fast'; choose one of lockstep"):
+        CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="fast")
+
+
+def test_sweep_backend_in_the_spec_serializes_as_the_word(tmp_path):
+    from hp_model.artifacts import canonical_hash
+    from orchestrator.sweep_spec import parse_spec
+
+    for f in ("g.json", "t.json"):
+        (tmp_path / f).write_text("{}")
+    doc = {"gait": "g.json", "tube": "t.json", "controllers": ["pd"], "draws": 1, "seed": 0,
+           "families": {"f": {}}, "backend": "fmu"}
+    spec = parse_spec(doc, tmp_path / "spec.toml")
+    assert spec.backend is SweepBackend.FMU
+    assert spec.model_dump(mode="json")["backend"] == "fmu"
+    assert canonical_hash(spec.identity()) == canonical_hash(
+        {"seed": 0, "steps": spec.steps, "backend": "fmu"})
