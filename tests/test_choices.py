@@ -7,6 +7,8 @@ import json
 
 import pytest
 
+from characterization.gait_fit import FitSegments
+from characterization.mocap_mapping import SegmentationMethod
 from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
@@ -23,6 +25,8 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (ControllerMode, ("stance", "swing", "fallback", "fault", "oracle")),
     (CosimMode, ("lockstep", "realtime")),
     (SweepBackend, ("simulator", "fmu")),
+    (SegmentationMethod, ("paper", "contact")),
+    (FitSegments, ("touchdown", "paper")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 
@@ -102,3 +106,12 @@ def test_sweep_backend_in_the_spec_serializes_as_the_word(tmp_path):
     assert spec.model_dump(mode="json")["backend"] == "fmu"
     assert canonical_hash(spec.identity()) == canonical_hash(
         {"seed": 0, "steps": spec.steps, "backend": "fmu"})
+
+
+def test_fit_segments_outside_the_choices_is_a_fit_error():
+    from characterization.bezier_fit import FitError
+    from characterization.gait_fit import fit_segments
+
+    assert fit_segments("paper") is FitSegments.PAPER
+    with pytest.raises(FitError, match=r"^unknown fit segments 'steps'; choose one of touch"):
+        fit_segments("steps")
