@@ -44,6 +44,7 @@ from human_fmu.perturbation import perturbed_thetas
 from prosthesis_controller import (
     ControllerContext,
     ControllerMode,
+    ControllerName,
     ProsthesisMeasurement,
     make_controller,
 )
@@ -79,7 +80,7 @@ class Scenario:
     (impacts), and an initial prosthesis offset (knee, ankle) in rad added to the nominal
     initial state (the whole walker is then re-placed on the stance foot)."""
 
-    controller: str = "clfqp"
+    controller: str = ControllerName.CLFQP  # or ORACLE
     perturbation: Perturbation = NOMINAL
     steps: int = 20
     initial_offset: tuple[float, float] = (0.0, 0.0)

@@ -14,7 +14,6 @@ from prosthesis_controller.config import (
     SwingConfig,
 )
 from prosthesis_controller.controllers import (
-    CONTROLLERS,
     BaseController,
     ClfQpController,
     ControllerContext,
@@ -27,6 +26,7 @@ from prosthesis_controller.interface import (
     Active,
     Controller,
     ControllerMode,
+    ControllerName,
     ControlOutput,
     Diagnostics,
     QpOutcome,
@@ -34,7 +34,6 @@ from prosthesis_controller.interface import (
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 
 __all__ = [
-    "CONTROLLERS",
     "Active",
     "BaseController",
     "ClfConfig",
@@ -44,6 +43,7 @@ __all__ = [
     "ControllerConfig",
     "ControllerContext",
     "ControllerMode",
+    "ControllerName",
     "Diagnostics",
     "DomainConfig",
     "Fault",

@@ -27,6 +27,7 @@ from prosthesis_controller.config import ControllerConfig
 from prosthesis_controller.interface import (
     Active,
     ControllerMode,
+    ControllerName,
     ControlOutput,
     Diagnostics,
     QpOutcome,
@@ -470,7 +471,7 @@ class BaseController:
 class PDController(BaseController):
     """Joint PD on the nominal stance trajectory at the state-based phase."""
 
-    name = "pd"
+    name = ControllerName.PD
 
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
@@ -485,7 +486,7 @@ class PhasePdController(BaseController):
     controllers: the closed-loop experiments use it to show what a controller with the
     prosthesis's own measurements achieves when its feedback has the full loop's sign."""
 
-    name = "phase-pd"
+    name = ControllerName.PHASE_PD
 
     def __init__(self, ctx: ControllerContext) -> None:
         super().__init__(ctx)
@@ -507,7 +508,7 @@ class PhasePdController(BaseController):
 class PassiveController(BaseController):
     """Spong's robust passivity-based law (stand-in for Azimi et al. 2017)."""
 
-    name = "passive"
+    name = ControllerName.PASSIVE
 
     def __init__(self, ctx: ControllerContext) -> None:
         super().__init__(ctx)
@@ -535,7 +536,7 @@ class ClfQpController(BaseController):
     z = (u_k, u_a[, rho]) with the torque and rate limits as box bounds, then polished
     (:mod:`prosthesis_controller.polish`)."""
 
-    name = "clfqp-paper"
+    name = ControllerName.CLFQP_PAPER
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
@@ -570,7 +571,7 @@ class ClfQpController(BaseController):
         self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
                            G=np.asfortranarray(np.ones((1, n))), h_l=np.array([-_INF]),
                            h_u=np.ones(1), x_l=xl0, x_u=xu0)
-        self.name = "clfqp-paper" if relaxed else "clfqp-paper-exact"
+        self.name = ControllerName.CLFQP_PAPER if relaxed else ControllerName.CLFQP_PAPER_EXACT
         self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
         self._polish = bool(c.polish)
         super().__init__(ctx)
@@ -681,12 +682,8 @@ class ClfQpController(BaseController):
         return uk, ua, tau, V, rho, QpOutcome.SOLVED, active, ControllerMode.STANCE
 
 
-CONTROLLERS = ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd", "passive",
-               "phase-pd")
-
-
-def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
-                    config: ControllerConfig | None = None, *,
+def make_controller(name: ControllerName | str, gait: Gait, tube: ForceTube,
+                    model: HumanProsthesisModel, config: ControllerConfig | None = None, *,
                     context: ControllerContext | None = None,
                     subsystem: ProsthesisSubsystem | None = None,
                     strict_tube: bool = True) -> BaseController:
@@ -695,28 +692,27 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
     paper's literal formulation on the prosthesis subsystem with the socket-force tube: a
     documented negative result), "pd", "passive" or "phase-pd" (reference, not in the
     paper).  Pass ``context`` to share the compiled terms between controllers (then gait,
-    tube, model and config are taken from it)."""
-    if name not in CONTROLLERS:
-        raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
+    tube, model and config are taken from it).  Another name is a one-line ``ValueError``
+    naming the :class:`ControllerName` choices."""
+    name = ControllerName(name)
     ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
                                        strict_tube=strict_tube)
-    if name in ("clfqp", "clfqp-exact"):
+    if name in (ControllerName.CLFQP, ControllerName.CLFQP_EXACT):
         from prosthesis_controller.loop_clfqp import LoopClfQpController
 
-        return LoopClfQpController(ctx, relaxed=name == "clfqp")
-    if name == "clfqp-paper":
+        return LoopClfQpController(ctx, relaxed=name == ControllerName.CLFQP)
+    if name == ControllerName.CLFQP_PAPER:
         return ClfQpController(ctx, relaxed=True)
-    if name == "clfqp-paper-exact":
+    if name == ControllerName.CLFQP_PAPER_EXACT:
         return ClfQpController(ctx, relaxed=False)
-    if name == "pd":
+    if name == ControllerName.PD:
         return PDController(ctx)
-    if name == "phase-pd":
+    if name == ControllerName.PHASE_PD:
         return PhasePdController(ctx)
     return PassiveController(ctx)
 
 
 __all__ = [
-    "CONTROLLERS",
     "BaseController",
     "ClfQpController",
     "ControllerContext",

@@ -37,6 +37,23 @@ class Active(IntFlag):
     CONTACT = 128  # a stance-foot contact row (friction, normal force, CoP) of clfqp
 
 
+class ControllerName(Choice):
+    """The prosthesis controllers :func:`~prosthesis_controller.controllers.make_controller`
+    builds (its docstring says what each is)."""
+
+    CLFQP = "clfqp"
+    CLFQP_EXACT = "clfqp-exact"
+    CLFQP_PAPER = "clfqp-paper"
+    CLFQP_PAPER_EXACT = "clfqp-paper-exact"
+    PD = "pd"
+    PASSIVE = "passive"
+    PHASE_PD = "phase-pd"
+
+    @classmethod
+    def label(cls) -> str:
+        return "controller"
+
+
 class QpOutcome(Choice):
     """What the tick's QP gave (``Diagnostics.qp_status``); the controller node reports it
     on the bus as :class:`bus_schemas.protocol.QpStatus` (``prosthesis_controller.node``)."""

@@ -21,7 +21,7 @@ import piqp
 
 from prosthesis_controller.controllers import BaseController, ControllerContext
 from prosthesis_controller.disturbance import DisturbanceEstimator
-from prosthesis_controller.interface import Active, ControllerMode, QpOutcome
+from prosthesis_controller.interface import Active, ControllerMode, ControllerName, QpOutcome
 from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_ROWS, LOOP_SIGMA_UNIT
 
 _INF = math.inf
@@ -36,7 +36,7 @@ _RHO_MAX = int(Active.RHO_MAX)
 class LoopClfQpController(BaseController):
     """Interaction-aware robust CLF-QP, relaxed (``clfqp``) or exact (``clfqp-exact``)."""
 
-    name = "clfqp"
+    name = ControllerName.CLFQP
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
@@ -66,7 +66,7 @@ class LoopClfQpController(BaseController):
         self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
                            G=np.asfortranarray(np.ones((_N_ROWS, n))), h_l=self._hl,
                            h_u=np.ones(_N_ROWS), x_l=xl0, x_u=xu0)
-        self.name = "clfqp" if relaxed else "clfqp-exact"
+        self.name = ControllerName.CLFQP if relaxed else ControllerName.CLFQP_EXACT
         self._qp_x: list[float] | None = None
         self.sigma = 0.0  # contact relaxation of the last solve (torque-equivalent units)
         un = ctx.config.uncertainty

@@ -56,7 +56,7 @@ from bus_schemas.bus_config import (
 )
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
 from bus_schemas.run_auth import RunCredentials
-from prosthesis_controller.interface import Active, Controller, QpOutcome
+from prosthesis_controller.interface import Active, Controller, ControllerName, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.timing import Durations, Usage, pin_thread
 
@@ -341,7 +341,7 @@ def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="prosthesis_controller.node", description=__doc__.split(
         "\n\n")[0])
-    p.add_argument("--controller", required=True)
+    p.add_argument("--controller", required=True, help=f"one of {ControllerName.choices()}")
     p.add_argument("--gait", required=True)
     p.add_argument("--tube", required=True)
     p.add_argument("--bus", help="bus config file (TOML/JSON)")

@@ -14,7 +14,7 @@ from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.hybrid import Constraint, ConstraintKind
 from orchestrator.modes import CosimMode, SweepBackend
-from prosthesis_controller.interface import ControllerMode, QpOutcome
+from prosthesis_controller.interface import ControllerMode, ControllerName, QpOutcome
 
 #: every enum and the strings files and command lines spell (unchanged formats)
 CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
@@ -23,6 +23,8 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (ClosedLoopMode, ("full", "human")),
     (QpOutcome, ("not_run", "solved", "infeasible", "failed", "nonfinite")),
     (ControllerMode, ("stance", "swing", "fallback", "fault", "oracle")),
+    (ControllerName, ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd",
+                      "passive", "phase-pd")),
     (CosimMode, ("lockstep", "realtime")),
     (SweepBackend, ("simulator", "fmu")),
     (SegmentationMethod, ("paper", "contact")),
@@ -52,6 +54,21 @@ def test_other_input_is_a_one_line_error_listing_the_choices(enum, values):
 def test_label_splits_the_class_name():
     assert CompileBackend.label() == "compile backend"
     assert ConstraintKind.label() == "constraint kind"
+    assert ControllerName.label() == "controller"  # its own
+
+
+def test_sweep_spec_names_a_bad_controller_and_keeps_the_words(tmp_path):
+    from orchestrator.sweep_spec import SpecError, parse_spec
+
+    for f in ("g.json", "t.json"):
+        (tmp_path / f).write_text("{}")
+    doc = {"gait": "g.json", "tube": "t.json", "controllers": ["pd", "clfqp"], "draws": 1,
+           "seed": 0, "families": {"f": {}}}
+    spec = parse_spec(doc, tmp_path / "spec.toml")
+    assert spec.controllers == (ControllerName.PD, ControllerName.CLFQP)
+    assert spec.model_dump(mode="json")["controllers"] == ["pd", "clfqp"]
+    with pytest.raises(SpecError, match="field 'controllers': unknown controller 'lqr'; choose"):
+        parse_spec({**doc, "controllers": ["lqr"]}, tmp_path / "spec.toml")
 
 
 def test_function_set_and_constraint_parse_their_choice():

@@ -12,10 +12,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prosthesis_controller import (
-    CONTROLLERS,
     ClfConfig,
     ControllerConfig,
     ControllerContext,
+    ControllerName,
     Fault,
     ProsthesisMeasurement,
     make_controller,
@@ -61,7 +61,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("name", CONTROLLERS)
+@pytest.mark.parametrize("name", ControllerName)
 @pytest.mark.parametrize("bad,flag", BAD)
 def test_malformed_measurement_gives_the_fault_fallback(ctx, nominal_x, name, bad, flag):
     ctl = make_controller(name, None, None, None, context=ctx)
@@ -120,7 +120,7 @@ finite_or_not = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
                               finite_or_not, finite_or_not, st.floats(-200, 2000),
                               st.booleans()), min_size=1, max_size=25))
 def test_any_measurement_sequence_gives_bounded_finite_outputs(ctx, seq):
-    ctls = [make_controller(n, None, None, None, context=ctx) for n in CONTROLLERS]
+    ctls = [make_controller(n, None, None, None, context=ctx) for n in ControllerName]
     for ctl in ctls:
         ctl.reset()
         t = 0.0

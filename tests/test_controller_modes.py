@@ -11,7 +11,7 @@ import pytest
 from hp_model import bezier
 from hp_model.outputs import Y2_COORDS
 from prosthesis_controller import (
-    CONTROLLERS,
+    ControllerName,
     ProsthesisMeasurement,
     make_controller,
 )
@@ -250,5 +250,5 @@ def test_factory_refuses_unknown_names_and_foreign_tubes(model, subsystem, templ
                                   gait_hash="0" * 16)
     with pytest.raises(ValueError, match="tube was made for gait"):
         make_controller("clfqp", template_gait, foreign, model, subsystem=subsystem)
-    for name in CONTROLLERS:
+    for name in ControllerName:
         assert make_controller(name, None, None, None, context=ctx).name == name
