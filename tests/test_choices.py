@@ -12,6 +12,7 @@ from characterization.mocap_mapping import SegmentationMethod
 from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
+from hp_model.force_tube import TubePhase
 from hp_model.hybrid import Constraint, ConstraintKind
 from orchestrator.modes import CosimMode, SweepBackend
 from prosthesis_controller.interface import ControllerMode, ControllerName, QpOutcome
@@ -29,6 +30,7 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (SweepBackend, ("simulator", "fmu")),
     (SegmentationMethod, ("paper", "contact")),
     (FitSegments, ("touchdown", "paper")),
+    (TubePhase, ("gait", "step")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 
@@ -132,3 +134,11 @@ def test_fit_segments_outside_the_choices_is_a_fit_error():
     assert fit_segments("paper") is FitSegments.PAPER
     with pytest.raises(FitError, match=r"^unknown fit segments 'steps'; choose one of touch"):
         fit_segments("steps")
+
+
+def test_playback_options_parse_the_tube_phase():
+    from characterization.playback import PlaybackError, PlaybackOptions
+
+    assert PlaybackOptions(tube_phase="step").tube_phase is TubePhase.STEP
+    with pytest.raises(PlaybackError, match=r"^unknown tube phase 'stance'; choose one of gait"):
+        PlaybackOptions(tube_phase="stance")

@@ -164,7 +164,9 @@ CHOICES = [(["model", "check"], "--backend", "'auto', 'c', 'sx'"),
            (["run", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE], "--mode",
             "'lockstep', 'realtime'"),
            (["sweep", "run", "spec.toml", "--out", "o"], "--backend", "'simulator', 'fmu'"),
-           (["sweep", "replay", "o", "clfqp/human/0"], "--backend", "'simulator', 'fmu'")]
+           (["sweep", "replay", "o", "clfqp/human/0"], "--backend", "'simulator', 'fmu'"),
+           (["tube", "fit", "s.npz", "--gait", GAIT, "--out", "t.json"], "--phase",
+            "'gait', 'step'")]
 
 
 @pytest.mark.parametrize(("argv", "opt", "words"), CHOICES,
