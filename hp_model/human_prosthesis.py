@@ -32,7 +32,7 @@ from hp_model import anthropometry as anth
 from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
 from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
-from hp_model.tree import Body, Frame, PlanarTree
+from hp_model.tree import Body, Frame, JointKind, PlanarTree
 
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
           "x_f", "z_f", "th_f", "th_pk", "th_pa")
@@ -119,21 +119,22 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
     def link(cfg) -> dict:
         return dict(mass=cfg.mass.value, com=(0.0, -cfg.com.value), inertia=cfg.inertia.value)
 
+    rev, planar = JointKind.REVOLUTE, JointKind.PLANAR
     bodies = (
-        Body("hat", None, "planar", ("x_B", "z_B", "th_B"),
+        Body("hat", None, planar, ("x_B", "z_B", "th_B"),
              mass=m_hat, com=(0.0, c_hat), inertia=I_hat),
-        Body("l_thigh", "hat", "revolute", ("th_lh",), mass=m_th, com=(0.0, -c_th), inertia=I_th),
-        Body("l_shank", "l_thigh", "revolute", ("th_lk",), placement=(0.0, -L.thigh),
+        Body("l_thigh", "hat", rev, ("th_lh",), mass=m_th, com=(0.0, -c_th), inertia=I_th),
+        Body("l_shank", "l_thigh", rev, ("th_lk",), placement=(0.0, -L.thigh),
              mass=m_sh, com=(0.0, -c_sh), inertia=I_sh),
-        Body("l_foot", "l_shank", "revolute", ("th_la",), placement=(0.0, -L.shank),
+        Body("l_foot", "l_shank", rev, ("th_la",), placement=(0.0, -L.shank),
              mass=m_ft, com=foot_com, inertia=I_ft),
-        Body("r_thigh", "hat", "revolute", ("th_rh",),
+        Body("r_thigh", "hat", rev, ("th_rh",),
              mass=r_thigh[0], com=r_thigh[1], inertia=r_thigh[2]),
-        Body("p_top", "r_thigh", "planar", SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
+        Body("p_top", "r_thigh", planar, SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
              **link(p.top)),
-        Body("p_shin", "p_top", "revolute", ("th_pk",), placement=(0.0, -p.top.length.value),
+        Body("p_shin", "p_top", rev, ("th_pk",), placement=(0.0, -p.top.length.value),
              **link(p.shin)),
-        Body("p_foot", "p_shin", "revolute", ("th_pa",), placement=(0.0, -p.shin.length.value),
+        Body("p_foot", "p_shin", rev, ("th_pa",), placement=(0.0, -p.shin.length.value),
              mass=pf.mass.value, com=(pf.com_x.value, pf.com_z.value), inertia=pf.inertia.value),
     )
     h_l, h_p = L.ankle_height, pf.ankle_height.value

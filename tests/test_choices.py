@@ -14,6 +14,7 @@ from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.force_tube import TubePhase
 from hp_model.hybrid import Constraint, ConstraintKind
+from hp_model.tree import Body, JointKind, ModelError
 from orchestrator.modes import CosimMode, SweepBackend
 from prosthesis_controller.interface import ControllerMode, ControllerName, QpOutcome
 
@@ -21,6 +22,7 @@ from prosthesis_controller.interface import ControllerMode, ControllerName, QpOu
 CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (CompileBackend, ("auto", "c", "sx")),
     (ConstraintKind, ("frame", "coords")),
+    (JointKind, ("revolute", "planar")),
     (ClosedLoopMode, ("full", "human")),
     (QpOutcome, ("not_run", "solved", "infeasible", "failed", "nonfinite")),
     (ControllerMode, ("stance", "swing", "fallback", "fault", "oracle")),
@@ -80,6 +82,9 @@ def test_function_set_and_constraint_parse_their_choice():
         Constraint("c", "plane", "x")
     c = Constraint("c", "frame", "p_sole")
     assert c.kind is ConstraintKind.FRAME and c.size == 3
+    with pytest.raises(ModelError, match="body 'b': unknown joint kind 'hinge'; choose one"):
+        Body("b", None, "hinge", ("q",))
+    assert Body("b", None, "planar", ("x", "z", "th")).joint.dof == 3
 
 
 def test_qp_outcome_maps_to_the_bus_status_unchanged():
