@@ -9,6 +9,7 @@ import pytest
 
 from characterization.gait_fit import FitSegments
 from characterization.mocap_mapping import SegmentationMethod
+from characterization.synthetic_subject import SynthSource
 from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
@@ -33,6 +34,7 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (SegmentationMethod, ("paper", "contact")),
     (FitSegments, ("touchdown", "paper")),
     (TubePhase, ("gait", "step")),
+    (SynthSource, ("model", "template")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 
