@@ -34,8 +34,9 @@ import hp_model
 from hp_model.force_tube import ForceTube, load_tube
 from hp_model.gait_artifact import Gait, load_gait
 from prosthesis_controller import (
-    CONTROLLERS,
     ControllerContext,
+    ControllerName,
+    QpOutcome,
     make_controller,
 )
 from tests.controller_support import stance_ticks
@@ -104,7 +105,7 @@ def main() -> None:
                          nominal=gait.socket_nominal, lower=-h, upper=h)
     ctx = ControllerContext(gait, tube, model)
     meas, u0 = stance_ticks(model, gait, a.ticks)
-    ctls = {n: make_controller(n, gait, tube, model, context=ctx) for n in CONTROLLERS}
+    ctls = {n: make_controller(n, gait, tube, model, context=ctx) for n in ControllerName}
 
     # the QPs the relaxed controller solves along this run (recorded in an untimed pass)
     rec = ctls["clfqp"]
@@ -112,12 +113,12 @@ def main() -> None:
     qps = []
     for m in meas:
         out = rec.tick(m)
-        if out.diagnostics.qp_status in ("solved", "failed"):
+        if out.diagnostics.qp_status in (QpOutcome.SOLVED, QpOutcome.FAILED):
             qps.append(rec.qp_data())  # copies, Fortran-ordered matrices
 
     if a.no_gc:
         gc.disable()
-    times: dict[str, list[np.ndarray]] = {n: [] for n in [*CONTROLLERS, "piqp"]}
+    times: dict[str, list[np.ndarray]] = {n: [] for n in [*ControllerName, "piqp"]}
     modes: dict[str, Counter] = {}
     for _ in range(a.repeats):
         for n, c in ctls.items():
@@ -144,7 +145,7 @@ def main() -> None:
               "clfqp-paper-exact": "paper's robust CLF-QP, exact", "pd": "PD",
               "passive": "robust-passive", "phase-pd": "phase-PD reference",
               "piqp": "bare piqp update + solve (relaxed QPs)"}
-    for n in [*CONTROLLERS, "piqp"]:
+    for n in [*ControllerName, "piqp"]:
         r = rows[n]
         md = ", ".join(f"{k} {v}" for k, v in sorted(modes.get(n, {}).items())) or "-"
         print(f"| {labels[n]} | {r['median_us']:.1f} | {r['p99_us']:.1f} | {md} |")

@@ -44,7 +44,7 @@ import zenoh
 
 from bus_schemas import keys
 from bus_schemas.keys import Direction
-from bus_schemas.zenoh_config import make_config
+from bus_schemas.zenoh_config import ZenohMode, make_config
 
 WIRE_VERSION = 1
 BATCH_VERSION = 2
@@ -314,7 +314,8 @@ class ZenohBus(can.BusABC):
     """
 
     def __init__(self, channel: str, can_filters: Any = None, *,
-                 listen: Any = None, connect: Any = None, mode: str = "peer",
+                 listen: Any = None, connect: Any = None,
+                 mode: ZenohMode | str = ZenohMode.PEER,
                  allow_remote: bool = False, zenoh_options: dict[str, Any] | None = None,
                  session: zenoh.Session | None = None, receive_own_messages: bool = False,
                  rx_queue_size: int = 10_000, declare_alive: bool = True,

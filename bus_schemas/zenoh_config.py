@@ -14,11 +14,19 @@ import ipaddress
 import json
 import socket
 from collections.abc import Iterable, Mapping
+from enum import StrEnum
 from typing import Any
 
 import zenoh
 
-MODES = ("peer", "client")
+
+class ZenohMode(StrEnum):
+    """A zenoh session's role (:func:`make_config`); the value is zenoh's own word.  (A plain
+    StrEnum: the bus stays free of the model package.)"""
+
+    PEER = "peer"
+    CLIENT = "client"  # needs connect endpoints, cannot listen
+
 _LOCAL_PROTOCOLS = ("unixsock-stream", "unixpipe")
 _GUARDED_KEYS = ("listen", "connect", "scouting", "mode")
 
@@ -79,7 +87,8 @@ LOW_LATENCY = {"transport/unicast/lowlatency": True, "transport/unicast/qos/enab
 
 
 def make_config(*, listen: str | Iterable[str] | None = None,
-                connect: str | Iterable[str] | None = None, mode: str = "peer",
+                connect: str | Iterable[str] | None = None,
+                mode: ZenohMode | str = ZenohMode.PEER,
                 allow_remote: bool = False, low_latency: bool = False,
                 options: Mapping[str, Any] | None = None) -> zenoh.Config:
     """A zenoh config with scouting off and explicit endpoints.
@@ -92,11 +101,14 @@ def make_config(*, listen: str | Iterable[str] | None = None,
     ``options``: further ``{key: value}`` settings inserted last with ``insert_json5``;
     keys under listen, connect, scouting and mode need ``allow_remote=True``.
     """
-    if mode not in MODES:
-        raise ValueError(f"zenoh mode {mode!r}: expected one of {MODES}")
+    try:
+        mode = ZenohMode(mode)
+    except ValueError:
+        raise ValueError(f"zenoh mode {mode!r}: expected one of {', '.join(ZenohMode)}"
+                         ) from None
     lst = _endpoints(listen, "listen", allow_remote)
     con = _endpoints(connect, "connect", allow_remote)
-    if mode == "client" and (lst or not con):
+    if mode == ZenohMode.CLIENT and (lst or not con):
         raise ValueError("zenoh client mode needs connect endpoints and no listen endpoints")
     cfg = zenoh.Config()
     cfg.insert_json5("mode", json.dumps(mode))

@@ -35,11 +35,25 @@ from characterization.step_segmentation import StepBounds
 from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
+from hp_model.choices import Choice
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS
 
-SEGMENTS = ("touchdown", "paper")
+
+class FitSegments(Choice):
+    """The portions of a take regressed per domain (module docstring)."""
+
+    TOUCHDOWN = "touchdown"  # the model's domains, touchdown to touchdown
+    PAPER = "paper"  # delta_p_hip rising = ps, falling = pns
+
+
+def fit_segments(segments: FitSegments | str) -> FitSegments:
+    """``segments`` parsed; a :class:`FitError` (one line naming the choices) otherwise."""
+    try:
+        return FitSegments(segments)
+    except ValueError as e:
+        raise FitError(str(e)) from None
 
 
 @dataclass(frozen=True)
@@ -50,7 +64,7 @@ class Regression:
     fits: dict[str, BezierFit]  # y2 per domain
     hip_velocity_rms: dict[str, float]  # m/s, spread of d/dt delta_p_hip about its mean
     n_steps: dict[str, int]
-    segments: str = "touchdown"
+    segments: FitSegments = FitSegments.TOUCHDOWN
 
     def quality(self) -> dict[str, dict]:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
@@ -173,15 +187,15 @@ def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
 
 
 def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int,
-                  src: str = "steps", segments: str = "touchdown") -> Regression:
+                  src: str = "steps", segments: FitSegments | str = FitSegments.TOUCHDOWN
+                  ) -> Regression:
     """Bezier regression of the stacked portions of each domain (``segments``: module
     docstring)."""
-    if segments not in SEGMENTS:
-        raise FitError(f"segments must be one of {', '.join(SEGMENTS)}, got {segments!r}")
-    found = domain_segments(steps) if segments == "touchdown" else []
+    segments = fit_segments(segments)
+    found = domain_segments(steps) if segments == FitSegments.TOUCHDOWN else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
     for d in CYCLE:
-        if segments == "touchdown":
+        if segments == FitSegments.TOUCHDOWN:
             r = regress_segments(model, steps, [s for s in found if s.domain == d], d,
                                  degree, src)
         else:
@@ -248,7 +262,8 @@ def walking_failures(verification: Mapping) -> list[str]:
 def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
              src: str = "steps", verify: bool = True,
              progress: Callable[[str], None] | None = None,
-             segments: str = "touchdown", allow_unstable: bool = False) -> Gait:
+             segments: FitSegments | str = FitSegments.TOUCHDOWN,
+             allow_unstable: bool = False) -> Gait:
     """The whole ``gait fit``: regression (of the portions ``segments``, module
     docstring), optimization, verification.  Raises :class:`GaitOptimizationError` (with
     IPOPT's status) when the optimization fails and :class:`GaitVerificationError` when the

@@ -50,6 +50,7 @@ from pydantic import (
 )
 
 from characterization.mocap_take import MocapError
+from hp_model.choices import Choice
 
 SCHEMA_VERSION = 1
 LIMBS = ("hat", "l_thigh", "l_shank", "l_foot", "r_thigh", "p_shin", "p_foot")
@@ -94,13 +95,19 @@ class JointMarkers(_Strict):
     markers: tuple[str, str]
 
 
+class SegmentationMethod(Choice):
+    """How a take is cut into steps (``[segmentation] method``)."""
+
+    PAPER = "paper"  # the turning points of delta_p_hip, the paper's rule
+    CONTACT = "contact"  # each foot's touchdowns from its markers (:mod:`foot_contact`)
+
+
 class Segmentation(_Strict):
-    """``method``: "paper" (the turning points of delta_p_hip, the paper's rule) or
-    "contact" (each foot's touchdowns from its markers, :mod:`foot_contact`)."""
+    """The feet's markers and the :class:`SegmentationMethod`."""
 
     human_foot_marker: str
     prosthesis_foot_marker: str
-    method: Literal["paper", "contact"] = "paper"
+    method: SegmentationMethod = SegmentationMethod.PAPER
     #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
     human_side: str = "Left"
     prosthesis_side: str = "Right"

@@ -33,7 +33,7 @@ from characterization.mocap_checks import (
     infer_up,
     trunk_trajectory,
 )
-from characterization.mocap_mapping import JOINTS, LIMBS, MocapMapping
+from characterization.mocap_mapping import JOINTS, LIMBS, MocapMapping, SegmentationMethod
 from characterization.mocap_take import MocapError, Take
 from characterization.sagittal import SagittalFrame, auto_forward, axis_vector
 from characterization.step_segmentation import (
@@ -93,7 +93,7 @@ class ProcessedTake:
     notes: tuple[str, ...]
     #: "human" / "prosthesis" foot: its stance from the markers (:mod:`foot_contact`)
     contacts: dict[str, FootContact] = field(default_factory=dict)
-    segmentation: str = "paper"
+    segmentation: SegmentationMethod = SegmentationMethod.PAPER
     #: the found events against the lab's in the file (:func:`foot_contact.compare_events`)
     lab_events: dict[str, dict[str, object]] = field(default_factory=dict)
 
@@ -338,7 +338,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     delta = ck * q[:, COORDS.index("th_pk")] + ca * q[:, COORDS.index("th_pa")]
     seg = mapping.segmentation
     contacts = foot_contacts(take, mapping, frame)
-    if seg.method == "contact":
+    if seg.method == SegmentationMethod.CONTACT:
         if set(contacts) != {"human", "prosthesis"}:
             raise MocapError(f"{take.source}: segmentation 'contact' needs both feet")
         bounds = contact_steps(contacts, len(q))
@@ -360,8 +360,8 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     if not steps:
         why = (f"{len(dropped)} found but dropped: {dropped[0].reason}" if dropped else
                "delta_p_hip(th_pk, th_pa) has fewer than two turning points"
-               if seg.method == "paper" else "no touchdown of one foot between two of the "
-               "other's")
+               if seg.method == SegmentationMethod.PAPER
+               else "no touchdown of one foot between two of the other's")
         raise MocapError(f"{take.source}: no complete step ({why})")
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
@@ -375,7 +375,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
                          f"{v['median_abs_frames']})")
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
                          dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
-                         contacts, seg.method, lab)
+                         contacts, SegmentationMethod(seg.method), lab)
 
 
 def _make_step(b: StepBounds, q: np.ndarray, coefficients: HipCoefficients,

@@ -82,7 +82,7 @@ from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
-from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, save_tube
+from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, TubePhase, save_tube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import STANCE, Y2_COORDS, GaitParams, VirtualConstraints
@@ -93,8 +93,6 @@ DOMAIN = "ps"
 #: the model-generated subject the true profiles leave the bare tube by <= 0.3 % of peak
 #: without noise and <= 0.8 % with 0.05 deg of angle noise (README table)
 DEFAULT_ALLOWANCE = 0.01
-#: what the tube's tau can be (PlaybackOptions.tube_phase)
-TUBE_PHASES = ("gait", "step")
 #: a progress callback: (what, done, total)
 Progress = Callable[[str, int, int], None]
 
@@ -119,12 +117,13 @@ class PlaybackOptions:
     #: configuration, (delta_p_hip - p_min*) / (p_max* - p_min*), the phase the controllers
     #: compute; "step" = each step's own tau (its own phase bounds, the paper's per-step
     #: normalization)
-    tube_phase: str = "gait"
+    tube_phase: TubePhase = TubePhase.GAIT
 
     def __post_init__(self) -> None:
-        if self.tube_phase not in TUBE_PHASES:
-            raise PlaybackError(f"tube phase must be one of {', '.join(TUBE_PHASES)}, got "
-                                f"{self.tube_phase!r}")
+        try:
+            object.__setattr__(self, "tube_phase", TubePhase(self.tube_phase))
+        except ValueError as e:
+            raise PlaybackError(str(e)) from None
 
     def sim_options(self) -> SimOptions:
         return SimOptions(dt=self.dt, substeps=self.substeps,
@@ -201,12 +200,12 @@ class TubeResult:
     playback: Playback
     used: list[int]  # step indices in the tube
     seconds: dict[str, float] = field(default_factory=dict)
-    phase: str = "step"
+    phase: TubePhase = TubePhase.STEP
     gait_ps: GaitParams | None = None
 
     def tube_tau(self, sp: StepPlayback, tau: np.ndarray | float) -> np.ndarray:
         """A phase of step ``sp`` (its own tau) in the tube's phase."""
-        if self.phase == "gait" and self.gait_ps is not None:
+        if self.phase == TubePhase.GAIT and self.gait_ps is not None:
             return phase_map(sp.params, self.gait_ps, tau)
         return np.asarray(tau, float)
 
@@ -428,9 +427,9 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
                             f"support, a degree-{degree} tube needs {degree + 1} ({why})")
     opt = options or PlaybackOptions()
     gait_ps = gait.params[DOMAIN]
-    inner = [s.in_phase_of(gait_ps) for s in good] if opt.tube_phase == "gait" else good
+    inner = [s.in_phase_of(gait_ps) for s in good] if opt.tube_phase == TubePhase.GAIT else good
     tau_lo, tau_hi = tube_interval([s.single_support for s in inner])  # type: ignore[misc]
-    if opt.tube_phase == "gait":  # the gait's F* is defined on its ps, tau in [0, 1]
+    if opt.tube_phase == TubePhase.GAIT:  # the gait's F* is defined on its ps, tau in [0, 1]
         tau_lo, tau_hi = max(tau_lo, 0.0), min(tau_hi, 1.0)
         if not tau_hi > tau_lo:
             raise PlaybackError(f"{src}: the steps' common single support [{tau_lo:.3f}, "
@@ -469,13 +468,14 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
         if progress is not None:
             progress("model error of the nominal-human model", 0, 1)
         tube = with_model_error(tube, model, gait, good, error_degree,
-                                exclude_after_touchdown, opt.tube_phase == "gait", src, beta)
+                                exclude_after_touchdown, opt.tube_phase == TubePhase.GAIT,
+                                src, beta)
     t2 = time.perf_counter()
     if progress is not None:
         progress("force tube done", 1, 1)
     return TubeResult(tube, profiles, pb, [s.step for s in good],
                       {"playback": t1 - t0, "tube": t2 - t1, "total": t2 - t0},
-                      opt.tube_phase, gait_ps if opt.tube_phase == "gait" else None)
+                      opt.tube_phase, gait_ps if opt.tube_phase == TubePhase.GAIT else None)
 
 
 def with_model_error(tube: ForceTube, model: HumanProsthesisModel, gait: Gait,
@@ -518,7 +518,7 @@ def report_markdown(res: TubeResult, steps_src: str = "steps", gait_src: str = "
         f"degree-{t.degree} Bezier bounds on tau in [{t.tau_lo:.3f}, {t.tau_hi:.3f}] "
         "(single support by the foot-marker rule), tau = "
         + ("the gait's phase of each sample (the controllers' phase)"
-           if res.phase == "gait" else "each step's own phase (the paper's normalization)")
+           if res.phase == TubePhase.GAIT else "each step's own phase (the paper's normalization)")
         + ".", "",
         f"Time: playback {res.seconds.get('playback', 0):.2f} s, tube "
         f"{res.seconds.get('tube', 0):.2f} s.", "",

@@ -50,11 +50,19 @@ from characterization.synthetic_gait import (
 from hp_model import HumanProsthesisModel
 from hp_model.artifacts import ArtifactError
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
+from hp_model.choices import Choice
 from hp_model.gait_artifact import Gait, load_gait
 
 #: the packaged reference gait of the default subject and device (NOTICE.md beside it)
 REFERENCE_GAIT = Path(__file__).resolve().parent / "data" / "reference_gait.json"
-SOURCES = ("model", "template")
+
+
+class SynthSource(Choice):
+    """Where the synthetic subject's motion comes from (module docstring)."""
+
+    MODEL = "model"  # the model walks a reference gait
+    TEMPLATE = "template"  # the kinematic template of characterization.synthetic_gait
+
 
 #: limb -> (frame giving its origin, coordinates summed for its pitch)
 LIMB_POSE = {"hat": ("hip", ("th_B",)), "l_thigh": ("hip", ("th_B", "th_lh")),
@@ -101,7 +109,7 @@ class SynthOptions:
     rb_dropout_rate: float = 0.3  # rigid-body losses (markers still seen) per body per second
     rb_dropout_max_frames: int = 24
     lead: float = 0.35  # s of partial steps before the first and after the last cycle
-    source: str = "model"  # "model" or "template" (module docstring)
+    source: SynthSource = SynthSource.MODEL  # or its value
     gait_file: str | None = None  # model source: reference gait (None: the packaged one)
     sigma: float = 0.03  # model source: rad, SD of the interior Bezier coefficients per step
     sigma_v_hip: float = 0.03  # model source: relative SD of the hip velocity per step
@@ -336,11 +344,12 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     delta_p_hip), step_ss_start/step_ss_end (the non-stance foot's swing: single
     support), p_land/p_lift/h_lift/h_land (contact event times, s).
     """
-    if opts.source not in SOURCES:
-        raise MocapError(f"synthetic subject: source must be one of {SOURCES}, got "
-                         f"{opts.source!r}")
+    try:
+        source = SynthSource(opts.source)
+    except ValueError as e:
+        raise MocapError(f"synthetic subject: {e}") from None
     rng = np.random.default_rng(opts.seed)
-    motion = _template_motion if opts.source == "template" else _model_motion
+    motion = _template_motion if source == SynthSource.TEMPLATE else _model_motion
     t, q, ev, stride_time = motion(model, opts, rng)
     take, take_c3d, limb_pose, joint_pos, exact = _markers(model, t, q, opts, rng)
     limb_pitch = np.column_stack([limb_pose[k][:, 2] for k in LIMBS])
@@ -373,7 +382,7 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     q = q.copy()
     q[:, 0:2] += shift
     truth = {
-        "source": np.array(opts.source), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
+        "source": np.array(source.value), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
         "joint_position": joint_pos, "joint_lambda": lam, "delta_ps": delta,
         "step_domain": np.array([s[0] for s in steps]),
         "step_start": np.array([s[1] for s in steps], dtype=np.int64),

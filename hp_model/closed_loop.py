@@ -30,11 +30,18 @@ from __future__ import annotations
 
 import casadi as ca
 
+from hp_model.choices import Choice
 from hp_model.compiled import FunctionSet
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints
 
-MODES = ("full", "human")
+
+class ClosedLoopMode(Choice):
+    """Where the prosthesis torques come from (module docstring); the value names the
+    functions (``rk4_<mode>_<d>``, delayed ``rk4_d<mode>_<d>``)."""
+
+    FULL = "full"  # feedback linearization of all 6 torques
+    HUMAN = "human"  # the human's 4; the prosthesis's given (u_p)
 
 
 def _rk4_of(f: ca.Function, name: str, nx: int, extra: list[tuple[str, int]],
@@ -71,16 +78,16 @@ def delayed_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
     out: list[ca.Function] = []
     for mode, u, extra in (
-            ("dfull", vc.functions[f"flv_{d}"](q, qd, theta, v), [("v", v)]),
-            ("dhuman", vc.functions[f"hflv_{d}"](q, qd, theta, v_h, u_p),
+            (ClosedLoopMode.FULL, vc.functions[f"flv_{d}"](q, qd, theta, v), [("v", v)]),
+            (ClosedLoopMode.HUMAN, vc.functions[f"hflv_{d}"](q, qd, theta, v_h, u_p),
              [("v_h", v_h), ("u_p", u_p)])):
         qdd, lam = dyn(q, qd, u)
-        f = ca.Function(f"xdot_{mode}_{d}", [x, theta, *(s for _, s in extra)],
+        f = ca.Function(f"xdot_d{mode}_{d}", [x, theta, *(s for _, s in extra)],
                         [ca.vertcat(qd, qdd), u, lam],
                         ["x", "theta", *(n for n, _ in extra)], ["xdot", "u", "lam"],
                         {"cse": True})
         dims = [("theta", vc.n_params)] + [(n, s.numel()) for n, s in extra]
-        out += [f, _rk4_of(f, f"rk4_{mode}_{d}", 2 * nq, dims, height)]
+        out += [f, _rk4_of(f, f"rk4_d{mode}_{d}", 2 * nq, dims, height)]
     return out
 
 
@@ -101,7 +108,8 @@ def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     out: list[ca.Function] = []
     u_full = fl(q, qd, theta, gains)[0]
     u_human = hfl(q, qd, theta, gains, u_p)
-    for mode, u, extra in (("full", u_full, []), ("human", u_human, [u_p])):
+    for mode, u, extra in ((ClosedLoopMode.FULL, u_full, []),
+                           (ClosedLoopMode.HUMAN, u_human, [u_p])):
         qdd, lam = dyn(q, qd, u)
         names = ["x", "theta", "gains"] + (["u_p"] if extra else [])
         f = ca.Function(f"xdot_{mode}_{d}", [x, theta, gains, *extra],

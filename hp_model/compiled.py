@@ -24,11 +24,21 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from hp_model.choices import Choice
+
 CFLAGS = ("-O2", "-fPIC", "-shared", "-fno-math-errno")
 
 
 class CompileError(RuntimeError):
     """The C compiler failed on generated code."""
+
+
+class CompileBackend(Choice):
+    """How a :class:`FunctionSet` evaluates its functions."""
+
+    AUTO = "auto"  # C when a compiler is found, else SX
+    C = "c"  # generated C, compiled (raise if impossible)
+    SX = "sx"  # the CasADi SX interpreter
 
 
 def cache_root() -> Path:
@@ -151,20 +161,20 @@ def densified(f: ca.Function) -> ca.Function:
 class FunctionSet:
     """Named CasADi Functions evaluated as compiled C (or the SX interpreter as fallback).
 
-    ``backend`` is ``"c"`` (compile; raise if impossible), ``"sx"`` (interpret) or ``"auto"``
-    (C when a compiler is found).
+    ``backend``: a :class:`CompileBackend` or its value; ``self.backend`` is the one used
+    (``C`` or ``SX``, never ``AUTO``).
     """
 
-    def __init__(self, functions: Sequence[ca.Function], name: str, backend: str = "auto") -> None:
+    def __init__(self, functions: Sequence[ca.Function], name: str,
+                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
         functions = [densified(f) for f in functions]
         self.symbolic = {f.name(): f for f in functions}
-        if backend not in ("auto", "c", "sx"):
-            raise ValueError(f"backend must be auto, c or sx, got {backend!r}")
-        if backend == "auto":
-            backend = "c" if find_c_compiler() else "sx"
+        backend = CompileBackend(backend)
+        if backend == CompileBackend.AUTO:
+            backend = CompileBackend.C if find_c_compiler() else CompileBackend.SX
         self.backend = backend
         self.library: Path | None = None
-        if backend == "c":
+        if backend == CompileBackend.C:
             self.library = compile_library(list(functions), name)
             self._numeric = {
                 n: NumericFunction(ca.external(n, str(self.library))) for n in self.symbolic

@@ -44,6 +44,7 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.artifacts import ArtifactError, FieldReader, load_json, save_json
+from hp_model.choices import Choice
 
 KIND = "hpcosim-tube"
 SCHEMA_VERSION = 2
@@ -53,6 +54,14 @@ ERROR_COMPONENTS = ("dy1", "d2y2")  # model error d: output accelerations
 ERROR_UNITS = ("m/s^2", "rad/s^2")
 #: default time after the prosthesis's touchdown excluded from the model-error bound (s)
 EXCLUDE_AFTER_TOUCHDOWN = 0.03
+
+
+class TubePhase(Choice):
+    """The phase tau a tube is a function of (``source.playback.tube_phase``;
+    :mod:`characterization.playback`)."""
+
+    GAIT = "gait"  # the gait's tau of each sample's configuration (what controllers compute)
+    STEP = "step"  # each step's own tau (its own phase bounds: the paper's normalization)
 
 
 @dataclass(frozen=True)

@@ -29,9 +29,10 @@ import casadi as ca
 import numpy as np
 
 from hp_model import anthropometry as anth
+from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
-from hp_model.hybrid import Constraint, Domain, HybridModel
-from hp_model.tree import Body, Frame, PlanarTree
+from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
+from hp_model.tree import Body, Frame, JointKind, PlanarTree
 
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
           "x_f", "z_f", "th_f", "th_pk", "th_pa")
@@ -118,21 +119,22 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
     def link(cfg) -> dict:
         return dict(mass=cfg.mass.value, com=(0.0, -cfg.com.value), inertia=cfg.inertia.value)
 
+    rev, planar = JointKind.REVOLUTE, JointKind.PLANAR
     bodies = (
-        Body("hat", None, "planar", ("x_B", "z_B", "th_B"),
+        Body("hat", None, planar, ("x_B", "z_B", "th_B"),
              mass=m_hat, com=(0.0, c_hat), inertia=I_hat),
-        Body("l_thigh", "hat", "revolute", ("th_lh",), mass=m_th, com=(0.0, -c_th), inertia=I_th),
-        Body("l_shank", "l_thigh", "revolute", ("th_lk",), placement=(0.0, -L.thigh),
+        Body("l_thigh", "hat", rev, ("th_lh",), mass=m_th, com=(0.0, -c_th), inertia=I_th),
+        Body("l_shank", "l_thigh", rev, ("th_lk",), placement=(0.0, -L.thigh),
              mass=m_sh, com=(0.0, -c_sh), inertia=I_sh),
-        Body("l_foot", "l_shank", "revolute", ("th_la",), placement=(0.0, -L.shank),
+        Body("l_foot", "l_shank", rev, ("th_la",), placement=(0.0, -L.shank),
              mass=m_ft, com=foot_com, inertia=I_ft),
-        Body("r_thigh", "hat", "revolute", ("th_rh",),
+        Body("r_thigh", "hat", rev, ("th_rh",),
              mass=r_thigh[0], com=r_thigh[1], inertia=r_thigh[2]),
-        Body("p_top", "r_thigh", "planar", SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
+        Body("p_top", "r_thigh", planar, SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
              **link(p.top)),
-        Body("p_shin", "p_top", "revolute", ("th_pk",), placement=(0.0, -p.top.length.value),
+        Body("p_shin", "p_top", rev, ("th_pk",), placement=(0.0, -p.top.length.value),
              **link(p.shin)),
-        Body("p_foot", "p_shin", "revolute", ("th_pa",), placement=(0.0, -p.shin.length.value),
+        Body("p_foot", "p_shin", rev, ("th_pa",), placement=(0.0, -p.shin.length.value),
              mass=pf.mass.value, com=(pf.com_x.value, pf.com_z.value), inertia=pf.inertia.value),
     )
     h_l, h_p = L.ankle_height, pf.ankle_height.value
@@ -156,12 +158,12 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
     return tree
 
 
-SOCKET = Constraint("socket", "coords", SOCKET_COORDS)
+SOCKET = Constraint("socket", ConstraintKind.COORDS, SOCKET_COORDS)
 DOMAIN_DEFS = (
-    Domain("ps", (Constraint("p_foot", "frame", "p_sole"), SOCKET), swing_frame="l_sole",
-           next="pns"),
-    Domain("pns", (Constraint("l_foot", "frame", "l_sole"), SOCKET), swing_frame="p_sole",
-           next="ps"),
+    Domain("ps", (Constraint("p_foot", ConstraintKind.FRAME, "p_sole"), SOCKET),
+           swing_frame="l_sole", next="pns"),
+    Domain("pns", (Constraint("l_foot", ConstraintKind.FRAME, "l_sole"), SOCKET),
+           swing_frame="p_sole", next="ps"),
 )
 
 
@@ -175,7 +177,8 @@ class HumanProsthesisModel(HybridModel):
     """
 
     def __init__(self, subject: SubjectConfig, device: DeviceConfig,
-                 body: BodyVariation = NOMINAL_BODY, backend: str = "auto") -> None:
+                 body: BodyVariation = NOMINAL_BODY,
+                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
         self.subject = subject
         self.device = device
         self.body = body

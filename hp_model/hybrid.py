@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from hp_model.compiled import FunctionSet
+from hp_model.choices import Choice
+from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.dynamics import (
     constrained_accel,
     constraint_terms,
@@ -37,21 +38,28 @@ from hp_model.dynamics import (
 from hp_model.tree import ModelError, PlanarTree, body_poses, frame_pose
 
 
+class ConstraintKind(Choice):
+    """What a :class:`Constraint` holds (module docstring)."""
+
+    FRAME = "frame"  # target: a frame name; h = its world pose (x, z, pitch), 3 rows
+    COORDS = "coords"  # target: a tuple of coordinate names; h = those coordinates
+
+
 @dataclass(frozen=True)
 class Constraint:
-    """One block of holonomic constraints.
-
-    kind ``"frame"``: target is a frame name; h = its world pose (x, z, pitch), 3 rows.
-    kind ``"coords"``: target is a tuple of coordinate names; h = those coordinates.
-    """
+    """One block of holonomic constraints of a :class:`ConstraintKind` (given as the enum
+    or its value) on ``target``."""
 
     name: str
-    kind: str
+    kind: ConstraintKind
     target: str | tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", ConstraintKind(self.kind))
 
     @property
     def size(self) -> int:
-        return 3 if self.kind == "frame" else len(self.target)
+        return 3 if self.kind == ConstraintKind.FRAME else len(self.target)
 
 
 @dataclass(frozen=True)
@@ -93,11 +101,11 @@ class HybridModel:
         gear_ratios: Sequence[float],
         domains: Sequence[Domain],
         name: str,
-        backend: str = "auto",
+        backend: CompileBackend | str = CompileBackend.AUTO,
     ) -> None:
         if len(actuated) != len(gear_ratios):
             raise ModelError("one gear ratio per actuated coordinate")
-        self.backend = backend
+        self.backend = CompileBackend(backend)
         self.tree = tree
         self.name = name
         self.nq = tree.nq
@@ -158,7 +166,7 @@ class HybridModel:
         self.functions: dict[str, ca.Function] = {
             f.name(): f.expand() if f.is_a("MXFunction") else f for f in fns
         }
-        self._numeric: dict[str, FunctionSet] = {}
+        self._numeric: dict[CompileBackend, FunctionSet] = {}
 
     # -- symbolic helpers --------------------------------------------------------------------
     def constraint_expr(self, constraints: Sequence[Constraint], q: ca.SX | None = None) -> ca.SX:
@@ -169,12 +177,10 @@ class HybridModel:
             poses = body_poses(self.tree, q)
         rows = []
         for c in constraints:
-            if c.kind == "frame":
+            if c.kind == ConstraintKind.FRAME:
                 rows.append(frame_pose(self.tree, q, c.target, poses))  # type: ignore[arg-type]
-            elif c.kind == "coords":
-                rows.append(ca.vertcat(*[q[self.tree.coord_index(n)] for n in c.target]))
             else:
-                raise ModelError(f"constraint '{c.name}': unknown kind '{c.kind}'")
+                rows.append(ca.vertcat(*[q[self.tree.coord_index(n)] for n in c.target]))
         return ca.vertcat(*rows)
 
     def frame_expr(self, frame: str, q: ca.SX | None = None) -> ca.SX:
@@ -192,12 +198,12 @@ class HybridModel:
             raise KeyError(f"{self.name}: no function '{name}'; have {have}") from None
 
     # -- numeric ------------------------------------------------------------------------------
-    def numeric(self, backend: str | None = None) -> FunctionSet:
+    def numeric(self, backend: CompileBackend | str | None = None) -> FunctionSet:
         """All functions compiled to C (or interpreted) and bound to reusable buffers;
-        ``backend`` defaults to the model's (``"auto"``; ``"sx"`` for a model built for a
+        ``backend`` defaults to the model's (``AUTO``; ``SX`` for a model built for a
         few calls, e.g. a sweep's perturbed plant, whose compilation would cost more than
         interpreting)."""
-        backend = backend or self.backend
+        backend = CompileBackend(backend or self.backend)
         if backend not in self._numeric:
             fs = FunctionSet(list(self.functions.values()), self.name, backend)
             self._numeric[backend] = fs
@@ -210,7 +216,7 @@ class HybridModel:
     def stance_frame(self, domain: str) -> str:
         """The frame the domain holds flat on the ground (its first frame constraint)."""
         return str(next(c.target for c in self.domains[domain].constraints
-                        if c.kind == "frame"))
+                        if c.kind == ConstraintKind.FRAME))
 
     def place_stance_foot(self, q: np.ndarray, domain: str, x: float = 0.0) -> np.ndarray:
         """A copy of ``q`` with the floating base moved so that the domain's stance frame

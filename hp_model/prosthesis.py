@@ -29,7 +29,7 @@ import numpy as np
 
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.hybrid import Constraint, Domain, HybridModel
+from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
 from hp_model.tree import frame_pose, rot
 
 SUB_COORDS = ("x_Bp", "z_Bp", "th_Bp", "th_pk", "th_pa")
@@ -41,7 +41,7 @@ class ProsthesisSubsystem(HybridModel):
     def __init__(self, full: HumanProsthesisModel) -> None:
         tree = full.tree.subtree("p_top", base_coords=SUB_COORDS[:3])
         p = full.device.prosthesis
-        foot = Constraint("p_foot", "frame", "p_sole")
+        foot = Constraint("p_foot", ConstraintKind.FRAME, "p_sole")
         super().__init__(
             tree, ("th_pk", "th_pa"), (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
             (Domain("ps", (foot,)),), name="prosthesis5",

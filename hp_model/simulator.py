@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hp_model.closed_loop import ClosedLoop
+from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HUMAN_OUTPUTS
@@ -234,13 +234,13 @@ class HybridSimulator:
         ``vhold``: the delayed human's feedback held over the period (None: continuous)."""
         if vhold is not None:
             f = self.dfs[f"rk4_d{mode}_{d}"]
-            if mode == "full":
+            if mode == ClosedLoopMode.FULL:
                 xn, z = f(x, self.thetas[d], vhold, h)
             else:
                 xn, z = f(x, self.thetas[d], vhold, u_p, h)
             return xn.copy(), float(z[0])
         f = self.fs[f"rk4_{mode}_{d}"]
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             xn, z = f(x, self.thetas[d], self.gains, h)
         else:
             xn, z = f(x, self.thetas[d], self.gains, u_p, h)
@@ -258,7 +258,7 @@ class HybridSimulator:
         """The feedback held over the period: the human rows from the pipeline's oldest
         entry, in mode full the prosthesis rows of ``v_now``."""
         rows = list(HUMAN_OUTPUTS[d])
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             v = v_now.copy()
             v[rows] = pipeline[0][rows]
             return v
@@ -269,13 +269,13 @@ class HybridSimulator:
         """The torques u (6, N m) and constraint wrenches lam (6) at state x."""
         if vhold is not None:
             f = self.dfs[f"xdot_d{mode}_{d}"]
-            if mode == "full":
+            if mode == ClosedLoopMode.FULL:
                 _, u, lam = f(x, self.thetas[d], vhold)
             else:
                 _, u, lam = f(x, self.thetas[d], vhold, u_p)
             return u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
-        if mode == "full":
+        if mode == ClosedLoopMode.FULL:
             _, u, lam = f(x, self.thetas[d], self.gains)
         else:
             _, u, lam = f(x, self.thetas[d], self.gains, u_p)
@@ -322,7 +322,8 @@ class HybridSimulator:
         return s, xs
 
     # -- runs ---------------------------------------------------------------------------------
-    def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str, mode: str = "human"
+    def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str,
+              mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
               ) -> SimulationRun:
         """A run from (q0, qd0) in ``domain``, to be stepped one period at a time (module
         docstring).  ``mode`` "human": the prosthesis motor torque comes from
@@ -340,7 +341,8 @@ class HybridSimulator:
         max_steps = np.inf if steps is None else steps
         n_periods = (int(np.floor(duration / self.opt.dt + 1e-9))
                      if duration is not None and np.isfinite(duration) else None)
-        r = self.start(q0, qd0, domain, mode="full" if policy is None else "human")
+        r = self.start(q0, qd0, domain,
+                       mode=ClosedLoopMode.FULL if policy is None else ClosedLoopMode.HUMAN)
         while True:
             st = r.observe()
             fall = r.apply(None if policy is None else policy(st.t, st))
@@ -360,9 +362,8 @@ class SimulationRun:
     (hybrid state, log, impacts, fall-check counters, the delayed human's pipeline)."""
 
     def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray, domain: str,
-                 mode: str = "human") -> None:
-        if mode not in ("human", "full"):
-            raise ValueError(f"mode must be 'human' or 'full', got {mode!r}")
+                 mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN) -> None:
+        mode = ClosedLoopMode(mode)
         if domain not in sim.model.domains:
             raise ValueError(f"unknown domain {domain!r}")
         self.sim, self.mode = sim, mode
@@ -423,7 +424,7 @@ class SimulationRun:
         self.observe()
         assert self._obs is not None
         tau, u, lam = self._obs
-        if self.mode == "human":
+        if self.mode == ClosedLoopMode.HUMAN:
             if u_p is None:
                 raise ValueError("mode human: give the prosthesis motor torque (2,)")
             lim = sim._u_limit  # bounded at the plant (the FMU does the same)

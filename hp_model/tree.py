@@ -19,17 +19,26 @@ expressions from it; :mod:`hp_model.dynamics` turns those into D, H and the rest
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
 
 import casadi as ca
 
-JointKind = Literal["revolute", "planar"]
-
-_JOINT_DOF = {"revolute": 1, "planar": 3}
+from hp_model.choices import Choice
 
 
 class ModelError(ValueError):
     """A kinematic tree or model built from inconsistent parts."""
+
+
+class JointKind(Choice):
+    """How a :class:`Body` moves relative to its parent."""
+
+    REVOLUTE = "revolute"  # one angle
+    PLANAR = "planar"  # x, z, th (the floating base, the socket)
+
+    @property
+    def dof(self) -> int:
+        """Number of joint coordinates."""
+        return 1 if self is JointKind.REVOLUTE else 3
 
 
 @dataclass(frozen=True)
@@ -39,7 +48,7 @@ class Body:
     Attributes:
         name: unique body name.
         parent: parent body name, or ``None`` for the root (floating base).
-        joint: ``"revolute"`` or ``"planar"``.
+        joint: a :class:`JointKind` (or its value).
         coords: names of the joint coordinates (1 for revolute, 3 for planar: x, z, th).
         placement: joint origin in the parent body frame, metres (x, z).
         placement_angle: fixed pitch of the joint frame relative to the parent, rad.
@@ -57,6 +66,12 @@ class Body:
     mass: float = 0.0
     com: tuple[float, float] = (0.0, 0.0)
     inertia: float = 0.0
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "joint", JointKind(self.joint))
+        except ValueError as e:
+            raise ModelError(f"body '{self.name}': {e}") from None
 
 
 @dataclass(frozen=True)
@@ -88,15 +103,13 @@ class PlanarTree:
         for i, b in enumerate(self.bodies):
             if b.name in index:
                 raise ModelError(f"duplicate body name '{b.name}'")
-            if b.joint not in _JOINT_DOF:
-                raise ModelError(f"body '{b.name}': unknown joint kind '{b.joint}'")
-            if len(b.coords) != _JOINT_DOF[b.joint]:
+            if len(b.coords) != b.joint.dof:
                 raise ModelError(
-                    f"body '{b.name}': a {b.joint} joint has {_JOINT_DOF[b.joint]} coordinates, "
+                    f"body '{b.name}': a {b.joint} joint has {b.joint.dof} coordinates, "
                     f"got {len(b.coords)}"
                 )
             if i == 0:
-                if b.parent is not None or b.joint != "planar":
+                if b.parent is not None or b.joint != JointKind.PLANAR:
                     raise ModelError("the first body must be the root: parent None, planar joint")
             elif b.parent not in index:
                 raise ModelError(f"body '{b.name}': parent '{b.parent}' must be defined before it")
@@ -172,7 +185,7 @@ class PlanarTree:
                     Body(
                         name=b.name,
                         parent=None,
-                        joint="planar",
+                        joint=JointKind.PLANAR,
                         coords=base_coords or (f"{root}_x", f"{root}_z", f"{root}_th"),
                         mass=b.mass,
                         com=b.com,
@@ -200,7 +213,7 @@ def _joint_transform(b: Body, qj: ca.SX) -> tuple[ca.SX, ca.SX]:
     """Pose of the child body frame in the parent frame: (position (2,), angle)."""
     p0 = ca.DM(b.placement)
     a0 = b.placement_angle
-    if b.joint == "revolute":
+    if b.joint == JointKind.REVOLUTE:
         return p0, a0 + qj[0]
     # planar: translate along the joint frame's axes, then rotate
     return p0 + rot(a0) @ qj[0:2], a0 + qj[2]

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from xml.sax.saxutils import quoteattr
 
-from hp_model.tree import PlanarTree
+from hp_model.tree import JointKind, PlanarTree
 
 _LIMIT = '<limit effort="1e6" velocity="1e6" lower="-1e3" upper="1e3"/>'
 BOUND_MASS = 1e-9
@@ -44,7 +44,7 @@ def to_urdf(tree: PlanarTree, robot_name: str = "hpcosim") -> str:
     for b in tree.bodies:
         parent = "world" if b.parent is None else b.parent
         px, pz = b.placement
-        if b.joint == "planar":
+        if b.joint == JointKind.PLANAR:
             cx, cz, cth = b.coords
             out.append(f'  <link name="{b.name}__px"/>\n  <link name="{b.name}__pz"/>\n')
             out.append(_joint(cx, "prismatic", parent, f"{b.name}__px", "1 0 0",

@@ -25,6 +25,7 @@ from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from prosthesis_controller.interface import ControllerName
 
 #: the grids (joint side, same value for knee and ankle)
 PD_GRID = ((1500.0, 3000.0, 6000.0, 12000.0), (20.0, 60.0, 150.0, 300.0))
@@ -54,7 +55,7 @@ def _config(controller: str, stiffness: float, damping: float):
     from prosthesis_controller import ControllerConfig
     from prosthesis_controller.config import PassiveConfig, PdConfig
 
-    if controller == "pd":
+    if controller == ControllerName.PD:
         return ControllerConfig(pd=PdConfig(kp=(stiffness, stiffness), kd=(damping, damping)))
     return ControllerConfig(passive=PassiveConfig(lam=(stiffness, stiffness),
                                                   k=(damping, damping)))
@@ -101,8 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     except (ArtifactError, FileNotFoundError) as e:
         print(f"baseline_gains: error: {e}", file=sys.stderr)
         return 2
-    for controller, grid, names in (("pd", PD_GRID, ("kp", "kd")),
-                                    ("passive", PASSIVE_GRID, ("Lambda", "K"))):
+    for controller, grid, names in ((ControllerName.PD, PD_GRID, ("kp", "kd")),
+                                    (ControllerName.PASSIVE, PASSIVE_GRID, ("Lambda", "K"))):
         res = grid_search(model, gait, tube, controller, grid)
         print(f"\n{controller}: | {names[0]} | {names[1]} | steps | knee RMS (rad) | end |")
         for r in res:

@@ -21,7 +21,7 @@ from characterization.bezier_fit import FitError
 from characterization.mocap_take import MocapError
 from characterization.phzd import GaitOptimizationError, GaitVerificationError
 from hp_model.artifacts import ArtifactError
-from hp_model.compiled import CompileError
+from hp_model.compiled import CompileBackend, CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from human_fmu.build import FmuBuildError
@@ -89,9 +89,9 @@ def _root(
 def model_check(
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
-    backend: Annotated[str, typer.Option(
+    backend: Annotated[CompileBackend, typer.Option(
         help="auto (compiled C when a compiler exists), c, or sx (CasADi interpreter).")
-    ] = "auto",
+    ] = CompileBackend.AUTO,
 ) -> None:
     """Build the 12-DOF model and the 5-DOF prosthesis subsystem, evaluate them, and check
     physics that fixes the answers (static balance, impact, subsystem consistency)."""

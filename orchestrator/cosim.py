@@ -60,6 +60,7 @@ from hp_model.falls import FallReason
 from human_fmu.instance import HumanFmu
 from orchestrator.loop import Command, FmuPlant, Observation, Sensed, run_loop
 from orchestrator.loop.recorder import GroundTruthRecorder
+from orchestrator.modes import CosimMode
 from prosthesis_controller.timing import Usage, pin_thread
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,7 +85,7 @@ class CosimConfig:
     tube: Path
     steps: int = 20
     max_time: float = 60.0  # s of simulation time
-    mode: str = "lockstep"  # or "realtime"
+    mode: CosimMode = CosimMode.LOCKSTEP  # or its value
     perturb: str = "none"  # CASE[:start[:every[:count]]] or human:AMPLITUDE[:SEED]
     record: Path | None = None
     fmu: Path | None = None
@@ -106,6 +107,9 @@ class CosimConfig:
     # forward (the wall slots in between are skipped, counted and recorded; simulation time
     # never skips) instead of bursting through the backlog
     max_lag: float = 0.02  # s
+
+    def __post_init__(self) -> None:
+        self.mode = CosimMode(self.mode)
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
@@ -301,7 +305,7 @@ def cpu_plan(cfg: CosimConfig) -> tuple[int | None, int | None]:
     periods in a row in 2 of 6 runs at the 2 ms cycle, unpinned in none.
     """
     avail = sorted(os.sched_getaffinity(0))
-    if not cfg.pin_cpus or cfg.mode != "lockstep" or len(avail) < 2:
+    if not cfg.pin_cpus or cfg.mode != CosimMode.LOCKSTEP or len(avail) < 2:
         return None, None
     i = 2 * (os.getpid() % (len(avail) // 2))
     return avail[i], avail[i + 1]
@@ -311,7 +315,7 @@ def bus_poll_us(cfg: CosimConfig) -> float:
     """How long a receive polls before it blocks, on both sides: ``poll_us`` in lockstep
     (the next frame is due within a fraction of a millisecond), 0 in realtime mode (pacing
     to the wall clock: nothing to gain, a CPU to keep free)."""
-    return float(cfg.poll_us) if cfg.mode == "lockstep" else 0.0
+    return float(cfg.poll_us) if cfg.mode == CosimMode.LOCKSTEP else 0.0
 
 
 def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
@@ -395,8 +399,6 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     from hp_model.gait_artifact import load_gait
 
     say = say or (lambda _m: None)
-    if cfg.mode not in ("lockstep", "realtime"):
-        raise ValueError(f"mode {cfg.mode!r}: expected lockstep or realtime")
     plan = FaultPlan.parse(cfg.perturb)
     model = model or hp_model.load_model()
     gait = load_gait(cfg.gait, model.parameter_hash())
@@ -577,7 +579,7 @@ class CanLink:
         self.lost, self.res, self.ratio = lost, res, ratio
         self.plant = Plant(limits)
         self.dt = cfg.dt
-        self.realtime = cfg.mode == "realtime"
+        self.realtime = cfg.mode == CosimMode.REALTIME
         self.u = (0.0, 0.0)
         self.missed_run = 0
         self.fault_first_miss = -1

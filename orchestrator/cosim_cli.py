@@ -12,6 +12,7 @@ from rich.console import Console
 from rich.table import Table
 
 from orchestrator.cli_options import DeviceOpt, SubjectOpt, check_output_folder
+from orchestrator.modes import CosimMode
 from orchestrator.tube_cli import tube_app  # `tube refit` joins `tube fit`
 
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
@@ -63,7 +64,8 @@ def run(
                                          "kill, hang (CASE[:start[:every[:count]]]), "
                                          "stall[:START[:MS]] (the plant sleeps MS ms), "
                                          "human[:AMPLITUDE[:SEED]].")] = "none",
-    mode: Annotated[str, typer.Option(help="lockstep or realtime.")] = "lockstep",
+    mode: Annotated[CosimMode, typer.Option(help="lockstep or realtime.")
+                    ] = CosimMode.LOCKSTEP,
     record: Annotated[Path | None, typer.Option(help="MCAP file to write.", dir_okay=False)
                       ] = None,
     fmu: Annotated[Path | None, typer.Option(help="Human FMU (default: built and cached "
@@ -110,7 +112,7 @@ def run(
     t.add_row("real-time factor", f"{res.real_time_factor:.2f}")
     t.add_row("frames tx / rx", f"{res.frames_tx} / {res.frames_rx}")
     t.add_row("missed / late replies", f"{res.missed} / {res.late}")
-    if mode == "realtime":
+    if mode == CosimMode.REALTIME:
         t.add_row("plant overruns / slots skipped (max lag)",
                   f"{res.overruns} / {res.skipped_slots} ({res.max_lag_ms:.1f} ms)")
     t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"

@@ -39,15 +39,15 @@ from orchestrator.scenarios import (
     select_perturbations,
     summary,
 )
-from prosthesis_controller import ControllerContext
+from prosthesis_controller import ControllerContext, ControllerName
 
 SCHEMA_VERSION = 2
-ROBUST_CONTROLLERS = ("clfqp", "passive", "pd")
+ROBUST_CONTROLLERS = (ControllerName.CLFQP, ControllerName.PASSIVE, ControllerName.PD)
 #: not one of the paper's controllers: shown next to them, never part of a claim
-REFERENCE_CONTROLLER = "phase-pd"
+REFERENCE_CONTROLLER = ControllerName.PHASE_PD
 #: the paper's literal formulation (reduced model, socket force an input in the tube): run
 #: beside, reported with its diagnosis, never part of the clfqp claims
-PAPER_CONTROLLER = "clfqp-paper"
+PAPER_CONTROLLER = ControllerName.CLFQP_PAPER
 #: the prosthesis starts with its knee output y2 = th_pk - B_pk(tau) this far (rad) off
 #: the nominal at the nominal start phase (the ankle moves with it so that tau is
 #: unchanged); one value for every controller and case (no per-case tuning)
@@ -191,7 +191,8 @@ def orbit_stability(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
 
 def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                     ctx: ControllerContext, steps: int, eigen: bool = True,
-                    controller: str = "clfqp", closed_loop: ClosedLoop | None = None,
+                    controller: str = ControllerName.CLFQP,
+                    closed_loop: ClosedLoop | None = None,
                     fd: bool = True) -> tuple[dict[str, Any], ScenarioResult]:
     """``steps`` steps of ``controller`` in ps (+ the shared swing controller) from the
     gait's start; stability by :func:`orbit_stability` about the last post-impact state
@@ -251,7 +252,8 @@ def exact_vs_relaxed(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                      ctx: ControllerContext, steps: int, closed_loop: ClosedLoop | None = None
                      ) -> tuple[dict[str, Any], dict[str, ScenarioResult]]:
     runs = {c: run_scenario(model, gait, tube, Scenario(c, NOMINAL, steps), context=ctx,
-                            closed_loop=closed_loop) for c in ("clfqp-exact", "clfqp")}
+                            closed_loop=closed_loop)
+            for c in (ControllerName.CLFQP_EXACT, ControllerName.CLFQP)}
     m: dict[str, Any] = {}
     for c, r in runs.items():
         ch = r.chatter_per_step()
@@ -264,28 +266,30 @@ def exact_vs_relaxed(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                 "knee_rms_per_step_rad": [
                     float(np.sqrt(np.mean((r.q_p[i0:i1, 0] - r.knee_ref[i0:i1])**2)))
                     for i0, i1 in r.step_bounds]}
-    a, b = m["clfqp-exact"]["chatter_rate_Nm_per_s"], m["clfqp"]["chatter_rate_Nm_per_s"]
+    a = m[ControllerName.CLFQP_EXACT]["chatter_rate_Nm_per_s"]
+    b = m[ControllerName.CLFQP]["chatter_rate_Nm_per_s"]
     m["chatter_ratio_exact_over_relaxed"] = (float(a / b) if a is not None and b else None)
-    kr = m["clfqp"]["knee_rms_per_step_rad"]
+    kr = m[ControllerName.CLFQP]["knee_rms_per_step_rad"]
     # converging onto the closed loop's periodic orbit: the knee RMS per step has settled
     # (the last step within SETTLED of the one before, not growing as the exact law's does).
     # The run starts on the gait's collocation state, which the full loop's orbit is not
     # exactly on (its first step tracks better than the orbit), so "last <= first" would
     # test the start, not the convergence
     m["relaxed_tracking_converging"] = bool(
-        len(kr) >= 2 and runs["clfqp"].success and abs(kr[-1] - kr[-2]) <= SETTLED * kr[-2])
+        len(kr) >= 2 and runs[ControllerName.CLFQP].success
+        and abs(kr[-1] - kr[-2]) <= SETTLED * kr[-2])
     return m, runs
 
 
 def fig6(runs: dict[str, ScenarioResult]) -> bytes:
     plt = _plt()
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
-    for c, col in (("clfqp-exact", "tab:blue"), ("clfqp", "tab:pink")):
+    for c, col in ((ControllerName.CLFQP_EXACT, "tab:blue"), (ControllerName.CLFQP, "tab:pink")):
         r = runs[c]
         for j, name in enumerate(("knee", "ankle")):
             u = np.where(r.domain == 0, r.torque[:, j], np.nan)
             ax[j].plot(r.t, u, color=col, lw=0.7,
-                       label=("exact (eq. robust_CLF_QP)" if c == "clfqp-exact"
+                       label=("exact (eq. robust_CLF_QP)" if c == ControllerName.CLFQP_EXACT
                               else "relaxed (eq. robust_CLF_QP_relax)"))
             ax[j].set_ylabel(f"{name} motor torque (N m)")
     ax[1].set_xlabel("t (s), ps only")
@@ -324,8 +328,9 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     order_ok, clf_all = [], True
     for rr in runs.values():
         k = {c: rr[c].knee_rms("ps") for c in ROBUST_CONTROLLERS}
-        order_ok.append(bool(k["clfqp"] < k["passive"] < k["pd"]))
-        clf_all = clf_all and rr["clfqp"].success
+        order_ok.append(bool(k[ControllerName.CLFQP] < k[ControllerName.PASSIVE]
+                             < k[ControllerName.PD]))
+        clf_all = clf_all and rr[ControllerName.CLFQP].success
     m["knee_rms_order_clfqp_lt_passive_lt_pd"] = order_ok
     # RMS of a run that fell is over the part before the fall: the order is a tracking
     # comparison only where the three controllers all complete the case
@@ -335,13 +340,14 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     # the paper's claim about its controller: clfqp tracks better than each baseline wherever
     # that baseline completes the case (a baseline that falls is beaten on robustness)
     m["clfqp_below_each_completed_baseline"] = [
-        bool(rr["clfqp"].success and all(
-            rr["clfqp"].knee_rms("ps") < rr[b].knee_rms("ps")
+        bool(rr[ControllerName.CLFQP].success and all(
+            rr[ControllerName.CLFQP].knee_rms("ps") < rr[b].knee_rms("ps")
             for b in ROBUST_CONTROLLERS[1:] if rr[b].success)) for rr in runs.values()]
     # the paper's order of its baselines, as found (None where one of them fell)
     m["passive_lt_pd_where_both_complete"] = [
-        (bool(rr["passive"].knee_rms("ps") < rr["pd"].knee_rms("ps"))
-         if rr["passive"].success and rr["pd"].success else None) for rr in runs.values()]
+        (bool(rr[ControllerName.PASSIVE].knee_rms("ps") < rr[ControllerName.PD].knee_rms("ps"))
+         if rr[ControllerName.PASSIVE].success and rr[ControllerName.PD].success else None)
+        for rr in runs.values()]
     m["clfqp_succeeds_every_case"] = bool(clf_all)
     m["every_controller_completes_every_case"] = bool(
         all(rr[c].success for rr in runs.values() for c in ROBUST_CONTROLLERS))
@@ -351,8 +357,9 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
 def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
     plt = _plt()
     fig, ax = plt.subplots(len(runs), 1, figsize=(9, 2.6 * len(runs)), squeeze=False)
-    cols = {"clfqp": "tab:green", "passive": "tab:orange", "pd": "tab:red",
-            REFERENCE_CONTROLLER: "tab:gray", PAPER_CONTROLLER: "tab:purple"}
+    cols = {ControllerName.CLFQP: "tab:green", ControllerName.PASSIVE: "tab:orange",
+            ControllerName.PD: "tab:red", REFERENCE_CONTROLLER: "tab:gray",
+            PAPER_CONTROLLER: "tab:purple"}
     for i, (n, rr) in enumerate(runs.items()):
         a = ax[i, 0]
         longest = max(rr.values(), key=lambda r: r.t.size)  # desired B_pk(tau) along it
@@ -389,8 +396,8 @@ def write_animations(model: HumanProsthesisModel, out: str, nominal: ScenarioRes
     runs = [("nominal", "walker_nominal.gif", nominal, "clfqp, nominal human",
              ANIMATION_SECONDS["nominal"])]
     for k, (case, rs) in enumerate(cases.items(), start=1):
-        if "clfqp" in rs:
-            runs.append((case, f"walker_case{k}.gif", rs["clfqp"], f"clfqp, {case}",
+        if ControllerName.CLFQP in rs:
+            runs.append((case, f"walker_case{k}.gif", rs[ControllerName.CLFQP], f"clfqp, {case}",
                          ANIMATION_SECONDS["case"]))
     files = {}
     for name, fname, r, title, secs in runs:
@@ -421,7 +428,7 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     m1p, _ = nominal_walking(model, gait, tube, ctx, steps, eigen=False,
                              controller=PAPER_CONTROLLER, closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig7_phase_portraits.png"),
-                       fig7({"clfqp": r1, REFERENCE_CONTROLLER: r1r}, gait))
+                       fig7({ControllerName.CLFQP: r1, REFERENCE_CONTROLLER: r1r}, gait))
     say("exact vs relaxed robust CLF-QP")
     m2, r2 = exact_vs_relaxed(model, gait, tube, ctx, min(steps, 5), closed_loop=cl)
     atomic_write_bytes(os.path.join(out, "fig6_torques.png"), fig6(r2))

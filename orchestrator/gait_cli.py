@@ -56,13 +56,14 @@ def fit(
     """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
     import hp_model
     from characterization.gait_figures import save_gait_figure
-    from characterization.gait_fit import fit_gait
+    from characterization.gait_fit import fit_gait, fit_segments
     from characterization.phzd import PHZDOptions
     from characterization.steps_artifact import load_steps
     from hp_model.gait_artifact import save_gait
     from orchestrator.cli_options import check_output_file
 
     console = Console(stderr=True)
+    portions = fit_segments(segments)
     check_output_file(out)
     data = load_steps(steps)
     model = hp_model.load_model(str(subject) if subject else None,
@@ -72,7 +73,7 @@ def fit(
                       track_kp=track_kp, track_kd=track_kd)
     with console.status("gait fit") as status:
         gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
-                        progress=lambda m: status.update(m), segments=segments,
+                        progress=lambda m: status.update(m), segments=portions,
                         allow_unstable=allow_unstable)
     save_gait(out, gait)
     if figure:

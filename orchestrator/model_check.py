@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hp_model import HumanProsthesisModel, ProsthesisSubsystem
+from hp_model.compiled import CompileBackend
 from hp_model.statics import standing_posture, static_equilibrium
 
 
@@ -20,8 +21,8 @@ class CheckRow:
     ok: bool
 
 
-def run_checks(model: HumanProsthesisModel, backend: str = "auto", seed: int = 0,
-               ) -> tuple[list[CheckRow], dict[str, float]]:
+def run_checks(model: HumanProsthesisModel, backend: CompileBackend = CompileBackend.AUTO,
+               seed: int = 0) -> tuple[list[CheckRow], dict[str, float]]:
     """Rows of the check table and timing figures (median microseconds per call)."""
     rows: list[CheckRow] = []
     fs = model.numeric(backend)

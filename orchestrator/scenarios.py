@@ -28,7 +28,7 @@ import numpy as np
 from characterization.force_tube_fit import deviation_profiles, fit_tube, nominal_coefficients
 from characterization.gait_verification import make_simulator
 from hp_model import bezier
-from hp_model.closed_loop import ClosedLoop
+from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
@@ -46,7 +46,7 @@ from orchestrator.loop import (
     SimulatorPlant,
     run_loop,
 )
-from prosthesis_controller import ControllerContext, make_controller
+from prosthesis_controller import ControllerContext, ControllerMode, ControllerName, make_controller
 
 DOMAINS = ("ps", "pns")
 #: not a prosthesis controller: full-state feedback linearization of the whole walker with
@@ -81,7 +81,7 @@ class Scenario:
     (impacts), and an initial prosthesis offset (knee, ankle) in rad added to the nominal
     initial state (the whole walker is then re-placed on the stance foot)."""
 
-    controller: str = "clfqp"
+    controller: str = ControllerName.CLFQP  # or ORACLE
     perturbation: Perturbation = NOMINAL
     steps: int = 20
     initial_offset: tuple[float, float] = (0.0, 0.0)
@@ -104,7 +104,7 @@ class ScenarioResult:
     qd_p: np.ndarray  # (n, 2)
     torque: np.ndarray  # (n, 2) motor torques the controller commanded
     knee_ref: np.ndarray  # (n,) nominal knee B_pk(tau) of the domain (gait, not perturbed)
-    mode: list[str]
+    mode: list[ControllerMode]
     V: np.ndarray
     rho: np.ndarray
     fallback_count: int
@@ -228,7 +228,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     link: Link
     if scenario.controller == ORACLE:
         sim.thetas = oracle_thetas(gait, sim.thetas)
-        plant = SimulatorPlant(sim, q0, qd0, mode="full")
+        plant = SimulatorPlant(sim, q0, qd0, mode=ClosedLoopMode.FULL)
         link = OracleLink()
     else:
         ctx = context or ControllerContext(gait, tube, model, None)

@@ -15,6 +15,8 @@ from rich.console import Console
 from rich.table import Table
 from typer.core import TyperGroup
 
+from orchestrator.modes import SweepBackend
+
 
 class _DefaultRun(TyperGroup):
     """``hpcosim sweep SPEC ...`` means ``hpcosim sweep run SPEC ...``."""
@@ -81,7 +83,8 @@ def run(
                      ] = None,
     steps: Annotated[int | None, typer.Option(min=1, help="Override the spec's steps per "
                                               "run.")] = None,
-    backend: Annotated[str | None, typer.Option(help="Override: simulator or fmu.")] = None,
+    backend: Annotated[SweepBackend | None, typer.Option(help="Override: simulator or fmu.")
+                       ] = None,
     report: Annotated[bool, typer.Option(help="Write the report when the sweep ends.")
                       ] = True,
 ) -> None:
@@ -163,15 +166,13 @@ def replay_cmd(
     out: Annotated[Path, typer.Argument(help="Sweep output folder.", file_okay=False)],
     key: Annotated[str, typer.Argument(help="Run key CONTROLLER/FAMILY/DRAW, e.g. "
                                        "clfqp/human/17.")],
-    backend: Annotated[str | None, typer.Option(help="Run on this backend instead "
-                                                "(simulator or fmu).")] = None,
+    backend: Annotated[SweepBackend | None, typer.Option(help="Run on this backend instead "
+                                                         "(simulator or fmu).")] = None,
 ) -> None:
     """Rerun one run of a sweep in this process and compare it with its stored result
     (exit 1 if any column differs)."""
     from orchestrator.sweep_replay import replay_run
 
-    if backend not in (None, "simulator", "fmu"):
-        raise _fail(f"--backend {backend}: expected simulator or fmu")
     try:
         r = replay_run(out, key, backend)
     except ValueError as e:

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from orchestrator.modes import SweepBackend
 from orchestrator.sweep_draws import RunKey, make_draw, run_keys
 from orchestrator.sweep_runs import Artifacts, SweepSetup, base_row, run_task
 from orchestrator.sweep_spec import SweepSpec
@@ -102,7 +103,7 @@ def dask_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
 
 def prepare_fmu(spec: SweepSpec) -> Path | None:
     """The FMU of an fmu-backend sweep: the spec's, or one built and cached for the gait."""
-    if spec.backend != "fmu":
+    if spec.backend != SweepBackend.FMU:
         return None
     if spec.fmu is not None:
         return spec.fmu

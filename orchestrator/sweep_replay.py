@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from orchestrator.modes import SweepBackend
 from orchestrator.sweep_draws import RunKey, make_draw
 from orchestrator.sweep_engine import prepare_fmu
 from orchestrator.sweep_runs import Artifacts, Resources, run_draw
@@ -63,9 +64,12 @@ def compare_rows(a: dict[str, Any], b: dict[str, Any], across_backends: bool = F
     return out
 
 
-def replay_run(out: str | Path, key: str, backend: str | None = None) -> Replay:
+def replay_run(out: str | Path, key: str, backend: SweepBackend | str | None = None
+               ) -> Replay:
     """Run ``key`` (CONTROLLER/FAMILY/DRAW) of the sweep in ``out`` again, from the
-    artifacts stored there, and compare with its stored row."""
+    artifacts stored there (on ``backend`` instead of the sweep's when given), and compare
+    with its stored row."""
+    backend = None if backend is None else SweepBackend(backend)
     store = ResultStore(Path(out))
     spec = store.spec()
     k = RunKey.parse(key)

@@ -28,11 +28,13 @@ from typing import Any
 import numpy as np
 
 from hp_model.artifacts import canonical_hash
+from hp_model.compiled import CompileBackend
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.outputs import Y2_COORDS
 from orchestrator.loop import Encoder
+from orchestrator.modes import SweepBackend
 from orchestrator.scenarios import (
     ORACLE,
     Perturbation,
@@ -44,6 +46,7 @@ from orchestrator.scenarios import (
 )
 from orchestrator.sweep_draws import HUMAN_JOINTS, Draw, RunKey
 from orchestrator.sweep_spec import SweepSpec
+from prosthesis_controller.interface import ControllerMode
 
 #: contexts (controller model x tube) kept per worker; a continuous tube_scale misses
 CONTEXT_CACHE = 16
@@ -69,7 +72,7 @@ class Artifacts:
             return Path(p).read_bytes() if p is not None else None
 
         return cls(spec.gait.read_bytes(), spec.tube.read_bytes(),
-                   read(fmu or spec.fmu) if spec.backend == "fmu" else None,
+                   read(fmu or spec.fmu) if spec.backend == SweepBackend.FMU else None,
                    read(spec.subject), read(spec.device))
 
     def hashes(self) -> dict[str, str | None]:
@@ -131,7 +134,8 @@ def scaled_tube(tube: ForceTube, scale: float) -> ForceTube:
 
 
 def erroneous_model(model: HumanProsthesisModel, mass: float, inertia: float, com: float,
-                    body: BodyVariation | None = None, backend: str = "auto"
+                    body: BodyVariation | None = None,
+                    backend: CompileBackend = CompileBackend.AUTO
                     ) -> HumanProsthesisModel:
     """The model with the prosthesis links' (top, shin, foot) masses, inertias and COM
     positions scaled (re-validated: a non-positive mass fails), and the human ``body`` (the
@@ -249,7 +253,8 @@ class Resources:
             return self._plants[key]
         # the model's own functions run a few times per step (impacts, start): interpreted;
         # the closed loop runs every step: compiled
-        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body, backend="sx")
+        m = erroneous_model(self.model, *draw.plant_prosthesis, body=draw.body,
+                            backend=CompileBackend.SX)
         cl = ClosedLoop(m, self.gait.degree)
         cl.numeric()
         self._plants[key] = (m, cl)
@@ -286,8 +291,8 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
             "knee_rms_ps_rad": _finite(s["knee_rms_ps_rad"]),
             "knee_rms_all_rad": _finite(s["knee_rms_all_rad"]),
             "fallback_count": int(s["fallback_count"]),
-            "fallback_ticks": int(s["modes"].get("fallback", 0)),
-            "fault_ticks": int(s["modes"].get("fault", 0)),
+            "fallback_ticks": int(s["modes"].get(ControllerMode.FALLBACK, 0)),
+            "fault_ticks": int(s["modes"].get(ControllerMode.FAULT, 0)),
             "max_torque_knee": _finite(peak[0]) if finite else None,
             "max_torque_ankle": _finite(peak[1]) if finite else None,
             "torque_finite": finite,
@@ -324,7 +329,7 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
         scenario = Scenario(key.controller, DrawPerturbation(
             f"{key.family}/{key.draw}", draw.bezier_amplitude, draw.bezier_seed, draw),
             spec.steps, (draw.knee_offset, draw.ankle_offset))
-        if spec.backend == "simulator" or key.controller == ORACLE:
+        if spec.backend == SweepBackend.SIMULATOR or key.controller == ORACLE:
             model, cl = res.plant(draw)
             r = run_scenario(model, res.gait, ctx.tube, scenario, context=ctx,
                              closed_loop=cl, human_gains=human_gains(res.gait, draw),

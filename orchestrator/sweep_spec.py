@@ -75,7 +75,8 @@ from pydantic import (
 
 from hp_model.artifacts import canonical_hash
 from hp_model.config import ConfigError, read_toml
-from prosthesis_controller import CONTROLLERS
+from orchestrator.modes import SweepBackend
+from prosthesis_controller import ControllerName
 
 SCHEMA_VERSION = 1
 BACKENDS = ("simulator", "fmu")
@@ -283,23 +284,22 @@ class SweepSpec(_Strict):
     tube: Path
     subject: Path | None = None
     device: Path | None = None
-    controllers: tuple[str, ...] = Field(min_length=1)
+    controllers: tuple[ControllerName, ...] = Field(min_length=1)
     families: dict[str, Family] = Field(min_length=1)
     draws: int = Field(ge=1)
     seed: int = Field(ge=0)
     steps: int = Field(10, ge=1)
-    backend: Literal["simulator", "fmu"] = "simulator"
+    backend: SweepBackend = SweepBackend.SIMULATOR
     fmu: Path | None = None
     batch: int = Field(25, ge=1)
     label_walkable: bool = True
 
-    @field_validator("controllers")
+    @field_validator("controllers", mode="before")
     @classmethod
-    def _controllers(cls, cs: tuple[str, ...]) -> tuple[str, ...]:
-        for c in cs:
-            if c not in CONTROLLERS:
-                raise ValueError(f"unknown controller '{c}'; choose from "
-                                 f"{', '.join(CONTROLLERS)}")
+    def _controllers(cls, cs: Any) -> Any:
+        if not isinstance(cs, list | tuple):
+            return cs
+        cs = tuple(ControllerName(c) for c in cs)  # one line naming the choices
         if len(set(cs)) != len(cs):
             raise ValueError("a controller is listed twice")
         return cs
@@ -314,9 +314,9 @@ class SweepSpec(_Strict):
 
     @model_validator(mode="after")
     def _fmu(self) -> SweepSpec:
-        if self.fmu is not None and self.backend != "fmu":
+        if self.fmu is not None and self.backend != SweepBackend.FMU:
             raise ValueError("'fmu' is given but backend is not 'fmu'")
-        if self.backend == "fmu":
+        if self.backend == SweepBackend.FMU:
             for name, fam in self.families.items():
                 bad = [k for k in fam.quantities() if k.startswith(SIMULATOR_ONLY)]
                 if bad:

@@ -11,6 +11,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from hp_model.force_tube import TubePhase
 from orchestrator.cli_options import DeviceOpt, SubjectOpt, check_output_file
 
 tube_app = typer.Typer(help="The socket-force tube: playback of the recorded steps (paper "
@@ -44,10 +45,10 @@ def fit(
         "--allowance", min=0.0, max=0.99,
         help="Widen the certified bounds by this fraction of each component's peak |F_s| "
         "for the playback's estimation error (0: the paper's bare tube).")] = 0.01,
-    phase: Annotated[str, typer.Option(
+    phase: Annotated[TubePhase, typer.Option(
         "--phase", help="The tube's tau: 'gait' = the gait's phase of each sample (the phase "
         "the controllers compute; default), 'step' = each step's own phase (the paper's "
-        "per-step normalization).")] = "gait",
+        "per-step normalization).")] = TubePhase.GAIT,
     model_error: Annotated[bool, typer.Option(
         "--model-error/--no-model-error",
         help="Also characterise what clfqp's nominal-human model does not explain along the "

@@ -14,7 +14,6 @@ from prosthesis_controller.config import (
     SwingConfig,
 )
 from prosthesis_controller.controllers import (
-    CONTROLLERS,
     BaseController,
     ClfQpController,
     ControllerContext,
@@ -26,13 +25,15 @@ from prosthesis_controller.controllers import (
 from prosthesis_controller.interface import (
     Active,
     Controller,
+    ControllerMode,
+    ControllerName,
     ControlOutput,
     Diagnostics,
+    QpOutcome,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 
 __all__ = [
-    "CONTROLLERS",
     "Active",
     "BaseController",
     "ClfConfig",
@@ -41,6 +42,8 @@ __all__ = [
     "Controller",
     "ControllerConfig",
     "ControllerContext",
+    "ControllerMode",
+    "ControllerName",
     "Diagnostics",
     "DomainConfig",
     "Fault",
@@ -51,6 +54,7 @@ __all__ = [
     "PhasePdConfig",
     "PhasePdController",
     "ProsthesisMeasurement",
+    "QpOutcome",
     "SafetyConfig",
     "SwingConfig",
     "make_controller",

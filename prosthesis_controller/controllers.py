@@ -16,6 +16,7 @@ import numpy as np
 import piqp
 
 from hp_model import bezier
+from hp_model.compiled import CompileBackend
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -24,18 +25,12 @@ from hp_model.prosthesis import ProsthesisSubsystem
 from prosthesis_controller.clf import ResClf, res_clf
 from prosthesis_controller.config import ControllerConfig
 from prosthesis_controller.interface import (
-    MODE_FALLBACK,
-    MODE_FAULT,
-    MODE_STANCE,
-    MODE_SWING,
-    QP_FAILED,
-    QP_INFEASIBLE,
-    QP_NONFINITE,
-    QP_NOT_RUN,
-    QP_SOLVED,
     Active,
+    ControllerMode,
+    ControllerName,
     ControlOutput,
     Diagnostics,
+    QpOutcome,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
 from prosthesis_controller.polish import polish
@@ -140,7 +135,7 @@ class ControllerContext:
     def __init__(self, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
                  config: ControllerConfig | None = None, *,
                  subsystem: ProsthesisSubsystem | None = None, strict_tube: bool = True,
-                 backend: str = "auto") -> None:
+                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
         cfg = config or ControllerConfig()
         self.config, self.gait, self.tube, self.model = cfg, gait, tube, model
         if strict_tube and tube.gait_hash != gait.hash():
@@ -438,7 +433,7 @@ class BaseController:
             u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
             self.fallback_count += 1
             tau = V = rho = 0.0
-            status, mode = QP_NOT_RUN, MODE_FAULT
+            status, mode = QpOutcome.NOT_RUN, ControllerMode.FAULT
             self._estimator_gap()
         else:
             t = float(meas.t)
@@ -452,12 +447,12 @@ class BaseController:
                 u0, u1, tau = self._swing_torque(t, qk, qa, vk, va, float(meas.socket_pitch))
                 V = rho = 0.0
                 self._estimator_gap()
-                status, mode = QP_NOT_RUN, MODE_SWING
+                status, mode = QpOutcome.NOT_RUN, ControllerMode.SWING
             if not (math.isfinite(u0) and math.isfinite(u1)):
                 step = self._fb_step
                 u0, u1 = _toward(self._u0, 0.0, step), _toward(self._u1, 0.0, step)
                 self.fallback_count += 1
-                mode = MODE_FALLBACK
+                mode = ControllerMode.FALLBACK
             if not (math.isfinite(tau) and math.isfinite(V) and math.isfinite(rho)):
                 tau = V = rho = 0.0
         lk, la = self._lim
@@ -476,13 +471,13 @@ class BaseController:
 class PDController(BaseController):
     """Joint PD on the nominal stance trajectory at the state-based phase."""
 
-    name = "pd"
+    name = ControllerName.PD
 
     def _stance(self, t, qk, qa, vk, va):
         self._clf_terms(qk, qa, vk, va)
         uk, ua = self._pd_torque(t, qk, qa, vk, va)
-        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0,
-                MODE_STANCE)
+        return (uk, ua, float(self._o_tau[0]), float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0,
+                ControllerMode.STANCE)
 
 
 class PhasePdController(BaseController):
@@ -491,7 +486,7 @@ class PhasePdController(BaseController):
     controllers: the closed-loop experiments use it to show what a controller with the
     prosthesis's own measurements achieves when its feedback has the full loop's sign."""
 
-    name = "phase-pd"
+    name = ControllerName.PHASE_PD
 
     def __init__(self, ctx: ControllerContext) -> None:
         super().__init__(ctx)
@@ -506,13 +501,14 @@ class PhasePdController(BaseController):
         f.call_inplace()
         ff, fb = f.outputs[0], f.outputs[1]
         return (ff[0] + fb[0] / self._gear[0], ff[1] + fb[1] / self._gear[1],
-                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+                float(f.outputs[2][0]), float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0,
+                ControllerMode.STANCE)
 
 
 class PassiveController(BaseController):
     """Spong's robust passivity-based law (stand-in for Azimi et al. 2017)."""
 
-    name = "passive"
+    name = ControllerName.PASSIVE
 
     def __init__(self, ctx: ControllerContext) -> None:
         super().__init__(ctx)
@@ -529,7 +525,7 @@ class PassiveController(BaseController):
         f.call_inplace()
         uj = f.outputs[0]
         return (uj[0] / self._gear[0], uj[1] / self._gear[1], float(self._o_tau[0]),
-                float(self._o_V[0]), 0.0, QP_NOT_RUN, 0, MODE_STANCE)
+                float(self._o_V[0]), 0.0, QpOutcome.NOT_RUN, 0, ControllerMode.STANCE)
 
 
 class ClfQpController(BaseController):
@@ -540,7 +536,7 @@ class ClfQpController(BaseController):
     z = (u_k, u_a[, rho]) with the torque and rate limits as box bounds, then polished
     (:mod:`prosthesis_controller.polish`)."""
 
-    name = "clfqp-paper"
+    name = ControllerName.CLFQP_PAPER
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
@@ -575,7 +571,7 @@ class ClfQpController(BaseController):
         self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
                            G=np.asfortranarray(np.ones((1, n))), h_l=np.array([-_INF]),
                            h_u=np.ones(1), x_l=xl0, x_u=xu0)
-        self.name = "clfqp-paper" if relaxed else "clfqp-paper-exact"
+        self.name = ControllerName.CLFQP_PAPER if relaxed else ControllerName.CLFQP_PAPER_EXACT
         self.qp_solution: np.ndarray | None = None  # (u_k, u_a[, rho]) of the last solve
         self._polish = bool(c.polish)
         super().__init__(ctx)
@@ -608,7 +604,7 @@ class ClfQpController(BaseController):
         tau, V = float(self._o_tau[0]), float(self._o_V[0])
         if not math.isfinite(self._o_check[0]):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         self._bounds()
         xl, xu = self._xl, self._xu
         n = self._n
@@ -634,7 +630,7 @@ class ClfQpController(BaseController):
         h = float(hu[0])
         if lo > h + 1e-9:
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_INFEASIBLE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.INFEASIBLE, 0, ControllerMode.FALLBACK
         s = self._solver
         P = self._o_Pu
         if n == 3:
@@ -646,14 +642,14 @@ class ClfQpController(BaseController):
             s.update(P=P2, c=self._c2, G=G2, h_u=hu, x_l=xl, x_u=xu)
         if s.solve() != _SOLVED:
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.FAILED, 0, ControllerMode.FALLBACK
         res = s.result
         z = res.x
         uk, ua = float(z[0]), float(z[1])
         rho = float(z[2]) if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         # active set from the solver's multipliers
         d = _DUAL_TOL
         row = res.z_u[0] > d
@@ -683,15 +679,11 @@ class ClfQpController(BaseController):
         self.qp_solution = np.array((uk, ua, rho)[:n])
         if n == 3:
             rho *= self._rho_scale
-        return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
+        return uk, ua, tau, V, rho, QpOutcome.SOLVED, active, ControllerMode.STANCE
 
 
-CONTROLLERS = ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd", "passive",
-               "phase-pd")
-
-
-def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
-                    config: ControllerConfig | None = None, *,
+def make_controller(name: ControllerName | str, gait: Gait, tube: ForceTube,
+                    model: HumanProsthesisModel, config: ControllerConfig | None = None, *,
                     context: ControllerContext | None = None,
                     subsystem: ProsthesisSubsystem | None = None,
                     strict_tube: bool = True) -> BaseController:
@@ -700,28 +692,27 @@ def make_controller(name: str, gait: Gait, tube: ForceTube, model: HumanProsthes
     paper's literal formulation on the prosthesis subsystem with the socket-force tube: a
     documented negative result), "pd", "passive" or "phase-pd" (reference, not in the
     paper).  Pass ``context`` to share the compiled terms between controllers (then gait,
-    tube, model and config are taken from it)."""
-    if name not in CONTROLLERS:
-        raise ValueError(f"unknown controller '{name}'; choose one of {', '.join(CONTROLLERS)}")
+    tube, model and config are taken from it).  Another name is a one-line ``ValueError``
+    naming the :class:`ControllerName` choices."""
+    name = ControllerName(name)
     ctx = context or ControllerContext(gait, tube, model, config, subsystem=subsystem,
                                        strict_tube=strict_tube)
-    if name in ("clfqp", "clfqp-exact"):
+    if name in (ControllerName.CLFQP, ControllerName.CLFQP_EXACT):
         from prosthesis_controller.loop_clfqp import LoopClfQpController
 
-        return LoopClfQpController(ctx, relaxed=name == "clfqp")
-    if name == "clfqp-paper":
+        return LoopClfQpController(ctx, relaxed=name == ControllerName.CLFQP)
+    if name == ControllerName.CLFQP_PAPER:
         return ClfQpController(ctx, relaxed=True)
-    if name == "clfqp-paper-exact":
+    if name == ControllerName.CLFQP_PAPER_EXACT:
         return ClfQpController(ctx, relaxed=False)
-    if name == "pd":
+    if name == ControllerName.PD:
         return PDController(ctx)
-    if name == "phase-pd":
+    if name == ControllerName.PHASE_PD:
         return PhasePdController(ctx)
     return PassiveController(ctx)
 
 
 __all__ = [
-    "CONTROLLERS",
     "BaseController",
     "ClfQpController",
     "ControllerContext",

@@ -19,6 +19,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
+from hp_model.choices import Choice
 from prosthesis_controller.measurement import ProsthesisMeasurement
 
 
@@ -36,18 +37,50 @@ class Active(IntFlag):
     CONTACT = 128  # a stance-foot contact row (friction, normal force, CoP) of clfqp
 
 
-# qp_status values
-QP_NOT_RUN = "not_run"  # no QP this tick (swing, baselines, fault)
-QP_SOLVED = "solved"
-QP_INFEASIBLE = "infeasible"  # exact feasibility test of the one row over the bounds failed
-QP_FAILED = "failed"  # piqp did not report solved (max iterations, numerics, infeasible)
-QP_NONFINITE = "nonfinite"  # non-finite model terms or solution
+class ControllerName(Choice):
+    """The prosthesis controllers :func:`~prosthesis_controller.controllers.make_controller`
+    builds (its docstring says what each is)."""
 
-# mode values
-MODE_STANCE = "stance"  # the controller's own stance law
-MODE_SWING = "swing"  # the shared swing controller
-MODE_FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward the PD torque
-MODE_FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
+    CLFQP = "clfqp"
+    CLFQP_EXACT = "clfqp-exact"
+    CLFQP_PAPER = "clfqp-paper"
+    CLFQP_PAPER_EXACT = "clfqp-paper-exact"
+    PD = "pd"
+    PASSIVE = "passive"
+    PHASE_PD = "phase-pd"
+
+    @classmethod
+    def label(cls) -> str:
+        return "controller"
+
+
+class QpOutcome(Choice):
+    """What the tick's QP gave (``Diagnostics.qp_status``); the controller node reports it
+    on the bus as :class:`bus_schemas.protocol.QpStatus` (``prosthesis_controller.node``)."""
+
+    NOT_RUN = "not_run"  # no QP this tick (swing, baselines, fault)
+    SOLVED = "solved"
+    INFEASIBLE = "infeasible"  # exact feasibility test of the one row over the bounds failed
+    FAILED = "failed"  # piqp did not report solved (max iterations, numerics, infeasible)
+    NONFINITE = "nonfinite"  # non-finite model terms or solution
+
+    @property
+    def is_failure(self) -> bool:
+        """A QP was due and gave no torque (the tick fell back)."""
+        return self in (QpOutcome.INFEASIBLE, QpOutcome.FAILED, QpOutcome.NONFINITE)
+
+
+class ControllerMode(Choice):
+    """Which law made the tick's torque (``Diagnostics.mode``; counted per run as
+    ``modes`` in the metrics)."""
+
+    STANCE = "stance"  # the controller's own stance law
+    SWING = "swing"  # the shared swing controller
+    FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward the PD torque
+    FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
+    #: no controller: the scenarios' oracle (full-state feedback linearization of the
+    #: prosthesis, :data:`orchestrator.scenarios.ORACLE`)
+    ORACLE = "oracle"
 
 
 class Diagnostics(NamedTuple):
@@ -56,11 +89,11 @@ class Diagnostics(NamedTuple):
 
     tau: phase (state-based in ps, the time-based estimate in pns); V: CLF value V_eps
     (evaluated for every controller in ps, 0 in pns); rho: relaxation (0 unless relaxed
-    CLF-QP); qp_status, active: see the constants and :class:`Active`; fallback_count:
+    CLF-QP); qp_status, active: :class:`QpOutcome` and :class:`Active`; fallback_count:
     ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
     output or a faulty measurement); fault: the
     :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
-    domain: "ps" or "pns"; mode: see the MODE_* constants.
+    domain: "ps" or "pns"; mode: :class:`ControllerMode`.
 
     Model-error estimate and coverage monitor (``clfqp``, ``clfqp-exact``;
     :mod:`prosthesis_controller.disturbance`; zero / False for the other controllers):
@@ -73,12 +106,12 @@ class Diagnostics(NamedTuple):
     tau: float
     V: float
     rho: float
-    qp_status: str
+    qp_status: QpOutcome
     active: int
     fallback_count: int
     fault: int
     domain: str
-    mode: str
+    mode: ControllerMode
     disturbance: tuple[float, float] = (0.0, 0.0)
     disturbance_valid: bool = False
     coverage_flag: bool = False

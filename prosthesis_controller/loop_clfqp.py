@@ -21,14 +21,7 @@ import piqp
 
 from prosthesis_controller.controllers import BaseController, ControllerContext
 from prosthesis_controller.disturbance import DisturbanceEstimator
-from prosthesis_controller.interface import (
-    MODE_FALLBACK,
-    MODE_STANCE,
-    QP_FAILED,
-    QP_NONFINITE,
-    QP_SOLVED,
-    Active,
-)
+from prosthesis_controller.interface import Active, ControllerMode, ControllerName, QpOutcome
 from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_ROWS, LOOP_SIGMA_UNIT
 
 _INF = math.inf
@@ -43,7 +36,7 @@ _RHO_MAX = int(Active.RHO_MAX)
 class LoopClfQpController(BaseController):
     """Interaction-aware robust CLF-QP, relaxed (``clfqp``) or exact (``clfqp-exact``)."""
 
-    name = "clfqp"
+    name = ControllerName.CLFQP
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
         self.relaxed = relaxed
@@ -73,7 +66,7 @@ class LoopClfQpController(BaseController):
         self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
                            G=np.asfortranarray(np.ones((_N_ROWS, n))), h_l=self._hl,
                            h_u=np.ones(_N_ROWS), x_l=xl0, x_u=xu0)
-        self.name = "clfqp" if relaxed else "clfqp-exact"
+        self.name = ControllerName.CLFQP if relaxed else ControllerName.CLFQP_EXACT
         self._qp_x: list[float] | None = None
         self.sigma = 0.0  # contact relaxation of the last solve (torque-equivalent units)
         un = ctx.config.uncertainty
@@ -183,7 +176,7 @@ class LoopClfQpController(BaseController):
             est.restart()
         if not math.isfinite(self._ochk[0]):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         self._bounds()
         n = self._n
         if self.relaxed:  # the generated function's own (Fortran-ordered) buffers
@@ -197,7 +190,7 @@ class LoopClfQpController(BaseController):
         s.update(P=P, c=c, G=G, h_u=self._oh, x_l=self._xl, x_u=self._xu)
         if not self._solve():
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_FAILED, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.FAILED, 0, ControllerMode.FALLBACK
         res = s.result
         # plain floats from here (numpy scalars cost ~0.1 us each); piqp meets the bounds
         # to its tolerance only: clamp
@@ -208,7 +201,7 @@ class LoopClfQpController(BaseController):
         self.sigma = max(0.0, z[3]) * self._sigma_scale if self.relaxed else 0.0
         if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
             uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QP_NONFINITE, 0, MODE_FALLBACK
+            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
         d = _DUAL_TOL
         zu = res.z_u.tolist()
         active = _CLF if zu[0] > d else 0
@@ -226,4 +219,4 @@ class LoopClfQpController(BaseController):
         if self.relaxed and zbu[2] > d:
             active |= _RHO_MAX
         self._qp_x = z
-        return uk, ua, tau, V, rho, QP_SOLVED, active, MODE_STANCE
+        return uk, ua, tau, V, rho, QpOutcome.SOLVED, active, ControllerMode.STANCE

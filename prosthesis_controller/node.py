@@ -56,15 +56,17 @@ from bus_schemas.bus_config import (
 )
 from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
 from bus_schemas.run_auth import RunCredentials
-from prosthesis_controller.interface import Active, Controller
+from prosthesis_controller.interface import Active, Controller, ControllerName, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.timing import Durations, Usage, pin_thread
 
 SUMMARY_PREFIX = "controller node: "  # + the JSON summary, last line on stderr at exit
 FEEDBACK = (FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD)
-_QP = {"solved": QpStatus.SOLVED, "not_run": QpStatus.NOT_RUN,
-       "infeasible": QpStatus.PRIMAL_INFEASIBLE, "failed": QpStatus.UNSOLVED,
-       "nonfinite": QpStatus.NUMERICS}
+#: the controller's QP outcome as the bus reports it (CtrlStatus.QpStatus)
+QP_STATUS: dict[QpOutcome, QpStatus] = {
+    QpOutcome.SOLVED: QpStatus.SOLVED, QpOutcome.NOT_RUN: QpStatus.NOT_RUN,
+    QpOutcome.INFEASIBLE: QpStatus.PRIMAL_INFEASIBLE, QpOutcome.FAILED: QpStatus.UNSOLVED,
+    QpOutcome.NONFINITE: QpStatus.NUMERICS}
 
 
 def _active_bits(a: int) -> int:
@@ -168,7 +170,7 @@ class ControllerNode:
         self.tick_time.add(time.perf_counter_ns() - t0)
         d = res.diagnostics
         self._last_diag = d
-        if d.qp_status in ("infeasible", "failed", "nonfinite"):
+        if d.qp_status.is_failure:
             self._flags |= FaultFlag.QP_FAILED
         if d.active & Active.OUTPUT_CLAMP:
             self._flags |= FaultFlag.TORQUE_SATURATED
@@ -197,7 +199,7 @@ class ControllerNode:
 
     def status_frames(self, ts: float = 0.0) -> list[can.Message]:
         d = self._last_diag
-        qp = _QP.get(d.qp_status, QpStatus.UNKNOWN) if d is not None else QpStatus.NOT_RUN
+        qp = QP_STATUS[d.qp_status] if d is not None else QpStatus.NOT_RUN
         frames = codec.encode_status(self._flags, qp, 0,
                                      min(d.fallback_count, 65535) if d is not None else 0,
                                      _active_bits(d.active) if d is not None else 0,
@@ -339,7 +341,7 @@ def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="prosthesis_controller.node", description=__doc__.split(
         "\n\n")[0])
-    p.add_argument("--controller", required=True)
+    p.add_argument("--controller", required=True, help=f"one of {ControllerName.choices()}")
     p.add_argument("--gait", required=True)
     p.add_argument("--tube", required=True)
     p.add_argument("--bus", help="bus config file (TOML/JSON)")

@@ -68,7 +68,7 @@ import casadi as ca
 import numpy as np
 
 from hp_model import bezier
-from hp_model.compiled import FunctionSet
+from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.interaction import InteractionModel
 from hp_model.interaction import prosthesis_outputs as stance_outputs
@@ -317,7 +317,8 @@ class ControllerTerms:
     """
 
     def __init__(self, sub: ProsthesisSubsystem, gait_degree: int, nominal_degree: int,
-                 bound_degree: int, pitch_degree: int = 5, backend: str = "auto",
+                 bound_degree: int, pitch_degree: int = 5,
+                 backend: CompileBackend | str = CompileBackend.AUTO,
                  feedforward_degree: int = 9, margin_degree: int = 0) -> None:
         self.sub = sub
         ck, ca_ = sub.full.hip_progress_coefficients("ps")

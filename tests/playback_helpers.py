@@ -84,7 +84,7 @@ class PinocchioSocket:
         tree = model.tree
         pm = pin.buildModelFromXML(to_urdf(tree))
         pm.gravity.linear = np.array([0.0, 0.0, -tree.gravity])
-        sole = next(c.target for c in model.domains[domain].constraints if c.kind == "frame")
+        sole = model.stance_frame(domain)
         fr = next(f for f in tree.frames if f.name == sole)
         body = tree.body(fr.body)
         jid = pm.getJointId(body.coords[-1])

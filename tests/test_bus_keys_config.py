@@ -12,6 +12,7 @@ from bus_schemas import keys
 from bus_schemas.keys import Direction
 from bus_schemas.zenoh_can import publisher_matched
 from bus_schemas.zenoh_config import (
+    ZenohMode,
     free_tcp_port,
     is_loopback_endpoint,
     loopback_endpoint,
@@ -91,8 +92,10 @@ def test_remote_endpoints_and_options_need_explicit_permission():
     assert json.loads(cfg.get_json("transport/unicast/lowlatency")) is False  # options last
     with pytest.raises(ValueError, match="client"):
         make_config(mode="client")
-    with pytest.raises(ValueError, match="mode"):
+    with pytest.raises(ValueError, match=r"^zenoh mode 'router': expected one of peer, client$"):
         make_config(mode="router")
+    for m in ("peer", ZenohMode.PEER):  # the word zenoh reads, either way
+        assert json.loads(make_config(mode=m).get_json("mode")) == "peer"
 
 
 def test_two_loopback_sessions_exchange_a_sample():

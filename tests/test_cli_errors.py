@@ -157,3 +157,19 @@ def test_unreadable_file(capsys, path, tmp_path):
     bad = tmp_path / "garbage.bin"
     bad.write_bytes(bytes(range(256)) * 4)
     _one_line_error(capsys, [*path, *_required(LEAVES[path], str(bad), str(tmp_path / "o"))])
+
+
+#: every option that is a choice of words, with the words it offers
+CHOICES = [(["model", "check"], "--backend", "'auto', 'c', 'sx'"),
+           (["run", "--controller", "clfqp", "--gait", GAIT, "--tube", TUBE], "--mode",
+            "'lockstep', 'realtime'"),
+           (["sweep", "run", "spec.toml", "--out", "o"], "--backend", "'simulator', 'fmu'"),
+           (["sweep", "replay", "o", "clfqp/human/0"], "--backend", "'simulator', 'fmu'"),
+           (["tube", "fit", "s.npz", "--gait", GAIT, "--out", "t.json"], "--phase",
+            "'gait', 'step'")]
+
+
+@pytest.mark.parametrize(("argv", "opt", "words"), CHOICES,
+                         ids=[f"{' '.join(a[:2])} {o}" for a, o, _ in CHOICES])
+def test_a_choice_outside_its_words_names_them(capsys, argv, opt, words):
+    _one_line_error(capsys, [*argv, opt, "nonsense"], opt, "'nonsense'", words)

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from prosthesis_controller import ClfConfig, ControllerConfig, ControllerContext, make_controller
 from prosthesis_controller.clf import res_clf
-from prosthesis_controller.interface import QP_SOLVED
+from prosthesis_controller.interface import QpOutcome
 from tests.controller_support import clf_terms, stance_meas, tube_about_nominal
 
 # the tube suggested for tests: (F_x, F_z, M_y) half-widths in N, N, N m
@@ -160,7 +160,7 @@ def test_exact_qp_satisfies_the_clf_condition_at_every_box_vertex(ctx, ctx_exact
         ctl = make_controller("clfqp-paper-exact", None, None, None, context=c)
         ctl.reset()
         out = ctl.tick(stance_meas(0.0, x))
-        if out.diagnostics.qp_status != QP_SOLVED:
+        if out.diagnostics.qp_status != QpOutcome.SOLVED:
             assert c is ctx_exact_bounded  # only torque bounds can make it infeasible
             assert out.diagnostics.mode == "fallback"
             continue
@@ -182,7 +182,7 @@ def test_relaxed_without_relaxation_or_bounds_is_the_exact_qp(ctx, ctx_unbounded
     exact.reset()
     relaxed.reset()
     oe, orl = exact.tick(stance_meas(0.0, x)), relaxed.tick(stance_meas(0.0, x))
-    assert oe.diagnostics.qp_status == orl.diagnostics.qp_status == QP_SOLVED
+    assert oe.diagnostics.qp_status == orl.diagnostics.qp_status == QpOutcome.SOLVED
     ue, ur = exact.qp_solution[:2], relaxed.qp_solution[:2]
     # both are interior-point solutions to 1e-9 of the normalised problem; torques ~ 1 N m
     np.testing.assert_allclose(ur, ue, rtol=1e-6, atol=1e-6)

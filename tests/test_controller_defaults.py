@@ -15,10 +15,10 @@ import pytest
 
 from hp_model.force_tube import load_tube
 from prosthesis_controller import (
-    CONTROLLERS,
     ClfConfig,
     ControllerConfig,
     ControllerContext,
+    ControllerName,
     make_controller,
 )
 from tests.controller_support import stance_ticks
@@ -41,7 +41,7 @@ def run_ticks(ctl, meas, u0):
     return outs, modes
 
 
-@pytest.mark.parametrize("name", CONTROLLERS)
+@pytest.mark.parametrize("name", ControllerName)
 def test_defaults_keep_every_controller_in_stance_on_the_default_subject(model, subsystem,
                                                                         demo, name):
     gait, tube = demo

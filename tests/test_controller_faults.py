@@ -12,15 +12,15 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prosthesis_controller import (
-    CONTROLLERS,
     ClfConfig,
     ControllerConfig,
     ControllerContext,
+    ControllerName,
     Fault,
     ProsthesisMeasurement,
     make_controller,
 )
-from prosthesis_controller.interface import MODE_FALLBACK, MODE_FAULT, QP_INFEASIBLE
+from prosthesis_controller.interface import ControllerMode, QpOutcome
 from tests.controller_support import stance_meas, tube_about_nominal
 
 
@@ -61,7 +61,7 @@ BAD = [
 ]
 
 
-@pytest.mark.parametrize("name", CONTROLLERS)
+@pytest.mark.parametrize("name", ControllerName)
 @pytest.mark.parametrize("bad,flag", BAD)
 def test_malformed_measurement_gives_the_fault_fallback(ctx, nominal_x, name, bad, flag):
     ctl = make_controller(name, None, None, None, context=ctx)
@@ -73,7 +73,7 @@ def test_malformed_measurement_gives_the_fault_fallback(ctx, nominal_x, name, ba
     _check_output(out, ctx.limits)
     d = out.diagnostics
     assert d.fault & flag
-    assert d.mode == MODE_FAULT
+    assert d.mode == ControllerMode.FAULT
     assert d.fallback_count == n_prev + 1
     # the fault fallback: the previous torque moved toward zero by at most fallback_rate
     step = ctx.config.safety.fallback_rate
@@ -82,7 +82,7 @@ def test_malformed_measurement_gives_the_fault_fallback(ctx, nominal_x, name, ba
     assert d.domain == good.diagnostics.domain
     # a valid measurement afterwards is served normally (time must still increase)
     after = ctl.tick(stance_meas(0.002, nominal_x))
-    assert after.diagnostics.fault == 0 and after.diagnostics.mode != MODE_FAULT
+    assert after.diagnostics.fault == 0 and after.diagnostics.mode != ControllerMode.FAULT
 
 
 def test_infeasible_qp_falls_back_toward_pd_rate_limited(model, subsystem, template_gait,
@@ -99,12 +99,13 @@ def test_infeasible_qp_falls_back_toward_pd_rate_limited(model, subsystem, templ
         x = nominal_x + k * np.array([-0.05, 0.03, -0.5, 0.5])
         ctl.reset((0.0, 0.0))
         out = ctl.tick(stance_meas(0.0, x))
-        if out.diagnostics.qp_status == QP_INFEASIBLE:
+        if out.diagnostics.qp_status == QpOutcome.INFEASIBLE:
             break
     pd.reset((0.0, 0.0))
     u_pd = pd.tick(stance_meas(0.0, x)).torque
     d = out.diagnostics
-    assert d.qp_status == QP_INFEASIBLE and d.mode == MODE_FALLBACK and d.fallback_count == 1
+    assert d.qp_status == QpOutcome.INFEASIBLE and d.mode == ControllerMode.FALLBACK
+    assert d.fallback_count == 1
     step = c.config.safety.fallback_rate
     np.testing.assert_allclose(out.torque, np.clip(u_pd, -step, step), atol=1e-12)
     _check_output(out, c.limits)
@@ -119,7 +120,7 @@ finite_or_not = st.one_of(st.floats(allow_nan=True, allow_infinity=True),
                               finite_or_not, finite_or_not, st.floats(-200, 2000),
                               st.booleans()), min_size=1, max_size=25))
 def test_any_measurement_sequence_gives_bounded_finite_outputs(ctx, seq):
-    ctls = [make_controller(n, None, None, None, context=ctx) for n in CONTROLLERS]
+    ctls = [make_controller(n, None, None, None, context=ctx) for n in ControllerName]
     for ctl in ctls:
         ctl.reset()
         t = 0.0

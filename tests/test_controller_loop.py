@@ -11,7 +11,7 @@ import quadprog
 from hp_model.force_tube import load_tube
 from orchestrator.scenarios import NOMINAL, Scenario, run_scenario
 from prosthesis_controller import ControllerContext, make_controller
-from prosthesis_controller.interface import QP_SOLVED
+from prosthesis_controller.interface import QpOutcome
 from tests.controller_support import stance_meas
 
 N_STATES = 600
@@ -73,7 +73,7 @@ def test_piqp_agrees_with_quadprog(demo_ctx, model, demo_gait, name):
         ctl.reset(rng.uniform(-lim, lim))
         out = ctl.tick(stance_meas(0.0, x))
         ref = _quadprog(*ctl.qp_data())
-        if out.diagnostics.qp_status != QP_SOLVED:
+        if out.diagnostics.qp_status != QpOutcome.SOLVED:
             assert name == "clfqp-exact", out.diagnostics.qp_status  # relaxed: always solvable
             assert ref is None, "piqp failed on a QP quadprog solves"
             continue

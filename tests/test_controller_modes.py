@@ -11,11 +11,11 @@ import pytest
 from hp_model import bezier
 from hp_model.outputs import Y2_COORDS
 from prosthesis_controller import (
-    CONTROLLERS,
+    ControllerName,
     ProsthesisMeasurement,
     make_controller,
 )
-from prosthesis_controller.interface import MODE_STANCE, MODE_SWING
+from prosthesis_controller.interface import ControllerMode
 from tests.controller_support import tube_about_nominal
 
 
@@ -34,7 +34,7 @@ def test_domain_switches_with_hysteresis_and_dwell(ctx):
     assert ctl.tick(m(0.2, load=0.5 * (cfg.load_on + cfg.load_off),
                       contact=True)).diagnostics.domain == "pns"
     out = ctl.tick(m(0.3, load=600, contact=True))
-    assert out.diagnostics.domain == "ps" and out.diagnostics.mode == MODE_STANCE
+    assert out.diagnostics.domain == "ps" and out.diagnostics.mode == ControllerMode.STANCE
     # a contact flicker within the dwell does not end stance
     assert ctl.tick(m(0.3 + cfg.min_dwell / 2, load=0, contact=False)).diagnostics.domain == "ps"
     # mid-band load keeps stance (hysteresis)
@@ -49,7 +49,7 @@ def test_domain_switches_with_hysteresis_and_dwell(ctx):
     assert ctl.tick(m(t0 + 0.5 * cfg.off_hold, load=10, contact=True)).diagnostics.domain \
         == "ps"
     out = ctl.tick(m(t0 + cfg.off_hold, load=10, contact=True))
-    assert out.diagnostics.domain == "pns" and out.diagnostics.mode == MODE_SWING
+    assert out.diagnostics.domain == "pns" and out.diagnostics.mode == ControllerMode.SWING
     # losing contact ends stance at once
     ctl.reset()
     ctl.tick(m(0.0, load=600, contact=True))
@@ -78,7 +78,7 @@ def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, mod
         vd = bezier.evaluate(bezier.derivative(pns.alpha[rows]), s) / T
         out = ctl.tick(m(t, (*qd, *vd)))
         assert out.diagnostics.tau == pytest.approx(s)
-        assert out.diagnostics.mode == MODE_SWING
+        assert out.diagnostics.mode == ControllerMode.SWING
         # gravity torque = dPE/dq at the nominal socket pitch (finite differences of the
         # subsystem's energy function: an independent path to the same model)
         q = np.r_[0.0, 0.0, float(bezier.evaluate(pitch_c[None, :], s)[0]), qd]
@@ -250,5 +250,5 @@ def test_factory_refuses_unknown_names_and_foreign_tubes(model, subsystem, templ
                                   gait_hash="0" * 16)
     with pytest.raises(ValueError, match="tube was made for gait"):
         make_controller("clfqp", template_gait, foreign, model, subsystem=subsystem)
-    for name in CONTROLLERS:
+    for name in ControllerName:
         assert make_controller(name, None, None, None, context=ctx).name == name

@@ -10,7 +10,7 @@ import pytest
 import quadprog
 
 from prosthesis_controller import ClfConfig, ControllerConfig, ControllerContext, make_controller
-from prosthesis_controller.interface import QP_INFEASIBLE, QP_SOLVED
+from prosthesis_controller.interface import QpOutcome
 from tests.controller_support import stance_meas, tube_about_nominal
 
 N_STATES = 1500
@@ -102,11 +102,11 @@ def test_piqp_agrees_with_quadprog_on_random_instances(contexts, variant):
         out = ctl.tick(stance_meas(0.0, x))
         data = ctl.qp_data()
         ref = (solve_relaxed if variant == "relaxed" else solve_exact)(*data)
-        if out.diagnostics.qp_status == QP_INFEASIBLE:
+        if out.diagnostics.qp_status == QpOutcome.INFEASIBLE:
             assert ref is None, "the feasibility test refused a feasible QP"
             counts["infeasible"] += 1
             continue
-        assert out.diagnostics.qp_status == QP_SOLVED
+        assert out.diagnostics.qp_status == QpOutcome.SOLVED
         assert ref is not None, "piqp solved a QP that quadprog finds infeasible"
         u_ref = ref[0] if variant == "relaxed" else ref
         u = ctl.qp_solution[:2]

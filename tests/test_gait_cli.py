@@ -58,7 +58,7 @@ def test_bad_segments_option_is_one_line(steps_file, tmp_path):
             "--segments", "steps")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip().splitlines() == [
-        "hpcosim: error: segments must be one of touchdown, paper, got 'steps'"]
+        "hpcosim: error: unknown fit segments 'steps'; choose one of touchdown, paper"]
 
 
 def test_fit_recovers_the_reference_gait(steps_file, tmp_path, model):

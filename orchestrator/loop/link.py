@@ -19,7 +19,7 @@ import numpy as np
 
 from orchestrator.loop.plant import Observation
 from prosthesis_controller import ProsthesisMeasurement
-from prosthesis_controller.interface import Controller
+from prosthesis_controller.interface import Controller, ControllerMode
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,7 @@ class Command:
     """A link's answer for one period."""
 
     torque: np.ndarray | None  # (2,) motor torques (N m); None: the plant's own law
-    mode: str = ""  # the controller's mode of the tick
+    mode: ControllerMode | str = ""  # the controller's mode of the tick ("" over CAN)
     V: float = 0.0  # CLF value
     rho: float = 0.0  # relaxation
     fallback_count: int = 0
@@ -147,7 +147,7 @@ class ControllerLink:
 
             u = np.array([codec.quantize_torque(float(u[0])),
                           codec.quantize_torque(float(u[1]))])
-        return Command(u, str(dg.mode), float(dg.V), float(dg.rho), int(dg.fallback_count))
+        return Command(u, dg.mode, float(dg.V), float(dg.rho), int(dg.fallback_count))
 
     def pace(self, k: int) -> None:
         """In process: no wall clock to keep."""
@@ -157,7 +157,7 @@ class OracleLink:
     """No prosthesis controller: the plant's own feedback linearization (mode full)."""
 
     def exchange(self, obs: Observation) -> Command:
-        return Command(None, "oracle")
+        return Command(None, ControllerMode.ORACLE)
 
     def pace(self, k: int) -> None:
         """In process: no wall clock to keep."""

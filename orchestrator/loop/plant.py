@@ -25,6 +25,7 @@ from typing import Protocol
 
 import numpy as np
 
+from hp_model.closed_loop import ClosedLoopMode
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimState
@@ -112,7 +113,8 @@ class SimulatorPlant:
     or "full" (the plant's own feedback linearization of all six torques: the oracle)."""
 
     def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
-                 domain: str = "ps", *, mode: str = "human") -> None:
+                 domain: str = "ps", *, mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
+                 ) -> None:
         self.sim = sim
         self.model: HumanProsthesisModel = sim.model
         self.dt = sim.opt.dt

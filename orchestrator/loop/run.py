@@ -28,6 +28,7 @@ import numpy as np
 from hp_model.falls import Fall
 from orchestrator.loop.link import Command, Link
 from orchestrator.loop.plant import Observation, Plant, Truth
+from prosthesis_controller.interface import ControllerMode
 
 
 class Recorder(Protocol):
@@ -45,7 +46,7 @@ class LoopLog:
     qd: list[np.ndarray] = field(default_factory=list)
     torque: list[np.ndarray] = field(default_factory=list)  # (2,) motor torques applied
     socket_force: list[np.ndarray] = field(default_factory=list)  # (3,)
-    mode: list[str] = field(default_factory=list)
+    mode: list[ControllerMode | str] = field(default_factory=list)
     V: list[float] = field(default_factory=list)
     rho: list[float] = field(default_factory=list)
     fallback_count: int = 0
