@@ -28,10 +28,10 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAIN_CODE, N_Y2, STANCE
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import N_Y2, STANCE
-from hp_model.simulator import DOMAIN_CODE, HybridSimulator, SimOptions
+from hp_model.simulator import HybridSimulator, SimOptions
 
 PERTURB = ("interior", "start", "all")
 

@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 
 from hp_model.artifacts import canonical_hash
+from hp_model.domains import Y2_COORDS
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
 from orchestrator.scenarios import (
     ORACLE,
     Encoder,

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import Y2_COORDS
 from hp_model.interaction import InteractionModel
-from hp_model.outputs import Y2_COORDS
 
 HUMAN = ("th_lh", "th_lk", "th_la", "th_rh")
 

@@ -15,7 +15,8 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 
 from hp_model import bezier
-from hp_model.outputs import STANCE, GaitParams, VirtualConstraints
+from hp_model.domains import STANCE
+from hp_model.outputs import GaitParams, VirtualConstraints
 
 
 def test_bezier_properties(rng):

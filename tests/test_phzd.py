@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from characterization.phzd import CYCLE
+from hp_model.domains import DOMAINS
 
 pytestmark = pytest.mark.slow
 
@@ -20,14 +20,14 @@ def result(regenerated):
 
 def test_ipopt_converges(result):
     assert result.solver["success"], result.solver["status"]
-    for d in CYCLE:
+    for d in DOMAINS:
         assert np.all(np.abs(result.offsets[d]) <= 0.15 + 1e-6)
 
 
 def test_collocation_points_satisfy_the_forward_dynamics(model, result):
     """Our KKT forward dynamics, fed the optimizer's (q, qd, u), returns its qdd and lam."""
     fs = model.numeric()
-    for d in CYCLE:
+    for d in DOMAINS:
         tr = result.trajectory[d]
         for k in range(tr["q"].shape[1]):
             qdd, lam = fs[f"dyn_{d}"](tr["q"][:, k], tr["qd"][:, k], tr["u"][:, k])

@@ -18,8 +18,8 @@ import pytest
 from scipy.stats import binomtest
 
 from hp_model import bezier
+from hp_model.domains import Y2_COORDS
 from hp_model.force_tube import save_tube
-from hp_model.outputs import Y2_COORDS
 from orchestrator.sweep_draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
 from orchestrator.sweep_replay import TAU_COLUMNS, compare_rows
 from orchestrator.sweep_report import mcnemar_exact, reason_class, wilson_interval

@@ -220,7 +220,7 @@ def test_the_fmu_backend_refuses_what_it_does_not_model(tmp_path, spec_file):
 # ------------------------------------------------------------------ the oracle
 
 def test_oracle_tracks_the_humans_rows_and_the_nominal_prosthesis(playback_gait):
-    from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
+    from hp_model.domains import HUMAN_OUTPUTS, Y2_COORDS
     from human_fmu.perturbation import perturbed_thetas
 
     nominal = {d: playback_gait.theta(d) for d in ("ps", "pns")}
