@@ -31,7 +31,13 @@ from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.domains import DOMAINS, N_Y2
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import GaitParams, VirtualConstraints, plain, unpack_symbolic
+from hp_model.outputs import (
+    GaitParams,
+    VirtualConstraints,
+    plain,
+    step_length,
+    unpack_symbolic,
+)
 
 
 class GaitOptimizationError(RuntimeError):
@@ -262,7 +268,8 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
             cost += opt.w_y2[k] * (e.T @ G @ e)
         cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
         cost += opt.w_offset * ca.sumsqr(X["delta"])
-        cost += opt.w_step * ((targets.p_max[d] - targets.p_min[d]) - (p_max - p_min)) ** 2
+        cost += opt.w_step * (step_length(targets.p_min[d], targets.p_max[d])
+                              - step_length(p_min, p_max)) ** 2
         if d == "ps":
             eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
 

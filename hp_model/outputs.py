@@ -21,7 +21,7 @@ The curve B is the gait's Bezier polynomial (:func:`plain`), continued linearly 
 for the simulated human (:func:`resting`).  The outputs are symbolic in the gait parameters
 theta = (alpha row by row, v_hip, p_min, p_max) (:class:`ThetaLayout`), so one object serves
 the regression, the optimizer, the simulator and the controllers; every formula here works
-on numbers, numpy arrays and CasADi symbols alike.
+on numbers, numpy arrays and CasADi symbols alike (:func:`resting` on symbols only).
 
 Feedback linearization uses the domain's constrained dynamics qdd = a(q, qd) + b(q) u:
 
@@ -118,23 +118,28 @@ def unpack_symbolic(theta: Num, degree: int) -> tuple[Num, Num, Num, Num]:
 
 
 # -- the phase --------------------------------------------------------------------------------
+def step_length(p_min: Num, p_max: Num) -> Num:
+    """p_max - p_min (m): the hip's forward progress over the step."""
+    return p_max - p_min
+
+
 def phase(delta_p: Num, p_min: Num, p_max: Num, *rates: Num) -> Any:
     """tau = (delta_p_hip - p_min) / (p_max - p_min) (delta_p_hip, p_min, p_max in m); with
     time derivatives of delta_p_hip given (m/s, m/s^2, ...), the tuple (tau, and the same
     derivatives of tau (1/s, ...) = rate / (p_max - p_min))."""
-    dp = p_max - p_min
+    dp = step_length(p_min, p_max)
     tau = (delta_p - p_min) / dp
     return (tau, *(r / dp for r in rates)) if rates else tau
 
 
 def phase_rate(delta_p_dot: Num, p_min: Num, p_max: Num) -> Num:
     """tau_dot (1/s) of a hip moving at delta_p_dot (m/s)."""
-    return delta_p_dot / (p_max - p_min)
+    return delta_p_dot / step_length(p_min, p_max)
 
 
 def delta_p_at(tau: Num, p_min: Num, p_max: Num) -> Num:
     """delta_p_hip (m) at phase tau: the inverse of :func:`phase`."""
-    return p_min + tau * (p_max - p_min)
+    return p_min + tau * step_length(p_min, p_max)
 
 
 @dataclass(frozen=True)
@@ -298,6 +303,11 @@ class GaitParams:
         return delta_p_at(tau, self.p_min, self.p_max)
 
     @property
+    def step_length(self) -> float:
+        """p_max - p_min (m): the hip's forward progress over the step."""
+        return step_length(self.p_min, self.p_max)
+
+    @property
     def nominal_rate(self) -> float:
         """tau_dot (1/s) of the hip moving at v_hip (y1 = 0)."""
         return phase_rate(self.v_hip, self.p_min, self.p_max)
@@ -305,7 +315,7 @@ class GaitParams:
     @property
     def nominal_duration(self) -> float:
         """(p_max - p_min) / v_hip (s): the step's duration at the nominal hip velocity."""
-        return (self.p_max - self.p_min) / self.v_hip
+        return self.step_length / self.v_hip
 
 
 def as_params(theta: GaitParams | np.ndarray, degree: int) -> GaitParams:
@@ -359,7 +369,7 @@ class VirtualConstraints:
         gains = ca.SX.sym("gains", 3)
         o = self.output_exprs(q, qd, theta)
         _, _, p_min, p_max = self.layout.unpack(theta)
-        dp = p_max - p_min
+        dp = step_length(p_min, p_max)
         cD, SD = ca.DM(c).T, ca.DM(S)
 
         # qdd = a + b u from the domain's constrained dynamics (affine in u)
@@ -463,7 +473,7 @@ class VirtualConstraints:
         for row, i in enumerate(r.y2):
             q[i], dq[i] = B[row], dB[row]
         q[r.ankle] = self.hip.ankle(delta_p_at(tau, p_min, p_max), q[r.knee])
-        dq[r.ankle] = self.hip.ankle(p_max - p_min, dq[r.knee])
+        dq[r.ankle] = self.hip.ankle(step_length(p_min, p_max), dq[r.knee])
         return stack(q), stack([v * tau_dot for v in dq])
 
     # -- numeric --------------------------------------------------------------------------

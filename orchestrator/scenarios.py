@@ -252,7 +252,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     gains = gait.gains_array if human_gains is None else np.asarray(human_gains, float)
     sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
                           options or SimOptions(), human_delay=human_delay)
-    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
+    idx = model.roles["ps"].prosthesis
     if scenario.controller == ORACLE:
         sim.thetas = oracle_thetas(gait, sim.thetas)
         return _run_oracle(model, gait, tube, scenario, sim, idx, q0, qd0)

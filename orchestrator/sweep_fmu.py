@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from human_fmu import FALL_CODES
@@ -36,7 +37,6 @@ from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
            "socket_Fx", "socket_Fz", "socket_My", "socket_pitch")
 CONE_FALL = 5  # reported one period late (module docstring)
-DOMAINS = ("ps", "pns")
 
 
 class FmuPlant(FmuInstance):

@@ -73,7 +73,7 @@ from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.interaction import InteractionModel
-from hp_model.outputs import HipProgress, delta_p_at, stance_outputs
+from hp_model.outputs import HipProgress, delta_p_at, stance_outputs, step_length
 from hp_model.prosthesis import ProsthesisSubsystem
 from hp_model.tree import PlanarTree, frame_pose
 
@@ -388,7 +388,7 @@ class ControllerTerms:
         tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
         Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
         qd_ = ca.vertcat(Bk, hip.ankle(delta_p_at(tau_s, rp_min, rp_max), Bk))
-        dqd_ = rate * ca.vertcat(dBk, hip.ankle(rp_max - rp_min, dBk))
+        dqd_ = rate * ca.vertcat(dBk, hip.ankle(step_length(rp_min, rp_max), dBk))
         ddqd_ = rate**2 * ca.vertcat(ddBk, -hip.c_knee * ddBk / hip.c_ankle)
         sref = ca.Function("stance_ref", [tau_s, rate, R.symbol], [qd_, dqd_, ddqd_],
                            ["tau", "rate", "p"], ["q_d", "qd_d", "qdd_d"])

@@ -52,9 +52,10 @@ _SMALL_SOLVE = """
 import hashlib, numpy as np, hp_model
 from characterization.phzd import PHZDOptions, optimize_gait
 from hp_model.blas_threads import blas_thread_counts
+from hp_model.domains import DOMAINS
 from tests.gait_template import template_targets
 r = optimize_gait(hp_model.load_model(), template_targets(), PHZDOptions(nodes=7, max_iter=15))
-x = np.concatenate([np.ravel(r.trajectory[d][k]) for d in ("ps", "pns")
+x = np.concatenate([np.ravel(r.trajectory[d][k]) for d in DOMAINS
                     for k in ("q", "qd", "qdd", "u", "lam")])
 print(hashlib.sha256(x.tobytes()).hexdigest(), max(blas_thread_counts().values()))
 """
