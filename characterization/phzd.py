@@ -119,7 +119,6 @@ def _point_functions(model: HumanProsthesisModel, vc: VirtualConstraints, opt: P
     u = ca.SX.sym("u", model.nu)
     lam = ca.SX.sym("lam", 6)
     theta = ca.SX.sym("theta", vc.n_params)
-    dom = model.domains[vc.domain]
     h = model.h[vc.domain]
     J = ca.jacobian(h, q)
     Jdqd = ca.jtimes(J @ qd, q, qd)
@@ -130,15 +129,13 @@ def _point_functions(model: HumanProsthesisModel, vc: VirtualConstraints, opt: P
     eq = ca.vertcat(dyn, hol, dy1 + opt.eps * y1, ddy2 + opt.kd * dy2 + opt.kp * y2)
     # ground wrench (F_x, F_z, M_y) at the stance sole point: friction cone, positive
     # normal force, centre of pressure inside the foot (d = -M_y / F_z in [-heel, toe])
-    stance_sole = dom.constraints[0].target
-    side = "l" if stance_sole.startswith("l_") else "p"
+    roles = model.roles[vc.domain]
     frames = {f.name: f for f in model.tree.frames}
-    heel = -frames[f"{side}_heel"].point[0]
-    toe = frames[f"{side}_toe"].point[0]
+    heel = -frames[roles.stance_foot[0]].point[0]
+    toe = frames[roles.stance_foot[1]].point[0]
     fx, fz, my = lam[0], lam[1], lam[2]
-    swing = "p" if side == "l" else "l"
-    z_heel = model.frame_expr(f"{swing}_heel")[1]
-    z_toe = model.frame_expr(f"{swing}_toe")[1]
+    z_heel = model.frame_expr(roles.swing_foot[0])[1]
+    z_toe = model.frame_expr(roles.swing_foot[1])[1]
     ineq = ca.vertcat(opt.mu * fz - fx, opt.mu * fz + fx, fz - opt.min_normal_force,
                       toe * fz + my, heel * fz - my, z_heel, z_toe)
     args = [q, qd, qdd, u, lam, theta]

@@ -32,16 +32,21 @@ PROSTHESIS = ("th_pk", "th_pa")
 
 @dataclass(frozen=True)
 class StanceLeg:
-    """Coordinates of a domain's stance leg and the frame of its ankle."""
+    """Coordinates of a domain's stance leg and the prefix of its frames (``side``_ankle,
+    _sole, _heel, _toe)."""
 
     hip: str
     knee: str
     ankle: str
-    ankle_frame: str
+    side: str
+
+    @property
+    def ankle_frame(self) -> str:
+        return f"{self.side}_ankle"
 
 
-STANCE_LEG = {"ps": StanceLeg("th_rh", "th_pk", "th_pa", "p_ankle"),
-              "pns": StanceLeg("th_lh", "th_lk", "th_la", "l_ankle")}
+STANCE_LEG = {"ps": StanceLeg("th_rh", "th_pk", "th_pa", "p"),
+              "pns": StanceLeg("th_lh", "th_lk", "th_la", "l")}
 STANCE = {d: (leg.knee, leg.ankle) for d, leg in STANCE_LEG.items()}
 Y2_COORDS = {
     "ps": ("th_lh", "th_lk", "th_la", "th_rh", "th_pk"),
@@ -66,7 +71,8 @@ class DomainRoles:
     placement puts on their outputs, :mod:`hp_model.placement`) and ``on_outputs_rows`` their
     y2 rows; ``prosthesis``: coordinate indices of (th_pk, th_pa); ``prosthesis_rows``: their
     y2 rows (-1 where the joint is not an output: the stance ankle);
-    ``human_rows``: rows of (y1, y2) the human's torques control."""
+    ``human_rows``: rows of (y1, y2) the human's torques control; ``stance_foot`` and
+    ``swing_foot``: the frames (heel, toe) of the stance and the swing foot."""
 
     name: str
     code: int
@@ -83,6 +89,8 @@ class DomainRoles:
     prosthesis: tuple[int, int]
     prosthesis_rows: tuple[int, int]
     human_rows: tuple[int, ...]
+    stance_foot: tuple[str, str]
+    swing_foot: tuple[str, str]
 
 
 def domain_roles(model: HybridModel, domain: str) -> DomainRoles:
@@ -103,4 +111,10 @@ def domain_roles(model: HybridModel, domain: str) -> DomainRoles:
         on_outputs_rows=rows, prosthesis=(idx(PROSTHESIS[0]), idx(PROSTHESIS[1])),
         prosthesis_rows=tuple(y2_row(domain, n) if n in names else -1  # type: ignore[arg-type]
                               for n in PROSTHESIS),
-        human_rows=HUMAN_OUTPUTS[domain])
+        human_rows=HUMAN_OUTPUTS[domain],
+        stance_foot=_heel_toe(STANCE_LEG[domain].side),
+        swing_foot=_heel_toe(STANCE_LEG[dom.next].side))
+
+
+def _heel_toe(side: str) -> tuple[str, str]:
+    return f"{side}_heel", f"{side}_toe"

@@ -251,8 +251,8 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
         f"#define HPFMU_DEGREE {degree}",
         f"#define HPFMU_NFRAMES {len(model.frame_names)}",
         f"#define HPFMU_IDX_ZB {names.index('z_B')}",
-        f"#define HPFMU_IDX_PK {names.index('th_pk')}",
-        f"#define HPFMU_IDX_PA {names.index('th_pa')}",
+        f"#define HPFMU_IDX_PK {model.roles['ps'].prosthesis[0]}",
+        f"#define HPFMU_IDX_PA {model.roles['ps'].prosthesis[1]}",
         f"#define HPFMU_SOCKET_FIRST {names.index('x_f')}", "",
         "/* the device's motor torque limits (knee, ankle; N m): inputs are clamped to them */",
         "static const double HPFMU_TORQUE_LIMIT[2] = {"
