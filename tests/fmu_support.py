@@ -46,7 +46,7 @@ def simulator(model: HumanProsthesisModel, gait: Gait, thetas=None,
 def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) -> dict:
     """The NominalPD table: nominal prosthesis angles, velocities and motor torques of the
     gait's collocation trajectory over its phase."""
-    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k, a = model.roles["ps"].prosthesis
     ratio = [float(model.B[k, 4]), float(model.B[a, 5])]
     table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in DOMAINS},
                    "phase": {}, "nominal": {}}
