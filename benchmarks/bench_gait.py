@@ -29,6 +29,7 @@ from characterization.mocap_pipeline import process_take, to_artifact
 from characterization.phzd import PHZDOptions, optimize_gait
 from characterization.synthetic_subject import SynthOptions, reference_gait, synthesize
 from hp_model import bezier
+from hp_model.domains import DOMAINS
 
 
 def main() -> None:
@@ -37,7 +38,7 @@ def main() -> None:
     ap.add_argument("--source", choices=("model", "template"), default="model")
     args = ap.parse_args()
     model = hp_model.load_model()
-    coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
     with tempfile.TemporaryDirectory():
         s = synthesize(model, SynthOptions(n_strides=37, seed=1, source=args.source))
         steps = to_artifact(process_take(s.take, default_mapping(), coef))

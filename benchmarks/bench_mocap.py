@@ -24,6 +24,7 @@ from characterization.mocap_report import render_report
 from characterization.motive_csv import write_motive_csv
 from characterization.steps_artifact import save_steps
 from characterization.synthetic_subject import SynthOptions, synthesize
+from hp_model.domains import DOMAINS
 
 
 def main() -> None:
@@ -31,7 +32,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args()
     model = hp_model.load_model()
-    coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
     mapping = default_mapping()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)

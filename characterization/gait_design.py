@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 
 from characterization.bezier_fit import fit_bezier
-from characterization.phzd import CYCLE, DataTargets, PHZDOptions, PHZDResult
+from characterization.phzd import DataTargets, PHZDOptions, PHZDResult
+from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams, VirtualConstraints
@@ -22,10 +23,8 @@ def nominal_socket_force(model: HumanProsthesisModel, result: PHZDResult,
                          degree: int = SOCKET_DEGREE) -> np.ndarray:
     """Bezier coefficients (3, degree+1) of F*(tau) over the ps phase, fitted to the socket
     wrench of the collocation trajectory (lam rows 3:6 of ps, the fixed joint's wrench)."""
-    tr = result.trajectory["ps"]
-    vc = VirtualConstraints(model, "ps", result.params["ps"].degree)
-    p = result.params["ps"]
-    tau = (vc.c_row @ tr["q"] - p.p_min) / (p.p_max - p.p_min)
+    tr, p = result.trajectory["ps"], result.params["ps"]
+    tau = VirtualConstraints(model, "ps", p.degree).phase(tr["q"], p)
     return fit_bezier(tau, tr["lam"][3:6, :].T, degree).alpha
 
 
@@ -34,7 +33,7 @@ def build_gait(model: HumanProsthesisModel, result: PHZDResult, targets: DataTar
                ) -> Gait:
     """The gait artifact of a converged optimization."""
     data = {d: GaitParams(np.asarray(targets.alpha[d]), targets.v_hip[d], targets.p_min[d],
-                          targets.p_max[d]) for d in CYCLE}
+                          targets.p_max[d]) for d in DOMAINS}
     options = {k: (list(v) if isinstance(v, tuple) else v)
                for k, v in dataclasses.asdict(opt).items()}
     solver = {"status": result.status, "success": result.success,

@@ -10,8 +10,8 @@ import numpy as np
 from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.gait_artifact import CYCLE, Gait
-from hp_model.outputs import Y2_COORDS
+from hp_model.domains import DOMAINS, Y2_COORDS
+from hp_model.gait_artifact import Gait
 
 LABELS = {"th_lh": "human hip", "th_lk": "human knee", "th_la": "human ankle",
           "th_rh": "prosthesis-side hip", "th_pk": "prosthesis knee",
@@ -31,7 +31,7 @@ def gait_figure_bytes(gait: Gait, steps: StepsArtifact | None = None, fmt: str =
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.05, hspace=0.35, wspace=0.25)
     axes = fig.subplots(5, 2, sharex=True)
     s = np.linspace(0, 1, 201)
-    for col, d in enumerate(CYCLE):
+    for col, d in enumerate(DOMAINS):
         names = Y2_COORDS[d]
         if steps is not None:
             cn = list(steps.coord_names)

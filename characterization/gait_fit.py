@@ -24,7 +24,6 @@ from characterization.domain_segmentation import domain_segments
 from characterization.gait_design import build_gait
 from characterization.gait_verification import make_simulator, poincare, simulate_gait
 from characterization.phzd import (
-    CYCLE,
     DataTargets,
     GaitOptimizationError,
     GaitVerificationError,
@@ -36,9 +35,10 @@ from characterization.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.choices import Choice
+from hp_model.domains import DOMAINS, STANCE, Y2_COORDS
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import STANCE, Y2_COORDS
+from hp_model.outputs import HipProgress, phase
 
 
 class FitSegments(Choice):
@@ -70,7 +70,7 @@ class Regression:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
                     "n": self.fits[d].n, "steps": self.n_steps[d],
                     "hip_velocity_rms": self.hip_velocity_rms[d],
-                    "segments": self.segments} for d in CYCLE}
+                    "segments": self.segments} for d in DOMAINS}
 
 
 @dataclass(frozen=True)
@@ -106,12 +106,12 @@ def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: S
         raise FitError(f"{src}: no '{domain}' step (need at least one step of each domain)")
     names = list(steps.coord_names)
     cols = [names.index(c) for c in Y2_COORDS[domain]]
-    ck, ca_ = model.hip_progress_coefficients(domain)
+    hip = HipProgress.of(model, domain)
     k, a = (names.index(c) for c in STANCE[domain])
     taus, ys, vels = [], [], []
     for i in indices:
         q = steps.step_q(i)
-        delta = ck * q[:, k] + ca_ * q[:, a]
+        delta = hip(q[:, k], q[:, a])
         w = slice(None) if windows is None or i not in windows else \
             slice(windows[i][0], windows[i][1] + 1)
         taus.append(steps.step_tau(i)[w])
@@ -161,17 +161,17 @@ def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
     does not progress, are left out."""
     names = list(steps.coord_names)
     cols = [names.index(c) for c in Y2_COORDS[domain]]
-    ck, ca_ = model.hip_progress_coefficients(domain)
+    hip = HipProgress.of(model, domain)
     k, a = (names.index(c) for c in STANCE[domain])
     taus, ys, vels, lo, hi = [], [], [], [], []
     for s in segments:
         q = steps.q[s.start:s.end + 1]
-        delta = ck * q[:, k] + ca_ * q[:, a]
-        phase = _segment_phase(delta, steps.frame_rate)
-        if phase is None:
+        delta = hip(q[:, k], q[:, a])
+        bounds = _segment_phase(delta, steps.frame_rate)
+        if bounds is None:
             continue
-        p_lo, p_hi, keep = phase
-        taus.append(((delta - p_lo) / (p_hi - p_lo))[keep])
+        p_lo, p_hi, keep = bounds
+        taus.append(phase(delta, p_lo, p_hi)[keep])
         ys.append(q[keep, cols])
         vels.append((np.gradient(delta) * steps.frame_rate)[keep])
         lo.append(p_lo)
@@ -194,7 +194,7 @@ def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int
     segments = fit_segments(segments)
     found = domain_segments(steps) if segments == FitSegments.TOUCHDOWN else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
-    for d in CYCLE:
+    for d in DOMAINS:
         if segments == FitSegments.TOUCHDOWN:
             r = regress_segments(model, steps, [s for s in found if s.domain == d], d,
                                  degree, src)
@@ -212,7 +212,7 @@ def output_rms(gait: Gait, n: int = 201) -> dict[str, np.ndarray]:
     """Per domain, RMS over tau of y_d(alpha*) - (y_d(alpha_mc) + delta), per output (rad)."""
     s = np.linspace(0.0, 1.0, n)
     out = {}
-    for d in CYCLE:
+    for d in DOMAINS:
         opt = bezier.evaluate(gait.params[d].alpha, s)
         data = bezier.evaluate(gait.data_params[d].alpha, s) + gait.offsets[d]
         out[d] = np.sqrt(np.mean((opt - data) ** 2, axis=0))

@@ -4,7 +4,8 @@
   from the optimized initial state (start of ps), for N steps on the hybrid simulator.
 - ``poincare``: the return map P from the post-impact state of ps to the next one (one
   cycle ps -> pns -> ps), in the 12 independent coordinates (6 joint angles, 6 joint
-  velocities; the base follows from the stance foot flat at x = 0 and at rest), its fixed
+  velocities; the base follows from the stance foot flat at x = 0 and at rest:
+  :func:`hp_model.placement.place`), its fixed
   point (found by iterating the map), and the eigenvalues of its Jacobian by central finite
   differences.  The orbit is locally exponentially stable when all |eig| < 1.
 """
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
@@ -26,7 +28,7 @@ JOINTS = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 def make_simulator(model: HumanProsthesisModel, gait: Gait, gains: np.ndarray | None = None,
                    options: SimOptions | None = None) -> HybridSimulator:
     cl = ClosedLoop(model, gait.degree)
-    return HybridSimulator(model, cl, {d: gait.theta(d) for d in ("ps", "pns")},
+    return HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
                            gait.gains_array if gains is None else gains, options)
 
 
@@ -47,15 +49,9 @@ class _Section:
 
     def expand(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = self.model
-        q = np.zeros(m.nq)
-        q[self.j] = s[:6]
-        q = m.place_stance_foot(q, "ps")
-        qd = np.zeros(m.nq)
-        qd[self.j] = s[6:]
-        _, _, J, _ = m.numeric()["terms_ps"](q, qd)
-        Jf = np.array(J[0:3, :])
-        qd[0:3] = np.linalg.solve(Jf[:, 0:3], -Jf[:, self.j] @ s[6:])
-        return q, qd
+        q, qd = np.zeros(m.nq), np.zeros(m.nq)
+        q[self.j], qd[self.j] = s[:6], s[6:]
+        return m.stance_state(q, qd, "ps")
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from characterization.motive_csv import read_motive_csv
 from characterization.steps_artifact import StepsFileError, steps_bytes
 from characterization.trc_io import read_trc
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import DOMAINS
 
 READERS = {".csv": read_motive_csv, ".c3d": read_c3d, ".trc": read_trc}
 
@@ -62,7 +63,7 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
          load_mapping(mapping) if mapping is not None else default_mapping())
     take = read_take(take_path)
     model = hp_model.load_model(subject, device)
-    coef = {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
     offsets = None
     if m.calibration is not None:
         offsets = static_offsets(read_take(m.calibration.static_trial), m,

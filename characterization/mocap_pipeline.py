@@ -45,6 +45,8 @@ from characterization.step_segmentation import (
 from characterization.steps_artifact import StepsArtifact
 from hp_model import COORDS
 from hp_model.config import SubjectLengths, default_subject_path, load_subject
+from hp_model.domains import STANCE
+from hp_model.outputs import HipProgress
 
 #: coordinate -> (distal limb, proximal limb or None)
 ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
@@ -334,8 +336,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     hip = np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
     q = joint_coordinates(pitches, hip)
     check_joint_angles(take.source, q, COORDS)
-    ck, ca = coefficients["ps"]
-    delta = ck * q[:, COORDS.index("th_pk")] + ca * q[:, COORDS.index("th_pa")]
+    delta = _hip_progress(q, coefficients, "ps")
     seg = mapping.segmentation
     contacts = foot_contacts(take, mapping, frame)
     if seg.method == SegmentationMethod.CONTACT:
@@ -378,14 +379,19 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
                          contacts, SegmentationMethod(seg.method), lab)
 
 
+def _hip_progress(q: np.ndarray, coefficients: HipCoefficients, domain: str) -> np.ndarray:
+    """delta_p_hip (m) of the frames q (n, 12) from the domain's stance knee and ankle."""
+    knee, ankle = STANCE[domain]
+    return HipProgress(*coefficients[domain])(q[:, COORDS.index(knee)],
+                                              q[:, COORDS.index(ankle)])
+
+
 def _make_step(b: StepBounds, q: np.ndarray, coefficients: HipCoefficients,
                foot_x: np.ndarray, rate: float, speed: float) -> Step | None:
     qs = q[b.start:b.end + 1]
     if not np.all(np.isfinite(qs)):
         return None
-    ck, ca = coefficients[b.domain]
-    k, a = ("th_pk", "th_pa") if b.domain == "ps" else ("th_lk", "th_la")
-    d = ck * qs[:, COORDS.index(k)] + ca * qs[:, COORDS.index(a)]
+    d = _hip_progress(qs, coefficients, b.domain)
     if d[-1] == d[0]:
         return None
     tau, lo, hi = phase_tau(d)

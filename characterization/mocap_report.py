@@ -18,6 +18,7 @@ from characterization.limb_angles import SOURCE_NAMES
 from characterization.mocap_pipeline import ProcessedTake
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import DOMAINS
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
@@ -44,7 +45,7 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
     return {
         "source": p.source, "frames": len(p.time), "frame_rate_hz": rate,
         "walking_direction_lab": p.frame.forward.tolist(), "up_lab": p.frame.up.tolist(),
-        "steps": {d: sum(s.domain == d for s in p.steps) for d in ("ps", "pns")},
+        "steps": {d: sum(s.domain == d for s in p.steps) for d in DOMAINS},
         "steps_without_single_support": sum(s.single_support is None for s in p.steps),
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
                     for d in p.dropped],
@@ -125,7 +126,7 @@ def figures(p: ProcessedTake) -> dict[str, bytes]:
     fig.subplots_adjust(left=0.05, right=0.99, top=0.94, bottom=0.09, wspace=0.35,
                         hspace=0.25)
     axes = fig.subplots(2, len(ANGLES), sharex=True)
-    for r, dom in enumerate(("ps", "pns")):
+    for r, dom in enumerate(DOMAINS):
         steps = [s for s in p.steps if s.domain == dom]
         for c, name in enumerate(ANGLES):
             ax = axes[r, c]

@@ -73,13 +73,11 @@ def model_error_samples(model: Any, gait: Any, q: np.ndarray, qd: np.ndarray, u:
     (n, 6) as the model's input) of one step: the true prosthesis accelerations from the
     constrained dynamics ``dyn_ps``, the model's from the interaction model at x_p."""
     from hp_model.interaction import InteractionModel
-    from hp_model.outputs import STANCE
 
     inter = interaction or InteractionModel(model, gait.degree)
     f = inter.numeric()["model_error_ps"]
     dyn = model.numeric()["dyn_ps"]
-    names = model.coord_names
-    k, a = (names.index(n) for n in STANCE["ps"])
+    k, a = model.roles["ps"].knee, model.roles["ps"].ankle
     theta, gains = gait.theta("ps"), gait.gains_array
     n = len(q)
     tau, d = np.empty(n), np.empty((n, 2))
@@ -95,15 +93,14 @@ def model_error_samples(model: Any, gait: Any, q: np.ndarray, qd: np.ndarray, u:
 def playback_error_samples(model: Any, gait: Any, steps: Sequence[Any]) -> list[ErrorSamples]:
     """:func:`model_error_samples` of played-back steps
     (:class:`characterization.playback.StepPlayback`, each in its own phase): the time since
-    the touchdown is the step's phase times its duration (p_max - p_min) / v_hip (y1 = 0
-    keeps tau_dot constant in playback)."""
+    the touchdown is the step's phase times its nominal duration
+    (``GaitParams.nominal_duration``; y1 = 0 keeps tau_dot constant in playback)."""
     from hp_model.interaction import InteractionModel
 
     inter = InteractionModel(model, gait.degree)
     out = []
     for sp in steps:
-        p = sp.params
-        since = np.asarray(sp.tau, float) * (p.p_max - p.p_min) / p.v_hip
+        since = np.asarray(sp.tau, float) * sp.params.nominal_duration
         out.append(model_error_samples(model, gait, sp.q, sp.qd, sp.u, since, inter))
     return out
 

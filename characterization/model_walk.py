@@ -28,10 +28,11 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAIN_CODE, DOMAINS, N_Y2
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import N_Y2, STANCE
-from hp_model.simulator import DOMAIN_CODE, HybridSimulator, SimOptions
+from hp_model.outputs import GaitParams
+from hp_model.simulator import HybridSimulator, SimOptions
 
 PERTURB = ("interior", "start", "all")
 
@@ -74,7 +75,7 @@ def perturbed_theta(gait: Gait, domain: str, rng: np.random.Generator, opt: Walk
         raise ValueError(f"perturb must be one of {PERTURB}, got {opt.perturb!r}")
     alpha[:, cols] += opt.sigma * rng.standard_normal((N_Y2, cols.size))
     v = p.v_hip * (1.0 + opt.sigma_v_hip * rng.standard_normal())
-    return np.r_[alpha.ravel(), v, p.p_min, p.p_max]
+    return GaitParams(alpha, v, p.p_min, p.p_max).pack()
 
 
 def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.Generator,
@@ -83,7 +84,7 @@ def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.G
     """``n_steps`` consecutive steps from the start of the gait's ps collocation trajectory
     (t = 0), each with its own perturbed theta (module docstring)."""
     cl = closed_loop or ClosedLoop(model, gait.degree)
-    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in ("ps", "pns")},
+    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
                           gait.gains_array, SimOptions(dt=opt.dt))
     tr = gait.trajectory["ps"]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
@@ -99,8 +100,8 @@ def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.G
         imp = r.impacts[0]
         rows = (r.domain == DOMAIN_CODE[d]) & (r.t < imp.t)
         q_end = imp.q.copy()
-        ankle = model.coord_names.index(STANCE[imp.into][1])
-        q_end[ankle] += imp.foot_pitch  # undo the flat-foot correction: the pre-impact pose
+        # undo the flat-foot correction: the pre-impact pose
+        q_end[model.roles[imp.into].ankle] += imp.foot_pitch
         out.append(WalkedStep(d, theta, np.r_[r.t[rows], imp.t] + t0,
                               np.vstack([r.q[rows], q_end]),
                               np.vstack([r.qd[rows], imp.qd_minus])))

@@ -29,10 +29,15 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
+from hp_model.domains import DOMAINS, N_Y2
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import N_Y2, GaitParams, VirtualConstraints, unpack_symbolic
-
-CYCLE = ("ps", "pns")
+from hp_model.outputs import (
+    GaitParams,
+    VirtualConstraints,
+    plain,
+    step_length,
+    unpack_symbolic,
+)
 
 
 class GaitOptimizationError(RuntimeError):
@@ -114,37 +119,23 @@ def _point_functions(model: HumanProsthesisModel, vc: VirtualConstraints, opt: P
     u = ca.SX.sym("u", model.nu)
     lam = ca.SX.sym("lam", 6)
     theta = ca.SX.sym("theta", vc.n_params)
-    dom = model.domains[vc.domain]
     h = model.h[vc.domain]
     J = ca.jacobian(h, q)
     Jdqd = ca.jtimes(J @ qd, q, qd)
     dyn = model.D @ qdd + model.H - ca.DM(model.B) @ u - J.T @ lam
     hol = J @ qdd + Jdqd
-    alpha, v_hip, p_min, p_max = unpack_symbolic(theta, vc.degree)
-    dp = p_max - p_min
-    c, S = ca.DM(vc.c_row).T, ca.DM(vc.S)
-    tau = (c @ q - p_min) / dp
-    tau_d = (c @ qd) / dp
-    tau_dd = (c @ qdd) / dp
-    dB = bezier.evaluate(bezier.derivative(alpha), tau)
-    ddB = bezier.evaluate(bezier.derivative(bezier.derivative(alpha)), tau)
-    y1 = c @ qd - v_hip
-    dy1 = c @ qdd
-    y2 = S @ q - bezier.evaluate(alpha, tau)
-    dy2 = S @ qd - dB * tau_d
-    ddy2 = S @ qdd - ddB * tau_d**2 - dB * tau_dd
+    o = vc.output_exprs(q, qd, theta, qdd, plain)
+    y1, dy1, y2, dy2, ddy2 = o.y1, o.dy1, o.y2, o.dy2, o.ddy2
     eq = ca.vertcat(dyn, hol, dy1 + opt.eps * y1, ddy2 + opt.kd * dy2 + opt.kp * y2)
     # ground wrench (F_x, F_z, M_y) at the stance sole point: friction cone, positive
     # normal force, centre of pressure inside the foot (d = -M_y / F_z in [-heel, toe])
-    stance_sole = dom.constraints[0].target
-    side = "l" if stance_sole.startswith("l_") else "p"
+    roles = model.roles[vc.domain]
     frames = {f.name: f for f in model.tree.frames}
-    heel = -frames[f"{side}_heel"].point[0]
-    toe = frames[f"{side}_toe"].point[0]
+    heel = -frames[roles.stance_foot[0]].point[0]
+    toe = frames[roles.stance_foot[1]].point[0]
     fx, fz, my = lam[0], lam[1], lam[2]
-    swing = "p" if side == "l" else "l"
-    z_heel = model.frame_expr(f"{swing}_heel")[1]
-    z_toe = model.frame_expr(f"{swing}_toe")[1]
+    z_heel = model.frame_expr(roles.swing_foot[0])[1]
+    z_toe = model.frame_expr(roles.swing_foot[1])[1]
     ineq = ca.vertcat(opt.mu * fz - fx, opt.mu * fz + fx, fz - opt.min_normal_force,
                       toe * fz + my, heel * fz - my, z_heel, z_toe)
     args = [q, qd, qdd, u, lam, theta]
@@ -152,7 +143,7 @@ def _point_functions(model: HumanProsthesisModel, vc: VirtualConstraints, opt: P
     f_eq = ca.Function(f"colloc_eq_{vc.domain}", args, [eq], names, ["eq"])
     f_in = ca.Function(f"colloc_ineq_{vc.domain}", args, [ineq], names, ["ineq"])
     f_out = ca.Function(f"start_outputs_{vc.domain}", [q, qd, theta],
-                        [ca.vertcat(y2, dy2), tau], ["q", "qd", "theta"], ["y2dy2", "tau"])
+                        [ca.vertcat(y2, dy2), o.tau], ["q", "qd", "theta"], ["y2dy2", "tau"])
     return f_eq, f_in, f_out
 
 
@@ -164,8 +155,7 @@ def initial_guess(model: HumanProsthesisModel, vc: VirtualConstraints, p: GaitPa
     taus = np.linspace(0.0, 1.0, n_points)
     Q = np.array([vc.posture(t, p) for t in taus]).T
     Q[0] -= Q[0, 0]
-    dtau = (p.p_max - p.p_min)
-    tau_dot = p.v_hip / dtau
+    tau_dot = p.nominal_rate
     dQ = np.gradient(Q, taus, axis=1) * tau_dot
     ddQ = np.gradient(dQ, taus, axis=1) * tau_dot
     terms = model.numeric()[f"terms_{vc.domain}"]
@@ -174,7 +164,7 @@ def initial_guess(model: HumanProsthesisModel, vc: VirtualConstraints, p: GaitPa
         D, H, J, _ = terms(Q[:, k], dQ[:, k])
         sol, *_ = np.linalg.lstsq(np.hstack([model.B, J.T]), D @ ddQ[:, k] + H, rcond=None)
         U[:, k], L[:, k] = sol[: model.nu], sol[model.nu:]
-    return {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(dtau / p.v_hip)}
+    return {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(p.nominal_duration)}
 
 
 def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
@@ -183,7 +173,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     opt = opt or PHZDOptions()
     N, P = opt.nodes, 2 * opt.nodes - 1
     G = bezier.gram(opt.degree)
-    vcs = {d: VirtualConstraints(model, d, opt.degree) for d in CYCLE}
+    vcs = {d: VirtualConstraints(model, d, opt.degree) for d in DOMAINS}
     w, g, lbg, ubg, w0, lbw, ubw = [], [], [], [], [], [], []
 
     def var(name, shape, init, lb=-np.inf, ub=np.inf):
@@ -210,7 +200,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     ulim = np.where(np.isfinite(model.torque_limits), model.torque_limits, 1e4)
     dec: dict[str, dict] = {}
     cost = 0
-    for d in CYCLE:
+    for d in DOMAINS:
         vc = vcs[d]
         a_mc = np.asarray(targets.alpha[d])
         p_mc = GaitParams(a_mc, targets.v_hip[d], targets.p_min[d], targets.p_max[d])
@@ -275,12 +265,14 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
             cost += opt.w_y2[k] * (e.T @ G @ e)
         cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
         cost += opt.w_offset * ca.sumsqr(X["delta"])
-        cost += opt.w_step * ((targets.p_max[d] - targets.p_min[d]) - (p_max - p_min)) ** 2
+        cost += opt.w_step * (step_length(targets.p_min[d], targets.p_max[d])
+                              - step_length(p_min, p_max)) ** 2
         if d == "ps":
             eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
 
     # impacts: ps -> pns, pns -> ps (periodic up to a forward translation)
-    for d, nxt in (("ps", "pns"), ("pns", "ps")):
+    for d in DOMAINS:
+        nxt = model.roles[d].next
         qe, qde = dec[d]["q"][:, -1], dec[d]["qd"][:, -1]
         qd_plus = var(f"qdplus_{d}", (model.nq, 1), 0.0)
         F_I = var(f"impulse_{d}", (6, 1), 0.0)
@@ -311,11 +303,11 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     stats = solver.stats()
     xs = np.array(sol["x"]).ravel()
     unpack = ca.Function("unpack", [ca.vertcat(*w)],
-                         [dec[d][k] for d in CYCLE for k in ("q", "qd", "qdd", "u", "lam", "T",
+                         [dec[d][k] for d in DOMAINS for k in ("q", "qd", "qdd", "u", "lam", "T",
                                                              "theta", "delta")])
     vals = [np.array(v) for v in unpack(xs)]
     params, offsets, durations, traj = {}, {}, {}, {}
-    for i, d in enumerate(CYCLE):
+    for i, d in enumerate(DOMAINS):
         q, qd, qdd, u, lam, T, theta, delta = vals[8 * i: 8 * i + 8]
         params[d] = GaitParams.unpack(theta.ravel(), opt.degree)
         offsets[d] = delta.ravel()

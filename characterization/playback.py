@@ -15,13 +15,14 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
    human foot's touchdown), which biases the accelerations, hence F_s, over single support
    (M_y by about 10 % of its peak).
 2. Start on that step's zero-dynamics surface at the window's first tau (0 for the whole
-   step): the posture ``VirtualConstraints.posture(tau, theta_i)`` (stance foot flat at
-   x = 0) and the velocity qd = d(posture)/dtau * tau_dot with tau_dot = v_hip /
-   (p_max - p_min), the base velocity solving J_foot qd = 0 (y1 = y2 = dy2 = 0 exactly).
+   step): the nominal posture of theta_i at that tau moving at its nominal rate, placed on
+   the stance foot at x = 0 (``zero_dynamics_ps`` of :mod:`hp_model.placement`;
+   y1 = y2 = dy2 = 0 exactly).
 3. Simulate the full 12-DOF model, all 6 torques from the feedback linearization of the
    step's outputs (:class:`hp_model.simulator.HybridSimulator`, mode "full"), until tau
    reaches the window's end (1 for the whole step): duration ceil(T / dt) dt with T the
-   window's share of (p_max - p_min) / v_hip (y1 = 0 keeps tau_dot constant).  The touchdown
+   window's share of the step's nominal duration (``GaitParams.nominal_duration``; y1 = 0
+   keeps tau_dot constant).  The touchdown
    guard is disarmed by default, so the ps domain covers the window even where the recorded
    human foot is already on the ground (those frames are removed afterwards, as in the
    paper); with ``stop_at_touchdown`` the run also ends at the human foot's touchdown.
@@ -35,19 +36,19 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
    relative difference is recorded per step (``kkt_residual``; about 1e-13).
 
 Tube: dF_s^i(tau) = F_s^i(tau) - F*(tau) for (F_x, F_z, M_y), F* the gait's nominal socket
-force.  tau is, by default (``PlaybackOptions.tube_phase = "gait"``), the GAIT's phase of
-each sample, (delta_p_hip - p_min*) / (p_max* - p_min*): the phase F* is a function of and
-the one the controllers compute from the prosthesis's angles.  Each step's own tau (the
-paper's per-step normalization, ``"step"``) puts a sample of the same configuration at
-another phase: a recorded step spans more hip progress than the gait's ps, and F* is then
-compared at the wrong place (on the demo subject: a tube ~30 % wider, centred up to 50 N
-away from F*).  Double support is removed by the paper's foot-marker rule: the steps
-artifact's single-support frames (human foot marker x moving forward faster than the
-threshold) give each step's [tau_a, tau_b]; the tube lives on [tau_lo, tau_hi] =
-[max tau_a, min tau_b] (:func:`characterization.force_tube_fit.tube_interval`), within
-[0, 1] in the gait's phase.  Then the LPs, the certificate and
-the credibility of :func:`characterization.force_tube_fit.fit_tube`; the tube records the
-gait's hash.  Steps in which the foot-marker rule found no single support are skipped.
+force. tau is, by default (``PlaybackOptions.tube_phase = "gait"``), the GAIT's phase of
+each sample (its delta_p_hip normalised by the gait's phase bounds p_min*, p_max*): the
+phase F* is a function of and the one the controllers compute from the prosthesis's angles.
+Each step's own tau (the paper's per-step normalization, ``"step"``) puts a sample of the
+same configuration at another phase: a recorded step spans more hip progress than the gait's
+ps, and F* is then compared at the wrong place (on the demo subject: a tube ~30 % wider,
+centred up to 50 N away from F*). Double support is removed by the paper's foot-marker rule:
+the steps artifact's single-support frames (human foot marker x moving forward faster than
+the threshold) give each step's [tau_a, tau_b]; the tube lives on [tau_lo, tau_hi] = [max
+tau_a, min tau_b] (:func:`characterization.force_tube_fit.tube_interval`), within [0, 1] in
+the gait's phase. Then the LPs, the certificate and the credibility of
+:func:`characterization.force_tube_fit.fit_tube`; the tube records the gait's hash. Steps in
+which the foot-marker rule found no single support are skipped.
 """
 
 from __future__ import annotations
@@ -79,13 +80,13 @@ from characterization.model_error_fit import (
 )
 from characterization.model_error_fit import markdown as model_error_markdown
 from characterization.steps_artifact import StepsArtifact
-from hp_model import bezier
 from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAINS
 from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, TubePhase, save_tube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import STANCE, Y2_COORDS, GaitParams, VirtualConstraints
+from hp_model.outputs import GaitParams
 from hp_model.simulator import HybridSimulator, SimOptions
 
 DOMAIN = "ps"
@@ -114,9 +115,8 @@ class PlaybackOptions:
     min_hip_height: float = 0.55  # m, below it the playback counts as fallen
     mu: float = 0.8  # friction coefficient of the (reported, not enforced) cone check
     #: the phase the tube is a function of: "gait" = the gait's tau of each sample's
-    #: configuration, (delta_p_hip - p_min*) / (p_max* - p_min*), the phase the controllers
-    #: compute; "step" = each step's own tau (its own phase bounds, the paper's per-step
-    #: normalization)
+    #: configuration (:mod:`hp_model.outputs`), the phase the controllers compute; "step" =
+    #: each step's own tau (its own phase bounds, the paper's per-step normalization)
     tube_phase: TubePhase = TubePhase.GAIT
 
     def __post_init__(self) -> None:
@@ -134,9 +134,8 @@ class PlaybackOptions:
 
 def phase_map(step: GaitParams, gait: GaitParams, tau: np.ndarray | float) -> np.ndarray:
     """A step's tau (its own phase bounds) as the phase of ``gait``: the same hip progress
-    delta_p_hip = p_min + tau (p_max - p_min), normalised by the gait's bounds (affine)."""
-    p = step.p_min + np.asarray(tau, float) * (step.p_max - step.p_min)
-    return (p - gait.p_min) / (gait.p_max - gait.p_min)
+    delta_p_hip, normalised by the gait's bounds (affine)."""
+    return gait.phase_of(step.delta_p_at(np.asarray(tau, float)))
 
 
 @dataclass(frozen=True)
@@ -234,7 +233,7 @@ def check_inputs(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
     if names != list(model.coord_names):
         raise PlaybackError(f"{src}: field 'coord_names' {names} are not the model's "
                             f"coordinates {list(model.coord_names)}")
-    for r, d in enumerate(("ps", "pns")):
+    for r, d in enumerate(DOMAINS):
         mine = np.array(model.hip_progress_coefficients(d))
         if not np.allclose(steps.hip_coefficients[r], mine, rtol=1e-9, atol=1e-12):
             raise PlaybackError(
@@ -275,27 +274,12 @@ def step_params(model: HumanProsthesisModel, steps: StepsArtifact, i: int, degre
     return GaitParams(r.fit.alpha, r.v_hip, r.p_min, r.p_max), np.asarray(r.fit.rms)
 
 
-def zero_dynamics_state(model: HumanProsthesisModel, vc: VirtualConstraints,
-                        params: GaitParams, tau: float = 0.0
+def zero_dynamics_state(closed_loop: ClosedLoop, params: GaitParams, tau: float = 0.0
                         ) -> tuple[np.ndarray, np.ndarray]:
     """(q, qd) on the zero-dynamics surface of ``params`` at phase ``tau`` with
-    d/dt delta_p_hip = v_hip: y1 = y2 = dy2 = 0, stance foot flat at x = 0 and at rest."""
-    d = vc.domain
-    q = vc.posture(tau, params)
-    dp = params.p_max - params.p_min
-    tau_dot = params.v_hip / dp
-    names = model.coord_names
-    dq = np.zeros(model.nq)  # d(posture)/dtau, joints
-    dB = bezier.evaluate(bezier.derivative(params.alpha), tau)
-    for name, val in zip(Y2_COORDS[d], dB, strict=True):
-        dq[names.index(name)] = val
-    k, a = (names.index(n) for n in STANCE[d])
-    dq[a] = (dp - vc.c_knee * dq[k]) / vc.c_ankle
-    qd = dq * tau_dot
-    _, _, J, _ = model.numeric()[f"terms_{d}"](q, qd)
-    Jf = np.array(J[0:3, :])
-    qd[0:3] = np.linalg.solve(Jf[:, 0:3], -Jf[:, 3:] @ qd[3:])
-    return q, qd
+    d/dt delta_p_hip = v_hip: y1 = y2 = dy2 = 0, stance foot flat at x = 0 and at rest
+    (``zero_dynamics_ps`` of :mod:`hp_model.placement`)."""
+    return closed_loop.zero_dynamics_state(DOMAIN, tau, params.pack())
 
 
 def socket_forces(model: HumanProsthesisModel, q: np.ndarray, qd: np.ndarray, u: np.ndarray,
@@ -328,13 +312,12 @@ def play_step(model: HumanProsthesisModel, closed_loop: ClosedLoop, gait: Gait,
     if str(steps.step_domain[i]) != DOMAIN:
         raise PlaybackError(f"{src}: step {i} is not a ps step")
     params, rms = step_params(model, steps, i, closed_loop.degree, src, opt.fit_margin)
-    vc = closed_loop.vcs[DOMAIN]
     ss = single_support_tau(steps, i)
     span = fit_window(steps, i, opt.fit_margin)[:2]
-    q0, qd0 = zero_dynamics_state(model, vc, params, span[0])
+    q0, qd0 = zero_dynamics_state(closed_loop, params, span[0])
     sim = HybridSimulator(model, closed_loop, {DOMAIN: params.pack(), "pns": gait.theta("pns")},
                           gait.gains_array, opt.sim_options())
-    T = (span[1] - span[0]) * (params.p_max - params.p_min) / params.v_hip
+    T = (span[1] - span[0]) * params.nominal_duration
     run = sim.run(q0, qd0, DOMAIN, steps=1, duration=math.ceil(T / opt.dt - 1e-9) * opt.dt)
     keep = run.domain == 0
     if run.impacts:  # the frame logged after the touchdown belongs to the next domain

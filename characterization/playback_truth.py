@@ -31,10 +31,10 @@ from characterization.model_walk import WalkError, WalkOptions, resample, walk
 from characterization.step_segmentation import phase_tau, segment_steps, single_support
 from characterization.steps_artifact import StepsArtifact, validate_steps
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAIN_CODE, STANCE
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import COORDS, HumanProsthesisModel
-from hp_model.outputs import STANCE
-from hp_model.simulator import DOMAIN_CODE
+from hp_model.outputs import HipProgress
 
 #: the joint-centre frames of the model for the steps artifact's joint_position
 JOINT_FRAMES = {"hip_l": "hip", "knee_l": "l_knee", "ankle_l": "l_ankle", "hip_r": "hip",
@@ -123,8 +123,7 @@ def _package(model, fs, segs, gait: Gait, opt: TruthOptions) -> SyntheticTake:
         Q[:, angles] += np.radians(opt.noise_deg) * noise[:, angles]
     names = list(COORDS)
     cidx = {c: names.index(c) for c in names}
-    delta_ps = (model.hip_progress_coefficients("ps")[0] * Q[:, cidx["th_pk"]]
-                + model.hip_progress_coefficients("ps")[1] * Q[:, cidx["th_pa"]])
+    delta_ps = HipProgress.of(model, "ps")(Q[:, cidx["th_pk"]], Q[:, cidx["th_pa"]])
     dom_code = np.array([DOMAIN_CODE[segs[k].domain] if k >= 0 else -1 for k in owner])
     steps_dom, starts, ends, lows, highs, ss_a, ss_b, taus, truth = ([] for _ in range(9))
     n_ps = 0
@@ -132,9 +131,9 @@ def _package(model, fs, segs, gait: Gait, opt: TruthOptions) -> SyntheticTake:
         if n_ps == opt.n_ps and b.domain == "ps":
             break
         a, e = b.start, b.end
-        ck, ca = model.hip_progress_coefficients(b.domain)
         kn, an = STANCE[b.domain]
-        tau, lo, hi = phase_tau(ck * Q[a:e + 1, cidx[kn]] + ca * Q[a:e + 1, cidx[an]])
+        hip = HipProgress.of(model, b.domain)
+        tau, lo, hi = phase_tau(hip(Q[a:e + 1, cidx[kn]], Q[a:e + 1, cidx[an]]))
         foot_x = pos[:, fidx[FOOT_MARKER[b.domain]], 0]
         ss = single_support(foot_x, rate, a, e, opt.foot_speed) or (-1, -1)
         truth.append(TruthStep(len(steps_dom), b.domain, time[a:e + 1], tau, F[a:e + 1],

@@ -9,10 +9,10 @@ the next minimum, prosthesis non-stance ``pns``.  Turning points are found with 
 a turn counts once the signal has retreated ``min_excursion`` (m) from the running
 extremum, so noise wiggles are ignored.  Partial portions at the take's ends are not steps.
 
-Per step the phase variable is tau = (delta - delta_lower) / (delta_upper - delta_lower),
-with delta the stance leg's delta_p_hip (ps: prosthesis knee/ankle; pns: the human's
-th_lk/th_la with the ``pns`` coefficients) and the bounds its values at the step's first
-and last frame (the paper's initial and final hip positions).
+Per step the phase variable is tau (:func:`hp_model.outputs.phase`) of delta, the stance
+leg's delta_p_hip (ps: prosthesis knee/ankle; pns: the human's th_lk/th_la with the ``pns``
+coefficients), with the bounds delta_lower, delta_upper its values at the step's first and
+last frame (the paper's initial and final hip positions).
 
 Double support (paper Sec. IV-B): single support by the stance leg is where the
 non-stance foot's marker moves forward (sagittal x speed above a threshold); the ps rule
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from characterization.limb_angles import runs
+from hp_model.outputs import phase
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,7 @@ def segment_steps(delta_ps: np.ndarray, min_excursion: float) -> list[StepBounds
 def phase_tau(delta: np.ndarray) -> tuple[np.ndarray, float, float]:
     """tau over one step's frames and the bounds (delta at the first and last frame)."""
     lo, hi = float(delta[0]), float(delta[-1])
-    return (delta - lo) / (hi - lo), lo, hi
+    return phase(delta, lo, hi), lo, hi
 
 
 def single_support(foot_x: np.ndarray, rate: float, start: int, end: int,

@@ -52,6 +52,7 @@ from hp_model.artifacts import ArtifactError
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 from hp_model.choices import Choice
 from hp_model.gait_artifact import Gait, load_gait
+from hp_model.outputs import HipProgress
 
 #: the packaged reference gait of the default subject and device (NOTICE.md beside it)
 REFERENCE_GAIT = Path(__file__).resolve().parent / "data" / "reference_gait.json"
@@ -356,8 +357,7 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     ci = {c: k for k, c in enumerate(model.coord_names)}
 
     # truth
-    ck, ca = model.hip_progress_coefficients("ps")
-    delta = ck * q[:, ci["th_pk"]] + ca * q[:, ci["th_pa"]]
+    delta = HipProgress.of(model, "ps")(q[:, ci["th_pk"]], q[:, ci["th_pa"]])
     steps = _truth_steps(delta, t, ev.p_land, ev.p_lift, stride_time)
     ss = []
     for dom, a, b in steps:

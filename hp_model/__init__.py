@@ -17,7 +17,8 @@ from hp_model.config import (
     load_device,
     load_subject,
 )
-from hp_model.human_prosthesis import ACTUATED, COORDS, DOMAINS, HumanProsthesisModel
+from hp_model.domains import DOMAINS
+from hp_model.human_prosthesis import ACTUATED, COORDS, HumanProsthesisModel
 from hp_model.prosthesis import SUB_COORDS, ProsthesisSubsystem
 
 __version__ = "0.1.0"

@@ -24,16 +24,26 @@ given instead of computed from the state (compiled separately, on first use, by
     mode "dfull":  xdot_dfull_<d>(x, theta, v (6))          all 6 torques from ``flv_<d>``
     mode "dhuman": xdot_dhuman_<d>(x, theta, v_h (4), u_p)  human torques from ``hflv_<d>``
     and rk4_dfull_<d>(x, theta, v, h), rk4_dhuman_<d>(x, theta, v_h, u_p, h)
+
+With them, compiled together, the walker's phase and outputs and its placed states
+(:mod:`hp_model.outputs`, :mod:`hp_model.placement`):
+
+    phase_<d>(q, theta) -> tau,  outputs_<d>(q, qd, theta) -> y1, y2, dy2, tau
+    start_<d>(q0, qd0, theta, offset) -> q, qd,  zero_dynamics_<d>(tau, theta) -> q, qd
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import casadi as ca
+import numpy as np
 
 from hp_model.choices import Choice
 from hp_model.compiled import FunctionSet
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints
+from hp_model.placement import walker_functions
 
 
 class ClosedLoopMode(Choice):
@@ -145,7 +155,8 @@ class ClosedLoop:
         fns: list[ca.Function] = []
         for d, vc in self.vcs.items():
             fns += closed_loop_functions(model, vc)
-            fns += [vc.functions[f"outputs_{d}"]]
+            fns += [vc.functions[f"outputs_{d}"], vc.functions[f"phase_{d}"]]
+            fns += walker_functions(vc)
         self.functions = {f.name(): f for f in fns}
         self._numeric: FunctionSet | None = None
         self._delayed: FunctionSet | None = None
@@ -155,6 +166,20 @@ class ClosedLoop:
             self._numeric = FunctionSet(list(self.functions.values()),
                                         f"{self.model.name}_cl_m{self.degree}")
         return self._numeric
+
+    def start_state(self, domain: str, q0: np.ndarray, qd0: np.ndarray, theta: np.ndarray,
+                    offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of ``start_<d>``: the start of a walk from (q0, qd0) with the prosthesis
+        (knee, ankle) moved by ``offset`` (rad) (:mod:`hp_model.placement`)."""
+        q, qd = self.numeric()[f"start_{domain}"](q0, qd0, theta, np.asarray(offset, float))
+        return q.copy(), qd.copy()
+
+    def zero_dynamics_state(self, domain: str, tau: float, theta: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of ``zero_dynamics_<d>``: the gait's posture at phase ``tau`` moving at its
+        nominal rate, placed at x = 0 (:mod:`hp_model.placement`)."""
+        q, qd = self.numeric()[f"zero_dynamics_{domain}"](tau, theta)
+        return q.copy(), qd.copy()
 
     def delayed(self) -> FunctionSet:
         """The compiled functions of the delayed human (module docstring), built on first

@@ -33,11 +33,11 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.artifacts import ArtifactError, FieldReader, canonical_hash, load_json, save_json
-from hp_model.outputs import N_Y2, GaitParams
+from hp_model.domains import DOMAINS, N_Y2
+from hp_model.outputs import GaitParams
 
 KIND = "hpcosim-gait"
 SCHEMA_VERSION = 1
-CYCLE = ("ps", "pns")
 
 
 @dataclass(frozen=True)
@@ -74,7 +74,7 @@ class Gait:
         return canonical_hash({
             "model_hash": self.model_hash, "gains": list(self.gains),
             "socket_nominal": self.socket_nominal,
-            "params": {d: self.params[d].pack() for d in CYCLE}})
+            "params": {d: self.params[d].pack() for d in DOMAINS}})
 
     def socket_force(self, tau: float | np.ndarray) -> np.ndarray:
         """Nominal socket force F*(tau) in ps: (3,) for a scalar tau, (n, 3) for an array;
@@ -100,7 +100,7 @@ def _params_doc(p: GaitParams) -> dict[str, Any]:
 
 def to_document(g: Gait) -> dict[str, Any]:
     domains: dict[str, Any] = {}
-    for d in CYCLE:
+    for d in DOMAINS:
         doc = _params_doc(g.params[d])
         doc["offsets"] = np.asarray(g.offsets.get(d, np.zeros(N_Y2)))
         doc["duration"] = float(g.durations.get(d, 0.0))
@@ -143,7 +143,7 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
     degree = int(r.number("degree", 1, 20))
     gains = tuple(r.number(f"gains.{k}", 0.0, 1e6) for k in ("eps", "kp", "kd"))
     params, data, offsets, durations, fit = {}, {}, {}, {}, {}
-    for d in CYCLE:
+    for d in DOMAINS:
         base = f"domains.{d}"
         params[d] = _read_params(r, base, degree)
         offsets[d] = r.array(f"{base}.offsets", (N_Y2,))

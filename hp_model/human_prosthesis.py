@@ -31,6 +31,7 @@ import numpy as np
 from hp_model import anthropometry as anth
 from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
+from hp_model.domains import DOMAINS, STANCE_LEG, DomainRoles, domain_roles
 from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
 from hp_model.tree import Body, Frame, JointKind, PlanarTree
 
@@ -38,7 +39,6 @@ COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
           "x_f", "z_f", "th_f", "th_pk", "th_pa")
 ACTUATED = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 SOCKET_COORDS = ("x_f", "z_f", "th_f")
-DOMAINS = ("ps", "pns")
 
 
 Part = tuple[float, tuple[float, float], float]
@@ -189,6 +189,8 @@ class HumanProsthesisModel(HybridModel):
             [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
         self.torque_limits.setflags(write=False)
         super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12", backend=backend)
+        #: each domain's roles resolved to indices (:mod:`hp_model.domains`)
+        self.roles: dict[str, DomainRoles] = {d: domain_roles(self, d) for d in DOMAINS}
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)
@@ -226,12 +228,10 @@ class HumanProsthesisModel(HybridModel):
         during stance in this sign convention (c_k, c_a < 0: the shank rotating forward
         over the foot is a negative ankle angle).
         """
-        stance = {"ps": ("p_ankle", "th_rh", "th_pk", "th_pa"),
-                  "pns": ("l_ankle", "th_lh", "th_lk", "th_la")}
-        ankle, h, k, a = stance[domain]
+        leg = STANCE_LEG[domain]
         tq, q = self.tree, self.q
-        ih, ik, ia = (tq.coord_index(c) for c in (h, k, a))
-        rel = self.frame_expr("hip")[0] - self.frame_expr(ankle)[0]
+        ih, ik, ia = (tq.coord_index(c) for c in (leg.hip, leg.knee, leg.ankle))
+        rel = self.frame_expr("hip")[0] - self.frame_expr(leg.ankle_frame)[0]
         # stance foot flat (th_f = 0): th_B = -(th_hip + th_knee + th_ankle)
         rel_flat = ca.substitute(rel, q[tq.coord_index("th_B")], -(q[ih] + q[ik] + q[ia]))
         grad = ca.Function("g", [q], [ca.gradient(rel_flat, q)])(np.zeros(self.nq))

@@ -16,6 +16,7 @@ Symbolic functions (CasADi, callable with SX/MX/DM) are named:
     energy(q, qd)           -> kinetic, potential
     frames(q, qd)           -> poses (3 x nf), velocities (3 x nf) of all named frames
     frame_acc(q, qd, qdd)   -> accelerations (3 x nf) of all named frames
+    place_<d>(q, qd, x)     -> q, qd on the stance foot of d at (x, 0) (:mod:`hp_model.placement`)
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from hp_model.dynamics import (
     impact_map,
     mass_matrix_and_bias,
 )
+from hp_model.placement import place_function
 from hp_model.tree import ModelError, PlanarTree, body_poses, frame_pose
 
 
@@ -166,6 +168,9 @@ class HybridModel:
         self.functions: dict[str, ca.Function] = {
             f.name(): f.expand() if f.is_a("MXFunction") else f for f in fns
         }
+        for d in domains:
+            if any(c.kind == ConstraintKind.FRAME for c in d.constraints):
+                self.functions[f"place_{d.name}"] = place_function(self, d.name)
         self._numeric: dict[CompileBackend, FunctionSet] = {}
 
     # -- symbolic helpers --------------------------------------------------------------------
@@ -220,15 +225,13 @@ class HybridModel:
 
     def place_stance_foot(self, q: np.ndarray, domain: str, x: float = 0.0) -> np.ndarray:
         """A copy of ``q`` with the floating base moved so that the domain's stance frame
-        (its first ``frame`` constraint) is flat (pitch 0) on the ground at (x, 0).
+        (its first ``frame`` constraint) is flat (pitch 0) on the ground at (x, 0); joint
+        angles are kept (:func:`hp_model.placement.place`)."""
+        return self.stance_state(q, np.zeros(self.nq), domain, x)[0]
 
-        Joint angles are kept; only the base pose (first three coordinates) changes.
-        """
-        i = self.frame_index(self.stance_frame(domain))
-        frames = self.numeric()["frames"]
-        out = np.array(q, dtype=float)
-        out[0:3] = 0.0
-        out[2] = -frames(out, np.zeros(self.nq))[0][2, i]
-        pos = frames(out, np.zeros(self.nq))[0][0:2, i].copy()
-        out[0:2] = np.array([x, 0.0]) - pos
-        return out
+    def stance_state(self, q: np.ndarray, qd: np.ndarray, domain: str, x: float = 0.0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """Copies of (q, qd) placed on the domain's stance foot at (x, 0), the base velocity
+        solving J_foot qd = 0 (:func:`hp_model.placement.place`)."""
+        qp, qdp = self.numeric()[f"place_{domain}"](q, qd, x)
+        return qp.copy(), qdp.copy()

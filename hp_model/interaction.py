@@ -7,11 +7,11 @@ torque.  Here the full 12-DOF model is evaluated with the human where the gait p
 phase the prosthesis measures:
 
 - **walker state** (:func:`nominal_walker_state`) from x_p = (th_pk, th_pa, dth_pk, dth_pa)
-  and the gait's ps parameters theta: tau = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min),
-  tau_dot from the prosthesis rates; the human joints (th_lh, th_lk, th_la, th_rh) on their
-  Bezier curves B(tau), their rates dB(tau) tau_dot; the socket joint q_f = 0; the base
-  placed so that the prosthesis sole is flat on the ground at x = 0, its rates from
-  J_foot qd = 0 (y2 = dy2 = 0 for the human's outputs);
+  and the gait's ps parameters theta: the phase tau and its rate from the prosthesis alone
+  (:meth:`hp_model.outputs.HipProgress.phase`); the human joints (th_lh, th_lk, th_la,
+  th_rh) on their Bezier curves B(tau), their rates dB(tau) tau_dot; the socket joint
+  q_f = 0; the walker placed on the prosthesis foot at x = 0 (:mod:`hp_model.placement`:
+  the base velocity from J_foot qd = 0) (y2 = dy2 = 0 for the human's outputs);
 - **the human's torques** from its feedback linearization given the prosthesis motor torque
   u_p (``hfl_ps`` of :class:`hp_model.outputs.VirtualConstraints`), then the constrained
   dynamics ``dyn_ps``: the prosthesis joint accelerations and the stance-foot wrench.
@@ -32,13 +32,14 @@ Functions (``InteractionModel.functions``; compiled by ``numeric()``):
     interaction_ps(x_p, theta, gains)      -> f (4), g (4, 2), w0 (3), W (3, 2), tau
     model_error_ps(x_p, theta, gains, qdd_p, u_p) -> d (2), nu (2), a (2), A (2, 2), tau
 
-``model_error_ps``: with the paper's prosthesis outputs (:func:`prosthesis_outputs`: y1 the
-hip velocity error, y2 the knee's deviation from its Bezier curve) and Jo = d(y1, dy2)/dx_p,
-the output accelerations nu = (dy1 [m/s^2], d2y2 [rad/s^2]) of a state x_p moving with the
-prosthesis joint accelerations ``qdd_p`` (rad/s^2, e.g. the full loop's) are
-nu = Jo (dth_p, qdd_p); the model's are a + A u_p (a = Jo f, A = Jo g); the model error is
-d = nu - (a + A u_p): what the nominal-human model does not explain (zero wherever the human
-is on its nominal outputs, e.g. along the gait).
+``model_error_ps``: with the paper's prosthesis outputs
+(:func:`hp_model.outputs.stance_outputs`: y1 the hip velocity error, y2 the knee's deviation
+from its Bezier curve) and Jo = d(y1, dy2)/dx_p, the output accelerations
+nu = (dy1 [m/s^2], d2y2 [rad/s^2]) of a state x_p moving with the prosthesis joint
+accelerations ``qdd_p`` (rad/s^2, e.g. the full loop's) are nu = Jo (dth_p, qdd_p); the
+model's are a + A u_p (a = Jo f, A = Jo g); the model error is d = nu - (a + A u_p): what
+the nominal-human model does not explain (zero wherever the human is on its nominal
+outputs, e.g. along the gait).
 
 ``gains`` = (eps, kp, kd) of the human's tracking (the gait's); on the nominal human its
 outputs are zero and the gains do not enter, but they are kept as inputs so that the same
@@ -50,68 +51,28 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from hp_model import bezier
 from hp_model.compiled import FunctionSet
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import STANCE, Y2_COORDS, VirtualConstraints, unpack_symbolic
+from hp_model.outputs import VirtualConstraints, stance_outputs
+from hp_model.placement import place
 
 DOMAIN = "ps"
-
-
-def prosthesis_outputs(x: ca.SX, alpha: ca.SX, v_hip: ca.SX, p_min: ca.SX, p_max: ca.SX,
-                       ck: float, ca_: float) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, ca.SX]:
-    """tau, tau_dot and the paper's prosthesis outputs y1 = c_k dth_pk + c_a dth_pa - v_hip*
-    (m/s), y2 = th_pk - B_pk(tau) (rad), dy2 (rad/s) at x = (th_pk, th_pa, dth_pk, dth_pa)
-    (B_pk, the knee row ``alpha`` of the ps gait, continued linearly outside [0, 1]).  The
-    one definition of the outputs the controllers and the model-error characterisation use."""
-    th, dth = x[0:2], x[2:4]
-    dp = p_max - p_min
-    tau = (ck * th[0] + ca_ * th[1] - p_min) / dp
-    tau_dot = (ck * dth[0] + ca_ * dth[1]) / dp
-    B, dB, _ = bezier.evaluate_continued(alpha, tau)
-    y1 = ck * dth[0] + ca_ * dth[1] - v_hip
-    return tau, tau_dot, y1, th[0] - B, dth[0] - dB * tau_dot
 
 
 def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_p: ca.SX,
                          theta: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
     """(q, qd, tau) of the walker in ``vc.domain`` = ps with the prosthesis at x_p and the
-    human on the gait's curves at the phase x_p gives (module docstring); symbolic."""
+    human on the gait's curves at the phase x_p gives (module docstring): the prosthesis
+    joints of a zero state set to x_p, :meth:`VirtualConstraints.on_outputs` and
+    :func:`hp_model.placement.place` at x = 0; symbolic."""
     if vc.domain != DOMAIN:
         raise ValueError("the restricted model is defined in prosthesis stance (ps)")
-    nq, idx = model.nq, model.coord_names.index
-    alpha, _v_hip, p_min, p_max = unpack_symbolic(theta, vc.degree)
-    dp = p_max - p_min
-    ck, ca_ = vc.c_knee, vc.c_ankle
-    tau = (ck * x_p[0] + ca_ * x_p[1] - p_min) / dp
-    tau_d = (ck * x_p[2] + ca_ * x_p[3]) / dp
-    B = bezier.evaluate(alpha, tau)
-    dB = bezier.evaluate(bezier.derivative(alpha), tau)
-    knee, ankle = (idx(n) for n in STANCE[DOMAIN])
-    human = [(idx(n), r) for r, n in enumerate(Y2_COORDS[DOMAIN]) if n not in STANCE[DOMAIN]]
-
-    def joints(base: ca.SX) -> ca.SX:
-        q = [ca.SX(0)] * nq
-        q[0], q[1], q[2] = base[0], base[1], base[2]
-        q[knee], q[ankle] = x_p[0], x_p[1]
-        for i, r in human:
-            q[i] = B[r]
-        return ca.vertcat(*q)
-
-    frame = model.stance_frame(DOMAIN)
-    # the sole's pitch is th_B plus joint angles (planar tree): flat -> th_B = -pitch at 0
-    th_B = -model.frame_expr(frame, joints(ca.vertcat(0, 0, 0)))[2]
-    pos = model.frame_expr(frame, joints(ca.vertcat(0, 0, th_B)))[0:2]
-    q = joints(ca.vertcat(-pos[0], -pos[1], th_B))
-    qd_list = [ca.SX(0)] * nq
-    qd_list[knee], qd_list[ankle] = x_p[2], x_p[3]
-    for i, r in human:
-        qd_list[i] = dB[r] * tau_d
-    qd_rest = ca.vertcat(*qd_list)
-    qs = ca.SX.sym("q", nq)
-    Jf = ca.Function("Jf", [qs], [ca.jacobian(model.frame_expr(frame, qs), qs)])(q)
-    qd_base = -ca.solve(Jf[:, 0:3], Jf[:, 3:] @ qd_rest[3:])
-    qd = ca.vertcat(qd_base, qd_rest[3:])
+    nq = model.nq
+    q, qd = [ca.SX(0)] * nq, [ca.SX(0)] * nq
+    for k, i in enumerate(model.roles[DOMAIN].prosthesis):
+        q[i], qd[i] = x_p[k], x_p[2 + k]
+    q, qd, tau = vc.on_outputs(ca.vertcat(*q), ca.vertcat(*qd), theta)
+    q, qd = place(model, DOMAIN, q, qd)
     return q, qd, tau
 
 
@@ -130,19 +91,17 @@ class InteractionModel:
         q, qd, tau = nominal_walker_state(model, vc, x_p, theta)
         u = vc.functions[f"hfl_{DOMAIN}"](q, qd, theta, gains, u_p)
         qdd, lam = model.function(f"dyn_{DOMAIN}")(q, qd, u)
-        idx = model.coord_names.index
-        xdot = ca.vertcat(x_p[2], x_p[3], *(qdd[idx(n)] for n in STANCE[DOMAIN]))
+        r = model.roles[DOMAIN]
+        xdot = ca.vertcat(x_p[2], x_p[3], qdd[r.knee], qdd[r.ankle])
         wrench = lam[0:3]
         zero = ca.DM.zeros(2)
         f = ca.substitute(xdot, u_p, zero)
         g = ca.jacobian(xdot, u_p)
         w0 = ca.substitute(wrench, u_p, zero)
         W = ca.jacobian(wrench, u_p)
-        alpha, v_hip, p_min, p_max = unpack_symbolic(theta, degree)
-        alpha_pk = alpha[Y2_COORDS[DOMAIN].index("th_pk"), :]
-        ck, ca_ = model.hip_progress_coefficients(DOMAIN)
-        _, _, y1, _, dy2 = prosthesis_outputs(x_p, alpha_pk, v_hip, p_min, p_max, ck, ca_)
-        Jo = ca.jacobian(ca.vertcat(y1, dy2), x_p)
+        alpha, v_hip, p_min, p_max = vc.layout.unpack(theta)
+        o = stance_outputs(vc.hip, x_p, alpha[r.prosthesis_rows[0], :], v_hip, p_min, p_max)
+        Jo = ca.jacobian(ca.vertcat(o.y1, o.dy2), x_p)
         qdd_p = ca.SX.sym("qdd_p", 2)
         nu = Jo @ ca.vertcat(x_p[2], x_p[3], qdd_p)
         a_o, A_o = Jo @ f, Jo @ g

@@ -62,9 +62,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
+from hp_model.domains import DOMAIN_CODE, HUMAN_OUTPUTS
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import HUMAN_OUTPUTS
 
 #: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period (the plant
 #: clamps it to the device's motor limits, ``model.torque_limits``)
@@ -151,9 +151,6 @@ class SimResult:
         return [(i.q, i.qd_plus) for i in self.impacts if i.into == into]
 
 
-DOMAIN_CODE = {"ps": 0, "pns": 1}
-
-
 def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau_peak: float,
                t_step: float, bad_cone: int, lam: np.ndarray, heel_pitch: float | None
                ) -> Fall | None:
@@ -221,11 +218,9 @@ class HybridSimulator:
         self.dfs = closed_loop.delayed() if human_delay is not None else None
         self.mfs = model.numeric()
         self.nq = model.nq
-        self._landing = {}
-        for d in model.domains:
-            sole = model.stance_frame(d)
-            ankle = "th_pa" if sole.startswith("p_") else "th_la"
-            self._landing[d] = (model.frame_index(sole), model.coord_names.index(ankle))
+        # the frame that lands when entering a domain is its stance sole, rotated about its
+        # stance ankle
+        self._landing = {d: (r.stance_frame_index, r.ankle) for d, r in model.roles.items()}
 
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float,
@@ -282,11 +277,9 @@ class HybridSimulator:
         return u.copy(), lam.copy()
 
     def phase(self, d: str, q: np.ndarray) -> float:
-        vc = self.cl.vcs[d]
-        th = self.thetas[d]
-        n = th.size
-        p_min, p_max = th[n - 2], th[n - 1]
-        return float((vc.c_row @ q - p_min) / (p_max - p_min))
+        """tau of q in domain d for the tracked gait (``VirtualConstraints.phase``: the same
+        arithmetic as the FMU's generated ``phase_<d>``)."""
+        return float(self.cl.vcs[d].phase(q, self.thetas[d]))
 
     def _flatten_landing_foot(self, into: str, q: np.ndarray) -> float:
         """Rotate the foot that becomes the stance foot of ``into`` flat about its ankle

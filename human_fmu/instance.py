@@ -23,6 +23,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from hp_model.domains import DOMAINS
+
 #: sensor outputs in the order :meth:`HumanFmu.read` returns them (rad, rad/s, N, phase, rad)
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
            "socket_pitch")
@@ -32,7 +34,6 @@ FORCES = ("socket_Fx", "socket_Fz", "socket_My")
 STATE = tuple(f"q[{i}]" for i in range(1, 13)) + tuple(f"qd[{i}]" for i in range(1, 13))
 COUNTS = ("domain", "steps", "fall_code")
 INPUTS = ("u_knee", "u_ankle")
-DOMAINS = ("ps", "pns")
 
 
 class FmuReading(NamedTuple):

@@ -23,13 +23,13 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hp_model.outputs import N_Y2
+from hp_model.domains import DOMAIN_CODE, DOMAINS
+from hp_model.outputs import ThetaLayout
 
 MASK = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
 MIX1 = 0xBF58476D1CE4E5B9
 MIX2 = 0x94D049BB133111EB
-DOMAIN_ORDER = ("ps", "pns")
 
 
 def splitmix64(seed: int, k: int) -> int:
@@ -51,13 +51,12 @@ def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: i
     moved by the generator's delta (see the module docstring)."""
     if not (np.isfinite(amplitude) and amplitude >= 0):
         raise ValueError(f"amplitude must be finite and >= 0, got {amplitude}")
-    out = {d: np.array(thetas[d], dtype=float) for d in DOMAIN_ORDER}
+    out = {d: np.array(thetas[d], dtype=float) for d in DOMAINS}
     if amplitude == 0:
         return out
-    n_alpha = out["ps"].size - 3
-    if n_alpha % N_Y2:
-        raise ValueError(f"theta of size {out['ps'].size} is not 5 (m+1) + 3")
-    for di, d in enumerate(DOMAIN_ORDER):
+    n_alpha = ThetaLayout.of_size(out["ps"].size).n_alpha
+    for d in DOMAINS:
+        k0 = DOMAIN_CODE[d] * n_alpha
         for i in range(n_alpha):
-            out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, di * n_alpha + i) - 1.0)
+            out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)
     return out

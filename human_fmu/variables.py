@@ -14,9 +14,9 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
+from hp_model.domains import DOMAINS, Y2_COORDS
 from hp_model.falls import FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
 from hp_model.simulator import SimOptions
 
 #: unit name -> SI base-unit exponents (kg, m, s, rad)
@@ -152,7 +152,7 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains
-    for d in ("ps", "pns"):
+    for d in DOMAINS:
         desc, units = theta_descriptions(d, degree)
         t.array(f"theta_{d}", "Real", "parameter", desc, units,
                 [float(v) for v in thetas[d]])
@@ -173,8 +173,8 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
             [coord_unit(n, True) for n in names], [float(v) for v in qd0])
     t.add("initial_domain", "Integer", "parameter", "initial domain: 0 = ps, 1 = pns", start=0)
     t.add("offset_knee", "Real", "parameter",
-          "initial offset added to th_pk (see README: foot re-placed, velocities projected)",
-          start=0.0, unit="rad")
+          "initial offset added to th_pk (see README: the human put on its outputs, the "
+          "walker re-placed on its stance foot)", start=0.0, unit="rad")
     t.add("offset_ankle", "Real", "parameter", "initial offset added to th_pa", start=0.0,
           unit="rad")
     # parameters: integration and events (SimOptions)

@@ -408,7 +408,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
     run_id = cfg.run_id or f"run-{os.getpid()}-{time.monotonic_ns() % 10**9}"
     keys.validate_run_id(run_id)
-    k_idx, a_idx = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k_idx, a_idx = model.roles["ps"].prosthesis
     ratio = (float(model.B[k_idx, 4]), float(model.B[a_idx, 5]))
 
     res = CosimResult(run_id=run_id)

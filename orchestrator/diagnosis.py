@@ -9,7 +9,7 @@ torque u_p in both models; the authority is the 2x2 matrix d(dy1, d2y2)/du_p (pe
 N m), evaluated at states of the gait's ps collocation trajectory:
 
     reduced:  A_m = [L_gm y1; L_gm L_f y2]                 (the CLF-QP's ``Am``)
-    full:     A   = d(c qdd, qdd_pk - dB/dtau (c qdd)/dp)/du_p  with qdd from the human's
+    full:     A   = d(dy1, d2y2)/du_p  with the prosthesis accelerations from the human's
                     feedback linearization and the constrained dynamics (``xdot_human_ps``)
 
 and A = A_m + A_s dF_s/du_p: the difference is the socket force's response to the torque,
@@ -22,26 +22,26 @@ from typing import Any
 
 import numpy as np
 
-from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import stance_outputs
 from prosthesis_controller import ControllerContext
 
 
 def _full_output_accel(cl: ClosedLoop, gait: Gait, x: np.ndarray, u_p: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
-    """(dy1, d2y2 without the velocity terms) and F_s of the full loop at x under u_p."""
-    vc = cl.vcs["ps"]
-    p = gait.params["ps"]
-    dp = p.p_max - p.p_min
+    """(dy1, d2y2) of the controller's outputs (:func:`hp_model.outputs.stance_outputs`)
+    and F_s of the full loop at x under u_p."""
+    vc, p = cl.vcs["ps"], gait.params["ps"]
+    r, nq = vc.roles, cl.model.nq
     xd, _, lam = cl.numeric()["xdot_human_ps"](x, gait.theta("ps"), gait.gains_array, u_p)
-    qdd = xd[cl.model.nq:]
-    tau = float((vc.c_row @ x[:cl.model.nq] - p.p_min) / dp)
-    knee = vc.S[4]  # selector of th_pk among the y2 rows
-    dB = float(bezier.evaluate(bezier.derivative(p.alpha[4:5]), np.clip(tau, 0, 1))[0])
-    c_qdd = float(vc.c_row @ qdd)
-    return np.array([c_qdd, float(knee @ qdd) - dB * c_qdd / dp]), lam[3:6].copy()
+    q, qd, qdd = x[:nq], x[nq:], xd[nq:]
+    k = r.prosthesis_rows[0]
+    o = stance_outputs(vc.hip, (q[r.knee], q[r.ankle], qd[r.knee], qd[r.ankle]),
+                       p.alpha[k:k + 1], p.v_hip, p.p_min, p.p_max,
+                       accel=(qdd[r.knee], qdd[r.ankle]))
+    return np.array([float(o.dy1), float(np.ravel(o.ddy2)[0])]), lam[3:6].copy()
 
 
 def input_authority(model: HumanProsthesisModel, gait: Gait, ctx: ControllerContext,
@@ -52,11 +52,8 @@ def input_authority(model: HumanProsthesisModel, gait: Gait, ctx: ControllerCont
     cl = ClosedLoop(model, gait.degree)
     tr = gait.trajectory["ps"]
     q, qd = np.asarray(tr["q"], float), np.asarray(tr["qd"], float)
-    vc = cl.vcs["ps"]
-    p = gait.params["ps"]
-    tau_all = (vc.c_row @ q - p.p_min) / (p.p_max - p.p_min)
-    names = model.coord_names
-    pk, pa = names.index("th_pk"), names.index("th_pa")
+    tau_all = cl.vcs["ps"].phase(q, gait.params["ps"])
+    pk, pa = model.roles["ps"].prosthesis
     f = ctx.terms.numeric["clf_qp"]
     out_names = f.function.name_out()
     rows = []

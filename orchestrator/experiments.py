@@ -26,9 +26,11 @@ import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAINS
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import HipProgress
 from orchestrator.diagnosis import input_authority
 from orchestrator.scenarios import (
     NOMINAL,
@@ -82,10 +84,8 @@ def _plt() -> Any:
 
 def knee_offset(model: HumanProsthesisModel, knee: float) -> tuple[float, float]:
     """Joint offsets (knee, ankle) that move the knee output y2 by ``knee`` rad at an
-    unchanged phase: delta_p_hip = c_k th_pk + c_a th_pa is kept, so the ankle moves by
-    -knee c_k / c_a."""
-    ck, ca_ = model.hip_progress_coefficients("ps")
-    return float(knee), float(-knee * ck / ca_)
+    unchanged phase: delta_p_hip is kept (:meth:`hp_model.outputs.HipProgress.ankle`)."""
+    return float(knee), float(HipProgress.of(model, "ps").ankle(0.0, knee))
 
 
 #: finite-difference steps of the return-map estimate: a sampled controller's return map is
@@ -229,7 +229,7 @@ def fig7(runs: dict[str, ScenarioResult], gait: Gait) -> bytes:
                 y = np.where(r.domain == dcode, r.q_p[:, j], np.nan)
                 a.plot(y, np.where(r.domain == dcode, r.qd_p[:, j], np.nan), color=col,
                        lw=0.7, label=lab)
-            for d in ("ps", "pns"):
+            for d in DOMAINS:
                 tr = gait.trajectory.get(d)
                 if tr is not None:
                     k = 10 + j

@@ -82,6 +82,8 @@ def fit(
 
 
 def _summary(console: Console, gait, out: Path) -> None:
+    from hp_model.domains import DOMAINS
+
     s = gait.solver
     console.print(f"[bold]gait[/bold] {out}  (hash {gait.hash()})")
     console.print(f"IPOPT: {s['status']} in {s['iterations']} iterations, "
@@ -89,11 +91,11 @@ def _summary(console: Console, gait, out: Path) -> None:
     t = Table("domain", "v_hip m/s", "step m", "duration s", "fit RMS deg (data)",
               "RMS deg (optimized vs data+offset)")
     v = gait.verification
-    for d in ("ps", "pns"):
+    for d in DOMAINS:
         p = gait.params[d]
         fitq = gait.fit_quality.get(d, {})
         rms = v.get("output_rms_deg", {}).get(d)
-        t.add_row(d, f"{p.v_hip:.3f}", f"{p.p_max - p.p_min:.3f}",
+        t.add_row(d, f"{p.v_hip:.3f}", f"{p.step_length:.3f}",
                   f"{gait.durations[d]:.3f}",
                   " ".join(f"{x:.1f}" for x in np.degrees(fitq.get("rms", []))),
                   " ".join(f"{x:.1f}" for x in rms) if rms is not None else "-")

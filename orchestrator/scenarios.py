@@ -29,11 +29,11 @@ from characterization.force_tube_fit import deviation_profiles, fit_tube, nomina
 from characterization.gait_verification import make_simulator
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
+from hp_model.domains import DOMAINS, HUMAN_OUTPUTS, N_Y2, PROSTHESIS, y2_row
 from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
 from hp_model.simulator import HybridSimulator, Impact, SimOptions
 from human_fmu.perturbation import perturbed_thetas
 from orchestrator.loop import (
@@ -48,14 +48,11 @@ from orchestrator.loop import (
 )
 from prosthesis_controller import ControllerContext, ControllerMode, ControllerName, make_controller
 
-DOMAINS = ("ps", "pns")
 #: not a prosthesis controller: full-state feedback linearization of the whole walker with
 #: perfect knowledge (the walkability label of a perturbed case)
 ORACLE = "oracle"
 #: the six actuated joints (the post-impact states of ScenarioResult)
 JOINTS = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
-#: row of th_pk / th_pa in the y2 outputs of each domain (hp_model.outputs.OUTPUTS)
-KNEE_ROW = {"ps": 4, "pns": 3}
 
 
 @dataclass(frozen=True)
@@ -79,7 +76,7 @@ NOMINAL = Perturbation()
 class Scenario:
     """One closed-loop run: prosthesis controller, the human's gait, number of steps
     (impacts), and an initial prosthesis offset (knee, ankle) in rad added to the nominal
-    initial state (the whole walker is then re-placed on the stance foot)."""
+    initial state (:func:`initial_state`)."""
 
     controller: str = ControllerName.CLFQP  # or ORACLE
     perturbation: Perturbation = NOMINAL
@@ -163,43 +160,25 @@ class ScenarioResult:
 
 
 def knee_reference(gait: Gait, domain: str, tau: float) -> float:
-    p = gait.params[domain]
-    return float(bezier.evaluate(p.alpha[KNEE_ROW[domain]:KNEE_ROW[domain] + 1],
-                                 np.clip(tau, 0.0, 1.0))[0])
+    """The prosthesis knee's nominal angle (rad) in ``domain`` at phase tau (clipped to
+    [0, 1])."""
+    r = y2_row(domain, PROSTHESIS[0])
+    row = gait.params[domain].alpha[r:r + 1]
+    return float(bezier.evaluate(row, np.clip(tau, 0.0, 1.0))[0])
 
 
 def initial_state(model: HumanProsthesisModel, gait: Gait,
-                  offset: Sequence[float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad) and the
-    human on its own outputs: the offset moves the phase tau (delta_p_hip is a function of
-    the prosthesis angles), so the human joints are put on their Bezier curves at the new
-    tau, with velocities dB/dtau * dtau/dt; the walker is re-placed with the prosthesis foot
-    flat on the ground and the base velocity solved from J_foot qd = 0 (the constrained
-    dynamics hold only the constraint's acceleration: a foot velocity left in qd would drift
-    the stance foot off the ground for the whole step).  Only the prosthesis starts off
-    its nominal trajectory, as in the paper's robustness test."""
+                  offset: Sequence[float] = (0.0, 0.0), closed_loop: ClosedLoop | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The gait's initial ps state with the prosthesis (knee, ankle) offset (rad): the
+    start of :mod:`hp_model.placement` (``ClosedLoop.start_state``; the human on its own
+    outputs at the phase the offset moves, the walker placed on the prosthesis foot; the
+    FMU's offset_knee/offset_ankle start from the same state).  Only the prosthesis starts
+    off its nominal trajectory, as in the paper's robustness test.  ``closed_loop``: of the
+    model and the gait's degree (built here when absent)."""
     tr = gait.trajectory["ps"]
-    q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
-    if not any(offset):
-        return q, qd
-    names = model.coord_names
-    pk, pa = names.index("th_pk"), names.index("th_pa")
-    q[pk] += offset[0]
-    q[pa] += offset[1]
-    p = gait.params["ps"]
-    ck, ca_ = model.hip_progress_coefficients("ps")
-    dp = p.p_max - p.p_min
-    tau = (ck * q[pk] + ca_ * q[pa] - p.p_min) / dp
-    tau_dot = (ck * qd[pk] + ca_ * qd[pa]) / dp
-    human = [names.index(c) for c in Y2_COORDS["ps"] if c != "th_pk"]
-    rows = [Y2_COORDS["ps"].index(names[i]) for i in human]
-    q[human] = bezier.evaluate(p.alpha[rows], tau)
-    qd[human] = bezier.evaluate(bezier.derivative(p.alpha[rows]), tau) * tau_dot
-    q = model.place_stance_foot(q, "ps")
-    J = np.array(model.numeric()["terms_ps"](q, qd)[2])[0:3, :]
-    rest = np.r_[3:model.nq]
-    qd[0:3] = np.linalg.solve(J[:, 0:3], -J[:, rest] @ qd[rest])
-    return q, qd
+    cl = closed_loop or ClosedLoop(model, gait.degree)
+    return cl.start_state("ps", tr["q"][:, 0], tr["qd"][:, 0], gait.theta("ps"), offset)
 
 
 def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
@@ -224,7 +203,7 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
                           options or SimOptions(), human_delay=human_delay)
     if q0 is None or qd0 is None:
-        q0, qd0 = initial_state(model, gait, scenario.initial_offset)
+        q0, qd0 = initial_state(model, gait, scenario.initial_offset, closed_loop)
     link: Link
     if scenario.controller == ORACLE:
         sim.thetas = oracle_thetas(gait, sim.thetas)
@@ -243,16 +222,16 @@ def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.
     """The outputs the oracle's walker tracks: the human's rows of ``thetas`` (the human's
     possibly perturbed gait) and the prosthesis's rows of the nominal gait (what a prosthesis
     controller is given)."""
-    m1 = gait.degree + 1
+    L = gait.params["ps"].layout
     out = {}
     for d in DOMAINS:
         th = np.array(thetas[d], float)
         nominal = gait.theta(d)
-        for r in range(len(Y2_COORDS[d])):
+        for r in range(N_Y2):
             if r + 1 not in HUMAN_OUTPUTS[d]:  # rows of (y1, y2): y2 row r is r + 1
-                th[r * m1:(r + 1) * m1] = nominal[r * m1:(r + 1) * m1]
-        th[-3:] = nominal[-3:]  # v_hip, p_min, p_max: the phase is the prosthesis's
-        out[d] = th
+                th[L.row(r)] = nominal[L.row(r)]
+        th[L.progress] = nominal[L.progress]  # v_hip, p_min, p_max: the phase is the
+        out[d] = th  # prosthesis's
     return out
 
 
@@ -280,9 +259,8 @@ def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     qd = np.array(log.qd, float).reshape(n, -1)
     fs = np.array(log.socket_force, float).reshape(n, 3)
     ps = domain == 0
-    names = model.coord_names
-    j = [names.index(c) for c in JOINTS]
-    pk, pa = names.index("th_pk"), names.index("th_pa")
+    j = [model.coord_names.index(c) for c in JOINTS]
+    pk, pa = model.roles["ps"].prosthesis
     post = [np.r_[im.q[j], im.qd_plus[j]] for im in impacts if im.into == "ps"]
     return ScenarioResult(
         scenario=scenario, t=np.array(log.t, float), tau=tau, domain=domain,
@@ -346,7 +324,7 @@ def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20
     (seeds first_seed, ...; prosthesis under feedback linearization, mode full), deviation
     from F*(tau), fitted with :func:`characterization.force_tube_fit.fit_tube`."""
     base = make_simulator(model, gait)
-    q0, qd0 = initial_state(model, gait)
+    q0, qd0 = initial_state(model, gait, closed_loop=base.cl)
     steps: list[tuple[np.ndarray, np.ndarray]] = []
     seed = first_seed
     while len(steps) < n_profiles and seed < first_seed + 20 * n_profiles:

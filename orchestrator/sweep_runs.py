@@ -29,10 +29,10 @@ import numpy as np
 
 from hp_model.artifacts import canonical_hash
 from hp_model.compiled import CompileBackend
+from hp_model.domains import Y2_COORDS, y2_row
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
 from orchestrator.loop import Encoder
 from orchestrator.modes import SweepBackend
 from orchestrator.scenarios import (
@@ -100,14 +100,13 @@ def human_thetas(gait: Gait, draw: Draw) -> dict[str, np.ndarray]:
     added to every coefficient of its row (a Bezier curve moves by a constant when all its
     coefficients do), in every domain where the joint is an output."""
     th = Perturbation("sweep", draw.bezier_amplitude, draw.bezier_seed).thetas(gait)
-    m1 = gait.degree + 1
+    L = gait.params["ps"].layout
     for joint, off in zip(HUMAN_JOINTS, draw.output_offset, strict=True):
         if off == 0.0:
             continue
         for d, rows in Y2_COORDS.items():
             if joint in rows:
-                r = rows.index(joint)
-                th[d][r * m1:(r + 1) * m1] += off
+                th[d][L.row(y2_row(d, joint))] += off
     return th
 
 

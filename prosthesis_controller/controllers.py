@@ -17,10 +17,11 @@ import piqp
 
 from hp_model import bezier
 from hp_model.compiled import CompileBackend
+from hp_model.domains import DOMAINS
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import Y2_COORDS
+from hp_model.outputs import HipProgress
 from hp_model.prosthesis import ProsthesisSubsystem
 from prosthesis_controller.clf import ResClf, res_clf
 from prosthesis_controller.config import ControllerConfig
@@ -113,11 +114,8 @@ def stance_torque_fit(gait: Gait, model: HumanProsthesisModel,
     if not tr or "q" not in tr or "u" not in tr:
         return np.zeros((2, degree + 1))
     q, u = np.asarray(tr["q"], dtype=float), np.asarray(tr["u"], dtype=float)
-    p = gait.params["ps"]
-    ck, ca_ = model.hip_progress_coefficients("ps")
-    names = model.coord_names
-    tau = (ck * q[names.index("th_pk")] + ca_ * q[names.index("th_pa")] - p.p_min) \
-        / (p.p_max - p.p_min)
+    p, r = gait.params["ps"], model.roles["ps"]
+    tau = HipProgress.of(model, "ps").phase(q[r.knee], q[r.ankle], p.p_min, p.p_max)
     B = bezier.basis(degree, np.clip(tau, 0.0, 1.0))
     if len(tau) <= degree:
         return np.repeat(u[4:6].mean(axis=1, keepdims=True), degree + 1, axis=1)
@@ -130,7 +128,7 @@ class ControllerContext:
     packed parameter vectors, limits and nominal durations.
 
     Raises ``ValueError`` for gamma > c3 or a tube made for another gait (``strict_tube``).
-    A gait without durations gets T = (p_max - p_min) / v_hip per domain."""
+    A gait without durations gets its nominal durations (``GaitParams.nominal_duration``)."""
 
     def __init__(self, gait: Gait, tube: ForceTube, model: HumanProsthesisModel,
                  config: ControllerConfig | None = None, *,
@@ -157,11 +155,11 @@ class ControllerContext:
         self.gear = (float(sub.B[3, 0]), float(sub.B[4, 1]))
 
         ps, pns = gait.params["ps"], gait.params["pns"]
-        alpha_pk = ps.alpha[Y2_COORDS["ps"].index("th_pk")]
+        alpha_pk = ps.alpha[model.roles["ps"].prosthesis_rows[0]]
         self.durations = {}
-        for d, p in (("ps", ps), ("pns", pns)):
+        for d in DOMAINS:
             T = float(gait.durations.get(d, 0.0)) if gait.durations else 0.0
-            self.durations[d] = T if T > 0 else (p.p_max - p.p_min) / p.v_hip
+            self.durations[d] = T if T > 0 else gait.params[d].nominal_duration
         T = self.terms
         self.clf_params = T.clf_layout.pack(
             alpha_pk=alpha_pk, v_hip=ps.v_hip, p_min=ps.p_min, p_max=ps.p_max,
@@ -170,7 +168,7 @@ class ControllerContext:
             tau_lo=tube.tau_lo, tau_hi=tube.tau_hi)
         self.stance_params = T.stance_layout.pack(alpha_pk=alpha_pk, p_min=ps.p_min,
                                                   p_max=ps.p_max)
-        rows = [Y2_COORDS["pns"].index(n) for n in ("th_pk", "th_pa")]
+        rows = list(model.roles["pns"].prosthesis_rows)
         sw = cfg.swing
         pitch = socket_pitch_fit(gait, model)
         #: the socket-pitch branch the swing's thigh lead reads (None: clock only)
@@ -256,9 +254,7 @@ class BaseController:
         self._off_hold = d.off_hold
         self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
         ps = ctx.gait.params["ps"]
-        ck, ca_ = ctx.terms.c_k, ctx.terms.c_a
-        dp = ps.p_max - ps.p_min
-        self._phase_row = (ck, ca_, ps.p_min, dp, ps.v_hip / dp)
+        self._phase_args = (ctx.terms.hip.phase, ps.p_min, ps.p_max, ps.nominal_rate)
         num = ctx.terms.numeric
         self._clf = num["clf_qp"]
         self._clf.inputs[1][:] = ctx.clf_params
@@ -360,9 +356,10 @@ class BaseController:
 
     def _stance_phase(self, qk: float, qa: float) -> tuple[float, float]:
         """The state-based phase tau(th_pk, th_pa) of the gait's ps (the phase the paper's
-        trajectories are functions of) and its nominal rate v_hip* / (p_max - p_min)."""
-        ck, ca_, p_min, dp, rate = self._phase_row
-        return (ck * qk + ca_ * qa - p_min) / dp, rate
+        trajectories are functions of; :meth:`hp_model.outputs.HipProgress.phase`) and its
+        nominal rate (``GaitParams.nominal_rate``)."""
+        phase, p_min, p_max, rate = self._phase_args
+        return phase(qk, qa, p_min, p_max), rate
 
     def _pd_torque(self, t: float, qk: float, qa: float, vk: float, va: float
                    ) -> tuple[float, float]:

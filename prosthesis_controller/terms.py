@@ -10,9 +10,10 @@ Functions (x = x_p = (th_pk, th_pa, dth_pk, dth_pa)):
 ``clf_qp(x, p)`` -- the robust CLF-QP of paper Sec. V.  With the reduced dynamics
 x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced``):
 
-    tau    = (c_k th_pk + c_a th_pa - p_min) / (p_max - p_min)
-    eta    = (y1, y2, dy2),  y1 = c_k dth_pk + c_a dth_pa - v_hip*,  y2 = th_pk - B_pk(tau)
-             (B_pk continued linearly outside tau in [0, 1]: bezier.evaluate_continued)
+    tau, eta = (y1, y2, dy2)   the paper's prosthesis outputs of the stance knee and ankle
+             (:func:`hp_model.outputs.stance_outputs`: tau from th_pk, th_pa alone,
+             y1 = c_k dth_pk + c_a dth_pa - v_hip*, y2 = th_pk - B_pk(tau), B_pk continued
+             linearly outside tau in [0, 1])
     nu     = Lf + Am u + As F_s   (Lf = [L_f y1; L_f^2 y2], Am = [L_gm y1; L_gm L_f y2], ...)
     V      = eta^T P_eps eta,  LFV = eta^T (P_eps F + F^T P_eps) eta,  LGV = 2 eta^T P_eps G
     robust CLF row over the box F_s in [c - r, c + r] (REFERENCE.md Sec. 2):
@@ -26,8 +27,9 @@ x_dot = f_p + g_m u + g_s F_s (:class:`hp_model.ProsthesisSubsystem`, ``reduced`
   the problem; the minimiser is unchanged).  The exact QP (no rho) is the (u, u) block.
 
 ``stance_ref(tau, rate, p)`` -- the nominal stance joint trajectory at a phase tau moving at
-``rate`` (1/s): th_pk = B_pk(tau), th_pa from the delta_p_hip relation
-(p_min + tau dp - c_k th_pk) / c_a, and their first and second time derivatives.
+``rate`` (1/s): th_pk = B_pk(tau), th_pa where delta_p_hip is the phase's
+(:func:`hp_model.outputs.delta_p_at`, :meth:`hp_model.outputs.HipProgress.ankle`), and their
+first and second time derivatives.
 
 ``swing_ref(x, s_raw, rate_raw, p)`` -- the swing target at the unclipped time phase
 s_raw = (t - t_liftoff) / T_pns (rate_raw = 1 / T_pns): the pns Bezier rows of th_pk, th_pa
@@ -71,8 +73,7 @@ from hp_model import bezier
 from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.interaction import InteractionModel
-from hp_model.interaction import prosthesis_outputs as stance_outputs
-from hp_model.outputs import Y2_COORDS, unpack_symbolic
+from hp_model.outputs import HipProgress, delta_p_at, stance_outputs, step_length
 from hp_model.prosthesis import ProsthesisSubsystem
 from hp_model.tree import PlanarTree, frame_pose
 
@@ -239,7 +240,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     The exact form uses the (u, u) block and the first two columns of the rows."""
     full = sub.full
     inter = InteractionModel(full, degree)
-    ck, ca_ = full.hip_progress_coefficients("ps")
+    vc = inter.vc
     L = Layout()
     theta = L.add("theta", (inter.vc.n_params,))
     gains = L.add("gains", (3,))
@@ -256,11 +257,11 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     toe, heel = L.add("toe"), L.add("heel")
     x = ca.SX.sym("x", 4)
     f_r, g_r, w0, W, _ = inter.functions["interaction_ps"](x, theta, gains)
-    alpha, v_hip, p_min, p_max = unpack_symbolic(theta, degree)
-    alpha_pk = alpha[Y2_COORDS["ps"].index("th_pk"), :]
-    tau, _, y1, y2, dy2 = stance_outputs(x, alpha_pk, v_hip, p_min, p_max, ck, ca_)
-    eta = ca.vertcat(y1, y2, dy2)
-    Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
+    alpha, v_hip, p_min, p_max = vc.layout.unpack(theta)
+    o = stance_outputs(vc.hip, x, alpha[vc.roles.prosthesis_rows[0], :], v_hip, p_min, p_max)
+    tau = o.tau
+    eta = ca.vertcat(o.y1, o.y2, o.dy2)
+    Jo = ca.jacobian(ca.vertcat(o.y1, o.dy2), x)
     a, A = Jo @ f_r, Jo @ g_r
     F, G = ca.DM(F_OUT), ca.DM(G_OUT)
     V = eta.T @ P_eps @ eta
@@ -321,8 +322,8 @@ class ControllerTerms:
                  backend: CompileBackend | str = CompileBackend.AUTO,
                  feedforward_degree: int = 9, margin_degree: int = 0) -> None:
         self.sub = sub
-        ck, ca_ = sub.full.hip_progress_coefficients("ps")
-        self.c_k, self.c_a = ck, ca_
+        hip = HipProgress.of(sub.full, "ps")
+        self.hip = hip
         m = gait_degree
         x = ca.SX.sym("x", 4)
         th, dth = x[0:2], x[2:4]
@@ -341,9 +342,10 @@ class ControllerTerms:
         tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
         self.clf_layout = L
 
-        tau, _, y1, y2, dy2 = stance_outputs(x, alpha, v_hip, p_min, p_max, ck, ca_)
-        eta = ca.vertcat(y1, y2, dy2)
-        Jo = ca.jacobian(ca.vertcat(y1, dy2), x)
+        o = stance_outputs(hip, x, alpha, v_hip, p_min, p_max)
+        tau = o.tau
+        eta = ca.vertcat(o.y1, o.y2, o.dy2)
+        Jo = ca.jacobian(ca.vertcat(o.y1, o.dy2), x)
         Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
         F, G = ca.DM(F_OUT), ca.DM(G_OUT)
         V = eta.T @ P_eps @ eta
@@ -386,10 +388,9 @@ class ControllerTerms:
         self.stance_layout = R
         tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
         Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
-        rdp = rp_max - rp_min
-        qd_ = ca.vertcat(Bk, (rp_min + tau_s * rdp - ck * Bk) / ca_)
-        dqd_ = rate * ca.vertcat(dBk, (rdp - ck * dBk) / ca_)
-        ddqd_ = rate**2 * ca.vertcat(ddBk, -ck * ddBk / ca_)
+        qd_ = ca.vertcat(Bk, hip.ankle(delta_p_at(tau_s, rp_min, rp_max), Bk))
+        dqd_ = rate * ca.vertcat(dBk, hip.ankle(step_length(rp_min, rp_max), dBk))
+        ddqd_ = rate**2 * ca.vertcat(ddBk, -hip.c_knee * ddBk / hip.c_ankle)
         sref = ca.Function("stance_ref", [tau_s, rate, R.symbol], [qd_, dqd_, ddqd_],
                            ["tau", "rate", "p"], ["q_d", "qd_d", "qdd_d"])
 
@@ -439,12 +440,11 @@ class ControllerTerms:
         ff = Q.add("feedforward", (2, feedforward_degree + 1))
         kp_q, kd_q, kv_q = Q.add("kp"), Q.add("kd"), Q.add("k_vhip")
         self.phase_pd_layout = Q
-        tau_q, _, y1_q, y2_q, dy2_q = stance_outputs(x, alpha_q, v_hip_q, p_min_q, p_max_q,
-                                                     ck, ca_)
-        u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(tau_q, 0), 1))
-        fb = ca.vertcat(-kp_q * y2_q - kd_q * dy2_q, kv_q * y1_q)
+        oq = stance_outputs(hip, x, alpha_q, v_hip_q, p_min_q, p_max_q)
+        u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(oq.tau, 0), 1))
+        fb = ca.vertcat(-kp_q * oq.y2 - kd_q * oq.dy2, kv_q * oq.y1)
         phase_pd = ca.Function("phase_pd", [x, Q.symbol],
-                               [u_ff, fb, tau_q, ca.vertcat(y1_q, y2_q, dy2_q)],
+                               [u_ff, fb, oq.tau, ca.vertcat(oq.y1, oq.y2, oq.dy2)],
                                ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
 
         # ---- passive -------------------------------------------------------------------

@@ -27,6 +27,7 @@ import numpy as np
 
 from characterization.gait_fit import fit_gait, verify_gait, walking_failures
 from characterization.phzd import PHZDOptions, optimize_gait
+from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 
@@ -126,7 +127,7 @@ def regenerate(name: str, model: HumanProsthesisModel) -> Gait:
 
 def coefficient_difference(a: Gait, b: Gait) -> float:
     """Largest absolute difference of the gaits' packed parameters over both domains."""
-    return float(max(np.abs(a.theta(d) - b.theta(d)).max() for d in ("ps", "pns")))
+    return float(max(np.abs(a.theta(d) - b.theta(d)).max() for d in DOMAINS))
 
 
 def assert_walks(model: HumanProsthesisModel, gait: Gait, name: str, steps: int = 20) -> None:

@@ -46,9 +46,14 @@ class NominalPD:
                     for d in DOMAINS}
 
     def phase(self, domain: str, q: np.ndarray) -> float:
-        """tau from the full configuration, exactly as ``HybridSimulator.phase``."""
+        """tau from the full configuration with the arithmetic of ``HybridSimulator.phase``
+        and the FMU's generated ``phase_<d>`` (hp_model.outputs; this file cannot import
+        it): the row's products summed in index order, then normalised by the bounds."""
         p_min, p_max = self.p[domain]
-        return float((self.c_row[domain] @ q - p_min) / (p_max - p_min))
+        s = 0.0
+        for c, x in zip(self.c_row[domain].tolist(), np.asarray(q, float).tolist(), strict=True):
+            s += c * x
+        return (s - p_min) / (p_max - p_min)
 
     def __call__(self, domain: str, tau: float, angles: np.ndarray, velocities: np.ndarray
                  ) -> np.ndarray:

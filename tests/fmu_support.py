@@ -46,14 +46,14 @@ def simulator(model: HumanProsthesisModel, gait: Gait, thetas=None,
 def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) -> dict:
     """The NominalPD table: nominal prosthesis angles, velocities and motor torques of the
     gait's collocation trajectory over its phase."""
-    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k, a = model.roles["ps"].prosthesis
     ratio = [float(model.B[k, 4]), float(model.B[a, 5])]
     table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in DOMAINS},
                    "phase": {}, "nominal": {}}
     for d in DOMAINS:
-        th = sim.thetas[d]
-        table["phase"][d] = {"c_row": sim.cl.vcs[d].c_row.tolist(), "p_min": float(th[-2]),
-                             "p_max": float(th[-1])}
+        vc, th = sim.cl.vcs[d], sim.thetas[d]
+        table["phase"][d] = {"c_row": vc.c_row.tolist(), "p_min": float(th[vc.layout.p_min]),
+                             "p_max": float(th[vc.layout.p_max])}
         tr = gait.trajectory[d]
         taus = [sim.phase(d, tr["q"][:, i]) for i in range(tr["q"].shape[1])]
         table["nominal"][d] = {"tau": taus, "q": tr["q"][[k, a]].tolist(),

@@ -31,11 +31,11 @@ def state_at(ctx, d) -> np.ndarray:
     tau, dk, vk, va = d
     ps = ctx.gait.params["ps"]
     from hp_model import bezier
-    from hp_model.outputs import Y2_COORDS
+    from hp_model.domains import PROSTHESIS, y2_row
 
-    qk = float(bezier.evaluate(ps.alpha[Y2_COORDS["ps"].index("th_pk")][None, :],
+    qk = float(bezier.evaluate(ps.alpha[y2_row("ps", PROSTHESIS[0])][None, :],
                                float(np.clip(tau, 0, 1)))[0]) + dk
-    qa = (ps.p_min + tau * (ps.p_max - ps.p_min) - ctx.terms.c_k * qk) / ctx.terms.c_a
+    qa = ctx.terms.hip.ankle(ps.delta_p_at(tau), qk)
     return np.array([qk, qa, vk, va])
 
 

@@ -11,6 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from hp_model.domains import DOMAINS
 from prosthesis_controller import (
     ClfConfig,
     ControllerConfig,
@@ -38,7 +39,7 @@ def _check_output(out, limits):
     d = out.diagnostics
     for v in (d.tau, d.V, d.rho, *d.disturbance, d.since_touchdown):
         assert math.isfinite(v)
-    assert d.domain in ("ps", "pns")
+    assert d.domain in DOMAINS
 
 
 BAD = [

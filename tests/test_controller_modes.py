@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hp_model import bezier
-from hp_model.outputs import Y2_COORDS
+from hp_model.outputs import phase_rate
 from prosthesis_controller import (
     ControllerName,
     ProsthesisMeasurement,
@@ -62,7 +62,7 @@ def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, mod
     torque alone; tau_hat is (t - t_liftoff) / T_pns."""
     T = ctx.durations["pns"]
     pns = template_gait.params["pns"]
-    rows = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
+    rows = list(ctx.model.roles["pns"].prosthesis_rows)
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
     t0 = 1.0
@@ -112,7 +112,7 @@ def test_swing_landing_straightens_the_shank_and_flattens_the_foot(stored_ctx):
     sw = ctx.config.swing
     T = ctx.durations["pns"]
     pns = ctx.gait.params["pns"]
-    rows = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
+    rows = list(ctx.model.roles["pns"].prosthesis_rows)
     pitch_c = ctx.swing_params[2 * (pns.degree + 1):2 * (pns.degree + 1) + 6]
     f = ctx.terms.numeric["swing_ref"]
     frames = ctx.subsystem.numeric()["frames"]
@@ -153,7 +153,8 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     from prosthesis_controller.controllers import stance_torque_fit
 
     ps = template_gait.params["ps"]
-    ck, ca_ = ctx.terms.c_k, ctx.terms.c_a
+    hip = ctx.terms.hip
+    ck, ca_ = hip.c_knee, hip.c_ankle
     cfg = ctx.config.phase_pd
     gear = np.array(ctx.gear)
     ctl = make_controller("phase-pd", None, None, None, context=ctx)
@@ -162,17 +163,16 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     ff = stance_torque_fit(template_gait, ctx.model)
     tr = template_gait.trajectory["ps"]
     q, u = np.asarray(tr["q"]), np.asarray(tr["u"])
-    tau_c = (ck * q[10] + ca_ * q[11] - ps.p_min) / (ps.p_max - ps.p_min)
+    tau_c = hip.phase(q[10], q[11], ps.p_min, ps.p_max)
     fit = bezier.evaluate(ff, np.clip(tau_c, 0, 1))
     # fit error well below the motor limits (2.4, 3 N m): 5 % of them
     assert np.abs(fit - u[4:6].T).max() < 0.05 * min(ctx.limits)
     for k, tau in enumerate((0.2, 0.5, 0.8)):
         qk = float(bezier.evaluate(ps.alpha[4:5], tau)[0])
-        qa = (ps.p_min + tau * (ps.p_max - ps.p_min) - ck * qk) / ca_
-        # velocities on the nominal: tau_dot = v_hip / dp, knee dB/dtau tau_dot
-        tdot = ps.v_hip / (ps.p_max - ps.p_min)
-        vk = float(bezier.evaluate(bezier.derivative(ps.alpha[4:5]), tau)[0]) * tdot
-        va = (ps.v_hip - ck * vk) / ca_
+        qa = hip.ankle(ps.delta_p_at(tau), qk)
+        # velocities on the nominal: tau_dot at v_hip, knee dB/dtau tau_dot
+        vk = float(bezier.evaluate(bezier.derivative(ps.alpha[4:5]), tau)[0]) * ps.nominal_rate
+        va = hip.ankle(ps.v_hip, vk)
         t = 0.1 + 0.1 * k
         out = ctl.tick(m(t, (qk, qa, vk, va), load=600, contact=True))
         expected = bezier.evaluate(ff, tau)
@@ -184,7 +184,7 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
                          load=600, contact=True))
         # y2 = e; dy2 = -dB/dtau * dv / dp (tau_dot grows with the hip speed); y1 = dv
         dB = float(bezier.evaluate(bezier.derivative(ps.alpha[4:5]), tau)[0])
-        dy2 = -dB * dv / (ps.p_max - ps.p_min)
+        dy2 = -dB * phase_rate(dv, ps.p_min, ps.p_max)
         fb = np.array([-cfg.kp * e - cfg.kd * dy2, cfg.k_vhip * dv]) / gear
         np.testing.assert_allclose(out.torque, expected + fb, atol=1e-9)
 
@@ -195,9 +195,8 @@ def test_pd_reference_obeys_the_phase_relation_and_vanishes_on_it(ctx, template_
     torque on it; off it, kp (q_d(tau(q)) - q) + kd (v_d - v), where q_d(tau(q)) - q has the
     ankle error -(c_k / c_a) times the knee's (the phase pins delta_p_hip)."""
     ps = template_gait.params["ps"]
-    ck, ca_ = ctx.terms.c_k, ctx.terms.c_a
-    dp = ps.p_max - ps.p_min
-    rate = ps.v_hip / dp
+    hip = ctx.terms.hip
+    rate = ps.nominal_rate
     f = ctx.terms.numeric["stance_ref"]
     ctl = make_controller("pd", None, None, None, context=ctx)
     ctl.reset()
@@ -206,16 +205,16 @@ def test_pd_reference_obeys_the_phase_relation_and_vanishes_on_it(ctx, template_
     kp, kd = np.array(ctx.config.pd.kp), np.array(ctx.config.pd.kd)
     for k, frac in enumerate((0.1, 0.5, 0.9)):
         q_d, v_d, _ = (a.copy() for a in f(frac, rate, ctx.stance_params))
-        # delta_p_hip(q_d) = p_min + tau (p_max - p_min)
-        assert ck * q_d[0] + ca_ * q_d[1] == pytest.approx(ps.p_min + frac * dp, abs=1e-12)
+        # delta_p_hip(q_d) is the phase's
+        assert hip(q_d[0], q_d[1]) == pytest.approx(ps.delta_p_at(frac), abs=1e-12)
         out = ctl.tick(m(t0 + 0.01 * (2 * k + 1), (*q_d, *v_d), load=600, contact=True))
         np.testing.assert_allclose(out.torque, 0.0, atol=1e-9)
         q = q_d + np.array([0.01, -0.02])
         v = v_d + np.array([0.3, 0.1])
-        tau = (ck * q[0] + ca_ * q[1] - ps.p_min) / dp
+        tau = hip.phase(q[0], q[1], ps.p_min, ps.p_max)
         q_r, v_r, _ = (a.copy() for a in f(tau, rate, ctx.stance_params))
         e = q_r - q
-        assert e[1] == pytest.approx(-(ck / ca_) * e[0], rel=1e-9)
+        assert e[1] == pytest.approx(-(hip.c_knee / hip.c_ankle) * e[0], rel=1e-9)
         out = ctl.tick(m(t0 + 0.01 * (2 * k + 2), (*q, *v), load=600, contact=True))
         expected = (kp * e + kd * (v_r - v)) / np.array(ctx.gear)
         lim = np.array(ctx.limits)
@@ -226,7 +225,7 @@ def test_passive_on_the_reference_is_inverse_dynamics_without_socket_force(ctx, 
     """On the reference at the state-based phase (e = 0, e_dot = 0): r = 0, the robust term
     vanishes, u = M qdd_d + C qd_d + g."""
     ps = template_gait.params["ps"]
-    rate = ps.v_hip / (ps.p_max - ps.p_min)
+    rate = ps.nominal_rate
     f = ctx.terms.numeric["stance_ref"]
     lag = ctx.terms.numeric["lagrangian"]
     ctl = make_controller("passive", None, None, None, context=ctx)

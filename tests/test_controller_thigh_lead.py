@@ -67,7 +67,7 @@ def _swing_tau(ctl, ctx, t0, T, frac, pitch):
 
 
 def _rows(ctx):
-    from hp_model.outputs import Y2_COORDS
+    from hp_model.domains import Y2_COORDS
 
     idx = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
     return ctx.gait.params["pns"].alpha[idx]

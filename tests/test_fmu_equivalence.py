@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hp_model.domains import DOMAINS
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from human_fmu import initial_state, perturbed_thetas
@@ -48,9 +49,9 @@ def test_python_reference_walks_ten_steps(nominal):
 
 @pytest.mark.parametrize("tau_from", ["q", "output"])
 def test_fmu_reproduces_the_simulator_over_ten_steps(fmu_path, nominal, tau_from):
-    """tau_from "q": the policy computes tau from the ground-truth q exactly as the simulator
-    (the two runs are then bit-identical on this machine); "output": it uses the FMU's tau
-    output (C loop vs numpy dot: ulp-level differences in the policy's input)."""
+    """tau_from "q": the policy computes tau from the ground-truth q with the simulator's
+    arithmetic; "output": it uses the FMU's tau output (the generated ``phase_<d>``, the
+    same arithmetic).  Either way the two runs are bit-identical on this machine."""
     _, pd, ref = nominal
     log = fmu_run(fmu_path, pd, ref.t.size, tau_from)
     assert not log["fall"]
@@ -79,21 +80,22 @@ def test_fmu_reproduces_the_simulator_over_ten_steps(fmu_path, nominal, tau_from
     assert np.abs(forces[:, 0] - load).max() <= 1e-6 * np.abs(load).max()
     assert np.abs(forces[:, 1:4] - ref.lam[:, 3:6]).max() <= 1e-6 * np.abs(ref.lam).max()
     assert np.abs(forces[:, 4:7] - ref.lam[:, 0:3]).max() <= 1e-6 * np.abs(ref.lam).max()
-    if tau_from == "q":  # same inputs, same generated C, same algorithm
-        assert err_q <= 1e-12 and err_t <= 1e-12
+    # same inputs, same generated C, same algorithm
+    assert err_q <= 1e-12 and err_t <= 1e-12
 
 
 def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, template_gait):
     # within what the test's NominalPD walks on the committed template gait (3 steps): at
     # amplitude 0.003 the perturbed human touches down late in the third stance and it falls
     amp, seed, dk, da = 0.001, -7, 0.01, -0.005
-    thetas = perturbed_thetas({d: template_gait.theta(d) for d in ("ps", "pns")}, amp, seed)
+    thetas = perturbed_thetas({d: template_gait.theta(d) for d in DOMAINS}, amp, seed)
+    progress = template_gait.params["ps"].layout.progress
     assert not np.array_equal(thetas["ps"], template_gait.theta("ps"))
-    assert np.array_equal(thetas["ps"][-3:], template_gait.theta("ps")[-3:])
+    assert np.array_equal(thetas["ps"][progress], template_gait.theta("ps")[progress])
     sim = simulator(model, template_gait, thetas)
     pd = NominalPD(policy_table(model, template_gait, sim))
     q0, qd0 = start_state(template_gait)
-    q1, qd1 = initial_state(model, q0, qd0, "ps", dk, da)
+    q1, qd1 = initial_state(sim.cl, template_gait.theta("ps"), q0, qd0, "ps", dk, da)
     assert q1[10] == q0[10] + dk and q1[11] == q0[11] + da
     ref = python_run(sim, pd, q1, qd1, steps=3)
     log = fmu_run(fmu_path, pd, ref.t.size, "q",
@@ -106,6 +108,24 @@ def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, te
     assert np.abs(q - ref.q).max() <= 1e-9
     assert len(log["impacts"]) == ref.steps
     assert np.abs(np.array(log["impacts"]) - [i.t for i in ref.impacts]).max() <= 1e-9
+
+
+def test_offsets_start_where_a_scenario_does(fmu_path, model, template_gait):
+    """One placement (hp_model.placement): the FMU's offset_knee/offset_ankle and a
+    closed-loop scenario's initial offset start the walk from the same state."""
+    from orchestrator.scenarios import initial_state as scenario_state
+
+    dk, da = 0.02, -0.01
+    sim = simulator(model, template_gait)
+    q_s, qd_s = scenario_state(model, template_gait, (dk, da), sim.cl)
+    q0, qd0 = start_state(template_gait)
+    assert np.abs(q_s - q0).max() > 1e-3  # really moved (the human onto its outputs too)
+    q_p, qd_p = initial_state(sim.cl, template_gait.theta("ps"), q0, qd0, "ps", dk, da)
+    pd = NominalPD(policy_table(model, template_gait, sim))
+    log = fmu_run(fmu_path, pd, 1, "q", real={"offset_knee": dk, "offset_ankle": da})
+    for q, qd in ((q_p, qd_p), (log["q"][0], log["qd"][0])):
+        assert np.abs(np.asarray(q) - q_s).max() <= 1e-12
+        assert np.abs(np.asarray(qd) - qd_s).max() <= 1e-12
 
 
 def test_start_in_pns(fmu_path, model, template_gait):
@@ -141,7 +161,7 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
     depends on the inputs of the step and shows one communication step later)."""
     sim = simulator(model, template_gait)
     table = policy_table(model, template_gait, sim)
-    for d in ("ps", "pns"):
+    for d in DOMAINS:
         table["nominal"][d]["u"] = (factor * np.array(table["nominal"][d]["u"])).tolist()
     pd = NominalPD(table)
     q0, qd0 = start_state(template_gait)

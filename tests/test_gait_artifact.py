@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hp_model.artifacts import ArtifactError
+from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import load_gait, save_gait
 
 
@@ -17,7 +18,7 @@ def test_round_trip_keeps_everything(tmp_path, model, template_gait):
     save_gait(p, template_gait)
     g = load_gait(p, model.parameter_hash())
     assert g.hash() == template_gait.hash()
-    for d in ("ps", "pns"):
+    for d in DOMAINS:
         np.testing.assert_allclose(g.params[d].alpha, template_gait.params[d].alpha)
     np.testing.assert_allclose(g.socket_force(0.5), template_gait.socket_force(0.5))
     assert g.solver["status"] == "Solve_Succeeded"

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import Y2_COORDS
 from hp_model.interaction import InteractionModel
-from hp_model.outputs import Y2_COORDS
 
 HUMAN = ("th_lh", "th_lk", "th_la", "th_rh")
 
@@ -23,7 +23,7 @@ def setup(model, demo_gait):
 
 
 def _x_p(model, q, qd):
-    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k, a = model.roles["ps"].prosthesis
     return np.r_[q[k], q[a], qd[k], qd[a]]
 
 
@@ -60,7 +60,7 @@ def test_affine_terms_equal_the_full_loop(model, setup, rng):
     im, cl, gait = setup
     theta, gains = gait.theta("ps"), gait.gains_array
     tr = gait.trajectory["ps"]
-    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k, a = model.roles["ps"].prosthesis
     inter = im.numeric()["interaction_ps"]
     for j in range(0, tr["q"].shape[1], 3):
         x0 = _x_p(model, tr["q"][:, j], tr["qd"][:, j])
@@ -81,7 +81,7 @@ def test_torque_authority_is_the_loops_finite_difference(model, setup):
     im, cl, gait = setup
     theta, gains = gait.theta("ps"), gait.gains_array
     tr = gait.trajectory["ps"]
-    k, a = model.coord_names.index("th_pk"), model.coord_names.index("th_pa")
+    k, a = model.roles["ps"].prosthesis
     inter = im.numeric()["interaction_ps"]
     j = tr["q"].shape[1] // 2
     x = _x_p(model, tr["q"][:, j], tr["qd"][:, j])

@@ -17,6 +17,7 @@ from characterization.mocap_pipeline import process_take
 from characterization.mocap_take import MocapError
 from characterization.synthetic_subject import SynthOptions, synthesize
 from hp_model import COORDS
+from hp_model.domains import DOMAINS
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,7 @@ def model():
 
 @pytest.fixture(scope="module")
 def coef(model):
-    return {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module")

@@ -24,6 +24,7 @@ from characterization.mocap_mapping import JOINTS, LIMBS, default_mapping, synth
 from characterization.mocap_pipeline import process_take
 from characterization.mocap_take import MocapError
 from characterization.synthetic_subject import SynthOptions, synthesize
+from hp_model.domains import DOMAINS
 
 ANGLE_COORDS = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
@@ -35,7 +36,7 @@ def model() -> hp_model.HumanProsthesisModel:
 
 @pytest.fixture(scope="module")
 def coef(model) -> dict[str, tuple[float, float]]:
-    return {d: model.hip_progress_coefficients(d) for d in ("ps", "pns")}
+    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module", params=["model", "template"])

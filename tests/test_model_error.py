@@ -191,7 +191,7 @@ def closed_loop_run(model, demo_gait, demo_tube, subsystem):
     ctx = ControllerContext(demo_gait, demo_tube, model, subsystem=subsystem)
     ctrl = make_controller("clfqp", None, None, None, context=ctx)
     ctrl.reset()
-    idx = (model.coord_names.index("th_pk"), model.coord_names.index("th_pa"))
+    idx = model.roles["ps"].prosthesis
     sim = HybridSimulator(model, ClosedLoop(model, demo_gait.degree), NOMINAL.thetas(demo_gait),
                           demo_gait.gains_array, SimOptions())
     diag = []

@@ -15,7 +15,8 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 
 from hp_model import bezier
-from hp_model.outputs import STANCE, GaitParams, VirtualConstraints
+from hp_model.domains import DOMAINS, STANCE
+from hp_model.outputs import GaitParams, VirtualConstraints
 
 
 def test_bezier_properties(rng):
@@ -54,10 +55,10 @@ def _params(domain: str) -> GaitParams:
 
 @pytest.fixture(scope="module")
 def vcs(model):
-    return {d: VirtualConstraints(model, d, degree=5) for d in ("ps", "pns")}
+    return {d: VirtualConstraints(model, d, degree=5) for d in DOMAINS}
 
 
-@pytest.mark.parametrize("domain", ["ps", "pns"])
+@pytest.mark.parametrize("domain", DOMAINS)
 def test_phase_and_outputs_on_the_surface(model, vcs, domain):
     vc = vcs[domain]
     p = _params(domain)
@@ -74,7 +75,7 @@ def test_phase_and_outputs_on_the_surface(model, vcs, domain):
         np.testing.assert_allclose(pose[:, model.frame_index(sole)][1:], 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("domain", ["ps", "pns"])
+@pytest.mark.parametrize("domain", DOMAINS)
 def test_feedback_linearization_gives_linear_output_dynamics(model, vcs, domain, rng):
     vc, p = vcs[domain], _params(domain)
     fs, mfs = vc.numeric(), model.numeric()

@@ -22,6 +22,7 @@ from characterization.playback import (
 )
 from characterization.playback_truth import TruthOptions, synthesize
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAINS
 from hp_model.simulator import HybridSimulator
 from tests.playback_helpers import relative_rms_errors, tube_excess
 
@@ -113,7 +114,7 @@ def test_gait_phase_is_the_hip_progress_normalised_by_the_gait(case, gait, model
     computed from the played-back q by the gait's own virtual constraints."""
     _, _, result = case
     cl = ClosedLoop(model, gait.degree)
-    sim_phase = HybridSimulator(model, cl, {d: gait.theta(d) for d in ("ps", "pns")},
+    sim_phase = HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
                                 gait.gains_array).phase
     sp = result.playback.good[0]
     for j in (0, len(sp.tau) // 2, len(sp.tau) - 1):
@@ -140,7 +141,7 @@ def test_playback_covers_its_fit_window(case):
         a, b = sp.single_support
         assert lo <= a and hi >= b and lo >= a - margin - 1e-12 and hi <= b + margin + 1e-12
         assert sp.tau[0] == pytest.approx(lo, abs=1e-12)
-        T = (sp.params.p_max - sp.params.p_min) / sp.params.v_hip
+        T = sp.params.nominal_duration
         assert hi <= sp.tau[-1] <= hi + 2e-3 / T
         assert np.all(np.diff(sp.tau) > 0)
         assert sp.touchdown_tau is None
@@ -152,7 +153,7 @@ def test_whole_step_playback_covers_the_whole_phase(model, gait):
     cl = ClosedLoop(model, gait.degree)
     tr = take.ps_truth()[0]
     sp = play_step(model, cl, gait, take.steps, tr.index, PlaybackOptions(fit_margin=None))
-    T = (sp.params.p_max - sp.params.p_min) / sp.params.v_hip
+    T = sp.params.nominal_duration
     assert sp.tau[0] == pytest.approx(0.0, abs=1e-12) and 1.0 <= sp.tau[-1] <= 1 + 2e-3 / T
     assert not sp.failed and sp.kkt_residual < 1e-9
 
@@ -172,7 +173,7 @@ def test_start_is_on_the_zero_dynamics_surface(model, gait):
     tau0 = fit_window(take.steps, i, PlaybackOptions().fit_margin)[0]
     assert tau0 > 0
     for tau_start in (0.0, tau0):
-        q0, qd0 = zero_dynamics_state(model, cl.vcs["ps"], sp.params, tau_start)
+        q0, qd0 = zero_dynamics_state(cl, sp.params, tau_start)
         y1, y2, dy2, tau = cl.numeric()["outputs_ps"](q0, qd0, sp.params.pack())
         assert abs(float(y1[0])) < 1e-12 and np.abs(y2).max() < 1e-12
         assert np.abs(dy2).max() < 1e-12 and abs(float(tau[0]) - tau_start) < 1e-12

@@ -18,9 +18,9 @@ import pytest
 from scipy.stats import binomtest
 
 from hp_model import bezier
+from hp_model.domains import Y2_COORDS
 from hp_model.falls import Fall, FallReason
 from hp_model.force_tube import save_tube
-from hp_model.outputs import Y2_COORDS
 from orchestrator.sweep_draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
 from orchestrator.sweep_replay import TAU_COLUMNS, compare_rows
 from orchestrator.sweep_report import (
@@ -223,16 +223,16 @@ def test_output_offsets_shift_the_human_curves_only(gait):
     base = human_thetas(gait, Draw("x", 0, 0.01, 5))
     th = human_thetas(gait, d)
     s = np.linspace(0, 1, 11)
-    m1 = gait.degree + 1
+    L = gait.params["ps"].layout
     for dom, rows in Y2_COORDS.items():
         for r, joint in enumerate(rows):
-            a0 = base[dom][r * m1:(r + 1) * m1][None, :]
-            a1 = th[dom][r * m1:(r + 1) * m1][None, :]
+            a0 = base[dom][L.row(r)][None, :]
+            a1 = th[dom][L.row(r)][None, :]
             shift = bezier.evaluate(a1, s) - bezier.evaluate(a0, s)
             want = dict(zip(("th_lh", "th_lk", "th_la", "th_rh"), d.output_offset,
                             strict=True)).get(joint, 0.0)  # prosthesis rows unchanged
             np.testing.assert_allclose(shift, want, atol=1e-15)
-        np.testing.assert_array_equal(th[dom][-3:], gait.theta(dom)[-3:])
+        np.testing.assert_array_equal(th[dom][L.progress], gait.theta(dom)[L.progress])
 
 
 def test_scaled_tube_divides_the_deviation_bounds(gait):

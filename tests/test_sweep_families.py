@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import DOMAINS
 from hp_model.falls import FallReason
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
@@ -103,7 +104,7 @@ def test_body_variation_scales_the_human_segments_only(model):
 @pytest.fixture(scope="module")
 def loop(model, playback_gait):
     cl = ClosedLoop(model, playback_gait.degree)
-    th = {d: playback_gait.theta(d) for d in ("ps", "pns")}
+    th = {d: playback_gait.theta(d) for d in DOMAINS}
     return cl, th, initial_state(model, playback_gait)
 
 
@@ -221,16 +222,16 @@ def test_the_fmu_backend_refuses_what_it_does_not_model(tmp_path, spec_file):
 # ------------------------------------------------------------------ the oracle
 
 def test_oracle_tracks_the_humans_rows_and_the_nominal_prosthesis(playback_gait):
-    from hp_model.outputs import HUMAN_OUTPUTS, Y2_COORDS
+    from hp_model.domains import HUMAN_OUTPUTS, Y2_COORDS
     from human_fmu.perturbation import perturbed_thetas
 
-    nominal = {d: playback_gait.theta(d) for d in ("ps", "pns")}
+    nominal = {d: playback_gait.theta(d) for d in DOMAINS}
     pert = perturbed_thetas(nominal, 0.02, 5)
     th = oracle_thetas(playback_gait, pert)
-    m1 = playback_gait.degree + 1
-    for d in ("ps", "pns"):
+    L = playback_gait.params["ps"].layout
+    for d in DOMAINS:
         for r, name in enumerate(Y2_COORDS[d]):
-            rows = slice(r * m1, (r + 1) * m1)
+            rows = L.row(r)
             src = pert if r + 1 in HUMAN_OUTPUTS[d] else nominal
             assert np.array_equal(th[d][rows], src[d][rows]), (d, name)
             assert name.startswith("th_p") == (src is nominal)

@@ -26,10 +26,11 @@ from typing import Protocol
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoopMode
+from hp_model.domains import DOMAINS
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimState
-from human_fmu.instance import DOMAINS, HumanFmu
+from human_fmu.instance import HumanFmu
 
 
 @dataclass(frozen=True)
@@ -119,8 +120,7 @@ class SimulatorPlant:
         self.model: HumanProsthesisModel = sim.model
         self.dt = sim.opt.dt
         self.run = sim.start(q0, qd0, domain, mode=mode)
-        names = self.model.coord_names
-        self._pk, self._pa = names.index("th_pk"), names.index("th_pa")
+        self._pk, self._pa = self.model.roles["ps"].prosthesis
         self._pitch = self.model.pitch_row("socket")
         self._k = 0
 
