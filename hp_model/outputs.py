@@ -490,6 +490,16 @@ class VirtualConstraints:
         _, p_min, p_max = self._progress(theta)
         return phase(self.hip(q[self.roles.knee], q[self.roles.ankle]), p_min, p_max)
 
+    def phase_function(self, theta: GaitParams | np.ndarray) -> Callable[[np.ndarray], float]:
+        """q (nq,) -> tau for the gait ``theta``, on Python floats: :meth:`phase`'s
+        arithmetic, in its order (so the generated ``phase_<d>`` agrees bit for bit), at a
+        third of its cost (the simulator evaluates it several times per period)."""
+        _, p_min, p_max = (float(v) for v in self._progress(theta))
+        ck, c_a = float(self.hip.c_knee), float(self.hip.c_ankle)
+        k, a = self.roles.knee, self.roles.ankle
+        dp = step_length(p_min, p_max)
+        return lambda q: (ck * float(q[k]) + c_a * float(q[a]) - p_min) / dp
+
     def phase_rate(self, qd: np.ndarray, theta: GaitParams | np.ndarray) -> Num:
         """tau_dot (1/s) of the velocities qd ((nq,) or (nq, n))."""
         _, p_min, p_max = self._progress(theta)

@@ -380,6 +380,9 @@ class SimulationRun:
         self._vhold: np.ndarray | None = None  # the delayed human's feedback held
         self._obs: tuple[float, np.ndarray, np.ndarray] | None = None  # tau, u, lam
         self._applied = False
+        #: tau of a state x (q first) per domain, for the gait tracked at the start
+        self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
+                       for dd in sim.model.domains}
 
     @property
     def steps(self) -> int:
@@ -392,7 +395,7 @@ class SimulationRun:
         observing again in the same period returns the same state)."""
         sim, x, d = self.sim, self._x, self.domain
         if self._obs is None:
-            tau = sim.phase(d, x[:sim.nq])
+            tau = self._phase[d](x)
             if self._n_delay is not None:  # the delayed human (module docstring)
                 v_now = sim._feedback(d, x)
                 self._pipeline.append(v_now)
@@ -454,7 +457,7 @@ class SimulationRun:
             rest = h
             while rest > 0:
                 xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold)
-                armed = sim.phase(d, x[:nq]) >= opt.guard_tau_min
+                armed = self._phase[d](x) >= opt.guard_tau_min
                 if armed and self._z_prev > 0 and z <= 0:
                     s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z)
                     nxt = sim.model.domains[d].next

@@ -719,7 +719,7 @@ class CanLink:
             self.u = (0.0, 0.0)
             first = self.fault_first_miss if self.fault_first_miss >= 0 else k
             res.detection_periods = k - first + 1
-        return Command(np.array(self.u), fault=reason)
+        return Command(self.u, fault=reason)
 
     def _fault(self, k: int, got: bool) -> str:
         """Why the plant stops trusting the controller this period ("" while it does)."""

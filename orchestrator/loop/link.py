@@ -12,8 +12,9 @@ motor torque of the period.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -22,11 +23,10 @@ from prosthesis_controller import ProsthesisMeasurement
 from prosthesis_controller.interface import Controller, ControllerMode
 
 
-@dataclass(frozen=True)
-class Command:
+class Command(NamedTuple):
     """A link's answer for one period."""
 
-    torque: np.ndarray | None  # (2,) motor torques (N m); None: the plant's own law
+    torque: Sequence[float] | None  # (2,) motor torques (N m); None: the plant's own law
     mode: ControllerMode | str = ""  # the controller's mode of the tick ("" over CAN)
     V: float = 0.0  # CLF value
     rho: float = 0.0  # relaxation
@@ -98,14 +98,16 @@ def measurement(obs: Observation, encoder: Encoder = IDEAL_ENCODER,
                 rng: np.random.Generator | None = None) -> ProsthesisMeasurement:
     """What the controller receives for observation ``obs`` through ``encoder``."""
     s = obs.sensed
+    if encoder.ideal:
+        return ProsthesisMeasurement(obs.t, s.knee_angle, s.ankle_angle, s.knee_velocity,
+                                     s.ankle_velocity, s.foot_load, s.contact, s.socket_pitch)
     ang = np.array([s.knee_angle, s.ankle_angle], float)
     vel = np.array([s.knee_velocity, s.ankle_velocity], float)
     pitch = s.socket_pitch
-    if not encoder.ideal:
-        g = rng if rng is not None else np.random.default_rng(encoder.seed)
-        ang, vel = encoder.read(g, ang, vel)
-        if np.isfinite(pitch):
-            pitch = encoder.pitch(g, pitch)
+    g = rng if rng is not None else np.random.default_rng(encoder.seed)
+    ang, vel = encoder.read(g, ang, vel)
+    if np.isfinite(pitch):
+        pitch = encoder.pitch(g, pitch)
     return ProsthesisMeasurement(t=float(obs.t), knee_angle=float(ang[0]),
                                  ankle_angle=float(ang[1]), knee_vel=float(vel[0]),
                                  ankle_vel=float(vel[1]), foot_load=s.foot_load,

@@ -16,7 +16,8 @@ def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
     fs, u = truth.socket_force, truth.torque
     return {"t": obs.t, "socket_force": {"Fx": float(fs[0]), "Fz": float(fs[1]),
                                          "My": float(fs[2])},
-            "q": truth.q.tolist(), "qd": truth.qd.tolist(), "domain": obs.domain,
+            "q": [float(x) for x in truth.q], "qd": [float(x) for x in truth.qd],
+            "domain": obs.domain,
             "tau": obs.tau, "step": obs.steps, "fallen": False,
             "u_applied": [float(u[0]), float(u[1])]}
 

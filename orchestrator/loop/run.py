@@ -19,11 +19,9 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
-
-import numpy as np
 
 from hp_model.falls import Fall
 from orchestrator.loop.link import Command, Link
@@ -42,10 +40,10 @@ class LoopLog:
     t: list[float] = field(default_factory=list)
     tau: list[float] = field(default_factory=list)
     domain: list[int] = field(default_factory=list)  # 0 ps, 1 pns
-    q: list[np.ndarray] = field(default_factory=list)  # (12,) ground truth
-    qd: list[np.ndarray] = field(default_factory=list)
-    torque: list[np.ndarray] = field(default_factory=list)  # (2,) motor torques applied
-    socket_force: list[np.ndarray] = field(default_factory=list)  # (3,)
+    q: list[Sequence[float]] = field(default_factory=list)  # (12,) ground truth
+    qd: list[Sequence[float]] = field(default_factory=list)
+    torque: list[Sequence[float]] = field(default_factory=list)  # (2,) motor torques applied
+    socket_force: list[Sequence[float]] = field(default_factory=list)  # (3,)
     mode: list[ControllerMode | str] = field(default_factory=list)
     V: list[float] = field(default_factory=list)
     rho: list[float] = field(default_factory=list)
@@ -68,8 +66,7 @@ class LoopLog:
         self.domain.append(0 if obs.domain == "ps" else 1)
         self.q.append(truth.q)
         self.qd.append(truth.qd)
-        self.torque.append(truth.torque if cmd.torque is None else
-                           np.asarray(cmd.torque, float))
+        self.torque.append(truth.torque if cmd.torque is None else cmd.torque)
         self.socket_force.append(truth.socket_force)
         self.mode.append(cmd.mode)
         self.V.append(cmd.V)
