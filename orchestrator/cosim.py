@@ -764,7 +764,7 @@ def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, 
                    periods=round(cfg.max_time / cfg.dt), stop=stop, progress=progress,
                    recorder=(None if rec is None else
                              GroundTruthRecorder(rec, log_ns=link.log_ns, deferred=True)),
-                   timed=True)
+                   timed=True, samples=False)
     res.steps = log.steps
     if log.fall is not None:
         res.fell, res.fall_code = True, log.fall.code

@@ -167,7 +167,9 @@ class FmuPlant:
         self.last_reading = r
         y = r.sensors
         dom = DOMAINS[r.domain]
-        s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
+        ps = r.domain == 0  # sensed(), inlined: the FMU's outputs are already floats
+        s = Sensed(y[0], y[1], y[2], y[3], (y[4] if y[4] > 0.0 else 0.0) if ps else 0.0, ps,
+                   y[6])
         held = False
         if r.fell:
             reason = FallReason(r.fall_code)

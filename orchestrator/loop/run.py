@@ -77,10 +77,12 @@ class LoopLog:
 def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None,
              recorder: Recorder | None = None, stop: threading.Event | None = None,
              progress: Callable[[int, float, int], None] | None = None,
-             timed: bool = False) -> LoopLog:
+             timed: bool = False, samples: bool = True) -> LoopLog:
     """Run the closed loop (module docstring) until a fall, a link fault, ``steps``
     impacts, ``periods`` periods (None: no limit) or ``stop``; ``progress(k, t, steps)``
-    every 100 periods; ``timed``: per-period timings in the log."""
+    every 100 periods; ``timed``: per-period timings in the log; ``samples``: keep the
+    per-period samples (False: only the counts and how the run ended, e.g. when a
+    recorder keeps them)."""
     log = LoopLog()
     clock = time.perf_counter_ns
     k = 0
@@ -93,7 +95,10 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
         cmd = link.exchange(obs)
         t2 = clock()
         truth = plant.actuate(cmd.torque)
-        log.add(obs, cmd, truth)
+        if samples:
+            log.add(obs, cmd, truth)
+        else:
+            log.t.append(obs.t)
         log.steps = obs.steps
         if recorder is not None:
             recorder.record(obs, cmd, truth)
