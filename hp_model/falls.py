@@ -113,6 +113,22 @@ class Fall:
                    float(d["tau"]), d.get("values", {}))
 
 
+class FallOutcome:
+    """Mixin of a run's result with a ``fall`` (:class:`Fall` or None): ``failed`` and the
+    one-line ``reason``."""
+
+    fall: Fall | None
+
+    @property
+    def failed(self) -> bool:
+        return self.fall is not None
+
+    @property
+    def reason(self) -> str:
+        """The fall's one-line message ("" without a fall)."""
+        return self.fall.message() if self.fall is not None else ""
+
+
 def c_definitions(prefix: str = "HP_FALL_") -> str:
     """C source: one ``#define <prefix><NAME> <code>`` per reason and
     ``static const char *fall_reason(int code)`` returning the description (the FMU's

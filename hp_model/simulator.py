@@ -63,7 +63,7 @@ import numpy as np
 
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.domains import DOMAIN_CODE, HUMAN_OUTPUTS
-from hp_model.falls import Fall, FallReason
+from hp_model.falls import Fall, FallOutcome, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 
 #: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period (the plant
@@ -121,7 +121,7 @@ class Impact:
 
 
 @dataclass
-class SimResult:
+class SimResult(FallOutcome):
     """Per-period log (arrays over periods), the impacts, and how the run ended."""
 
     t: np.ndarray
@@ -133,15 +133,6 @@ class SimResult:
     domain: np.ndarray  # (n,) 0 = ps, 1 = pns
     impacts: list[Impact] = field(default_factory=list)
     fall: Fall | None = None  # how the run ended (None: steps or duration reached)
-
-    @property
-    def failed(self) -> bool:
-        return self.fall is not None
-
-    @property
-    def reason(self) -> str:
-        """The fall's one-line message ("" without a fall)."""
-        return self.fall.message() if self.fall is not None else ""
 
     @property
     def steps(self) -> int:

@@ -30,7 +30,7 @@ from characterization.gait_verification import make_simulator
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.domains import DOMAINS, HUMAN_OUTPUTS, N_Y2, PROSTHESIS, y2_row
-from hp_model.falls import Fall
+from hp_model.falls import Fall, FallOutcome
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -90,7 +90,7 @@ class Scenario:
 
 
 @dataclass
-class ScenarioResult:
+class ScenarioResult(FallOutcome):
     """Per-period time series (1 kHz) of one scenario and how it ended."""
 
     scenario: Scenario
@@ -117,15 +117,6 @@ class ScenarioResult:
     @property
     def success(self) -> bool:
         return not self.failed and self.steps >= self.scenario.steps
-
-    @property
-    def failed(self) -> bool:
-        return self.fall is not None
-
-    @property
-    def reason(self) -> str:
-        """The fall's one-line message ("" without a fall)."""
-        return self.fall.message() if self.fall is not None else ""
 
     @property
     def fail_t(self) -> float | None:

@@ -3,8 +3,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
+
+import numpy as np
 
 from orchestrator.loop.link import Command
 from orchestrator.loop.plant import Observation, Truth
@@ -16,10 +18,14 @@ def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
     fs, u = truth.socket_force, truth.torque
     return {"t": obs.t, "socket_force": {"Fx": float(fs[0]), "Fz": float(fs[1]),
                                          "My": float(fs[2])},
-            "q": [float(x) for x in truth.q], "qd": [float(x) for x in truth.qd],
-            "domain": obs.domain,
+            "q": _floats(truth.q), "qd": _floats(truth.qd), "domain": obs.domain,
             "tau": obs.tau, "step": obs.steps, "fallen": False,
             "u_applied": [float(u[0]), float(u[1])]}
+
+
+def _floats(v: Sequence[float]) -> list[float]:
+    """A list of floats (the FMU's values already are; the simulator's are an array)."""
+    return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
 
 class GroundTruthRecorder:
