@@ -167,9 +167,7 @@ class FmuPlant:
         self.last_reading = r
         y = r.sensors
         dom = DOMAINS[r.domain]
-        ps = r.domain == 0  # sensed(), inlined: the FMU's outputs are already floats
-        s = Sensed(y[0], y[1], y[2], y[3], (y[4] if y[4] > 0.0 else 0.0) if ps else 0.0, ps,
-                   y[6])
+        s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
         held = False
         if r.fell:
             reason = FallReason(r.fall_code)
