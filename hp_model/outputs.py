@@ -167,6 +167,13 @@ class HipProgress:
         its stance: the controllers' and the interaction model's phase)."""
         return phase(self(knee, ankle), p_min, p_max)
 
+    def phase_function(self, p_min: float, p_max: float) -> Callable[[float, float], float]:
+        """(knee, ankle) (rad) -> tau for the bounds (m), on Python floats: :meth:`phase`'s
+        arithmetic in its order without its calls (a controller evaluates it every tick)."""
+        ck, c_a = float(self.c_knee), float(self.c_ankle)
+        lo, dp = float(p_min), float(step_length(p_min, p_max))
+        return lambda knee, ankle: (ck * knee + c_a * ankle - lo) / dp
+
 
 # -- the curves: (B, dB/dtau, d2B/dtau2) of the rows of alpha at tau --------------------------
 Curve = Callable[[Num, Num], tuple[Num, Num, Num]]

@@ -254,7 +254,7 @@ class BaseController:
         self._off_hold = d.off_hold
         self._T_ps, self._T_pns = ctx.durations["ps"], ctx.durations["pns"]
         ps = ctx.gait.params["ps"]
-        self._phase_args = (ctx.terms.hip.phase, ps.p_min, ps.p_max, ps.nominal_rate)
+        self._phase_args = (ctx.terms.hip.phase_function(ps.p_min, ps.p_max), ps.nominal_rate)
         num = ctx.terms.numeric
         self._clf = num["clf_qp"]
         self._clf.inputs[1][:] = ctx.clf_params
@@ -358,8 +358,8 @@ class BaseController:
         """The state-based phase tau(th_pk, th_pa) of the gait's ps (the phase the paper's
         trajectories are functions of; :meth:`hp_model.outputs.HipProgress.phase`) and its
         nominal rate (``GaitParams.nominal_rate``)."""
-        phase, p_min, p_max, rate = self._phase_args
-        return phase(qk, qa, p_min, p_max), rate
+        phase, rate = self._phase_args
+        return phase(qk, qa), rate
 
     def _pd_torque(self, t: float, qk: float, qa: float, vk: float, va: float
                    ) -> tuple[float, float]:
