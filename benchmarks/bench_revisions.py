@@ -8,7 +8,8 @@ alike; prints each chosen figure's median and spread per side and the after/befo
 ``--bench NAME`` runs ``benchmarks/bench_NAME.py`` (of each tree, with that tree first on
 PYTHONPATH) with the arguments after ``--`` plus ``--json``; ``--key`` (repeatable) is a
 dotted path into that JSON whose value is a number or a list of numbers (their median is
-the round's figure).  The revision's tree must have the benchmark script and its --json.
+the round's figure).  The revision's tree must have the benchmark script and its --json,
+or ``--script-from-here`` runs this tree's script on both.
 """
 
 from __future__ import annotations
@@ -34,11 +35,13 @@ def pick(d: Any, path: str) -> float:
     return float(d)
 
 
-def run(tree: Path, bench: str, args: list[str]) -> dict[str, Any]:
+def run(tree: Path, bench: str, args: list[str], script_tree: Path | None = None
+        ) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "out.json"
         env = dict(os.environ, PYTHONPATH=str(tree))
-        cmd = [sys.executable, str(tree / "benchmarks" / f"bench_{bench}.py"), *args,
+        script = (script_tree or tree) / "benchmarks" / f"bench_{bench}.py"
+        cmd = [sys.executable, str(script), *args,
                "--json", str(out)]
         p = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
         if p.returncode != 0:
@@ -56,6 +59,9 @@ def main() -> None:
     ap.add_argument("--bench", required=True, help="cosim, fmu, controllers, sweep, ...")
     ap.add_argument("--key", action="append", required=True, help="dotted path into the JSON")
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--script-from-here", action="store_true",
+                    help="run this tree's benchmark script on both (the revision's lacks it "
+                         "or its --json; the script must work with the revision's API)")
     a = ap.parse_args(own)
     rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", a.before],
                          capture_output=True, text=True, check=True).stdout.strip()
@@ -68,7 +74,7 @@ def main() -> None:
             for r in range(a.rounds):
                 sides = [("before", old), ("after", ROOT)]
                 for side, tree in (sides if r % 2 == 0 else sides[::-1]):
-                    d = run(tree, a.bench, extra)
+                    d = run(tree, a.bench, extra, ROOT if a.script_from_here else None)
                     for k in a.key:
                         figs[k][side].append(pick(d, k))
                     load = os.getloadavg()[0]
