@@ -84,7 +84,7 @@ def delayed_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     v_h = ca.SX.sym("v_h", 4)
     u_p = ca.SX.sym("u_p", 2)
     dyn = model.function(f"dyn_{d}")
-    swing = model.domains[d].swing_frame
+    swing = model.roles[d].swing_frame
     height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
     out: list[ca.Function] = []
     for mode, u, extra in (
@@ -112,7 +112,7 @@ def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     u_p = ca.SX.sym("u_p", 2)
     dyn = model.function(f"dyn_{d}")
     fl, hfl = vc.functions[f"fl_{d}"], vc.functions[f"hfl_{d}"]
-    swing = model.domains[d].swing_frame
+    swing = model.roles[d].swing_frame
     height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
 
     out: list[ca.Function] = []

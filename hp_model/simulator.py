@@ -451,8 +451,7 @@ class SimulationRun:
                 armed = self._phase[d](x) >= opt.guard_tau_min
                 if armed and self._z_prev > 0 and z <= 0:
                     s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z)
-                    nxt = sim.model.domains[d].next
-                    assert nxt is not None
+                    nxt = sim.model.roles[d].next
                     qe, qdm = xe[:nq].copy(), xe[nq:]
                     pitch = sim._flatten_landing_foot(nxt, qe)
                     qdp, imp = sim.mfs[f"impact_{nxt}"](qe, qdm)
