@@ -156,7 +156,6 @@ class FmuPlant:
         self._fall: Fall | None = None
         self._obs: Observation | None = None
         self._state: list[float] = []
-        self.last_reading = None
 
     @property
     def fall(self) -> Fall | None:
@@ -164,21 +163,19 @@ class FmuPlant:
 
     def observe(self) -> Observation:
         r = self.fmu.read()
-        self.last_reading = r
         y = r.sensors
         dom = DOMAINS[r.domain]
         s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
-        held = False
+        obs = Observation(self._k, self._k * self.dt, dom, r.steps, float(y[5]), s)
         if r.fell:
             reason = FallReason(r.fall_code)
-            held = reason in HELD and self._obs is not None
-            prev = self._obs if held and self._obs is not None else None
-            t = prev.t if prev is not None else self._k * self.dt
-            self._fall = Fall(reason, t, prev.domain if prev else dom,
-                              prev.tau if prev else float(y[5]))
+            # a held state is the previous observation's: the fall happened there
+            prev = self._obs if reason in HELD else None
+            at = prev if prev is not None else obs
+            self._fall = Fall(reason, at.t, at.domain, at.tau)
+            obs = obs._replace(held=prev is not None)
         self._state = r.state
-        obs = Observation(self._k, self._k * self.dt, dom, r.steps, float(y[5]), s, held)
-        if not held:
+        if not obs.held:
             self._obs = obs
         return obs
 
