@@ -154,9 +154,9 @@ def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau
     nq = x.size // 2
     q, qd = x[:nq], x[nq:]
     fz, fx = float(lam[1]), float(lam[0])
-    if not np.all(np.isfinite(x)):
+    if not np.isfinite(x).all():
         return Fall(FallReason.NON_FINITE, t, d, tau)
-    speed = float(np.max(np.abs(qd)))
+    speed = float(np.abs(qd).max())
     if speed > opt.max_speed:
         return Fall(FallReason.DIVERGED, t, d, tau, {"speed": speed, "limit": opt.max_speed})
     if q[1] < opt.min_hip_height:
@@ -384,8 +384,16 @@ class SimulationRun:
         """The state at the start of the current period, with the constraint wrenches under
         the torque held so far (the delayed human's pipeline takes this period's error;
         observing again in the same period returns the same state)."""
-        sim, x, d = self.sim, self._x, self.domain
+        x, nq = self._x, self.sim.nq
+        tau, _, lam = self._evaluate()
+        return SimState(self.t, self.domain, x[:nq].copy(), x[nq:].copy(), tau, lam.copy(),
+                        self.steps)
+
+    def _evaluate(self) -> tuple[float, np.ndarray, np.ndarray]:
+        """(tau, u, lam) at the start of the period under the torque held so far, evaluated
+        once per period (the delayed human's pipeline takes this period's error)."""
         if self._obs is None:
+            sim, x, d = self.sim, self._x, self.domain
             tau = self._phase[d](x)
             if self._n_delay is not None:  # the delayed human (module docstring)
                 v_now = sim._feedback(d, x)
@@ -395,9 +403,7 @@ class SimulationRun:
                 self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
             u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
             self._obs = (tau, u, lam)
-        tau, _, lam = self._obs
-        return SimState(self.t, d, x[:sim.nq].copy(), x[sim.nq:].copy(), tau, lam.copy(),
-                        self.steps)
+        return self._obs
 
     def apply(self, u_p: np.ndarray | None) -> Fall | None:
         """Hold the prosthesis motor torque ``u_p`` (2, N m; clamped to the device's limits,
@@ -408,14 +414,13 @@ class SimulationRun:
         if self._applied:
             raise RuntimeError("apply() was already called in this period; advance() first")
         sim, x, d = self.sim, self._x, self.domain
-        self.observe()
-        assert self._obs is not None
-        tau, u, lam = self._obs
+        tau, u, lam = self._evaluate()
         if self.mode == ClosedLoopMode.HUMAN:
             if u_p is None:
                 raise ValueError("mode human: give the prosthesis motor torque (2,)")
             lim = sim._u_limit  # bounded at the plant (the FMU does the same)
-            self._u_p = np.clip(np.asarray(u_p, dtype=float).reshape(2), -lim, lim)
+            self._u_p = np.minimum(np.maximum(np.asarray(u_p, dtype=float).reshape(2), -lim),
+                                   lim)
             u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
         elif u_p is not None:
             raise ValueError("mode full: the torques come from feedback linearization; "

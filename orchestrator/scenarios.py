@@ -150,12 +150,17 @@ class ScenarioResult(FallOutcome):
         return out
 
 
-def knee_reference(gait: Gait, domain: str, tau: float) -> float:
-    """The prosthesis knee's nominal angle (rad) in ``domain`` at phase tau (clipped to
-    [0, 1])."""
-    r = y2_row(domain, PROSTHESIS[0])
-    row = gait.params[domain].alpha[r:r + 1]
-    return float(bezier.evaluate(row, np.clip(tau, 0.0, 1.0))[0])
+def knee_reference(gait: Gait, domain: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """The prosthesis knee's nominal angle (rad) per sample: in domain code ``domain``
+    (0 ps, 1 pns) at phase ``tau`` (clipped to [0, 1]); shape of ``tau``."""
+    domain, tau = np.asarray(domain), np.clip(np.asarray(tau, float), 0.0, 1.0)
+    ref = np.zeros(tau.shape)
+    for code, d in enumerate(DOMAINS):
+        m = domain == code
+        if m.any():
+            r = y2_row(d, PROSTHESIS[0])
+            ref[m] = bezier.evaluate(gait.params[d].alpha[r:r + 1], tau[m])[:, 0]
+    return ref
 
 
 def initial_state(model: HumanProsthesisModel, gait: Gait,
@@ -235,8 +240,7 @@ def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     n = log.periods
     domain = np.array(log.domain, int)
     tau = np.array(log.tau, float)
-    ref = np.array([knee_reference(gait, DOMAINS[d], ta)
-                    for d, ta in zip(domain, tau, strict=True)])
+    ref = knee_reference(gait, domain, tau)
     bounds, i0 = [], None
     for i, d in enumerate(domain):
         if d == 0 and i0 is None:
