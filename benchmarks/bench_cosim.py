@@ -28,7 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from orchestrator.cosim import CosimConfig, CosimResult, run_cosim
+from orchestrator.cosim.master import CosimConfig, CosimResult, run_cosim
 
 
 def figures(res: CosimResult, mcap_bytes: int) -> dict[str, float]:

@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 
 import hp_model
-from characterization.gait_design import build_gait
-from characterization.gait_fit import output_rms, regress_steps, verify_gait
-from characterization.mocap_mapping import default_mapping
-from characterization.mocap_pipeline import process_take, to_artifact
-from characterization.phzd import PHZDOptions, optimize_gait
-from characterization.synthetic_subject import SynthOptions, reference_gait, synthesize
+from characterization.gait.design import build_gait
+from characterization.gait.fit import output_rms, regress_steps, verify_gait
+from characterization.gait.phzd import PHZDOptions, optimize_gait
+from characterization.mocap.mapping import default_mapping
+from characterization.mocap.pipeline import process_take, to_artifact
+from characterization.mocap.synthetic_subject import SynthOptions, reference_gait, synthesize
 from hp_model import bezier
 from hp_model.domains import DOMAINS
 

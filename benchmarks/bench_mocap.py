@@ -17,13 +17,13 @@ import time
 from pathlib import Path
 
 import hp_model
-from characterization.mocap_files import process_file, read_take
-from characterization.mocap_mapping import default_mapping
-from characterization.mocap_pipeline import process_take, to_artifact
-from characterization.mocap_report import render_report
-from characterization.motive_csv import write_motive_csv
-from characterization.steps_artifact import save_steps
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.files import process_file, read_take
+from characterization.mocap.mapping import default_mapping
+from characterization.mocap.motive_csv import write_motive_csv
+from characterization.mocap.pipeline import process_take, to_artifact
+from characterization.mocap.report import render_report
+from characterization.mocap.steps_artifact import save_steps
+from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from hp_model.domains import DOMAINS
 
 

@@ -11,7 +11,7 @@ F_s computation (our compiled ``socket_ps``) against the same computation with P
    (:class:`tests.playback_helpers.PinocchioSocket`), in the same run, interleaved repeats.
    Target: ours no slower.  The two must agree (relative 1e-8), checked.
 3. ``--accuracy``: the estimate against the model-generated truth
-   (:mod:`characterization.playback_truth`) for a few angle-noise levels.
+   (:mod:`characterization.tube.playback_truth`) for a few angle-noise levels.
 
     PYTHONPATH=. python benchmarks/bench_playback.py [--repeats 7] [--steps 20]
         [--gait tests/data/playback/gait_synthetic.json] [--steps-file steps.npz] [--accuracy]
@@ -33,14 +33,14 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import hp_model
-from characterization.playback import (
+from characterization.mocap.steps_artifact import load_steps
+from characterization.tube.playback import (
     PlaybackOptions,
     fit_force_tube,
     socket_forces,
     write_outputs,
 )
-from characterization.playback_truth import TruthOptions, synthesize
-from characterization.steps_artifact import load_steps
+from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.gait_artifact import load_gait
 from tests.playback_helpers import (
     PinocchioSocket,

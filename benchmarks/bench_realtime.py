@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from orchestrator.cosim import CosimConfig, run_cosim
+from orchestrator.cosim.master import CosimConfig, run_cosim
 
 COLUMNS = ("completed", "ticks", "late", "missed", "overruns", "skipped_slots", "max_lag_ms",
            "latency_median_us", "latency_p99_us", "real_time_factor")

@@ -21,11 +21,11 @@ import tempfile
 import time
 from pathlib import Path
 
-from orchestrator.sweep_draws import make_draw, run_keys
-from orchestrator.sweep_engine import dask_client, run_sweep
-from orchestrator.sweep_runs import Artifacts, Resources, run_draw
-from orchestrator.sweep_spec import load_spec
-from orchestrator.sweep_store import read_results
+from orchestrator.sweep.draws import make_draw, run_keys
+from orchestrator.sweep.engine import dask_client, run_sweep
+from orchestrator.sweep.runs import Artifacts, Resources, run_draw
+from orchestrator.sweep.spec import load_spec
+from orchestrator.sweep.store import read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.force_tube_fit import (
+from characterization.tube.fit import (
     credibility_markdown,
     fit_bounds,
     fit_tube,

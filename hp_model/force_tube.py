@@ -58,7 +58,7 @@ EXCLUDE_AFTER_TOUCHDOWN = 0.03
 
 class TubePhase(Choice):
     """The phase tau a tube is a function of (``source.playback.tube_phase``;
-    :mod:`characterization.playback`)."""
+    :mod:`characterization.tube.playback`)."""
 
     GAIT = "gait"  # the gait's tau of each sample's configuration (what controllers compute)
     STEP = "step"  # each step's own tau (its own phase bounds: the paper's normalization)

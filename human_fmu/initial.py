@@ -6,7 +6,7 @@ and ankle offsets are added to th_pk and th_pa, the human joints are put on thei
 the phase of the resulting stance knee and ankle (the gait parameters ``theta`` of the
 domain, as given: not the human's perturbation), and the walker is placed on its stance foot
 where q0 has it, the base velocity solving J_foot qd = 0: the state a closed-loop scenario
-with the same offsets starts from (:func:`orchestrator.scenarios.initial_state`).
+with the same offsets starts from (:func:`orchestrator.experiments.scenarios.initial_state`).
 """
 
 from __future__ import annotations

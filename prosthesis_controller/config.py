@@ -148,8 +148,8 @@ class PdConfig(_Strict):
     """Joint PD on the nominal prosthesis trajectory as a function of the state-based stance
     phase tau(th_pk, th_pa), reference velocities at the nominal phase rate (JOINT-side gains,
     N m/rad and N m s/rad; no model information, as the paper's PD).  Defaults chosen by
-    :mod:`orchestrator.baseline_gains` on the default subject's nominal run (the walking
-    pair of its grid with the lowest knee RMS) and frozen for every other case."""
+    :mod:`orchestrator.experiments.baseline_gains` on the default subject's nominal run (the
+    walking pair of its grid with the lowest knee RMS) and frozen for every other case."""
 
     kp: Pair = (12000.0, 12000.0)
     kd: Pair = (150.0, 150.0)
@@ -177,7 +177,8 @@ class PassiveConfig(_Strict):
     (m, m c_x, m c_z, I_joint) per moving link); ``boundary``: boundary-layer width of
     |Y^T r| below which the robust term is linear (avoids chattering)."""
 
-    lam: Pair = (60.0, 60.0)  # Lambda, K: chosen by orchestrator.baseline_gains (PdConfig)
+    # Lambda, K: chosen by orchestrator.experiments.baseline_gains (PdConfig)
+    lam: Pair = (60.0, 60.0)
     k: Pair = (400.0, 400.0)
     rho_theta: NonNegative = 0.2
     boundary: Positive = 0.5

@@ -79,7 +79,7 @@ class ControllerMode(Choice):
     FALLBACK = "fallback"  # QP failure: previous torque rate-limited toward the PD torque
     FAULT = "fault"  # bad measurement: previous torque rate-limited toward zero
     #: no controller: the scenarios' oracle (full-state feedback linearization of the
-    #: prosthesis, :data:`orchestrator.scenarios.ORACLE`)
+    #: prosthesis, :data:`orchestrator.experiments.scenarios.ORACLE`)
     ORACLE = "oracle"
 
 

@@ -225,7 +225,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
         cost:     |a + A u|^2 + c_rho rho + c_sigma sigma
 
     with [c_d - r_d, c_d + r_d] the characterised bound of what the nominal-human model does
-    not explain, d = nu_true - (a + A u) (:mod:`characterization.model_error_fit`), a Bezier
+    not explain, d = nu_true - (a + A u) (:mod:`characterization.tube.model_error`), a Bezier
     box over the
     phase s in [tau_lo, tau_hi], zero outside that range and when ``margin_gate`` is 0 (the
     controller sets it per tick: 0 within the excluded time after touchdown, whose transient

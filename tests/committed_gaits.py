@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.gait_fit import fit_gait, verify_gait, walking_failures
-from characterization.phzd import PHZDOptions, optimize_gait
+from characterization.gait.fit import fit_gait, verify_gait, walking_failures
+from characterization.gait.phzd import PHZDOptions, optimize_gait
 from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -54,9 +54,9 @@ class Recipe:
 def _fit_take(model: HumanProsthesisModel, work: Path, synth: dict, opt: PHZDOptions,
               segments: str = "touchdown") -> Gait:
     """mocap synth -> mocap process -> gait fit, as the CLI verbs do."""
-    from characterization.mocap_files import process_file
-    from characterization.steps_artifact import load_steps
-    from characterization.synthetic_subject import SynthOptions, synthesize, write_synthetic
+    from characterization.mocap.files import process_file
+    from characterization.mocap.steps_artifact import load_steps
+    from characterization.mocap.synthetic_subject import SynthOptions, synthesize, write_synthetic
 
     opts = SynthOptions(**synth)
     write_synthetic(work / "take", synthesize(model, opts), opts)
@@ -68,8 +68,8 @@ def _fit_take(model: HumanProsthesisModel, work: Path, synth: dict, opt: PHZDOpt
 def make_template(model: HumanProsthesisModel, _work: Path) -> Gait:
     """The quick template gait (ps about 0.3 s): the default optimization of
     :func:`tests.gait_template.template_targets`."""
-    from characterization.gait_design import build_gait
-    from characterization.phzd import GaitVerificationError
+    from characterization.gait.design import build_gait
+    from characterization.gait.phzd import GaitVerificationError
     from tests.gait_template import template_targets
 
     opt = PHZDOptions()
@@ -133,7 +133,7 @@ def coefficient_difference(a: Gait, b: Gait) -> float:
 def assert_walks(model: HumanProsthesisModel, gait: Gait, name: str, steps: int = 20) -> None:
     """What a test that needs a walking gait checks first: ``steps`` steps of the full model
     under the gait's own feedback linearization, from its optimized start."""
-    from characterization.gait_verification import make_simulator, simulate_gait
+    from characterization.gait.verification import make_simulator, simulate_gait
 
     run = simulate_gait(make_simulator(model, gait), gait, steps)
     assert not run.failed and run.steps >= steps, (

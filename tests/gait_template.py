@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from characterization.bezier_fit import fit_bezier
-from characterization.phzd import DataTargets
+from characterization.gait.bezier_fit import fit_bezier
+from characterization.gait.phzd import DataTargets
 
 
 def template_targets() -> DataTargets:

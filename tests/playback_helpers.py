@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.steps_artifact import StepsArtifact
+from characterization.mocap.steps_artifact import StepsArtifact
 
 DATA = Path(__file__).parent / "data" / "playback"
 GAIT = DATA / "gait_synthetic.json"

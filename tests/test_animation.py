@@ -1,5 +1,5 @@
-"""The walker animation (``orchestrator.animation.walker_gif``): one frame per 1/fps s of the
-run, the figure following the hip, the stick figure where the model's frames are."""
+"""The walker animation (``orchestrator.experiments.animation.walker_gif``): one frame per
+1/fps s of the run, the figure following the hip, the stick figure where the model's frames are."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from orchestrator.animation import walker_gif
-from orchestrator.scenarios import NOMINAL, Scenario, run_scenario
+from orchestrator.experiments.animation import walker_gif
+from orchestrator.experiments.scenarios import NOMINAL, Scenario, run_scenario
 from tests.controller_support import tube_about_nominal
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from characterization.bezier_fit import FitError, fit_bezier
+from characterization.gait.bezier_fit import FitError, fit_bezier
 from hp_model import bezier
 
 

@@ -7,9 +7,9 @@ import json
 
 import pytest
 
-from characterization.gait_fit import FitSegments
-from characterization.mocap_mapping import SegmentationMethod
-from characterization.synthetic_subject import SynthSource
+from characterization.gait.fit import FitSegments
+from characterization.mocap.mapping import SegmentationMethod
+from characterization.mocap.synthetic_subject import SynthSource
 from hp_model.choices import Choice
 from hp_model.closed_loop import ClosedLoopMode
 from hp_model.compiled import CompileBackend, FunctionSet
@@ -64,7 +64,7 @@ def test_label_splits_the_class_name():
 
 
 def test_sweep_spec_names_a_bad_controller_and_keeps_the_words(tmp_path):
-    from orchestrator.sweep_spec import SpecError, parse_spec
+    from orchestrator.sweep.spec import SpecError, parse_spec
 
     for f in ("g.json", "t.json"):
         (tmp_path / f).write_text("{}")
@@ -101,7 +101,7 @@ def test_qp_outcome_maps_to_the_bus_status_unchanged():
 
 
 def test_mode_counts_serialize_as_the_words():
-    from orchestrator.scenarios import as_jsonable
+    from orchestrator.experiments.scenarios import as_jsonable
 
     modes = [ControllerMode.STANCE] * 3 + [ControllerMode("fallback")]
     counts = {m: modes.count(m) for m in sorted(set(modes))}
@@ -110,7 +110,7 @@ def test_mode_counts_serialize_as_the_words():
 
 
 def test_cosim_config_parses_its_mode_and_records_the_word(tmp_path):
-    from orchestrator.cosim import CosimConfig
+    from orchestrator.cosim.master import CosimConfig
 
     cfg = CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="realtime")
     assert cfg.mode is CosimMode.REALTIME
@@ -121,7 +121,7 @@ def test_cosim_config_parses_its_mode_and_records_the_word(tmp_path):
 
 def test_sweep_backend_in_the_spec_serializes_as_the_word(tmp_path):
     from hp_model.artifacts import canonical_hash
-    from orchestrator.sweep_spec import parse_spec
+    from orchestrator.sweep.spec import parse_spec
 
     for f in ("g.json", "t.json"):
         (tmp_path / f).write_text("{}")
@@ -135,8 +135,8 @@ def test_sweep_backend_in_the_spec_serializes_as_the_word(tmp_path):
 
 
 def test_fit_segments_outside_the_choices_is_a_fit_error():
-    from characterization.bezier_fit import FitError
-    from characterization.gait_fit import fit_segments
+    from characterization.gait.bezier_fit import FitError
+    from characterization.gait.fit import fit_segments
 
     assert fit_segments("paper") is FitSegments.PAPER
     with pytest.raises(FitError, match=r"^unknown fit segments 'steps'; choose one of touch"):
@@ -144,7 +144,7 @@ def test_fit_segments_outside_the_choices_is_a_fit_error():
 
 
 def test_playback_options_parse_the_tube_phase():
-    from characterization.playback import PlaybackError, PlaybackOptions
+    from characterization.tube.playback import PlaybackError, PlaybackOptions
 
     assert PlaybackOptions(tube_phase="step").tube_phase is TubePhase.STEP
     with pytest.raises(PlaybackError, match=r"^unknown tube phase 'stance'; choose one of gait"):

@@ -9,7 +9,7 @@ import pytest
 import quadprog
 
 from hp_model.force_tube import load_tube
-from orchestrator.scenarios import NOMINAL, Scenario, run_scenario
+from orchestrator.experiments.scenarios import NOMINAL, Scenario, run_scenario
 from prosthesis_controller import ControllerContext, make_controller
 from prosthesis_controller.interface import QpOutcome
 from tests.controller_support import stance_meas

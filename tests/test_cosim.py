@@ -24,7 +24,7 @@ from bus_schemas.protocol import CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
 from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
-from orchestrator.cosim import (
+from orchestrator.cosim.master import (
     CosimConfig,
     FaultPlan,
     Plant,
@@ -33,8 +33,8 @@ from orchestrator.cosim import (
     run_cosim,
     tick_breakdown,
 )
+from orchestrator.cosim.recording import play_to_bus, read_recording, refit_tube, replay
 from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
-from orchestrator.recording import play_to_bus, read_recording, refit_tube, replay
 from prosthesis_controller.controllers import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
@@ -520,7 +520,7 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
     endpoint, torque frames at the limits, liveliness token) but without the run's secret:
     zenoh refuses it at the transport, nothing it sends reaches the plant and nothing the
     plant sends reaches it; the run walks exactly as the undisturbed lockstep run."""
-    import orchestrator.cosim as cosim_mod
+    import orchestrator.cosim.master as cosim_mod
     from bus_schemas.zenoh_config import loopback_endpoint
 
     endpoint = loopback_endpoint()

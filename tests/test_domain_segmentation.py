@@ -30,11 +30,11 @@ import itertools
 import numpy as np
 import pytest
 
-from characterization.domain_segmentation import domain_segments
-from characterization.gait_fit import regress_steps
-from characterization.mocap_mapping import default_mapping
-from characterization.mocap_pipeline import process_take, to_artifact
-from characterization.synthetic_subject import SynthOptions, reference_gait, synthesize
+from characterization.gait.fit import regress_steps
+from characterization.mocap.domain_segmentation import domain_segments
+from characterization.mocap.mapping import default_mapping
+from characterization.mocap.pipeline import process_take, to_artifact
+from characterization.mocap.synthetic_subject import SynthOptions, reference_gait, synthesize
 from hp_model import bezier
 from hp_model.domains import DOMAINS
 

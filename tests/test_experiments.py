@@ -10,8 +10,7 @@ import pytest
 
 from hp_model.domains import DOMAINS
 from hp_model.simulator import SimState
-from orchestrator.loop import measurement, observe_state
-from orchestrator.scenarios import (
+from orchestrator.experiments.scenarios import (
     NOMINAL,
     Perturbation,
     Scenario,
@@ -21,6 +20,7 @@ from orchestrator.scenarios import (
     socket_force_in_tube,
     summary,
 )
+from orchestrator.loop import measurement, observe_state
 from tests.controller_support import tube_about_nominal
 
 
@@ -64,7 +64,7 @@ def test_offset_start_moves_only_the_prosthesis_knee_output(model, stored_gait):
     """knee_offset(d) puts the knee output d rad off at the nominal phase; the human is on
     its outputs and the stance foot flat and at rest (J_foot qd = 0)."""
     from hp_model.closed_loop import ClosedLoop
-    from orchestrator.experiments import knee_offset
+    from orchestrator.experiments.paper import knee_offset
 
     vc = ClosedLoop(model, stored_gait.degree).vcs["ps"]
     out = vc.numeric()["outputs_ps"]

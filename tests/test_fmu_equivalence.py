@@ -113,7 +113,7 @@ def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, te
 def test_offsets_start_where_a_scenario_does(fmu_path, model, template_gait):
     """One placement (hp_model.placement): the FMU's offset_knee/offset_ankle and a
     closed-loop scenario's initial offset start the walk from the same state."""
-    from orchestrator.scenarios import initial_state as scenario_state
+    from orchestrator.experiments.scenarios import initial_state as scenario_state
 
     dk, da = 0.02, -0.01
     sim = simulator(model, template_gait)

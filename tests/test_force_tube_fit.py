@@ -11,8 +11,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from characterization import force_tube_fit as ftf
-from characterization.bezier_fit import FitError
+from characterization.gait.bezier_fit import FitError
+from characterization.tube import fit as ftf
 from hp_model import bezier
 from hp_model.force_tube import COMPONENTS, load_tube, save_tube
 

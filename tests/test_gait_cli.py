@@ -23,7 +23,7 @@ import json
 import numpy as np
 import pytest
 
-from characterization.synthetic_subject import reference_gait
+from characterization.mocap.synthetic_subject import reference_gait
 from hp_model import bezier
 from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import load_gait

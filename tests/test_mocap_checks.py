@@ -10,12 +10,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import hp_model
-from characterization.c3d_io import write_c3d
-from characterization.mocap_checks import ANATOMICAL_DEG, check_joint_angles
-from characterization.mocap_mapping import default_mapping
-from characterization.mocap_pipeline import process_take
-from characterization.mocap_take import MocapError
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.c3d_io import write_c3d
+from characterization.mocap.checks import ANATOMICAL_DEG, check_joint_angles
+from characterization.mocap.mapping import default_mapping
+from characterization.mocap.pipeline import process_take
+from characterization.mocap.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.take import MocapError
 from hp_model import COORDS
 from hp_model.domains import DOMAINS
 
@@ -151,8 +151,8 @@ def test_marker_names_match_ignoring_case_and_suggest_the_closest(take):
 def test_inspect_prints_the_take_and_writes_a_mapping_that_processes(model, tmp_path, capsys):
     """``hpcosim mocap inspect``: the columns, rate and axes guess; the skeleton it writes
     guesses every limb, joint and foot of the synthetic naming and processes the take."""
-    from characterization.mocap_inspect import TODO, summarize
-    from characterization.synthetic_subject import write_synthetic
+    from characterization.mocap.inspection import TODO, summarize
+    from characterization.mocap.synthetic_subject import write_synthetic
     from orchestrator.cli import main
 
     opts = SynthOptions(n_strides=4, seed=5)
@@ -168,7 +168,7 @@ def test_inspect_prints_the_take_and_writes_a_mapping_that_processes(model, tmp_
     assert main(["mocap", "process", str(c3d), "--mapping", str(skeleton), "--out",
                  str(steps)]) == 0
     assert steps.exists()
-    from characterization.c3d_io import read_c3d
+    from characterization.mocap.c3d_io import read_c3d
 
     s = summarize(read_c3d(c3d))
     assert s.n_frames > 0 and all(0.9 < c.valid <= 1.0 for c in s.columns)
@@ -194,7 +194,7 @@ def test_a_static_trial_calibrates_a_misplaced_skin_marker(model, coef, tmp_path
     applied (the issue measured 5-9 deg on real skin markers without calibration)."""
     import json
 
-    import characterization.synthetic_subject as ss
+    import characterization.mocap.synthetic_subject as ss
 
     m = dict(ss.MARKERS)
     shank = list(m["l_shank"])
@@ -214,7 +214,7 @@ def test_a_static_trial_calibrates_a_misplaced_skin_marker(model, coef, tmp_path
 
     raw = process_take(walk.take_c3d, default_mapping(), coef)
     assert 6.0 < knee_rms(raw) < 12.0
-    from characterization.mocap_pipeline import static_offsets
+    from characterization.mocap.pipeline import static_offsets
 
     off = static_offsets(static.take_c3d, default_mapping())
     assert abs(np.degrees(off["l_shank"])) > 6.0 and abs(np.degrees(off["l_thigh"])) < 0.2
@@ -222,7 +222,7 @@ def test_a_static_trial_calibrates_a_misplaced_skin_marker(model, coef, tmp_path
     assert knee_rms(cal) < 0.5
     assert any(n.startswith("calibration (pitch offsets subtracted, deg): ") for n in cal.notes)
     # through the CLI: [calibration] static_trial in the mapping, relative to it
-    from characterization.synthetic_subject import mapping_toml
+    from characterization.mocap.synthetic_subject import mapping_toml
     from orchestrator.cli import main
 
     write_c3d(tmp_path / "walk.c3d", walk.take_c3d)
@@ -244,8 +244,8 @@ def test_lab_events_in_a_c3d_are_read_and_the_found_ones_compared(model, coef, t
     synthetic truth's contact events: within 6 frames, as the contact test finds)."""
     import json
 
-    from characterization.c3d_io import read_c3d
-    from characterization.mocap_take import LabEvent
+    from characterization.mocap.c3d_io import read_c3d
+    from characterization.mocap.take import LabEvent
     from orchestrator.cli import main
 
     s = synthesize(model, SynthOptions(n_strides=4, seed=7))

@@ -16,7 +16,13 @@ import numpy as np
 import pytest
 from scipy.io import loadmat
 
-from characterization.limb_angles import INTERPOLATED, MARKERS, limb_pitch, lowpass, pair_pitch
+from characterization.mocap.limb_angles import (
+    INTERPOLATED,
+    MARKERS,
+    limb_pitch,
+    lowpass,
+    pair_pitch,
+)
 
 DATA = Path(__file__).parent / "data" / "gatk-walking"
 
@@ -76,7 +82,7 @@ def test_foot_contact_against_the_force_plate(gatk) -> None:
     every touchdown within 2 frames (20 ms); lift-offs early by at most 9 frames, as the
     metatarsal head rises while the toes still push (measured 8; a toe-tip marker would see
     the lift-off), never late."""
-    from characterization.foot_contact import foot_contact
+    from characterization.mocap.foot_contact import foot_contact
 
     t, mk, _ = gatk
     raw = np.genfromtxt(DATA / "rawdata.txt", skip_header=1)

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import hp_model
-from characterization.c3d_io import read_c3d, write_c3d
-from characterization.mocap_mapping import LIMBS, default_mapping
-from characterization.mocap_pipeline import limb_pitches, resolve_frame
-from characterization.mocap_take import MocapError
-from characterization.motive_csv import read_motive_csv, write_motive_csv
-from characterization.sagittal import SagittalFrame, axis_vector
-from characterization.steps_artifact import load_steps
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.c3d_io import read_c3d, write_c3d
+from characterization.mocap.mapping import LIMBS, default_mapping
+from characterization.mocap.motive_csv import read_motive_csv, write_motive_csv
+from characterization.mocap.pipeline import limb_pitches, resolve_frame
+from characterization.mocap.sagittal import SagittalFrame, axis_vector
+from characterization.mocap.steps_artifact import load_steps
+from characterization.mocap.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.take import MocapError
 from hp_model.domains import DOMAINS
 from orchestrator.cli import main
 
@@ -201,8 +201,8 @@ def test_cli_synth_then_process(tmp_path, capsys) -> None:
 
 
 def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
-    from characterization.mocap_mapping import load_mapping
-    from characterization.synthetic_subject import mapping_toml
+    from characterization.mocap.mapping import load_mapping
+    from characterization.mocap.synthetic_subject import mapping_toml
 
     good = mapping_toml(default_mapping())
     p = tmp_path / "mapping.toml"
@@ -225,7 +225,7 @@ def test_mapping_config_errors_and_explicit_axes(files, tmp_path) -> None:
     for limb in LIMBS:
         np.testing.assert_allclose(auto[limb].theta, explicit[limb].theta, atol=1e-5)
     # walking the other way round flips every pitch's sign (the frame made directly) ...
-    from characterization.sagittal import sagittal_frame
+    from characterization.mocap.sagittal import sagittal_frame
 
     back = limb_pitches(c3d, m, sagittal_frame("+z", "+x"))
     np.testing.assert_allclose(back["l_shank"].theta, -explicit["l_shank"].theta, atol=1e-12)
@@ -270,7 +270,7 @@ def test_c3d_labels_beyond_point_used_are_spare(files) -> None:
     continues LABELS.  Before, such files were refused (markers != labels)."""
     import ezc3d
 
-    from characterization.c3d_io import point_labels, take_from_c3d
+    from characterization.mocap.c3d_io import point_labels, take_from_c3d
 
     c = ezc3d.c3d(str(files["c3d"]))
     ref = read_c3d(files["c3d"])
@@ -320,7 +320,7 @@ def test_trc_round_trip_and_processing(synth, tmp_path) -> None:
     """OpenSim's TRC (tab separated, mm, Y up): the synthetic take written and read back
     (to the 1e-6 mm the writer prints), lost samples kept lost; processed end to end through
     the CLI; bad files are one-line errors naming the line."""
-    from characterization.trc_io import read_trc, write_trc
+    from characterization.mocap.trc_io import read_trc, write_trc
     from orchestrator.cli import main
 
     take = synth.take.replace(rigid_bodies={}, rigid_body_markers={})
@@ -356,7 +356,7 @@ def test_motive_exports_with_markers_only_or_rigid_bodies_only(synth, tmp_path) 
     every step kept.  Rigid bodies only (their solved markers still exported): a
     rigid-body loss has no marker pair to fall back on, so the steps it spans are dropped,
     each with the limb and the frames in the reason."""
-    from characterization.mocap_pipeline import process_take
+    from characterization.mocap.pipeline import process_take
 
     coef = {d: hp_model.load_model().hip_progress_coefficients(d) for d in DOMAINS}
     full = process_take(synth.take, default_mapping(), coef)

@@ -10,15 +10,15 @@ import numpy as np
 import pytest
 
 import hp_model
-from characterization.mocap_mapping import default_mapping
-from characterization.mocap_pipeline import process_take, to_artifact
-from characterization.steps_artifact import (
+from characterization.mocap.mapping import default_mapping
+from characterization.mocap.pipeline import process_take, to_artifact
+from characterization.mocap.steps_artifact import (
     StepsFileError,
     load_steps,
     save_steps,
     steps_bytes,
 )
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from hp_model.domains import DOMAINS
 
 

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 import hp_model
-from characterization.joint_centres import fit_joint_centre
-from characterization.limb_angles import INTERPOLATED, MARKERS, NONE, RIGID_BODY
-from characterization.mocap_mapping import JOINTS, LIMBS, default_mapping, synthetic_names
-from characterization.mocap_pipeline import process_take
-from characterization.mocap_take import MocapError
-from characterization.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.joint_centres import fit_joint_centre
+from characterization.mocap.limb_angles import INTERPOLATED, MARKERS, NONE, RIGID_BODY
+from characterization.mocap.mapping import JOINTS, LIMBS, default_mapping, synthetic_names
+from characterization.mocap.pipeline import process_take
+from characterization.mocap.synthetic_subject import SynthOptions, synthesize
+from characterization.mocap.take import MocapError
 from hp_model.domains import DOMAINS
 
 ANGLE_COORDS = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
@@ -218,7 +218,7 @@ def test_contact_segmentation_finds_the_impacts(synth, coef) -> None:
     foot skims the ground slowly before the impact (model source) or lands smoothly
     (template), so the markers slow down 2-5 frames before it; the QA data lists each
     step's interval and each foot's events."""
-    from characterization.mocap_report import qa_summary
+    from characterization.mocap.report import qa_summary
 
     m = default_mapping()
     m = m.model_copy(update={"segmentation": m.segmentation.model_copy(

@@ -11,20 +11,20 @@ import math
 import numpy as np
 import pytest
 
-from characterization.model_error_fit import (
+from characterization.tube.model_error import (
     ErrorSamples,
     fit_model_error,
     model_error_samples,
     playback_error_samples,
 )
-from characterization.playback import fit_force_tube
-from characterization.playback_truth import TruthOptions, synthesize
+from characterization.tube.playback import fit_force_tube
+from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.artifacts import ArtifactError
 from hp_model.closed_loop import ClosedLoop
 from hp_model.force_tube import ModelErrorBound, load_tube, save_tube
 from hp_model.simulator import HybridSimulator, SimOptions
+from orchestrator.experiments.scenarios import NOMINAL, initial_state
 from orchestrator.loop import measurement, observe_state
-from orchestrator.scenarios import NOMINAL, initial_state
 from prosthesis_controller import ControllerContext, make_controller
 from prosthesis_controller.config import ControllerConfig, UncertaintyConfig
 from tests.committed_gaits import ROOT
@@ -262,8 +262,8 @@ def test_clfqp_walks_with_the_margin_on(model, demo_gait, subsystem):
     the default), clfqp walks 20 nominal steps inside the limits, no fallback, knee RMS
     <= 0.003 rad (measured 0.0013 rad, the same without the margin); the bound is worth < 1
     motor N m at mid-stance (measured 0.5-0.7)."""
-    from characterization.model_error_fit import margin_torque
-    from orchestrator.scenarios import Scenario, run_scenario
+    from characterization.tube.model_error import margin_torque
+    from orchestrator.experiments.scenarios import Scenario, run_scenario
 
     tube = load_tube(DEMO_TUBE_V2, demo_gait.hash())
     me = tube.model_error

@@ -50,7 +50,7 @@ def test_impacts_connect_the_domains_periodically(model, result):
 
 _SMALL_SOLVE = """
 import hashlib, numpy as np, hp_model
-from characterization.phzd import PHZDOptions, optimize_gait
+from characterization.gait.phzd import PHZDOptions, optimize_gait
 from hp_model.blas_threads import blas_thread_counts
 from hp_model.domains import DOMAINS
 from tests.gait_template import template_targets

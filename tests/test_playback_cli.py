@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from characterization.playback import PlaybackError, fit_force_tube
-from characterization.playback_truth import TruthOptions, synthesize
-from characterization.steps_artifact import save_steps
+from characterization.mocap.steps_artifact import save_steps
+from characterization.tube.playback import PlaybackError, fit_force_tube
+from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.artifacts import ArtifactError
 from hp_model.force_tube import load_tube
 from hp_model.gait_artifact import save_gait

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from characterization.playback import (
+from characterization.tube.playback import (
     DEFAULT_ALLOWANCE,
     PlaybackOptions,
     fit_force_tube,
@@ -20,7 +20,7 @@ from characterization.playback import (
     play_step,
     zero_dynamics_state,
 )
-from characterization.playback_truth import TruthOptions, synthesize
+from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import DOMAINS
 from hp_model.simulator import HybridSimulator

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from characterization.gait_fit import verify_gait
-from characterization.gait_verification import make_simulator, simulate_gait
+from characterization.gait.fit import verify_gait
+from characterization.gait.verification import make_simulator, simulate_gait
 from hp_model.falls import Fall, FallReason
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
 from tests.fmu_runner import NominalPD

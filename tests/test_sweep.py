@@ -21,16 +21,16 @@ from hp_model import bezier
 from hp_model.domains import Y2_COORDS
 from hp_model.falls import Fall, FallReason
 from hp_model.force_tube import save_tube
-from orchestrator.sweep_draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
-from orchestrator.sweep_replay import TAU_COLUMNS, compare_rows
-from orchestrator.sweep_report import (
+from orchestrator.sweep.draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
+from orchestrator.sweep.replay import TAU_COLUMNS, compare_rows
+from orchestrator.sweep.report import (
     UNLABELLED,
     fall_label,
     mcnemar_exact,
     summarize,
     wilson_interval,
 )
-from orchestrator.sweep_runs import (
+from orchestrator.sweep.runs import (
     Artifacts,
     Resources,
     erroneous_model,
@@ -38,8 +38,8 @@ from orchestrator.sweep_runs import (
     run_draw,
     scaled_tube,
 )
-from orchestrator.sweep_spec import SpecError, load_spec
-from orchestrator.sweep_store import (
+from orchestrator.sweep.spec import SpecError, load_spec
+from orchestrator.sweep.store import (
     KIND,
     SCHEMA_VERSION,
     VOLATILE,
@@ -296,7 +296,7 @@ def test_run_error_is_a_row_not_an_exception(resources):
 def test_fmu_backend_equals_simulator(resources, tmp_path):
     """The same draws on the FMU (fmpy, reset per run) give the simulator's rows: the same
     samples, torques and falls; tau-derived numbers to the last bits of tau."""
-    from orchestrator.sweep_engine import prepare_fmu
+    from orchestrator.sweep.engine import prepare_fmu
 
     spec, res = resources
     fspec = spec.model_copy(update={"backend": "fmu"})
@@ -419,7 +419,7 @@ def test_replay_reproduces_a_stored_run(reference, capsys):
 
 @pytest.mark.slow
 def test_two_workers_give_identical_rows(reference, spec_path, tmp_path):
-    from orchestrator.sweep_engine import run_sweep
+    from orchestrator.sweep.engine import run_sweep
 
     _, ref = reference
     o = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2, window=3)
@@ -434,7 +434,7 @@ def test_two_workers_give_identical_rows(reference, spec_path, tmp_path):
 def test_fmu_backend_sweep_on_dask(reference, spec_path, tmp_path):
     """The FMU travels to the workers in the plugin (no shared file); the rows match the
     simulator's 1-worker rows run for run."""
-    from orchestrator.sweep_engine import run_sweep
+    from orchestrator.sweep.engine import run_sweep
 
     _, ref = reference
     spec = load_spec(spec_path, {"backend": "fmu"})
@@ -454,7 +454,7 @@ def test_killed_worker_loses_no_result(reference, files, tmp_path):
     1-worker rows."""
     from distributed import Client, LocalCluster
 
-    from orchestrator.sweep_engine import run_sweep
+    from orchestrator.sweep.engine import run_sweep
 
     _, ref = reference
     spec = load_spec(files[0] / "spec.toml")
@@ -499,7 +499,7 @@ def test_ctrl_c_then_resume_without_redoing(reference, files, tmp_path):
     import sys
     import time
 
-    from orchestrator.sweep_engine import run_sweep
+    from orchestrator.sweep.engine import run_sweep
 
     _, ref = reference
     spec_path = write_spec(tmp_path / "spec.toml", files[1], draws=8)

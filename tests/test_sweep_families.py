@@ -18,18 +18,18 @@ from hp_model.falls import FallReason
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
-from orchestrator.loop import Encoder
-from orchestrator.scenarios import (
+from orchestrator.experiments.scenarios import (
     ORACLE,
     Scenario,
     initial_state,
     oracle_thetas,
     run_scenario,
 )
-from orchestrator.sweep_draws import SEGMENTS, Draw, make_draw
-from orchestrator.sweep_runs import Artifacts, Resources, human_gains, run_draw
-from orchestrator.sweep_spec import SpecError, load_spec
-from orchestrator.sweep_store import read_results
+from orchestrator.loop import Encoder
+from orchestrator.sweep.draws import SEGMENTS, Draw, make_draw
+from orchestrator.sweep.runs import Artifacts, Resources, human_gains, run_draw
+from orchestrator.sweep.spec import SpecError, load_spec
+from orchestrator.sweep.store import read_results
 from tests.controller_support import tube_about_nominal
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -275,7 +275,7 @@ def test_a_sweep_labels_draws_walkable_and_reports_among_them(tmp_path, spec_fil
     try:
         key = next(r for r in rows if r["family"] == "body" and r["controller"] == "pd")
         d = make_draw(spec, "body", key["draw"])
-        from orchestrator.sweep_draws import RunKey
+        from orchestrator.sweep.draws import RunKey
 
         again = run_draw(res, spec, RunKey("pd", "body", d.index), d)
         assert again["duration_s"] == key["duration_s"]

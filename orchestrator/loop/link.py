@@ -7,7 +7,7 @@ motor torque of the period.
 - :class:`OracleLink`: no controller; the plant's own feedback linearization of the
   prosthesis outputs (perfect knowledge and sensing: the walkability label).
 - The CAN link over a python-can bus with the fault plan is
-  :class:`orchestrator.cosim.CanLink`.
+  :class:`orchestrator.cosim.master.CanLink`.
 """
 
 from __future__ import annotations

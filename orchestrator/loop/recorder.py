@@ -1,5 +1,6 @@
 """The loop's optional recorder: the ground truth of every period into an MCAP recording
-(``/ground_truth``, the channel :mod:`orchestrator.recording` and ``hpcosim animate`` read)."""
+(``/ground_truth``, the channel :mod:`orchestrator.cosim.recording` and ``hpcosim animate``
+read)."""
 
 from __future__ import annotations
 

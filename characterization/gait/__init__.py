@@ -1,0 +1,1 @@
+"""Gait design (paper Sec. IV-A): Bezier regression, PHZD gait optimization, verification."""

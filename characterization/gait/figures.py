@@ -1,0 +1,71 @@
+"""The paper's Fig. 4: the data's Bezier fit against the optimized gait's outputs."""
+
+from __future__ import annotations
+
+import io
+import os
+
+import numpy as np
+
+from characterization.mocap.steps_artifact import StepsArtifact
+from hp_model import bezier
+from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import DOMAINS, Y2_COORDS
+from hp_model.gait_artifact import Gait
+
+LABELS = {"th_lh": "human hip", "th_lk": "human knee", "th_la": "human ankle",
+          "th_rh": "prosthesis-side hip", "th_pk": "prosthesis knee",
+          "th_pa": "prosthesis ankle"}
+
+
+def gait_figure_bytes(gait: Gait, steps: StepsArtifact | None = None, fmt: str = "png") -> bytes:
+    """One panel per output (rows) and domain (columns): recorded samples (grey), the
+    regression B(alpha_mc) (blue), the regression plus offsets (dashed) and the optimized
+    B(alpha*) (red), in degrees against tau."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8.5, 10))
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.05, hspace=0.35, wspace=0.25)
+    axes = fig.subplots(5, 2, sharex=True)
+    s = np.linspace(0, 1, 201)
+    for col, d in enumerate(DOMAINS):
+        names = Y2_COORDS[d]
+        if steps is not None:
+            cn = list(steps.coord_names)
+            for i in range(steps.n_steps):
+                if steps.step_domain[i] != d:
+                    continue
+                q, tau = steps.step_q(i), steps.step_tau(i)
+                for r, n in enumerate(names):
+                    axes[r, col].plot(tau, np.degrees(q[:, cn.index(n)]), color="0.8", lw=0.5)
+        data = gait.data_params.get(d)
+        opt = np.degrees(bezier.evaluate(gait.params[d].alpha, s))
+        for r, n in enumerate(names):
+            ax = axes[r, col]
+            if data is not None:
+                fit = np.degrees(bezier.evaluate(data.alpha, s))
+                ax.plot(s, fit[:, r], color="tab:blue", lw=1.5, label="data fit")
+                off = np.degrees(gait.offsets[d][r]) if d in gait.offsets else 0.0
+                ax.plot(s, fit[:, r] + off, color="tab:blue", lw=1, ls="--",
+                        label="data fit + offset")
+            ax.plot(s, opt[:, r], color="tab:red", lw=1.5, label="optimized")
+            ax.set_title(f"{d}: {LABELS[n]}", fontsize=9)
+            ax.grid(alpha=0.3)
+            if col == 0:
+                ax.set_ylabel("deg")
+        axes[-1, col].set_xlabel(r"$\tau$")
+    axes[0, 0].legend(fontsize=7, loc="best")
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=110)
+    return buf.getvalue()
+
+
+def save_gait_figure(path: str | os.PathLike[str], gait: Gait,
+                     steps: StepsArtifact | None = None) -> None:
+    fmt = os.fspath(path).rsplit(".", 1)[-1].lower()
+    if fmt not in ("png", "pdf", "svg"):
+        raise ValueError(f"{path}: figure format must be png, pdf or svg")
+    atomic_write_bytes(path, gait_figure_bytes(gait, steps, fmt))

@@ -1,0 +1,76 @@
+"""File-level entry points of motion-capture processing (used by ``hpcosim mocap``)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from characterization.mocap.c3d_io import read_c3d
+from characterization.mocap.mapping import MocapMapping, default_mapping, load_mapping
+from characterization.mocap.motive_csv import read_motive_csv
+from characterization.mocap.pipeline import (
+    ProcessedTake,
+    process_take,
+    static_offsets,
+    to_artifact,
+)
+from characterization.mocap.report import render_report
+from characterization.mocap.steps_artifact import StepsFileError, steps_bytes
+from characterization.mocap.take import MocapError, Take
+from characterization.mocap.trc_io import read_trc
+from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import DOMAINS
+
+READERS = {".csv": read_motive_csv, ".c3d": read_c3d, ".trc": read_trc}
+
+
+def read_take(path: str | os.PathLike[str]) -> Take:
+    """Read a Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    reader = READERS.get(p.suffix.lower())
+    if reader is None:
+        raise MocapError(f"{p}: unknown take format '{p.suffix}' (expected .csv, .c3d or .trc)")
+    return reader(p)
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    processed: ProcessedTake
+    steps_path: Path
+    report_paths: tuple[Path, ...]
+
+
+def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str], *,
+                 subject: str | None = None, device: str | None = None,
+                 mapping: str | os.PathLike[str] | MocapMapping | None = None,
+                 with_figures: bool = True) -> ProcessResult:
+    """Read a take, process it and write the steps file, QA report and figures.
+
+    Everything is computed before anything is written, so bad input leaves no file.
+    """
+    import hp_model
+
+    outp = Path(out)
+    if outp.suffix not in (".npz", ".json"):
+        raise StepsFileError(f"{outp}: unknown steps file extension '{outp.suffix}' "
+                             "(use .npz or .json)")
+    if not outp.parent.is_dir():
+        raise FileNotFoundError(f"{outp.parent}: output folder does not exist")
+    m = (mapping if isinstance(mapping, MocapMapping) else
+         load_mapping(mapping) if mapping is not None else default_mapping())
+    take = read_take(take_path)
+    model = hp_model.load_model(subject, device)
+    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
+    offsets = None
+    if m.calibration is not None:
+        offsets = static_offsets(read_take(m.calibration.static_trial), m,
+                                 model.subject.lengths)
+    processed = process_take(take, m, coef, model.subject.lengths, offsets)
+    files = render_report(outp, processed, with_figures)
+    files[outp] = steps_bytes(outp, to_artifact(processed))
+    for path, data in files.items():  # the steps file last
+        atomic_write_bytes(path, data)
+    return ProcessResult(processed, outp, tuple(p for p in files if p != outp))

@@ -1,0 +1,168 @@
+"""What a take holds, and a mapping to start from (``hpcosim mocap inspect``, issue 19).
+
+:func:`summarize` lists the markers and rigid bodies with their valid frames and longest
+gap, the frame rate and length, and a guess of the axes: up is the lab axis along which the
+markers span the most per frame (a standing body is taller than wide or deep; its sign is
+the file format's default, which ``mocap process`` then checks against the trunk and the
+feet), the walking axis the one the markers' centroid travels along the most.
+:func:`mapping_skeleton` writes a mapping TOML with every limb, joint and the segmentation
+filled by name patterns where the names allow it and ``"TODO"`` where they do not, every
+column name of the take listed in comments, for the user to edit.
+"""
+
+from __future__ import annotations
+
+import re
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from characterization.mocap.mapping import JOINTS, LIMBS
+from characterization.mocap.take import Take
+
+TODO = "TODO"
+#: limb -> name pattern (case-insensitive, searched in a rigid body's or marker's name)
+LIMB_PATTERNS = {
+    "hat": r"hat|trunk|torso|thorax|pelvis|sacr|back|chest|c7|strn|clav",
+    "l_thigh": r"(^|[^a-z])(l|left)[_\s:.\-]?(thigh|thi|femur)",
+    "l_shank": r"(^|[^a-z])(l|left)[_\s:.\-]?(shank|tib|shin|leg)",
+    "l_foot": r"(^|[^a-z])(l|left)[_\s:.\-]?(foot|toe|heel|hee|mt|meta)",
+    "r_thigh": r"(^|[^a-z])(r|right)[_\s:.\-]?(thigh|thi|femur)",
+    "p_shin": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(shin|shank|tib|leg)",
+    "p_foot": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(foot|toe|heel|hee|mt|meta)",
+}
+_HEEL, _TOE = re.compile(r"heel|hee|cal", re.I), re.compile(r"toe|mt|meta", re.I)
+_AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Column:
+    """One marker or rigid body: valid share of the frames, longest gap (frames)."""
+
+    name: str
+    kind: str  # "marker", "rigid body", "rigid body marker"
+    valid: float
+    longest_gap: int
+
+
+@dataclass(frozen=True)
+class TakeSummary:
+    source: str
+    n_frames: int
+    frame_rate: float
+    duration: float  # s
+    format_up: str
+    columns: tuple[Column, ...]
+    up_axis: str | None  # e.g. "+y": the largest per-frame span, the format's sign
+    up_span: float  # m, median per-frame span of the markers along it
+    walk_axis: str | None  # e.g. "-x": the centroid's largest net travel
+    walk_travel: float  # m
+
+
+def _longest_run(bad: np.ndarray) -> int:
+    best = run = 0
+    for b in bad:
+        run = run + 1 if b else 0
+        best = max(best, run)
+    return best
+
+
+def _column(name: str, kind: str, p: np.ndarray) -> Column:
+    ok = np.all(np.isfinite(p), axis=1)
+    return Column(name, kind, float(ok.mean()) if len(ok) else 0.0, _longest_run(~ok))
+
+
+def summarize(take: Take) -> TakeSummary:
+    """The take's columns, rate, length and axis guesses (module docstring)."""
+    cols = [_column(n, "marker", p) for n, p in take.markers.items()]
+    cols += [_column(n, "rigid body", rb.position) for n, rb in take.rigid_bodies.items()]
+    cols += [_column(n, "rigid body marker", p) for n, p in take.rigid_body_markers.items()]
+    pts = [p for p in take.markers.values()] or [p for p in take.rigid_body_markers.values()]
+    up_axis, up_span, walk_axis, walk = None, 0.0, None, 0.0
+    if pts:
+        P = np.stack(pts, axis=1)  # (n, m, 3)
+        with warnings.catch_warnings():  # all-NaN frames
+            warnings.simplefilter("ignore", RuntimeWarning)
+            span = np.nanmedian(np.nanmax(P, axis=1) - np.nanmin(P, axis=1), axis=0)
+            centroid = np.nanmean(P, axis=1)
+        if np.isfinite(span).any():
+            k = int(np.nanargmax(span))
+            default = take.up_axis
+            sign = default[0] if default[1] == _AXES[k] else "+"
+            up_axis, up_span = f"{sign}{_AXES[k]}", float(span[k])
+            ok = np.all(np.isfinite(centroid), axis=1)
+            if ok.sum() >= 2:
+                d = centroid[ok][-1] - centroid[ok][0]
+                d[k] = 0.0
+                j = int(np.argmax(np.abs(d)))
+                walk_axis = f"{'+' if d[j] >= 0 else '-'}{_AXES[j]}"
+                walk = float(abs(d[j]))
+    dur = float(take.time[-1] - take.time[0]) if take.n_frames else 0.0
+    return TakeSummary(take.source, take.n_frames, take.frame_rate, dur, take.up_axis,
+                       tuple(cols), up_axis, up_span, walk_axis, walk)
+
+
+def _matches(limb: str, names: list[str]) -> list[str]:
+    pat = re.compile(LIMB_PATTERNS[limb], re.I)
+    return [n for n in names if pat.search(n)]
+
+
+def _limb_guess(limb: str, take: Take) -> tuple[str | None, list[str]]:
+    """(rigid body, markers) whose names look like the limb's."""
+    rbs = _matches(limb, list(take.rigid_bodies))
+    markers = _matches(limb, [*take.markers, *take.rigid_body_markers])
+    rb = rbs[0] if rbs else None
+    if rb is not None:  # prefer the rigid body's own markers
+        own = [m for m in markers if m.split(":")[0] == rb]
+        markers = own + [m for m in markers if m not in own]
+    return rb, markers
+
+
+def _q(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def mapping_skeleton(take: Take) -> str:
+    """A mapping TOML to edit (module docstring)."""
+    s = summarize(take)
+    lines = [f"# mapping skeleton for {take.source} (hpcosim mocap inspect): check every",
+             f"# entry; \"{TODO}\" marks what the names did not tell.  Format: README,",
+             "# 'Mapping file'.  Columns in the take:"]
+    for c in s.columns:
+        lines.append(f"#   {c.kind:17s} {c.name}  ({100 * c.valid:.0f} % valid)")
+    lines += ["", "schema_version = 1",
+              f"up = {_q(s.up_axis) if s.up_axis else _q('auto')}"
+              f"        # guess: the body spans {s.up_span:.2f} m along it",
+              'forward = "auto"   # the trunk\'s travel (or the feet on a treadmill)'
+              + (f"; the markers travel {s.walk_travel:.2f} m along {s.walk_axis}"
+                 if s.walk_axis else ""), ""]
+    first: dict[str, str] = {}
+    for limb in LIMBS:
+        rb, mk = _limb_guess(limb, take)
+        foot = limb.endswith("foot")
+        pair = mk[:2]
+        if foot and len(mk) >= 2:
+            heel = next((m for m in mk if _HEEL.search(m.split(":")[-1])), None)
+            toe = next((m for m in mk if _TOE.search(m.split(":")[-1]) and m != heel), None)
+            if heel and toe:
+                pair = [heel, toe]
+        lines.append(f"[limbs.{limb}]")
+        if take.rigid_bodies:  # a take without any (C3D) is processed from the markers
+            lines.append(f"rigid_body = {_q(rb) if rb else _q(TODO)}"
+                         + ("" if rb else "   # or delete this line if the limb has none"))
+        a, b = [*pair, TODO, TODO][:2]
+        axis = "heel -> toe" if foot else "distal -> proximal"
+        lines.append(f"markers = [{_q(a)}, {_q(b)}]   # {axis}")
+        if foot:
+            lines += ['pair_axis = "forward"', 'rigid_body_axis = "forward"']
+        lines.append("")
+        first[limb] = mk[0] if mk else TODO
+    for j, (a, b) in JOINTS.items():
+        lines += [f"[joints.{j}]   # one marker on {a}, one on {b}",
+                  f"markers = [{_q(first[a])}, {_q(first[b])}]", ""]
+    lines += ["[segmentation]",
+              f"human_foot_marker = {_q(first['l_foot'])}",
+              f"prosthesis_foot_marker = {_q(first['p_foot'])}", "",
+              "[processing]", "max_gap = 0.1", "lowpass_hz = 15.0", ""]
+    return "\n".join(lines)

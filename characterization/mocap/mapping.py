@@ -1,0 +1,210 @@
+"""Which rigid bodies and markers are which limb, and the processing options (TOML config).
+
+Limbs are the model's bodies (``hp_model`` names): ``hat`` (head-arms-trunk, the base),
+``l_thigh``, ``l_shank``, ``l_foot``, ``r_thigh`` (human thigh with the iWalk; AMPRO3's
+top link is rigidly attached to it since q_f = 0, so markers on either count), ``p_shin``,
+``p_foot``.  For each limb: a rigid body (optional) and a marker pair (optional; at least
+one of the two).  The pair's direction first -> second lies along the limb's ``up`` axis
+(leg segments, trunk: e.g. distal -> proximal) or its ``forward`` axis (feet: heel ->
+toe) when the limb is at zero pitch.
+
+Joints (each between two limbs, one marker on each, paper Sec. II): ``hip_l`` (hat,
+l_thigh), ``knee_l``, ``ankle_l``, ``hip_r`` (hat, r_thigh), ``knee_p`` (r_thigh,
+p_shin), ``ankle_p`` (p_shin, p_foot).
+
+Example (the synthetic subject's naming is :func:`default_mapping`)::
+
+    schema_version = 1
+    up = "auto"            # "+y" etc.; auto = the file format's default (Motive +y, C3D +z)
+    forward = "auto"       # walking direction, a lab axis or [x, y, z]; auto = net hip travel
+    [limbs.l_shank]
+    rigid_body = "LShank"
+    markers = ["LShank:Marker1", "LShank:Marker2"]
+    [joints.knee_l]
+    markers = ["LThigh:Marker1", "LShank:Marker2"]
+    [segmentation]
+    human_foot_marker = "LFoot:Marker1"
+    prosthesis_foot_marker = "PFoot:Marker1"
+    [processing]
+    max_gap = 0.1          # s: longest gap with neither pitch source that is interpolated
+    lowpass_hz = 15.0      # zero-phase Butterworth on limb pitches; 0 = off
+    [calibration]
+    static_trial = "static.c3d"  # standing in the neutral posture: per-limb pitch offsets
+
+A limb may also state an offset: ``offset_deg = 5.0`` (its measured pitch at zero pitch).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from characterization.mocap.take import MocapError
+from hp_model.choices import Choice
+
+SCHEMA_VERSION = 1
+LIMBS = ("hat", "l_thigh", "l_shank", "l_foot", "r_thigh", "p_shin", "p_foot")
+#: joint -> (proximal limb, distal limb)
+JOINTS = {
+    "hip_l": ("hat", "l_thigh"),
+    "knee_l": ("l_thigh", "l_shank"),
+    "ankle_l": ("l_shank", "l_foot"),
+    "hip_r": ("hat", "r_thigh"),
+    "knee_p": ("r_thigh", "p_shin"),
+    "ankle_p": ("p_shin", "p_foot"),
+}
+Axis = Literal["up", "forward"]
+AxisSpec = str | Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class LimbSource(_Strict):
+    """Where a limb's pitch comes from."""
+
+    rigid_body: str | None = None
+    markers: tuple[str, str] | None = None
+    pair_axis: Axis = "up"
+    rigid_body_axis: Axis = "up"
+    #: deg: the limb's measured pitch when it is at zero pitch (subtracted; on top of a
+    #: static trial's offset)
+    offset_deg: float = 0.0
+
+    @model_validator(mode="after")
+    def _one_source(self) -> LimbSource:
+        if self.rigid_body is None and self.markers is None:
+            raise ValueError("give a rigid_body, markers, or both")
+        return self
+
+
+class JointMarkers(_Strict):
+    """One marker on the proximal limb and one on the distal limb of a joint."""
+
+    markers: tuple[str, str]
+
+
+class SegmentationMethod(Choice):
+    """How a take is cut into steps (``[segmentation] method``)."""
+
+    PAPER = "paper"  # the turning points of delta_p_hip, the paper's rule
+    CONTACT = "contact"  # each foot's touchdowns from its markers (:mod:`foot_contact`)
+
+
+class Segmentation(_Strict):
+    """The feet's markers and the :class:`SegmentationMethod`."""
+
+    human_foot_marker: str
+    prosthesis_foot_marker: str
+    method: SegmentationMethod = SegmentationMethod.PAPER
+    #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
+    human_side: str = "Left"
+    prosthesis_side: str = "Right"
+    foot_speed_threshold: Annotated[float, Field(gt=0)] = 0.25  # m/s: foot "moving"
+    min_excursion: Annotated[float, Field(gt=0)] = 0.05  # m: delta_p_hip turning hysteresis
+
+
+class Processing(_Strict):
+    max_gap: Annotated[float, Field(ge=0)] = 0.1  # s
+    lowpass_hz: Annotated[float, Field(ge=0)] = 15.0
+    min_joint_rotation_deg: Annotated[float, Field(gt=0)] = 5.0
+
+
+class Calibration(_Strict):
+    """Anatomical calibration: a static trial of the subject standing in the neutral
+    posture (every joint angle and the trunk pitch zero); each limb's median pitch in it is
+    that limb's offset.  The path is relative to the mapping file."""
+
+    static_trial: str
+
+
+class MocapMapping(_Strict):
+    """The whole mapping config."""
+
+    schema_version: Literal[1] = 1
+    up: AxisSpec = "auto"
+    forward: AxisSpec = "auto"
+    limbs: dict[str, LimbSource]
+    joints: dict[str, JointMarkers] = Field(default_factory=dict)
+    segmentation: Segmentation | None = None
+    processing: Processing = Processing()
+    calibration: Calibration | None = None
+
+    @field_validator("limbs")
+    @classmethod
+    def _limb_names(cls, v: dict[str, LimbSource]) -> dict[str, LimbSource]:
+        return _known_keys(v, LIMBS, "limb")
+
+    @field_validator("joints")
+    @classmethod
+    def _joint_names(cls, v: dict[str, JointMarkers]) -> dict[str, JointMarkers]:
+        return _known_keys(v, JOINTS, "joint")
+
+
+def _known_keys(v: dict, allowed, what: str) -> dict:
+    """``v`` unchanged if every key is in ``allowed``, else a ValueError naming the key."""
+    for k in v:
+        if k not in allowed:
+            raise ValueError(f"unknown {what} '{k}' ({what}s are {', '.join(allowed)})")
+    return v
+
+
+def load_mapping(path: str | Path) -> MocapMapping:
+    """Read and validate a mapping TOML; errors name the file and the field."""
+    p = Path(path)
+    try:
+        raw = tomllib.loads(p.read_text())
+    except FileNotFoundError:
+        raise
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise MocapError(f"{p}: not valid TOML ({e})") from None
+    try:
+        m = MocapMapping.model_validate(raw)
+    except ValidationError as e:
+        err = e.errors()[0]
+        loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
+        raise MocapError(f"{p}: field '{loc}': {err['msg']}") from None
+    if m.calibration is not None:  # relative to the mapping file
+        trial = p.parent / m.calibration.static_trial
+        m = m.model_copy(update={"calibration": Calibration(static_trial=str(trial))})
+    return m
+
+
+def synthetic_names() -> dict[str, str]:
+    """Rigid-body name of each limb in the synthetic subject (markers are
+    '<rigid body>:Marker1..4'; Marker1 -> Marker2 is the pitch pair)."""
+    return {"hat": "HAT", "l_thigh": "LThigh", "l_shank": "LShank", "l_foot": "LFoot",
+            "r_thigh": "RThigh", "p_shin": "PShin", "p_foot": "PFoot"}
+
+
+def default_mapping() -> MocapMapping:
+    """The mapping for the synthetic subject's naming (``hpcosim mocap synth``)."""
+    n = synthetic_names()
+    limbs = {
+        limb: LimbSource(rigid_body=rb, markers=(f"{rb}:Marker1", f"{rb}:Marker2"),
+                         pair_axis="forward" if limb.endswith("foot") else "up",
+                         rigid_body_axis="forward" if limb.endswith("foot") else "up")
+        for limb, rb in n.items()
+    }
+    # proximal limb: its distal marker (Marker1; the trunk's Marker1 is on the sacrum);
+    # distal limb: its proximal marker (Marker2; feet: Marker3, on the instep)
+    joints = {
+        j: JointMarkers(markers=(f"{n[a]}:Marker1",
+                                 f"{n[b]}:Marker3" if b.endswith("foot") else f"{n[b]}:Marker2"))
+        for j, (a, b) in JOINTS.items()
+    }
+    return MocapMapping(
+        limbs=limbs, joints=joints,
+        segmentation=Segmentation(human_foot_marker=f"{n['l_foot']}:Marker1",
+                                  prosthesis_foot_marker=f"{n['p_foot']}:Marker1"))

@@ -1,0 +1,186 @@
+"""QA report (Markdown + JSON) and figures of a processed take, written next to the steps file.
+
+Report: steps found per domain, steps dropped and why, frames from each pitch source per
+limb, gaps filled and left, joint-centre fits (residual, rotation, well-posedness), notes.
+Figures: joint angles of every step over tau (one panel per coordinate and domain) and phase
+portraits (angle vs. angular velocity) of the prosthesis knee and ankle per step.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from characterization.mocap.limb_angles import SOURCE_NAMES
+from characterization.mocap.pipeline import ProcessedTake
+from hp_model import COORDS
+from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import DOMAINS
+
+ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
+
+
+def qa_summary(p: ProcessedTake) -> dict[str, object]:
+    """The QA numbers as plain data (JSON-ready)."""
+    rate = p.frame_rate
+    limbs = {}
+    for k, lp in p.pitches.items():
+        filled = [g for g in lp.gaps if g.filled]
+        left = [g for g in lp.gaps if not g.filled]
+        limbs[k] = {
+            "frames": lp.counts(),
+            "marker_pair_offset_deg": float(np.degrees(lp.pair_offset)),
+            "gaps_filled": len(filled), "frames_filled": sum(g.length for g in filled),
+            "gaps_unfilled": len(left), "frames_unfilled": sum(g.length for g in left),
+            "longest_unfilled_s": max((g.length for g in left), default=0) / rate,
+        }
+    joints = {j: {"residual_mm": f.residual_rms * 1000, "rotation_sd_deg":
+                  float(np.degrees(f.rotation_sd)), "frames": f.frames,
+                  "well_posed": f.well_posed, "lambda_proximal_m": f.lam1.tolist(),
+                  "lambda_distal_m": f.lam2.tolist(), "message": f.message}
+              for j, f in p.joints.items()}
+    return {
+        "source": p.source, "frames": len(p.time), "frame_rate_hz": rate,
+        "walking_direction_lab": p.frame.forward.tolist(), "up_lab": p.frame.up.tolist(),
+        "steps": {d: sum(s.domain == d for s in p.steps) for d in DOMAINS},
+        "steps_without_single_support": sum(s.single_support is None for s in p.steps),
+        "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
+                    for d in p.dropped],
+        "limbs": limbs, "joints": joints, "notes": list(p.notes),
+        "segmentation": p.segmentation,
+        "step_intervals": [{"domain": st.domain, "start": st.start, "end": st.end,
+                            "t_start_s": float(p.time[st.start]),
+                            "t_end_s": float(p.time[st.end])} for st in p.steps],
+        "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
+                         "ground_speed_m_s": c.ground_speed} for f, c in p.contacts.items()},
+        "lab_events": p.lab_events,
+    }
+
+
+def qa_markdown(summary: dict) -> str:
+    s = summary
+    lines = [f"# Motion-capture QA: {Path(s['source']).name}", "",
+             f"{s['frames']} frames at {s['frame_rate_hz']:g} Hz; walking direction (lab) "
+             f"{np.round(s['walking_direction_lab'], 3).tolist()}, up "
+             f"{np.round(s['up_lab'], 3).tolist()}.", "",
+             f"Steps kept: {s['steps']['ps']} ps, {s['steps']['pns']} pns "
+             f"({s['steps_without_single_support']} without a detected single-support part);"
+             f" dropped: {len(s['dropped'])}.", ""]
+    if s["dropped"]:
+        lines += ["| dropped | frames | reason |", "|---|---|---|"]
+        lines += [f"| {d['domain']} | {d['start']}-{d['end']} | {d['reason']} |"
+                  for d in s["dropped"]]
+        lines.append("")
+    names = list(SOURCE_NAMES.values())
+    lines += ["## Limb pitch sources (frames)", "",
+              "| limb | " + " | ".join(names) + " | gaps filled (frames) | gaps left (frames) "
+              "| pair offset (deg) |", "|---" * (len(names) + 4) + "|"]
+    for k, v in s["limbs"].items():
+        lines.append(f"| {k} | " + " | ".join(str(v["frames"][n]) for n in names)
+                     + f" | {v['gaps_filled']} ({v['frames_filled']}) | {v['gaps_unfilled']} "
+                     f"({v['frames_unfilled']}) | {v['marker_pair_offset_deg']:.2f} |")
+    lines += ["", "## Joint centres", "",
+              "| joint | residual (mm RMS) | rotation SD (deg) | frames | well posed |",
+              "|---|---|---|---|---|"]
+    for j, v in s["joints"].items():
+        lines.append(f"| {j} | {v['residual_mm']:.2f} | {v['rotation_sd_deg']:.1f} | "
+                     f"{v['frames']} | {'yes' if v['well_posed'] else 'NO'} |")
+    lines += ["", f"## Steps (segmentation: {s['segmentation']})", "",
+              "| step | domain | frames | time (s) |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['domain']} | {v['start']}-{v['end']} | {v['t_start_s']:.3f}-"
+              f"{v['t_end_s']:.3f} |" for k, v in enumerate(s["step_intervals"])]
+    if s["contacts"]:
+        lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
+        lines += [f"- {f}: touchdowns {c['touchdowns']}, lift-offs {c['liftoffs']} (ground "
+                  f"{c['ground_speed_m_s']:+.2f} m/s)" for f, c in s["contacts"].items()]
+    if s["lab_events"]:
+        lines += ["", "## Found events against the lab's (frames, found - lab)", "",
+                  "| foot | event | in the file | max abs | median abs |", "|---|---|---|---|---|"]
+        for foot, kinds in s["lab_events"].items():
+            for kind, v in kinds.items():
+                lines.append(f"| {foot} | {kind} | {v['lab_events']} | {v['max_abs_frames']} "
+                             f"| {v['median_abs_frames']} |")
+    lines += ["", "## Notes", ""] + [f"- {n}" for n in s["notes"]]
+    return "\n".join(lines) + "\n"
+
+
+def _png(fig: object) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)  # type: ignore[attr-defined]
+    return buf.getvalue()
+
+
+def figures(p: ProcessedTake) -> dict[str, bytes]:
+    """PNG bytes of the joint-angle and phase-portrait figures."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
+
+    out = {}
+    fig = Figure(figsize=(14, 5.5))
+    fig.subplots_adjust(left=0.05, right=0.99, top=0.94, bottom=0.09, wspace=0.35,
+                        hspace=0.25)
+    axes = fig.subplots(2, len(ANGLES), sharex=True)
+    for r, dom in enumerate(DOMAINS):
+        steps = [s for s in p.steps if s.domain == dom]
+        for c, name in enumerate(ANGLES):
+            ax = axes[r, c]
+            col = COORDS.index(name)
+            segs = [np.column_stack([s.tau, np.degrees(p.q[s.start:s.end + 1, col])])
+                    for s in steps]
+            ax.add_collection(LineCollection(segs, linewidths=0.7, alpha=0.6))
+            ax.autoscale()
+            ax.set_title(f"{name} ({dom})", fontsize=9)
+            if c == 0:
+                ax.set_ylabel("deg")
+            if r == 1:
+                ax.set_xlabel("tau")
+    out["joint_angles"] = _png(fig)
+
+    fig = Figure(figsize=(9, 4))
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.13, wspace=0.3)
+    axes = fig.subplots(1, 2)
+    for ax, name in zip(axes, ("th_pk", "th_pa"), strict=True):
+        col = COORDS.index(name)
+        for dom, color in (("ps", "tab:green"), ("pns", "tab:pink")):
+            segs = []
+            for s in (s for s in p.steps if s.domain == dom):
+                th = p.q[s.start:s.end + 1, col]
+                segs.append(np.column_stack([np.degrees(th),
+                                             np.degrees(np.gradient(th) * p.frame_rate)]))
+            ax.add_collection(LineCollection(segs, colors=color, linewidths=0.6, alpha=0.6,
+                                             label=dom))
+        ax.autoscale()
+        ax.set_xlabel(f"{name} (deg)")
+        ax.set_ylabel(f"d{name}/dt (deg/s)")
+        ax.legend(fontsize=8)
+    out["phase_portraits"] = _png(fig)
+    return out
+
+
+def render_report(steps_path: str | Path, p: ProcessedTake, with_figures: bool = True
+                  ) -> dict[Path, bytes]:
+    """Contents of ``<stem>.qa.md``, ``<stem>.qa.json`` and the figures, by output path
+    (next to the steps file); nothing is written."""
+    base = Path(steps_path).with_suffix("")
+    summary = qa_summary(p)
+    out = {base.with_name(base.name + ".qa.md"): qa_markdown(summary).encode(),
+           base.with_name(base.name + ".qa.json"): json.dumps(summary, indent=2).encode()}
+    if with_figures:
+        for name, png in figures(p).items():
+            out[base.with_name(f"{base.name}_{name}.png")] = png
+    return out
+
+
+def write_report(steps_path: str | Path, p: ProcessedTake, with_figures: bool = True
+                 ) -> list[Path]:
+    """Write the QA report and figures next to the steps file (each atomically)."""
+    files = render_report(steps_path, p, with_figures)
+    for path, data in files.items():
+        atomic_write_bytes(path, data)
+    return list(files)

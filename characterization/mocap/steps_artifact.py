@@ -1,0 +1,235 @@
+"""The steps artifact: per-step joint trajectories from one take (``.npz`` or ``.json``).
+
+Layout, ``schema_version = 1`` (n frames, k steps, 12 coordinates, 6 joints, 7 limbs; SI
+units, radians, sagittal world frame x forward / z up):
+
+| field | shape | meaning |
+|---|---|---|
+| schema_version | () int | 1 |
+| source | () str | the take's file |
+| frame_rate | () float | Hz |
+| coord_names | (12,) str | the model's q names (hp_model.COORDS) |
+| limb_names, joint_names | (7,), (6,) str | see :mod:`characterization.mocap.mapping` |
+| time | (n,) | s |
+| q | (n, 12) | x_B, z_B = hip centre (m), th_B = trunk pitch, joint angles; q_f = 0; |
+|   |         | NaN in unfilled gaps |
+| limb_pitch | (n, 7) | rad |
+| pitch_source | (n, 7) int | 0 none, 1 rigid body, 2 markers, 3 interpolated |
+| joint_position | (n, 6, 2) | m, joint centres (x, z) |
+| joint_lambda | (6, 2, 2) | marker -> joint vectors L1, L2 in their limb frames, m |
+| joint_residual | (6,) | RMS discrepancy of the two joint estimates, m (NaN: not fitted) |
+| joint_well_posed | (6,) bool | |
+| delta_ps | (n,) | delta_p_hip(th_pk, th_pa), m |
+| hip_coefficients | (2, 2) | rows ps, pns: (c_k, c_a) |
+| step_domain | (k,) str | "ps" / "pns" |
+| step_start, step_end | (k,) int | first and last frame (both included) |
+| step_delta_lower, step_delta_upper | (k,) | delta_p_hip at the step's first / last frame, m |
+| step_ss_start, step_ss_end | (k,) int | single-support frames (double support |
+|   |          | trimmed), -1 if none |
+| tau | (sum T,) | tau of every step, concatenated |
+| tau_offsets | (k + 1,) int | step i's tau is tau[tau_offsets[i]:tau_offsets[i + 1]] |
+| dropped_domain, dropped_start, dropped_end, dropped_reason | (m,) | steps not kept, and why |
+
+Saving is atomic (temp file + rename).  Loading validates everything and raises
+:class:`StepsFileError` with one line naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from characterization.mocap.take import MocapError
+from hp_model.atomic_io import atomic_write_bytes
+
+SCHEMA_VERSION = 1
+
+
+class StepsFileError(MocapError):
+    """A steps file that cannot be used (wrong version, missing or bad field)."""
+
+
+@dataclass(frozen=True)
+class StepsArtifact:
+    """In-memory form of the steps file (fields as in the module docstring)."""
+
+    source: str
+    frame_rate: float
+    coord_names: np.ndarray
+    limb_names: np.ndarray
+    joint_names: np.ndarray
+    time: np.ndarray
+    q: np.ndarray
+    limb_pitch: np.ndarray
+    pitch_source: np.ndarray
+    joint_position: np.ndarray
+    joint_lambda: np.ndarray
+    joint_residual: np.ndarray
+    joint_well_posed: np.ndarray
+    delta_ps: np.ndarray
+    hip_coefficients: np.ndarray
+    step_domain: np.ndarray
+    step_start: np.ndarray
+    step_end: np.ndarray
+    step_delta_lower: np.ndarray
+    step_delta_upper: np.ndarray
+    step_ss_start: np.ndarray
+    step_ss_end: np.ndarray
+    tau: np.ndarray
+    tau_offsets: np.ndarray
+    dropped_domain: np.ndarray
+    dropped_start: np.ndarray
+    dropped_end: np.ndarray
+    dropped_reason: np.ndarray
+    schema_version: int = SCHEMA_VERSION
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.step_domain)
+
+    def step_tau(self, i: int) -> np.ndarray:
+        return self.tau[self.tau_offsets[i]:self.tau_offsets[i + 1]]
+
+    def step_q(self, i: int) -> np.ndarray:
+        return self.q[self.step_start[i]:self.step_end[i] + 1]
+
+
+_STR = {"source", "coord_names", "limb_names", "joint_names", "step_domain", "dropped_domain",
+        "dropped_reason"}
+_INT = {"pitch_source", "step_start", "step_end", "step_ss_start", "step_ss_end",
+        "tau_offsets", "dropped_start", "dropped_end", "schema_version"}
+_BOOL = {"joint_well_posed"}
+
+
+def _coerce(name: str, value: object) -> object:
+    if name == "source":
+        return str(np.asarray(value))
+    if name == "frame_rate":
+        return float(np.asarray(value))
+    if name == "schema_version":
+        return int(np.asarray(value))
+    if name in _STR:
+        return np.asarray(value, dtype=str)
+    if name in _INT:
+        return np.asarray(value, dtype=np.int64)
+    if name in _BOOL:
+        return np.asarray(value, dtype=bool)
+    return np.asarray(value, dtype=float)
+
+
+def to_dict(a: StepsArtifact) -> dict[str, object]:
+    return {f.name: getattr(a, f.name) for f in fields(a)}
+
+
+def steps_bytes(path: str | os.PathLike[str], a: StepsArtifact) -> bytes:
+    """The file content for ``.npz`` (compressed) or ``.json``, by the path's extension."""
+    p = Path(path)
+    d = to_dict(a)
+    if p.suffix == ".npz":
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **{k: np.asarray(v) for k, v in d.items()})
+        return buf.getvalue()
+    if p.suffix == ".json":
+        def enc(v: object) -> object:
+            if isinstance(v, np.ndarray):
+                if v.dtype.kind == "f":
+                    return np.where(np.isfinite(v), v, None).tolist()
+                return v.tolist()
+            return v
+        return json.dumps({k: enc(v) for k, v in d.items()}).encode()
+    raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}' (use .npz or .json)")
+
+
+def save_steps(path: str | os.PathLike[str], a: StepsArtifact) -> None:
+    """Write ``.npz`` or ``.json`` by the file's extension, atomically."""
+    atomic_write_bytes(path, steps_bytes(path, a))
+
+
+def load_steps(path: str | os.PathLike[str]) -> StepsArtifact:
+    """Read and validate a steps file."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: no such file")
+    try:
+        if p.suffix == ".npz":
+            with np.load(p, allow_pickle=False) as z:
+                raw: dict[str, object] = {k: z[k] for k in z.files}
+        elif p.suffix == ".json":
+            raw = json.loads(p.read_text())
+            raw = {k: (np.array(v, dtype=float) if isinstance(v, list) and k not in _STR | _INT
+                       | _BOOL else v) for k, v in raw.items()}
+        else:
+            raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}'")
+    except StepsFileError:
+        raise
+    except Exception as e:
+        raise StepsFileError(f"{p}: not a readable steps file ({type(e).__name__})") from None
+    if not isinstance(raw, dict):
+        raise StepsFileError(f"{p}: not a steps file")
+    ver = raw.get("schema_version")
+    if ver is None:
+        raise StepsFileError(f"{p}: field 'schema_version' missing")
+    if int(np.asarray(ver)) != SCHEMA_VERSION:
+        raise StepsFileError(f"{p}: field 'schema_version': version {int(np.asarray(ver))} is "
+                             f"not supported (this program reads {SCHEMA_VERSION})")
+    vals = {}
+    for f in fields(StepsArtifact):
+        if f.name not in raw:
+            raise StepsFileError(f"{p}: field '{f.name}' missing")
+        try:
+            vals[f.name] = _coerce(f.name, raw[f.name])
+        except (TypeError, ValueError):
+            raise StepsFileError(f"{p}: field '{f.name}': wrong type") from None
+    a = StepsArtifact(**vals)
+    validate_steps(a, str(p))
+    return a
+
+
+def validate_steps(a: StepsArtifact, src: str) -> None:
+    """Shapes and value checks; raises :class:`StepsFileError` naming the field."""
+    n, k = len(a.time), len(a.step_domain)
+    nj, nl, nq = len(a.joint_names), len(a.limb_names), len(a.coord_names)
+
+    def need(field: str, ok: bool, what: str) -> None:
+        if not ok:
+            raise StepsFileError(f"{src}: field '{field}': {what}")
+
+    need("frame_rate", np.isfinite(a.frame_rate) and a.frame_rate > 0, "must be > 0")
+    need("time", a.time.ndim == 1 and n > 1 and bool(np.all(np.diff(a.time) > 0)),
+         "must be increasing")
+    shapes = {"q": (n, nq), "limb_pitch": (n, nl), "pitch_source": (n, nl),
+              "joint_position": (n, nj, 2), "joint_lambda": (nj, 2, 2), "joint_residual": (nj,),
+              "joint_well_posed": (nj,), "delta_ps": (n,), "hip_coefficients": (2, 2)}
+    for name, shape in shapes.items():
+        need(name, getattr(a, name).shape == shape, f"shape {getattr(a, name).shape}, "
+             f"expected {shape}")
+    for name in ("step_start", "step_end", "step_delta_lower", "step_delta_upper",
+                 "step_ss_start", "step_ss_end"):
+        need(name, getattr(a, name).shape == (k,), f"expected {k} values")
+    need("pitch_source", bool(np.all((a.pitch_source >= 0) & (a.pitch_source <= 3))),
+         "codes must be 0..3")
+    need("step_domain", bool(np.all(np.isin(a.step_domain, ["ps", "pns"]))),
+         "values must be 'ps' or 'pns'")
+    need("step_start", bool(np.all((a.step_start >= 0) & (a.step_start < a.step_end)
+                                   & (a.step_end < n))), "steps must lie inside the take")
+    need("tau_offsets", a.tau_offsets.shape == (k + 1,) and bool(
+        np.array_equal(np.diff(a.tau_offsets), a.step_end - a.step_start + 1))
+        and (k == 0 or a.tau_offsets[0] == 0) and a.tau_offsets[-1] == len(a.tau),
+        "must delimit one tau value per step frame")
+    need("tau", bool(np.all(np.isfinite(a.tau))), "must be finite")
+    need("step_delta_upper", bool(np.all(a.step_delta_upper != a.step_delta_lower)),
+         "equals the lower bound")
+    for i in range(k):
+        s, e = a.step_start[i], a.step_end[i]
+        need("q", bool(np.all(np.isfinite(a.q[s:e + 1]))), f"NaN inside step {i}")
+        ss, se = a.step_ss_start[i], a.step_ss_end[i]
+        need("step_ss_start", (ss == -1 and se == -1) or (s <= ss <= se <= e),
+             f"step {i}: single support must lie inside the step")
+    m = len(a.dropped_domain)
+    for name in ("dropped_start", "dropped_end", "dropped_reason"):
+        need(name, getattr(a, name).shape == (m,), f"expected {m} values")

@@ -1,0 +1,200 @@
+"""The ``hpcosim`` command line.
+
+Every verb is a thin layer over a plain Python function.  Errors a user can cause (bad
+files, bad values) print one line ``hpcosim: error: ...`` to stderr and exit with status 2;
+a check that runs but fails exits with status 1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+import hp_model
+from characterization.gait.bezier_fit import FitError
+from characterization.gait.phzd import GaitOptimizationError, GaitVerificationError
+from characterization.mocap.take import MocapError
+from hp_model.artifacts import ArtifactError
+from hp_model.compiled import CompileBackend, CompileError
+from hp_model.config import ConfigError
+from hp_model.tree import ModelError
+from human_fmu.build import FmuBuildError
+from orchestrator.cli import experiments as experiments_cli
+from orchestrator.cli.cosim import register as register_cosim
+from orchestrator.cli.fmu import fmu_app
+from orchestrator.cli.gait import gait_app
+from orchestrator.cli.mocap import mocap_app
+from orchestrator.cli.sweep import sweep_app
+from orchestrator.cli.tube import tube_app
+
+app = typer.Typer(
+    name="hpcosim",
+    help="Motion capture to a model-based powered-prosthesis controller, proven in a "
+    "human-prosthesis co-simulation (Gehlhar, Chen, Ames, IROS 2020).",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+model_app = typer.Typer(help="The human-prosthesis model.", no_args_is_help=True)
+app.add_typer(model_app, name="model")
+app.add_typer(mocap_app, name="mocap")
+app.add_typer(gait_app, name="gait")
+app.add_typer(tube_app, name="tube")
+app.add_typer(fmu_app, name="fmu")
+app.add_typer(sweep_app, name="sweep")
+app.command("experiments")(experiments_cli.experiments)
+app.command("demo")(experiments_cli.demo)
+register_cosim(app)
+
+#: exceptions that are the user's input, reported in one line (FitError covers
+#: characterization.tube.playback.PlaybackError and tube.fit.TubeFitError without importing
+#: scipy at start-up; ArtifactError: gait and tube files)
+USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
+                                               FileNotFoundError, MocapError, FitError,
+                                               ArtifactError, GaitOptimizationError,
+                                               FmuBuildError)
+
+#: a check that ran and failed (exit 1)
+CHECK_FAILURES: tuple[type[BaseException], ...] = (GaitVerificationError,)
+
+SubjectOpt = Annotated[Path | None, typer.Option(
+    "--subject", help="Subject TOML (default: the shipped example subject).",
+    dir_okay=False)]
+DeviceOpt = Annotated[Path | None, typer.Option(
+    "--device", help="Device TOML (default: the shipped AMPRO3 + iWalk estimates).",
+    dir_okay=False)]
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"hpcosim {hp_model.__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                          help="Print the version and exit.")] = False,
+) -> None:
+    """hpcosim: from motion capture to a prosthesis controller you can trust."""
+
+
+@model_app.command("check")
+def model_check(
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+    backend: Annotated[CompileBackend, typer.Option(
+        help="auto (compiled C when a compiler exists), c, or sx (CasADi interpreter).")
+    ] = CompileBackend.AUTO,
+) -> None:
+    """Build the 12-DOF model and the 5-DOF prosthesis subsystem, evaluate them, and check
+    physics that fixes the answers (static balance, impact, subsystem consistency)."""
+    from orchestrator.cli.model_check import run_checks
+
+    console = Console()
+    with console.status("building and compiling the models (cached after the first run)"):
+        model = hp_model.load_model(
+            str(subject) if subject else None, str(device) if device else None)
+        rows, timing = run_checks(model, backend=backend)
+    s, d = model.subject, model.device
+    console.print(f"[bold]{model.name}[/]: subject '{s.name}' ({s.body_mass:g} kg, {s.sex}), "
+                  f"device '{d.name}'")
+    console.print(f"  {model.nq} coordinates: {', '.join(model.coord_names)}")
+    console.print(f"  total mass {model.tree.total_mass:.3f} kg (prosthesis "
+                  f"{model.prosthesis_mass:.3f} kg); domains "
+                  + ", ".join(f"{n} ({dm.n_constraints} constraints)"
+                              for n, dm in model.domains.items())
+                  + f"; backend {model.numeric(backend).backend}")
+    table = Table(title="model self-check")
+    table.add_column("check")
+    table.add_column("value", justify="right")
+    table.add_column("expected", justify="right")
+    table.add_column("ok", justify="center")
+    for r in rows:
+        table.add_row(r.name, r.value, r.expected, "[green]yes[/]" if r.ok else "[red]NO[/]")
+    table.add_row("D, H, J, Jdot qd (12 DOF) per call (us)", f"{timing['terms_ps_us']:.2f}", "",
+                  "")
+    table.add_row("constrained dynamics (qdd, lam) per call (us)",
+                  f"{timing['dyn_ps_us']:.2f}", "", "")
+    table.add_row("prosthesis 4-state form f_p, g_m, g_s per call (us)",
+                  f"{timing['sub_reduced_us']:.2f}", "", "")
+    console.print(table)
+    if not all(r.ok for r in rows):
+        raise typer.Exit(1)
+
+
+def _click_exceptions() -> tuple[type[BaseException], ...]:
+    """Usage-error classes of every click a CLI may raise: typer >= 0.16 vendors its own
+    (``typer._click``) beside an installed click."""
+    out: list[type[BaseException]] = []
+    for mod in ("typer._click.exceptions", "click.exceptions"):
+        with contextlib.suppress(ImportError):
+            out.append(__import__(mod, fromlist=["ClickException"]).ClickException)
+    return tuple(out)
+
+
+#: user errors of modules the CLI loads only when a verb needs them: (module, class)
+LAZY_USER_ERRORS = (("orchestrator.cosim.recording", "RecordingError"),
+                    ("orchestrator.cosim.master", "CosimError"),
+                    ("bus_schemas.bus_config", "BusConfigError"))
+
+
+def _loaded_user_errors() -> tuple[type[BaseException], ...]:
+    """The classes of :data:`LAZY_USER_ERRORS` whose module is loaded (an exception of one
+    can only come from a loaded module)."""
+    out = []
+    for mod, name in LAZY_USER_ERRORS:
+        m = sys.modules.get(mod)
+        if m is not None:
+            out.append(getattr(m, name))
+    return tuple(out)
+
+
+def _os_error(e: OSError) -> str:
+    """``FILE: reason`` of an operating-system error (the file it names, if any)."""
+    what = e.strerror or str(e)
+    return _one_line(f"{e.filename}: {what}" if e.filename else what)
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: run the app, turning user errors into one-line messages."""
+    try:
+        # without standalone mode click returns (not raises) a command's typer.Exit code
+        rc = app(args=argv, standalone_mode=False)
+    except typer.Exit as e:
+        return e.exit_code
+    except typer.Abort:
+        print("hpcosim: aborted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as e:
+        print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
+        return 2
+    except CHECK_FAILURES as e:
+        print(f"hpcosim: check failed: {e}", file=sys.stderr)
+        return 1
+    except OSError as e:  # the environment: a full disk, a read-only folder, a size limit
+        print(f"hpcosim: error: {_os_error(e)}", file=sys.stderr)
+        return 2
+    except Exception as e:  # click usage errors carry their own exit code
+        if isinstance(e, _loaded_user_errors()):
+            print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
+            return 2
+        if isinstance(e, _click_exceptions()):
+            print(f"hpcosim: error: {_one_line(e.format_message())}", file=sys.stderr)
+            return int(getattr(e, "exit_code", 2))
+        raise
+    return rc if isinstance(rc, int) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

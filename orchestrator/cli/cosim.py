@@ -1,0 +1,249 @@
+"""``hpcosim controller serve``, ``hpcosim run``, ``hpcosim replay``, ``hpcosim tube refit``."""
+
+from __future__ import annotations
+
+import glob
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_folder
+from orchestrator.cli.tube import tube_app  # `tube refit` joins `tube fit`
+from orchestrator.modes import CosimMode
+
+controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
+recording_app = typer.Typer(help="Co-simulation recordings (MCAP).", no_args_is_help=True)
+
+GaitOpt = Annotated[Path, typer.Option("--gait", help="Gait file.", dir_okay=False)]
+TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_okay=False)]
+
+
+@controller_app.command("serve")
+def serve(
+    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
+                                            "choice), clfqp-exact, clfqp-paper, "
+                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
+    gait: GaitOpt,
+    tube: TubeOpt,
+    bus: Annotated[Path | None, typer.Option("--bus", help="Bus config (TOML/JSON): "
+                                             "interface zenoh/virtual/socketcan/...")] = None,
+    interface: Annotated[str | None, typer.Option(help="Override: python-can interface.")
+                         ] = None,
+    run_id: Annotated[str | None, typer.Option(help="Override: zenoh run id.")] = None,
+    channel: Annotated[str | None, typer.Option(help="Override: CAN channel (non-zenoh).")
+                       ] = None,
+    listen: Annotated[str | None, typer.Option(help="Override: zenoh listen endpoints.")
+                      ] = None,
+    connect: Annotated[str | None, typer.Option(help="Override: zenoh connect endpoints.")
+                       ] = None,
+    watchdog_ms: Annotated[float, typer.Option(min=0.1, help="Safe state after this long without "
+                                               "measurements.")] = 50.0,
+) -> None:
+    """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
+    from prosthesis_controller.node import bus_config_from_args, run_node
+
+    cfg = bus_config_from_args(str(bus) if bus else None, interface=interface, run_id=run_id,
+                               channel=channel, listen=listen, connect=connect)
+    s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3)
+    Console(stderr=True).print(f"controller node: {s}")
+
+
+def run(
+    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
+                                            "choice), clfqp-exact, clfqp-paper, "
+                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
+    gait: GaitOpt,
+    tube: TubeOpt,
+    steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
+    perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
+                                         "corrupt-counter, corrupt-checksum, corrupt-length, "
+                                         "kill, hang (CASE[:start[:every[:count]]]), "
+                                         "stall[:START[:MS]] (the plant sleeps MS ms), "
+                                         "human[:AMPLITUDE[:SEED]].")] = "none",
+    mode: Annotated[CosimMode, typer.Option(help="lockstep or realtime.")
+                    ] = CosimMode.LOCKSTEP,
+    record: Annotated[Path | None, typer.Option(help="MCAP file to write.", dir_okay=False)
+                      ] = None,
+    fmu: Annotated[Path | None, typer.Option(help="Human FMU (default: built and cached "
+                                             "for the gait).", dir_okay=False)] = None,
+    max_time: Annotated[float, typer.Option(min=0.001, help="Simulation time limit [s].")
+                        ] = 60.0,
+    pin: Annotated[bool, typer.Option(help="Run the plant and the controller each on its "
+                                      "own CPU.")] = True,
+) -> None:
+    """Co-simulate the human FMU with the controller in its own process over zenoh."""
+    from orchestrator.cosim.master import CosimConfig, run_cosim
+
+    console = Console()
+    if record is not None:  # before the FMU build and the controller start
+        check_output_folder(record.parent, "--record")
+    cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
+                      perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time,
+                      pin_cpus=pin)
+    from orchestrator.cosim.master import CosimError
+
+    with console.status("starting") as status:
+        try:
+            res = run_cosim(cfg, say=lambda m: status.update(m),
+                            progress=lambda k, t, s: status.update(
+                                f"t = {t:.2f} s, {s}/{steps} steps"),
+                            install_signal_handlers=True)
+        except (CosimError, ValueError) as e:
+            print(f"hpcosim: error: {e}", file=sys.stderr)
+            raise typer.Exit(2) from None
+    if res.interrupted:
+        import signal as _signal
+
+        where = f"; recording complete: {record}" if record else ""
+        print(f"hpcosim: interrupted by {res.interrupted} at t = {res.sim_time:.3f} s after "
+              f"{res.steps} of {steps} steps{where}", file=sys.stderr)
+        raise typer.Exit(128 + int(_signal.Signals[res.interrupted]))
+    t = Table(title=f"co-simulation {res.run_id} ({mode})")
+    t.add_column("item")
+    t.add_column("value")
+    end = ("FAULTED: " + res.fault_reason) if res.faulted else \
+        (f"fell ({res.fall_reason}, code {res.fall_code})" if res.fell else "completed")
+    t.add_row("result", end)
+    t.add_row("sim time / steps / ticks", f"{res.sim_time:.3f} s / {res.steps} / {res.ticks}")
+    t.add_row("real-time factor", f"{res.real_time_factor:.2f}")
+    t.add_row("frames tx / rx", f"{res.frames_tx} / {res.frames_rx}")
+    t.add_row("missed / late replies", f"{res.missed} / {res.late}")
+    if mode == CosimMode.REALTIME:
+        t.add_row("plant overruns / slots skipped (max lag)",
+                  f"{res.overruns} / {res.skipped_slots} ({res.max_lag_ms:.1f} ms)")
+    t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"
+                                                         for k, v in res.latency_us.items()))
+    t.add_row("per tick us", ", ".join(f"{k} {v:.0f}" for k, v in res.timing_us.items()))
+    nt = res.node.get("timing_us", {})
+    if nt:
+        t.add_row("controller node us (mean)", ", ".join(
+            f"{k.replace('_', ' ')} {v.get('mean_us', 0):.0f}" for k, v in nt.items()))
+    t.add_row("rejects plant / controller", f"{res.plant_rejects} / {res.ctrl_rejects}")
+    t.add_row("torque commands clamped to the device limits", str(res.torque_clamped))
+    t.add_row("injected", str(res.injected))
+    if record:
+        t.add_row("recording", str(record))
+    console.print(t)
+    if res.faulted:
+        raise typer.Exit(1)
+
+
+def replay_cmd(
+    recording: Annotated[Path, typer.Argument(help="MCAP recording.", dir_okay=False)],
+    controller: Annotated[str | None, typer.Option(help="Controller (default: recorded).")
+                          ] = None,
+    to_bus: Annotated[Path | None, typer.Option("--to-bus", help="Play the recorded frames "
+                                                "onto this bus config instead.")] = None,
+    speed: Annotated[float, typer.Option(min=0.0, help="Playback speed for --to-bus (0: fast).")
+                     ] = 1.0,
+) -> None:
+    """Replay recorded measurements through a controller and report the largest torque
+    difference, or play the recorded frames onto a CAN bus at recorded timing."""
+    console = Console()
+    if to_bus is not None:
+        from bus_schemas.bus_config import load_bus_config, make_bus
+        from orchestrator.cosim.recording import play_to_bus
+
+        bus = make_bus(load_bus_config(to_bus), "plant")
+        try:
+            n = play_to_bus(recording, bus, speed=speed)
+        finally:
+            bus.shutdown()
+        console.print(f"{n} frames sent")
+        return
+    from orchestrator.cosim.recording import replay
+
+    r = replay(recording, controller)
+    console.print(f"{r.controller}: {r.cycles} cycles, largest torque difference "
+                  f"{r.max_torque_diff:.3g} N m (motor)")
+
+
+@tube_app.command("refit")
+def refit(
+    recordings: Annotated[list[str], typer.Argument(help="MCAP recordings (globs ok).")],
+    gait: GaitOpt,
+    out: Annotated[Path, typer.Option("--out", help="Tube file to write.", dir_okay=False)],
+    old: Annotated[Path | None, typer.Option("--old", help="Tube to report coverage of "
+                                             "(default: the first recording's).")] = None,
+    model_error: Annotated[bool, typer.Option(
+        "--model-error", help="Refit the model-error bound of clfqp's nominal-human model "
+        "(the tube's model_error) from the controller's recorded online estimates "
+        "(/controller/disturbance) instead of the socket-force tube; the socket-force tube is "
+        "kept from --old (default: the first recording's).")] = False,
+    degree: Annotated[int, typer.Option("--degree", min=0, max=20,
+                                        help="Bezier degree of the refitted bounds.")] = 3,
+    exclude_ms: Annotated[float | None, typer.Option(
+        "--exclude-ms", min=0.0, max=255.0,
+        help="--model-error: time after touchdown left out of the bound (ms; default: the "
+        "old bound's, else 30).")] = None,
+) -> None:
+    """Refit the force tube from recorded ground-truth socket force (ps portions), or with
+    --model-error the model-error bound from the controller's recorded estimates."""
+    from orchestrator.cosim.recording import refit_model_error, refit_tube
+
+    paths = [p for r in recordings for p in (sorted(glob.glob(r)) or [r])]
+    if model_error:
+        rep = refit_model_error(paths, gait, out, old_tube=old, degree=degree,
+                                exclude_after_touchdown=None if exclude_ms is None
+                                else exclude_ms * 1e-3)
+    else:
+        rep = refit_tube(paths, gait, out, old_tube=old, degree=degree)
+    Console().print(rep)
+
+
+@recording_app.command("recover")
+def recover_cmd(
+    part: Annotated[Path, typer.Argument(help="The .part file a killed run left.",
+                                         dir_okay=False)],
+    out: Annotated[Path | None, typer.Option("--out", help="Recording to write (default: the "
+                                             "part's name without the leading dot and "
+                                             ".part).", dir_okay=False)] = None,
+) -> None:
+    """Restore every completely written chunk of a killed run's recording into a complete
+    MCAP file that replay and tube refit read."""
+    from orchestrator.cosim.recording import recover
+
+    rep = recover(part, out)
+    ended = "the whole recording" if rep["complete_input"] else \
+        f"up to the first incomplete record ({rep['stopped_at']})"
+    Console().print(f"recovered {rep['messages']} messages, {ended}: {rep['out']}")
+
+
+def animate_cmd(
+    recording: Annotated[Path, typer.Argument(help="MCAP recording (hpcosim run --record).",
+                                              dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="GIF to write.", dir_okay=False)],
+    seconds: Annotated[float | None, typer.Option(
+        "--seconds", min=0.04, help="Animate the first SECONDS of the run (default: all).")
+    ] = None,
+    fps: Annotated[float, typer.Option("--fps", min=1.0, max=100.0,
+                                       help="Frames per second.")] = 25.0,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+) -> None:
+    """The walker of a recorded run, animated (stick figure from the model's frames: human
+    blue, prosthesis orange, socket force red) as a GIF."""
+    import hp_model
+    from hp_model.atomic_io import atomic_write_bytes
+    from orchestrator.cli.options import check_output_file
+    from orchestrator.experiments.animation import recording_gif
+
+    check_output_file(out)
+    model = hp_model.load_model(str(subject) if subject else None,
+                                str(device) if device else None)
+    data = recording_gif(recording, model, fps=fps, max_seconds=seconds)
+    atomic_write_bytes(out, data)
+    Console().print(f"wrote {out} ({len(data) / 1024:.0f} KiB)")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the co-simulation verbs to the ``hpcosim`` app."""
+    app.add_typer(controller_app, name="controller")
+    app.add_typer(recording_app, name="recording")
+    app.command("run")(run)
+    app.command("replay")(replay_cmd)
+    app.command("animate")(animate_cmd)

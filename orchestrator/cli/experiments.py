@@ -1,0 +1,130 @@
+"""``hpcosim experiments`` and ``hpcosim demo`` (registered in :mod:`orchestrator.cli`)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+
+STAGES = ("synthetic subject", "mocap processing", "gait fit", "tube fit", "experiments",
+          "report")
+
+
+def _claims_table(console: Console, metrics: dict[str, Any]) -> None:
+    """One line per claim: reproduced or not, the claim's id and its key number (the full
+    numbers are in report.md)."""
+    console.print("[bold]paper Sec. V claims[/] (numbers in report.md):")
+    for c in metrics["claims"]:
+        mark = "[green]reproduced    [/]" if c["reproduced"] else "[red]NOT reproduced[/]"
+        console.print(f"  {mark} {c['id']:15s} {c.get('headline', '')}", overflow="ellipsis",
+                      no_wrap=True)
+
+
+def experiments(
+    gait: Annotated[Path, typer.Option("--gait", help="Gait file (gait fit).", dir_okay=False)],
+    tube: Annotated[Path, typer.Option("--tube", help="Tube file (tube fit).", dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Output folder.", file_okay=False)],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Steps per run.")] = 20,
+    eigen: Annotated[bool, typer.Option(help="Closed-loop return-map eigenvalues (finite "
+                                        "differences, 24 extra runs).")] = True,
+) -> None:
+    """Paper Sec. V on the full closed loop: nominal walking (Fig. 7), exact vs relaxed
+    CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md."""
+    import hp_model
+    from hp_model.force_tube import load_tube
+    from hp_model.gait_artifact import load_gait
+    from orchestrator.experiments.paper import run_experiments
+    from orchestrator.experiments.report import write_report
+
+    console = Console()
+    model = hp_model.load_model()
+    g = load_gait(gait, model.parameter_hash())
+    tb = load_tube(tube, g.hash())
+    with console.status("experiments") as st:
+        m = run_experiments(model, g, tb, out, steps, eigen=eigen,
+                            progress=lambda s: st.update(s))
+        write_report(out, m)
+    _claims_table(console, m)
+    console.print(f"wrote {out}/metrics.json, report.md and figures")
+
+
+def demo(
+    out: Annotated[Path, typer.Option("--out", help="Output folder.",
+                                      file_okay=False)] = Path("out/demo-experiments"),
+    quick: Annotated[bool, typer.Option("--quick", help="Fewer strides and steps, no gait "
+                                        "verification (CI).")] = False,
+    steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps per closed-loop "
+                                              "run (default 20, --quick 3).")] = None,
+) -> None:
+    """The whole pipeline on the synthetic subject: mocap synth -> mocap process -> gait fit
+    -> tube fit -> experiments -> report.md."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    import hp_model
+    from characterization.gait.fit import fit_gait
+    from characterization.gait.phzd import PHZDOptions
+    from characterization.mocap.files import process_file
+    from characterization.mocap.steps_artifact import load_steps
+    from characterization.mocap.synthetic_subject import SynthOptions, synthesize, write_synthetic
+    from characterization.tube.playback import fit_force_tube
+    from characterization.tube.playback import write_outputs as write_tube_outputs
+    from hp_model.gait_artifact import save_gait
+    from orchestrator.experiments.paper import run_experiments
+    from orchestrator.experiments.report import write_report
+
+    n_steps = steps or (3 if quick else 20)
+    out.mkdir(parents=True, exist_ok=True)
+    console = Console()
+    stages: list[dict[str, Any]] = []
+    model = hp_model.load_model()
+    with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
+                  console=console) as prog:
+        task = prog.add_task("demo", total=len(STAGES))
+        t0 = time.perf_counter()
+
+        def done(stage: str, output: str) -> None:
+            nonlocal t0
+            stages.append({"stage": stage, "seconds": time.perf_counter() - t0,
+                           "output": output})
+            prog.advance(task)
+            console.print(f"[green]done[/] {stage} ({stages[-1]['seconds']:.1f} s): {output}")
+            t0 = time.perf_counter()
+
+        prog.update(task, description="synthetic subject")
+        opts = SynthOptions(n_strides=8 if quick else 20, seed=1)
+        paths = write_synthetic(out / "take", synthesize(model, opts), opts)
+        done("synthetic subject", str(paths.get("csv", out / "take")))
+        prog.update(task, description="mocap processing")
+        take = out / "take" / "take.csv"
+        process_file(take, out / "steps.npz", with_figures=False)
+        done("mocap processing", str(out / "steps.npz"))
+        prog.update(task, description="gait fit")
+        data = load_steps(out / "steps.npz")
+        gait = fit_gait(model, data, PHZDOptions(), src=str(out / "steps.npz"),
+                        verify=not quick,
+                        progress=lambda s: prog.update(task, description=f"gait fit: {s}"))
+        save_gait(out / "gait.json", gait)
+        done("gait fit", str(out / "gait.json"))
+        prog.update(task, description="tube fit (playback of the recorded steps)")
+        res = fit_force_tube(model, gait, data, n_steps=10 if quick else 20,
+                             src=str(out / "steps.npz"))
+        write_tube_outputs(out / "tube.json", res, str(out / "steps.npz"),
+                           str(out / "gait.json"))
+        tube = res.tube
+        done("tube fit", str(out / "tube.json"))
+        prog.update(task, description="experiments")
+        m = run_experiments(model, gait, tube, out, n_steps, eigen=not quick,
+                            progress=lambda s: prog.update(task,
+                                                           description=f"experiments: {s}"))
+        done("experiments", str(out / "metrics.json"))
+        prog.update(task, description="report")
+        extra = ([f"--quick: {n_steps} steps per run instead of 20, {opts.n_strides} strides, "
+                  "no gait verification, no return-map eigenvalues."] if quick else [])
+        stages.append({"stage": "report", "seconds": 0.0, "output": str(out / "report.md")})
+        write_report(out, m, stages, extra)
+        prog.advance(task)
+    _claims_table(console, m)
+    console.print(f"wrote {out}/report.md")

@@ -1,0 +1,109 @@
+"""``hpcosim gait ...``: gait design (paper Sec. IV-A)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from orchestrator.cli.options import DeviceOpt, SubjectOpt
+
+gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimization.",
+                       no_args_is_help=True)
+
+
+@gait_app.command("fit")
+def fit(
+    steps: Annotated[Path, typer.Argument(help="Steps file from `hpcosim mocap process`.",
+                                          dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Gait file to write (.json); the Fig. 4 "
+                                      "figure goes next to it.", dir_okay=False)],
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+    degree: Annotated[int, typer.Option(help="Bezier degree of the joint outputs.",
+                                        min=1, max=9)] = 5,
+    nodes: Annotated[int, typer.Option(help="Collocation nodes per domain.",
+                                       min=5, max=101)] = 21,
+    max_iter: Annotated[int, typer.Option(help="IPOPT iteration limit.", min=1)] = 1000,
+    segments: Annotated[str, typer.Option(
+        help="Portions of the take regressed per domain: 'touchdown' (the model's domains, "
+        "touchdown to touchdown) or 'paper' (delta_p_hip rising = ps, falling = pns).")
+    ] = "touchdown",
+    offset_weight: Annotated[float, typer.Option(
+        help="Weight of the squared offsets delta_alpha in the cost (0 = the paper's cost).",
+        min=0.0)] = 0.1,
+    touchdown_slip: Annotated[float | None, typer.Option(
+        help="Largest forward/backward speed of the swing sole at touchdown, m/s (default: "
+        "not bounded).", min=0.0)] = None,
+    track_kp: Annotated[float, typer.Option(
+        help="Stiffness (1/s^2) of the human's output tracking stored with the gait (the "
+        "simulated human, the FMU); the orbit does not depend on it, its stability does.",
+        min=0.0)] = 1600.0,
+    track_kd: Annotated[float, typer.Option(help="Damping (1/s) of that tracking.",
+                                            min=0.0)] = 80.0,
+    verify: Annotated[bool, typer.Option(help="Closed-loop verification (20 steps, "
+                                         "return map); a gait that fails it is not written.")
+                      ] = True,
+    allow_unstable: Annotated[bool, typer.Option(
+        help="Write the gait even when it falls or its return map is not contracting "
+        "(marked walks: false in its verification).")] = False,
+    figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
+) -> None:
+    """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
+    import hp_model
+    from characterization.gait.figures import save_gait_figure
+    from characterization.gait.fit import fit_gait, fit_segments
+    from characterization.gait.phzd import PHZDOptions
+    from characterization.mocap.steps_artifact import load_steps
+    from hp_model.gait_artifact import save_gait
+    from orchestrator.cli.options import check_output_file
+
+    console = Console(stderr=True)
+    portions = fit_segments(segments)
+    check_output_file(out)
+    data = load_steps(steps)
+    model = hp_model.load_model(str(subject) if subject else None,
+                                str(device) if device else None)
+    opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter, w_offset=offset_weight,
+                      touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip,
+                      track_kp=track_kp, track_kd=track_kd)
+    with console.status("gait fit") as status:
+        gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
+                        progress=lambda m: status.update(m), segments=portions,
+                        allow_unstable=allow_unstable)
+    save_gait(out, gait)
+    if figure:
+        save_gait_figure(out.with_suffix(".png"), gait, data)
+    _summary(Console(), gait, out)
+
+
+def _summary(console: Console, gait, out: Path) -> None:
+    from hp_model.domains import DOMAINS
+
+    s = gait.solver
+    console.print(f"[bold]gait[/bold] {out}  (hash {gait.hash()})")
+    console.print(f"IPOPT: {s['status']} in {s['iterations']} iterations, "
+                  f"{s['seconds']:.1f} s; cost {s['cost']:.4g}")
+    t = Table("domain", "v_hip m/s", "step m", "duration s", "fit RMS deg (data)",
+              "RMS deg (optimized vs data+offset)")
+    v = gait.verification
+    for d in DOMAINS:
+        p = gait.params[d]
+        fitq = gait.fit_quality.get(d, {})
+        rms = v.get("output_rms_deg", {}).get(d)
+        t.add_row(d, f"{p.v_hip:.3f}", f"{p.step_length:.3f}",
+                  f"{gait.durations[d]:.3f}",
+                  " ".join(f"{x:.1f}" for x in np.degrees(fitq.get("rms", []))),
+                  " ".join(f"{x:.1f}" for x in rms) if rms is not None else "-")
+    console.print(t)
+    if v:
+        verdict = "walks" if v.get("walks") else "does NOT walk: written by --allow-unstable"
+        console.print(f"closed loop: {v['steps_simulated']} steps simulated"
+                      f"{' (FAILED: ' + v['failure'] + ')' if v['simulation_failed'] else ''}; "
+                      f"return-map spectral radius {v['spectral_radius']:.3g} ({verdict})")
+    else:
+        console.print("closed loop: not verified (--no-verify)")

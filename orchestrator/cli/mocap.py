@@ -1,0 +1,138 @@
+"""``hpcosim mocap ...``: motion-capture processing and the synthetic subject."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from orchestrator.cli.options import DeviceOpt, SubjectOpt
+
+mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectories.",
+                        no_args_is_help=True)
+
+
+@mocap_app.command("process")
+def process(
+    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take.",
+                                         dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Steps file to write (.npz or .json); "
+                                      "the QA report and figures go next to it.",
+                                      dir_okay=False)],
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+    mapping: Annotated[Path | None, typer.Option(
+        "--mapping", help="Limb mapping TOML (default: the synthetic subject's naming).",
+        dir_okay=False)] = None,
+    figures: Annotated[bool, typer.Option(help="Write the figures.")] = True,
+) -> None:
+    """Limb pitches, joint centres, joint angles and steps (ps/pns, tau) of one take."""
+    from characterization.mocap.files import process_file
+
+    console = Console()
+    with console.status(f"processing {take}"):
+        r = process_file(take, out, subject=str(subject) if subject else None,
+                         device=str(device) if device else None, mapping=mapping,
+                         with_figures=figures)
+    p = r.processed
+    n_ps = sum(s.domain == "ps" for s in p.steps)
+    console.print(f"[bold]{take}[/]: {len(p.time)} frames at {p.frame_rate:g} Hz; steps "
+                  f"{n_ps} ps + {len(p.steps) - n_ps} pns kept, {len(p.dropped)} dropped")
+    t = Table(title="joint centres")
+    for c in ("joint", "residual (mm)", "rotation SD (deg)", "well posed"):
+        t.add_column(c)
+    for j, f in p.joints.items():
+        t.add_row(j, f"{f.residual_rms * 1000:.2f}", f"{f.rotation_sd * 57.29578:.1f}",
+                  "yes" if f.well_posed else "[red]NO[/]")
+    console.print(t)
+    for d in p.dropped:
+        console.print(f"  dropped {d.domain} step, frames {d.start}-{d.end}: {d.reason}")
+    console.print(f"wrote {r.steps_path} and " + ", ".join(x.name for x in r.report_paths))
+
+
+@mocap_app.command("inspect")
+def inspect(
+    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take.",
+                                         dir_okay=False)],
+    mapping_out: Annotated[Path | None, typer.Option(
+        "--mapping-out", help="Write a mapping skeleton (TOML) to edit for this take's "
+        "names.", dir_okay=False)] = None,
+) -> None:
+    """What a take holds (markers, rigid bodies, rate, length, gaps, an axes guess), and
+    optionally a mapping to start from."""
+    from characterization.mocap.files import read_take
+    from characterization.mocap.inspection import mapping_skeleton, summarize
+    from hp_model.atomic_io import atomic_write_bytes
+    from orchestrator.cli.options import check_output_file
+
+    if mapping_out is not None:
+        check_output_file(mapping_out, "--mapping-out")
+    t = read_take(take)
+    s = summarize(t)
+    console = Console()
+    console.print(f"[bold]{take}[/]: {s.n_frames} frames at {s.frame_rate:g} Hz "
+                  f"({s.duration:.2f} s); the format's up axis {s.format_up}")
+    if s.up_axis:
+        console.print(f"axes guess: up {s.up_axis} (the markers span {s.up_span:.2f} m along "
+                      f"it per frame; sign from the format), walking "
+                      + (f"{s.walk_axis} ({s.walk_travel:.2f} m of travel)" if s.walk_axis
+                         else "unknown"))
+    tab = Table(title="columns")
+    for c in ("kind", "name", "valid %", "longest gap (frames)"):
+        tab.add_column(c)
+    for c in s.columns:
+        tab.add_row(c.kind, c.name, f"{100 * c.valid:.1f}", str(c.longest_gap))
+    console.print(tab)
+    if mapping_out is not None:
+        atomic_write_bytes(mapping_out, mapping_skeleton(t).encode())
+        console.print(f"wrote {mapping_out}: edit every entry, then hpcosim mocap process "
+                      f"{take} --mapping {mapping_out} --out steps.npz")
+
+
+@mocap_app.command("synth")
+def synth(
+    out: Annotated[Path, typer.Option("--out", help="Output folder.", file_okay=False)],
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Step cycles (strides).")] = 37,
+    seed: Annotated[int, typer.Option("--seed", help="Random seed.")] = 0,
+    noise_mm: Annotated[float, typer.Option(min=0, help="Marker noise SD per coordinate, "
+                                            "mm.")] = 0.5,
+    dropout_rate: Annotated[float, typer.Option(min=0, help="Marker occlusions per marker "
+                                                "per second.")] = 0.5,
+    dropout_frames: Annotated[int, typer.Option(min=1, help="Longest occlusion, "
+                                                "frames.")] = 10,
+    rate: Annotated[float, typer.Option(min=1, help="Frame rate, Hz.")] = 120.0,
+    source: Annotated[str, typer.Option(
+        help="'model': the model walks a reference gait (hybrid simulator, dynamically "
+        "consistent); 'template': a kinematic template with double support.")] = "model",
+    gait: Annotated[Path | None, typer.Option(
+        "--gait", help="Reference gait of --source model (default: the packaged gait of the "
+        "default subject and device).", dir_okay=False)] = None,
+    variability: Annotated[float, typer.Option(
+        min=0, help="--source model: SD of the interior Bezier coefficients per step, "
+        "rad.")] = 0.03,
+    speed_variability: Annotated[float, typer.Option(
+        min=0, help="--source model: relative SD of the hip velocity per step.")] = 0.03,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+) -> None:
+    """A synthetic subject on the prosthesis: Motive CSV, C3D and ground truth."""
+    import hp_model
+    from characterization.mocap.synthetic_subject import SynthOptions, synthesize, write_synthetic
+
+    console = Console()
+    opts = SynthOptions(n_strides=steps, seed=seed, noise_mm=noise_mm,
+                        dropout_rate=dropout_rate, dropout_max_frames=dropout_frames,
+                        rate=rate, source=source, gait_file=str(gait) if gait else None,
+                        sigma=variability, sigma_v_hip=speed_variability)
+    with console.status("generating the synthetic take"):
+        model = hp_model.load_model(str(subject) if subject else None,
+                                    str(device) if device else None)
+        s = synthesize(model, opts)
+        paths = write_synthetic(out, s, opts)
+    console.print(f"{steps} step cycles ({source}), {s.take.n_frames} frames at {rate:g} Hz, "
+                  f"{len(s.truth['step_domain'])} complete steps in the truth")
+    for k, v in paths.items():
+        console.print(f"  {k}: {v}")

@@ -1,0 +1,138 @@
+"""``hpcosim tube ...``: socket-force playback of the recorded steps and the force tube."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from hp_model.force_tube import TubePhase
+from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_file
+
+tube_app = typer.Typer(help="The socket-force tube: playback of the recorded steps (paper "
+                       "Sec. IV-B).", no_args_is_help=True)
+
+
+@tube_app.command("fit")
+def fit(
+    steps: Annotated[Path, typer.Argument(help="Steps file (.npz or .json) from `hpcosim mocap "
+                                          "process`.", dir_okay=False)],
+    gait: Annotated[Path, typer.Option("--gait", help="Gait file (from `hpcosim gait fit`); "
+                                       "F* is its nominal socket force.", dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Tube file to write (.json); the Fig. 5 "
+                                      "figure (<stem>_fig5.png) and the report (<stem>.md) go "
+                                      "next to it.", dir_okay=False)],
+    degree: Annotated[int, typer.Option("--degree", min=0, max=20,
+                                        help="Bezier degree of the tube's bounds.")] = 3,
+    n_steps: Annotated[int | None, typer.Option(
+        "--steps", min=1, help="Play back the first N prosthesis-stance steps (default: "
+        "all; the paper used 20).")] = None,
+    fit_margin: Annotated[float, typer.Option(
+        "--fit-margin", min=0.0, max=1.0,
+        help="Fit each step's Bezier curves on its single support (foot-marker rule) widened "
+        "by this much tau on each side, and play back over that window.")] = 0.1,
+    whole_step_fit: Annotated[bool, typer.Option(
+        "--whole-step-fit", help="The paper's variant: fit every frame of the step and play "
+        "back from tau = 0 to 1 (overrides --fit-margin).")] = False,
+    stop_at_touchdown: Annotated[bool, typer.Option(
+        help="End each playback at the human foot's touchdown too.")] = False,
+    allowance: Annotated[float, typer.Option(
+        "--allowance", min=0.0, max=0.99,
+        help="Widen the certified bounds by this fraction of each component's peak |F_s| "
+        "for the playback's estimation error (0: the paper's bare tube).")] = 0.01,
+    phase: Annotated[TubePhase, typer.Option(
+        "--phase", help="The tube's tau: 'gait' = the gait's phase of each sample (the phase "
+        "the controllers compute; default), 'step' = each step's own phase (the paper's "
+        "per-step normalization).")] = TubePhase.GAIT,
+    model_error: Annotated[bool, typer.Option(
+        "--model-error/--no-model-error",
+        help="Also characterise what clfqp's nominal-human model does not explain along the "
+        "playbacks and store its mid-stance bound in the tube (model_error).")] = True,
+    error_degree: Annotated[int, typer.Option(
+        "--error-degree", min=0, max=20, help="Bezier degree of the model-error bound.")] = 3,
+    exclude_ms: Annotated[float, typer.Option(
+        "--exclude-ms", min=0.0, max=255.0,
+        help="Time after the prosthesis's touchdown left out of the model-error bound (ms); "
+        "the impact transient is left to the CLF relaxation.")] = 30.0,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
+) -> None:
+    """Play back every prosthesis-stance step on the full model, estimate the socket force,
+    and fit the certified force tube around its deviation from the gait's nominal F*; with
+    it (default) the mid-stance bound of clfqp's model error along the same playbacks."""
+    import hp_model
+    from characterization.mocap.steps_artifact import load_steps
+    from characterization.tube.playback import (
+        PlaybackError,
+        PlaybackOptions,
+        fit_force_tube,
+        write_outputs,
+    )
+    from hp_model.gait_artifact import load_gait
+
+    console = Console()
+    if out.suffix != ".json":
+        raise PlaybackError(f"{out}: the tube file must end in .json")
+    check_output_file(out)
+    with console.status("loading the model (compiled once, then cached)"):
+        model = hp_model.load_model(str(subject) if subject else None,
+                                    str(device) if device else None)
+        g = load_gait(gait, model.parameter_hash())
+        s = load_steps(steps)
+    with Progress(TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
+                  console=console, transient=True) as prog:
+        task = prog.add_task("playback", total=None)
+
+        def progress(what: str, done: int, total: int) -> None:
+            prog.update(task, description=what, completed=done, total=total)
+
+        res = fit_force_tube(model, g, s, degree=degree, n_steps=n_steps,
+                             options=PlaybackOptions(
+                                 stop_at_touchdown=stop_at_touchdown,
+                                 fit_margin=None if whole_step_fit else fit_margin,
+                                 tube_phase=phase),
+                             progress=progress, src=str(steps), allowance=allowance,
+                             model_error=model_error, error_degree=error_degree,
+                             exclude_after_touchdown=exclude_ms * 1e-3)
+    paths = write_outputs(out, res, str(steps), str(gait))
+    t, cred = res.tube, res.tube.credibility
+    console.print(f"[bold]{steps}[/]: {len(res.playback.steps)} ps steps played back in "
+                  f"{res.seconds['playback']:.2f} s, {len(res.used)} in the tube; tau in "
+                  f"[{t.tau_lo:.3f}, {t.tau_hi:.3f}] (single support, foot-marker rule; "
+                  f"{res.phase} phase)")
+    for i, why in res.playback.skipped:
+        console.print(f"  [yellow]skipped[/] step {i}: {why}")
+    table = Table(title=f"force tube (degree {t.degree}) around F* of gait {t.gait_hash}")
+    for c in ("component", "lower min", "upper max", "mean width"):
+        table.add_column(c, justify="right")
+    lo, hi = t.delta_bounds(np.linspace(t.tau_lo, t.tau_hi, 201))
+    for c, (name, unit) in enumerate(zip(("F_x", "F_z", "M_y"), ("N", "N", "N m"),
+                                         strict=True)):
+        table.add_row(f"{name} ({unit})", f"{lo[:, c].min():.1f}", f"{hi[:, c].max():.1f}",
+                      f"{np.mean(hi[:, c] - lo[:, c]):.1f}")
+    console.print(table)
+    post = cred["a_posteriori"]
+    console.print(f"certificate: inside {cred['certificate']['inside']}, optimal "
+                  f"{cred['certificate']['optimal']}; a posteriori k = {post['k_tube']}, "
+                  f"eps = {post['epsilon_tube']:.3f} at {cred['confidence']:.0%}; leave-one-out "
+                  f"coverage {cred['leave_one_out']['coverage']:.2f}")
+    me = t.model_error
+    if me is not None:
+        mc = me.credibility
+        loo = mc["leave_one_out"]["step_coverage"]
+        console.print(f"model error: tau in [{me.tau_lo:.3f}, {me.tau_hi:.3f}], first "
+                      f"{me.exclude_after_touchdown * 1e3:.0f} ms after touchdown excluded; "
+                      f"max |d| = {me.source['max_abs'][0]:.3g} m/s^2 (dy1), "
+                      f"{me.source['max_abs'][1]:.3g} rad/s^2 (d2y2); a posteriori k = "
+                      f"{mc['a_posteriori']['k']}, eps = {mc['a_posteriori']['epsilon']:.3f}; "
+                      "leave-one-out coverage "
+                      + ("-" if loo is None else f"{loo:.2f}"))
+    elif model_error:
+        console.print(f"[yellow]model error[/]: {t.source.get('model_error', 'not fitted')}")
+    console.print(f"wrote {paths['tube']}, {paths['figure'].name}, {paths['report'].name}")

@@ -1,0 +1,1 @@
+"""Robustness sweeps on Dask: spec, draws, runs, engine, store, report, replay."""

@@ -1,0 +1,47 @@
+"""The FMU backend of a sweep run: the human FMU (fmpy, in the worker's process) as the
+plant of the one closed loop (:func:`orchestrator.loop.run_loop`), the prosthesis
+controller in the loop, no bus in between.
+
+The FMU is instantiated once per worker (:func:`open_fmu`) and restarted for every run; the
+human's gait (perturbed thetas) and the initial state are set as parameters, so a run on
+the FMU starts exactly where the simulator's run of the same draw starts, and the loop logs
+the same samples as the simulator's (README of ``human_fmu`` for the falls the FMU decides
+before integrating a step).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from hp_model.gait_artifact import Gait
+from hp_model.human_prosthesis import HumanProsthesisModel
+from human_fmu.instance import HumanFmu
+from orchestrator.experiments.scenarios import Scenario, ScenarioResult, scenario_result
+from orchestrator.loop import IDEAL_ENCODER, ControllerLink, Encoder, FmuPlant, run_loop
+from prosthesis_controller import ControllerContext, make_controller
+
+
+def open_fmu(path: Path, workdir: Path, gait: Gait) -> HumanFmu:
+    """The worker's FMU instance, extracted into ``workdir``; refuses an FMU built for
+    another gait."""
+    fmu = HumanFmu(path, unzipdir=workdir / "fmu", instance="sweep")
+    try:
+        fmu.check_gait(gait.hash())
+    except ValueError:
+        fmu.free()
+        raise
+    return fmu
+
+
+def run_fmu_scenario(fmu: HumanFmu, model: HumanProsthesisModel, gait: Gait,
+                     ctx: ControllerContext, scenario: Scenario, thetas: dict[str, np.ndarray],
+                     q0: np.ndarray, qd0: np.ndarray, dt: float = 1e-3,
+                     encoder: Encoder = IDEAL_ENCODER) -> ScenarioResult:
+    """One scenario on the FMU (module docstring): the human tracks ``thetas`` from
+    (q0, qd0) in ps; the controller's measurements go through ``encoder``."""
+    fmu.start_walk(thetas, q0, qd0)
+    ctrl = make_controller(scenario.controller, gait, ctx.tube, model, context=ctx)
+    log = run_loop(FmuPlant(fmu, dt), ControllerLink(ctrl, encoder), steps=scenario.steps)
+    return scenario_result(model, gait, ctx.tube, scenario, log)

@@ -1,0 +1,104 @@
+"""The packages' folders by subject (docs/layout.md): imports point one way between the
+packages and between the subpackages of ``orchestrator`` and ``characterization``, and no
+folder holds a family of files named by a shared prefix or suffix in place of a package."""
+
+from __future__ import annotations
+
+import ast
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("hp_model", "characterization", "human_fmu", "prosthesis_controller",
+            "bus_schemas", "orchestrator")
+
+#: unit -> the units it may import (besides itself); a unit is a package or a subpackage
+ALLOWED = {
+    "hp_model": set(),
+    "bus_schemas": {"hp_model"},
+    "human_fmu": {"hp_model"},
+    "prosthesis_controller": {"hp_model", "bus_schemas"},
+    "characterization": {"hp_model"},
+    "characterization.mocap": {"hp_model"},
+    "characterization.gait": {"hp_model", "characterization.mocap"},
+    "characterization.tube": {"hp_model", "characterization.mocap", "characterization.gait"},
+    "orchestrator": {"hp_model"},
+    "orchestrator.loop": {"hp_model", "human_fmu", "prosthesis_controller", "bus_schemas"},
+    # the recordings refit the tube
+    "orchestrator.cosim": {"hp_model", "human_fmu", "prosthesis_controller", "bus_schemas",
+                           "characterization.mocap", "characterization.gait",
+                           "characterization.tube", "orchestrator", "orchestrator.loop"},
+    "orchestrator.experiments": {"hp_model", "human_fmu", "prosthesis_controller",
+                                 "bus_schemas", "characterization", "characterization.mocap",
+                                 "characterization.gait", "characterization.tube",
+                                 "orchestrator", "orchestrator.loop", "orchestrator.cosim"},
+}
+ALLOWED["orchestrator.sweep"] = ALLOWED["orchestrator.experiments"] | {
+    "orchestrator.experiments"}
+ALLOWED["orchestrator.cli"] = set(ALLOWED) - {"orchestrator.cli"}
+ALLOWED["characterization"] = set()  # the package's own __init__ imports nothing
+
+
+def _unit(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] not in PACKAGES:
+        return None
+    two = ".".join(parts[:2])
+    return two if two in ALLOWED else parts[0]
+
+
+def _modules() -> list[tuple[str, Path]]:
+    out = []
+    for pkg in PACKAGES:
+        for f in sorted((ROOT / pkg).rglob("*.py")):
+            rel = f.relative_to(ROOT).with_suffix("")
+            parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+            out.append((".".join(parts), f))
+    return out
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """Every module ``path`` imports, at top level or inside a function."""
+    found: set[str] = set()
+    is_pkg = path.name == "__init__.py"
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: resolve against this module's package
+                base = module.split(".")
+                base = base[:len(base) - node.level + (1 if is_pkg else 0)]
+                name = ".".join(base + ([node.module] if node.module else []))
+            else:
+                name = node.module or ""
+            found.add(name)
+            found.update(f"{name}.{a.name}" for a in node.names)
+    return found
+
+
+def test_imports_point_one_way() -> None:
+    bad = []
+    for module, path in _modules():
+        own = _unit(module)
+        assert own is not None
+        for imp in _imports(path, module):
+            other = _unit(imp)
+            if other is None or other == own:
+                continue
+            if other not in ALLOWED[own]:
+                bad.append(f"{path.relative_to(ROOT)} ({own}) imports {imp} ({other})")
+    assert not bad, "\n".join(sorted(set(bad)))
+
+
+def test_no_folder_holds_a_prefix_or_suffix_family() -> None:
+    bad = []
+    for pkg in PACKAGES:
+        for folder in [ROOT / pkg, *(p.parent for p in (ROOT / pkg).rglob("*/__init__.py"))]:
+            names = [f.stem for f in folder.glob("*.py") if "_" in f.stem.strip("_")]
+            for label, key in (("prefix", lambda n: n.split("_")[0]),
+                               ("suffix", lambda n: n.split("_")[-1])):
+                for word, n in Counter(map(key, names)).items():
+                    if n >= 3:
+                        bad.append(f"{folder.relative_to(ROOT)}: {n} files with the {label} "
+                                   f"{word!r} (a subpackage?)")
+    assert not bad, "\n".join(bad)
