@@ -1,0 +1,146 @@
+"""The end of a walk through FMI 2.0's own path, for every fall code, driven through fmpy's
+low-level API: the doStep at the fall and every later one return fmi2Discard (also with a
+1e6 or a NaN torque input set after the fall), fmi2Terminated is true,
+fmi2LastSuccessfulTime is the fall time of the in-process simulator (the same run, the same
+policy), and every output is finite and the simulator's state at that time (the feedthrough
+outputs: the simulator's torques and wrenches at that state under the torque held)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import fmi2Discard, fmi2LastSuccessfulTime, fmi2Terminated
+
+from hp_model.domains import DOMAINS
+from hp_model.falls import FallReason
+from hp_model.simulator import SimOptions
+from tests.fmu_runner import HumanFMU, NominalPD
+from tests.fmu_support import built_fmu, policy_table, python_run, simulator, start_state
+
+#: friction-cone check off (|F_x| <= mu F_z always holds for F_z >= min_normal_force)
+NO_CONE = {"mu": 1e9, "min_normal_force": -1e12}
+#: every check but the non-finite one off
+ONLY_NON_FINITE = {**NO_CONE, "min_hip_height": -1e9, "tau_max": 1e9, "max_step_time": 1e9,
+                   "max_speed": 1e300, "tau_backward": 1e9}
+INTEGER = ("substeps", "cone_periods")
+#: the falls whose state at the simulator's fall time is not finite or blown up: the FMU holds
+#: the state one period earlier (the last finite one)
+HELD_BEFORE = (FallReason.NON_FINITE, FallReason.DIVERGED)
+#: feedthrough outputs: the torques (prosthesis: motor torques) and the wrenches
+U = tuple(f"u[{i}]" for i in range(1, 7))
+LAM = ("stance_Fx", "stance_Fz", "stance_My", "socket_Fx", "socket_Fz", "socket_My")
+STATE = tuple(f"q[{i}]" for i in range(1, 13)) + tuple(f"qd[{i}]" for i in range(1, 13))
+OTHER = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load",
+         "socket_pitch", "tau", "t_impact")
+
+
+@pytest.fixture(scope="module")
+def fmu_path(tmp_path_factory, model, template_gait):
+    return built_fmu(tmp_path_factory, model, template_gait)[0]
+
+
+@pytest.fixture(scope="module")
+def nominal_peaks(model, template_gait):
+    """(the start's hip height, the lowest over a step, the peak speed) of the nominal walk."""
+    sim = simulator(model, template_gait)
+    ref = python_run(sim, NominalPD(policy_table(model, template_gait, sim)),
+                     *start_state(template_gait), steps=1)
+    return float(ref.q[0, 1]), float(ref.q[:, 1].min()), float(np.abs(ref.qd).max())
+
+
+def case(reason: FallReason, peaks: tuple[float, float, float]) -> tuple[dict, float, float]:
+    """(options, torque scale, dt) that make the nominal-PD walk end with ``reason``."""
+    hip0, hip_min, speed = peaks
+    return {
+        FallReason.NON_FINITE: ({**ONLY_NON_FINITE, "substeps": 1}, 1.0, 0.2),
+        FallReason.HIP_LOW: ({"min_hip_height": 0.5 * (hip0 + hip_min)}, 1.0, 1e-3),
+        FallReason.PHASE_BACKWARD: (NO_CONE, 3.0, 1e-3),
+        FallReason.NO_TOUCHDOWN: ({"tau_max": 0.5}, 1.0, 1e-3),
+        FallReason.FRICTION_CONE: ({}, 0.0, 1e-3),
+        FallReason.HEEL_OR_TOE: ({"max_touchdown_pitch": 1e-7}, 1.0, 1e-3),
+        FallReason.PHASE_STALLED: ({"max_step_time": 0.1}, 1.0, 1e-3),
+        FallReason.DIVERGED: ({"max_speed": 0.5 * speed}, 1.0, 1e-3),
+    }[reason]
+
+
+def scaled_pd(model, gait, sim, scale: float) -> NominalPD:
+    table = policy_table(model, gait, sim)
+    for d in DOMAINS:
+        table["nominal"][d]["u"] = (scale * np.array(table["nominal"][d]["u"])).tolist()
+    return NominalPD(table)
+
+
+def discarded(f, t: float, dt: float) -> bool:
+    """doStep(t, dt) through fmpy: False when it returns fmi2OK, True for fmi2Discard (any
+    other status fails the test)."""
+    try:
+        f.doStep(t, dt)
+        return False
+    except FMICallException as e:
+        assert e.status == fmi2Discard, e.status
+        return True
+
+
+@pytest.mark.parametrize("reason", [r for r in FallReason if r is not FallReason.NONE],
+                         ids=lambda r: r.label)
+def test_every_fall_ends_the_run_the_fmi_way(fmu_path, model, template_gait, nominal_peaks,
+                                             reason):
+    options, scale, dt = case(reason, nominal_peaks)
+    sim = simulator(model, template_gait, options=SimOptions(dt=dt, **options))
+    pd = scaled_pd(model, template_gait, sim, scale)
+    q0, qd0 = start_state(template_gait)
+    ref = python_run(sim, pd, q0, qd0, steps=4)
+    assert ref.fall is not None and ref.fall.reason is reason, ref.reason
+
+    h = HumanFMU(str(fmu_path))
+    h.setup({k: v for k, v in options.items() if k not in INTEGER},
+            {k: v for k, v in options.items() if k in INTEGER})
+    f = h.fmu
+    uv, qv = h.vrs(["u_knee", "u_ankle"]), h.vrs(STATE)
+    k = 0
+    while True:  # the simulator's loop: read, policy, set, step
+        q = np.array(f.getReal(qv)[:12])
+        qd = np.array(f.getReal(qv)[12:])
+        d = DOMAINS[f.getInteger(h.vrs(["domain"]))[0]]
+        f.setReal(uv, pd(d, pd.phase(d, q), q[10:12], qd[10:12]).tolist())
+        if discarded(f, k * dt, dt):
+            break
+        k += 1
+        assert k < ref.t.size, "the FMU walks on past the simulator's fall"
+    t_step = k * dt  # the start of the step that ended the walk
+    assert f.getBooleanStatus(fmi2Terminated)
+    assert f.getBoolean(h.vrs(["fall"])) == [True]
+    assert f.getInteger(h.vrs(["fall_code"])) == [int(reason)]
+    last = f.getRealStatus(fmi2LastSuccessfulTime)
+    # the fall time: the simulator's (the time of its fall checks, at a period's start), or,
+    # where the simulator's state there is not finite or blown up, the period before it
+    fall_t = ref.fall.t - dt if reason in HELD_BEFORE else ref.fall.t
+    assert last == pytest.approx(fall_t, abs=1e-12)
+    assert t_step <= last <= t_step + dt
+    i = int(np.argmin(np.abs(ref.t - last)))
+    assert abs(ref.t[i] - last) <= 1e-12
+    # every output finite; the state is the simulator's at that time
+    held = f.getReal(h.vrs(STATE))
+    others = f.getReal(h.vrs(OTHER + U + LAM))
+    assert all(math.isfinite(v) for v in held + others)
+    np.testing.assert_array_equal(held, np.r_[ref.q[i], ref.qd[i]])
+    assert f.getInteger(h.vrs(["domain"]))[0] == ref.domain[i]
+    # later steps, with a 1e6 torque or a NaN set, are discarded; the state stays, and the
+    # feedthrough outputs are the simulator's at that state under the torque held
+    lim = model.torque_limits[4:6]
+    for j, (u, held_u) in enumerate((((1e6, -1e6), (lim[0], -lim[1])),
+                                     ((math.nan, math.nan), (lim[0], -lim[1])))):
+        f.setReal(uv, list(u))
+        assert discarded(f, t_step + (j + 1) * dt, dt)
+        assert f.getBooleanStatus(fmi2Terminated)
+        assert f.getRealStatus(fmi2LastSuccessfulTime) == last
+        assert f.getReal(h.vrs(STATE)) == held
+        out = f.getReal(h.vrs(U + LAM))
+        assert all(math.isfinite(v) for v in out)
+        u_ref, lam_ref = sim._eval("human", DOMAINS[ref.domain[i]], np.r_[ref.q[i], ref.qd[i]],
+                                   np.array(held_u, float), None)
+        np.testing.assert_allclose(out, np.r_[u_ref, lam_ref], rtol=1e-9, atol=1e-9)
+    h.free()
