@@ -144,3 +144,90 @@ def test_every_fall_ends_the_run_the_fmi_way(fmu_path, model, template_gait, nom
                                    np.array(held_u, float), None)
         np.testing.assert_allclose(out, np.r_[u_ref, lam_ref], rtol=1e-9, atol=1e-9)
     h.free()
+
+
+# -- the project's own master: FmuPlant ends the run on the standard status -------------------
+class ConstantLink:
+    """A link that commands a constant motor torque (N m) every period."""
+
+    def __init__(self, torque: tuple[float, float]) -> None:
+        self.torque = torque
+
+    def exchange(self, obs):
+        from orchestrator.loop import Command
+
+        return Command(self.torque)
+
+    def pace(self, k: int) -> None:
+        pass
+
+
+class NoFallOutput:
+    """A master's view of the human FMU without the project's ``fall``/``fall_code`` outputs
+    (the real FMU underneath): the end must come from fmi2Discard/fmi2Terminated alone."""
+
+    def __init__(self, fmu, limits: dict | None = None) -> None:
+        self.fmu, self.limits = fmu, limits or {}
+
+    def start_walk(self, thetas, q0, qd0):
+        self.fmu.start_walk(thetas, q0, qd0, self.limits)
+
+    def read(self):
+        return self.fmu.read()._replace(fall_code=0, fell=False)
+
+    def __getattr__(self, name):
+        return getattr(self.fmu, name)
+
+
+@pytest.fixture(scope="module")
+def human(fmu_path):
+    from human_fmu.instance import HumanFmu
+
+    fmu = HumanFmu(fmu_path, instance="end")
+    yield fmu
+    fmu.free()
+
+
+@pytest.mark.parametrize("limits, reason", [({}, FallReason.FRICTION_CONE),
+                                            ({"max_step_time": 0.1},
+                                             FallReason.PHASE_STALLED)])
+def test_fmu_plant_ends_where_the_simulator_plant_does(human, model, template_gait, limits,
+                                                       reason):
+    """No prosthesis torque: the walk ends in a friction-cone fall (decided before the step:
+    the FMU holds the previous period's state) or, with a 0.1 s bound on the step time,
+    stalled (the state at the end of the step).  FmuPlant ends the run on the
+    FMU's fmi2Discard/fmi2Terminated with the simulator plant's samples and fall."""
+    from orchestrator.loop import FmuPlant, SimulatorPlant, run_loop
+
+    thetas = {d: template_gait.theta(d) for d in DOMAINS}
+    q0, qd0 = start_state(template_gait)
+    sim = simulator(model, template_gait, options=SimOptions(**limits))
+    ref = run_loop(SimulatorPlant(sim, q0, qd0), ConstantLink((0.0, 0.0)), steps=4)
+    human.start_walk(thetas, q0, qd0, limits)
+    log = run_loop(FmuPlant(human, 1e-3), ConstantLink((0.0, 0.0)), steps=4)
+    assert ref.fall is not None and ref.fall.reason is reason
+    assert log.fall is not None and log.fall.reason is reason
+    assert (log.fall.t, log.fall.domain, log.fall.tau) == (ref.fall.t, ref.fall.domain,
+                                                           ref.fall.tau)
+    assert log.periods == ref.periods
+    np.testing.assert_array_equal(np.array(log.q), np.array(ref.q))
+
+
+def test_a_discard_without_a_fall_code_ends_the_run(human, model, template_gait, ctx):
+    """A master that reads no fall output still ends the run: the loop stops at the FMU's
+    fmi2Discard/fmi2Terminated with an error naming it, never loops; so does a sweep run."""
+    from orchestrator.loop import FmuEndError, FmuPlant, run_loop
+    from orchestrator.scenarios import NOMINAL, Scenario
+    from orchestrator.sweep_fmu import period_bound, run_fmu_scenario
+
+    thetas = {d: template_gait.theta(d) for d in DOMAINS}
+    q0, qd0 = start_state(template_gait)
+    human.start_walk(thetas, q0, qd0)
+    with pytest.raises(FmuEndError, match="without a fall code"):
+        run_loop(FmuPlant(NoFallOutput(human), 1e-3), ConstantLink((0.0, 0.0)), steps=4)
+    with pytest.raises(FmuEndError, match="without a fall code"):
+        # a walking controller, a step-time bound it breaks (0.1 s)
+        run_fmu_scenario(NoFallOutput(human, {"max_step_time": 0.1}), model, template_gait, ctx,
+                         Scenario("phase-pd", NOMINAL, 4), thetas, q0, qd0)
+    # a run's periods are bounded: (steps + 1) max_step_time (3 s) at 1 kHz, plus one
+    assert period_bound(human, 4, 1e-3) == 15001
