@@ -224,7 +224,8 @@ def test_a_discard_without_a_fall_code_ends_the_run(human, model, template_gait,
     q0, qd0 = start_state(template_gait)
     human.start_walk(thetas, q0, qd0)
     with pytest.raises(FmuEndError, match="without a fall code"):
-        run_loop(FmuPlant(NoFallOutput(human), 1e-3), ConstantLink((0.0, 0.0)), steps=4)
+        run_loop(FmuPlant(NoFallOutput(human), 1e-3), ConstantLink((0.0, 0.0)), steps=4,
+                 periods=20_000)  # a loop that missed the end would stop here, not raise
     with pytest.raises(FmuEndError, match="without a fall code"):
         # a walking controller, a step-time bound it breaks (0.1 s)
         run_fmu_scenario(NoFallOutput(human, {"max_step_time": 0.1}), model, template_gait, ctx,
