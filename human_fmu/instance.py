@@ -143,21 +143,22 @@ class HumanFmu:
         f.exitInitializationMode()
         self._started = True
 
-    def start_walk(self, thetas: Mapping[str, np.ndarray], q0: np.ndarray, qd0: np.ndarray
-                   ) -> None:
+    def start_walk(self, thetas: Mapping[str, np.ndarray], q0: np.ndarray, qd0: np.ndarray,
+                   real: Mapping[str, float] | None = None) -> None:
         """Start a run where the human tracks ``thetas`` (packed gait per domain) from
         (q0, qd0) in ps, with no FMU-side perturbation or offset: the state the in-process
-        simulator starts from."""
-        real: dict[str, float] = {}
+        simulator starts from; ``real``: other Real parameters (e.g. fall limits)."""
+        values: dict[str, float] = {}
         for d in DOMAINS:
             th = np.asarray(thetas[d], float)
             if th.size != self.n_theta:
                 raise ValueError(f"theta_{d} of size {th.size}; the FMU has {self.n_theta}")
-            real.update({f"theta_{d}[{i + 1}]": float(v) for i, v in enumerate(th)})
-        real.update({f"q0[{i + 1}]": float(v) for i, v in enumerate(q0)})
-        real.update({f"qd0[{i + 1}]": float(v) for i, v in enumerate(qd0)})
-        real.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
-        self.start(real, {"human_seed": 0, "initial_domain": 0})
+            values.update({f"theta_{d}[{i + 1}]": float(v) for i, v in enumerate(th)})
+        values.update({f"q0[{i + 1}]": float(v) for i, v in enumerate(q0)})
+        values.update({f"qd0[{i + 1}]": float(v) for i, v in enumerate(qd0)})
+        values.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
+        values.update(real or {})
+        self.start(values, {"human_seed": 0, "initial_domain": 0})
 
     def model_description_xml(self) -> bytes:
         return (self.unzipdir / "modelDescription.xml").read_bytes()
@@ -192,6 +193,21 @@ class HumanFmu:
         (fmi2Discard with fmi2Terminated: a fall; the outputs hold the last valid state).
         Any other failure raises fmpy's ``FMICallException``."""
         return step_or_end(self.fmu, self._c, t, dt)
+
+    def last_successful_time(self) -> float:
+        """fmi2GetRealStatus(fmi2LastSuccessfulTime) [s]: after the walk has ended, the time
+        of the state the outputs hold (human_fmu/README.md)."""
+        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Real
+
+        t = fmi2Real()
+        self.fmu.fmi2GetRealStatus(self._c, fmi2LastSuccessfulTime, ctypes.byref(t))
+        return float(t.value)
+
+    def start_value(self, name: str) -> float:
+        """The start value of variable ``name`` in the model description (a parameter's
+        default)."""
+        v = next(v for v in self.md.modelVariables if v.name == name)
+        return float(v.start)
 
     def free(self) -> None:
         """Terminate and free the instance, then remove the extracted files."""

@@ -15,11 +15,13 @@
  *       map of the next domain gives qd+; the rest (1 - s) h is integrated in the new domain;
  *     - state checks at the end (non-finite, speed, hip height, tau backward, tau_max, stall) and the
  *       touchdown-pitch check; a fall ends the walk: the `fall` output is raised, doStep
- *       returns fmi2Discard (then and on every later call), fmi2GetBooleanStatus
- *       (fmi2Terminated) is true and fmi2GetRealStatus(fmi2LastSuccessfulTime) is the time
- *       of the state held: the end of the step, or its start when the step ended non-finite
- *       or blown up (codes 1, 8) or the friction cone ended it before integrating (code 5),
- *       so every output stays finite and physical.
+ *       returns fmi2Discard (then and on every later call, whatever the inputs),
+ *       fmi2GetBooleanStatus(fmi2Terminated) is true and
+ *       fmi2GetRealStatus(fmi2LastSuccessfulTime) is the fall time, the time of the state
+ *       held (the simulator's fall time): the end of the step, or its start when the step
+ *       ended non-finite or blown up (codes 1, 8: the last finite state) or the friction
+ *       cone ended it before integrating (code 5), so every output stays finite and
+ *       physical (a non-finite torque input never replaces the torque held).
  *
  * No global mutable state: any number of instances may live in one process.
  *

@@ -11,6 +11,7 @@ from orchestrator.loop.link import (
     measurement,
 )
 from orchestrator.loop.plant import (
+    FmuEndError,
     FmuPlant,
     Observation,
     Plant,
@@ -21,6 +22,7 @@ from orchestrator.loop.plant import (
 )
 from orchestrator.loop.run import LoopLog, Recorder, run_loop
 
-__all__ = ["IDEAL_ENCODER", "Command", "ControllerLink", "Encoder", "FmuPlant", "Link",
+__all__ = ["IDEAL_ENCODER", "Command", "ControllerLink", "Encoder", "FmuEndError", "FmuPlant",
+           "Link",
            "LoopLog", "Observation", "OracleLink", "Plant", "Recorder", "Sensed",
            "SimulatorPlant", "Truth", "measurement", "observe_state", "run_loop"]

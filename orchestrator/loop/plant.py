@@ -140,15 +140,20 @@ class SimulatorPlant:
         self._k += 1
 
 
-#: falls the FMU decides before integrating a step, or undoes: its outputs then hold the
-#: previous period's state (README of human_fmu), which the loop has already observed
-HELD = frozenset({FallReason.NON_FINITE, FallReason.FRICTION_CONE, FallReason.DIVERGED})
+class FmuEndError(RuntimeError):
+    """The FMU ended the run (fmi2Discard, fmi2Terminated) without a fall code."""
 
 
 class FmuPlant:
     """The human FMU (:class:`HumanFmu`, already started) as a plant; the step size is
-    ``dt``.  A fall reported by the FMU becomes a :class:`Fall` at the observed time,
-    domain and phase (the FMU reports its code, not the event's numbers)."""
+    ``dt``.  The run ends the FMI 2.0 way: a doStep that returns fmi2Discard with
+    fmi2Terminated ends it, and ``fmi2LastSuccessfulTime`` tells which state the outputs
+    hold: the end of that step (the fall is observed there, like the simulator's), or its
+    start (falls 1, 5, 8: the previous observation's state, already logged, where the fall
+    happened).  The ``fall_code`` output gives the reason (:class:`FmuEndError` without one);
+    the :class:`Fall` has the observed time, domain and phase (the FMU reports its code,
+    not the event's numbers).  A fall of the initial state (no step taken) is read from the
+    ``fall`` output."""
 
     def __init__(self, fmu: HumanFmu, dt: float) -> None:
         self.fmu, self.dt = fmu, float(dt)
@@ -156,6 +161,7 @@ class FmuPlant:
         self._fall: Fall | None = None
         self._obs: Observation | None = None
         self._state: list[float] = []
+        self._ended_at: float | None = None  # fmi2LastSuccessfulTime once the run has ended
 
     @property
     def fall(self) -> Fall | None:
@@ -167,13 +173,17 @@ class FmuPlant:
         dom = DOMAINS[r.domain]
         s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
         obs = Observation(self._k, self._k * self.dt, dom, r.steps, float(y[5]), s)
-        if r.fell:
-            reason = FallReason(r.fall_code)
-            # a held state is the previous observation's: the fall happened there
-            prev = self._obs if reason in HELD else None
-            at = prev if prev is not None else obs
-            self._fall = Fall(reason, at.t, at.domain, at.tau)
-            obs = obs._replace(held=prev is not None)
+        if self._ended_at is not None or r.fell:
+            if not r.fell or r.fall_code == FallReason.NONE:
+                raise FmuEndError(f"the FMU ended the run at t = {self._ended_at} s (fmi2Discard, "
+                               "fmi2Terminated) without a fall code")
+            # held: the outputs are at the start of the discarded step, the previous
+            # observation's state, where the fall happened
+            held = (self._ended_at is not None and self._obs is not None
+                    and self._ended_at < obs.t - 0.5 * self.dt)
+            at = self._obs if held and self._obs is not None else obs
+            self._fall = Fall(FallReason(r.fall_code), at.t, at.domain, at.tau)
+            obs = obs._replace(held=held)
         self._state = r.state
         if not obs.held:
             self._obs = obs
@@ -188,5 +198,8 @@ class FmuPlant:
         return Truth(st[:12], st[12:], self.fmu.forces(), (u0, u1))
 
     def advance(self) -> None:
-        self.fmu.step(self._k * self.dt, self.dt)  # False at a fall: the next read shows it
+        if self._ended_at is not None:
+            raise RuntimeError("the FMU has ended the run")
+        if not self.fmu.step(self._k * self.dt, self.dt):  # fmi2Discard + fmi2Terminated
+            self._ended_at = self.fmu.last_successful_time()
         self._k += 1

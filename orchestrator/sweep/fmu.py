@@ -7,10 +7,15 @@ human's gait (perturbed thetas) and the initial state are set as parameters, so 
 the FMU starts exactly where the simulator's run of the same draw starts, and the loop logs
 the same samples as the simulator's (README of ``human_fmu`` for the falls the FMU decides
 before integrating a step).
+
+The run ends on the FMU's standard status (fmi2Discard with fmi2Terminated: a fall) or at
+the scenario's steps; :func:`period_bound` bounds it besides, so an FMU that neither falls
+nor steps (or discards without a fall code) can never hold a worker forever.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +24,14 @@ from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from human_fmu.instance import HumanFmu
 from orchestrator.experiments.scenarios import Scenario, ScenarioResult, scenario_result
-from orchestrator.loop import IDEAL_ENCODER, ControllerLink, Encoder, FmuPlant, run_loop
+from orchestrator.loop import (
+    IDEAL_ENCODER,
+    ControllerLink,
+    Encoder,
+    FmuEndError,
+    FmuPlant,
+    run_loop,
+)
 from prosthesis_controller import ControllerContext, make_controller
 
 
@@ -35,6 +47,13 @@ def open_fmu(path: Path, workdir: Path, gait: Gait) -> HumanFmu:
     return fmu
 
 
+def period_bound(fmu: HumanFmu, steps: int, dt: float) -> int:
+    """The most periods a run of ``steps`` steps can take: the FMU ends a step that has no
+    touchdown within its ``max_step_time`` (s) as a fall (phase stalled), so ``steps`` + 1
+    such intervals, plus one period."""
+    return math.ceil((steps + 1) * fmu.start_value("max_step_time") / dt) + 1
+
+
 def run_fmu_scenario(fmu: HumanFmu, model: HumanProsthesisModel, gait: Gait,
                      ctx: ControllerContext, scenario: Scenario, thetas: dict[str, np.ndarray],
                      q0: np.ndarray, qd0: np.ndarray, dt: float = 1e-3,
@@ -43,5 +62,10 @@ def run_fmu_scenario(fmu: HumanFmu, model: HumanProsthesisModel, gait: Gait,
     (q0, qd0) in ps; the controller's measurements go through ``encoder``."""
     fmu.start_walk(thetas, q0, qd0)
     ctrl = make_controller(scenario.controller, gait, ctx.tube, model, context=ctx)
-    log = run_loop(FmuPlant(fmu, dt), ControllerLink(ctrl, encoder), steps=scenario.steps)
+    bound = period_bound(fmu, scenario.steps, dt)
+    log = run_loop(FmuPlant(fmu, dt), ControllerLink(ctrl, encoder), steps=scenario.steps,
+                   periods=bound)
+    if log.fall is None and not log.fault and log.steps < scenario.steps:
+        raise FmuEndError(f"the FMU run neither fell nor completed {scenario.steps} steps in "
+                       f"{bound} periods")
     return scenario_result(model, gait, ctx.tube, scenario, log)
