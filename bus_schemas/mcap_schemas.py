@@ -7,12 +7,21 @@ Channels (schema encoding ``jsonschema``, message encoding ``json``), see :data:
 - ``/prosthesis/measurements``: ``hpcosim.ProsthesisMeasurements``, decoded feedback;
 - ``/prosthesis/torque_command``: ``hpcosim.TorqueCommand``, decoded torque commands;
 - ``/ground_truth``: ``hpcosim.GroundTruth``, plant state and socket force;
-- ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status.
+- ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status;
+- ``/walker/reference``: ``hpcosim.WalkerReference``, the gait's desired prosthesis angles
+  and the force tube at the recorded phase (every 10 ms).
+
+Foxglove channels (schema and message encoding ``protobuf``, the messages and schemas of the
+``foxglove-schemas-protobuf`` package), see :data:`FOXGLOVE_CHANNELS`:
+
+- ``/walker/tf``: ``foxglove.FrameTransforms``, the walker's frames (every 10 ms);
+- ``/walker/scene``: ``foxglove.SceneUpdate``, the walker drawn with primitives.
 
 Units: SI (s, rad, rad/s, N, N m); ``log_time`` of every message in ns (simulation time in
 lockstep runs, wall time otherwise). Non-finite floats are written as ``null`` (JSON has no
-NaN). The mcap package has no JSON decoder: pass :class:`JsonDecoderFactory` to
-``mcap.reader.make_reader(..., decoder_factories=[JsonDecoderFactory()])``.
+NaN). The mcap package has no JSON or protobuf decoder: pass :class:`JsonDecoderFactory`
+(and :class:`ProtobufDecoderFactory` for the Foxglove channels) to
+``mcap.reader.make_reader(..., decoder_factories=[...])``; :func:`read_messages` does.
 """
 
 from __future__ import annotations
@@ -42,6 +51,7 @@ from bus_schemas.mcap_append import append_messages, supports
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
+PROTOBUF_ENCODING = "protobuf"  # schema and message encoding of the Foxglove channels
 #: generalized coordinates q of the 12-DOF model (= ``hp_model.COORDS``, tested)
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh", "x_f", "z_f", "th_f",
           "th_pk", "th_pa")
@@ -158,6 +168,23 @@ PLANT_TIMING = _schema(
         "skipped": _int("wall-clock slots skipped at this tick (lag past max_lag), 0 if none"),
     }, ["t", "tick", "lag", "skipped"])
 
+_FORCE = {"type": ["object", "null"], "properties": {"Fx": _num("[N]"), "Fz": _num("[N]"),
+                                                    "My": _num("[N m]")}}
+
+WALKER_REFERENCE = _schema(
+    "hpcosim.WalkerReference", "The gait's desired prosthesis joint angles and the force "
+    "tube at the plant's phase tau(q) (recorded every 10 ms with /walker/tf).", {
+        "t": _num("simulation time [s]"),
+        "domain": {"enum": ["ps", "pns"], "description": "prosthesis stance / non-stance"},
+        "tau": _num("phase variable tau(q) [1]"),
+        "knee": _num("desired th_pk (the gait's Bezier output at tau clipped to [0, 1]) "
+                     "[rad]"),
+        "ankle": _num("desired th_pa [rad]; null in ps (the stance ankle is not an output)"),
+        "socket_lower": {**_FORCE, "description": "force tube's lower bound on the socket "
+                         "force F_s at tau (ps only, else null)"},
+        "socket_upper": {**_FORCE, "description": "force tube's upper bound (ps only)"},
+    }, ["t", "domain", "tau", "knee", "ankle", "socket_lower", "socket_upper"])
+
 #: topic -> JSON schema
 CHANNELS: dict[str, dict[str, Any]] = {
     "/can/tx": CAN_FRAME,
@@ -168,7 +195,44 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
     "/controller/disturbance": CONTROLLER_DISTURBANCE,
     "/cosim/timing": PLANT_TIMING,
+    "/walker/reference": WALKER_REFERENCE,
 }
+
+#: topic -> Foxglove protobuf message (``foxglove-schemas-protobuf``)
+FOXGLOVE_CHANNELS: dict[str, str] = {
+    "/walker/tf": "foxglove.FrameTransforms",
+    "/walker/scene": "foxglove.SceneUpdate",
+}
+
+
+def foxglove_message_class(name: str) -> type[Any]:
+    """The ``foxglove-schemas-protobuf`` class of Foxglove message ``name``
+    (e.g. ``foxglove.SceneUpdate``)."""
+    import importlib
+
+    pkg, _, short = name.partition(".")
+    if pkg != "foxglove" or not short.isidentifier():
+        raise KeyError(f"{name!r} is not a Foxglove message name")
+    return getattr(importlib.import_module(f"foxglove_schemas_protobuf.{short}_pb2"), short)
+
+
+def protobuf_descriptor_set(message_class: type[Any]) -> bytes:
+    """The serialized ``FileDescriptorSet`` of a protobuf message class: its file and every
+    file it imports, dependencies first (what an MCAP ``protobuf`` schema record holds)."""
+    from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+    fds, seen = FileDescriptorSet(), set()
+
+    def add(fd: Any) -> None:
+        if fd.name in seen:
+            return
+        seen.add(fd.name)
+        for dep in fd.dependencies:
+            add(dep)
+        fd.CopyToProto(fds.file.add())
+
+    add(message_class.DESCRIPTOR.file)
+    return fds.SerializeToString()
 
 
 def can_frame_message(msg: can.Message, direction: str, *, name: str | None = None,
@@ -247,11 +311,41 @@ def _decode_json(data: bytes) -> Any:
     return json.loads(data)
 
 
+class ProtobufDecoderFactory(DecoderFactory):
+    """Decodes channels with message encoding ``protobuf`` into protobuf messages, with the
+    classes built from each channel's own schema record (its ``FileDescriptorSet``)."""
+
+    def __init__(self) -> None:
+        self._classes: dict[int, Any] = {}
+
+    def decoder_for(self, message_encoding: str, schema: Schema | None):
+        if (message_encoding != PROTOBUF_ENCODING or schema is None
+                or schema.encoding != PROTOBUF_ENCODING):
+            return None
+        if schema.id not in self._classes:
+            self._classes[schema.id] = protobuf_class(schema.name, schema.data)
+        return self._classes[schema.id].FromString
+
+
+def protobuf_class(name: str, descriptor_set: bytes) -> type[Any]:
+    """The message class ``name`` of a serialized ``FileDescriptorSet``, in a pool of its
+    own (so it is what the recording says, whatever this process has imported)."""
+    from google.protobuf import descriptor_pool, message_factory
+    from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+    pool = descriptor_pool.DescriptorPool()
+    for f in FileDescriptorSet.FromString(descriptor_set).file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
 def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
                   ) -> Iterator[tuple[str, int, Any]]:
-    """``(topic, log_time_ns, decoded message)`` of every message of an MCAP file."""
+    """``(topic, log_time_ns, decoded message)`` of every message of an MCAP file (JSON
+    channels as dicts, protobuf channels as protobuf messages)."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory(),
+                                                   ProtobufDecoderFactory()])
         for _, channel, message, decoded in reader.iter_decoded_messages(
                 topics=list(topics) if topics is not None else None):
             yield channel.topic, message.log_time, decoded
@@ -377,9 +471,12 @@ class Recorder:
     # -- channels and records
     def add_channel(self, topic: str, schema: Mapping[str, Any] | None = None,
                     metadata: Mapping[str, str] | None = None) -> int:
-        """Register ``topic`` (idempotent) with ``schema`` (default: ``CHANNELS[topic]``)."""
+        """Register ``topic`` (idempotent) with ``schema`` (default: ``CHANNELS[topic]``, or
+        for a topic of :data:`FOXGLOVE_CHANNELS` its Foxglove protobuf schema)."""
         if topic in self._channels:
             return self._channels[topic]
+        if schema is None and topic in FOXGLOVE_CHANNELS:
+            return self.add_protobuf_channel(topic, FOXGLOVE_CHANNELS[topic], metadata)
         if schema is None:
             if topic not in CHANNELS:
                 raise KeyError(f"no schema for topic {topic!r}; pass one")
@@ -396,9 +493,27 @@ class Recorder:
         self._sequence[cid] = 0
         return cid
 
+    def add_protobuf_channel(self, topic: str, message: str,
+                             metadata: Mapping[str, str] | None = None) -> int:
+        """Register ``topic`` (idempotent) for the Foxglove protobuf message ``message``
+        (e.g. ``foxglove.FrameTransforms``); its messages are written as serialized bytes."""
+        if topic in self._channels:
+            return self._channels[topic]
+        if message not in self._schemas:
+            self._schemas[message] = self._writer.register_schema(
+                name=message, encoding=PROTOBUF_ENCODING,
+                data=protobuf_descriptor_set(foxglove_message_class(message)))
+        cid = self._writer.register_channel(topic=topic, message_encoding=PROTOBUF_ENCODING,
+                                            schema_id=self._schemas[message],
+                                            metadata=dict(metadata or {}))
+        self._channels[topic] = cid
+        self._sequence[cid] = 0
+        return cid
+
     def register_all(self) -> None:
-        """Register every channel of :data:`CHANNELS` (so viewers list them all)."""
-        for topic in CHANNELS:
+        """Register every channel of :data:`CHANNELS` and :data:`FOXGLOVE_CHANNELS` (so
+        viewers list them all)."""
+        for topic in (*CHANNELS, *FOXGLOVE_CHANNELS):
             self.add_channel(topic)
 
     def write(self, topic: str, message: Any, log_time_ns: int | None = None,

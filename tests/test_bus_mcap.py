@@ -24,6 +24,7 @@ from bus_schemas.mcap_append import append_messages, supports
 from bus_schemas.mcap_schemas import (
     CHANNELS,
     COORDS,
+    FOXGLOVE_CHANNELS,
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
     JsonDecoderFactory,
@@ -76,6 +77,10 @@ def test_schemas_are_valid_and_examples_conform():
         "/controller/disturbance": {"t": 0.5, "d": [0.01, -0.2], "tau": 0.4, "valid": True,
                                     "flag": False, "since_touchdown": 0.255},
         "/cosim/timing": {"t": 0.05, "tick": 50, "lag": 0.061, "skipped": 20},
+        "/walker/reference": {"t": 0.5, "domain": "ps", "tau": 0.4, "knee": 0.1,
+                              "ankle": None, "socket_lower": {"Fx": -9.0, "Fz": -800.0,
+                                                              "My": 1.0},
+                              "socket_upper": {"Fx": 9.0, "Fz": -600.0, "My": 5.0}},
     }
     assert examples.keys() == CHANNELS.keys()
     for topic, schema in CHANNELS.items():
@@ -121,9 +126,12 @@ def test_recorder_round_trip_every_channel(tmp_path):
         summary = reader.get_summary()
         assert summary is not None
         assert summary.statistics.message_count == 900
-        assert {c.topic for c in summary.channels.values()} == set(CHANNELS)
-        assert all(c.message_encoding == MESSAGE_ENCODING for c in summary.channels.values())
-        assert {s.encoding for s in summary.schemas.values()} == {SCHEMA_ENCODING}
+        assert {c.topic for c in summary.channels.values()} == set(CHANNELS) | set(
+            FOXGLOVE_CHANNELS)
+        enc = {c.topic: (c.message_encoding, summary.schemas[c.schema_id].encoding)
+               for c in summary.channels.values()}
+        assert all(enc[t] == (MESSAGE_ENCODING, SCHEMA_ENCODING) for t in CHANNELS)
+        assert all(enc[t] == ("protobuf", "protobuf") for t in FOXGLOVE_CHANNELS)
         assert all(ci.compression == "zstd" for ci in summary.chunk_indexes)
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
         assert meta["run"] == {"run_id": "r1", "dt": "0.001"}
