@@ -8,6 +8,8 @@ Channels (schema encoding ``jsonschema``, message encoding ``json``), see :data:
 - ``/prosthesis/torque_command``: ``hpcosim.TorqueCommand``, decoded torque commands;
 - ``/ground_truth``: ``hpcosim.GroundTruth``, plant state and socket force;
 - ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status;
+- ``/can/rates``: ``hpcosim.CanRates``, frames per second of each frame name and direction
+  over windows of 100 ms log time (a recorder made with ``can_rates``);
 - ``/walker/reference``: ``hpcosim.WalkerReference``, the gait's desired prosthesis angles
   and the force tube at the recorded phase (every 10 ms).
 
@@ -168,6 +170,17 @@ PLANT_TIMING = _schema(
         "skipped": _int("wall-clock slots skipped at this tick (lag past max_lag), 0 if none"),
     }, ["t", "tick", "lag", "skipped"])
 
+_RATES = {"type": "object", "additionalProperties": {"type": "number"}}
+
+CAN_RATES = _schema(
+    "hpcosim.CanRates", "CAN frames per second over one window of log time, by frame name "
+    "(ampro3.dbc; 0x... for an id it does not name); every name seen so far is listed.", {
+        "t": _num("end of the window [s] (log time)"),
+        "window": _num("window length [s]"),
+        "tx": {**_RATES, "description": "plant -> controller [1/s]"},
+        "rx": {**_RATES, "description": "controller -> plant [1/s]"},
+    }, ["t", "window", "tx", "rx"])
+
 _FORCE = {"type": ["object", "null"], "properties": {"Fx": _num("[N]"), "Fz": _num("[N]"),
                                                     "My": _num("[N m]")}}
 
@@ -195,6 +208,7 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
     "/controller/disturbance": CONTROLLER_DISTURBANCE,
     "/cosim/timing": PLANT_TIMING,
+    "/can/rates": CAN_RATES,
     "/walker/reference": WALKER_REFERENCE,
 }
 
@@ -249,6 +263,41 @@ def can_frame_message(msg: can.Message, direction: str, *, name: str | None = No
 def _can_record(msg: can.Message, direction: str, name: str | None, status: str | None
                 ) -> dict[str, Any]:
     return can_frame_message(msg, direction, name=name, status=status)
+
+
+class CanRates:
+    """Counts the CAN frames written and gives the ``/can/rates`` record of each window of
+    ``period`` s of log time (the first starts at the first frame)."""
+
+    def __init__(self, period: float = 0.1) -> None:
+        if not period > 0:
+            raise ValueError(f"CAN rate window {period} s: must be > 0")
+        self.period = period
+        self._period_ns = round(period * 1e9)
+        self._end: int | None = None
+        self._counts: dict[str, dict[str, int]] = {"tx": {}, "rx": {}}
+
+    def add(self, message: Mapping[str, Any], ns: int) -> list[tuple[int, dict[str, Any]]]:
+        """Count one ``hpcosim.CanFrame`` record logged at ``ns``; returns (log time [ns],
+        record) of every window that ended before it."""
+        out = []
+        if self._end is None:
+            self._end = ns + self._period_ns
+        while ns >= self._end:
+            out.append((self._end, self._close()))
+            self._end += self._period_ns
+        name = message.get("name") or f"0x{int(message['id']):03X}"
+        c = self._counts[message["direction"]]
+        c[name] = c.get(name, 0) + 1
+        return out
+
+    def _close(self) -> dict[str, Any]:
+        assert self._end is not None
+        rec: dict[str, Any] = {"t": self._end * 1e-9, "window": self.period}
+        for d, c in self._counts.items():
+            rec[d] = {n: k / self.period for n, k in c.items()}
+            self._counts[d] = dict.fromkeys(c, 0)
+        return rec
 
 
 # --------------------------------------------------------------------------- JSON
@@ -354,6 +403,9 @@ def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = N
 # --------------------------------------------------------------------------- recorder
 
 
+_CAN_TOPICS = frozenset(("/can/tx", "/can/rx"))
+
+
 def _compression(name: str) -> CompressionType:
     if name == "zstd":
         try:
@@ -443,11 +495,14 @@ class Recorder:
     """
 
     def __init__(self, path: str | os.PathLike[str], *, compression: str = "zstd",
-                 chunk_size: int = 512 * 1024, metadata: Mapping[str, Any] | None = None
-                 ) -> None:
+                 chunk_size: int = 512 * 1024, metadata: Mapping[str, Any] | None = None,
+                 can_rates: float | None = None) -> None:
         self.path = Path(path)
         self.part_path = self.path.with_name(f".{self.path.name}.part")
         self.compression = _compression(compression)
+        #: ``can_rates`` [s]: the CAN frames written are counted and ``/can/rates`` written
+        #: every window of that much log time
+        self._rates = None if can_rates is None else CanRates(can_rates)
         self._file = _GuardedFile(_locked_part(self.path, self.part_path), self.path)
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
@@ -525,6 +580,9 @@ class Recorder:
                 return
             raise RuntimeError(f"recorder {self.path} is finished")
         t = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        if self._rates is not None and topic in _CAN_TOPICS and isinstance(message, dict):
+            for ns, rates in self._rates.add(message, t):
+                self.write("/can/rates", rates, ns)
         data = message if isinstance(message, bytes) else encode_json(message)
         outer = self._busy
         self._busy = True

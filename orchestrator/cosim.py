@@ -440,7 +440,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         fmu.start(real, integer)
         if cfg.record is not None:
             Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
-            rec = Recorder(cfg.record, metadata={"run_id": run_id})
+            rec = Recorder(cfg.record, metadata={"run_id": run_id}, can_rates=0.1)
             rec.register_all()
             rec.add_metadata("config", cfg.to_dict())
             rec.add_metadata("versions", versions())
