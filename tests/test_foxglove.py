@@ -274,3 +274,34 @@ def test_layout_parses_and_names_what_recordings_have(recording, model):
                    "/controller/diagnostics.rho", "/can/rates.rx.TorqueCmd"):
         assert needed in paths
     assert len(by["/can/rates"]) >= 5
+
+
+def test_reference_is_the_gait_and_the_tube_at_the_recorded_phase(recording, model,
+                                                                   template_gait):
+    """/walker/reference: the desired knee as the scenarios' knee reference, the ankle
+    only in pns, the socket-force bounds the tube's box (c -/+ r) in ps."""
+    from hp_model.force_tube import load_tube
+    from orchestrator.recording import read_recording
+    from orchestrator.scenarios import knee_reference
+
+    rec, _, _, _ = recording
+    rows = [o for _, _, o in read_messages(rec, ["/walker/reference"])]
+    tube_path = rec.parent / "tube.json"
+    assert read_recording(rec, messages=False).attachments["tube.json"] == \
+        tube_path.read_bytes()
+    tube = load_tube(tube_path, template_gait.hash())
+    code = np.array([0 if o["domain"] == "ps" else 1 for o in rows])
+    tau = np.array([o["tau"] for o in rows])
+    assert {0, 1} <= set(code.tolist())
+    assert [o["knee"] for o in rows] == pytest.approx(
+        knee_reference(template_gait, code, tau), abs=1e-12)
+    for o in rows:
+        assert (o["ankle"] is None) == (o["domain"] == "ps")
+        if o["domain"] == "ps":
+            c, r = tube.box(o["tau"])
+            assert [o["socket_lower"][k] for k in ("Fx", "Fz", "My")] == pytest.approx(
+                c - r, abs=1e-9)
+            assert [o["socket_upper"][k] for k in ("Fx", "Fz", "My")] == pytest.approx(
+                c + r, abs=1e-9)
+        else:
+            assert o["socket_lower"] is None and o["socket_upper"] is None
