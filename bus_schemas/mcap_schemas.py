@@ -7,12 +7,23 @@ Channels (schema encoding ``jsonschema``, message encoding ``json``), see :data:
 - ``/prosthesis/measurements``: ``hpcosim.ProsthesisMeasurements``, decoded feedback;
 - ``/prosthesis/torque_command``: ``hpcosim.TorqueCommand``, decoded torque commands;
 - ``/ground_truth``: ``hpcosim.GroundTruth``, plant state and socket force;
-- ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status.
+- ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status;
+- ``/can/rates``: ``hpcosim.CanRates``, frames per second of each frame name and direction
+  over windows of 100 ms log time (a recorder made with ``can_rates``);
+- ``/walker/reference``: ``hpcosim.WalkerReference``, the gait's desired prosthesis angles
+  and the force tube at the recorded phase (every 10 ms).
+
+Foxglove channels (schema and message encoding ``protobuf``, the messages and schemas of the
+``foxglove-schemas-protobuf`` package), see :data:`FOXGLOVE_CHANNELS`:
+
+- ``/walker/tf``: ``foxglove.FrameTransforms``, the walker's frames (every 10 ms);
+- ``/walker/scene``: ``foxglove.SceneUpdate``, the walker drawn with primitives.
 
 Units: SI (s, rad, rad/s, N, N m); ``log_time`` of every message in ns (simulation time in
 lockstep runs, wall time otherwise). Non-finite floats are written as ``null`` (JSON has no
-NaN). The mcap package has no JSON decoder: pass :class:`JsonDecoderFactory` to
-``mcap.reader.make_reader(..., decoder_factories=[JsonDecoderFactory()])``.
+NaN). The mcap package has no JSON or protobuf decoder: pass :class:`JsonDecoderFactory`
+(and :class:`ProtobufDecoderFactory` for the Foxglove channels) to
+``mcap.reader.make_reader(..., decoder_factories=[...])``; :func:`read_messages` does.
 """
 
 from __future__ import annotations
@@ -42,6 +53,7 @@ from bus_schemas.mcap_append import append_messages, supports
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
+PROTOBUF_ENCODING = "protobuf"  # schema and message encoding of the Foxglove channels
 #: generalized coordinates q of the 12-DOF model (= ``hp_model.COORDS``, tested)
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh", "x_f", "z_f", "th_f",
           "th_pk", "th_pa")
@@ -158,6 +170,34 @@ PLANT_TIMING = _schema(
         "skipped": _int("wall-clock slots skipped at this tick (lag past max_lag), 0 if none"),
     }, ["t", "tick", "lag", "skipped"])
 
+_RATES = {"type": "object", "additionalProperties": {"type": "number"}}
+
+CAN_RATES = _schema(
+    "hpcosim.CanRates", "CAN frames per second over one window of log time, by frame name "
+    "(ampro3.dbc; 0x... for an id it does not name); every name seen so far is listed.", {
+        "t": _num("end of the window [s] (log time)"),
+        "window": _num("window length [s]"),
+        "tx": {**_RATES, "description": "plant -> controller [1/s]"},
+        "rx": {**_RATES, "description": "controller -> plant [1/s]"},
+    }, ["t", "window", "tx", "rx"])
+
+_FORCE = {"type": ["object", "null"], "properties": {"Fx": _num("[N]"), "Fz": _num("[N]"),
+                                                    "My": _num("[N m]")}}
+
+WALKER_REFERENCE = _schema(
+    "hpcosim.WalkerReference", "The gait's desired prosthesis joint angles and the force "
+    "tube at the plant's phase tau(q) (recorded every 10 ms with /walker/tf).", {
+        "t": _num("simulation time [s]"),
+        "domain": {"enum": ["ps", "pns"], "description": "prosthesis stance / non-stance"},
+        "tau": _num("phase variable tau(q) [1]"),
+        "knee": _num("desired th_pk (the gait's Bezier output at tau clipped to [0, 1]) "
+                     "[rad]"),
+        "ankle": _num("desired th_pa [rad]; null in ps (the stance ankle is not an output)"),
+        "socket_lower": {**_FORCE, "description": "force tube's lower bound on the socket "
+                         "force F_s at tau (ps only, else null)"},
+        "socket_upper": {**_FORCE, "description": "force tube's upper bound (ps only)"},
+    }, ["t", "domain", "tau", "knee", "ankle", "socket_lower", "socket_upper"])
+
 #: topic -> JSON schema
 CHANNELS: dict[str, dict[str, Any]] = {
     "/can/tx": CAN_FRAME,
@@ -168,7 +208,45 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
     "/controller/disturbance": CONTROLLER_DISTURBANCE,
     "/cosim/timing": PLANT_TIMING,
+    "/can/rates": CAN_RATES,
+    "/walker/reference": WALKER_REFERENCE,
 }
+
+#: topic -> Foxglove protobuf message (``foxglove-schemas-protobuf``)
+FOXGLOVE_CHANNELS: dict[str, str] = {
+    "/walker/tf": "foxglove.FrameTransforms",
+    "/walker/scene": "foxglove.SceneUpdate",
+}
+
+
+def foxglove_message_class(name: str) -> type[Any]:
+    """The ``foxglove-schemas-protobuf`` class of Foxglove message ``name``
+    (e.g. ``foxglove.SceneUpdate``)."""
+    import importlib
+
+    pkg, _, short = name.partition(".")
+    if pkg != "foxglove" or not short.isidentifier():
+        raise KeyError(f"{name!r} is not a Foxglove message name")
+    return getattr(importlib.import_module(f"foxglove_schemas_protobuf.{short}_pb2"), short)
+
+
+def protobuf_descriptor_set(message_class: type[Any]) -> bytes:
+    """The serialized ``FileDescriptorSet`` of a protobuf message class: its file and every
+    file it imports, dependencies first (what an MCAP ``protobuf`` schema record holds)."""
+    from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+    fds, seen = FileDescriptorSet(), set()
+
+    def add(fd: Any) -> None:
+        if fd.name in seen:
+            return
+        seen.add(fd.name)
+        for dep in fd.dependencies:
+            add(dep)
+        fd.CopyToProto(fds.file.add())
+
+    add(message_class.DESCRIPTOR.file)
+    return fds.SerializeToString()
 
 
 def can_frame_message(msg: can.Message, direction: str, *, name: str | None = None,
@@ -185,6 +263,41 @@ def can_frame_message(msg: can.Message, direction: str, *, name: str | None = No
 def _can_record(msg: can.Message, direction: str, name: str | None, status: str | None
                 ) -> dict[str, Any]:
     return can_frame_message(msg, direction, name=name, status=status)
+
+
+class CanRates:
+    """Counts the CAN frames written and gives the ``/can/rates`` record of each window of
+    ``period`` s of log time (the first starts at the first frame)."""
+
+    def __init__(self, period: float = 0.1) -> None:
+        if not period > 0:
+            raise ValueError(f"CAN rate window {period} s: must be > 0")
+        self.period = period
+        self._period_ns = round(period * 1e9)
+        self._end: int | None = None
+        self._counts: dict[str, dict[str, int]] = {"tx": {}, "rx": {}}
+
+    def add(self, message: Mapping[str, Any], ns: int) -> list[tuple[int, dict[str, Any]]]:
+        """Count one ``hpcosim.CanFrame`` record logged at ``ns``; returns (log time [ns],
+        record) of every window that ended before it."""
+        out = []
+        if self._end is None:
+            self._end = ns + self._period_ns
+        while ns >= self._end:
+            out.append((self._end, self._close()))
+            self._end += self._period_ns
+        name = message.get("name") or f"0x{int(message['id']):03X}"
+        c = self._counts[message["direction"]]
+        c[name] = c.get(name, 0) + 1
+        return out
+
+    def _close(self) -> dict[str, Any]:
+        assert self._end is not None
+        rec: dict[str, Any] = {"t": self._end * 1e-9, "window": self.period}
+        for d, c in self._counts.items():
+            rec[d] = {n: k / self.period for n, k in c.items()}
+            self._counts[d] = dict.fromkeys(c, 0)
+        return rec
 
 
 # --------------------------------------------------------------------------- JSON
@@ -247,17 +360,50 @@ def _decode_json(data: bytes) -> Any:
     return json.loads(data)
 
 
+class ProtobufDecoderFactory(DecoderFactory):
+    """Decodes channels with message encoding ``protobuf`` into protobuf messages, with the
+    classes built from each channel's own schema record (its ``FileDescriptorSet``)."""
+
+    def __init__(self) -> None:
+        self._classes: dict[int, Any] = {}
+
+    def decoder_for(self, message_encoding: str, schema: Schema | None):
+        if (message_encoding != PROTOBUF_ENCODING or schema is None
+                or schema.encoding != PROTOBUF_ENCODING):
+            return None
+        if schema.id not in self._classes:
+            self._classes[schema.id] = protobuf_class(schema.name, schema.data)
+        return self._classes[schema.id].FromString
+
+
+def protobuf_class(name: str, descriptor_set: bytes) -> type[Any]:
+    """The message class ``name`` of a serialized ``FileDescriptorSet``, in a pool of its
+    own (so it is what the recording says, whatever this process has imported)."""
+    from google.protobuf import descriptor_pool, message_factory
+    from google.protobuf.descriptor_pb2 import FileDescriptorSet
+
+    pool = descriptor_pool.DescriptorPool()
+    for f in FileDescriptorSet.FromString(descriptor_set).file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
 def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
                   ) -> Iterator[tuple[str, int, Any]]:
-    """``(topic, log_time_ns, decoded message)`` of every message of an MCAP file."""
+    """``(topic, log_time_ns, decoded message)`` of every message of an MCAP file (JSON
+    channels as dicts, protobuf channels as protobuf messages)."""
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory(),
+                                                   ProtobufDecoderFactory()])
         for _, channel, message, decoded in reader.iter_decoded_messages(
                 topics=list(topics) if topics is not None else None):
             yield channel.topic, message.log_time, decoded
 
 
 # --------------------------------------------------------------------------- recorder
+
+
+_CAN_TOPICS = frozenset(("/can/tx", "/can/rx"))
 
 
 def _compression(name: str) -> CompressionType:
@@ -349,11 +495,14 @@ class Recorder:
     """
 
     def __init__(self, path: str | os.PathLike[str], *, compression: str = "zstd",
-                 chunk_size: int = 512 * 1024, metadata: Mapping[str, Any] | None = None
-                 ) -> None:
+                 chunk_size: int = 512 * 1024, metadata: Mapping[str, Any] | None = None,
+                 can_rates: float | None = None) -> None:
         self.path = Path(path)
         self.part_path = self.path.with_name(f".{self.path.name}.part")
         self.compression = _compression(compression)
+        #: ``can_rates`` [s]: the CAN frames written are counted and ``/can/rates`` written
+        #: every window of that much log time
+        self._rates = None if can_rates is None else CanRates(can_rates)
         self._file = _GuardedFile(_locked_part(self.path, self.part_path), self.path)
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
@@ -377,9 +526,12 @@ class Recorder:
     # -- channels and records
     def add_channel(self, topic: str, schema: Mapping[str, Any] | None = None,
                     metadata: Mapping[str, str] | None = None) -> int:
-        """Register ``topic`` (idempotent) with ``schema`` (default: ``CHANNELS[topic]``)."""
+        """Register ``topic`` (idempotent) with ``schema`` (default: ``CHANNELS[topic]``, or
+        for a topic of :data:`FOXGLOVE_CHANNELS` its Foxglove protobuf schema)."""
         if topic in self._channels:
             return self._channels[topic]
+        if schema is None and topic in FOXGLOVE_CHANNELS:
+            return self.add_protobuf_channel(topic, FOXGLOVE_CHANNELS[topic], metadata)
         if schema is None:
             if topic not in CHANNELS:
                 raise KeyError(f"no schema for topic {topic!r}; pass one")
@@ -396,9 +548,27 @@ class Recorder:
         self._sequence[cid] = 0
         return cid
 
+    def add_protobuf_channel(self, topic: str, message: str,
+                             metadata: Mapping[str, str] | None = None) -> int:
+        """Register ``topic`` (idempotent) for the Foxglove protobuf message ``message``
+        (e.g. ``foxglove.FrameTransforms``); its messages are written as serialized bytes."""
+        if topic in self._channels:
+            return self._channels[topic]
+        if message not in self._schemas:
+            self._schemas[message] = self._writer.register_schema(
+                name=message, encoding=PROTOBUF_ENCODING,
+                data=protobuf_descriptor_set(foxglove_message_class(message)))
+        cid = self._writer.register_channel(topic=topic, message_encoding=PROTOBUF_ENCODING,
+                                            schema_id=self._schemas[message],
+                                            metadata=dict(metadata or {}))
+        self._channels[topic] = cid
+        self._sequence[cid] = 0
+        return cid
+
     def register_all(self) -> None:
-        """Register every channel of :data:`CHANNELS` (so viewers list them all)."""
-        for topic in CHANNELS:
+        """Register every channel of :data:`CHANNELS` and :data:`FOXGLOVE_CHANNELS` (so
+        viewers list them all)."""
+        for topic in (*CHANNELS, *FOXGLOVE_CHANNELS):
             self.add_channel(topic)
 
     def write(self, topic: str, message: Any, log_time_ns: int | None = None,
@@ -410,6 +580,9 @@ class Recorder:
                 return
             raise RuntimeError(f"recorder {self.path} is finished")
         t = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        if self._rates is not None and topic in _CAN_TOPICS and isinstance(message, dict):
+            for ns, rates in self._rates.add(message, t):
+                self.write("/can/rates", rates, ns)
         data = message if isinstance(message, bytes) else encode_json(message)
         outer = self._busy
         self._busy = True

@@ -41,10 +41,12 @@ def test_walker_gif_of_a_short_run(model, template_gait):
 
 def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     """``hpcosim animate RUN.mcap``: the walker of a recording's /ground_truth channel (here
-    written by the recorder from an in-process run, as the co-simulation writes it)."""
+    written by the recorder from an in-process run, as the co-simulation writes it, with
+    the Foxglove channels /walker/* beside it)."""
     from bus_schemas.mcap_schemas import Recorder
     from orchestrator.cli import main
     from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
+    from orchestrator.loop.foxglove import WalkerFoxglove
     from orchestrator.loop.recorder import GroundTruthRecorder
     from prosthesis_controller import make_controller
     from tests.fmu_support import simulator, start_state
@@ -55,8 +57,11 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     path = tmp_path / "run.mcap"
     with Recorder(path) as rec:
         rec.register_all()
-        log = run_loop(plant, link, steps=2, recorder=GroundTruthRecorder(rec))
+        walker = WalkerFoxglove(model, template_gait, tube)
+        log = run_loop(plant, link, steps=2,
+                       recorder=GroundTruthRecorder(rec, walker=walker))
     assert log.steps == 2 and log.fall is None
+    assert rec.message_count > 1.25 * log.periods  # /ground_truth and every 10 ms /walker/*
     out = tmp_path / "walker.gif"
     assert main(["animate", str(path), "--out", str(out), "--seconds", "0.5", "--fps",
                  "20"]) == 0

@@ -13,6 +13,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import can
 import jsonschema
 import numpy as np
 import pytest
@@ -24,6 +25,7 @@ from bus_schemas.mcap_append import append_messages, supports
 from bus_schemas.mcap_schemas import (
     CHANNELS,
     COORDS,
+    FOXGLOVE_CHANNELS,
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
     JsonDecoderFactory,
@@ -76,6 +78,12 @@ def test_schemas_are_valid_and_examples_conform():
         "/controller/disturbance": {"t": 0.5, "d": [0.01, -0.2], "tau": 0.4, "valid": True,
                                     "flag": False, "since_touchdown": 0.255},
         "/cosim/timing": {"t": 0.05, "tick": 50, "lag": 0.061, "skipped": 20},
+        "/can/rates": {"t": 0.1, "window": 0.1, "tx": {"KneeFeedback": 1000.0},
+                       "rx": {"TorqueCmd": 990.0, "0x7FF": 0.0}},
+        "/walker/reference": {"t": 0.5, "domain": "ps", "tau": 0.4, "knee": 0.1,
+                              "ankle": None, "socket_lower": {"Fx": -9.0, "Fz": -800.0,
+                                                              "My": 1.0},
+                              "socket_upper": {"Fx": 9.0, "Fz": -600.0, "My": 5.0}},
     }
     assert examples.keys() == CHANNELS.keys()
     for topic, schema in CHANNELS.items():
@@ -86,6 +94,30 @@ def test_schemas_are_valid_and_examples_conform():
         jsonschema.validate(json.loads(encode_json(bad)), CHANNELS["/ground_truth"])
     with pytest.raises(ValueError, match="direction"):
         can_frame_message(frame, "up")
+
+
+def test_can_rates_per_window_and_frame_name(tmp_path):
+    """A recorder made with ``can_rates`` writes /can/rates at the end of every window of
+    log time: frames per second by direction and name, names seen before listed at 0."""
+    path = tmp_path / "rates.mcap"
+    knee, torque = codec.encode_feedback(0.1, 0.0, 0.0, 0.0, 0.0, False, 0)[0], \
+        codec.encode_torque(0.5, -0.5, 0)
+    with Recorder(path, can_rates=0.01) as rec:
+        for k in range(25):  # 1 kHz for 25 ms; torque replies only in the first 12 ms
+            rec.write_can(knee, "tx", k * 1_000_000, name="KneeFeedback")
+            if k < 12:
+                rec.defer_can(torque, "rx", k * 1_000_000 + 500_000, name="TorqueCmd")
+            rec.write_deferred()
+        rec.write_can(can.Message(arbitration_id=0x7FF, data=b"x"), "rx", 25_000_000)
+    rows = [(ns, o) for _, ns, o in read_messages(path, ["/can/rates"])]
+    assert [ns for ns, _ in rows] == [10_000_000, 20_000_000]
+    assert rows[0][1] == {"t": 0.01, "window": 0.01, "tx": {"KneeFeedback": 1000.0},
+                          "rx": {"TorqueCmd": 1000.0}}
+    assert rows[1][1]["tx"] == {"KneeFeedback": 1000.0}
+    assert rows[1][1]["rx"] == {"TorqueCmd": 200.0}  # 10.5 and 11.5 ms
+    with pytest.raises(ValueError, match="must be > 0"):
+        Recorder(tmp_path / "x.mcap", can_rates=0.0)
+    assert not list(tmp_path.glob(".x.mcap*"))  # refused before any file is made
 
 
 def test_encode_json_handles_numpy_and_non_finite():
@@ -121,9 +153,12 @@ def test_recorder_round_trip_every_channel(tmp_path):
         summary = reader.get_summary()
         assert summary is not None
         assert summary.statistics.message_count == 900
-        assert {c.topic for c in summary.channels.values()} == set(CHANNELS)
-        assert all(c.message_encoding == MESSAGE_ENCODING for c in summary.channels.values())
-        assert {s.encoding for s in summary.schemas.values()} == {SCHEMA_ENCODING}
+        assert {c.topic for c in summary.channels.values()} == set(CHANNELS) | set(
+            FOXGLOVE_CHANNELS)
+        enc = {c.topic: (c.message_encoding, summary.schemas[c.schema_id].encoding)
+               for c in summary.channels.values()}
+        assert all(enc[t] == (MESSAGE_ENCODING, SCHEMA_ENCODING) for t in CHANNELS)
+        assert all(enc[t] == ("protobuf", "protobuf") for t in FOXGLOVE_CHANNELS)
         assert all(ci.compression == "zstd" for ci in summary.chunk_indexes)
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
         assert meta["run"] == {"run_id": "r1", "dt": "0.001"}

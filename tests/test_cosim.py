@@ -19,7 +19,13 @@ import pytest
 from mcap.reader import make_reader
 
 from bus_schemas import codec
-from bus_schemas.mcap_schemas import CHANNELS, JsonDecoderFactory, read_messages
+from bus_schemas.mcap_schemas import (
+    CHANNELS,
+    FOXGLOVE_CHANNELS,
+    JsonDecoderFactory,
+    ProtobufDecoderFactory,
+    read_messages,
+)
 from bus_schemas.protocol import CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
@@ -95,13 +101,17 @@ def test_lockstep_run_completes(lockstep):
 def test_recording_reads_back_every_channel_decodes(lockstep):
     res, path = lockstep
     with open(path, "rb") as f:
-        reader = make_reader(f, decoder_factories=[JsonDecoderFactory()])
+        reader = make_reader(f, decoder_factories=[JsonDecoderFactory(),
+                                                   ProtobufDecoderFactory()])
         topics = Counter()
         for _, channel, _, obj in reader.iter_decoded_messages():
-            assert isinstance(obj, dict)
+            if channel.topic in FOXGLOVE_CHANNELS:  # protobuf, tests/test_foxglove.py
+                assert type(obj).DESCRIPTOR.full_name == FOXGLOVE_CHANNELS[channel.topic]
+            else:
+                assert isinstance(obj, dict)
             topics[channel.topic] += 1
     # every channel has messages but the realtime plant's overruns (none in lockstep)
-    assert set(CHANNELS) - {"/cosim/timing"} <= set(topics)
+    assert {*CHANNELS, *FOXGLOVE_CHANNELS} - {"/cosim/timing"} <= set(topics)
     assert "/cosim/timing" not in topics
     assert topics["/can/tx"] == res.frames_tx
     assert topics["/can/rx"] == res.frames_rx

@@ -59,6 +59,7 @@ from bus_schemas.zenoh_config import loopback_endpoint
 from hp_model.falls import FallReason
 from human_fmu.instance import HumanFmu
 from orchestrator.loop import Command, FmuPlant, Observation, Sensed, run_loop
+from orchestrator.loop.foxglove import WalkerFoxglove
 from orchestrator.loop.recorder import GroundTruthRecorder
 from orchestrator.modes import CosimMode
 from prosthesis_controller.timing import Usage, pin_thread
@@ -404,7 +405,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
     gait = load_gait(cfg.gait, model.parameter_hash())
     from hp_model.force_tube import load_tube
 
-    load_tube(cfg.tube, gait.hash())  # refuse a mismatched tube here, not in the child
+    tube = load_tube(cfg.tube, gait.hash())  # refuse a mismatched tube here, not in the child
     fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
     run_id = cfg.run_id or f"run-{os.getpid()}-{time.monotonic_ns() % 10**9}"
     keys.validate_run_id(run_id)
@@ -439,7 +440,7 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         fmu.start(real, integer)
         if cfg.record is not None:
             Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
-            rec = Recorder(cfg.record, metadata={"run_id": run_id})
+            rec = Recorder(cfg.record, metadata={"run_id": run_id}, can_rates=0.1)
             rec.register_all()
             rec.add_metadata("config", cfg.to_dict())
             rec.add_metadata("versions", versions())
@@ -496,7 +497,9 @@ def run_cosim(cfg: CosimConfig, *, progress: Callable[[int, float, int], None] |
         if not stop.is_set():
             say("controller alive")
             limits = (float(model.torque_limits[4]), float(model.torque_limits[5]))
-            _loop(cfg, plan, fmu, bus, rec, proc, lost, stop, res, ratio, limits, progress)
+            walker = None if rec is None else WalkerFoxglove(model, gait, tube)
+            _loop(cfg, plan, fmu, bus, rec, proc, lost, stop, res, ratio, limits, progress,
+                  walker)
     finally:
         if affinity is not None:
             os.sched_setaffinity(0, affinity)
@@ -755,15 +758,18 @@ class CanLink:
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, proc: Any,
           lost: threading.Event, stop: threading.Event, res: CosimResult,
           ratio: tuple[float, float], limits: tuple[float, float],
-          progress: Callable[[int, float, int], None] | None) -> None:
+          progress: Callable[[int, float, int], None] | None,
+          walker: WalkerFoxglove | None = None) -> None:
     """The tick loop (module docstring): :func:`orchestrator.loop.run_loop` of the FMU
-    plant and the CAN link, and the run's summary from it."""
+    plant and the CAN link, and the run's summary from it; ``walker``: the recording also
+    carries the walker for Foxglove (:mod:`orchestrator.loop.foxglove`)."""
     link = CanLink(cfg, plan, bus, rec, proc, lost, res, ratio, limits)
     usage = Usage()
     log = run_loop(FmuPlant(fmu, cfg.dt), link, steps=cfg.steps,
                    periods=round(cfg.max_time / cfg.dt), stop=stop, progress=progress,
                    recorder=(None if rec is None else
-                             GroundTruthRecorder(rec, log_ns=link.log_ns, deferred=True)),
+                             GroundTruthRecorder(rec, log_ns=link.log_ns, deferred=True,
+                                                 walker=walker)),
                    timed=True, samples=False)
     res.steps = log.steps
     if log.fall is not None:

@@ -19,12 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from hp_model.human_prosthesis import HumanProsthesisModel
-
-FORCE_SCALE = 1500.0  # N per metre of arrow
-HUMAN = ("#1f5fa8", (("hip", "l_knee", "l_ankle", "l_heel", "l_toe", "l_ankle"),
-                     ("hip", "r_knee")))
-IWALK = ("#7f7f7f", (("r_knee", "socket"),))
-PROSTHESIS = ("#e07b00", (("socket", "p_knee", "p_ankle", "p_heel", "p_toe", "p_ankle"),))
+from orchestrator.loop.walker_figure import FORCE_SCALE, HUMAN, IWALK, PROSTHESIS
 
 
 def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain: np.ndarray,
@@ -132,4 +127,4 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
                       title=f"{Path(path).name}" + (f" ({ctrl})" if ctrl else ""))
 
 
-__all__ = ["FORCE_SCALE", "recording_gif", "walker_gif"]
+__all__ = ["recording_gif", "walker_gif"]

@@ -1,6 +1,8 @@
 """The loop's optional recorder: the ground truth of every period into an MCAP recording
 (``/ground_truth``, the channel :mod:`orchestrator.cosim.recording` and ``hpcosim animate``
-read)."""
+read) and, given a :class:`~orchestrator.loop.foxglove.WalkerFoxglove`, every
+:data:`~orchestrator.loop.foxglove.PERIOD` of simulation time the walker for Foxglove
+(``/walker/tf``, ``/walker/scene``, ``/walker/reference``)."""
 
 from __future__ import annotations
 
@@ -9,6 +11,13 @@ from typing import Any
 
 import numpy as np
 
+from orchestrator.loop.foxglove import (
+    PERIOD,
+    REFERENCE_TOPIC,
+    SCENE_TOPIC,
+    TRANSFORMS_TOPIC,
+    WalkerFoxglove,
+)
 from orchestrator.loop.link import Command
 from orchestrator.loop.plant import Observation, Truth
 
@@ -33,16 +42,28 @@ class GroundTruthRecorder:
     """Writes ``/ground_truth`` to ``rec`` (a :class:`bus_schemas.mcap_schemas.Recorder`)
     at log time ``log_ns(t)`` (default: the simulation time); ``deferred``: queued and
     serialized when the owner calls ``rec.write_deferred()`` (the co-simulation does it
-    while it waits for the controller)."""
+    while it waits for the controller); ``walker``: also the walker for Foxglove, at the
+    first period and then every ``period`` s of simulation time (the messages are built
+    when written, so a deferred recorder's hot path only queues them)."""
 
     def __init__(self, rec: Any, *, log_ns: Callable[[float], int] | None = None,
-                 deferred: bool = False) -> None:
-        self.rec, self.deferred = rec, deferred
+                 deferred: bool = False, walker: WalkerFoxglove | None = None,
+                 period: float = PERIOD) -> None:
+        self.rec, self.deferred, self.walker, self.period = rec, deferred, walker, period
         self.log_ns = log_ns or (lambda t: round(t * 1e9))
+        self._next = -np.inf  # simulation time of the next walker message [s]
 
     def record(self, obs: Observation, cmd: Command, truth: Truth) -> None:
         ns = self.log_ns(obs.t)
-        if self.deferred:
-            self.rec.defer_call("/ground_truth", ns, ground_truth_record, obs, truth)
-        else:
-            self.rec.write("/ground_truth", ground_truth_record(obs, truth), ns)
+        put = self.rec.defer_call if self.deferred else self._write
+        put("/ground_truth", ns, ground_truth_record, obs, truth)
+        w = self.walker
+        if w is not None and obs.t >= self._next:
+            self._next = obs.t + self.period * (1.0 - 1e-6)
+            put(TRANSFORMS_TOPIC, ns, w.transforms, ns, truth.q)
+            put(SCENE_TOPIC, ns, w.scene, ns, obs.t, truth.q, truth.socket_force, obs.domain,
+                obs.tau, obs.steps)
+            put(REFERENCE_TOPIC, ns, w.reference, obs.t, obs.domain, obs.tau)
+
+    def _write(self, topic: str, ns: int, build: Callable[..., Any], *args: Any) -> None:
+        self.rec.write(topic, build(*args), ns)
