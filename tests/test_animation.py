@@ -4,6 +4,7 @@ run, the figure following the hip, the stick figure where the model's frames are
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -96,3 +97,43 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     assert main(["animate", str(empty), "--out", str(tmp_path / "e.gif")]) == 2
     assert "0 /ground_truth messages" in capsys.readouterr().err
     assert not (tmp_path / "e.gif").exists()
+
+
+def test_parse_scenario(model):
+    """The experiments' scenarios by name (``hpcosim animate SCENARIO``)."""
+    from orchestrator.experiments import parse_scenario
+
+    sc = parse_scenario(model, "phase-pd/human:0.01:2+offset", 1)
+    assert (sc.controller, sc.perturbation.amplitude, sc.perturbation.seed) == (
+        "phase-pd", 0.01, 2)
+    assert sc.initial_offset[0] == pytest.approx(0.02) and sc.steps == 1
+    sc = parse_scenario(model, "clfqp", 4)
+    assert (sc.perturbation.amplitude, sc.initial_offset, sc.steps) == (0.0, (0.0, 0.0), 4)
+    assert parse_scenario(model, "oracle/nominal", 2).controller == "oracle"
+    for bad, msg in (("nope/nominal", "controller 'nope'"), ("pd/human:x", "human:AMPLITUDE"),
+                     ("pd/drop:3", "human:AMPLITUDE"), ("pd+later", "only suffix"),
+                     ("pd/human:0.5", "outside")):
+        with pytest.raises(ValueError, match=msg):
+            parse_scenario(model, bad, 1)
+
+
+def test_hpcosim_animate_a_scenario(tmp_path, capsys):
+    """``hpcosim animate SCENARIO``: a scenario of the experiments run in process (the demo
+    subject's committed gait and tube, 1 step, a perturbed human, the robustness cases'
+    offset start); a bad name or a missing --gait is a one-line error, no file written."""
+    from orchestrator.cli import main
+
+    data = Path(__file__).resolve().parent / "data" / "controller"
+    gt = ["--gait", str(data / "gait_demo.json"), "--tube", str(data / "tube_demo.json")]
+    out = tmp_path / "walker.gif"
+    assert main(["animate", "phase-pd/human:0.01:2+offset", *gt, "--steps", "1", "--fps",
+                 "10", "--seconds", "0.5", "--out", str(out)]) == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 6
+    capsys.readouterr()
+    assert main(["animate", "nope/nominal", *gt, "--out", str(tmp_path / "b.gif")]) == 2
+    err = capsys.readouterr().err
+    assert "controller 'nope'" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["animate", "pd", "--out", str(tmp_path / "b.gif")]) == 2
+    assert "needs --gait and --tube" in capsys.readouterr().err
+    assert not (tmp_path / "b.gif").exists()
