@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -198,3 +199,34 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
         assert f"({f})" in report
         with Image.open(out / f) as im:
             assert im.format == "GIF" and im.n_frames >= 4 * 25
+
+
+@pytest.mark.slow
+def test_demo_terminal_output_fits_one_screen(tmp_path, capsys, monkeypatch):
+    """``hpcosim demo``'s terminal output (--quick, 1 step per run), captured at 80 columns:
+    at most 24 lines, every stage with its time, one line per claim with its mark, and where
+    the report is."""
+    from orchestrator.cli import main
+    from orchestrator.experiments_cli import STAGES
+
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setenv("LINES", "24")
+    out = tmp_path / "demo"
+    capsys.readouterr()
+    assert main(["demo", "--quick", "--steps", "1", "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.rstrip("\n").splitlines()
+    print("\n".join(lines))
+    # screen lines: the report's path may be longer than a line, then wrapped
+    assert sum(max(1, math.ceil(len(x) / 80)) for x in lines) <= 24, "\n".join(lines)
+    assert max(len(x) for x in lines[:-1]) <= 80, "\n".join(lines)
+    for stage in STAGES[:-1]:  # the report's line is the last one
+        mine = [x for x in lines if x.startswith(f"done {stage} ")]
+        assert len(mine) == 1 and re.search(r" \d+\.\d s  \S", mine[0]), (stage, lines)
+    claims = json.loads((out / "metrics.json").read_text())["claims"]
+    for c in claims:
+        mine = [x for x in lines if f" {c['id']} " in x]
+        assert len(mine) == 1, (c["id"], lines)
+        assert ("NOT reproduced" in mine[0]) == (not c["reproduced"]), mine[0]
+    assert sum("reproduced" in x for x in lines) == len(claims)
+    assert re.fullmatch(rf"report: {re.escape(str(out))}/report\.md \(\d+ s in all; .*\)",
+                        lines[-1]) and (out / "report.md").is_file()
