@@ -4,8 +4,8 @@ From the run's full configuration q (n, 12) and the model's frames (:meth:`hp_mo
 HumanProsthesisModel.numeric` ``frames``: x, z of every joint and sole point): the human
 (trunk, left leg, the thigh in the iWalk) in blue, the prosthesis (socket to foot) in
 orange, the ground, the socket force on the prosthesis as an arrow at the socket (world
-frame; 1 m per ``FORCE_SCALE`` N, at most ``MAX_ARROW`` m long, drawn ``ARROW_OFFSET`` m behind
-the socket so that it does not hide the shank, with its magnitude written at its tail), and the
+frame; 1 m per ``FORCE_SCALE`` N, at most ``MAX_ARROW`` m long, drawn ``ARROW_OFFSET`` m in front
+of the socket so that it does not hide the shank, with its magnitude written at its tail), and the
 time, domain, phase and step count.  The view follows the hip.  Frames are taken every
 ``1 / fps`` s of the 1 kHz log and written with matplotlib's Pillow writer (no other
 dependency).
@@ -24,7 +24,8 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 
 FORCE_SCALE = 1500.0  # N per metre of arrow
 MAX_ARROW = 0.45  # m: longer arrows are shortened (direction kept) to stay in the frame
-ARROW_OFFSET = -0.12  # m along x: the arrow's tail beside the socket, clear of the shank
+ARROW_OFFSET = 0.15  # m along x: the tail in front of the socket, clear of the shank and of
+#: the swing leg (behind the prosthesis while the load peaks, early in stance)
 ARROW_COLOUR = "#b00020"
 HUMAN = ("#1f5fa8", (("hip", "l_knee", "l_ankle", "l_heel", "l_toe", "l_ankle"),
                      ("hip", "r_knee")))
@@ -82,7 +83,7 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
     arrow = ax.annotate("", xy=(0, 0), xytext=(0, 0), annotation_clip=False,
                         arrowprops={"arrowstyle": "-|>", "color": ARROW_COLOUR, "lw": 2.5,
                                     "mutation_scale": 14})
-    force_label = ax.text(0, 0, "", color=ARROW_COLOUR, fontsize=9, ha="right", va="bottom")
+    force_label = ax.text(0, 0, "", color=ARROW_COLOUR, fontsize=9, ha="left", va="bottom")
     label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=10)
     ax.set_title(title, fontsize=10)
 
@@ -108,7 +109,7 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
             dx, dz = arrow_vector(wx, wz)
             arrow.xy = (sx + dx, sz + dz)
             arrow.set_position((sx, sz))
-            force_label.set_position((sx - 0.02, sz))
+            force_label.set_position((sx + 0.02, sz))
             force_label.set_text(f"F_s {math.hypot(fx, fz):.0f} N")
         ax.set_xlim(hx - 1.0, hx + 1.0)
         d = "ps" if domain[idx[k]] == 0 else "pns"
