@@ -91,8 +91,8 @@ def demo(
     console = Console()
     stages: list[dict[str, Any]] = []
     model = hp_model.load_model()
-    _line(console, "[bold]hpcosim demo[/]: synthetic subject -> mocap -> gait -> tube -> "
-          "experiments -> report")
+    _line(console, "[bold]hpcosim demo[/]: subject -> mocap -> gait -> tube -> experiments "
+          "-> report")
     t_all = time.perf_counter()
     # transient: the bar shows the running stage, the lines printed above it stay
     with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
