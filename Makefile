@@ -28,8 +28,10 @@ test: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
+# Every benchmark (about 10 min on 2 cores) -> docs/performance.md, generated with the machine,
+# the date and the commit (never edited by hand; the prose is docs/performance-notes.md)
 bench: $(STAMP)
-	$(VENV)/bin/python benchmarks/bench_model.py
+	$(VENV)/bin/python benchmarks/run_all.py --out docs/performance.md
 
 # Re-resolve every dependency within pyproject's ranges in a scratch venv and write the
 # exact versions to requirements.lock; then run `make clean test` and commit both files.

@@ -9,11 +9,13 @@ closed-loop verification (20 steps + return map).  Printed once: the optimized o
 RMS from the data (+ offsets), and for the model source from the reference gait.
 
     PYTHONPATH=. python benchmarks/bench_gait.py [--repeats 3] [--source model|template]
+        [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import tempfile
 import time
@@ -36,6 +38,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--source", choices=("model", "template"), default="model")
+    ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     model = hp_model.load_model()
     coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
@@ -57,11 +60,18 @@ def main() -> None:
                      time.perf_counter() - t1, r.status, v["spectral_radius"]))
     med = statistics.median
     print("| quantity | median | min | max |\n|---|---|---|---|")
+    figures = {}
     for i, name in ((0, "build + solve (s)"), (1, "IPOPT solve (s)"), (2, "iterations"),
                     (3, "share of solve in function/derivative evaluation"),
                     (4, "verification: 20 steps + return map (s)")):
         xs = [row[i] for row in rows]
+        figures[name] = {"median": med(xs), "min": min(xs), "max": max(xs)}
         print(f"| {name} | {med(xs):.3g} | {min(xs):.3g} | {max(xs):.3g} |")
+    if args.json:
+        args.json.write_text(json.dumps({"source": args.source, "repeats": args.repeats,
+                                         "status": str(rows[0][5]),
+                                         "spectral_radius": float(rows[0][6]),
+                                         "figures": figures}, indent=1))
     print(f"\nstatus {rows[0][5]}; return-map spectral radius {rows[0][6]:.2g}; "
           f"repeats {args.repeats}; source {args.source}")
     tau = np.linspace(0.0, 1.0, 201)

@@ -5,12 +5,13 @@ joint angles, segmentation), rendering the QA report and figures, writing the st
 "Core" = read + process + steps file; "all" adds the report and figures.  The take is
 generated once (not timed).  Target (issue 3): end to end under 2 s.
 
-    PYTHONPATH=. python benchmarks/bench_mocap.py [--repeats 7]
+    PYTHONPATH=. python benchmarks/bench_mocap.py [--repeats 7] [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import tempfile
 import time
@@ -30,6 +31,7 @@ from hp_model.domains import DOMAINS
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     model = hp_model.load_model()
     coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
@@ -65,6 +67,12 @@ def main() -> None:
     print(f"{'stage':<16}{'median (s)':>12}{'min':>9}{'max':>9}")
     for k, v in rows.items():
         print(f"{k:<16}{statistics.median(v):>12.3f}{min(v):>9.3f}{max(v):>9.3f}")
+    if args.json:
+        args.json.write_text(json.dumps({
+            "frames": take.n_frames, "csv_mb": size, "steps": len(p.steps),
+            "repeats": args.repeats,
+            "stages_s": {k: {"median": statistics.median(v), "min": min(v), "max": max(v)}
+                         for k, v in rows.items()}}, indent=1))
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ F_s computation (our compiled ``socket_ps``) against the same computation with P
 
     PYTHONPATH=. python benchmarks/bench_playback.py [--repeats 7] [--steps 20]
         [--gait tests/data/playback/gait_synthetic.json] [--steps-file steps.npz] [--accuracy]
+        [--json out.json]
 
 Without ``--steps-file`` the steps come from the model-generated subject (20 ps steps).
 """
@@ -22,6 +23,7 @@ Without ``--steps-file`` the steps come from the model-generated subject (20 ps 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import tempfile
@@ -66,6 +68,7 @@ def main() -> None:
     ap.add_argument("--steps-file", type=Path, default=None)
     ap.add_argument("--frame-repeats", type=int, default=5)
     ap.add_argument("--accuracy", action="store_true")
+    ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
 
     model = hp_model.load_model()
@@ -123,6 +126,16 @@ def main() -> None:
           f"; max relative difference {err:.1e}")
     if err > 1e-8:
         raise SystemExit(f"ours and Pinocchio disagree ({err:.1e})")
+    if args.json:
+        def st(v: list[float], scale: float = 1.0) -> dict[str, float]:
+            return {"median": scale * statistics.median(v), "min": scale * min(v),
+                    "max": scale * max(v)}
+
+        args.json.write_text(json.dumps({
+            "steps": len(res.playback.steps), "frames": n_frames, "repeats": args.repeats,
+            "fit_s": {"total": st(total), "playback": st(play), "tube": st(tube)},
+            "per_frame_us": {"ours": st(ours_t, 1e6), "pinocchio": st(pin_t, 1e6)},
+            "max_relative_difference": err}, indent=1))
 
     # 3. accuracy against the truth
     if args.accuracy:

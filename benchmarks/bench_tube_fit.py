@@ -7,11 +7,13 @@ are timed separately.  Target (issue "force tube"): playback of 20 steps + tube 
 so the fit should stay well under 1 s.
 
     PYTHONPATH=. python benchmarks/bench_tube_fit.py [--repeats 15] [--steps 20] [--samples 150]
+        [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import tempfile
 import time
@@ -50,6 +52,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--samples", type=int, default=150)
     ap.add_argument("--degree", type=int, default=3)
+    ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     nominal = np.zeros((3, 6))
     rows: dict[str, list[float]] = {k: [] for k in (
@@ -80,6 +83,12 @@ def main() -> None:
     for k, v in rows.items():
         ms = np.array(v) * 1e3
         print(f"{k:32s} {statistics.median(ms):10.1f} {ms.min():8.1f} {ms.max():8.1f}")
+    if args.json:
+        args.json.write_text(json.dumps({
+            "steps": args.steps, "samples": args.samples, "degree": args.degree,
+            "repeats": args.repeats,
+            "stages_ms": {k: {"median": 1e3 * statistics.median(v), "min": 1e3 * min(v),
+                              "max": 1e3 * max(v)} for k, v in rows.items()}}, indent=1))
     print(f"last fit: k_tube = {cr['a_posteriori']['k_tube']}, "
           f"eps_tube = {cr['a_posteriori']['epsilon_tube']:.3f}, "
           f"LOO coverage = {cr['leave_one_out']['coverage']:.2f}")

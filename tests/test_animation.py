@@ -4,12 +4,13 @@
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
-from orchestrator.experiments.animation import walker_gif
+from orchestrator.experiments.animation import ARROW_COLOUR, MAX_ARROW, arrow_vector, walker_gif
 from orchestrator.experiments.scenarios import NOMINAL, Scenario, run_scenario
 from tests.controller_support import tube_about_nominal
 
@@ -28,7 +29,7 @@ def test_walker_gif_of_a_short_run(model, template_gait):
         im.seek(n - 1)
         last = np.asarray(im.convert("RGB"))
     assert n == int(np.floor((r.t[-1] - r.t[0]) * 20.0 + 1e-9)) + 1
-    assert size == (384, 256)
+    assert size == (600, 400)
     # the figure is drawn (human blue, prosthesis orange pixels) and changes over the run
     for img in (first, last):
         assert np.any((img[..., 2] > 150) & (img[..., 0] < 80))  # blue
@@ -37,6 +38,33 @@ def test_walker_gif_of_a_short_run(model, template_gait):
     with pytest.raises(ValueError, match="empty run"):
         walker_gif(model, r.t[:0], r.q[:0], r.domain[:0], r.tau[:0])
 
+
+def _frame(data: bytes) -> np.ndarray:
+    with Image.open(io.BytesIO(data)) as im:
+        return np.asarray(im.convert("RGB")).astype(int)
+
+
+def test_socket_force_arrow_drawn_at_peak_load(model, template_gait):
+    """The arrow stays in the frame when the socket force is large (an annotation whose tip
+    leaves the axes is not drawn by default): the stance frame of the run's largest |F_s|,
+    the force multiplied by 5, one frame rendered with and without the force."""
+    tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
+    r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 1))
+    assert r.socket_force is not None
+    mag = np.where(r.domain == 0, np.hypot(r.socket_force[:, 0], r.socket_force[:, 1]), 0.0)
+    k = int(np.argmax(mag))
+    assert r.domain[k] == 0 and mag[k] > 300.0
+    force = 5.0 * r.socket_force[k:k + 1]
+    assert np.hypot(*arrow_vector(force[0, 0], force[0, 1])) == pytest.approx(MAX_ARROW)
+    args = (model, r.t[k:k + 1], r.q[k:k + 1], r.domain[k:k + 1], r.tau[k:k + 1])
+    with_force, without = _frame(walker_gif(*args, force)), _frame(walker_gif(*args))
+    rgb = np.array([int(ARROW_COLOUR[i:i + 2], 16) for i in (1, 3, 5)])
+
+    def arrow_pixels(img: np.ndarray) -> int:
+        return int((np.abs(img - rgb).max(axis=-1) < 40).sum())
+
+    assert arrow_pixels(without) == 0
+    assert arrow_pixels(with_force) > 150  # the shaft, the head and the magnitude's label
 
 
 def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
@@ -74,3 +102,43 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     assert main(["animate", str(empty), "--out", str(tmp_path / "e.gif")]) == 2
     assert "0 /ground_truth messages" in capsys.readouterr().err
     assert not (tmp_path / "e.gif").exists()
+
+
+def test_parse_scenario(model):
+    """The experiments' scenarios by name (``hpcosim animate SCENARIO``)."""
+    from orchestrator.experiments.paper import parse_scenario
+
+    sc = parse_scenario(model, "phase-pd/human:0.01:2+offset", 1)
+    assert (sc.controller, sc.perturbation.amplitude, sc.perturbation.seed) == (
+        "phase-pd", 0.01, 2)
+    assert sc.initial_offset[0] == pytest.approx(0.02) and sc.steps == 1
+    sc = parse_scenario(model, "clfqp", 4)
+    assert (sc.perturbation.amplitude, sc.initial_offset, sc.steps) == (0.0, (0.0, 0.0), 4)
+    assert parse_scenario(model, "oracle/nominal", 2).controller == "oracle"
+    for bad, msg in (("nope/nominal", "controller 'nope'"), ("pd/human:x", "human:AMPLITUDE"),
+                     ("pd/drop:3", "human:AMPLITUDE"), ("pd+later", "only suffix"),
+                     ("pd/human:0.5", "outside")):
+        with pytest.raises(ValueError, match=msg):
+            parse_scenario(model, bad, 1)
+
+
+def test_hpcosim_animate_a_scenario(tmp_path, capsys):
+    """``hpcosim animate SCENARIO``: a scenario of the experiments run in process (the demo
+    subject's committed gait and tube, 1 step, a perturbed human, the robustness cases'
+    offset start); a bad name or a missing --gait is a one-line error, no file written."""
+    from orchestrator.cli import main
+
+    data = Path(__file__).resolve().parent / "data" / "controller"
+    gt = ["--gait", str(data / "gait_demo.json"), "--tube", str(data / "tube_demo.json")]
+    out = tmp_path / "walker.gif"
+    assert main(["animate", "phase-pd/human:0.01:2+offset", *gt, "--steps", "1", "--fps",
+                 "10", "--seconds", "0.5", "--out", str(out)]) == 0
+    with Image.open(out) as im:
+        assert im.n_frames == 6
+    capsys.readouterr()
+    assert main(["animate", "nope/nominal", *gt, "--out", str(tmp_path / "b.gif")]) == 2
+    err = capsys.readouterr().err
+    assert "controller 'nope'" in err and len(err.strip().splitlines()) == 1, err
+    assert main(["animate", "pd", "--out", str(tmp_path / "b.gif")]) == 2
+    assert "needs --gait and --tube" in capsys.readouterr().err
+    assert not (tmp_path / "b.gif").exists()

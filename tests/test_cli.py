@@ -58,9 +58,17 @@ def _verbs(group, prefix=()):
             yield path
 
 
-def test_every_verb_answers_help_and_is_in_the_readme(capsys):
+def readme_verbs(text: str) -> list[tuple[str, ...]]:
+    """The verbs of README's command-line table (rows starting ``| `hpcosim VERB` |``)."""
+    import re
+
+    rows = re.findall(r"^\| `hpcosim ([a-z][a-z -]*)` \|", text, flags=re.MULTILINE)
+    return [tuple(r.split()) for r in rows]
+
+
+def test_every_verb_answers_help_and_is_in_the_readme_table(capsys):
     """Each command of ``hpcosim`` (walked from the app itself, not a hand list) prints its
-    help with exit 0, and the README's command line section names it."""
+    help with exit 0, and README's verb table lists exactly the app's verbs, each once."""
     from pathlib import Path
 
     import typer.main
@@ -69,9 +77,18 @@ def test_every_verb_answers_help_and_is_in_the_readme(capsys):
 
     verbs = sorted(_verbs(typer.main.get_group(app)))
     assert len(verbs) >= 17, verbs
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     for v in verbs:
         assert main([*v, "--help"]) == 0, v
         out = capsys.readouterr().out
         assert "Usage" in out, v
-        assert f"hpcosim {' '.join(v)}" in readme, f"README does not name 'hpcosim {' '.join(v)}'"
+    table = readme_verbs((Path(__file__).resolve().parents[1] / "README.md").read_text())
+    assert len(table) == len(set(table)), f"README lists a verb twice: {table}"
+    assert set(table) == set(verbs), (
+        f"README's table lacks {sorted(set(verbs) - set(table))}, "
+        f"lists unknown {sorted(set(table) - set(verbs))}")
+
+
+def test_readme_verbs_parses_the_table():
+    text = "| verb | what |\n|---|---|\n| `hpcosim tube fit` | x |\n| `hpcosim demo` | y |\n" \
+           "see `hpcosim run` here\n"
+    assert readme_verbs(text) == [("tube", "fit"), ("demo",)]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -113,7 +114,7 @@ def test_perturbation_changes_the_human_only(template_gait):
 
 
 @pytest.mark.slow
-def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
+def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path, capsys, monkeypatch):
     """``hpcosim demo`` (the whole pipeline, 20 steps per run) and the numbers the docs
     states for it (section "Results on the demo subject").  Every stage is deterministic
     (single-threaded IPOPT, fixed seeds), so the tolerances only absorb the last digits of
@@ -121,7 +122,13 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
     from orchestrator.cli import main
 
     out = tmp_path / "demo"
+    monkeypatch.setenv("COLUMNS", "80")
+    monkeypatch.setenv("LINES", "24")
+    capsys.readouterr()
     assert main(["demo", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out.rstrip("\n").splitlines()
+    print("\n".join(printed))
+    assert_fits_one_screen(printed, out)
     for f in ("gait.json", "tube.json", "metrics.json", "report.md", "fig6_torques.png",
               "fig7_phase_portraits.png", "fig8_robustness.png"):
         assert (out / f).stat().st_size > 0, f
@@ -198,3 +205,25 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path):
         assert f"({f})" in report
         with Image.open(out / f) as im:
             assert im.format == "GIF" and im.n_frames >= 4 * 25
+
+
+def assert_fits_one_screen(lines: list[str], out) -> None:
+    """``hpcosim demo``'s terminal output ``lines``, captured at 80 columns: at most 24
+    lines, every stage with its time, one line per claim with its mark, and where the
+    report is (written to ``out``)."""
+    from orchestrator.cli.experiments import STAGES
+
+    # screen lines: the report's path may be longer than a line, then wrapped
+    assert sum(max(1, math.ceil(len(x) / 80)) for x in lines) <= 24, "\n".join(lines)
+    assert max(len(x) for x in lines[:-1]) <= 80, "\n".join(lines)
+    for stage in STAGES[:-1]:  # the report's line is the last one
+        mine = [x for x in lines if x.startswith(f"done {stage} ")]
+        assert len(mine) == 1 and re.search(r" \d+\.\d s  \S", mine[0]), (stage, lines)
+    claims = json.loads((out / "metrics.json").read_text())["claims"]
+    for c in claims:
+        mine = [x for x in lines if f" {c['id']} " in x]
+        assert len(mine) == 1, (c["id"], lines)
+        assert ("NOT reproduced" in mine[0]) == (not c["reproduced"]), mine[0]
+    assert sum("reproduced" in x for x in lines) == len(claims)
+    assert re.fullmatch(rf"report: {re.escape(str(out))}/report\.md \(\d+ s in all; .*\)",
+                        lines[-1]) and (out / "report.md").is_file()

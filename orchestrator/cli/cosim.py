@@ -214,28 +214,58 @@ def recover_cmd(
 
 
 def animate_cmd(
-    recording: Annotated[Path, typer.Argument(help="MCAP recording (hpcosim run --record).",
-                                              dir_okay=False)],
+    source: Annotated[str, typer.Argument(
+        metavar="RUN.mcap|SCENARIO",
+        help="An MCAP recording (hpcosim run --record), or a scenario of the experiments run "
+        "in process: CONTROLLER[/nominal|/human:AMPLITUDE[:SEED]][+offset], e.g. clfqp, "
+        "pd/human:0.01:3+offset (needs --gait and --tube).")],
     out: Annotated[Path, typer.Option("--out", help="GIF to write.", dir_okay=False)],
     seconds: Annotated[float | None, typer.Option(
         "--seconds", min=0.04, help="Animate the first SECONDS of the run (default: all).")
     ] = None,
     fps: Annotated[float, typer.Option("--fps", min=1.0, max=100.0,
                                        help="Frames per second.")] = 25.0,
+    gait: Annotated[Path | None, typer.Option("--gait", help="Scenario: gait file.",
+                                              dir_okay=False)] = None,
+    tube: Annotated[Path | None, typer.Option("--tube", help="Scenario: force-tube file.",
+                                              dir_okay=False)] = None,
+    steps: Annotated[int, typer.Option("--steps", min=1, max=100,
+                                       help="Scenario: steps to walk.")] = 3,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
-    """The walker of a recorded run, animated (stick figure from the model's frames: human
-    blue, prosthesis orange, socket force red) as a GIF."""
+    """The walker of a recorded run or of a scenario run in process, animated (stick figure
+    from the model's frames: human blue, prosthesis orange, socket force red) as a GIF."""
     import hp_model
     from hp_model.atomic_io import atomic_write_bytes
     from orchestrator.cli.options import check_output_file
-    from orchestrator.experiments.animation import recording_gif
+    from orchestrator.experiments.animation import recording_gif, walker_gif
 
     check_output_file(out)
+    recording = source.endswith(".mcap") or Path(source).is_file()
+    if not recording and (gait is None or tube is None):
+        raise typer.BadParameter(f"scenario {source!r} needs --gait and --tube",
+                                 param_hint="--gait/--tube")
     model = hp_model.load_model(str(subject) if subject else None,
                                 str(device) if device else None)
-    data = recording_gif(recording, model, fps=fps, max_seconds=seconds)
+    if recording:
+        data = recording_gif(source, model, fps=fps, max_seconds=seconds)
+    else:
+        from hp_model.force_tube import load_tube
+        from hp_model.gait_artifact import load_gait
+        from orchestrator.experiments.paper import parse_scenario
+        from orchestrator.experiments.scenarios import run_scenario
+
+        try:
+            sc = parse_scenario(model, source, steps)
+        except ValueError as e:
+            raise typer.BadParameter(str(e), param_hint="RUN.mcap|SCENARIO") from None
+        assert gait is not None and tube is not None
+        g = load_gait(gait, model.parameter_hash())
+        r = run_scenario(model, g, load_tube(tube, g.hash()), sc)
+        ended = f"{r.steps} steps" + (f", fell: {r.fall.reason.label}" if r.fall else "")
+        data = walker_gif(model, r.t, r.q, r.domain, r.tau, r.socket_force, fps=fps,
+                          max_seconds=seconds, title=f"{sc.label} ({ended})")
     atomic_write_bytes(out, data)
     Console().print(f"wrote {out} ({len(data) / 1024:.0f} KiB)")
 

@@ -13,14 +13,25 @@ STAGES = ("synthetic subject", "mocap processing", "gait fit", "tube fit", "expe
           "report")
 
 
+def _line(console: Console, text: str) -> None:
+    """One line, cut with an ellipsis at the console's width (never wrapped)."""
+    console.print(text, overflow="ellipsis", no_wrap=True, crop=True)
+
+
+def _stage_line(console: Console, stage: str, seconds: float, output: str, out: Path) -> None:
+    """``done STAGE (T s): OUTPUT``, the output relative to the demo's folder."""
+    rel = Path(output)
+    rel = rel.relative_to(out) if rel.is_relative_to(out) else rel
+    _line(console, f"[green]done[/] {stage:17s} {seconds:6.1f} s  {rel}")
+
+
 def _claims_table(console: Console, metrics: dict[str, Any]) -> None:
     """One line per claim: reproduced or not, the claim's id and its key number (the full
     numbers are in report.md)."""
     console.print("[bold]paper Sec. V claims[/] (numbers in report.md):")
     for c in metrics["claims"]:
         mark = "[green]reproduced    [/]" if c["reproduced"] else "[red]NOT reproduced[/]"
-        console.print(f"  {mark} {c['id']:15s} {c.get('headline', '')}", overflow="ellipsis",
-                      no_wrap=True)
+        _line(console, f"  {mark} {c['id']:15s} {c.get('headline', '')}")
 
 
 def experiments(
@@ -80,8 +91,12 @@ def demo(
     console = Console()
     stages: list[dict[str, Any]] = []
     model = hp_model.load_model()
+    _line(console, "[bold]hpcosim demo[/]: subject -> mocap -> gait -> tube -> experiments "
+          "-> report")
+    t_all = time.perf_counter()
+    # transient: the bar shows the running stage, the lines printed above it stay
     with Progress(TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(),
-                  console=console) as prog:
+                  console=console, transient=True) as prog:
         task = prog.add_task("demo", total=len(STAGES))
         t0 = time.perf_counter()
 
@@ -90,7 +105,7 @@ def demo(
             stages.append({"stage": stage, "seconds": time.perf_counter() - t0,
                            "output": output})
             prog.advance(task)
-            console.print(f"[green]done[/] {stage} ({stages[-1]['seconds']:.1f} s): {output}")
+            _stage_line(console, stage, stages[-1]["seconds"], output, out)
             t0 = time.perf_counter()
 
         prog.update(task, description="synthetic subject")
@@ -127,4 +142,6 @@ def demo(
         write_report(out, m, stages, extra)
         prog.advance(task)
     _claims_table(console, m)
-    console.print(f"wrote {out}/report.md")
+    # the path whole (a terminal wraps it if it must), never cut
+    console.print(f"report: [bold]{out}/report.md[/] ({time.perf_counter() - t_all:.0f} s in "
+                  "all; figures, walker animations, metrics.json beside it)", soft_wrap=True)

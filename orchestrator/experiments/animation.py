@@ -4,9 +4,11 @@ From the run's full configuration q (n, 12) and the model's frames (:meth:`hp_mo
 HumanProsthesisModel.numeric` ``frames``: x, z of every joint and sole point): the human
 (trunk, left leg, the thigh in the iWalk) in blue, the prosthesis (socket to foot) in
 orange, the ground, the socket force on the prosthesis as an arrow at the socket (world
-frame; 1 m per ``FORCE_SCALE`` N), and the time, domain, phase and step count.  The view
-follows the hip.  Frames are taken every ``1 / fps`` s of the 1 kHz log and written with
-matplotlib's Pillow writer (no other dependency).
+frame; 1 m per ``FORCE_SCALE`` N, at most ``MAX_ARROW`` m long, drawn ``ARROW_OFFSET`` m in front
+of the socket so that it does not hide the shank, with its magnitude written at its tail), and the
+time, domain, phase and step count.  The view follows the hip.  Frames are taken every
+``1 / fps`` s of the 1 kHz log and written with matplotlib's Pillow writer (no other
+dependency).
 """
 
 from __future__ import annotations
@@ -21,11 +23,24 @@ import numpy as np
 from hp_model.human_prosthesis import HumanProsthesisModel
 from orchestrator.loop.walker_figure import FORCE_SCALE, HUMAN, IWALK, PROSTHESIS
 
+MAX_ARROW = 0.45  # m: longer arrows are shortened (direction kept) to stay in the frame
+ARROW_OFFSET = 0.15  # m along x: the tail in front of the socket, clear of the shank and of
+#: the swing leg (behind the prosthesis while the load peaks, early in stance)
+ARROW_COLOUR = "#b00020"
+
+
+def arrow_vector(fx: float, fz: float) -> tuple[float, float]:
+    """The arrow (m) of a world-frame force (N): ``FORCE_SCALE`` N per metre, shortened to
+    ``MAX_ARROW`` m with its direction kept."""
+    n = math.hypot(fx, fz) / FORCE_SCALE
+    k = 1.0 / FORCE_SCALE if n <= MAX_ARROW else MAX_ARROW / n / FORCE_SCALE
+    return fx * k, fz * k
+
 
 def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain: np.ndarray,
                tau: np.ndarray, socket_force: np.ndarray | None = None, *,
                title: str = "", fps: float = 25.0, max_seconds: float | None = None,
-               size: tuple[float, float] = (6.0, 4.0), dpi: int = 64) -> bytes:
+               size: tuple[float, float] = (6.0, 4.0), dpi: int = 100) -> bytes:
     """GIF bytes of the run (module docstring).  ``t`` (n,) s, ``q`` (n, 12), ``domain``
     (n,) 0 = ps / 1 = pns, ``tau`` (n,), ``socket_force`` (n, 3) (F_x, F_z, M_y in the
     prosthesis top link's frame) or None."""
@@ -60,10 +75,13 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
             (ln,) = ax.plot([], [], "-o", color=colour, lw=3, ms=3)
             lines.append(ln)
     (head,) = ax.plot([], [], "-o", color=HUMAN[0], lw=4, ms=3)
-    arrow = ax.annotate("", xy=(0, 0), xytext=(0, 0),
-                        arrowprops={"arrowstyle": "->", "color": "#b00020", "lw": 1.5})
-    label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=8)
-    ax.set_title(title, fontsize=8)
+    # annotation_clip=False: an annotation whose point leaves the axes is not drawn at all
+    arrow = ax.annotate("", xy=(0, 0), xytext=(0, 0), annotation_clip=False,
+                        arrowprops={"arrowstyle": "-|>", "color": ARROW_COLOUR, "lw": 2.5,
+                                    "mutation_scale": 14})
+    force_label = ax.text(0, 0, "", color=ARROW_COLOUR, fontsize=9, ha="left", va="bottom")
+    label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=10)
+    ax.set_title(title, fontsize=10)
 
     def draw(k: int) -> Sequence[object]:
         p = pose[k]
@@ -83,13 +101,17 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
             wx = math.cos(a) * fx + math.sin(a) * fz  # rotation about +y
             wz = -math.sin(a) * fx + math.cos(a) * fz
             sx, sz = xy["socket"]
-            arrow.xy = (sx + wx / FORCE_SCALE, sz + wz / FORCE_SCALE)
+            sx += ARROW_OFFSET
+            dx, dz = arrow_vector(wx, wz)
+            arrow.xy = (sx + dx, sz + dz)
             arrow.set_position((sx, sz))
+            force_label.set_position((sx + 0.02, sz))
+            force_label.set_text(f"F_s {math.hypot(fx, fz):.0f} N")
         ax.set_xlim(hx - 1.0, hx + 1.0)
         d = "ps" if domain[idx[k]] == 0 else "pns"
         label.set_text(f"t {t[idx[k]]:.2f} s  {d}  tau {tau[idx[k]]:.2f}  "
                        f"step {int(steps[idx[k]])}")
-        return (*lines, head, arrow, label)
+        return (*lines, head, arrow, force_label, label)
 
     anim = animation.FuncAnimation(fig, draw, frames=len(idx), blit=False)
     with tempfile.TemporaryDirectory() as tmp:  # Pillow's writer wants a file name
@@ -98,8 +120,6 @@ def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain
         data = path.read_bytes()
     plt.close(fig)
     return data
-
-
 
 
 def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float = 25.0,
@@ -127,4 +147,4 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
                       title=f"{Path(path).name}" + (f" ({ctrl})" if ctrl else ""))
 
 
-__all__ = ["recording_gif", "walker_gif"]
+__all__ = ["ARROW_COLOUR", "MAX_ARROW", "arrow_vector", "recording_gif", "walker_gif"]

@@ -381,6 +381,39 @@ def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
     return _png(fig)
 
 
+def parse_scenario(model: HumanProsthesisModel, text: str, steps: int) -> Scenario:
+    """A scenario of the experiments by name: ``CONTROLLER[/PERTURBATION][+offset]``, the
+    controller a :class:`~prosthesis_controller.ControllerName` (or ``oracle``), the
+    perturbation ``nominal`` (default) or ``human:AMPLITUDE[:SEED]`` (rad, as ``hpcosim run
+    --perturb``; the robustness cases are ``human:0.01:SEED``), ``+offset`` the robustness
+    cases' prosthesis start off nominal (:data:`ROBUST_KNEE_OFFSET`).  ValueError if bad."""
+    from orchestrator.experiments.scenarios import ORACLE, Perturbation
+
+    body, plus, suffix = text.partition("+")
+    if plus and suffix != "offset":
+        raise ValueError(f"scenario {text!r}: the only suffix is '+offset'")
+    ctrl, _, pert = body.partition("/")
+    if ctrl not in (*ControllerName, ORACLE):
+        raise ValueError(f"scenario {text!r}: controller {ctrl!r} is not one of "
+                         f"{', '.join([*ControllerName, ORACLE])}")
+    if pert in ("", "nominal"):
+        p = NOMINAL
+    else:
+        parts = pert.split(":")
+        try:
+            if parts[0] != "human" or not 2 <= len(parts) <= 3:
+                raise ValueError
+            amp, seed = float(parts[1]), int(parts[2]) if len(parts) == 3 else 0
+        except ValueError:
+            raise ValueError(f"scenario {text!r}: the perturbation is 'nominal' or "
+                             f"'human:AMPLITUDE[:SEED]'") from None
+        if not 0.0 <= amp <= 0.1:
+            raise ValueError(f"scenario {text!r}: amplitude {amp} rad outside [0, 0.1]")
+        p = Perturbation(f"human:{amp:g}:{seed}", amp, seed)
+    offset = knee_offset(model, ROBUST_KNEE_OFFSET) if plus else (0.0, 0.0)
+    return Scenario(ctrl, p, steps, offset)
+
+
 # ---------------------------------------------------------------- all
 
 #: seconds of each run the animations show (the nominal run, each robustness case)

@@ -1,0 +1,64 @@
+"""``make bench``'s generator (``benchmarks/run_all.py``) on one real, quick benchmark: the
+page it writes has the machine, the date, the commit and the benchmark's table, and it
+renders the same page again from the kept JSON; bad input is a one-line error."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_all(*args: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, str(ROOT / "benchmarks" / "run_all.py"), *args],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+
+
+def test_run_all_writes_the_page_from_a_real_benchmark(tmp_path):
+    page, res = tmp_path / "performance.md", tmp_path / "results"
+    r = run_all("--only", "model", "--quick", "--out", str(page), "--results", str(res))
+    assert r.returncode == 0, r.stdout + r.stderr
+    text = page.read_text()
+    rev = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], cwd=ROOT,
+                         capture_output=True, text=True).stdout.strip()
+    assert re.search(r"Measured \d{4}-\d\d-\d\d \d\d:\d\d UTC at commit `" + rev, text)
+    assert f"| cores | {os.cpu_count()} |" in text
+    assert f"| Python | {platform.python_version()} |" in text
+    assert re.search(r"\| packages \| .*numpy \d", text) and "| CPU | " in text
+    assert "### model: " in text and "| figure | median | spread | ratio | target | met |" in text
+    # the table is the JSON's: each case's median and ratio to Pinocchio, and its target
+    figures = json.loads((res / "model.json").read_text())
+    assert len(figures) == 7
+    for name, f in figures.items():
+        row = next(x for x in text.splitlines() if x.startswith(f"| {name} (us) |"))
+        med = float(row.split("|")[2])
+        assert abs(med - f["median_us"]) <= 0.01 * f["median_us"] + 0.01, (row, f)
+    ours = next(x for x in text.splitlines() if x.startswith("| ours C: D,H,J,Jdot qd (us) |"))
+    assert "ratio <= 1" in ours and ("yes" in ours or "**no**" in ours)
+    assert "--quick" in text and "${" not in text
+    # the same page again from the kept results, nothing run
+    again = tmp_path / "again.md"
+    r = run_all("--render-only", "--results", str(res), "--out", str(again))
+    assert r.returncode == 0, r.stderr
+    def undated(s: str) -> str:
+        return re.sub(r"Measured .* UTC", "", s)
+
+    assert undated(again.read_text()) == undated(text)
+
+
+def test_run_all_bad_input_is_a_one_line_error(tmp_path):
+    page = tmp_path / "p.md"
+    for args, msg in ((["--only", "nope"], "unknown benchmark 'nope'"),
+                      (["--render-only"], "needs --results"),
+                      (["--out", str(tmp_path / "no" / "p.md")], "is not a folder")):
+        r = run_all(*(args if "--out" in args else [*args, "--out", str(page)]))
+        assert r.returncode == 2 and msg in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not page.exists()
