@@ -22,15 +22,19 @@ from characterization.mocap.mapping import JOINTS, LIMBS
 from characterization.mocap.take import Take
 
 TODO = "TODO"
+#: m: less net travel of the markers than this is not a walking direction (a treadmill)
+TREADMILL_TRAVEL = 0.2
 #: limb -> name pattern (case-insensitive, searched in a rigid body's or marker's name)
 LIMB_PATTERNS = {
-    "hat": r"hat|trunk|torso|thorax|pelvis|sacr|back|chest|c7|strn|clav",
-    "l_thigh": r"(^|[^a-z])(l|left)[_\s:.\-]?(thigh|thi|femur)",
-    "l_shank": r"(^|[^a-z])(l|left)[_\s:.\-]?(shank|tib|shin|leg)",
-    "l_foot": r"(^|[^a-z])(l|left)[_\s:.\-]?(foot|toe|heel|hee|mt|meta)",
-    "r_thigh": r"(^|[^a-z])(r|right)[_\s:.\-]?(thigh|thi|femur)",
-    "p_shin": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(shin|shank|tib|leg)",
-    "p_foot": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(foot|toe|heel|hee|mt|meta)",
+    "hat": r"hat|trunk|torso|thorax|pelvis|sacr|back|chest|c7|strn|stern|clav|neck|mid_?hip",
+    "l_thigh": r"(^|[^a-z])(l|left)[_\s:.\-]?(thigh|thi|femur|hip|knee|kne)",
+    "l_shank": r"(^|[^a-z])(l|left)[_\s:.\-]?(shank|tib|shin|leg|knee|kne|ankle|ank)",
+    "l_foot": r"(^|[^a-z])(l|left)[_\s:.\-]?(foot|big_?toe|toe|heel|hee|mt|meta)",
+    "r_thigh": r"(^|[^a-z])(r|right)[_\s:.\-]?(thigh|thi|femur|hip|knee|kne)",
+    "p_shin": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(shin|shank|tib|leg|knee|kne"
+              r"|ankle|ank)",
+    "p_foot": r"(^|[^a-z])(p|pros\w*|ampro\w*|r|right)[_\s:.\-]?(foot|big_?toe|toe|heel|hee|mt"
+              r"|meta)",
 }
 _HEEL, _TOE = re.compile(r"heel|hee|cal", re.I), re.compile(r"toe|mt|meta", re.I)
 _AXES = "xyz"
@@ -119,6 +123,20 @@ def _limb_guess(limb: str, take: Take) -> tuple[str | None, list[str]]:
     return rb, markers
 
 
+def _distal_proximal(take: Take, names: list[str], up: str | None) -> list[str]:
+    """Of a leg's or the trunk's markers, the lowest and the highest along the up guess (the
+    longest pair, ordered distal -> proximal as the mapping wants it); the first two by name
+    where heights are unknown."""
+    if up is None or len(names) < 2:
+        return names[:2]
+    k, sign = _AXES.index(up[1]), (-1.0 if up[0] == "-" else 1.0)
+    with warnings.catch_warnings():  # a marker lost in every frame
+        warnings.simplefilter("ignore", RuntimeWarning)
+        h = {n: sign * float(np.nanmedian(take.marker(n)[:, k])) for n in names}
+    known = sorted((n for n in names if np.isfinite(h[n])), key=h.__getitem__)
+    return [known[0], known[-1]] if len(known) >= 2 else names[:2]
+
+
 def _q(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -136,12 +154,14 @@ def mapping_skeleton(take: Take) -> str:
               f"        # guess: the body spans {s.up_span:.2f} m along it",
               'forward = "auto"   # the trunk\'s travel (or the feet on a treadmill)'
               + (f"; the markers travel {s.walk_travel:.2f} m along {s.walk_axis}"
+                 if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL else
+                 f"; the markers travel only {s.walk_travel:.2f} m: a treadmill?"
                  if s.walk_axis else ""), ""]
     first: dict[str, str] = {}
     for limb in LIMBS:
         rb, mk = _limb_guess(limb, take)
         foot = limb.endswith("foot")
-        pair = mk[:2]
+        pair = mk[:2] if foot else _distal_proximal(take, mk, s.up_axis)
         if foot and len(mk) >= 2:
             heel = next((m for m in mk if _HEEL.search(m.split(":")[-1])), None)
             toe = next((m for m in mk if _TOE.search(m.split(":")[-1]) and m != heel), None)
@@ -157,7 +177,7 @@ def mapping_skeleton(take: Take) -> str:
         if foot:
             lines += ['pair_axis = "forward"', 'rigid_body_axis = "forward"']
         lines.append("")
-        first[limb] = mk[0] if mk else TODO
+        first[limb] = pair[0] if pair else TODO
     for j, (a, b) in JOINTS.items():
         lines += [f"[joints.{j}]   # one marker on {a}, one on {b}",
                   f"markers = [{_q(first[a])}, {_q(first[b])}]", ""]

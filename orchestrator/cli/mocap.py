@@ -64,7 +64,7 @@ def inspect(
     """What a take holds (markers, rigid bodies, rate, length, gaps, an axes guess), and
     optionally a mapping to start from."""
     from characterization.mocap.files import read_take
-    from characterization.mocap.inspection import mapping_skeleton, summarize
+    from characterization.mocap.inspection import TREADMILL_TRAVEL, mapping_skeleton, summarize
     from hp_model.atomic_io import atomic_write_bytes
     from orchestrator.cli.options import check_output_file
 
@@ -78,8 +78,11 @@ def inspect(
     if s.up_axis:
         console.print(f"axes guess: up {s.up_axis} (the markers span {s.up_span:.2f} m along "
                       f"it per frame; sign from the format), walking "
-                      + (f"{s.walk_axis} ({s.walk_travel:.2f} m of travel)" if s.walk_axis
-                         else "unknown"))
+                      + (f"{s.walk_axis} ({s.walk_travel:.2f} m of travel)"
+                         if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL
+                         else f"unknown: the markers travel {s.walk_travel:.2f} m (a treadmill? "
+                         "'forward = \"auto\"' then takes the feet's heel -> toe direction)"
+                         if s.walk_axis else "unknown"))
     tab = Table(title="columns")
     for c in ("kind", "name", "valid %", "longest gap (frames)"):
         tab.add_column(c)
