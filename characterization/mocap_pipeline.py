@@ -19,7 +19,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from characterization.foot_contact import FootContact, compare_events, foot_contact
+from characterization.foot_contact import (
+    FootContact,
+    alternate,
+    compare_events,
+    contact_from_events,
+    foot_contact,
+)
 from characterization.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap_checks import (
@@ -103,7 +109,8 @@ class ProcessedTake:
 def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
                   ) -> dict[str, FootContact]:
     """Each foot's contact from its heel -> toe pair (limbs ``l_foot``, ``p_foot`` with
-    ``pair_axis = "forward"``), else from the segmentation's foot marker alone."""
+    ``pair_axis = "forward"``), else from the segmentation's foot marker alone; with both
+    feet, their stances made to alternate (:func:`foot_contact.alternate`)."""
     seg = mapping.segmentation
     out = {}
     for foot, limb, single in (("human", "l_foot", seg.human_foot_marker if seg else None),
@@ -117,6 +124,23 @@ def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
         else:
             continue
         out[foot] = foot_contact(heel, toe, take.time)
+    if set(out) == {"human", "prosthesis"}:
+        out["human"], out["prosthesis"] = alternate(out["human"], out["prosthesis"])
+    return out
+
+
+def lab_contacts(take: Take, mapping: MocapMapping, markers: dict[str, FootContact]
+                 ) -> dict[str, FootContact]:
+    """Each foot's contact from the lab's events in the file where it has them (its side's
+    touchdowns and lift-offs), else from the markers."""
+    seg = mapping.segmentation
+    if seg is None or not take.events:
+        return dict(markers)
+    out = dict(markers)
+    for foot, side in (("human", seg.human_side), ("prosthesis", seg.prosthesis_side)):
+        c = contact_from_events(take.events, take.time, side, markers.get(foot))
+        if c is not None:
+            out[foot] = c
     return out
 
 
