@@ -220,6 +220,12 @@ def _lab_frames(events: Sequence[LabEvent], time: np.ndarray, side: str,
             and time[0] <= e.time <= time[-1]]
 
 
+def _extend(on: np.ndarray, k: int, step: int, state: bool) -> None:
+    while 0 <= k < len(on) and on[k] != state:
+        on[k] = state
+        k += step
+
+
 def contact_from_events(events: Sequence[LabEvent], time: np.ndarray, side: str,
                         markers: FootContact | None = None) -> FootContact | None:
     """One foot's contact from the lab's events of ``side`` (touchdown to the next
@@ -240,6 +246,8 @@ def contact_from_events(events: Sequence[LabEvent], time: np.ndarray, side: str,
         on[prev:f] = state
         state, prev = bool(is_td), f
     on[prev:last + 1] = state
+    _extend(on, first - 1, -1, ev[0][1] == 0)  # the markers' run at each end of the span
+    _extend(on, last + 1, 1, state)  # takes the lab's state there
     t_d, l_o = _events(on)
     return FootContact(on, t_d, l_o, markers.ground_speed if markers else 0.0,
                        stride_time(on, 1.0 / float(np.median(np.diff(time)))), "lab events")

@@ -28,7 +28,8 @@ processing can go on safely it is a note (the QA report and the terminal).
 - **Walking** (error, :func:`check_walking`): the feet's contact shows a stride within
   ``foot_contact.STRIDE_RANGE`` (a cadence of 40-200 steps/min; a take shorter than two of
   the longest strides is not judged), the two feet's touchdowns alternate (at most
-  ``MAX_REPEATS`` of them follow one of the same foot), and the hip progresses over the
+  ``MAX_REPEATS`` of them follow one of the same foot, and the prosthesis lands within
+  ``PHASE`` of a stride after the human foot), and the hip progresses over the
   ground (its mean speed relative to the ground, the belt's on a treadmill, within
   ``WALKING_SPEED``).
 - **Frame times** (warning, :func:`frame_time_warnings`): gaps of ``GAP_PERIODS`` (2) to 10
@@ -272,6 +273,9 @@ def check_names(take: Take, mapping: MocapMapping) -> None:
 WALKING_SPEED = (0.1, 3.0)
 #: the share of touchdowns that may follow one of the same foot
 MAX_REPEATS = 0.25
+#: the prosthesis foot's touchdown after the human foot's, share of the stride (walking
+#: alternates the feet: about half; hopping or a take of one foot twice: 0 or 1)
+PHASE = (0.25, 0.75)
 #: frame-time steps of at least this many periods are gaps (a frame or more missing)
 GAP_PERIODS = 1.5
 
@@ -296,10 +300,16 @@ def check_walking(source: str, contacts: dict[str, FootContact], hip_x: np.ndarr
     ev = sorted([(f, "h") for f in contacts["human"].touchdowns]
                 + [(f, "p") for f in contacts["prosthesis"].touchdowns])
     repeats = sum(a[1] == b[1] for a, b in itertools.pairwise(ev))
-    if repeats > MAX_REPEATS * (len(ev) - 1):
+    h, p = (np.asarray(contacts[f].touchdowns, float) for f in ("human", "prosthesis"))
+    nxt = np.searchsorted(p, h)
+    ok = nxt < len(p)
+    rate = 1.0 / float(np.median(np.diff(time)))
+    phase = float(np.median((p[nxt[ok]] - h[ok]) / rate / stride)) if ok.any() else 0.0
+    if repeats > MAX_REPEATS * (len(ev) - 1) or not PHASE[0] <= phase <= PHASE[1]:
         raise MocapError(f"{source}: not walking: the feet's touchdowns do not alternate "
-                         f"({repeats} of {len(ev) - 1} follow one of the same foot; stride "
-                         f"{stride:.2f} s)")
+                         f"({repeats} of {len(ev) - 1} follow one of the same foot; the "
+                         f"prosthesis lands {phase:.2f} of a {stride:.2f} s stride after the "
+                         f"human foot, walking is {PHASE[0]:g}-{PHASE[1]:g})")
     ok = np.isfinite(hip_x)
     ground = float(np.mean([c.ground_speed for c in contacts.values()]))
     speed = (float(np.polyfit(time[ok], hip_x[ok], 1)[0]) - ground) if ok.sum() > 2 \

@@ -107,7 +107,7 @@ class Segmentation(_Strict):
 
     human_foot_marker: str
     prosthesis_foot_marker: str
-    method: SegmentationMethod = SegmentationMethod.PAPER
+    method: SegmentationMethod = SegmentationMethod.CONTACT
     #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
     human_side: str = "Left"
     prosthesis_side: str = "Right"
@@ -188,8 +188,10 @@ def synthetic_names() -> dict[str, str]:
             "r_thigh": "RThigh", "p_shin": "PShin", "p_foot": "PFoot"}
 
 
-def default_mapping() -> MocapMapping:
-    """The mapping for the synthetic subject's naming (``hpcosim mocap synth``)."""
+def default_mapping(method: SegmentationMethod | str = SegmentationMethod.CONTACT
+                    ) -> MocapMapping:
+    """The mapping for the synthetic subject's naming (``hpcosim mocap synth``), cutting
+    steps by ``method``."""
     n = synthetic_names()
     limbs = {
         limb: LimbSource(rigid_body=rb, markers=(f"{rb}:Marker1", f"{rb}:Marker2"),
@@ -207,4 +209,5 @@ def default_mapping() -> MocapMapping:
     return MocapMapping(
         limbs=limbs, joints=joints,
         segmentation=Segmentation(human_foot_marker=f"{n['l_foot']}:Marker1",
-                                  prosthesis_foot_marker=f"{n['p_foot']}:Marker1"))
+                                  prosthesis_foot_marker=f"{n['p_foot']}:Marker1",
+                                  method=SegmentationMethod(method)))
