@@ -195,11 +195,17 @@ def test_not_walking_is_a_one_line_error(model, coef, contact) -> None:
         check_walking("take.c3d", c, np.full_like(x, 3.0), t)
 
 
-def test_treadmill_walking_passes(model, coef) -> None:
+@pytest.fixture(scope="module")
+def short_take(model):
+    """10 strides of the template subject (quick to make)."""
+    return synthesize(model, SynthOptions(n_strides=10, seed=0, source="template")).take
+
+
+def test_treadmill_walking_passes(short_take, coef) -> None:
     """Walking with the hip held in place (every marker moved back by the hip's mean
     travel: a steady treadmill belt) is walking: the ground moves at minus the walking
     speed, and every step is found."""
-    take = synthesize(model, SynthOptions(n_strides=10, seed=0, source="template")).take
+    take = short_take
     hip = take.marker("HAT:Marker1")[:, 0]
     ok = np.isfinite(hip)
     travel = np.polyval(np.polyfit(take.time[ok], hip[ok], 1), take.time)  # a steady belt
@@ -226,3 +232,28 @@ def test_frame_time_gaps_are_a_warning(synth, coef) -> None:
     assert len(w) == 1 and "3 frame(s) missing" in w[0] and "4.0 periods" in w[0]
     assert w[0].startswith("synthetic: ") and "\n" not in w[0]
     assert qa_summary(p)["warnings"] == list(p.warnings)
+
+
+def test_warnings_are_printed_one_line_each(short_take, tmp_path, capsys) -> None:
+    """``hpcosim mocap process`` prints each warning as one line (exit 0), as in the QA
+    report: a Motive CSV with 2 frames missing."""
+    import json
+
+    from characterization.motive_csv import write_motive_csv
+    from orchestrator.cli import main
+
+    keep = np.ones(short_take.n_frames, bool)
+    keep[500:502] = False
+    cut = short_take.replace(time=short_take.time[keep],
+                             markers={k: v[keep] for k, v in short_take.markers.items()},
+                             rigid_bodies={}, rigid_body_markers={})
+    write_motive_csv(tmp_path / "gap.csv", cut)
+    out = tmp_path / "steps.npz"
+    assert main(["mocap", "process", str(tmp_path / "gap.csv"), "--out", str(out),
+                 "--no-figures"]) == 0
+    lines = [x for x in capsys.readouterr().out.splitlines() if x.startswith("warning: ")]
+    assert len(lines) == 1 and "gap.csv: frame times: 1 gap(s), about 2 frame(s) missing " \
+        "(largest 3.0 periods between frames 499 and 500" in lines[0], lines
+    qa = json.loads((tmp_path / "steps.qa.json").read_text())
+    assert qa["warnings"] == [lines[0].removeprefix("warning: ")]
+    assert "## Warnings" in (tmp_path / "steps.qa.md").read_text()
