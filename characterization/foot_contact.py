@@ -4,23 +4,29 @@ contact, not from turning points).
 From the markers (:func:`foot_contact`): a foot is on the ground while its heel or its toe
 marker moves with the ground *and* lies near its own stance height.  Per marker and frame
 the contact score is the largest of |v_x - v_ground| / ``speed_tol``, |v_z| / ``speed_tol``
-and (z - z_stance) / ``height_tol`` (sagittal coordinates, after a zero-phase low-pass);
-the foot's score is its markers' smaller one.  Hysteresis: contact starts where the score
-drops below 1 and ends where it exceeds ``exit_factor``.  The ground's velocity is 0
-overground and the belt's on a treadmill: the median forward velocity of the slower half of
-the samples (a foot is in stance about 60 % of the cycle).  A marker's stance height is its
-median height over the frames where it moves with the ground.  The stride time is the
-first autocorrelation peak of the contact signal between ``STRIDE_RANGE``; stance and
-flight shorter than ``min_phase`` of it (half a swing, about 40 % of a stride) are merged
-into their neighbours.  Across the two feet (:func:`alternate`), a foot's two touchdowns
-with no touchdown of the other foot between them are one stance: the shorter of the
-contact or flight run between them is merged away.
+and (z - z_stance) / h_tol (sagittal coordinates, after a zero-phase low-pass); the foot's
+score is its markers' smaller one.  The ground's velocity is 0 overground and the belt's
+on a treadmill: the median forward velocity of the slower half of the samples (a foot is in
+stance about 60 % of the cycle).  A marker's stance height z_stance is its median height
+over the frames where it moves with the ground, and h_tol the larger of ``height_tol`` and
+``height_spread`` robust SDs of those heights (a heel marker that rises through a real
+stance gets a wider band).  Hysteresis: a stance starts where the score drops below 1 and
+lasts until it exceeds ``exit_factor``; its lift-off is then put after its last frame below
+1 (the same thresholds as the touchdown).  The stride time is the highest autocorrelation
+of the contact signal within ``STRIDE_RANGE``; stances and flights shorter than
+``min_phase`` of it (half a swing, about 40 % of a stride) are merged into their
+neighbours, shortest first.  Across the two feet (:func:`alternate`), a foot's two
+touchdowns with no touchdown of the other foot between them are one stance: the shorter of
+the contact or flight run between them is merged away.
 
-Measured: on the synthetic subject (0.5 mm noise, dropouts; ``tests/test_mocap_contact.py``)
-every touchdown and lift-off within 4 frames at 120 Hz; on the real treadmill take of
-``tests/data/gatk-walking`` (100 Hz, heel and 5th metatarsal markers) against its force
-plate, touchdowns within 2 frames, lift-offs 5-8 frames early: the 5th metatarsal head
-rises while the toes still push (a toe-tip marker would see the lift-off).
+Measured (``tests/test_mocap_contact.py``, ``tests/test_mocap_gatk.py``): on the synthetic
+subject (37 strides at 120 Hz, 0.5 mm noise, dropouts) every touchdown and lift-off found
+once; the model source's (rigid impacts) within 2 and 4 frames, the template source's
+(smooth contacts) within 6 and 7, the frames its foot takes to reach ``speed_tol`` plus the
+low-pass.  On the real treadmill take of ``tests/data/gatk-walking`` (100 Hz, heel and 5th
+metatarsal markers) against its force plate: touchdowns within 1 frame, lift-offs 8 frames
+early: the 5th metatarsal head rises while the toes still push (a toe-tip marker would see
+the lift-off).
 
 From the lab's events (:func:`contact_from_events`): a C3D's EVENT group ("Foot Strike" /
 "Foot Off" per side, e.g. from a force plate) gives each foot's contact directly.
