@@ -53,14 +53,17 @@ class Recipe:
 
 def _fit_take(model: HumanProsthesisModel, work: Path, synth: dict, opt: PHZDOptions,
               segments: str = "touchdown") -> Gait:
-    """mocap synth -> mocap process -> gait fit, as the CLI verbs do."""
+    """mocap synth -> mocap process -> gait fit, as the CLI verbs do; ``segments="paper"``
+    regresses the steps of the paper's rule (``[segmentation] method = "paper"``)."""
     from characterization.mocap.files import process_file
+    from characterization.mocap.mapping import default_mapping
     from characterization.mocap.steps_artifact import load_steps
     from characterization.mocap.synthetic_subject import SynthOptions, synthesize, write_synthetic
 
     opts = SynthOptions(**synth)
     write_synthetic(work / "take", synthesize(model, opts), opts)
-    process_file(work / "take" / "take.csv", work / "steps.npz", with_figures=False)
+    process_file(work / "take" / "take.csv", work / "steps.npz", with_figures=False,
+                 mapping=default_mapping("paper" if segments == "paper" else "contact"))
     return fit_gait(model, load_steps(work / "steps.npz"), opt, src=str(work / "steps.npz"),
                     segments=segments)
 

@@ -46,7 +46,7 @@ N_STRIDES = 37
 def take(model):
     s = synthesize(model, SynthOptions(n_strides=N_STRIDES, seed=4))
     coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
-    return s, to_artifact(process_take(s.take, default_mapping(), coef))
+    return s, to_artifact(process_take(s.take, default_mapping("paper"), coef))
 
 
 @pytest.fixture(scope="module")

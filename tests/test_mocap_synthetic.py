@@ -46,7 +46,7 @@ def synth(model, request):
 
 @pytest.fixture(scope="module")
 def processed(synth, coef):
-    return process_take(synth.take, default_mapping(), coef)
+    return process_take(synth.take, default_mapping("paper"), coef)
 
 
 def test_truth_is_consistent_with_the_model(synth, model) -> None:
@@ -164,7 +164,7 @@ def test_long_gap_drops_the_step_with_a_reason(synth, coef) -> None:
     quat = rb.quaternion.copy()
     quat[lo:hi] = np.nan
     bodies["LShank"] = type(rb)(rb.position, quat, rb.mean_error)
-    p = process_take(take.replace(markers=markers, rigid_bodies=bodies), default_mapping(),
+    p = process_take(take.replace(markers=markers, rigid_bodies=bodies), default_mapping("paper"),
                      coef)
     assert len(p.dropped) == 1
     d = p.dropped[0]
@@ -210,25 +210,3 @@ def test_no_complete_step_is_an_error(synth, coef) -> None:
                       for k, v in short.rigid_bodies.items()})
     with pytest.raises(MocapError, match="no complete step"):
         process_take(take, default_mapping(), coef)
-
-
-def test_contact_segmentation_finds_the_impacts(synth, coef) -> None:
-    """``segmentation.method = "contact"``: steps from each foot's touchdowns, labelled as
-    the truth's, each starting within 6 frames (50 ms) of the truth's touchdown: the swing
-    foot skims the ground slowly before the impact (model source) or lands smoothly
-    (template), so the markers slow down 2-5 frames before it; the QA data lists each
-    step's interval and each foot's events."""
-    from characterization.mocap.report import qa_summary
-
-    m = default_mapping()
-    m = m.model_copy(update={"segmentation": m.segmentation.model_copy(
-        update={"method": "contact"})})
-    p = process_take(synth.take, m, coef)
-    assert len(p.steps) >= len(synth.truth["step_domain"]) - 2
-    rate = p.frame_rate
-    for st in p.steps:
-        land = synth.truth["p_land" if st.domain == "ps" else "h_land"]
-        assert np.min(np.abs(land - p.time[st.start])) * rate <= 6.0
-    qa = qa_summary(p)
-    assert qa["segmentation"] == "contact" and len(qa["step_intervals"]) == len(p.steps)
-    assert set(qa["contacts"]) == {"human", "prosthesis"}

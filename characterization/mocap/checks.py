@@ -25,15 +25,26 @@ processing can go on safely it is a note (the QA report and the terminal).
   rigid segments about a joint (not a walking take, or markers mislabelled).
 - **Joint angles** (error): the 2nd-98th percentile of each joint coordinate within
   ``ANATOMICAL_DEG`` (the model's conventions: hip flexion negative, knee flexion positive).
+- **Walking** (error, :func:`check_walking`): the feet's contact shows a stride within
+  ``foot_contact.STRIDE_RANGE`` (a cadence of 40-200 steps/min; a take shorter than two of
+  the longest strides is not judged), the two feet's touchdowns alternate (at most
+  ``MAX_REPEATS`` of them follow one of the same foot, and the prosthesis lands within
+  ``PHASE`` of a stride after the human foot), and the hip progresses over the
+  ground (its mean speed relative to the ground, the belt's on a treadmill, within
+  ``WALKING_SPEED``).
+- **Frame times** (warning, :func:`frame_time_warnings`): gaps of ``GAP_PERIODS`` (2) to 10
+  frame periods (frames missing from the export; the readers refuse a jump of more than 10).
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
+from characterization.mocap.foot_contact import STRIDE_RANGE, FootContact
 from characterization.mocap.mapping import MocapMapping
 from characterization.mocap.sagittal import SagittalFrame
 from characterization.mocap.take import MocapError, Take
@@ -256,3 +267,71 @@ def check_names(take: Take, mapping: MocapMapping) -> None:
             take.rigid_body(name) if rb else take.marker(name)
         except MocapError as e:
             raise MocapError(f"{e} (mapping entry {entry})") from None
+
+
+#: m/s: the hip's mean speed over the ground of a person walking (slowest to fastest)
+WALKING_SPEED = (0.1, 3.0)
+#: the share of touchdowns that may follow one of the same foot
+MAX_REPEATS = 0.25
+#: the prosthesis foot's touchdown after the human foot's, share of the stride (walking
+#: alternates the feet: about half; hopping or a take of one foot twice: 0 or 1)
+PHASE = (0.25, 0.75)
+#: frame-time steps of at least this many periods are gaps (a frame or more missing)
+GAP_PERIODS = 1.5
+
+
+def check_walking(source: str, contacts: dict[str, FootContact], hip_x: np.ndarray,
+                  time: np.ndarray) -> None:
+    """The take is walking: periodic, alternating foot contact and the hip progressing over
+    the ground (module docstring).  ``hip_x``: the hip's forward position (m, NaN allowed)."""
+    if set(contacts) != {"human", "prosthesis"}:
+        return
+    duration = float(time[-1] - time[0])
+    if duration < 2 * STRIDE_RANGE[1]:
+        return
+    strides = [c.stride_time for c in contacts.values() if np.isfinite(c.stride_time)]
+    n_td = {f: len(c.touchdowns) for f, c in contacts.items()}
+    if not strides or min(n_td.values()) < 2:
+        raise MocapError(f"{source}: not walking: no periodic foot contact over "
+                         f"{duration:.1f} s (touchdowns human {n_td['human']}, prosthesis "
+                         f"{n_td['prosthesis']}; a stride of {STRIDE_RANGE[0]:g}-"
+                         f"{STRIDE_RANGE[1]:g} s expected)")
+    stride = float(np.median(strides))
+    ev = sorted([(f, "h") for f in contacts["human"].touchdowns]
+                + [(f, "p") for f in contacts["prosthesis"].touchdowns])
+    repeats = sum(a[1] == b[1] for a, b in itertools.pairwise(ev))
+    h, p = (np.asarray(contacts[f].touchdowns, float) for f in ("human", "prosthesis"))
+    nxt = np.searchsorted(p, h)
+    ok = nxt < len(p)
+    rate = 1.0 / float(np.median(np.diff(time)))
+    phase = float(np.median((p[nxt[ok]] - h[ok]) / rate / stride)) if ok.any() else 0.0
+    if repeats > MAX_REPEATS * (len(ev) - 1) or not PHASE[0] <= phase <= PHASE[1]:
+        raise MocapError(f"{source}: not walking: the feet's touchdowns do not alternate "
+                         f"({repeats} of {len(ev) - 1} follow one of the same foot; the "
+                         f"prosthesis lands {phase:.2f} of a {stride:.2f} s stride after the "
+                         f"human foot, walking is {PHASE[0]:g}-{PHASE[1]:g})")
+    ok = np.isfinite(hip_x)
+    ground = float(np.mean([c.ground_speed for c in contacts.values()]))
+    speed = (float(np.polyfit(time[ok], hip_x[ok], 1)[0]) - ground) if ok.sum() > 2 \
+        else float("nan")
+    lo, hi = WALKING_SPEED
+    if not lo <= speed <= hi:
+        raise MocapError(f"{source}: not walking: the hip moves at {speed:.2f} m/s over the "
+                         f"ground (ground {ground:+.2f} m/s; walking is {lo:g}-{hi:g} m/s) "
+                         f"with a stride of {stride:.2f} s")
+
+
+def frame_time_warnings(take: Take) -> list[str]:
+    """One warning if the frame times have gaps of ``GAP_PERIODS`` or more periods."""
+    dt = np.diff(take.time)
+    if dt.size == 0:
+        return []
+    period = float(np.median(dt))
+    gaps = np.flatnonzero(dt >= GAP_PERIODS * period)
+    if gaps.size == 0:
+        return []
+    k = int(gaps[np.argmax(dt[gaps])])
+    missing = int(np.sum(np.round(dt[gaps] / period) - 1))
+    return [f"{take.source}: frame times: {gaps.size} gap(s), about {missing} frame(s) "
+            f"missing (largest {dt[k] / period:.1f} periods between frames {k} and {k + 1}, "
+            f"t = {take.time[k]:.3f} s); the frames are processed as consecutive"]

@@ -15,8 +15,11 @@ p_shin), ``ankle_p`` (p_shin, p_foot).
 Example (the synthetic subject's naming is :func:`default_mapping`)::
 
     schema_version = 1
-    up = "auto"            # "+y" etc.; auto = the file format's default (Motive +y, C3D +z)
-    forward = "auto"       # walking direction, a lab axis or [x, y, z]; auto = net hip travel
+    up = "auto"            # "+y" etc. or [x, y, z]; auto = the lab axis the data show (the
+                           # trunk above the feet), the format's default (Motive +y, C3D +z)
+                           # only when the mapping has no trunk and feet to check
+    forward = "auto"       # walking direction, a lab axis or [x, y, z]; auto = the trunk's
+                           # travel, or the feet's heel -> toe direction (a treadmill)
     [limbs.l_shank]
     rigid_body = "LShank"
     markers = ["LShank:Marker1", "LShank:Marker2"]
@@ -25,6 +28,7 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     [segmentation]
     human_foot_marker = "LFoot:Marker1"
     prosthesis_foot_marker = "PFoot:Marker1"
+    method = "contact"     # each foot's stance from contact (default); "paper": delta_p_hip
     [processing]
     max_gap = 0.1          # s: longest gap with neither pitch source that is interpolated
     lowpass_hz = 15.0      # zero-phase Butterworth on limb pitches; 0 = off
@@ -99,7 +103,7 @@ class SegmentationMethod(Choice):
     """How a take is cut into steps (``[segmentation] method``)."""
 
     PAPER = "paper"  # the turning points of delta_p_hip, the paper's rule
-    CONTACT = "contact"  # each foot's touchdowns from its markers (:mod:`foot_contact`)
+    CONTACT = "contact"  # each foot's touchdowns (markers or lab events, :mod:`foot_contact`)
 
 
 class Segmentation(_Strict):
@@ -107,7 +111,7 @@ class Segmentation(_Strict):
 
     human_foot_marker: str
     prosthesis_foot_marker: str
-    method: SegmentationMethod = SegmentationMethod.PAPER
+    method: SegmentationMethod = SegmentationMethod.CONTACT
     #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
     human_side: str = "Left"
     prosthesis_side: str = "Right"
@@ -188,8 +192,10 @@ def synthetic_names() -> dict[str, str]:
             "r_thigh": "RThigh", "p_shin": "PShin", "p_foot": "PFoot"}
 
 
-def default_mapping() -> MocapMapping:
-    """The mapping for the synthetic subject's naming (``hpcosim mocap synth``)."""
+def default_mapping(method: SegmentationMethod | str = SegmentationMethod.CONTACT
+                    ) -> MocapMapping:
+    """The mapping for the synthetic subject's naming (``hpcosim mocap synth``), cutting
+    steps by ``method``."""
     n = synthetic_names()
     limbs = {
         limb: LimbSource(rigid_body=rb, markers=(f"{rb}:Marker1", f"{rb}:Marker2"),
@@ -207,4 +213,5 @@ def default_mapping() -> MocapMapping:
     return MocapMapping(
         limbs=limbs, joints=joints,
         segmentation=Segmentation(human_foot_marker=f"{n['l_foot']}:Marker1",
-                                  prosthesis_foot_marker=f"{n['p_foot']}:Marker1"))
+                                  prosthesis_foot_marker=f"{n['p_foot']}:Marker1",
+                                  method=SegmentationMethod(method)))

@@ -26,11 +26,19 @@ from characterization.mocap.checks import (
     check_names,
     check_units,
     check_up,
+    check_walking,
     feet_forward,
+    frame_time_warnings,
     infer_up,
     trunk_trajectory,
 )
-from characterization.mocap.foot_contact import FootContact, compare_events, foot_contact
+from characterization.mocap.foot_contact import (
+    FootContact,
+    alternate,
+    compare_events,
+    contact_from_events,
+    foot_contact,
+)
 from characterization.mocap.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.mocap.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap.mapping import JOINTS, LIMBS, MocapMapping, SegmentationMethod
@@ -54,6 +62,8 @@ ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
               "th_rh": ("r_thigh", "hat"), "th_pk": ("p_shin", "r_thigh"),
               "th_pa": ("p_foot", "p_shin")}
 HipCoefficients = dict[str, tuple[float, float]]
+#: frames: marker-found events further than this from the lab's are a warning (issue 19)
+LAB_EVENT_FRAMES = 3
 
 
 @dataclass(frozen=True)
@@ -98,12 +108,15 @@ class ProcessedTake:
     segmentation: SegmentationMethod = SegmentationMethod.PAPER
     #: the found events against the lab's in the file (:func:`foot_contact.compare_events`)
     lab_events: dict[str, dict[str, object]] = field(default_factory=dict)
+    #: failed checks that processing went on after (QA report and terminal), one line each
+    warnings: tuple[str, ...] = ()
 
 
 def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
                   ) -> dict[str, FootContact]:
     """Each foot's contact from its heel -> toe pair (limbs ``l_foot``, ``p_foot`` with
-    ``pair_axis = "forward"``), else from the segmentation's foot marker alone."""
+    ``pair_axis = "forward"``), else from the segmentation's foot marker alone; with both
+    feet, their stances made to alternate (:func:`foot_contact.alternate`)."""
     seg = mapping.segmentation
     out = {}
     for foot, limb, single in (("human", "l_foot", seg.human_foot_marker if seg else None),
@@ -117,6 +130,23 @@ def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
         else:
             continue
         out[foot] = foot_contact(heel, toe, take.time)
+    if set(out) == {"human", "prosthesis"}:
+        out["human"], out["prosthesis"] = alternate(out["human"], out["prosthesis"])
+    return out
+
+
+def lab_contacts(take: Take, mapping: MocapMapping, markers: dict[str, FootContact]
+                 ) -> dict[str, FootContact]:
+    """Each foot's contact from the lab's events in the file where it has them (its side's
+    touchdowns and lift-offs), else from the markers."""
+    seg = mapping.segmentation
+    if seg is None or not take.events:
+        return dict(markers)
+    out = dict(markers)
+    for foot, side in (("human", seg.human_side), ("prosthesis", seg.prosthesis_side)):
+        c = contact_from_events(take.events, take.time, side, markers.get(foot))
+        if c is not None:
+            out[foot] = c
     return out
 
 
@@ -330,7 +360,9 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     joints = fit_joints(take, mapping, frame, pitches)
     check_joint_residuals(take.source, {j: f.residual_rms for j, f in joints.items()},
                           joint_segment_lengths(lengths))
-    notes = [*checks, *(f.message for f in joints.values())]
+    notes = [*checks, *(f.message for f in joints.values() if f.well_posed)]
+    warnings = [*frame_time_warnings(take),
+                *(f"{take.source}: {f.message}" for f in joints.values() if not f.well_posed)]
     hips = np.stack([joints[j].position for j in ("hip_l", "hip_r") if j in joints])
     cnt = np.isfinite(hips).sum(axis=0)
     hip = np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
@@ -338,7 +370,13 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     check_joint_angles(take.source, q, COORDS)
     delta = _hip_progress(q, coefficients, "ps")
     seg = mapping.segmentation
-    contacts = foot_contacts(take, mapping, frame)
+    marker_contacts = foot_contacts(take, mapping, frame)
+    check_walking(take.source, marker_contacts, q[:, COORDS.index("x_B")], take.time)
+    contacts = lab_contacts(take, mapping, marker_contacts)
+    for foot, c in contacts.items():
+        if c.source != marker_contacts[foot].source:
+            notes.append(f"{foot} foot contact from the lab's events in the file "
+                         f"(the markers' outside their span)")
     if seg.method == SegmentationMethod.CONTACT:
         if set(contacts) != {"human", "prosthesis"}:
             raise MocapError(f"{take.source}: segmentation 'contact' needs both feet")
@@ -367,16 +405,19 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
                      f"{bounds[-1].end} are not complete steps")
-    lab = compare_events(contacts, take.events, take.time,
+    lab = compare_events(marker_contacts, take.events, take.time,
                          {"human": seg.human_side, "prosthesis": seg.prosthesis_side})
     for foot, kinds in lab.items():
         for kind, v in kinds.items():
-            notes.append(f"lab events, {foot} foot {kind}s: {v['lab_events']} in the file, "
-                         f"found within {v['max_abs_frames']} frames (median "
-                         f"{v['median_abs_frames']})")
+            line = (f"lab events, {foot} foot {kind}s: {v['lab_events']} in the file, "
+                    f"found from the markers within {v['max_abs_frames']} frames (median "
+                    f"{v['median_abs_frames']})")
+            far = v["max_abs_frames"] is None or v["max_abs_frames"] > LAB_EVENT_FRAMES
+            (warnings if far else notes).append(
+                f"{take.source}: {line}, more than {LAB_EVENT_FRAMES}" if far else line)
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
                          dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
-                         contacts, SegmentationMethod(seg.method), lab)
+                         contacts, SegmentationMethod(seg.method), lab, tuple(warnings))
 
 
 def _hip_progress(q: np.ndarray, coefficients: HipCoefficients, domain: str) -> np.ndarray:

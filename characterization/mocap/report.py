@@ -49,13 +49,16 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
         "steps_without_single_support": sum(s.single_support is None for s in p.steps),
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
                     for d in p.dropped],
-        "limbs": limbs, "joints": joints, "notes": list(p.notes),
+        "limbs": limbs, "joints": joints, "warnings": list(p.warnings),
+        "notes": list(p.notes),
         "segmentation": p.segmentation,
         "step_intervals": [{"domain": st.domain, "start": st.start, "end": st.end,
                             "t_start_s": float(p.time[st.start]),
                             "t_end_s": float(p.time[st.end])} for st in p.steps],
         "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
-                         "ground_speed_m_s": c.ground_speed} for f, c in p.contacts.items()},
+                         "ground_speed_m_s": c.ground_speed,
+                         "stride_time_s": c.stride_time if np.isfinite(c.stride_time)
+                         else None, "source": c.source} for f, c in p.contacts.items()},
         "lab_events": p.lab_events,
     }
 
@@ -94,8 +97,10 @@ def qa_markdown(summary: dict) -> str:
               f"{v['t_end_s']:.3f} |" for k, v in enumerate(s["step_intervals"])]
     if s["contacts"]:
         lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
-        lines += [f"- {f}: touchdowns {c['touchdowns']}, lift-offs {c['liftoffs']} (ground "
-                  f"{c['ground_speed_m_s']:+.2f} m/s)" for f, c in s["contacts"].items()]
+        lines += [f"- {f} ({c['source']}): touchdowns {c['touchdowns']}, lift-offs "
+                  f"{c['liftoffs']} (ground {c['ground_speed_m_s']:+.2f} m/s, stride "
+                  f"{c['stride_time_s'] or float('nan'):.2f} s)"
+                  for f, c in s["contacts"].items()]
     if s["lab_events"]:
         lines += ["", "## Found events against the lab's (frames, found - lab)", "",
                   "| foot | event | in the file | max abs | median abs |", "|---|---|---|---|---|"]
@@ -103,6 +108,8 @@ def qa_markdown(summary: dict) -> str:
             for kind, v in kinds.items():
                 lines.append(f"| {foot} | {kind} | {v['lab_events']} | {v['max_abs_frames']} "
                              f"| {v['median_abs_frames']} |")
+    if s["warnings"]:
+        lines += ["", "## Warnings", ""] + [f"- {w}" for w in s["warnings"]]
     lines += ["", "## Notes", ""] + [f"- {n}" for n in s["notes"]]
     return "\n".join(lines) + "\n"
 

@@ -18,13 +18,11 @@ from rich.table import Table
 
 import hp_model
 from characterization.gait.bezier_fit import FitError
-from characterization.gait.phzd import GaitOptimizationError, GaitVerificationError
 from characterization.mocap.take import MocapError
 from hp_model.artifacts import ArtifactError
 from hp_model.compiled import CompileBackend, CompileError
 from hp_model.config import ConfigError
 from hp_model.tree import ModelError
-from human_fmu.build import FmuBuildError
 from orchestrator.cli import experiments as experiments_cli
 from orchestrator.cli.cosim import register as register_cosim
 from orchestrator.cli.fmu import fmu_app
@@ -57,11 +55,7 @@ register_cosim(app)
 #: scipy at start-up; ArtifactError: gait and tube files)
 USER_ERRORS: tuple[type[BaseException], ...] = (ConfigError, ModelError, CompileError,
                                                FileNotFoundError, MocapError, FitError,
-                                               ArtifactError, GaitOptimizationError,
-                                               FmuBuildError)
-
-#: a check that ran and failed (exit 1)
-CHECK_FAILURES: tuple[type[BaseException], ...] = (GaitVerificationError,)
+                                               ArtifactError)
 
 SubjectOpt = Annotated[Path | None, typer.Option(
     "--subject", help="Subject TOML (default: the shipped example subject).",
@@ -140,16 +134,22 @@ def _click_exceptions() -> tuple[type[BaseException], ...]:
 
 
 #: user errors of modules the CLI loads only when a verb needs them: (module, class)
+#: (the gait optimizer and the FMU build are not loaded by the verbs that do not use them)
 LAZY_USER_ERRORS = (("orchestrator.cosim.recording", "RecordingError"),
                     ("orchestrator.cosim.master", "CosimError"),
-                    ("bus_schemas.bus_config", "BusConfigError"))
+                    ("bus_schemas.bus_config", "BusConfigError"),
+                    ("characterization.gait.phzd", "GaitOptimizationError"),
+                    ("human_fmu.build", "FmuBuildError"))
+#: a check that ran and failed (exit 1): (module, class), as :data:`LAZY_USER_ERRORS`
+LAZY_CHECK_FAILURES = (("characterization.gait.phzd", "GaitVerificationError"),)
 
 
-def _loaded_user_errors() -> tuple[type[BaseException], ...]:
-    """The classes of :data:`LAZY_USER_ERRORS` whose module is loaded (an exception of one
-    can only come from a loaded module)."""
+def _loaded_user_errors(
+        which: tuple[tuple[str, str], ...] = LAZY_USER_ERRORS) -> tuple[type[BaseException], ...]:
+    """The classes of ``which`` whose module is loaded (an exception of one can only come
+    from a loaded module)."""
     out = []
-    for mod, name in LAZY_USER_ERRORS:
+    for mod, name in which:
         m = sys.modules.get(mod)
         if m is not None:
             out.append(getattr(m, name))
@@ -179,13 +179,13 @@ def main(argv: list[str] | None = None) -> int:
     except USER_ERRORS as e:
         print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
         return 2
-    except CHECK_FAILURES as e:
-        print(f"hpcosim: check failed: {e}", file=sys.stderr)
-        return 1
     except OSError as e:  # the environment: a full disk, a read-only folder, a size limit
         print(f"hpcosim: error: {_os_error(e)}", file=sys.stderr)
         return 2
     except Exception as e:  # click usage errors carry their own exit code
+        if isinstance(e, _loaded_user_errors(LAZY_CHECK_FAILURES)):
+            print(f"hpcosim: check failed: {e}", file=sys.stderr)
+            return 1
         if isinstance(e, _loaded_user_errors()):
             print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
             return 2

@@ -50,6 +50,8 @@ def process(
     console.print(t)
     for d in p.dropped:
         console.print(f"  dropped {d.domain} step, frames {d.start}-{d.end}: {d.reason}")
+    for w in p.warnings:  # one line each, never wrapped
+        console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
     console.print(f"wrote {r.steps_path} and " + ", ".join(x.name for x in r.report_paths))
 
 
