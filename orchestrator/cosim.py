@@ -45,7 +45,7 @@ import can
 import numpy as np
 
 from bus_schemas import codec, keys
-from bus_schemas.bus_config import send_frames
+from bus_schemas.bus_config import FrameReader, send_frames
 from bus_schemas.protocol import (
     CTRL_TO_PLANT,
     PLANT_TO_CTRL,
@@ -234,7 +234,7 @@ class FaultPlan:
         d = k - self.start
         return d % max(1, self.every) == 0 and d // max(1, self.every) < self.count
 
-    def apply(self, k: int, frames: list[can.Message]) -> tuple[list[can.Message], str | None]:
+    def apply(self, k: int, frames: list[Any]) -> tuple[list[Any], str | None]:
         """Frames to send this tick (SimTime last unless delayed) and the fault applied."""
         if not self.hits(k) or self.case in PROCESS_CASES + PLANT_CASES:
             return frames, None
@@ -373,7 +373,7 @@ class Plant:
             self.torque_clamped += 1
         return out[0], out[1]
 
-    def on_rx(self, msg: can.Message) -> codec.Verdict:
+    def on_rx(self, msg: can.Message | codec.Frame) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
         v = self.checker.check(msg)
         if v.ok:
@@ -576,6 +576,7 @@ class CanLink:
                  lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
                  limits: tuple[float, float]) -> None:
         self.cfg, self.plan, self.bus, self.rec, self.proc = cfg, plan, bus, rec, proc
+        self.frames = FrameReader(bus)
         self.lost, self.res, self.ratio = lost, res, ratio
         self.plant = Plant(limits)
         self.dt = cfg.dt
@@ -653,7 +654,7 @@ class CanLink:
             self.proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
         s = obs.sensed
         t_us = round(t * 1e6)
-        frames = codec.encode_feedback(s.knee_angle, s.knee_velocity, s.ankle_angle,
+        frames = codec.feedback_frames(s.knee_angle, s.knee_velocity, s.ankle_angle,
                                        s.ankle_velocity, s.foot_load, s.contact, k % 16,
                                        sim_time_us=t_us, socket_pitch=s.socket_pitch,
                                        timestamp=t)
@@ -685,7 +686,7 @@ class CanLink:
             left = deadline - time.perf_counter()
             if left <= 0 or self.lost.is_set():
                 break
-            msg = self.bus.recv(min(left, 0.005))
+            msg = self.frames.recv(min(left, 0.005))
             if msg is None:
                 continue
             v = self.on_rx(msg, t)
@@ -745,7 +746,7 @@ class CanLink:
             left = end - time.perf_counter()
             if left <= 0:
                 break
-            msg = self.bus.recv(left)
+            msg = self.frames.recv(left)
             if msg is not None:
                 v = self.on_rx(msg, t)
                 if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:

@@ -49,6 +49,7 @@ import can
 from bus_schemas import codec
 from bus_schemas.bus_config import (
     BusConfig,
+    FrameReader,
     bus_config_from_dict,
     load_bus_config,
     make_bus,
@@ -118,7 +119,8 @@ class ControllerNode:
         controller.reset()
 
     # -- frames in, frames out
-    def handle(self, msg: can.Message, now: float | None = None) -> list[can.Message]:
+    def handle(self, msg: can.Message | codec.Frame, now: float | None = None
+               ) -> list[can.Message]:
         v = self.checker.check(msg)
         if not v.ok:
             self._flags |= FaultFlag.BAD_FRAMES
@@ -258,9 +260,10 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
     cycle = Durations()  # first frame of a cycle received -> its reply sent
     first: int | None = None
     usage = Usage()
+    frames = FrameReader(bus)
     try:
         while stop is None or not stop.is_set():
-            msg = bus.recv(timeout)
+            msg = frames.recv(timeout)
             if msg is not None and first is None:
                 first = time.perf_counter_ns()
             now = time.monotonic()
@@ -269,7 +272,7 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
                 out = node.handle(msg, now)
                 if out:
                     break
-                msg = bus.recv(0.0)
+                msg = frames.recv(0.0)
             out += node.poll(now)
             send_frames(bus, out)
             if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:

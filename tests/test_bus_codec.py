@@ -390,3 +390,73 @@ def test_random_payloads_on_known_ids(fid, data):
     if v.ok:
         ref = codec.decode_cantools(can.Message(arbitration_id=fid, data=data))
         assert list(v.value) == [ref[s.name] for s in protocol.frame_spec(fid).payload]
+
+
+# --------------------------------------------------------------------------- light frames
+
+
+def test_light_frames_are_the_messages_bytes():
+    rng = np.random.default_rng(22)
+    for i in range(500):
+        a = rng.uniform(-4, 4, 5) * (10.0 ** rng.integers(-6, 2))
+        load = float(rng.uniform(-1500, 3500))
+        pitch = [None, math.nan, float(a[4])][i % 3]
+        kw = {"sim_time_us": int(rng.integers(0, 2**40)) if i % 4 else None,
+              "socket_pitch": pitch, "timestamp": float(rng.uniform(0, 100))}
+        args = (*map(float, a[:4]), load, bool(i % 2), int(rng.integers(0, 64)))
+        msgs = codec.encode_feedback(*args, **kw)
+        frames = codec.feedback_frames(*args, **kw)
+        assert len(msgs) == len(frames)
+        for m, f in zip(msgs, frames, strict=True):
+            assert type(f) is codec.Frame and type(f.data) is bytes
+            assert (f.timestamp, f.arbitration_id, f.data) == (
+                m.timestamp, m.arbitration_id, bytes(m.data))
+            assert f.to_message().equals(m, timestamp_delta=0.0)
+    with pytest.raises(ValueError, match="NaN"):
+        codec.feedback_frames(math.nan, 0, 0, 0, 0, True, 0)
+
+
+def _same(a: codec.Verdict, b: codec.Verdict) -> None:
+    assert (a.status, a.frame_id, a.name, a.counter, a.timestamp, a.detail) == (
+        b.status, b.frame_id, b.name, b.counter, b.timestamp, b.detail)
+    assert a.value == b.value and type(a.value) is type(b.value)
+
+
+@settings(max_examples=400, deadline=None)
+@given(fid=st.one_of(st.sampled_from(sorted(int(i) for i in FrameId)),
+                     st.integers(0, 0x7FF)),
+       data=st.one_of(st.binary(min_size=8, max_size=8), st.binary(max_size=12)),
+       ts=st.floats(allow_nan=False))
+def test_decode_frame_equals_decode(fid, data, ts):
+    f = codec.Frame(ts, fid, data)
+    m = can.Message(timestamp=ts, arbitration_id=fid, is_extended_id=False, data=data,
+                    dlc=8)
+    _same(codec.decode_frame(f), codec.decode(m))
+
+
+def test_checker_gives_the_same_verdicts_for_frames_and_messages():
+    """Every class, with counters in and out of sequence, replays, corruptions."""
+    rng = np.random.default_rng(5)
+    a, b = FrameChecker(accept=protocol.PLANT_TO_CTRL), FrameChecker(
+        accept=protocol.PLANT_TO_CTRL)
+    for k in range(3000):
+        counter = k % 16 if rng.random() > 0.1 else int(rng.integers(0, 16))
+        fr = codec.feedback_frames(*rng.uniform(-1, 1, 4), 100.0, True, counter,
+                                   sim_time_us=k, timestamp=k * 1e-3)
+        for f in fr:
+            r = rng.random()
+            data = bytearray(f.data)
+            fid = f.arbitration_id
+            if r < 0.03:
+                data[int(rng.integers(0, 8))] ^= 1 << int(rng.integers(0, 8))
+            elif r < 0.05:
+                data = data[:int(rng.integers(0, 8))]
+            elif r < 0.07:
+                fid = int(rng.choice([0x010, 0x7FF, 0x300, 0x5]))
+            f2 = codec.Frame(f.timestamp, fid, bytes(data))
+            m = can.Message(timestamp=f.timestamp, arbitration_id=fid,
+                            is_extended_id=False, data=data, dlc=8)
+            _same(a.check(f2), b.check(m))
+    assert a.counts == b.counts and a.counts[FrameStatus.OK] > 6000
+    assert all(a.counts[s] for s in FrameStatus)
+    assert (a.lost, a.resyncs) == (b.lost, b.resyncs)
