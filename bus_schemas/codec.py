@@ -21,14 +21,16 @@ Units: angles rad, velocities rad/s, torques N m (motor side), load N, sim time 
 from __future__ import annotations
 
 import enum
+import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, NamedTuple
 
 import can
 import numpy as np
 
-from bus_schemas.crc8 import TABLE, XOROUT, crc8_update
+from bus_schemas import fastcodec
+from bus_schemas.crc8 import XOROUT, crc8_update
 from bus_schemas.protocol import (
     CHECKSUM_SIGNAL,
     COUNTER_SIGNAL,
@@ -63,6 +65,7 @@ __all__ = [
     "decode",
     "decode_cantools",
     "decode_frame",
+    "disturbance_frame",
     "encode_cantools",
     "encode_disturbance",
     "encode_feedback",
@@ -72,12 +75,14 @@ __all__ = [
     "encode_status",
     "encode_torque",
     "feedback_frames",
+    "heartbeat_frame",
     "quantize",
     "quantize_angle",
     "quantize_load",
     "quantize_pitch",
     "quantize_torque",
     "quantize_velocity",
+    "torque_frame",
 ]
 
 
@@ -220,25 +225,15 @@ def _nan(spec: FrameSpec, i: int) -> ValueError:
 def _data(spec: FrameSpec, values: Sequence[Any], counter: int | None) -> bytes:
     """The 8 data bytes of ``values`` (payload order): clamp to [min, max], round half to
     even exactly as cantools does, mask and shift; then counter and checksum for
-    protected frames."""
+    protected frames (the frame's generated encoder, :mod:`bus_schemas.fastcodec`)."""
     if len(values) != len(spec.enc_plan):
         raise ValueError(f"{spec.name}: {len(spec.enc_plan)} values needed")
-    w = 0
-    for i, (start, mask, lo, hi, scale, offset, linear) in enumerate(spec.enc_plan):
-        v = float(values[i])
-        if v != v:
-            raise _nan(spec, i)
-        v = lo if v < lo else hi if v > hi else v
-        w |= (round((v - offset) / scale if linear else v) & mask) << start
-    if not spec.protected:
-        return w.to_bytes(FRAME_LENGTH, "little")
-    if counter is None:
-        raise ValueError(f"{spec.name} is protected: a rolling counter is required")
-    w |= (int(counter) & 0x0F) << 48
-    c, t = spec.crc_state, TABLE
-    for b in w.to_bytes(7, "little"):
-        c = t[c ^ b]
-    return (w | (c ^ XOROUT) << 56).to_bytes(FRAME_LENGTH, "little")
+    return _encoders()[spec.frame_id](values, counter)
+
+
+@functools.cache
+def _encoders() -> dict[int, Callable[[Any, int | None], bytes]]:
+    return {fid: fastcodec.encoder(spec) for fid, spec in frame_specs().items()}
 
 
 def _frame(spec: FrameSpec, values: Sequence[Any], counter: int | None,
@@ -360,6 +355,29 @@ def encode_disturbance(dy1: float, d2y2: float, tau: float, valid: bool, flag: b
                   None, timestamp)
 
 
+def torque_frame(knee: float, ankle: float, counter: int, *, enable: bool = True,
+                 timestamp: float = 0.0) -> Frame:
+    """:func:`encode_torque` as a light :class:`Frame` (the same bytes)."""
+    spec = _SPEC()[FrameId.TORQUE_CMD]
+    return Frame(float(timestamp), spec.frame_id,
+                 _data(spec, (knee, ankle, 1 if enable else 0), counter))
+
+
+def heartbeat_frame(state: CtrlState | int, tick: int, counter: int, *,
+                    timestamp: float = 0.0) -> Frame:
+    """:func:`encode_heartbeat` as a light :class:`Frame` (the same bytes)."""
+    m = encode_heartbeat(state, tick, counter, timestamp=timestamp)
+    return Frame(float(timestamp), m.arbitration_id, bytes(m.data))
+
+
+def disturbance_frame(dy1: float, d2y2: float, tau: float, valid: bool, flag: bool,
+                      since_touchdown: float, *, timestamp: float = 0.0) -> Frame:
+    """:func:`encode_disturbance` as a light :class:`Frame` (the same bytes)."""
+    spec = _SPEC()[FrameId.CTRL_DISTURBANCE]
+    return Frame(float(timestamp), spec.frame_id, _data(
+        spec, (dy1, d2y2, tau, 1 if valid else 0, 1 if flag else 0, since_touchdown), None))
+
+
 # --------------------------------------------------------------------------- decode
 
 
@@ -408,35 +426,36 @@ def decode_frame(f: Frame) -> Verdict:
     fid, data, ts = f.arbitration_id, f.data, f.timestamp
     if type(data) is not bytes or type(ts) is not float or type(fid) is not int:
         return decode(f)
-    spec = frame_specs().get(fid)
-    if spec is None:
+    dec = _decoders().get(fid)
+    if dec is None:
         return Verdict(_UNKNOWN_ID, fid, timestamp=ts, detail="id")
     if len(data) != FRAME_LENGTH:
-        return Verdict(_BAD_LENGTH, fid, spec.name, timestamp=ts,
+        return Verdict(_BAD_LENGTH, fid, frame_specs()[fid].name, timestamp=ts,
                        detail=f"dlc {FRAME_LENGTH}, {len(data)} data bytes")
-    return _checked(spec, data, ts)
+    return dec(data, ts)
 
 
 def _checked(spec: FrameSpec, data: bytes | bytearray, ts: float) -> Verdict:
-    """Checksum check and typed payload of 8 data bytes of a known frame."""
-    counter = None
-    fid = spec.frame_id
-    if spec.protected:
-        c, t = spec.crc_state, TABLE
-        for b in data[:7]:
-            c = t[c ^ b]
-        c ^= XOROUT
-        if c != data[7]:
-            return Verdict(_BAD_CHECKSUM, fid, spec.name, timestamp=ts,
-                           detail=f"checksum {data[7]:#04x}, expected {c:#04x}")
-        counter = data[6] & 0x0F
-    vals = _values(spec, data)
-    if fid == _HEARTBEAT:
-        vals[0] = _member(CtrlState, vals[0])
-    elif fid == _STATUS:
-        vals[0], vals[1] = FaultFlag(vals[0]), _member(QpStatus, vals[1])
-        vals[4] = ActiveConstraint(vals[4])
-    return Verdict(_OK, fid, spec.name, counter, PAYLOAD_TYPES[fid](*vals), ts)
+    """Checksum check and typed payload of 8 data bytes of a known frame (the frame's
+    generated decoder, :mod:`bus_schemas.fastcodec`)."""
+    return _decoders()[spec.frame_id](data, ts)
+
+
+def _fix_heartbeat(vals: list[Any]) -> None:
+    vals[0] = _member(CtrlState, vals[0])
+
+
+def _fix_status(vals: list[Any]) -> None:
+    vals[0], vals[1] = FaultFlag(vals[0]), _member(QpStatus, vals[1])
+    vals[4] = ActiveConstraint(vals[4])
+
+
+@functools.cache
+def _decoders() -> dict[int, Callable[[bytes | bytearray, float], Verdict]]:
+    fixes = {_HEARTBEAT: _fix_heartbeat, _STATUS: _fix_status}
+    return {fid: fastcodec.decoder(spec, Verdict, PAYLOAD_TYPES[fid], _OK, _BAD_CHECKSUM,
+                                   fixes.get(fid))
+            for fid, spec in frame_specs().items()}
 
 
 # hot-path constants (enum attribute lookups cost more than a global)
