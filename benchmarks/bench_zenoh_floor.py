@@ -6,10 +6,13 @@ would block), payloads of the co-simulation's size (a 5-frame batch out, a 1-fra
 No CAN encoding, no checks, no controller: what a lockstep tick can never go below, apart
 from the FMU step and the controller tick.  ``--work-us W`` makes the echo side spin W us
 before it answers (a stand-in for the controller tick, to see whether the transport's cost
-changes when the echo side is busy).
+changes when the echo side is busy). ``--shm``: zenoh's shared-memory transport enabled on
+both sessions and every payload put from a buffer of a shared-memory provider (zenoh would
+otherwise send payloads under its 3 KiB threshold over the link as usual); the sample's
+notification still travels over the link.
 
     PYTHONPATH=. python benchmarks/bench_zenoh_floor.py [--n 5000] [--work-us 0] \
-        [--no-low-latency] [--no-pin] [--json out.json]
+        [--no-low-latency] [--no-pin] [--shm] [--json out.json]
 """
 
 from __future__ import annotations
@@ -21,9 +24,11 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
+import zenoh.shm
 
 from bus_schemas.zenoh_config import loopback_endpoint, make_config
 
@@ -48,7 +53,22 @@ def _wait(handler: zenoh.Handler, poll_s: float) -> zenoh.Sample:
 
 
 def _session(a: argparse.Namespace, **ends: str) -> zenoh.Session:
-    return zenoh.open(make_config(low_latency=not a.no_low_latency, **ends))
+    opts = {"transport/shared_memory/enabled": True} if a.shm else {}
+    return zenoh.open(make_config(low_latency=not a.no_low_latency, options=opts, **ends))
+
+
+def _sender(a: argparse.Namespace, pub: zenoh.Publisher, data: bytes) -> Callable[[], None]:
+    """A function putting ``data`` (from a shared-memory buffer each time with ``--shm``)."""
+    if not a.shm:
+        return lambda: pub.put(data)
+    provider = zenoh.shm.ShmProvider.default_backend(1 << 20)
+    n, policy = len(data), zenoh.shm.BlockOn()
+
+    def put() -> None:
+        buf = provider.alloc(n, policy=policy)
+        buf[0:n] = data
+        pub.put(buf)
+    return put
 
 
 def _publisher(s: zenoh.Session, key: str) -> zenoh.Publisher:
@@ -64,7 +84,7 @@ def echo(a: argparse.Namespace) -> None:
     sub = s.declare_subscriber(KEY_OUT, zenoh.handlers.RingChannel(1024))
     pub = _publisher(s, KEY_BACK)
     print("ready", flush=True)
-    reply = bytes(BACK)
+    reply = _sender(a, pub, bytes(BACK))
     spin = a.work_us * 1e-6
     while True:
         smp = _wait(sub.handler, a.poll_us * 1e-6)
@@ -75,7 +95,7 @@ def echo(a: argparse.Namespace) -> None:
             end = time.perf_counter() + spin
             while time.perf_counter() < end:
                 pass
-        pub.put(reply)
+        reply()
     s.close()
 
 
@@ -88,16 +108,17 @@ def ping(a: argparse.Namespace) -> dict[str, float]:
     proc = subprocess.Popen([sys.executable, __file__, "--echo", ep, "--poll-us",
                              str(a.poll_us), "--work-us", str(a.work_us)]
                             + (["--no-low-latency"] if a.no_low_latency else [])
-                            + (["--no-pin"] if a.no_pin else []),
+                            + (["--no-pin"] if a.no_pin else [])
+                            + (["--shm"] if a.shm else []),
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
         while not getattr(pub.matching_status, "matching", False):
             time.sleep(0.01)
-        out, rtt = bytes(OUT), []
+        out, rtt = _sender(a, pub, bytes(OUT)), []
         for _ in range(a.n):
             t0 = time.perf_counter_ns()
-            pub.put(out)
+            out()
             _wait(sub.handler, a.poll_us * 1e-6)
             rtt.append(time.perf_counter_ns() - t0)
         pub.put(b"")
@@ -118,6 +139,7 @@ def main() -> None:
     p.add_argument("--poll-us", type=float, default=300.0)
     p.add_argument("--no-low-latency", action="store_true")
     p.add_argument("--no-pin", action="store_true")
+    p.add_argument("--shm", action="store_true")
     p.add_argument("--json", type=Path)
     p.add_argument("--echo", help=argparse.SUPPRESS)
     a = p.parse_args()

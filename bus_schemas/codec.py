@@ -293,9 +293,23 @@ def feedback_frames(knee_angle: float, knee_vel: float, ankle_angle: float,
                     sim_time_us: int | None = None, socket_pitch: float | None = None,
                     timestamp: float = 0.0) -> list[Frame]:
     """:func:`encode_feedback` as light :class:`Frame` s (the same bytes)."""
-    return [Frame(timestamp, spec.frame_id, _data(spec, vals, counter))
-            for spec, vals in _feedback_plan(knee_angle, knee_vel, ankle_angle, ankle_vel,
-                                             load, contact, sim_time_us, socket_pitch)]
+    enc, ts = _encoders(), float(timestamp)
+    out = [Frame(ts, _KNEE, enc[_KNEE]((knee_angle, knee_vel), counter)),
+           Frame(ts, _ANKLE, enc[_ANKLE]((ankle_angle, ankle_vel), counter)),
+           Frame(ts, _LOAD, enc[_LOAD]((load, 1 if contact else 0), counter))]
+    if socket_pitch is not None:
+        ok = math.isfinite(socket_pitch)
+        out.append(Frame(ts, _IMU, enc[_IMU]((socket_pitch if ok else 0.0, 1 if ok else 0),
+                                             counter)))
+    if sim_time_us is not None:
+        out.append(Frame(ts, _SIMTIME, enc[_SIMTIME]((int(sim_time_us) % (1 << 32),),
+                                                     counter)))
+    return out
+
+
+_KNEE, _ANKLE, _LOAD, _IMU, _SIMTIME = (int(FrameId.KNEE_FEEDBACK), int(FrameId.ANKLE_FEEDBACK),
+                                        int(FrameId.FOOT_LOAD), int(FrameId.SOCKET_IMU),
+                                        int(FrameId.SIM_TIME))
 
 
 def encode_sim_time(sim_time_us: int, counter: int, *, timestamp: float = 0.0) -> can.Message:
@@ -654,7 +668,16 @@ class FrameChecker:
             v = Verdict(_UNKNOWN_ID, fid, v.name, timestamp=v.timestamp,
                         detail="not accepted by this receiver")
         elif v.counter is not None:
-            ok, why = self._counter_ok(int(fid), int(v.counter))  # type: ignore[arg-type]
+            c = v.counter
+            last = self._last.get(fid)  # type: ignore[arg-type]
+            if last is not None and 0 < (c - last) % 16 <= self.max_gap:  # in sequence
+                self.lost += (c - last) % 16 - 1
+                self._last[fid] = c  # type: ignore[index]
+                if self._candidate:
+                    self._candidate.pop(fid, None)  # type: ignore[arg-type]
+                self._ok += 1
+                return v
+            ok, why = self._counter_ok(int(fid), int(c))  # type: ignore[arg-type]
             if why == "duplicate":
                 v = Verdict(_DUPLICATE, fid, v.name, v.counter, timestamp=v.timestamp,
                             detail=f"counter {v.counter} again")

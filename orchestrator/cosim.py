@@ -619,11 +619,8 @@ class CanLink:
             rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
                            v.counter, msg.timestamp, self.ratio)
         elif v.frame_id == FrameId.CTRL_DISTURBANCE:
-            e = v.value
-            rec.defer("/controller/disturbance", {
-                "t": msg.timestamp, "d": [e.dy1, e.d2y2], "tau": e.tau,
-                "valid": bool(e.valid), "flag": bool(e.flag),
-                "since_touchdown": e.since_touchdown}, ns)
+            rec.defer_call("/controller/disturbance", ns, disturbance_record, v.value,
+                           msg.timestamp)
         elif v.frame_id == FrameId.CTRL_STATUS:
             st = v.value
             u, r = self.u, self.ratio
@@ -829,6 +826,13 @@ def torque_record(c: codec.TorqueCmd, counter: int | None, timestamp: float,
     return {"knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
             "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable), "counter": counter,
             "cycle_time_us": round(timestamp * 1e6)}
+
+
+def disturbance_record(e: codec.CtrlDisturbance, timestamp: float) -> dict[str, Any]:
+    """``/controller/disturbance``: the controller's model-error estimate of the cycle
+    whose SimTime timestamp [s] the frame echoes."""
+    return {"t": timestamp, "d": [e.dy1, e.d2y2], "tau": e.tau, "valid": bool(e.valid),
+            "flag": bool(e.flag), "since_touchdown": e.since_touchdown}
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],

@@ -70,6 +70,9 @@ QP_STATUS: dict[QpOutcome, QpStatus] = {
     QpOutcome.NONFINITE: QpStatus.NUMERICS}
 
 
+_OUTPUT_CLAMP = int(Active.OUTPUT_CLAMP)  # an int: IntFlag's & is Python code
+
+
 def _active_bits(a: int) -> int:
     out = 0
     if a & (Active.KNEE_LOWER | Active.KNEE_UPPER):
@@ -175,7 +178,7 @@ class ControllerNode:
         self._last_diag = d
         if d.qp_status.is_failure:
             self._flags |= FaultFlag.QP_FAILED
-        if d.active & Active.OUTPUT_CLAMP:
+        if int(d.active) & _OUTPUT_CLAMP:
             self._flags |= FaultFlag.TORQUE_SATURATED
         self.state = CtrlState.RUNNING
         if self.ticks % self.heartbeat_every == 0:
