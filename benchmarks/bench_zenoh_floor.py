@@ -9,10 +9,11 @@ before it answers (a stand-in for the controller tick, to see whether the transp
 changes when the echo side is busy). ``--shm``: zenoh's shared-memory transport enabled on
 both sessions and every payload put from a buffer of a shared-memory provider (zenoh would
 otherwise send payloads under its 3 KiB threshold over the link as usual); the sample's
-notification still travels over the link.
+notification still travels over the link. ``--unix``: a unix-socket endpoint instead of
+TCP on the loopback.
 
     PYTHONPATH=. python benchmarks/bench_zenoh_floor.py [--n 5000] [--work-us 0] \
-        [--no-low-latency] [--no-pin] [--shm] [--json out.json]
+        [--no-low-latency] [--no-pin] [--shm] [--unix] [--json out.json]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -101,7 +103,8 @@ def echo(a: argparse.Namespace) -> None:
 
 def ping(a: argparse.Namespace) -> dict[str, float]:
     _pin(None if a.no_pin else 0)
-    ep = loopback_endpoint()
+    ep = (f"unixsock-stream/{tempfile.gettempdir()}/zenoh-floor-{os.getpid()}.sock"
+          if a.unix else loopback_endpoint())
     s = _session(a, listen=ep)
     sub = s.declare_subscriber(KEY_BACK, zenoh.handlers.RingChannel(1024))
     pub = _publisher(s, KEY_OUT)
@@ -109,7 +112,7 @@ def ping(a: argparse.Namespace) -> dict[str, float]:
                              str(a.poll_us), "--work-us", str(a.work_us)]
                             + (["--no-low-latency"] if a.no_low_latency else [])
                             + (["--no-pin"] if a.no_pin else [])
-                            + (["--shm"] if a.shm else []),
+                            + (["--shm"] if a.shm else []) + (["--unix"] if a.unix else []),
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
@@ -140,6 +143,7 @@ def main() -> None:
     p.add_argument("--no-low-latency", action="store_true")
     p.add_argument("--no-pin", action="store_true")
     p.add_argument("--shm", action="store_true")
+    p.add_argument("--unix", action="store_true")
     p.add_argument("--json", type=Path)
     p.add_argument("--echo", help=argparse.SUPPRESS)
     a = p.parse_args()
