@@ -307,6 +307,7 @@ def feedback_frames(knee_angle: float, knee_vel: float, ankle_angle: float,
     return out
 
 
+_TORQUE, _DISTURBANCE = int(FrameId.TORQUE_CMD), int(FrameId.CTRL_DISTURBANCE)
 _KNEE, _ANKLE, _LOAD, _IMU, _SIMTIME = (int(FrameId.KNEE_FEEDBACK), int(FrameId.ANKLE_FEEDBACK),
                                         int(FrameId.FOOT_LOAD), int(FrameId.SOCKET_IMU),
                                         int(FrameId.SIM_TIME))
@@ -372,9 +373,8 @@ def encode_disturbance(dy1: float, d2y2: float, tau: float, valid: bool, flag: b
 def torque_frame(knee: float, ankle: float, counter: int, *, enable: bool = True,
                  timestamp: float = 0.0) -> Frame:
     """:func:`encode_torque` as a light :class:`Frame` (the same bytes)."""
-    spec = _SPEC()[FrameId.TORQUE_CMD]
-    return Frame(float(timestamp), spec.frame_id,
-                 _data(spec, (knee, ankle, 1 if enable else 0), counter))
+    return Frame(float(timestamp), _TORQUE,
+                 _encoders()[_TORQUE]((knee, ankle, 1 if enable else 0), counter))
 
 
 def heartbeat_frame(state: CtrlState | int, tick: int, counter: int, *,
@@ -387,9 +387,8 @@ def heartbeat_frame(state: CtrlState | int, tick: int, counter: int, *,
 def disturbance_frame(dy1: float, d2y2: float, tau: float, valid: bool, flag: bool,
                       since_touchdown: float, *, timestamp: float = 0.0) -> Frame:
     """:func:`encode_disturbance` as a light :class:`Frame` (the same bytes)."""
-    spec = _SPEC()[FrameId.CTRL_DISTURBANCE]
-    return Frame(float(timestamp), spec.frame_id, _data(
-        spec, (dy1, d2y2, tau, 1 if valid else 0, 1 if flag else 0, since_touchdown), None))
+    return Frame(float(timestamp), _DISTURBANCE, _encoders()[_DISTURBANCE](
+        (dy1, d2y2, tau, 1 if valid else 0, 1 if flag else 0, since_touchdown), None))
 
 
 # --------------------------------------------------------------------------- decode

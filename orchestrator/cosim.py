@@ -364,14 +364,12 @@ class Plant:
         each clamped to +-limit (a non-finite value is applied as zero and counted)."""
         if not c.enable:
             return 0.0, 0.0
-        out, over = [], False
-        for x, lim in zip((float(c.knee), float(c.ankle)), self.limits, strict=True):
-            out.append(min(max(x, -lim), lim) if math.isfinite(x) else 0.0)
-            # a command at the limit decodes to within the signal's resolution of it
-            over = over or not (abs(x) <= lim + TORQUE_STEP)
-        if over:
+        (k, a), (lk, la) = (float(c.knee), float(c.ankle)), self.limits
+        # a command at the limit decodes to within the signal's resolution of it
+        if not (abs(k) <= lk + TORQUE_STEP and abs(a) <= la + TORQUE_STEP):
             self.torque_clamped += 1
-        return out[0], out[1]
+        return (min(max(k, -lk), lk) if math.isfinite(k) else 0.0,
+                min(max(a, -la), la) if math.isfinite(a) else 0.0)
 
     def on_rx(self, msg: can.Message | codec.Frame) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
@@ -612,7 +610,7 @@ class CanLink:
         if rec is None:
             return v
         ns = self.log_ns(t)
-        rec.defer_can(msg, "rx", ns, name=v.name, status=str(v.status))
+        rec.defer_can(msg, "rx", ns, name=v.name, status=v.status)  # str() when written
         if not v.ok:
             return v
         if v.frame_id == FrameId.TORQUE_CMD:
