@@ -474,29 +474,38 @@ class ZenohBus(can.BusABC):
         return frames[0], False
 
     def recv_frames(self, timeout: float | None = None) -> list[can.Message | Frame]:
-        """All frames of the next sample at once ([] on timeout; frames a ``recv`` left
-        queued come first): classic frames as light :class:`~bus_schemas.codec.Frame` s
-        (:func:`unpack_frames`), the batch's order kept. The bus's ``can_filters``
-        apply as in ``recv``. The hot-path form of ``recv`` for a node that handles a
-        cycle's frames together."""
+        """All frames of the next sample at once, waiting up to ``timeout`` s (None: no
+        limit) as ``recv`` does; [] when none came. Frames a ``recv`` left queued, and own
+        messages, come first; classic frames as light :class:`~bus_schemas.codec.Frame` s
+        (:func:`unpack_frames`), the batch's order kept; the bus's ``can_filters`` apply.
+        The hot-path form of ``recv`` for a node that handles a cycle's frames together."""
         if self._is_shutdown or self._rx is None:
             raise can.CanOperationError("ZenohBus is shut down")
-        if self._own or self._pending:
-            out: list[can.Message | Frame] = [*self._own, *self._pending]
-            self._own.clear()
-            self._pending.clear()
-        else:
-            try:
-                sample = self._rx.recv(timeout)
-            except zenoh.ZError as e:
-                raise can.CanOperationError(f"ZenohBus {self.channel!r} closed: {e}") from e
-            if sample is None:
-                return []
-            out, bad = unpack_frames(sample.payload.to_bytes(), self.channel)
-            self.rx_malformed += bad
-        if self._filters:
-            out = [m for m in out if self._matches_filters(m)]  # type: ignore[arg-type]
-        return out
+        deadline = None if timeout is None else time.monotonic() + timeout
+        left = timeout
+        while True:
+            out: list[can.Message | Frame] = []
+            if not (self._own or self._pending):
+                try:
+                    sample = self._rx.recv(left)
+                except zenoh.ZError as e:
+                    raise can.CanOperationError(
+                        f"ZenohBus {self.channel!r} closed: {e}") from e
+                if sample is not None:
+                    out, bad = unpack_frames(sample.payload.to_bytes(), self.channel)
+                    self.rx_malformed += bad
+            if self._own or self._pending:
+                out = [*self._own, *self._pending, *out]
+                self._own.clear()
+                self._pending.clear()
+            if self._filters:
+                out = [m for m in out if self._matches_filters(m)]  # type: ignore[arg-type]
+            if out:
+                return out
+            if deadline is not None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return []
 
     def wait_for_peer(self, timeout: float = 5.0, *, alive: bool = True) -> bool:
         """Wait until a subscriber matches what this bus sends and, if ``alive``, the other

@@ -170,6 +170,15 @@ def test_recv_frames_and_the_frame_reader(pair):
         got = [reader.recv(2.0) for _ in cycle]
         assert got == cycle
     assert reader.recv(0.05) is None and ctrl.recv_frames(0.01) == []
+    # a wake-up, a foreign key or a malformed payload does not cut the wait short (as
+    # python-can's recv); a frame after them is returned
+    plant.session.put("hpcosim/run/t1/can/tx/wake/someone", b"")
+    plant.session.put("hpcosim/run/t1/can/tx", b"not a frame")
+    t0 = time.monotonic()
+    assert ctrl.recv_frames(0.2) == [] and time.monotonic() - t0 >= 0.19
+    plant.session.put("hpcosim/run/t1/can/tx", b"not a frame")
+    send_frames(plant, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 0))
+    assert [m.arbitration_id for m in ctrl.recv_frames(2.0)] == [0x101, 0x102, 0x110]
     # frames a recv left queued come first; filters apply
     send_frames(plant, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 1,
                                              sim_time_us=1))
