@@ -2,10 +2,11 @@
 
 Two paths produce the same bytes and the same decoded floats (tested bit for bit):
 
-- the fast path (default): layouts precomputed from the DBC (:func:`frame_specs`), packed
-  with integer shifts; encoding about 3x faster than the same work through cantools,
-  decoding with all checks about as fast as cantools' bare decode plus a CRC check (see
-  ``benchmarks/bench_bus.py``);
+- the fast path (default): layouts precomputed from the DBC (:func:`frame_specs`), turned
+  into one straight-line encoder and decoder per frame (:mod:`bus_schemas.fastcodec`);
+  encoding about 3x faster than the same work through cantools, decoding with all checks
+  about as fast as cantools' bare decode plus a CRC check (see ``benchmarks/bench_bus.py``);
+  :class:`Frame` and the ``*_frame(s)`` encoders skip the ``can.Message``;
 - the cantools path (:func:`encode_cantools`, :func:`decode_cantools`), the reference.
 
 Encoding clamps every value to its DBC ``[min|max]`` (a torque beyond +-5 N m is sent as

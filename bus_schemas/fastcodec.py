@@ -4,9 +4,11 @@
 length, sign, scale, offset, range) as read from ``ampro3.dbc``; this module writes, for
 each frame, a straight-line Python function from it (every shift, mask, sign fix, scale
 and CRC-table step unrolled, the constants as literals) and compiles it once per process.
-The generated code does exactly what the loops of :mod:`bus_schemas.codec` do, in the same
-order with the same constants (so the same floats, bit for bit: tested against cantools
-and against the loops), in about half the time: no loop, no per-signal tuple unpacking.
+The generated code does what a loop over the layout does, in the same order with the same
+constants (so the same bytes and floats, bit for bit: the encoders tested against
+cantools, the decoders against cantools and the layout loop of
+:func:`bus_schemas.codec.decode_signals`), without the loop and the per-signal tuple
+unpacking.
 
 - ``encoder(spec)(values, counter) -> bytes``: the 8 data bytes (clamped, rounded half to
   even, counter and checksum filled in); NaN raises ``ValueError``.
@@ -42,8 +44,9 @@ def _crc_lines(spec: FrameSpec, src: str) -> list[str]:
 
 
 def encoder(spec: FrameSpec) -> Callable[[Any, int | None], bytes]:
-    """The 8 data bytes of ``values`` (payload order) and ``counter`` for ``spec``; the
-    same as :func:`bus_schemas.codec._data`'s loop."""
+    """The 8 data bytes of ``values`` (payload order) and ``counter`` for ``spec``: each
+    value clamped to [min, max] (NaN raises), rounded half to even as cantools does,
+    masked and shifted; then counter and checksum for a protected frame."""
     consts: dict[str, Any] = {}
     lines = ["def enc(values, counter):"]
     terms = []
@@ -84,8 +87,8 @@ def decoder(spec: FrameSpec, verdict: type, payload: type, ok: Any, bad_checksum
             ) -> Callable[[bytes | bytearray, float], Any]:
     """Checksum check and typed payload of 8 data bytes of ``spec``'s frame: a ``verdict``
     (:class:`bus_schemas.codec.Verdict`) with status ``ok`` and ``payload(*values)``, or
-    ``bad_checksum``; the same as :func:`bus_schemas.codec._checked`'s loop. ``fix``
-    edits the value list in place before the payload is built (enum members)."""
+    ``bad_checksum``. ``fix`` edits the value list in place before the payload is built
+    (enum members)."""
     consts: dict[str, Any] = {}
     lines = ["def dec(data, ts):"]
     counter = "None"
