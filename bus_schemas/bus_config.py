@@ -28,7 +28,7 @@ from typing import Any
 
 import can
 
-from bus_schemas.codec import Frame
+from bus_schemas.frame import Frame
 
 ROLES = ("plant", "ctrl", "monitor")
 

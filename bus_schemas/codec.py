@@ -32,6 +32,7 @@ import numpy as np
 
 from bus_schemas import fastcodec
 from bus_schemas.crc8 import XOROUT, crc8_update
+from bus_schemas.frame import Frame
 from bus_schemas.protocol import (
     CHECKSUM_SIGNAL,
     COUNTER_SIGNAL,
@@ -189,31 +190,6 @@ class Verdict(NamedTuple):
     @property
     def ok(self) -> bool:
         return self.status is _OK
-
-
-class Frame(NamedTuple):
-    """A classic CAN data frame with a standard id: the light stand-in for a
-    ``can.Message`` on the co-simulation's hot paths (the ``*_frames`` encoders, the batch
-    wire form), built in a fraction of a ``can.Message``'s time. It has the attributes
-    :func:`decode`, :func:`bus_schemas.zenoh_can.pack_message` and the recorder read; a
-    ``data`` of a length other than 8 bytes is ``bad_length`` as for a ``can.Message``."""
-
-    timestamp: float  # s
-    arbitration_id: int
-    data: bytes  # 8 bytes
-    # class attributes, not fields: what a Frame always is
-    dlc = FRAME_LENGTH
-    is_extended_id = False
-    is_remote_frame = False
-    is_error_frame = False
-    is_fd = False
-    bitrate_switch = False
-    error_state_indicator = False
-
-    def to_message(self) -> can.Message:
-        """The same frame as a ``can.Message`` (for a bus that needs one)."""
-        return can.Message(timestamp=self.timestamp, arbitration_id=self.arbitration_id,
-                           is_extended_id=False, dlc=FRAME_LENGTH, data=bytearray(self.data))
 
 
 # --------------------------------------------------------------------------- encode

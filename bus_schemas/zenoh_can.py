@@ -44,7 +44,7 @@ import can
 import zenoh
 
 from bus_schemas import keys
-from bus_schemas.codec import Frame
+from bus_schemas.frame import Frame
 from bus_schemas.keys import Direction
 from bus_schemas.zenoh_config import ZenohMode, make_config
 

@@ -396,6 +396,9 @@ def test_random_payloads_on_known_ids(fid, data):
 
 
 def test_light_frames_are_the_messages_bytes():
+    from bus_schemas import frame
+
+    assert frame.FRAME_LENGTH == protocol.FRAME_LENGTH and codec.Frame is frame.Frame
     rng = np.random.default_rng(22)
     for i in range(500):
         a = rng.uniform(-4, 4, 5) * (10.0 ** rng.integers(-6, 2))
