@@ -20,12 +20,15 @@ from __future__ import annotations
 
 import json
 import tomllib
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import can
+
+from bus_schemas.frame import Frame
 
 ROLES = ("plant", "ctrl", "monitor")
 
@@ -111,7 +114,7 @@ def _open_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
     return can.Bus(interface=cfg.interface, channel=cfg.channel or cfg.run_id, **kw)
 
 
-def send_frames(bus: can.BusABC, msgs: Sequence[can.Message]) -> None:
+def send_frames(bus: can.BusABC, msgs: Sequence[can.Message | Frame]) -> None:
     """Send the frames of one control cycle, in order: as one bulk transfer where the bus
     has ``send_batch`` (:class:`bus_schemas.zenoh_can.ZenohBus`), else frame by frame
     (any python-can bus)."""
@@ -122,4 +125,30 @@ def send_frames(bus: can.BusABC, msgs: Sequence[can.Message]) -> None:
         batch(msgs)
     else:
         for m in msgs:
-            bus.send(m)
+            bus.send(m.to_message() if isinstance(m, Frame) else m)
+
+
+class FrameReader:
+    """Receive frames one at a time from ``bus``, a cycle's frames taken together where
+    the bus can (``recv_frames`` of :class:`bus_schemas.zenoh_can.ZenohBus`: one call per
+    sample, light frames), else frame by frame through python-can's ``recv``. The
+    counterpart of :func:`send_frames`."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        self.bus = bus
+        self._many = getattr(bus, "recv_frames", None)
+        self._queue: deque[Any] = deque()
+
+    def recv(self, timeout: float | None = None) -> Any:
+        """The next frame (a ``can.Message`` or a :class:`bus_schemas.codec.Frame`), or
+        None when none came within ``timeout`` s."""
+        q = self._queue
+        if q:
+            return q.popleft()
+        if self._many is None:
+            return self.bus.recv(timeout)
+        got = self._many(timeout)
+        if not got:
+            return None
+        q.extend(got)
+        return q.popleft()

@@ -49,6 +49,7 @@ import can
 from bus_schemas import codec
 from bus_schemas.bus_config import (
     BusConfig,
+    FrameReader,
     bus_config_from_dict,
     load_bus_config,
     make_bus,
@@ -69,6 +70,9 @@ QP_STATUS: dict[QpOutcome, QpStatus] = {
     QpOutcome.NONFINITE: QpStatus.NUMERICS}
 
 
+_OUTPUT_CLAMP = int(Active.OUTPUT_CLAMP)  # an int: IntFlag's & is Python code
+
+
 def _active_bits(a: int) -> int:
     out = 0
     if a & (Active.KNEE_LOWER | Active.KNEE_UPPER):
@@ -80,17 +84,18 @@ def _active_bits(a: int) -> int:
     return out
 
 
-def _disturbance_frame(d: Any, ts: float) -> can.Message:
+def _disturbance_frame(d: Any, ts: float) -> codec.Frame:
     """``CtrlDisturbance`` of a tick's diagnostics (model-error estimate, coverage flag)."""
     e = d.disturbance
-    return codec.encode_disturbance(e[0], e[1], d.tau, d.disturbance_valid, d.coverage_flag,
-                                    d.since_touchdown, timestamp=ts)
+    return codec.disturbance_frame(e[0], e[1], d.tau, d.disturbance_valid, d.coverage_flag,
+                                   d.since_touchdown, timestamp=ts)
 
 
 class ControllerNode:
     """Frame handling and controller ticking, independent of the transport (testable
     without a bus): :meth:`handle` one received frame -> frames to send; :meth:`poll` the
-    watchdog."""
+    watchdog. Frames out are light :class:`bus_schemas.codec.Frame` s (``send_frames``
+    sends them as ``can.Message`` s on a bus that needs those)."""
 
     def __init__(self, controller: Controller, *, watchdog: float = 0.05,
                  heartbeat_every: int = 10, status_every: int = 100) -> None:
@@ -118,7 +123,8 @@ class ControllerNode:
         controller.reset()
 
     # -- frames in, frames out
-    def handle(self, msg: can.Message, now: float | None = None) -> list[can.Message]:
+    def handle(self, msg: can.Message | codec.Frame, now: float | None = None
+               ) -> list[codec.Frame]:
         v = self.checker.check(msg)
         if not v.ok:
             self._flags |= FaultFlag.BAD_FRAMES
@@ -136,7 +142,7 @@ class ControllerNode:
         self._last_us = us
         return (us + self._wrap) * 1e-6
 
-    def _cycle(self, v: codec.Verdict, now: float) -> list[can.Message]:
+    def _cycle(self, v: codec.Verdict, now: float) -> list[codec.Frame]:
         self._last_cycle = now
         fresh = True
         for f in FEEDBACK:
@@ -154,13 +160,13 @@ class ControllerNode:
         elif self.imu_seen:
             fresh = False
         t = self._time(v.value.us)
-        out: list[can.Message] = []
+        out: list[codec.Frame] = []
         if not fresh:
             self.stale_cycles += 1
             self._flags |= FaultFlag.STALE_FEEDBACK
         if len(self.last) < len(FEEDBACK):  # nothing to control on yet
-            out.append(codec.encode_torque(0.0, 0.0, self._next(), enable=False,
-                                           timestamp=v.timestamp))
+            out.append(codec.torque_frame(0.0, 0.0, self._next(), enable=False,
+                                          timestamp=v.timestamp))
             return out
         k, a, ld = (self.last[f] for f in FEEDBACK)
         meas = ProsthesisMeasurement(t, k.angle, a.angle, k.velocity, a.velocity, ld.load,
@@ -172,7 +178,7 @@ class ControllerNode:
         self._last_diag = d
         if d.qp_status.is_failure:
             self._flags |= FaultFlag.QP_FAILED
-        if d.active & Active.OUTPUT_CLAMP:
+        if int(d.active) & _OUTPUT_CLAMP:
             self._flags |= FaultFlag.TORQUE_SATURATED
         self.state = CtrlState.RUNNING
         if self.ticks % self.heartbeat_every == 0:
@@ -183,8 +189,8 @@ class ControllerNode:
             out.append(_disturbance_frame(d, v.timestamp))
         self.ticks += 1
         u = res.torque
-        out.append(codec.encode_torque(float(u[0]), float(u[1]), self._next(), enable=True,
-                                       timestamp=v.timestamp))
+        out.append(codec.torque_frame(float(u[0]), float(u[1]), self._next(), enable=True,
+                                      timestamp=v.timestamp))
         return out
 
     def _next(self) -> int:
@@ -192,12 +198,12 @@ class ControllerNode:
         self._counter = (c + 1) % 16
         return c
 
-    def _heartbeat(self, ts: float) -> can.Message:
+    def _heartbeat(self, ts: float) -> codec.Frame:
         c = self._hb_counter
         self._hb_counter = (c + 1) % 16
-        return codec.encode_heartbeat(self.state, self.ticks, c, timestamp=ts)
+        return codec.heartbeat_frame(self.state, self.ticks, c, timestamp=ts)
 
-    def status_frames(self, ts: float = 0.0) -> list[can.Message]:
+    def status_frames(self, ts: float = 0.0) -> list[codec.Frame]:
         d = self._last_diag
         qp = QP_STATUS[d.qp_status] if d is not None else QpStatus.NOT_RUN
         frames = codec.encode_status(self._flags, qp, 0,
@@ -208,9 +214,9 @@ class ControllerNode:
                                      coverage_count=min(d.coverage_count, 127)
                                      if d is not None else 0, timestamp=ts)
         self._flags = FaultFlag.NONE
-        return frames
+        return [codec.Frame(float(ts), m.arbitration_id, bytes(m.data)) for m in frames]
 
-    def poll(self, now: float | None = None) -> list[can.Message]:
+    def poll(self, now: float | None = None) -> list[codec.Frame]:
         """Watchdog: SAFE state (zero torque, disabled) when no cycle came for
         ``watchdog`` s; repeated every ``watchdog`` s while it lasts."""
         now = time.monotonic() if now is None else now
@@ -224,7 +230,7 @@ class ControllerNode:
             return []
         self._last_safe_send = now
         return [self._heartbeat(0.0),
-                codec.encode_torque(0.0, 0.0, self._next(), enable=False)]
+                codec.torque_frame(0.0, 0.0, self._next(), enable=False)]
 
 
 # --------------------------------------------------------------------------- serving
@@ -258,18 +264,19 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
     cycle = Durations()  # first frame of a cycle received -> its reply sent
     first: int | None = None
     usage = Usage()
+    frames = FrameReader(bus)
     try:
         while stop is None or not stop.is_set():
-            msg = bus.recv(timeout)
+            msg = frames.recv(timeout)
             if msg is not None and first is None:
                 first = time.perf_counter_ns()
             now = time.monotonic()
-            out: list[can.Message] = []
+            out: list[codec.Frame] = []
             while msg is not None:  # the frames already here, up to a cycle's end
                 out = node.handle(msg, now)
                 if out:
                     break
-                msg = bus.recv(0.0)
+                msg = frames.recv(0.0)
             out += node.poll(now)
             send_frames(bus, out)
             if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:

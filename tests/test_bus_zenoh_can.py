@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import statistics
+import struct
 import subprocess
 import sys
 import textwrap
@@ -12,13 +13,16 @@ import threading
 import time
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import can
 import pytest
 import zenoh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from bus_schemas import codec
-from bus_schemas.bus_config import send_frames
+from bus_schemas.bus_config import FrameReader, send_frames
 from bus_schemas.codec import FrameChecker
 from bus_schemas.keys import Direction
 from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState
@@ -27,6 +31,7 @@ from bus_schemas.zenoh_can import (
     pack_batch,
     pack_message,
     parse_channel,
+    unpack_frames,
     unpack_message,
     unpack_payload,
 )
@@ -107,6 +112,92 @@ def test_batch_wire_format_rejects_garbage():
     inner[2 + 1] = 9  # the first frame's own version byte
     frames, bad = unpack_payload(bytes(inner))
     assert bad == 1 and [m.arbitration_id for m in frames] == [0x102, 0x110]
+
+
+def _fields(m: Any) -> tuple[Any, ...]:
+    return (m.timestamp, m.arbitration_id, bytes(m.data), m.dlc, m.is_extended_id,
+            m.is_remote_frame, m.is_error_frame, m.is_fd, m.bitrate_switch,
+            m.error_state_indicator)
+
+
+def test_light_frames_pack_and_unpack_as_messages():
+    frames = codec.feedback_frames(0.1, -0.2, 0.3, 0.0, 650.0, True, 7, sim_time_us=7000,
+                                   socket_pitch=0.01, timestamp=0.007)
+    msgs = [f.to_message() for f in frames]
+    for ts in (None, 9.5):
+        assert pack_batch(frames, ts) == pack_batch(msgs, ts)
+    # a fault plan's odd frame among light ones: the general path, same bytes
+    odd = can.Message(timestamp=0.007, arbitration_id=0x101, dlc=7, data=bytes(7))
+    assert pack_batch([odd, *frames]) == pack_batch([odd, *msgs])
+    p = pack_batch(frames)
+    got, bad = unpack_frames(p, "ch")
+    ref, bad_ref = unpack_payload(p, "ch")
+    assert bad == bad_ref == 0 and all(type(g) is codec.Frame for g in got)
+    assert [_fields(g) for g in got] == [_fields(m) for m in ref]
+    assert [_fields(g) for g in unpack_frames(pack_message(msgs[0]))[0]] == [
+        _fields(msgs[0])]
+
+
+@settings(max_examples=400, deadline=None)
+@given(frames=st.lists(st.tuples(st.floats(), st.integers(0, 0x1FFFFFFF),
+                                 st.integers(0, 63), st.binary(min_size=8, max_size=8),
+                                 st.integers(0, 3)), min_size=1, max_size=8),
+       cut=st.integers(0, 4))
+def test_unpack_frames_agrees_with_unpack_payload(frames, cut):
+    """Random batches of 8-byte frames (any id, flags, NaN timestamps, wrong versions,
+    truncated): the same frames, fields and malformed count as the general path."""
+    parts = [bytes((2, len(frames)))]
+    for ts, aid, flags, data, ver in frames:
+        body = struct.pack("<BdIBB", ver if ver < 3 else 1, ts, aid, flags if ver else 0,
+                           8) + data
+        parts += [bytes((len(body),)), body]
+    p = b"".join(parts)
+    p = p[:len(p) - cut]
+    got, bad = unpack_frames(p)
+    ref, bad_ref = unpack_payload(p)
+    assert bad == bad_ref
+    assert [_fields(g) if g.timestamp == g.timestamp else None for g in got] == [
+        _fields(m) if m.timestamp == m.timestamp else None for m in ref]
+
+
+def test_recv_frames_and_the_frame_reader(pair):
+    plant, ctrl = pair
+    reader = FrameReader(ctrl)
+    for k in range(20):
+        cycle = codec.feedback_frames(0.01 * k, 0.0, 0.0, 0.0, 600.0, True, k,
+                                      sim_time_us=1000 * k, timestamp=k * 1e-3)
+        send_frames(plant, cycle)
+        got = [reader.recv(2.0) for _ in cycle]
+        assert got == cycle
+    assert reader.recv(0.05) is None and ctrl.recv_frames(0.01) == []
+    # a wake-up, a foreign key or a malformed payload does not cut the wait short (as
+    # python-can's recv); a frame after them is returned
+    plant.session.put("hpcosim/run/t1/can/tx/wake/someone", b"")
+    plant.session.put("hpcosim/run/t1/can/tx", b"not a frame")
+    t0 = time.monotonic()
+    assert ctrl.recv_frames(0.2) == [] and time.monotonic() - t0 >= 0.19
+    plant.session.put("hpcosim/run/t1/can/tx", b"not a frame")
+    send_frames(plant, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 0))
+    assert [m.arbitration_id for m in ctrl.recv_frames(2.0)] == [0x101, 0x102, 0x110]
+    # frames a recv left queued come first; filters apply
+    send_frames(plant, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 1,
+                                             sim_time_us=1))
+    assert ctrl.recv(2.0).arbitration_id == 0x101
+    assert [m.arbitration_id for m in ctrl.recv_frames(1.0)] == [0x102, 0x110, 0x080]
+    ctrl.set_filters([{"can_id": 0x110, "can_mask": 0x7FF}])
+    send_frames(plant, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 2))
+    assert [m.arbitration_id for m in ctrl.recv_frames(2.0)] == [0x110]
+    ctrl.set_filters(None)
+    # a plain python-can bus: frame by frame, light frames sent as messages
+    tx = can.Bus(interface="virtual", channel="reader")
+    rx = can.Bus(interface="virtual", channel="reader")
+    try:
+        send_frames(tx, codec.feedback_frames(0.1, 0.0, 0.0, 0.0, 1.0, True, 3))
+        r = FrameReader(rx)
+        assert [r.recv(1.0).arbitration_id for _ in range(3)] == [0x101, 0x102, 0x110]
+    finally:
+        tx.shutdown()
+        rx.shutdown()
 
 
 def test_send_batch_arrives_frame_by_frame_in_order(pair):

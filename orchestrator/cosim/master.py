@@ -45,7 +45,7 @@ import can
 import numpy as np
 
 from bus_schemas import codec, keys
-from bus_schemas.bus_config import send_frames
+from bus_schemas.bus_config import FrameReader, send_frames
 from bus_schemas.protocol import (
     CTRL_TO_PLANT,
     PLANT_TO_CTRL,
@@ -235,7 +235,7 @@ class FaultPlan:
         d = k - self.start
         return d % max(1, self.every) == 0 and d // max(1, self.every) < self.count
 
-    def apply(self, k: int, frames: list[can.Message]) -> tuple[list[can.Message], str | None]:
+    def apply(self, k: int, frames: list[Any]) -> tuple[list[Any], str | None]:
         """Frames to send this tick (SimTime last unless delayed) and the fault applied."""
         if not self.hits(k) or self.case in PROCESS_CASES + PLANT_CASES:
             return frames, None
@@ -365,16 +365,14 @@ class Plant:
         each clamped to +-limit (a non-finite value is applied as zero and counted)."""
         if not c.enable:
             return 0.0, 0.0
-        out, over = [], False
-        for x, lim in zip((float(c.knee), float(c.ankle)), self.limits, strict=True):
-            out.append(min(max(x, -lim), lim) if math.isfinite(x) else 0.0)
-            # a command at the limit decodes to within the signal's resolution of it
-            over = over or not (abs(x) <= lim + TORQUE_STEP)
-        if over:
+        (k, a), (lk, la) = (float(c.knee), float(c.ankle)), self.limits
+        # a command at the limit decodes to within the signal's resolution of it
+        if not (abs(k) <= lk + TORQUE_STEP and abs(a) <= la + TORQUE_STEP):
             self.torque_clamped += 1
-        return out[0], out[1]
+        return (min(max(k, -lk), lk) if math.isfinite(k) else 0.0,
+                min(max(a, -la), la) if math.isfinite(a) else 0.0)
 
-    def on_rx(self, msg: can.Message) -> codec.Verdict:
+    def on_rx(self, msg: can.Message | codec.Frame) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
         v = self.checker.check(msg)
         if v.ok:
@@ -579,6 +577,7 @@ class CanLink:
                  lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
                  limits: tuple[float, float]) -> None:
         self.cfg, self.plan, self.bus, self.rec, self.proc = cfg, plan, bus, rec, proc
+        self.frames = FrameReader(bus)
         self.lost, self.res, self.ratio = lost, res, ratio
         self.plant = Plant(limits)
         self.dt = cfg.dt
@@ -614,18 +613,15 @@ class CanLink:
         if rec is None:
             return v
         ns = self.log_ns(t)
-        rec.defer_can(msg, "rx", ns, name=v.name, status=str(v.status))
+        rec.defer_can(msg, "rx", ns, name=v.name, status=v.status)  # str() when written
         if not v.ok:
             return v
         if v.frame_id == FrameId.TORQUE_CMD:
             rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
                            v.counter, msg.timestamp, self.ratio)
         elif v.frame_id == FrameId.CTRL_DISTURBANCE:
-            e = v.value
-            rec.defer("/controller/disturbance", {
-                "t": msg.timestamp, "d": [e.dy1, e.d2y2], "tau": e.tau,
-                "valid": bool(e.valid), "flag": bool(e.flag),
-                "since_touchdown": e.since_touchdown}, ns)
+            rec.defer_call("/controller/disturbance", ns, disturbance_record, v.value,
+                           msg.timestamp)
         elif v.frame_id == FrameId.CTRL_STATUS:
             st = v.value
             u, r = self.u, self.ratio
@@ -656,7 +652,7 @@ class CanLink:
             self.proc.send_signal(signal.SIGKILL if plan.case == "kill" else signal.SIGSTOP)
         s = obs.sensed
         t_us = round(t * 1e6)
-        frames = codec.encode_feedback(s.knee_angle, s.knee_velocity, s.ankle_angle,
+        frames = codec.feedback_frames(s.knee_angle, s.knee_velocity, s.ankle_angle,
                                        s.ankle_velocity, s.foot_load, s.contact, k % 16,
                                        sim_time_us=t_us, socket_pitch=s.socket_pitch,
                                        timestamp=t)
@@ -688,7 +684,7 @@ class CanLink:
             left = deadline - time.perf_counter()
             if left <= 0 or self.lost.is_set():
                 break
-            msg = self.bus.recv(min(left, 0.005))
+            msg = self.frames.recv(min(left, 0.005))
             if msg is None:
                 continue
             v = self.on_rx(msg, t)
@@ -748,7 +744,7 @@ class CanLink:
             left = end - time.perf_counter()
             if left <= 0:
                 break
-            msg = self.bus.recv(left)
+            msg = self.frames.recv(left)
             if msg is not None:
                 v = self.on_rx(msg, t)
                 if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
@@ -834,6 +830,13 @@ def torque_record(c: codec.TorqueCmd, counter: int | None, timestamp: float,
     return {"knee": c.knee, "ankle": c.ankle, "knee_joint": c.knee * ratio[0],
             "ankle_joint": c.ankle * ratio[1], "enable": bool(c.enable), "counter": counter,
             "cycle_time_us": round(timestamp * 1e6)}
+
+
+def disturbance_record(e: codec.CtrlDisturbance, timestamp: float) -> dict[str, Any]:
+    """``/controller/disturbance``: the controller's model-error estimate of the cycle
+    whose SimTime timestamp [s] the frame echoes."""
+    return {"t": timestamp, "d": [e.dy1, e.d2y2], "tau": e.tau, "valid": bool(e.valid),
+            "flag": bool(e.flag), "since_touchdown": e.since_touchdown}
 
 
 def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int],
