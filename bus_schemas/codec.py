@@ -50,6 +50,7 @@ from bus_schemas.protocol import (
 
 __all__ = [
     "AnkleFeedback",
+    "CtrlClf",
     "CtrlDisturbance",
     "CtrlHeartbeat",
     "CtrlRejects",
@@ -63,12 +64,14 @@ __all__ = [
     "SocketImu",
     "TorqueCmd",
     "Verdict",
+    "clf_frame",
     "database",
     "decode",
     "decode_cantools",
     "decode_frame",
     "disturbance_frame",
     "encode_cantools",
+    "encode_clf",
     "encode_disturbance",
     "encode_feedback",
     "encode_frame",
@@ -80,6 +83,8 @@ __all__ = [
     "heartbeat_frame",
     "quantize",
     "quantize_angle",
+    "quantize_clf_rho",
+    "quantize_clf_v",
     "quantize_load",
     "quantize_pitch",
     "quantize_torque",
@@ -154,6 +159,13 @@ class CtrlDisturbance(NamedTuple):
     since_touchdown: float  # s, since the switch to stance, saturating at 0.255
 
 
+class CtrlClf(NamedTuple):
+    V: float  # CLF value V_eps (dimensionless, >= 0); 0 when absent
+    rho: float  # CLF-QP relaxation (dimensionless, >= 0); 0 when absent
+    v_valid: int  # 1: V is the controller's value, 0: absent
+    rho_valid: int  # 1: rho is the controller's value, 0: absent (no relaxation)
+
+
 class CtrlRejects(NamedTuple):
     bad_checksum: int
     bad_counter: int
@@ -173,6 +185,7 @@ PAYLOAD_TYPES: Mapping[int, type[NamedTuple]] = {
     FrameId.CTRL_STATUS: CtrlStatus,
     FrameId.CTRL_REJECTS: CtrlRejects,
     FrameId.CTRL_DISTURBANCE: CtrlDisturbance,
+    FrameId.CTRL_CLF: CtrlClf,
 }
 
 
@@ -284,7 +297,8 @@ def feedback_frames(knee_angle: float, knee_vel: float, ankle_angle: float,
     return out
 
 
-_TORQUE, _DISTURBANCE = int(FrameId.TORQUE_CMD), int(FrameId.CTRL_DISTURBANCE)
+_TORQUE, _DISTURBANCE, _CLF = (int(FrameId.TORQUE_CMD), int(FrameId.CTRL_DISTURBANCE),
+                               int(FrameId.CTRL_CLF))
 _KNEE, _ANKLE, _LOAD, _IMU, _SIMTIME = (int(FrameId.KNEE_FEEDBACK), int(FrameId.ANKLE_FEEDBACK),
                                         int(FrameId.FOOT_LOAD), int(FrameId.SOCKET_IMU),
                                         int(FrameId.SIM_TIME))
@@ -345,6 +359,28 @@ def encode_disturbance(dy1: float, d2y2: float, tau: float, valid: bool, flag: b
     return _frame(_SPEC()[FrameId.CTRL_DISTURBANCE],
                   (dy1, d2y2, tau, 1 if valid else 0, 1 if flag else 0, since_touchdown),
                   None, timestamp)
+
+
+def _clf_values(V: float | None, rho: float | None) -> tuple[float, float, int, int]:
+    """CtrlClf payload: a None or non-finite value is sent absent (0 with its valid bit 0)."""
+    v_ok = V is not None and math.isfinite(V)
+    r_ok = rho is not None and math.isfinite(rho)
+    return (V if v_ok else 0.0, rho if r_ok else 0.0,  # type: ignore[return-value]
+            1 if v_ok else 0, 1 if r_ok else 0)
+
+
+def encode_clf(V: float | None, rho: float | None, counter: int, *,
+               timestamp: float = 0.0) -> can.Message:
+    """CtrlClf frame (protected): the CLF value V (step 1e-5, 0 .. 167.77215) and the
+    relaxation rho (step 1e-3, 0 .. 16777.215), both dimensionless, clamped to their ranges;
+    None or a non-finite value is sent absent (valid bit 0)."""
+    return _frame(_SPEC()[FrameId.CTRL_CLF], _clf_values(V, rho), counter, timestamp)
+
+
+def clf_frame(V: float | None, rho: float | None, counter: int, *,
+              timestamp: float = 0.0) -> Frame:
+    """:func:`encode_clf` as a light :class:`Frame` (the same bytes)."""
+    return Frame(float(timestamp), _CLF, _encoders()[_CLF](_clf_values(V, rho), counter))
 
 
 def torque_frame(knee: float, ankle: float, counter: int, *, enable: bool = True,
@@ -549,6 +585,17 @@ def quantize_load(x: Any) -> Any:
     return quantize(FrameId.FOOT_LOAD, "FootNormalLoad", x)
 
 
+def quantize_clf_v(x: Any) -> Any:
+    """CLF value V as decoded from CtrlClf (step 1e-5, clamped to [0, 167.77215])."""
+    return quantize(FrameId.CTRL_CLF, "ClfV", x)
+
+
+def quantize_clf_rho(x: Any) -> Any:
+    """CLF-QP relaxation rho as decoded from CtrlClf (step 1e-3, clamped to
+    [0, 16777.215])."""
+    return quantize(FrameId.CTRL_CLF, "ClfRho", x)
+
+
 def quantize_pitch(x: Any) -> Any:
     """Socket pitch as decoded (step 1e-5 rad, clamped to +-3.2 rad)."""
     return quantize(FrameId.SOCKET_IMU, "SocketPitch", x)
@@ -570,7 +617,8 @@ class FrameChecker:
     was, so one stray or replayed frame never invalidates the next genuine one.  The checker
     resynchronizes only when two consecutive frames agree on a new sequence (a rejected
     counter c followed by c + 1: lost frames or a sender restart), counted in
-    :attr:`resyncs`.  Unprotected frames (CtrlStatus, CtrlRejects) have no counter check.
+    :attr:`resyncs`.  Unprotected frames (CtrlStatus, CtrlRejects, CtrlDisturbance) have no
+    counter check.
     Never raises.
     """
 

@@ -8,6 +8,8 @@ Channels (schema encoding ``jsonschema``, message encoding ``json``), see :data:
 - ``/prosthesis/torque_command``: ``hpcosim.TorqueCommand``, decoded torque commands;
 - ``/ground_truth``: ``hpcosim.GroundTruth``, plant state and socket force;
 - ``/controller/diagnostics``: ``hpcosim.ControllerDiagnostics``, tau, V, rho, QP status;
+- ``/controller/clf``: ``hpcosim.ControllerClf``, the controller's CLF value V and
+  relaxation rho of every period (``CtrlClf`` frames; null when absent);
 - ``/can/rates``: ``hpcosim.CanRates``, frames per second of each frame name and direction
   over windows of 100 ms log time (a recorder made with ``can_rates``);
 - ``/walker/reference``: ``hpcosim.WalkerReference``, the gait's desired prosthesis angles
@@ -161,6 +163,16 @@ CONTROLLER_DISTURBANCE = _schema(
         "since_touchdown": _num("time since the switch to stance [s], saturating at 0.255"),
     }, ["t", "d", "tau", "valid", "flag", "since_touchdown"])
 
+CONTROLLER_CLF = _schema(
+    "hpcosim.ControllerClf", "The controller's CLF value and relaxation of one control "
+    "period as the loop received them (CtrlClf frame in a co-simulation: V step 1e-5, rho "
+    "step 1e-3).", {
+        "t": _num("simulation time of the period [s]"),
+        "V": _num("CLF value V_eps [1], >= 0 (0 in pns); null: not received or absent"),
+        "rho": _num("CLF-QP relaxation rho [1], >= 0; null: absent (a controller without a "
+                    "relaxation) or not received"),
+    }, ["t", "V", "rho"])
+
 PLANT_TIMING = _schema(
     "hpcosim.PlantTiming", "A realtime plant tick begun a period or more behind its "
     "wall-clock slot (an overrun), and the slots skipped to catch up.", {
@@ -207,6 +219,7 @@ CHANNELS: dict[str, dict[str, Any]] = {
     "/ground_truth": GROUND_TRUTH,
     "/controller/diagnostics": CONTROLLER_DIAGNOSTICS,
     "/controller/disturbance": CONTROLLER_DISTURBANCE,
+    "/controller/clf": CONTROLLER_CLF,
     "/cosim/timing": PLANT_TIMING,
     "/can/rates": CAN_RATES,
     "/walker/reference": WALKER_REFERENCE,

@@ -44,6 +44,7 @@ class FrameId(enum.IntEnum):
     CTRL_STATUS = 0x300
     CTRL_REJECTS = 0x301
     CTRL_DISTURBANCE = 0x302
+    CTRL_CLF = 0x303
 
 
 #: frames the plant (prosthesis hardware side) sends and the controller receives
@@ -51,7 +52,7 @@ PLANT_TO_CTRL = frozenset({FrameId.SIM_TIME, FrameId.KNEE_FEEDBACK, FrameId.ANKL
                            FrameId.FOOT_LOAD, FrameId.SOCKET_IMU})
 #: frames the controller sends and the plant receives
 CTRL_TO_PLANT = frozenset({FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.CTRL_STATUS,
-                           FrameId.CTRL_REJECTS, FrameId.CTRL_DISTURBANCE})
+                           FrameId.CTRL_REJECTS, FrameId.CTRL_DISTURBANCE, FrameId.CTRL_CLF})
 
 
 class CtrlState(enum.IntEnum):
@@ -112,6 +113,10 @@ TORQUE_STEP = 1e-6  # N m motor side, KneeTorqueCmd / AnkleTorqueCmd
 TORQUE_RANGE = (-5.0, 5.0)  # N m motor side
 LOAD_STEP = 0.1  # N, FootNormalLoad
 LOAD_RANGE = (-1000.0, 3000.0)  # N
+CLF_V_STEP = 1e-5  # CtrlClf.ClfV, CLF value V_eps (dimensionless)
+CLF_V_RANGE = (0.0, 167.77215)  # the full 24-bit unsigned range
+CLF_RHO_STEP = 1e-3  # CtrlClf.ClfRho, CLF-QP relaxation (dimensionless)
+CLF_RHO_RANGE = (0.0, 16777.215)  # the full 24-bit unsigned range (default rho_max 1e4)
 
 
 @functools.cache

@@ -5,8 +5,10 @@ has an IMU ``SocketImu``, and, last, ``SimTime``, all with the same rolling coun
 node checks every frame (:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter;
 rejects are counted and reported in ``CtrlRejects``), collects the cycle, and on ``SimTime``
 ticks the controller and answers with (heartbeat every ``heartbeat_every`` ticks,
-``CtrlStatus`` + ``CtrlRejects`` every ``status_every`` ticks, ``CtrlDisturbance`` on every
-tick with a valid model-error estimate (``clfqp``'s stance), then) one ``TorqueCmd``. The
+``CtrlClf`` (the tick's CLF value V and relaxation rho; rho absent for a controller without
+a relaxation) on every tick, ``CtrlStatus`` + ``CtrlRejects`` every ``status_every`` ticks,
+``CtrlDisturbance`` on every tick with a valid model-error estimate (``clfqp``'s stance),
+then) one ``TorqueCmd``. The
 torque frame's timestamp echoes the ``SimTime`` frame's timestamp, so the plant knows which
 cycle a reply answers (lockstep plants stamp frames with simulation time). A feedback frame
 missing from a cycle (dropped, corrupted, late) is replaced by its last accepted value and
@@ -113,6 +115,9 @@ class ControllerNode:
         self.safe_entries = 0
         self._counter = 0  # TorqueCmd rolling counter
         self._hb_counter = 0
+        self._clf_counter = 0  # CtrlClf rolling counter
+        #: CtrlClf carries rho only for a controller with a relaxation (relaxed CLF-QPs)
+        self.sends_rho = bool(getattr(controller, "relaxed", False))
         self._last_cycle: float | None = None  # the watchdog is armed by the first cycle
         self._last_safe_send = 0.0
         self._flags = FaultFlag.NONE
@@ -183,6 +188,10 @@ class ControllerNode:
         self.state = CtrlState.RUNNING
         if self.ticks % self.heartbeat_every == 0:
             out.append(self._heartbeat(v.timestamp))
+        c = self._clf_counter
+        self._clf_counter = (c + 1) % 16
+        out.append(codec.clf_frame(d.V, d.rho if self.sends_rho else None, c,
+                                   timestamp=v.timestamp))
         if self.ticks % self.status_every == 0:
             out.extend(self.status_frames(v.timestamp))
         if d.disturbance_valid:

@@ -20,7 +20,7 @@ from bus_schemas.protocol import CtrlState, FaultFlag, FrameId, QpStatus
 
 PROTECTED = {FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.SIM_TIME,
              FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD,
-             FrameId.SOCKET_IMU}
+             FrameId.SOCKET_IMU, FrameId.CTRL_CLF}
 
 
 def bits(x: float) -> bytes:
@@ -37,7 +37,8 @@ def test_dbc_frames_ids_senders():
     assert {m.frame_id: m.name for m in db.messages} == {
         0x010: "TorqueCmd", 0x020: "CtrlHeartbeat", 0x080: "SimTime",
         0x101: "KneeFeedback", 0x102: "AnkleFeedback", 0x110: "FootLoad",
-        0x111: "SocketImu", 0x300: "CtrlStatus", 0x301: "CtrlRejects", 0x302: "CtrlDisturbance"}
+        0x111: "SocketImu", 0x300: "CtrlStatus", 0x301: "CtrlRejects", 0x302: "CtrlDisturbance",
+        0x303: "CtrlClf"}
     assert {int(i) for i in FrameId} == {m.frame_id for m in db.messages}
     for m in db.messages:
         assert m.length == 8 and not m.is_extended_frame and not m.is_fd
@@ -57,11 +58,14 @@ def test_quantization_constants_match_dbc():
         ("TorqueCmd", "AnkleTorqueCmd", protocol.TORQUE_STEP, protocol.TORQUE_RANGE),
         ("FootLoad", "FootNormalLoad", protocol.LOAD_STEP, protocol.LOAD_RANGE),
         ("SocketImu", "SocketPitch", protocol.ANGLE_STEP, protocol.ANGLE_RANGE),
+        ("CtrlClf", "ClfV", protocol.CLF_V_STEP, protocol.CLF_V_RANGE),
+        ("CtrlClf", "ClfRho", protocol.CLF_RHO_STEP, protocol.CLF_RHO_RANGE),
     ]:
         s = spec(frame).signal(sig)
         assert (s.scale, s.offset, (s.minimum, s.maximum)) == (step, 0, rng)
-        # the range fits the raw integer with margin (clamping never overflows)
-        assert max(abs(s.minimum), abs(s.maximum)) / s.scale < 2 ** (s.length - 1)
+        # the range fits the raw integer (clamping never overflows)
+        raw = round(max(abs(s.minimum), abs(s.maximum)) / s.scale)
+        assert raw < 2 ** (s.length - 1) if s.signed else raw == 2 ** s.length - 1
 
 
 def test_bus_load_of_dbc_cycle_times():
@@ -192,6 +196,32 @@ def test_disturbance_frame():
         (32.0, -320.0, 3.2, 0.255))
     with pytest.raises(ValueError, match="NaN"):
         codec.encode_disturbance(math.nan, 0.0, 0.0, True, False, 0.0)
+
+
+def test_clf_frame():
+    """CtrlClf: V (step 1e-5) and rho (step 1e-3), dimensionless, >= 0, clamped to their
+    24-bit ranges; None or non-finite is absent (valid bit 0, value 0); protected (counter
+    and checksum like TorqueCmd); the cantools reference decodes the same bytes."""
+    m = codec.encode_clf(0.0123456, 4.6891, 19, timestamp=0.25)
+    v = codec.decode(m)
+    assert v.ok and v.name == "CtrlClf" and v.counter == 3 and v.timestamp == 0.25
+    c = v.value
+    assert (c.v_valid, c.rho_valid) == (1, 1)
+    assert bits(c.V) == bits(codec.quantize_clf_v(0.0123456))
+    assert bits(c.rho) == bits(codec.quantize_clf_rho(4.6891))
+    assert (c.V, c.rho) == pytest.approx((0.01235, 4.689), abs=1e-12)
+    ref = codec.decode_cantools(m)
+    assert (ref["ClfV"], ref["ClfRho"], ref["ClfVValid"], ref["ClfRhoValid"], ref["Counter"]) \
+        == (c.V, c.rho, 1, 1, 3)
+    assert m.data[7] == frame_checksum(FrameId.CTRL_CLF, m.data)
+    assert codec.decode(codec.encode_clf(0.2, None, 0)).value == codec.CtrlClf(0.2, 0.0, 1, 0)
+    assert codec.decode(codec.encode_clf(math.nan, math.inf, 0)).value == (0.0, 0.0, 0, 0)
+    big = codec.decode(codec.encode_clf(1e9, 1e9, 0)).value
+    assert (big.V, big.rho) == pytest.approx(protocol.CLF_V_RANGE[1:] + protocol.CLF_RHO_RANGE[1:])
+    assert codec.decode(codec.encode_clf(-1e-12, -3.0, 0)).value == (0.0, 0.0, 1, 1)
+    with pytest.raises(ValueError, match="rolling counter"):
+        codec.encode_frame("CtrlClf", {"ClfV": 0.1, "ClfRho": 0.0, "ClfVValid": 1,
+                                       "ClfRhoValid": 1})
 
 
 def test_sim_time_wraps_at_2_to_32():
@@ -502,7 +532,11 @@ def test_light_encoders_are_the_message_encoders():
                  (codec.encode_disturbance(a * 9, b * 90, a / 2, k % 2, k % 3, b / 20,
                                            timestamp=ts),
                   codec.disturbance_frame(a * 9, b * 90, a / 2, k % 2, k % 3, b / 20,
-                                          timestamp=ts))]
+                                          timestamp=ts)),
+                 (codec.encode_clf(abs(a) * 30, None if k % 3 == 0 else b * 3000, k,
+                                   timestamp=ts),
+                  codec.clf_frame(abs(a) * 30, None if k % 3 == 0 else b * 3000, k,
+                                  timestamp=ts))]
         for m, f in pairs:
             assert (f.timestamp, f.arbitration_id, f.data) == (
                 m.timestamp, m.arbitration_id, bytes(m.data))

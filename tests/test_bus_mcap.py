@@ -77,6 +77,7 @@ def test_schemas_are_valid_and_examples_conform():
                                                      "coverage_count": 3},
         "/controller/disturbance": {"t": 0.5, "d": [0.01, -0.2], "tau": 0.4, "valid": True,
                                     "flag": False, "since_touchdown": 0.255},
+        "/controller/clf": {"t": 0.5, "V": 0.0123, "rho": None},
         "/cosim/timing": {"t": 0.05, "tick": 50, "lag": 0.061, "skipped": 20},
         "/can/rates": {"t": 0.1, "window": 0.1, "tx": {"KneeFeedback": 1000.0},
                        "rx": {"TorqueCmd": 990.0, "0x7FF": 0.0}},
@@ -92,6 +93,8 @@ def test_schemas_are_valid_and_examples_conform():
     bad = ground_truth(0) | {"q": [0.0] * 11}
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(json.loads(encode_json(bad)), CHANNELS["/ground_truth"])
+    with pytest.raises(jsonschema.ValidationError):  # V and rho are required (null: absent)
+        jsonschema.validate({"t": 0.5, "V": 0.01}, CHANNELS["/controller/clf"])
     with pytest.raises(ValueError, match="direction"):
         can_frame_message(frame, "up")
 

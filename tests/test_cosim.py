@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -26,12 +27,14 @@ from bus_schemas.mcap_schemas import (
     ProtobufDecoderFactory,
     read_messages,
 )
-from bus_schemas.protocol import CtrlState, FrameId
+from bus_schemas.protocol import CTRL_TO_PLANT, CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
 from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
 from orchestrator.cosim.master import (
+    CanLink,
     CosimConfig,
+    CosimResult,
     FaultPlan,
     Plant,
     cpu_plan,
@@ -40,7 +43,7 @@ from orchestrator.cosim.master import (
     tick_breakdown,
 )
 from orchestrator.cosim.recording import play_to_bus, read_recording, refit_tube, replay
-from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
+from orchestrator.loop import ControllerLink, Observation, Sensed, SimulatorPlant, run_loop
 from prosthesis_controller.controllers import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
@@ -157,6 +160,85 @@ def test_lockstep_equals_in_process_simulation(lockstep, files, model):
     t_gt = (np.flatnonzero(np.diff(steps_gt)) + 1) * (res.sim_time / res.ticks)
     assert len(t_imp) >= len(t_gt) >= 9
     np.testing.assert_allclose(t_gt, t_imp[:len(t_gt)], atol=1.5e-3)
+    # the controller's V and rho (CtrlClf -> Command -> /controller/clf) against the
+    # in-process run's, quantized as the frame quantizes them: the two runs' states differ
+    # by up to 1e-6 rad, so V and rho may differ by a step (measured: never, 2994 ticks)
+    clf = _clf_by_cycle(path)
+    vr = np.array([[clf[round(k * 1e3)]["V"], clf[round(k * 1e3)]["rho"]] for k in range(n)])
+    vi = np.column_stack([codec.quantize_clf_v(np.array(log.V[:n])),
+                          codec.quantize_clf_rho(np.array(log.rho[:n]))])
+    dv, drho = np.abs(vr[:, 0] - vi[:, 0]), np.abs(vr[:, 1] - vi[:, 1])
+    assert dv.max() <= 1.5e-5 and drho.max() <= 1.5e-3, (dv.max(), drho.max())
+    assert np.mean(dv == 0) >= 0.99 and np.mean(drho == 0) >= 0.99
+    assert vi[:, 0].max() > 0.01 and vi[:, 1].max() > 1.0  # V and rho, not just zeros
+
+
+def _clf_by_cycle(path: Path) -> dict[int, dict]:
+    """/controller/clf records by cycle time [us]."""
+    return {round(o["t"] * 1e6): o for _, _, o in read_messages(path, ["/controller/clf"])}
+
+
+def _clf_in_process(path: Path, files, model, name: str) -> dict[int, tuple[float, float]]:
+    """(V, rho) by cycle time [us] of a fresh controller ``name`` fed the recorded
+    measurements in order (what the node decoded), quantized as CtrlClf quantizes them."""
+    from hp_model.force_tube import load_tube
+    from prosthesis_controller import ProsthesisMeasurement
+
+    gait = load_gait(files["gait"], model.parameter_hash())
+    ctrl = make_controller(name, gait, load_tube(files["tube"], gait.hash()), model)
+    ctrl.reset()
+    out = {}
+    for _, _, m in read_messages(path, ["/prosthesis/measurements"]):
+        p = m.get("socket_pitch")
+        d = ctrl.tick(ProsthesisMeasurement(
+            m["sim_time_us"] * 1e-6, m["knee_angle"], m["ankle_angle"], m["knee_velocity"],
+            m["ankle_velocity"], m["foot_load"], bool(m["contact"]),
+            math.nan if p is None else p)).diagnostics
+        out[m["sim_time_us"]] = (codec.quantize_clf_v(d.V), codec.quantize_clf_rho(d.rho))
+    return out
+
+
+def test_clf_values_travel_in_ctrlclf_frames(lockstep, files, model):
+    """clfqp's V and rho of every tick go out in a CtrlClf frame (protected: none rejected,
+    one per tick), become Command.V/.rho and /controller/clf: finite, >= 0, present in every
+    ps tick; bit for bit the V and rho, at the frame's resolution, of the same controller
+    fed the recorded measurements in process. /controller/diagnostics carries them too."""
+    res, path = lockstep
+    clf = _clf_by_cycle(path)
+    assert len(clf) == res.ticks
+    names = Counter(o["name"] for _, _, o in read_messages(path, ["/can/rx"]))
+    assert names["CtrlClf"] == res.ticks and res.plant_rejects["bad_counter"] == 0
+    domain = {round(o["t"] * 1e6): o["domain"] for _, _, o in read_messages(
+        path, ["/ground_truth"])}
+    ps = [us for us, d in domain.items() if d == "ps"]
+    assert len(ps) > 1000
+    for us in ps:
+        V, rho = clf[us]["V"], clf[us]["rho"]
+        assert V is not None and rho is not None and math.isfinite(V) and math.isfinite(rho)
+        assert V >= 0 and rho >= 0
+    assert max(clf[us]["V"] for us in ps) > 0.01
+    assert max(clf[us]["rho"] for us in ps) > 1.0  # the relaxation acts on a few ticks
+    ref = _clf_in_process(path, files, model, CTRL)
+    assert len(ref) == res.ticks
+    assert all((clf[us]["V"], clf[us]["rho"]) == ref[us] for us in ref)
+    diag = [o for _, _, o in read_messages(path, ["/controller/diagnostics"])]
+    assert diag and all((o["V"], o["rho"]) == ref[round(o["t"] * 1e6)] for o in diag)
+
+
+def test_pd_sends_its_v_and_no_rho(files, model):
+    """A controller without a relaxation (PD): CtrlClf carries its V (the CLF evaluated in
+    ps, as in process) and rho absent, so Command.rho and /controller/clf's rho are null.
+    (PD does not walk the template gait: it falls within the first stance.)"""
+    rec = files["dir"] / "pd.mcap"
+    res = run_cosim(cfg(files, controller="pd", steps=1, record=rec), model=model)
+    assert not res.faulted and res.ticks > 100 and res.missed == 0, res
+    clf = _clf_by_cycle(rec)
+    assert len(clf) == res.ticks
+    assert all(o["rho"] is None for o in clf.values())
+    assert all(o["V"] is not None and o["V"] >= 0 for o in clf.values())
+    assert max(o["V"] for o in clf.values()) > 0.01
+    ref = _clf_in_process(rec, files, model, "pd")
+    assert len(ref) == res.ticks and all(clf[us]["V"] == ref[us][0] for us in ref)
 
 
 def test_replay_same_controller_zero_difference(lockstep, model):
@@ -345,6 +427,97 @@ def test_node_hands_the_imu_pitch_to_the_controller(ctx):
     assert cycle(4, -5.0) == -3.2 and node.stale_cycles == 2  # resynchronized; clamped
 
 
+class _Keep:
+    """A controller that keeps its outputs (other attributes: the inner controller's)."""
+
+    def __init__(self, inner):
+        self.inner, self.out = inner, []
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)
+
+    def reset(self):
+        self.inner.reset()
+
+    def tick(self, m):
+        self.out.append(self.inner.tick(m))
+        return self.out[-1]
+
+
+@pytest.mark.parametrize("name", ["clfqp", "pd"])
+def test_node_sends_ctrlclf_every_tick(ctx, name):
+    """Every tick with a computed torque: one CtrlClf with its own rolling counter, the
+    cycle's timestamp, before CtrlStatus and TorqueCmd, the tick's V and (a relaxed CLF-QP
+    only) rho at the frame's resolution; PD: rho absent."""
+    keep = _Keep(make_controller(name, None, None, None, context=ctx))
+    node = ControllerNode(keep, watchdog=10.0, status_every=3)
+    assert node.sends_rho == (name == "clfqp")
+    plant = codec.FrameChecker(accept=CTRL_TO_PLANT)
+    vs = []
+    for k in range(20):
+        out = []
+        for m in codec.encode_feedback(0.1 + 0.005 * k, 0.01 * k, 0.2, 0.0, 500.0, True,
+                                       k % 16, sim_time_us=k * 1000, timestamp=k * 1e-3):
+            out += node.handle(m, now=k * 1e-3)
+        ids = [f.arbitration_id for f in out]
+        assert ids.count(FrameId.CTRL_CLF) == 1 and ids[-1] == FrameId.TORQUE_CMD
+        i = ids.index(FrameId.CTRL_CLF)
+        assert FrameId.CTRL_STATUS not in ids[:i]
+        verdicts = [plant.check(f) for f in out]
+        v = verdicts[i]
+        assert all(x.ok for x in verdicts) and v.counter == k % 16 and v.timestamp == k * 1e-3
+        d = keep.out[-1].diagnostics
+        assert v.value.v_valid == 1 and codec.quantize_clf_v(d.V) == v.value.V
+        if name == "clfqp":
+            assert v.value.rho_valid == 1 and v.value.rho == codec.quantize_clf_rho(d.rho)
+        else:
+            assert (v.value.rho_valid, v.value.rho) == (0, 0.0)
+        vs.append(v.value.V)
+    assert max(vs) > 0  # in stance: a V, not only zeros
+
+
+def test_can_link_takes_v_and_rho_from_the_cycles_ctrlclf():
+    """CanLink: the cycle's good CtrlClf gives Command.V/.rho (rho None when absent); a
+    corrupted, replayed, another cycle's or missing CtrlClf gives None and the torque still
+    applies; the plant's checker counts the rejects."""
+    ch = f"canlink-clf-{os.getpid()}"
+    plant_bus = can.Bus(interface="virtual", channel=ch)
+    ctrl_bus = can.Bus(interface="virtual", channel=ch, preserve_timestamps=True)
+    res = CosimResult()
+    link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.5),
+                   FaultPlan.parse("none"), plant_bus, None, None, threading.Event(), res,
+                   (50.0, 50.0), (2.0, 2.0))
+    sensed = Sensed(0.1, 0.2, 0.0, 0.0, 500.0, True, math.nan)
+
+    def cycle(k, *clf):
+        for f in (*clf, codec.torque_frame(0.1, 0.2, k, timestamp=k * 1e-3)):
+            ctrl_bus.send(f.to_message())
+        return link.exchange(Observation(k, k * 1e-3, "ps", 0, 0.1, sensed))
+
+    try:
+        c = cycle(0, codec.clf_frame(0.0123456, 4.5678, 0, timestamp=0.0))
+        assert (c.V, c.rho) == (codec.quantize_clf_v(0.0123456), codec.quantize_clf_rho(4.5678))
+        assert c.torque == pytest.approx((0.1, 0.2)) and not c.fault
+        c = cycle(1, codec.clf_frame(0.02, None, 1, timestamp=1e-3))
+        assert (c.V, c.rho) == (0.02, None)
+        bad = codec.clf_frame(0.03, 1.0, 2, timestamp=2e-3)
+        bad = codec.Frame(bad.timestamp, bad.arbitration_id, bytes([bad.data[0] ^ 1])
+                          + bad.data[1:])
+        c = cycle(2, bad)
+        assert (c.V, c.rho) == (None, None) and c.torque == pytest.approx((0.1, 0.2))
+        c = cycle(3, codec.clf_frame(0.04, 1.0, 1, timestamp=3e-3))  # counter 1 again
+        assert (c.V, c.rho) == (None, None)
+        c = cycle(4, codec.clf_frame(0.05, 1.0, 2, timestamp=3e-3))  # the previous cycle's
+        assert (c.V, c.rho) == (None, None)
+        c = cycle(5)  # none sent
+        assert (c.V, c.rho) == (None, None) and res.missed == 0
+        counts = link.plant.checker.counts
+        assert counts["bad_checksum"] == 1 and counts["duplicate"] == 1
+    finally:
+        plant_bus.shutdown()
+        ctrl_bus.shutdown()
+
+
 def test_node_watchdog_is_armed_by_the_first_cycle(ctx):
     """Before any measurement the node stays quiet (a SAFE torque frame, timestamp 0,
     sent while a slow plant starts would pass for the reply to the cycle at t = 0)."""
@@ -418,6 +591,13 @@ def test_plant_rejects_bad_controller_frames():
     c = p.checker.counts
     assert c["ok"] == 1 and c["duplicate"] == 1 and c["bad_checksum"] == 1
     assert c["unknown_id"] == 1
+    # CtrlClf is protected likewise: its own counter sequence, checksum over id and data
+    clf = [codec.encode_clf(0.1, 0.2, k) for k in (0, 1, 1, 5)]
+    moved = can.Message(arbitration_id=FrameId.CTRL_CLF, dlc=8,  # a TorqueCmd payload
+                        data=codec.encode_torque(0.1, 0.2, 2).data, is_extended_id=False)
+    assert [str(p.on_rx(m).status) for m in (*clf, moved)] == [
+        "ok", "ok", "duplicate", "bad_counter", "bad_checksum"]
+    assert p.checker.counts["bad_counter"] == 1 and p.checker.counts["bad_checksum"] == 2
 
 
 def test_plant_bounds_an_out_of_range_torque_frame(model):

@@ -235,10 +235,6 @@ def _resolve(obj, rest: str):
     return obj
 
 
-#: in co-simulation recordings these are null: the CtrlStatus frame does not carry V, rho
-NULL_IN_COSIM = {"/controller/diagnostics.V", "/controller/diagnostics.rho"}
-
-
 def test_layout_parses_and_names_what_recordings_have(recording, model):
     rec, summary, by, _ = recording
     doc = json.loads(LAYOUT.read_text())
@@ -265,15 +261,19 @@ def test_layout_parses_and_names_what_recordings_have(recording, model):
                 values.append(_resolve(o, path[len(topic):]))
         assert values, f"{path}: in no message of {topic}"
         assert all(v is None or isinstance(v, int | float | str) for v in values), path
-        if path not in NULL_IN_COSIM:
-            assert any(isinstance(v, int | float | str) for v in values), f"{path}: all null"
+        assert any(isinstance(v, int | float | str) for v in values), f"{path}: all null"
     # the panels cover what issue 21 lists
     for needed in ("/walker/reference.knee", "/walker/reference.ankle",
                    "/prosthesis/torque_command.knee_joint", "/ground_truth.socket_force.Fz",
-                   "/walker/reference.socket_lower.Fz", "/controller/diagnostics.V",
-                   "/controller/diagnostics.rho", "/can/rates.rx.TorqueCmd"):
+                   "/walker/reference.socket_lower.Fz", "/controller/clf.V",
+                   "/controller/clf.rho", "/can/rates.rx.TorqueCmd", "/can/rates.rx.CtrlClf"):
         assert needed in paths
     assert len(by["/can/rates"]) >= 5
+    # V and rho: one record per period, none null (clfqp relaxes: rho is present)
+    clf = [o for _, _, o in read_messages(rec, ["/controller/clf"])]
+    assert len(clf) == summary.statistics.channel_message_counts[next(
+        i for i, c in summary.channels.items() if c.topic == "/ground_truth")]
+    assert all(o["V"] is not None and o["rho"] is not None for o in clf)
 
 
 def test_reference_is_the_gait_and_the_tube_at_the_recorded_phase(recording, model,

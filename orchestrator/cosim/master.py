@@ -10,7 +10,9 @@ Per tick k (t = k dt, dt = 1 ms by default) the plant
 3. waits for the ``TorqueCmd`` answering this cycle (its timestamp echoes t):
    *lockstep* blocks for it (deterministic), *realtime* waits at most until the tick's wall
    deadline and otherwise holds the last torque (counted late; latency stats kept);
-   other controller frames (heartbeat, status, rejects) are checked and recorded on the way;
+   other controller frames (heartbeat, status, rejects, CLF) are checked and recorded on
+   the way; the cycle's ``CtrlClf`` gives the period's ``Command.V`` and ``.rho`` (None when
+   absent or not received);
 4. sets the torque inputs, reads the socket force (it depends on them), records ground
    truth, and steps the FMU by dt.
 
@@ -563,6 +565,9 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
     return d
 
 
+_CLF = int(FrameId.CTRL_CLF)
+
+
 class CanLink:
     """The controller in its own process, over CAN frames on a python-can ``bus`` (AMPRO3's
     protocol; module docstring, steps 2-3): per period the plant's frames go out through the
@@ -571,7 +576,9 @@ class CanLink:
     into the tick's wall slot).  A missing reply holds the last torque; the watchdog, a
     lost liveliness token or a SAFE/FAULT heartbeat give the safe torque (zero) and a
     :attr:`Command.fault`.  Recording is deferred: the tick's frames are queued as they
-    happen and serialized while the plant waits for the reply."""
+    happen and serialized while the plant waits for the reply.  The cycle's ``CtrlClf``
+    frame gives :attr:`Command.V` and :attr:`Command.rho` (None when the frame says absent,
+    or when no good frame of this cycle came)."""
 
     def __init__(self, cfg: CosimConfig, plan: FaultPlan, bus: Any, rec: Any, proc: Any,
                  lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
@@ -602,6 +609,8 @@ class CanLink:
         # reply_timeout of the start.  Lockstep waits reply_timeout for every reply, so it
         # is armed from the first period.
         self.armed = not self.realtime
+        #: the last good CtrlClf: (timestamp [s], V or None, rho or None)
+        self.clf: tuple[float, float | None, float | None] | None = None
 
     def log_ns(self, t: float) -> int:
         return round((time.perf_counter() - self.wall0 if self.realtime else t) * 1e9)
@@ -609,6 +618,10 @@ class CanLink:
     def on_rx(self, msg: can.Message, t: float) -> codec.Verdict:
         v = self.plant.on_rx(msg)
         self.res.frames_rx += 1
+        if v.frame_id == _CLF and v.ok:
+            c = v.value
+            self.clf = (msg.timestamp, c.V if c.v_valid else None,
+                        c.rho if c.rho_valid else None)
         rec = self.rec
         if rec is None:
             return v
@@ -625,9 +638,11 @@ class CanLink:
         elif v.frame_id == FrameId.CTRL_STATUS:
             st = v.value
             u, r = self.u, self.ratio
+            c = self.clf  # the node sends its cycle's CtrlClf before CtrlStatus
+            V, rho = (c[1], c[2]) if c is not None and c[0] == msg.timestamp else (None, None)
             rec.defer("/controller/diagnostics", {
                 "t": msg.timestamp, "controller": self.cfg.controller, "domain": None,
-                "tau": None, "V": None, "rho": None, "u": [u[0] * r[0], u[1] * r[1]],
+                "tau": None, "V": V, "rho": rho, "u": [u[0] * r[0], u[1] * r[1]],
                 "qp_status": getattr(st.qp_status, "name", str(st.qp_status)),
                 "active_constraints": [a.name for a in type(st.active_constraints)
                                        if a in st.active_constraints and a.name],
@@ -718,7 +733,10 @@ class CanLink:
             self.u = (0.0, 0.0)
             first = self.fault_first_miss if self.fault_first_miss >= 0 else k
             res.detection_periods = k - first + 1
-        return Command(self.u, fault=reason)
+        c = self.clf
+        if c is not None and abs(c[0] - t) <= self.rtol:  # this cycle's CtrlClf
+            return Command(self.u, V=c[1], rho=c[2], fault=reason)
+        return Command(self.u, V=None, rho=None, fault=reason)
 
     def _fault(self, k: int, got: bool) -> str:
         """Why the plant stops trusting the controller this period ("" while it does)."""

@@ -28,8 +28,8 @@ class Command(NamedTuple):
 
     torque: Sequence[float] | None  # (2,) motor torques (N m); None: the plant's own law
     mode: ControllerMode | str = ""  # the controller's mode of the tick ("" over CAN)
-    V: float = 0.0  # CLF value
-    rho: float = 0.0  # relaxation
+    V: float | None = 0.0  # CLF value V_eps; None: not reported (over CAN: CtrlClf absent)
+    rho: float | None = 0.0  # CLF-QP relaxation; None: not reported (no relaxation)
     fallback_count: int = 0
     fault: str = ""  # non-empty: the link failed (watchdog, lost peer); the run ends
 

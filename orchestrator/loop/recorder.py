@@ -1,6 +1,8 @@
 """The loop's optional recorder: the ground truth of every period into an MCAP recording
 (``/ground_truth``, the channel :mod:`orchestrator.cosim.recording` and ``hpcosim animate``
-read) and, given a :class:`~orchestrator.loop.foxglove.WalkerFoxglove`, every
+read), the link's CLF value and relaxation of every period (``/controller/clf``, null
+where the link reported none) and, given a
+:class:`~orchestrator.loop.foxglove.WalkerFoxglove`, every
 :data:`~orchestrator.loop.foxglove.PERIOD` of simulation time the walker for Foxglove
 (``/walker/tf``, ``/walker/scene``, ``/walker/reference``)."""
 
@@ -33,14 +35,24 @@ def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
             "u_applied": [float(u[0]), float(u[1])]}
 
 
+CLF_TOPIC = "/controller/clf"
+
+
+def clf_record(t: float, V: float | None, rho: float | None) -> dict[str, Any]:
+    """``/controller/clf`` of one period: time [s], the command's CLF value and relaxation
+    (dimensionless; None where the link reported none)."""
+    return {"t": t, "V": V, "rho": rho}
+
+
 def _floats(v: Sequence[float]) -> list[float]:
     """A list of floats (the FMU's values already are; the simulator's are an array)."""
     return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
 
 class GroundTruthRecorder:
-    """Writes ``/ground_truth`` to ``rec`` (a :class:`bus_schemas.mcap_schemas.Recorder`)
-    at log time ``log_ns(t)`` (default: the simulation time); ``deferred``: queued and
+    """Writes ``/ground_truth`` and ``/controller/clf`` to ``rec`` (a
+    :class:`bus_schemas.mcap_schemas.Recorder`) at log time ``log_ns(t)`` (default: the
+    simulation time); ``deferred``: queued and
     serialized when the owner calls ``rec.write_deferred()`` (the co-simulation does it
     while it waits for the controller); ``walker``: also the walker for Foxglove, at the
     first period and then every ``period`` s of simulation time (the messages are built
@@ -57,6 +69,7 @@ class GroundTruthRecorder:
         ns = self.log_ns(obs.t)
         put = self.rec.defer_call if self.deferred else self._write
         put("/ground_truth", ns, ground_truth_record, obs, truth)
+        put(CLF_TOPIC, ns, clf_record, obs.t, cmd.V, cmd.rho)
         w = self.walker
         if w is not None and obs.t >= self._next:
             self._next = obs.t + self.period * (1.0 - 1e-6)

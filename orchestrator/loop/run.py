@@ -45,8 +45,8 @@ class LoopLog:
     torque: list[Sequence[float]] = field(default_factory=list)  # (2,) motor torques applied
     socket_force: list[Sequence[float]] = field(default_factory=list)  # (3,)
     mode: list[ControllerMode | str] = field(default_factory=list)
-    V: list[float] = field(default_factory=list)
-    rho: list[float] = field(default_factory=list)
+    V: list[float | None] = field(default_factory=list)  # None: the link reported none
+    rho: list[float | None] = field(default_factory=list)
     fallback_count: int = 0
     steps: int = 0
     fall: Fall | None = None
