@@ -337,8 +337,8 @@ def test_controller_hung_alive_is_detected_by_missing_replies(files, model, mode
     # Real time on a shared 2-core virtual machine: now and then both processes stall for
     # 10-15 ms (5+ periods), which the watchdog rightly ends as a silent controller, or the
     # walker falls under the held torques, before the hang is injected (once in three
-    # full-suite runs on 2026-11-26: a fault at tick 96 of 2 ms).  Such a run says nothing of the hang: run again, at most 3 times; every
-    # run that reaches the hang is judged below.
+    # full-suite runs on 2026-11-26: a fault at tick 96 of 2 ms).  Such a run says nothing
+    # of the hang: run again, at most 3 times; the run that reaches the hang is judged below.
     for _ in range(3 if mode == "realtime" else 1):
         res = run_cosim(cfg(files, steps=5, record=rec, perturb=f"hang:{start}", mode=mode,
                             dt=dt), model=model)
