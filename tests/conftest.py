@@ -11,6 +11,7 @@ import pytest
 
 import hp_model
 from hp_model import HumanProsthesisModel, ProsthesisSubsystem
+from hp_model.domains import DOMAINS
 from tests.committed_gaits import load_committed
 
 
@@ -37,6 +38,12 @@ def model() -> HumanProsthesisModel:
 @pytest.fixture(scope="session")
 def subsystem(model: HumanProsthesisModel) -> ProsthesisSubsystem:
     return ProsthesisSubsystem(model)
+
+
+@pytest.fixture(scope="module")
+def coef(model) -> dict[str, tuple[float, float]]:
+    """The model's hip-progress coefficients per domain (what mocap processing takes)."""
+    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture

@@ -17,17 +17,11 @@ from characterization.mocap.pipeline import process_take
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from characterization.mocap.take import MocapError
 from hp_model import COORDS
-from hp_model.domains import DOMAINS
 
 
 @pytest.fixture(scope="module")
 def model():
     return hp_model.load_model()
-
-
-@pytest.fixture(scope="module")
-def coef(model):
-    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module")

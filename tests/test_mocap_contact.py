@@ -24,16 +24,10 @@ from characterization.mocap.pipeline import process_take
 from characterization.mocap.step_segmentation import segment_steps
 from characterization.mocap.synthetic_subject import SynthOptions, static_trial, synthesize
 from characterization.mocap.take import LabEvent, MocapError
-from hp_model.domains import DOMAINS
 from hp_model.outputs import HipProgress
 
 GATK = Path(__file__).parent / "data" / "gatk-walking"
 FEET = {"prosthesis": ("ankle_p", "p_land", "p_lift"), "human": ("ankle_l", "h_land", "h_lift")}
-
-
-@pytest.fixture(scope="module")
-def coef(model) -> dict[str, tuple[float, float]]:
-    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module", params=["model", "template"])

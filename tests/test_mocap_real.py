@@ -40,7 +40,6 @@ from characterization.mocap.mapping import load_mapping
 from characterization.mocap.pipeline import process_take
 from characterization.mocap.take import MocapError
 from hp_model import COORDS
-from hp_model.domains import DOMAINS
 
 DATA = Path(__file__).parent / "data"
 OPENSIM = DATA / "opensim-walk"
@@ -66,11 +65,6 @@ def _agreement(found: np.ndarray, ref: np.ndarray) -> tuple[float, float, float]
     e = found - ref
     return (float(np.sqrt(np.mean(e**2))), float(np.std(e)),
             float(np.corrcoef(found, ref)[0, 1]))
-
-
-@pytest.fixture(scope="module")
-def coef(model):
-    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,6 @@ from characterization.mocap.mapping import JOINTS, LIMBS, default_mapping, synth
 from characterization.mocap.pipeline import process_take
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from characterization.mocap.take import MocapError
-from hp_model.domains import DOMAINS
 
 ANGLE_COORDS = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
@@ -32,11 +31,6 @@ ANGLE_COORDS = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 @pytest.fixture(scope="module")
 def model() -> hp_model.HumanProsthesisModel:
     return hp_model.load_model()
-
-
-@pytest.fixture(scope="module")
-def coef(model) -> dict[str, tuple[float, float]]:
-    return {d: model.hip_progress_coefficients(d) for d in DOMAINS}
 
 
 @pytest.fixture(scope="module", params=["model", "template"])
