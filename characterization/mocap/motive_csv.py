@@ -28,7 +28,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from characterization.mocap.take import MocapError, RigidBodyTrack, Take
 from hp_model.atomic_io import atomic_write_text
@@ -231,6 +230,8 @@ def _parse_data(lines: list[str], ncol: int, offset: int, src: str) -> np.ndarra
 
 
 def _euler_to_quat(eul_deg: np.ndarray, order: str) -> np.ndarray:
+    from scipy.spatial.transform import Rotation  # only for Euler exports
+
     out = np.full((eul_deg.shape[0], 4), np.nan)
     ok = np.all(np.isfinite(eul_deg), axis=1)
     if ok.any():
@@ -241,6 +242,8 @@ def _euler_to_quat(eul_deg: np.ndarray, order: str) -> np.ndarray:
 
 
 def _quat_to_euler(quat: np.ndarray, order: str) -> np.ndarray:
+    from scipy.spatial.transform import Rotation  # only for Euler exports
+
     out = np.full((quat.shape[0], 3), np.nan)
     ok = np.all(np.isfinite(quat), axis=1)
     if ok.any():

@@ -237,6 +237,11 @@ def limb_pitches(take: Take, mapping: MocapMapping, frame: SagittalFrame,
     configured low-pass applied."""
     proc = mapping.processing
     max_gap = round(proc.max_gap * take.frame_rate)
+    if proc.lowpass_hz >= take.frame_rate / 2:
+        raise MocapError(f"{take.source}: mapping field 'processing.lowpass_hz' = "
+                         f"{proc.lowpass_hz:g} Hz is not below the take's Nyquist frequency "
+                         f"({take.frame_rate / 2:g} Hz at {take.frame_rate:g} Hz); lower it "
+                         "or set 0 (off)")
     out = {}
     for limb in limbs:
         if limb not in mapping.limbs:
