@@ -370,3 +370,17 @@ def test_motive_exports_with_markers_only_or_rigid_bodies_only(synth, tmp_path) 
     assert rb.steps and rb.dropped
     for d in rb.dropped:
         assert "has no pitch source for" in d.reason and "frames" in d.reason
+
+
+def test_a_lowpass_at_or_above_nyquist_is_a_one_line_error(files, tmp_path, capsys) -> None:
+    """The take is 120 Hz: a 60 Hz low-pass has no Butterworth design (it was a traceback)."""
+    m = tmp_path / "m.toml"
+    assert main(["mocap", "inspect", str(files["csv"]), "--mapping-out", str(m)]) == 0
+    m.write_text(m.read_text().replace("lowpass_hz = 15.0", "lowpass_hz = 60.0"))
+    capsys.readouterr()
+    code = main(["mocap", "process", str(files["csv"]), "--out", str(tmp_path / "s.npz"),
+                 "--mapping", str(m)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "'processing.lowpass_hz' = 60 Hz" in err and "Nyquist frequency (60 Hz" in err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["m.toml"]

@@ -3,12 +3,12 @@
 Report: steps found per domain, steps dropped and why, frames from each pitch source per
 limb, gaps filled and left, joint-centre fits (residual, rotation, well-posedness), notes.
 Figures: joint angles of every step over tau (one panel per coordinate and domain) and phase
-portraits (angle vs. angular velocity) of the prosthesis knee and ankle per step.
+portraits (angle vs. angular velocity) of the prosthesis knee and ankle per step, drawn with
+Pillow (``plot.py``: matplotlib took 1.2 s of the stage's 2 s budget).
 """
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 
@@ -114,59 +114,35 @@ def qa_markdown(summary: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _png(fig: object) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)  # type: ignore[attr-defined]
-    return buf.getvalue()
-
-
 def figures(p: ProcessedTake) -> dict[str, bytes]:
     """PNG bytes of the joint-angle and phase-portrait figures."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.collections import LineCollection
-    from matplotlib.figure import Figure
+    from characterization.mocap import plot
 
     out = {}
-    fig = Figure(figsize=(14, 5.5))
-    fig.subplots_adjust(left=0.05, right=0.99, top=0.94, bottom=0.09, wspace=0.35,
-                        hspace=0.25)
-    axes = fig.subplots(2, len(ANGLES), sharex=True)
+    fig = plot.Figure(1260, 495, 2, len(ANGLES))
     for r, dom in enumerate(DOMAINS):
         steps = [s for s in p.steps if s.domain == dom]
         for c, name in enumerate(ANGLES):
-            ax = axes[r, c]
             col = COORDS.index(name)
             segs = [np.column_stack([s.tau, np.degrees(p.q[s.start:s.end + 1, col])])
                     for s in steps]
-            ax.add_collection(LineCollection(segs, linewidths=0.7, alpha=0.6))
-            ax.autoscale()
-            ax.set_title(f"{name} ({dom})", fontsize=9)
-            if c == 0:
-                ax.set_ylabel("deg")
-            if r == 1:
-                ax.set_xlabel("tau")
-    out["joint_angles"] = _png(fig)
+            fig.panel(r, c, segs, [plot.BLUE] * len(segs), f"{name} ({dom}), deg",
+                      "tau" if r == 1 else "")
+    out["joint_angles"] = fig.png()
 
-    fig = Figure(figsize=(9, 4))
-    fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.13, wspace=0.3)
-    axes = fig.subplots(1, 2)
-    for ax, name in zip(axes, ("th_pk", "th_pa"), strict=True):
+    fig = plot.Figure(810, 360, 1, 2)
+    for c, name in enumerate(("th_pk", "th_pa")):
         col = COORDS.index(name)
-        for dom, color in (("ps", "tab:green"), ("pns", "tab:pink")):
-            segs = []
+        segs, colors = [], []
+        for dom, color in (("ps", plot.GREEN), ("pns", plot.PINK)):
             for s in (s for s in p.steps if s.domain == dom):
                 th = p.q[s.start:s.end + 1, col]
                 segs.append(np.column_stack([np.degrees(th),
                                              np.degrees(np.gradient(th) * p.frame_rate)]))
-            ax.add_collection(LineCollection(segs, colors=color, linewidths=0.6, alpha=0.6,
-                                             label=dom))
-        ax.autoscale()
-        ax.set_xlabel(f"{name} (deg)")
-        ax.set_ylabel(f"d{name}/dt (deg/s)")
-        ax.legend(fontsize=8)
-    out["phase_portraits"] = _png(fig)
+                colors.append(color)
+        fig.panel(0, c, segs, colors, f"d{name}/dt (deg/s)", f"{name} (deg)",
+                  legend=(("ps", plot.GREEN), ("pns", plot.PINK)))
+    out["phase_portraits"] = fig.png()
     return out
 
 
