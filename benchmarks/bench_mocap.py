@@ -3,7 +3,9 @@
 Stages timed per repeat: reading the Motive CSV, processing (limb pitches, joint centres,
 joint angles, segmentation), rendering the QA report and figures, writing the steps file.
 "Core" = read + process + steps file; "all" adds the report and figures.  The take is
-generated once (not timed).  Target (issue 3): end to end under 2 s.
+generated once (not timed).  Target (issues 3 and 19): end to end under 2 s, measured as a
+user runs it: ``hpcosim mocap process`` in a fresh process (interpreter start, imports,
+model, figures; wall time, the "CLI" rows), alternating with ``--no-figures``.
 
     PYTHONPATH=. python benchmarks/bench_mocap.py [--repeats 7] [--json out.json]
 """
@@ -12,7 +14,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -26,6 +31,20 @@ from characterization.mocap.report import render_report
 from characterization.mocap.steps_artifact import save_steps
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from hp_model.domains import DOMAINS
+
+CLI = "CLI: hpcosim mocap process"
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_cli(take: Path, out: Path, no_figures: bool) -> float:
+    """Wall time (s) of ``hpcosim mocap process`` in a fresh interpreter."""
+    cmd = [sys.executable, "-m", "orchestrator.cli", "mocap", "process", str(take), "--out",
+           str(out)] + (["--no-figures"] if no_figures else [])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(ROOT)] + ([os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else []))}
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=True, capture_output=True, env=env, cwd=ROOT)
+    return time.perf_counter() - t0
 
 
 def main() -> None:
@@ -61,12 +80,17 @@ def main() -> None:
                          ("write", t4 - t3), ("core", (t2 - t0) + (t4 - t3)),
                          ("all", t4 - t0), ("process_file()", t5 - t4)):
                 rows[k].append(v)
+        cli = {CLI: [], CLI + " --no-figures": []}
+        for _ in range(max(5, args.repeats)):
+            for k in cli:
+                cli[k].append(run_cli(d / "take.csv", d / "cli.npz", k.endswith("figures")))
+        rows.update(cli)
     print(f"take: {take.n_frames} frames at {take.frame_rate:g} Hz, {len(take.markers)} "
           f"markers + {len(take.rigid_bodies)} rigid bodies, CSV {size:.1f} MB; "
           f"{len(p.steps)} steps; {args.repeats} repeats")
-    print(f"{'stage':<16}{'median (s)':>12}{'min':>9}{'max':>9}")
+    print(f"{'stage':<44}{'median (s)':>12}{'min':>9}{'max':>9}")
     for k, v in rows.items():
-        print(f"{k:<16}{statistics.median(v):>12.3f}{min(v):>9.3f}{max(v):>9.3f}")
+        print(f"{k:<44}{statistics.median(v):>12.3f}{min(v):>9.3f}{max(v):>9.3f}")
     if args.json:
         args.json.write_text(json.dumps({
             "frames": take.n_frames, "csv_mb": size, "steps": len(p.steps),

@@ -33,7 +33,7 @@ from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
 from hp_model.domains import DOMAINS, STANCE_LEG, DomainRoles, domain_roles
 from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
-from hp_model.tree import Body, Frame, JointKind, PlanarTree
+from hp_model.tree import Body, Frame, JointKind, PlanarTree, frame_pose
 
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
           "x_f", "z_f", "th_f", "th_pk", "th_pa")
@@ -167,6 +167,26 @@ DOMAIN_DEFS = (
 )
 
 
+def hip_progress_coefficients(tree: PlanarTree, domain: str) -> tuple[float, float]:
+    """(c_knee, c_ankle) of the linearised hip position delta_p_hip = c_k th_k + c_a th_a.
+
+    delta_p_hip is the forward position of the hip relative to the stance ankle with the
+    stance foot flat, linearised about upright (REFERENCE.md Sec. 1b): it increases
+    during stance in this sign convention (c_k, c_a < 0: the shank rotating forward
+    over the foot is a negative ankle angle).  From the tree alone (:func:`build_tree`),
+    without the model's dynamics: ``hpcosim mocap process`` needs only these.
+    """
+    leg = STANCE_LEG[domain]
+    q = ca.SX.sym("q", tree.nq)
+    ih, ik, ia = (tree.coord_index(c) for c in (leg.hip, leg.knee, leg.ankle))
+    rel = frame_pose(tree, q, "hip")[0] - frame_pose(tree, q, leg.ankle_frame)[0]
+    # stance foot flat (th_f = 0): th_B = -(th_hip + th_knee + th_ankle)
+    rel_flat = ca.substitute(rel, q[tree.coord_index("th_B")], -(q[ih] + q[ik] + q[ia]))
+    grad = ca.Function("g", [q], [ca.gradient(rel_flat, q)])(np.zeros(tree.nq))
+    g = grad.full().ravel()
+    return float(g[ik]), float(g[ia])
+
+
 class HumanProsthesisModel(HybridModel):
     """The 12-DOF hybrid model.  Besides the :class:`HybridModel` functions it has
 
@@ -221,22 +241,8 @@ class HumanProsthesisModel(HybridModel):
         return sum(self.tree.body(b).mass for b in ("p_top", "p_shin", "p_foot"))
 
     def hip_progress_coefficients(self, domain: str) -> tuple[float, float]:
-        """(c_knee, c_ankle) of the linearised hip position delta_p_hip = c_k th_k + c_a th_a.
-
-        delta_p_hip is the forward position of the hip relative to the stance ankle with the
-        stance foot flat, linearised about upright (REFERENCE.md Sec. 1b): it increases
-        during stance in this sign convention (c_k, c_a < 0: the shank rotating forward
-        over the foot is a negative ankle angle).
-        """
-        leg = STANCE_LEG[domain]
-        tq, q = self.tree, self.q
-        ih, ik, ia = (tq.coord_index(c) for c in (leg.hip, leg.knee, leg.ankle))
-        rel = self.frame_expr("hip")[0] - self.frame_expr(leg.ankle_frame)[0]
-        # stance foot flat (th_f = 0): th_B = -(th_hip + th_knee + th_ankle)
-        rel_flat = ca.substitute(rel, q[tq.coord_index("th_B")], -(q[ih] + q[ik] + q[ia]))
-        grad = ca.Function("g", [q], [ca.gradient(rel_flat, q)])(np.zeros(self.nq))
-        g = grad.full().ravel()
-        return float(g[ik]), float(g[ia])
+        """(c_knee, c_ankle) of delta_p_hip (:func:`hip_progress_coefficients`)."""
+        return hip_progress_coefficients(self.tree, domain)
 
     def pitch_row(self, frame: str) -> np.ndarray:
         """(nq,) row c with the world pitch of ``frame`` = c . q (rad): exact, the pitch of

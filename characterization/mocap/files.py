@@ -51,7 +51,8 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
 
     Everything is computed before anything is written, so bad input leaves no file.
     """
-    import hp_model
+    from hp_model.config import default_device_path, default_subject_path, load_device, load_subject
+    from hp_model.human_prosthesis import build_tree, hip_progress_coefficients
 
     outp = Path(out)
     if outp.suffix not in (".npz", ".json"):
@@ -62,13 +63,14 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
     m = (mapping if isinstance(mapping, MocapMapping) else
          load_mapping(mapping) if mapping is not None else default_mapping())
     take = read_take(take_path)
-    model = hp_model.load_model(subject, device)
-    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
+    subj = load_subject(subject or default_subject_path())
+    # the coefficients need the model's tree only, not its dynamics (0.3 s to build)
+    tree = build_tree(subj, load_device(device or default_device_path()))
+    coef = {d: hip_progress_coefficients(tree, d) for d in DOMAINS}
     offsets = None
     if m.calibration is not None:
-        offsets = static_offsets(read_take(m.calibration.static_trial), m,
-                                 model.subject.lengths)
-    processed = process_take(take, m, coef, model.subject.lengths, offsets)
+        offsets = static_offsets(read_take(m.calibration.static_trial), m, subj.lengths)
+    processed = process_take(take, m, coef, subj.lengths, offsets)
     files = render_report(outp, processed, with_figures)
     files[outp] = steps_bytes(outp, to_artifact(processed))
     for path, data in files.items():  # the steps file last
