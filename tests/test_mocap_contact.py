@@ -128,7 +128,8 @@ def test_paper_rule_on_a_real_take_labels_a_whole_swing_ps() -> None:
     """The issue's real-take finding on tests/data/gatk-walking: with the lab's own knee and
     ankle angles (flexion, plantarflexion positive as the model's) the paper's rule makes a
     ps step that lies wholly in the swing (force plate below 20 N), while the markers'
-    contact is the plate's stance but for the lift-offs' 8 frames (5th metatarsal marker)."""
+    contact is the plate's stance to a few frames at each event (touchdowns within 2,
+    lift-offs within 3: ``test_mocap_gatk.py``)."""
     import hp_model
     from characterization.mocap.foot_contact import foot_contact
 
@@ -141,7 +142,7 @@ def test_paper_rule_on_a_real_take_labels_a_whole_swing_ps() -> None:
     assert any(not on[s.start:s.end + 1].any() for s in ps), ps
     c = foot_contact(raw[:, 9:11], raw[:, 11:13], raw[:, 0])
     assert np.sum(c.contact & ~on) <= 2 * len(c.touchdowns)  # touchdowns within 2 frames
-    assert np.sum(on & ~c.contact) <= 9 * len(c.liftoffs) + 2 * len(c.touchdowns)
+    assert np.sum(on & ~c.contact) <= 3 * len(c.liftoffs) + 2 * len(c.touchdowns)
 
 
 def test_lab_events_give_the_contact(synth, coef) -> None:

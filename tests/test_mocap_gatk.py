@@ -79,11 +79,12 @@ def test_hip_and_ankle_follow_the_reference_convention(gatk) -> None:
 def test_foot_contact_against_the_force_plate(gatk) -> None:
     """Stance of the right foot from its heel and 5th-metatarsal markers (treadmill: the
     ground moves at the belt's speed) against the force plate's vertical force above 20 N:
-    every touchdown within 2 frames (20 ms; measured 1); lift-offs early by at most 9
-    frames, as the metatarsal head rises while the toes still push (measured 8; the issue
-    asks 3, which a toe-tip marker would allow), never late.  The cadence: the plate's
-    stride, 1.20 s, to a frame."""
-    from characterization.mocap.foot_contact import foot_contact
+    every touchdown within 2 frames (20 ms; measured 1) and every lift-off within 3 (the
+    issue's bound; measured 2 and 3 early).  The metatarsal head rises 6 cm while the toes
+    still push (the plate still reads 300 N when it leaves its stance band, 8 frames early):
+    the rule follows the foot's roll over the toes (foot_contact's docstring).  The cadence:
+    the plate's stride, 1.20 s, to a frame."""
+    from characterization.mocap.foot_contact import ContactOptions, foot_contact
 
     t, mk, _ = gatk
     raw = np.genfromtxt(DATA / "rawdata.txt", skip_header=1)
@@ -95,6 +96,12 @@ def test_foot_contact_against_the_force_plate(gatk) -> None:
     assert c.ground_speed == pytest.approx(-0.98, abs=0.05)  # the belt
     assert len(c.touchdowns) == 3 and len(c.liftoffs) == 2
     assert np.max(np.abs(np.array(c.touchdowns) - td_fp)) <= 2
-    early = lo_fp - np.array(c.liftoffs)
-    assert np.all((early >= 0) & (early <= 9)), early
+    assert np.max(np.abs(np.array(c.liftoffs) - lo_fp)) <= 3
     assert c.stride_time == pytest.approx(np.mean(np.diff(td_fp)) / 100, abs=0.01)
+    # the roll's threshold is not tuned to the take: 5 to 20 deg find the same events
+    for roll in (5.0, 20.0):
+        c2 = foot_contact(mk["RHEE"], mk["RMT5"], t, ContactOptions(roll_deg=roll))
+        assert c2.liftoffs == c.liftoffs and c2.touchdowns == c.touchdowns
+    # without the roll (a threshold no foot reaches) the marker's own lift-off, 8 early
+    c0 = foot_contact(mk["RHEE"], mk["RMT5"], t, ContactOptions(roll_deg=180.0))
+    assert list(lo_fp - np.array(c0.liftoffs)) == [8, 8]

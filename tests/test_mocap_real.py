@@ -24,7 +24,9 @@ Tolerances, from how each system places its points on the limb:
   knee RMS 6.2 / 8.0 deg, r 0.97 / 0.93.  Bounds: RMS 10 deg, r 0.9.
 * Gait events: the issue asks for the found touchdowns and lift-offs within 3 frames of the
   lab's; the lab's here are the force plates' 20 N crossings (600 Hz, read from the excerpt
-  of the lab's GRF file).  Measured: +2.9, -2.3, +2.2, -1.6 frames at 60 Hz.
+  of the lab's GRF file).  Measured: touchdowns +2.9 and +2.2, lift-offs +1.4 and +0.7
+  frames at 60 Hz (-1.6 and -2.3 before the lift-off followed the foot's roll over the toes,
+  ``foot_contact``).
 """
 
 from __future__ import annotations
