@@ -384,3 +384,14 @@ def test_a_lowpass_at_or_above_nyquist_is_a_one_line_error(files, tmp_path, caps
     assert code == 2 and len(err.splitlines()) == 1
     assert "'processing.lowpass_hz' = 60 Hz" in err and "Nyquist frequency (60 Hz" in err
     assert sorted(x.name for x in tmp_path.iterdir()) == ["m.toml"]
+
+
+@pytest.mark.parametrize("body", ["1,2,3", "1,,3", "1,2,", "1,,,\n2,,3,", ",1,,2\n3,4,5,,",
+                                  "1,,\n,,\n", "a,,,,,b,,\n,"])
+def test_empty_cells_read_as_nan_like_the_regex(body: str) -> None:
+    """The plain-replace filling of empty cells equals the regex it replaced."""
+    import re
+
+    from characterization.mocap.motive_csv import _fill_empty
+
+    assert _fill_empty(body) == re.sub(r"(?<=,)(?=,|$)", "nan", body, flags=re.MULTILINE)
