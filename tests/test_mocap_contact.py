@@ -78,6 +78,7 @@ def test_every_touchdown_and_liftoff_of_the_truth(contact, synth) -> None:
         tol = _lag_frames(tr, foot, rate, ContactOptions().speed_tol) + filt
         c = contact.contacts[foot]
         assert c.source == "markers"
+        assert c.rolled == ()  # its feet leave the ground flat: no roll over the toes
         for kind, found in ((land, c.touchdowns), (lift, c.liftoffs)):
             true = tr[kind] * rate
             err = _matched(found, true[(true > 1) & (true < n - 2)])

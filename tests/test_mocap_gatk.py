@@ -97,6 +97,7 @@ def test_foot_contact_against_the_force_plate(gatk) -> None:
     assert len(c.touchdowns) == 3 and len(c.liftoffs) == 2
     assert np.max(np.abs(np.array(c.touchdowns) - td_fp)) <= 2
     assert np.max(np.abs(np.array(c.liftoffs) - lo_fp)) <= 3
+    assert c.rolled == (6, 5)  # frames the roll over the toes moved each lift-off
     assert c.stride_time == pytest.approx(np.mean(np.diff(td_fp)) / 100, abs=0.01)
     # the roll's threshold is not tuned to the take: 5 to 20 deg find the same events
     for roll in (5.0, 20.0):

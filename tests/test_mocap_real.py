@@ -31,6 +31,7 @@ Tolerances, from how each system places its points on the limb:
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -149,6 +150,10 @@ def test_opensim_events_against_the_force_plates(opensim):
             assert found[kind].size, (foot, kind)
             err = float(found[kind][np.argmin(np.abs(found[kind] - t))] - t)
             assert abs(err) <= 3.0, (foot, kind, t, err)
+        assert c.rolled == (3,)  # toe-tip markers: the roll moves each lift-off 3 frames
+    qa = next(x for x in opensim.report_paths if x.name.endswith(".qa.json"))
+    summary = json.loads(qa.read_text())
+    assert summary["contacts"]["prosthesis"]["liftoffs_moved_by_roll_frames"] == [3]
 
 
 def test_opensim_without_the_static_trial_the_joint_angle_check_refuses(model, coef):

@@ -20,8 +20,9 @@ and turning further, goes on until the toe marker moves forward over the ground 
 walking speed: the marker's most posterior position relative to the body, Zeni et al.'s
 (Gait & Posture 27, 2008) toe-off for a marker on the 2nd metatarsal head.  The walking
 speed is the marker's mean forward speed over the ground across the take.  A foot that
-leaves the ground flat (the synthetic subject's) or a toe-tip marker that leaves at toe-off
-(the OpenSim take's) is not changed by this.  The stride time is the highest autocorrelation
+leaves the ground flat (the synthetic subject's) is not changed by this; a toe-tip marker,
+which leaves its band near the toe-off, little (the OpenSim take's: 3 frames at 60 Hz, from
+1.6-2.3 frames early to 0.7-1.4 late).  The stride time is the highest autocorrelation
 of the contact signal within ``STRIDE_RANGE``; stances and flights shorter than
 ``min_phase`` of it (half a swing, about 40 % of a stride) are merged into their
 neighbours, shortest first.  Across the two feet (:func:`alternate`), a foot's two
@@ -82,6 +83,9 @@ class FootContact:
     ground_speed: float
     stride_time: float = float("nan")
     source: str = "markers"
+    #: frames each lift-off was moved by the foot's roll over its toes (one per stance the
+    #: roll extended; :func:`foot_contact`), reported in the QA report
+    rolled: tuple[int, ...] = ()
 
 
 def _filled(x: np.ndarray) -> np.ndarray:
@@ -171,29 +175,32 @@ def foot_contact(heel: np.ndarray, toe: np.ndarray, time: np.ndarray,
     if np.isfinite(T):
         on = _debounce(on, max(1, round(opt.min_phase * T * rate)))
     on = _lift_at_last_contact(on, score < 1.0)
-    on = _lift_after_the_roll(on, P[0], P[-1], time, ground, np.radians(opt.roll_deg))
+    on, rolled = _lift_after_the_roll(on, P[0], P[-1], time, ground,
+                                      np.radians(opt.roll_deg))
     td, lo = _events(on)
-    return FootContact(on, td, lo, ground, T)
+    return FootContact(on, td, lo, ground, T, rolled=rolled)
 
 
 def _lift_after_the_roll(on: np.ndarray, heel: np.ndarray, toe: np.ndarray, time: np.ndarray,
-                         ground: float, roll: float) -> np.ndarray:
+                         ground: float, roll: float) -> tuple[np.ndarray, tuple[int, ...]]:
     """Each stance that ends while the foot rolls over its toes, extended to the frame its
     toe marker moves forward over the ground at the walking speed (module docstring).
 
     Rolling: the heel -> toe line pitched toe-down by more than ``roll`` (rad) from its
     median over the stances and still turning toe-down.  The walking speed is the toe
     marker's mean forward speed over the ground across the take (over whole strides a foot
-    travels as far as the body).  With one marker per foot (heel = toe) nothing changes."""
+    travels as far as the body).  With one marker per foot (heel = toe) nothing changes.
+    Returns the contact and the frames each moved lift-off was moved by."""
     d = toe - heel
     pitch = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     if not np.all(np.isfinite(pitch)) or not on.any():
-        return on
+        return on, ()
     turning_down = np.gradient(pitch, time) < 0
     rolling = turning_down & (pitch < float(np.median(pitch[on])) - roll)
     u = np.gradient(toe[:, 0], time) - ground
     walking = float(np.mean(u))
     out = on.copy()
+    moved: list[int] = []
     edges = np.flatnonzero(np.diff(np.r_[0, on.astype(np.int8), 0]))
     starts, ends = edges[::2], edges[1::2]
     for i, b in enumerate(ends):
@@ -202,7 +209,9 @@ def _lift_after_the_roll(on: np.ndarray, heel: np.ndarray, toe: np.ndarray, time
         while k < nxt and rolling[k] and u[k] < walking:
             k += 1
         out[b:k] = True
-    return out
+        if k > b:
+            moved.append(int(k - b))
+    return out, tuple(moved)
 
 
 def _lift_at_last_contact(on: np.ndarray, inside: np.ndarray) -> np.ndarray:

@@ -58,7 +58,9 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
         "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
                          "ground_speed_m_s": c.ground_speed,
                          "stride_time_s": c.stride_time if np.isfinite(c.stride_time)
-                         else None, "source": c.source} for f, c in p.contacts.items()},
+                         else None, "source": c.source,
+                         "liftoffs_moved_by_roll_frames": list(c.rolled)}
+                     for f, c in p.contacts.items()},
         "lab_events": p.lab_events,
     }
 
@@ -100,6 +102,9 @@ def qa_markdown(summary: dict) -> str:
         lines += [f"- {f} ({c['source']}): touchdowns {c['touchdowns']}, lift-offs "
                   f"{c['liftoffs']} (ground {c['ground_speed_m_s']:+.2f} m/s, stride "
                   f"{c['stride_time_s'] or float('nan'):.2f} s)"
+                  + (f"; lift-offs moved by the foot's roll over its toes: "
+                     f"{', '.join(f'+{k}' for k in c['liftoffs_moved_by_roll_frames'])} frames"
+                     if c["liftoffs_moved_by_roll_frames"] else "")
                   for f, c in s["contacts"].items()]
     if s["lab_events"]:
         lines += ["", "## Found events against the lab's (frames, found - lab)", "",
