@@ -1,7 +1,7 @@
 """The accuracy check of the production integration (the FMU's doStep, which the
 in-process ``HybridSimulator`` reproduces bit for bit) against a tight-tolerance reference
 run of the same scenario: the criterion and its pieces, used by
-``benchmarks/fmu_accuracy.py`` (the figures, docs/performance.md) and
+``benchmarks/bench_accuracy.py`` (the figures, docs/performance.md) and
 ``tests/test_integration_accuracy.py`` (the bound, on a few steps).
 
 Scenario: the demo walking controller ``clfqp`` in process on the demo gait and tube

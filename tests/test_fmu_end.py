@@ -140,7 +140,7 @@ def test_every_fall_ends_the_run_the_fmi_way(fmu_path, model, template_gait, nom
         assert f.getReal(h.vrs(STATE)) == held
         out = f.getReal(h.vrs(U + LAM))
         assert all(math.isfinite(v) for v in out)
-        u_ref, lam_ref = sim._eval("human", DOMAINS[ref.domain[i]], np.r_[ref.q[i], ref.qd[i]],
+        _, u_ref, lam_ref = sim._eval("human", DOMAINS[ref.domain[i]], np.r_[ref.q[i], ref.qd[i]],
                                    np.array(held_u, float), None)
         np.testing.assert_allclose(out, np.r_[u_ref, lam_ref], rtol=1e-9, atol=1e-9)
     h.free()

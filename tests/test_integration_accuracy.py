@@ -1,7 +1,7 @@
 """The accuracy of the production integration (the FMU's doStep = ``HybridSimulator`` with
 ``SimOptions()``, bit for bit; tests/test_fmu_equivalence.py) by the per-step restart
 criterion of ``tests/integration_accuracy.py`` on the first impacts of the demo walk of
-``clfqp`` (the full 20 steps: ``benchmarks/fmu_accuracy.py``, docs/performance.md).
+``clfqp`` (the full 20 steps: ``benchmarks/bench_accuracy.py``, docs/performance.md).
 
 The bound is the issue's: state error (inf-norm of q in m/rad and qd- in m/s, rad/s) below
 1e-6 at every impact.  It is a statement about the integrator only if the reference is two

@@ -6,7 +6,7 @@ scenario, the reference and the criterion are described there): the largest stat
 ``clfqp``; the reference's own error (Richardson: half its substeps); the free-running error
 for transparency.  Target (issue 22): state error below 1e-6 at every impact.
 
-Usage: PYTHONPATH=. python benchmarks/fmu_accuracy.py [--steps 20] [--substeps 2]
+Usage: PYTHONPATH=. python benchmarks/bench_accuracy.py [--steps 20] [--substeps 2]
        [--ref-substeps 64] [--json out.json]
 """
 
