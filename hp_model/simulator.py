@@ -11,16 +11,20 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   The first step of a period reuses the vector field the period's friction-cone check
   evaluated at its start under the torque applied (its first stage; ``rk4k_<mode>_<d>``,
   the same arithmetic), so a period costs 4 x substeps evaluations, that check's included.
-  The default, two steps per 1 ms period, is checked against a tight-tolerance reference by
-  ``benchmarks/bench_accuracy.py`` (state error at every impact below 1e-6; one step is not
-  accurate enough).
+  The default, one step per 1 ms period, is checked against a tight-tolerance reference by
+  ``benchmarks/bench_accuracy.py`` (state error at every impact below 1e-6).
 - Touchdown of the swing foot is the guard: swing sole height crossing zero downward, once
-  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown).
-  When a step ends below the ground, the crossing is located by the Illinois (regula falsi)
-  method on s in (0, 1], re-integrating one RK4 step of length s h from the step's start,
-  to ``event_tol`` metres or ``event_iters`` iterations.  The impact map of the next domain
-  gives qd+, the domain switches and the rest of the step, (1 - s) h, is integrated in the
-  new domain.
+  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown). When
+  a step ends below the ground, the crossing is located by the Illinois (regula falsi)
+  method on s in (0, 1], re-integrating one RK4 step of length s h from the step's start, to
+  ``event_tol`` metres or ``event_iters`` iterations. A foot that touches down nearly
+  tangentially can dip below the ground and rise again within one step: when the sole's
+  vertical velocity is negative at the step's start and positive at its end (both ends above
+  ground), the minimum of the cubic Hermite interpolant of its height is found (bisection of
+  its derivative, :func:`dip`), the step is re-integrated to it, and if the sole is below
+  ground there the crossing is located in (0, s_min] the same way. The impact map of the
+  next domain gives qd+, the domain switches and the rest of the step, (1 - s) h, is
+  integrated in the new domain.
 - Flat-foot touchdown: the model's impact makes the landing foot a flat stance foot, but
   off the nominal orbit it lands with a small residual pitch, which the holonomic
   constraint would then freeze forever (a neutral mode that tilts the whole walker step
@@ -82,7 +86,7 @@ class SimOptions:
     """Integration and event settings (SI units)."""
 
     dt: float = 1e-3  # s, period of the prosthesis torque (and of the log)
-    substeps: int = 2  # RK4 steps per period
+    substeps: int = 1  # RK4 steps per period
     guard_tau_min: float = 0.6  # the guard is armed past this phase
     event_tol: float = 1e-10  # m, swing-sole height at the located impact
     event_iters: int = 60
@@ -183,6 +187,24 @@ def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau
         return Fall(FallReason.HEEL_OR_TOE, t, d, tau,
                     {"pitch": heel_pitch, "limit": opt.max_touchdown_pitch})
     return None
+
+
+def dip(z0: float, z1: float, m0: float, m1: float) -> float | None:
+    """The minimum s in (0, 1) of the cubic Hermite interpolant of values z0, z1 and slopes
+    m0 < 0 < m1 (per unit s) at s = 0, 1, by 60 bisections of its derivative; None unless
+    m0 < 0 < m1.  The FMU's C (``dip`` in hpfmu_core.inc) does the same arithmetic."""
+    if not (m0 < 0 and m1 > 0):
+        return None
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        s = (lo + hi) / 2
+        dp = ((6 * s * s - 6 * s) * z0 + (3 * s * s - 4 * s + 1) * m0
+              + (6 * s - 6 * s * s) * z1 + (3 * s * s - 2 * s) * m1)
+        if dp < 0:
+            lo = s
+        else:
+            hi = s
+    return (lo + hi) / 2
 
 
 class HybridSimulator:
@@ -300,10 +322,10 @@ class HybridSimulator:
 
     def _locate(self, mode: str, d: str, x0: np.ndarray, u_p: np.ndarray, h: float,
                 vhold: np.ndarray | None, z0: float, z1: float,
-                k1: np.ndarray | None = None) -> tuple[float, np.ndarray]:
-        """s in (0, 1] with swing height of rk4(x0, s h) = 0 (Illinois method); ``k1``: the
-        vector field at x0, if known."""
-        a, b, fa, fb = 0.0, 1.0, z0, z1
+                k1: np.ndarray | None = None, s1: float = 1.0) -> tuple[float, np.ndarray]:
+        """s in (0, s1] with swing height of rk4(x0, s h) = 0 (Illinois method), z0 and z1
+        the heights at 0 and s1; ``k1``: the vector field at x0, if known."""
+        a, b, fa, fb = 0.0, s1, z0, z1
         xs, side = None, 0
         s = 1.0
         for _ in range(self.opt.event_iters):
@@ -323,6 +345,25 @@ class HybridSimulator:
                 side = -1
         assert xs is not None
         return s, xs
+
+    def _touchdown(self, mode: str, d: str, x: np.ndarray, xn: np.ndarray, u_p: np.ndarray,
+                   h: float, vhold: np.ndarray | None, z0: float, z1: float,
+                   k1: np.ndarray | None) -> tuple[float, float]:
+        """(s1, z(s1)): the end of the bracket of a touchdown in the step of h s from x to xn
+        whose sole heights are z0 > 0 and z1 (module docstring): (1, z1) if z1 <= 0, else the
+        sole's lowest point inside the step if it is below ground there, else (1, z1)."""
+        if z1 <= 0:
+            return 1.0, z1
+        g = self.mfs[f"guard_{d}"]
+        nq = self.nq
+        v0 = float(g(x[:nq], x[nq:])[1][0])
+        v1 = float(g(xn[:nq], xn[nq:])[1][0])
+        s = dip(z0, z1, h * v0, h * v1)
+        if s is not None:
+            zs = self._rk4(mode, d, x, u_p, s * h, vhold, k1)[1]
+            if zs <= 0:
+                return s, zs
+        return 1.0, z1
 
     # -- runs ---------------------------------------------------------------------------------
     def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str,
@@ -479,9 +520,13 @@ class SimulationRun:
             while rest > 0:
                 xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold, k1)
                 armed = self._phase[d](x) >= opt.guard_tau_min
-                if armed and self._z_prev > 0 and z <= 0:
-                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z,
-                                        k1)
+                s1, z1 = 1.0, z
+                if armed and self._z_prev > 0:
+                    s1, z1 = sim._touchdown(mode, d, x, xn, u_p, rest, self._vhold,
+                                            self._z_prev, z, k1)
+                if armed and self._z_prev > 0 and z1 <= 0:
+                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z1,
+                                        k1, s1)
                     k1 = None
                     nxt = sim.model.roles[d].next
                     qe, qdm = xe[:nq].copy(), xe[nq:]

@@ -55,7 +55,7 @@ def case(reason: FallReason, peaks: tuple[float, float, float]) -> tuple[dict, f
     """(options, torque scale, dt) that make the nominal-PD walk end with ``reason``."""
     hip0, hip_min, speed = peaks
     return {
-        FallReason.NON_FINITE: ({**ONLY_NON_FINITE, "substeps": 1}, 1.0, 0.2),
+        FallReason.NON_FINITE: ({**ONLY_NON_FINITE, "substeps": 1}, 1.0, 0.25),
         FallReason.HIP_LOW: ({"min_hip_height": 0.5 * (hip0 + hip_min)}, 1.0, 1e-3),
         FallReason.PHASE_BACKWARD: (NO_CONE, 3.0, 1e-3),
         FallReason.NO_TOUCHDOWN: ({"tau_max": 0.5}, 1.0, 1e-3),
