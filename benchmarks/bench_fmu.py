@@ -2,16 +2,19 @@
 simulator, and the FMU build time.
 
   - build: ``build_fmu`` from the gait file (model, code generation, compile, zip);
-  - one 1 ms doStep (2 RK4 substeps, event location when an impact falls in the step) through
-    fmpy ``FMU2Slave.doStep``: median and p90 over a walking run whose prosthesis torques are
-    the nominal-PD policy's torques of the Python run, replayed (so both integrate the same
-    trajectory, impacts included); also the plain ctypes call without fmpy's wrapper, and a
-    whole co-simulation exchange (set 2 inputs + doStep + get 6 sensor outputs);
+  - one 1 ms doStep (one RK4 step whose first stage is the friction-cone check's
+    evaluation, so four evaluations of the closed loop; event location when an impact falls
+    in the step) through fmpy ``FMU2Slave.doStep``: median and p90 over a walking run whose
+    prosthesis torques are the nominal-PD policy's torques of the Python run, replayed (so
+    both integrate the same trajectory, impacts included); also the plain ctypes call
+    without fmpy's wrapper, and a whole co-simulation exchange (set 2 inputs + doStep + get
+    6 sensor outputs);
   - the in-process ``HybridSimulator`` over the same periods with the same replayed torques
     (mean per period: ``run`` does not expose single periods);
   - the ratio Python per period / FMU doStep.
 
-Targets (issue): doStep median <= 30 us; >= 10x faster than the Python simulator; build < 60 s.
+Targets (issue 22): doStep median <= 15 us (at the accuracy bench_accuracy.py checks);
+>= 10x faster than the Python simulator; build < 60 s.
 The machines are shared: quote ratios.
 
 Usage: PYTHONPATH=. python benchmarks/bench_fmu.py [--gait gait.json] [--periods 3000]

@@ -172,6 +172,21 @@ def fmu_rows(j: dict[str, Any]) -> list[Row]:
                 "FMU >= 10x faster", j["ratio_median"] >= 10)]
 
 
+def accuracy_rows(j: dict[str, Any]) -> list[Row]:
+    w, f = j["per_step"], j["free_running"]
+    sub, ref = j["substeps"], j["ref_substeps"]
+    return [Row(f"state error at every impact, max (RK4 x{sub}; q, qd- inf-norm)", w["state"],
+                "", None, f"< {j['target_state_error']:g}", w["state"] < j["target_state_error"]),
+            Row("  of which q (m, rad)", w["q"]),
+            Row("  of which qd- (m/s, rad/s)", w["qd"]),
+            Row("impact time error, max (s)", w["t"]),
+            Row(f"reference's own error, RK4 x{ref} (Richardson: x{ref // 2} / 15)",
+                j["reference_error_estimate"]),
+            Row(f"free running {j['steps']} steps: state error, max (loop sensitivity)",
+                f["state"]),
+            Row(f"free running {j['steps']} steps: impact time error, max (s)", f["t"])]
+
+
 def sweep_rows(j: dict[str, Any]) -> list[Row]:
     rates = {k: v for k, v in j["runs_per_min"].items() if v}
     ref = rates.get("serial")
@@ -251,6 +266,9 @@ BENCHES = (
     Bench("fmu", "human FMU (fmpy) against the in-process Python simulator",
           ["--periods", "3000"], ["--periods", "300"], fmu_rows,
           "Python simulator per period"),
+    Bench("accuracy", "integration accuracy of the FMU's doStep (= the in-process simulator): "
+          "per-step restart against a tight reference, clfqp on the demo gait",
+          ["--steps", "20"], ["--steps", "2"], accuracy_rows),
     Bench("sweep", "sweep throughput (examples/sweep/quick.toml), serial and Dask",
           ["--draws", "10", "--steps", "3", "--repeats", "2"],
           ["--draws", "2", "--steps", "1", "--repeats", "1", "--serial-only"], sweep_rows,

@@ -8,13 +8,23 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
 - Time advances in periods of ``dt`` (the prosthesis controller's rate); in each period the
   prosthesis motor torque u_p is held (zero-order hold) and ``substeps`` RK4 steps of
   h = dt / substeps integrate the closed loop of the current domain (``rk4_<mode>_<d>``).
+  The first step of a period reuses the vector field the period's friction-cone check
+  evaluated at its start under the torque applied (its first stage; ``rk4k_<mode>_<d>``,
+  the same arithmetic), so a period costs 4 x substeps evaluations, that check's included.
+  The default, one step per 1 ms period, is checked against a tight-tolerance reference by
+  ``benchmarks/bench_accuracy.py`` (state error at every impact below 1e-6).
 - Touchdown of the swing foot is the guard: swing sole height crossing zero downward, once
-  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown).
-  When a step ends below the ground, the crossing is located by the Illinois (regula falsi)
-  method on s in (0, 1], re-integrating one RK4 step of length s h from the step's start,
-  to ``event_tol`` metres or ``event_iters`` iterations.  The impact map of the next domain
-  gives qd+, the domain switches and the rest of the step, (1 - s) h, is integrated in the
-  new domain.
+  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown). When
+  a step ends below the ground, the crossing is located by the Illinois (regula falsi)
+  method on s in (0, 1], re-integrating one RK4 step of length s h from the step's start, to
+  ``event_tol`` metres or ``event_iters`` iterations. A foot that touches down nearly
+  tangentially can dip below the ground and rise again within one step: when the sole's
+  vertical velocity is negative at the step's start and positive at its end (both ends above
+  ground), the minimum of the cubic Hermite interpolant of its height is found (bisection of
+  its derivative, :func:`dip`), the step is re-integrated to it, and if the sole is below
+  ground there the crossing is located in (0, s_min] the same way. The impact map of the
+  next domain gives qd+, the domain switches and the rest of the step, (1 - s) h, is
+  integrated in the new domain.
 - Flat-foot touchdown: the model's impact makes the landing foot a flat stance foot, but
   off the nominal orbit it lands with a small residual pitch, which the holonomic
   constraint would then freeze forever (a neutral mode that tilts the whole walker step
@@ -76,7 +86,7 @@ class SimOptions:
     """Integration and event settings (SI units)."""
 
     dt: float = 1e-3  # s, period of the prosthesis torque (and of the log)
-    substeps: int = 2  # RK4 steps per period
+    substeps: int = 1  # RK4 steps per period
     guard_tau_min: float = 0.6  # the guard is armed past this phase
     event_tol: float = 1e-10  # m, swing-sole height at the located impact
     event_iters: int = 60
@@ -179,6 +189,24 @@ def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau
     return None
 
 
+def dip(z0: float, z1: float, m0: float, m1: float) -> float | None:
+    """The minimum s in (0, 1) of the cubic Hermite interpolant of values z0, z1 and slopes
+    m0 < 0 < m1 (per unit s) at s = 0, 1, by 60 bisections of its derivative; None unless
+    m0 < 0 < m1.  The FMU's C (``dip`` in hpfmu_core.inc) does the same arithmetic."""
+    if not (m0 < 0 and m1 > 0):
+        return None
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        s = (lo + hi) / 2
+        dp = ((6 * s * s - 6 * s) * z0 + (3 * s * s - 4 * s + 1) * m0
+              + (6 * s - 6 * s * s) * z1 + (3 * s * s - 2 * s) * m1)
+        if dp < 0:
+            lo = s
+        else:
+            hi = s
+    return (lo + hi) / 2
+
+
 class HybridSimulator:
     """Simulates the 12-DOF model under the human's (and optionally the prosthesis's)
     feedback linearization; see the module docstring.
@@ -215,9 +243,19 @@ class HybridSimulator:
 
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float,
-             vhold: np.ndarray | None) -> tuple[np.ndarray, float]:
+             vhold: np.ndarray | None, k1: np.ndarray | None = None
+             ) -> tuple[np.ndarray, float]:
         """One RK4 step of h s: the new state and the swing sole height (m) at its end;
-        ``vhold``: the delayed human's feedback held over the period (None: continuous)."""
+        ``vhold``: the delayed human's feedback held over the period (None: continuous);
+        ``k1``: the vector field at x under the same inputs, if known (``rk4k``: the same
+        numbers, one evaluation less; not with ``vhold``)."""
+        if k1 is not None:
+            f = self.fs[f"rk4k_{mode}_{d}"]
+            if mode == ClosedLoopMode.FULL:
+                xn, z = f(x, self.thetas[d], self.gains, h, k1)
+            else:
+                xn, z = f(x, self.thetas[d], self.gains, u_p, h, k1)
+            return xn.copy(), float(z[0])
         if vhold is not None:
             f = self.dfs[f"rk4_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
@@ -251,21 +289,22 @@ class HybridSimulator:
         return pipeline[0][rows].copy()
 
     def _eval(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray,
-              vhold: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """The torques u (6, N m) and constraint wrenches lam (6) at state x."""
+              vhold: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The vector field xdot (24), the torques u (6, N m) and the constraint wrenches
+        lam (6) at state x."""
         if vhold is not None:
             f = self.dfs[f"xdot_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
-                _, u, lam = f(x, self.thetas[d], vhold)
+                xdot, u, lam = f(x, self.thetas[d], vhold)
             else:
-                _, u, lam = f(x, self.thetas[d], vhold, u_p)
-            return u.copy(), lam.copy()
+                xdot, u, lam = f(x, self.thetas[d], vhold, u_p)
+            return xdot.copy(), u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
         if mode == ClosedLoopMode.FULL:
-            _, u, lam = f(x, self.thetas[d], self.gains)
+            xdot, u, lam = f(x, self.thetas[d], self.gains)
         else:
-            _, u, lam = f(x, self.thetas[d], self.gains, u_p)
-        return u.copy(), lam.copy()
+            xdot, u, lam = f(x, self.thetas[d], self.gains, u_p)
+        return xdot.copy(), u.copy(), lam.copy()
 
     def phase(self, d: str, q: np.ndarray) -> float:
         """tau of q in domain d for the tracked gait (``VirtualConstraints.phase``: the same
@@ -282,14 +321,16 @@ class HybridSimulator:
         return pitch
 
     def _locate(self, mode: str, d: str, x0: np.ndarray, u_p: np.ndarray, h: float,
-                vhold: np.ndarray | None, z0: float, z1: float) -> tuple[float, np.ndarray]:
-        """s in (0, 1] with swing height of rk4(x0, s h) = 0 (Illinois method)."""
-        a, b, fa, fb = 0.0, 1.0, z0, z1
+                vhold: np.ndarray | None, z0: float, z1: float,
+                k1: np.ndarray | None = None, s1: float = 1.0) -> tuple[float, np.ndarray]:
+        """s in (0, s1] with swing height of rk4(x0, s h) = 0 (Illinois method), z0 and z1
+        the heights at 0 and s1; ``k1``: the vector field at x0, if known."""
+        a, b, fa, fb = 0.0, s1, z0, z1
         xs, side = None, 0
         s = 1.0
         for _ in range(self.opt.event_iters):
             s = (a * fb - b * fa) / (fb - fa)
-            xs, z = self._rk4(mode, d, x0, u_p, s * h, vhold)
+            xs, z = self._rk4(mode, d, x0, u_p, s * h, vhold, k1)
             if abs(z) <= self.opt.event_tol:
                 break
             if z > 0:
@@ -304,6 +345,25 @@ class HybridSimulator:
                 side = -1
         assert xs is not None
         return s, xs
+
+    def _touchdown(self, mode: str, d: str, x: np.ndarray, xn: np.ndarray, u_p: np.ndarray,
+                   h: float, vhold: np.ndarray | None, z0: float, z1: float,
+                   k1: np.ndarray | None) -> tuple[float, float]:
+        """(s1, z(s1)): the end of the bracket of a touchdown in the step of h s from x to xn
+        whose sole heights are z0 > 0 and z1 (module docstring): (1, z1) if z1 <= 0, else the
+        sole's lowest point inside the step if it is below ground there, else (1, z1)."""
+        if z1 <= 0:
+            return 1.0, z1
+        g = self.mfs[f"guard_{d}"]
+        nq = self.nq
+        v0 = float(g(x[:nq], x[nq:])[1][0])
+        v1 = float(g(xn[:nq], xn[nq:])[1][0])
+        s = dip(z0, z1, h * v0, h * v1)
+        if s is not None:
+            zs = self._rk4(mode, d, x, u_p, s * h, vhold, k1)[1]
+            if zs <= 0:
+                return s, zs
+        return 1.0, z1
 
     # -- runs ---------------------------------------------------------------------------------
     def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str,
@@ -370,6 +430,9 @@ class SimulationRun:
         self._pipeline: deque[np.ndarray] = deque()
         self._vhold: np.ndarray | None = None  # the delayed human's feedback held
         self._obs: tuple[float, np.ndarray, np.ndarray] | None = None  # tau, u, lam
+        #: the vector field at the period's start under the torque applied (the first RK4
+        #: stage of the period; None with the delayed human)
+        self._k1: np.ndarray | None = None
         self._applied = False
         #: tau of a state x (q first) per domain, for the gait tracked at the start
         self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
@@ -401,8 +464,9 @@ class SimulationRun:
                 while len(self._pipeline) > self._n_delay + 1:
                     self._pipeline.popleft()
                 self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
-            u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
             self._obs = (tau, u, lam)
+            self._k1 = xdot if self._n_delay is None else None
         return self._obs
 
     def apply(self, u_p: np.ndarray | None) -> Fall | None:
@@ -421,7 +485,8 @@ class SimulationRun:
             lim = sim._u_limit  # bounded at the plant (the FMU does the same)
             self._u_p = np.minimum(np.maximum(np.asarray(u_p, dtype=float).reshape(2), -lim),
                                    lim)
-            u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            self._k1 = xdot if self._n_delay is None else None
         elif u_p is not None:
             raise ValueError("mode full: the torques come from feedback linearization; "
                              "apply(None)")
@@ -449,13 +514,20 @@ class SimulationRun:
         sim, opt, nq, mode = self.sim, self.sim.opt, self.sim.nq, self.mode
         x, d, u_p, t = self._x, self.domain, self._u_p, self.t
         h = opt.dt / opt.substeps
+        k1 = self._k1  # the field at x, the first stage of the period's first step
         for j in range(opt.substeps):
             rest = h
             while rest > 0:
-                xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold)
+                xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold, k1)
                 armed = self._phase[d](x) >= opt.guard_tau_min
-                if armed and self._z_prev > 0 and z <= 0:
-                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z)
+                s1, z1 = 1.0, z
+                if armed and self._z_prev > 0:
+                    s1, z1 = sim._touchdown(mode, d, x, xn, u_p, rest, self._vhold,
+                                            self._z_prev, z, k1)
+                if armed and self._z_prev > 0 and z1 <= 0:
+                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z1,
+                                        k1, s1)
+                    k1 = None
                     nxt = sim.model.roles[d].next
                     qe, qdm = xe[:nq].copy(), xe[nq:]
                     pitch = sim._flatten_landing_foot(nxt, qe)
@@ -479,11 +551,12 @@ class SimulationRun:
                         break
                     continue
                 x, self._z_prev = xn, z
+                k1 = None
                 rest = 0.0
         self._x, self.domain = x, d
         self.periods += 1
         self.t = self.periods * opt.dt
-        self._obs, self._applied = None, False
+        self._obs, self._applied, self._k1 = None, False, None
 
     def last_sample(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, u, lam) of the last logged period (after :meth:`apply`): the state at its

@@ -69,7 +69,7 @@ FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 #: per FMI version: the API source file, its headers and the binaries folder
 API = {2: ("hpfmu.c", FMI_HEADERS, PLATFORM), 3: ("hpfmu3.c", FMI3_HEADERS, PLATFORM_TUPLE)}
-CASADI_FUNCTIONS = ("rk4_human_ps", "rk4_human_pns", "xdot_human_ps", "xdot_human_pns",
+CASADI_FUNCTIONS = ("rk4k_human_ps", "rk4k_human_pns", "xdot_human_ps", "xdot_human_pns",
                     "phase_ps", "phase_pns", "start_ps", "start_pns")
 MODEL_FUNCTIONS = ("impact_ps", "impact_pns", "guard_ps", "guard_pns", "frames")
 

@@ -19,6 +19,7 @@ from fmpy.validation import validate_fmu
 
 from hp_model.domains import DOMAINS
 from hp_model.falls import FallReason
+from hp_model.simulator import SimOptions
 from human_fmu import MODEL_IDENTIFIER, FmuBuildError, build_fmu
 from human_fmu.build import FMU_CFLAGS
 from tests.fmu_runner import HumanFMU, NominalPD, run
@@ -83,7 +84,7 @@ def test_model_description_variables(built, model, template_gait):
         assert np.array_equal(th, template_gait.theta(d))
     q0 = np.array([float(v[f"q0[{i}]"].start) for i in range(1, 13)])
     assert np.array_equal(q0, template_gait.trajectory["ps"]["q"][:, 0])
-    assert v["substeps"].type == "Integer" and int(v["substeps"].start) == 2
+    assert v["substeps"].type == "Integer" and int(v["substeps"].start) == SimOptions().substeps
     assert v["model_hash"].start == model.parameter_hash()
     assert v["gait_hash"].start == template_gait.hash()
     # outputs: only the forces and torques feed through from the inputs
