@@ -152,3 +152,23 @@ class FrameReader:
             return None
         q.extend(got)
         return q.popleft()
+
+    def recv_all(self, timeout: float | None = None) -> list[Any]:
+        """The frames already taken and not yet returned, else those of the next sample
+        (one frame from a bus without ``recv_frames``); [] when none came within
+        ``timeout`` s. A cycle's frames in one call, for a caller that handles them
+        together."""
+        q = self._queue
+        if q:
+            out = list(q)
+            q.clear()
+            return out
+        if self._many is None:
+            m = self.bus.recv(timeout)
+            return [] if m is None else [m]
+        return self._many(timeout)
+
+    def unread(self, frames: Sequence[Any]) -> None:
+        """Put ``frames`` back (in this order) before anything else the next receive
+        returns: the rest of a sample a caller did not need yet."""
+        self._queue.extendleft(reversed(frames))
