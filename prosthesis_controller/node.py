@@ -145,9 +145,8 @@ class ControllerNode:
         """Received frames in order (a sample's: the plant's cycle) -> the frames to send:
         :meth:`handle` of each, the replies concatenated."""
         out: list[codec.Frame] = []
-        check, pending = self.checker.check, self.pending
-        for msg in frames:
-            v = check(msg)
+        pending = self.pending
+        for v in self.checker.check_all(frames):
             fid = v.frame_id
             if v.status is not _OK:
                 self._flags |= FaultFlag.BAD_FRAMES
