@@ -544,12 +544,19 @@ def decode_cantools(msg: can.Message) -> dict[str, Any]:
 # --------------------------------------------------------------------------- quantize
 
 
+@functools.cache
+def _signal(frame: int | str, signal: str) -> tuple[FrameSpec, Any]:
+    """(frame spec, signal) of ``frame.signal``, looked up once (the recordings quantize
+    every measurement)."""
+    spec = frame_spec(frame)
+    return spec, spec.signal(signal)
+
+
 def quantize(frame: int | str, signal: str, x: Any) -> Any:
     """The value a decoder sees for ``x`` sent as ``frame.signal``: clamp to the DBC range,
     round half to even to the step, scale back. Scalars give floats, arrays give arrays
     (bit-identical to the scalar path). NaN raises ``ValueError``."""
-    spec = frame_spec(frame)
-    sig = spec.signal(signal)
+    spec, sig = _signal(frame, signal)
     if isinstance(x, np.ndarray | list | tuple):
         a = np.asarray(x, dtype=float)
         if np.isnan(a).any():
