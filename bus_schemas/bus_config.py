@@ -137,6 +137,7 @@ class FrameReader:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
         self._many = getattr(bus, "recv_frames", None)
+        self._poll = getattr(bus, "poll_frames", None)
         self._queue: deque[Any] = deque()
 
     def recv(self, timeout: float | None = None) -> Any:
@@ -167,6 +168,20 @@ class FrameReader:
             m = self.bus.recv(timeout)
             return [] if m is None else [m]
         return self._many(timeout)
+
+    def ready(self) -> bool:
+        """True when a frame is here to be received without waiting (taken from the bus
+        where it can tell, ``poll_frames``; a bus without it answers False: nothing
+        interrupts the caller's other work)."""
+        if self._queue:
+            return True
+        if self._poll is None:
+            return False
+        got = self._poll()
+        if not got:
+            return False
+        self._queue.extend(got)
+        return True
 
     def unread(self, frames: Sequence[Any]) -> None:
         """Put ``frames`` back (in this order) before anything else the next receive

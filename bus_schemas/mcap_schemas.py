@@ -666,11 +666,15 @@ class Recorder:
         """Entries queued and not yet written (a :meth:`defer_many` entry counts once)."""
         return len(self._deferred)
 
-    def write_deferred(self) -> int:
-        """Write the queued messages in queue order; returns how many."""
+    def write_deferred(self, stop: Callable[[], bool] | None = None) -> int:
+        """Write the queued messages in queue order; returns how many. ``stop``: asked
+        before each queue entry, True leaves the rest queued (for a later call or
+        :meth:`finish`: the file's records and their order are the same either way)."""
         n = 0
         q = self._deferred
         while q and not self.finished:
+            if stop is not None and stop():
+                break
             topic, build, args, ns = q.popleft()
             if topic is None:
                 for tp, message in build(*args):  # type: ignore[misc]

@@ -569,6 +569,9 @@ _CLF, _TORQUE, _STATUS, _DISTURBANCE = (int(FrameId.CTRL_CLF), int(FrameId.TORQU
                                         int(FrameId.CTRL_STATUS),
                                         int(FrameId.CTRL_DISTURBANCE))
 _OK = codec.FrameStatus.OK
+#: record queue entries the plant may leave for later waits when the controller's reply
+#: comes before the serialization is done (a few ticks' worth)
+MAX_BACKLOG = 64
 
 
 class CanLink:
@@ -652,6 +655,12 @@ class CanLink:
                 "ctrl_rejects": self.plant.ctrl_rejects}, self.log_ns(t))
         return v
 
+    def _reply_here(self) -> bool:
+        """Stop serializing records: a controller frame is here, and at most
+        :data:`MAX_BACKLOG` queue entries are left (serializing keeps up with the run; what
+        is left goes in the next waits)."""
+        return self.rec.deferred <= MAX_BACKLOG and self.frames.ready()
+
     def _defer_rx(self, items: list[tuple[Any, codec.Verdict]], t: float) -> None:
         """Queue the records of one received sample's frames (one queue entry)."""
         if items and self.rec is not None:
@@ -683,10 +692,11 @@ class CanLink:
         s0 = clock()
         send_frames(self.bus, send)
         res.frames_tx += len(send)
-        if rec is not None:  # while the controller works: queue and serialize the records
+        if rec is not None:  # while the controller works: queue and serialize the records,
+            # stopping as soon as the reply is here (the rest waits for the next tick's wait)
             r0 = clock()
             rec.defer_many(self.log_ns(t), tx_records, frames, self.names, s, t_us, k % 16)
-            rec.write_deferred()
+            rec.write_deferred(self._reply_here)
             self.t_rec.append(clock() - r0)
         w0 = clock()
         # this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt into the
