@@ -912,7 +912,9 @@ def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int
     cycle's reply in hand: zenoh both ways, the node's frame handling and controller tick,
     and the plant's MCAP serialization done meanwhile), and the overhead beyond FMU + round
     trip (FMU-output encoding, frame checks, queuing records); ``record``: serialization
-    inside the round trip; ``wait``: blocked after it (see :func:`reply_early_share`)."""
+    inside the round trip (it stops once a controller frame is here: ``MAX_BACKLOG``);
+    ``wait``: polling or blocked after it, and the reply's frame checks (see
+    :func:`reply_early_share`)."""
     n = max(1, len(tick))
 
     def mean(a: list[int], over: int | None = None) -> float:
