@@ -297,8 +297,9 @@ def feedback_frames(knee_angle: float, knee_vel: float, ankle_angle: float,
     return out
 
 
-_TORQUE, _DISTURBANCE, _CLF = (int(FrameId.TORQUE_CMD), int(FrameId.CTRL_DISTURBANCE),
-                               int(FrameId.CTRL_CLF))
+_TORQUE, _DISTURBANCE, _CLF, _HEARTBEAT = (
+    int(FrameId.TORQUE_CMD), int(FrameId.CTRL_DISTURBANCE), int(FrameId.CTRL_CLF),
+    int(FrameId.CTRL_HEARTBEAT))
 _KNEE, _ANKLE, _LOAD, _IMU, _SIMTIME = (int(FrameId.KNEE_FEEDBACK), int(FrameId.ANKLE_FEEDBACK),
                                         int(FrameId.FOOT_LOAD), int(FrameId.SOCKET_IMU),
                                         int(FrameId.SIM_TIME))
@@ -393,8 +394,11 @@ def torque_frame(knee: float, ankle: float, counter: int, *, enable: bool = True
 def heartbeat_frame(state: CtrlState | int, tick: int, counter: int, *,
                     timestamp: float = 0.0) -> Frame:
     """:func:`encode_heartbeat` as a light :class:`Frame` (the same bytes)."""
-    m = encode_heartbeat(state, tick, counter, timestamp=timestamp)
-    return Frame(float(timestamp), m.arbitration_id, bytes(m.data))
+    s = int(state)
+    if s not in CtrlState._value2member_map_:
+        raise ValueError(f"CtrlHeartbeat.CtrlState: {state!r} is not a CtrlState")
+    return Frame(float(timestamp), _HEARTBEAT,
+                 _encoders()[_HEARTBEAT]((s, int(tick) % (1 << 32)), counter))
 
 
 def disturbance_frame(dy1: float, d2y2: float, tau: float, valid: bool, flag: bool,

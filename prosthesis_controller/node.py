@@ -80,6 +80,7 @@ _SIM_TIME, _IMU, _TORQUE = (int(FrameId.SIM_TIME), int(FrameId.SOCKET_IMU),
                             int(FrameId.TORQUE_CMD))
 _KNEE, _ANKLE, _LOAD = (int(f) for f in FEEDBACK)
 _QP_FAILURES = frozenset(q for q in QpOutcome if q.is_failure)
+_RUNNING = CtrlState.RUNNING
 
 
 def _active_bits(a: int) -> int:
@@ -201,7 +202,7 @@ class ControllerNode:
             self._flags |= FaultFlag.QP_FAILED
         if int(d.active) & _OUTPUT_CLAMP:
             self._flags |= FaultFlag.TORQUE_SATURATED
-        self.state = CtrlState.RUNNING
+        self.state = _RUNNING
         ts, ticks = v.timestamp, self.ticks
         if ticks % self.heartbeat_every == 0:
             out.append(self._heartbeat(ts))

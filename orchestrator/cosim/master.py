@@ -346,6 +346,12 @@ def _pct(a: list[float], q: float) -> float:
 # --------------------------------------------------------------------------- the run
 
 
+_CLF, _TORQUE, _STATUS, _DISTURBANCE, _HEARTBEAT, _REJECTS = (
+    int(FrameId.CTRL_CLF), int(FrameId.TORQUE_CMD), int(FrameId.CTRL_STATUS),
+    int(FrameId.CTRL_DISTURBANCE), int(FrameId.CTRL_HEARTBEAT), int(FrameId.CTRL_REJECTS))
+_OK = codec.FrameStatus.OK
+
+
 class Plant:
     """The plant side of one run: rx frame checking, the controller state it implies, and
     the bound on what it applies: every torque command is clamped to the device's motor
@@ -377,12 +383,13 @@ class Plant:
     def on_rx(self, msg: can.Message | codec.Frame) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
         v = self.checker.check(msg)
-        if v.ok:
-            if v.frame_id == FrameId.CTRL_HEARTBEAT:
+        if v.status is _OK:
+            fid = v.frame_id  # plain ints below: an IntEnum member's lookup is Python code
+            if fid == _HEARTBEAT:
                 self.ctrl_state = int(v.value.state)
-            elif v.frame_id == FrameId.CTRL_REJECTS:
+            elif fid == _REJECTS:
                 self.ctrl_rejects = {k: int(n) for k, n in v.value._asdict().items()}
-            elif v.frame_id == FrameId.CTRL_STATUS:
+            elif fid == _STATUS:
                 self.last_status = v.value
         return v
 
@@ -565,10 +572,6 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
     return d
 
 
-_CLF, _TORQUE, _STATUS, _DISTURBANCE = (int(FrameId.CTRL_CLF), int(FrameId.TORQUE_CMD),
-                                        int(FrameId.CTRL_STATUS),
-                                        int(FrameId.CTRL_DISTURBANCE))
-_OK = codec.FrameStatus.OK
 #: record queue entries the plant may leave for later waits when the controller's reply
 #: comes before the serialization is done (a few ticks' worth)
 MAX_BACKLOG = 64
@@ -781,7 +784,7 @@ class CanLink:
             items: list[tuple[Any, codec.Verdict]] = []
             for msg in self.frames.recv_all(left):
                 v = self.on_rx(msg, t, items)
-                if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
+                if v.frame_id == _TORQUE and v.status is _OK and v.value.enable:
                     self.u = (v.value.knee, v.value.ankle)
             self._defer_rx(items, t)
 
