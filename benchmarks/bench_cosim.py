@@ -9,7 +9,8 @@ FMU step), every figure measured inside the same run; median and spread over ``-
 Per run (plant side, means per tick): ``tick``; ``fmu`` (all FMU calls: outputs, inputs,
 doStep); ``round_trip`` (the cycle's frames sent -> its TorqueCmd in hand: zenoh both ways,
 the node's frame checks, controller tick and encoding, and the plant's MCAP serialization
-done meanwhile, itself reported as ``record``; ``wait`` is the part spent blocked after
+done meanwhile, itself reported as ``record`` (it stops once a controller frame is here and
+leaves the rest for the next waits); ``wait`` is the part spent polling or blocked after
 it); ``overhead`` = tick - round trip - FMU (reading FMU outputs into frames, frame
 checks, queuing records, loop bookkeeping). Controller node (same run, its own clock):
 ``controller tick`` and ``node cycle`` (first frame of a cycle received -> reply sent).

@@ -137,6 +137,7 @@ class FrameReader:
     def __init__(self, bus: can.BusABC) -> None:
         self.bus = bus
         self._many = getattr(bus, "recv_frames", None)
+        self._poll = getattr(bus, "poll_frames", None)
         self._queue: deque[Any] = deque()
 
     def recv(self, timeout: float | None = None) -> Any:
@@ -152,3 +153,37 @@ class FrameReader:
             return None
         q.extend(got)
         return q.popleft()
+
+    def recv_all(self, timeout: float | None = None) -> list[Any]:
+        """The frames already taken and not yet returned, else those of the next sample
+        (one frame from a bus without ``recv_frames``); [] when none came within
+        ``timeout`` s. A cycle's frames in one call, for a caller that handles them
+        together."""
+        q = self._queue
+        if q:
+            out = list(q)
+            q.clear()
+            return out
+        if self._many is None:
+            m = self.bus.recv(timeout)
+            return [] if m is None else [m]
+        return self._many(timeout)
+
+    def ready(self) -> bool:
+        """True when a frame is here to be received without waiting (taken from the bus
+        where it can tell, ``poll_frames``; a bus without it answers False: nothing
+        interrupts the caller's other work)."""
+        if self._queue:
+            return True
+        if self._poll is None:
+            return False
+        got = self._poll()
+        if not got:
+            return False
+        self._queue.extend(got)
+        return True
+
+    def unread(self, frames: Sequence[Any]) -> None:
+        """Put ``frames`` back (in this order) before anything else the next receive
+        returns: the rest of a sample a caller did not need yet."""
+        self._queue.extendleft(reversed(frames))

@@ -531,8 +531,10 @@ class Recorder:
         self._pending: int | None = None
         self._exit_on_signal = True
         self._old_handlers: dict[int, Any] = {}
-        self._deferred: deque[tuple[str, Callable[..., Any] | None, tuple[Any, ...], int]] \
-            = deque()
+        #: (topic, build, args, log time); topic None: ``build(*args)`` gives (topic, message)
+        #: pairs (:meth:`defer_many`)
+        self._deferred: deque[tuple[str | None, Callable[..., Any] | None, tuple[Any, ...],
+                                    int]] = deque()
         if metadata:
             self.add_metadata("run", metadata)
 
@@ -638,6 +640,19 @@ class Recorder:
         self._deferred.append((topic, build, args, time.time_ns() if log_time_ns is None
                                else int(log_time_ns)))
 
+    def defer_many(self, log_time_ns: int | None, build: Callable[..., Iterable[
+            tuple[str, Any]]], *args: Any) -> None:
+        """Queue the messages ``build(*args)`` gives as (topic, message) pairs, all at one
+        log time, built only when written: one queue entry for the several records of one
+        event (a cycle's frames and what they carry), so the caller's hot path pays for one
+        tuple."""
+        ns = time.time_ns() if log_time_ns is None else int(log_time_ns)
+        if self.finished:
+            for topic, message in build(*args):
+                self.write(topic, message, ns)
+            return
+        self._deferred.append((None, build, args, ns))
+
     def defer_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
                   *, name: str | None = None, status: str | None = None) -> None:
         """Queue a frame for ``/can/tx`` or ``/can/rx`` (see :meth:`write_can`)."""
@@ -648,15 +663,24 @@ class Recorder:
 
     @property
     def deferred(self) -> int:
-        """Messages queued and not yet written."""
+        """Entries queued and not yet written (a :meth:`defer_many` entry counts once)."""
         return len(self._deferred)
 
-    def write_deferred(self) -> int:
-        """Write the queued messages in queue order; returns how many."""
+    def write_deferred(self, stop: Callable[[], bool] | None = None) -> int:
+        """Write the queued messages in queue order; returns how many. ``stop``: asked
+        before each queue entry, True leaves the rest queued (for a later call or
+        :meth:`finish`: the file's records and their order are the same either way)."""
         n = 0
         q = self._deferred
         while q and not self.finished:
+            if stop is not None and stop():
+                break
             topic, build, args, ns = q.popleft()
+            if topic is None:
+                for tp, message in build(*args):  # type: ignore[misc]
+                    self.write(tp, message, ns)
+                    n += 1
+                continue
             self.write(topic, build(*args) if build else args[0], ns)
             n += 1
         return n

@@ -8,8 +8,11 @@ fmpy would.)
 
 fmpy's ``getReal``/``setReal`` build new ctypes arrays on every call (2-4 us each); a loop
 reads and writes the same variables every 1 ms tick, so the value-reference and value
-arrays are allocated once and fmpy's checked ``fmi2GetReal`` etc. are called on them (a
-status above warning raises fmpy's ``FMICallException``).
+arrays are allocated once, and the per-tick calls go straight to the FMU's fmi2 functions
+as fmpy loaded them from its shared library (the ctypes functions with fmpy's argument
+types), without fmpy's Python wrapper around each (its optional call logging and status
+check): the status is checked here the same way (above warning raises fmpy's
+``FMICallException``).
 """
 
 from __future__ import annotations
@@ -47,15 +50,33 @@ class FmuReading(NamedTuple):
     fell: bool
 
 
-def step_or_end(slave: Any, component: Any, t: float, dt: float) -> bool:
-    """``slave.fmi2DoStep(component, t, dt, fmi2True)`` on an fmpy ``FMU2Slave``: True on
+_WARNING = 1  # fmi2Warning: a status above it is a failed call
+
+
+def _checked(f: Any, name: str) -> Any:
+    """The fmi2 function ``f`` (a ctypes function of the FMU's library) raising fmpy's
+    ``FMICallException`` for a status above warning, as fmpy's wrapper does."""
+    from fmpy.fmi1 import FMICallException
+
+    def call(*args: Any) -> int:
+        status = f(*args)
+        if status > _WARNING:
+            raise FMICallException(function=name, status=status)
+        return int(status)
+    return call
+
+
+def step_or_end(slave: Any, component: Any, t: float, dt: float,
+                do_step: Any = None) -> bool:
+    """``slave.fmi2DoStep(component, t, dt, fmi2True)`` on an fmpy ``FMU2Slave`` (or
+    ``do_step(component, t, dt, fmi2True)``, a checked call of the same function): True on
     success, False when the FMU discards the step and reports itself terminated (the end of
     the walk), else the ``FMICallException`` propagates."""
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import fmi2Boolean, fmi2Discard, fmi2Terminated, fmi2True
 
     try:
-        slave.fmi2DoStep(component, t, dt, fmi2True)
+        (do_step or slave.fmi2DoStep)(component, t, dt, fmi2True)
         return True
     except FMICallException as e:
         if e.status != fmi2Discard:
@@ -113,6 +134,13 @@ class HumanFmu:
         self._fall = _Buffer(self.vr, ("fall",), fmi2Boolean)
         self._u = _Buffer(self.vr, INPUTS, fmi2Real)
         self._forces = _Buffer(self.vr, FORCES, fmi2Real)
+        dll = self.fmu.dll  # the functions fmpy loaded, with its argument types
+        self._get_real = _checked(dll.fmi2GetReal, "fmi2GetReal")
+        self._get_integer = _checked(dll.fmi2GetInteger, "fmi2GetInteger")
+        self._get_boolean = _checked(dll.fmi2GetBoolean, "fmi2GetBoolean")
+        self._set_real = _checked(dll.fmi2SetReal, "fmi2SetReal")
+        self._do_step = _checked(dll.fmi2DoStep, "fmi2DoStep")
+        self._n_sensors = len(SENSORS)
         self._started = False
 
     # -- set-up ------------------------------------------------------------------------------
@@ -166,33 +194,32 @@ class HumanFmu:
     # -- the per-tick exchange -------------------------------------------------------------
     def read(self) -> FmuReading:
         """The outputs at the start of the current period."""
-        f, c = self.fmu, self._c
+        c = self._c
         s, i, b = self._out, self._ints, self._fall
-        f.fmi2GetReal(c, s.refs, s.n, s.values)
-        f.fmi2GetInteger(c, i.refs, i.n, i.values)
-        f.fmi2GetBoolean(c, b.refs, b.n, b.values)
-        v = s.values[:]
-        n = len(SENSORS)
-        dom, steps, code = i.values[:]
+        self._get_real(c, s.refs, s.n, s.values)
+        self._get_integer(c, i.refs, i.n, i.values)
+        self._get_boolean(c, b.refs, b.n, b.values)
+        n, v = self._n_sensors, s.values
+        dom, steps, code = i.values
         return FmuReading(v[:n], v[n:], dom, steps, code, b.values[0] != 0)
 
     def set_torque(self, knee: float, ankle: float) -> None:
         """The prosthesis motor torques held over the next step [N m]."""
         u = self._u
         u.values[0], u.values[1] = knee, ankle
-        self.fmu.fmi2SetReal(self._c, u.refs, u.n, u.values)
+        self._set_real(self._c, u.refs, u.n, u.values)
 
     def forces(self) -> list[float]:
         """The socket force (Fx, Fz [N], My [N m]) under the torque just set."""
         g = self._forces
-        self.fmu.fmi2GetReal(self._c, g.refs, g.n, g.values)
+        self._get_real(self._c, g.refs, g.n, g.values)
         return g.values[:]
 
     def step(self, t: float, dt: float) -> bool:
         """fmi2DoStep(t, dt): True while the walk goes on, False once the FMU has ended it
         (fmi2Discard with fmi2Terminated: a fall; the outputs hold the last valid state).
         Any other failure raises fmpy's ``FMICallException``."""
-        return step_or_end(self.fmu, self._c, t, dt)
+        return step_or_end(self.fmu, self._c, t, dt, self._do_step)
 
     def last_successful_time(self) -> float:
         """fmi2GetRealStatus(fmi2LastSuccessfulTime) [s]: after the walk has ended, the time

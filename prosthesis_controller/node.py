@@ -73,6 +73,14 @@ QP_STATUS: dict[QpOutcome, QpStatus] = {
 
 
 _OUTPUT_CLAMP = int(Active.OUTPUT_CLAMP)  # an int: IntFlag's & is Python code
+_OK = codec.FrameStatus.OK
+#: plain ints (hashing and comparing an IntEnum member is Python code)
+_HELD = frozenset(int(f) for f in (*FEEDBACK, FrameId.SOCKET_IMU))  # held until SimTime
+_SIM_TIME, _IMU, _TORQUE = (int(FrameId.SIM_TIME), int(FrameId.SOCKET_IMU),
+                            int(FrameId.TORQUE_CMD))
+_KNEE, _ANKLE, _LOAD = (int(f) for f in FEEDBACK)
+_QP_FAILURES = frozenset(q for q in QpOutcome if q.is_failure)
+_RUNNING = CtrlState.RUNNING
 
 
 def _active_bits(a: int) -> int:
@@ -130,16 +138,24 @@ class ControllerNode:
     # -- frames in, frames out
     def handle(self, msg: can.Message | codec.Frame, now: float | None = None
                ) -> list[codec.Frame]:
-        v = self.checker.check(msg)
-        if not v.ok:
-            self._flags |= FaultFlag.BAD_FRAMES
-            return []
-        if v.frame_id in FEEDBACK or v.frame_id == FrameId.SOCKET_IMU:
-            self.pending[v.frame_id] = (v.counter, v.value)
-            return []
-        if v.frame_id == FrameId.SIM_TIME:
-            return self._cycle(v, time.monotonic() if now is None else now)
-        return []
+        """One received frame -> the frames to send (the reply on a cycle's ``SimTime``)."""
+        return self.handle_frames((msg,), now)
+
+    def handle_frames(self, frames: Sequence[can.Message | codec.Frame],
+                      now: float | None = None) -> list[codec.Frame]:
+        """Received frames in order (a sample's: the plant's cycle) -> the frames to send:
+        :meth:`handle` of each, the replies concatenated."""
+        out: list[codec.Frame] = []
+        pending = self.pending
+        for v in self.checker.check_all(frames):
+            fid = v.frame_id
+            if v.status is not _OK:
+                self._flags |= FaultFlag.BAD_FRAMES
+            elif fid in _HELD:
+                pending[fid] = (v.counter, v.value)
+            elif fid == _SIM_TIME:
+                out += self._cycle(v, time.monotonic() if now is None else now)
+        return out
 
     def _time(self, us: int) -> float:
         if self._last_us is not None and us < self._last_us:
@@ -150,13 +166,14 @@ class ControllerNode:
     def _cycle(self, v: codec.Verdict, now: float) -> list[codec.Frame]:
         self._last_cycle = now
         fresh = True
-        for f in FEEDBACK:
-            p = self.pending.pop(f, None)
-            if p is not None and p[0] == v.counter:
-                self.last[f] = p[1]
+        pending, last, c = self.pending, self.last, v.counter
+        for f in (_KNEE, _ANKLE, _LOAD):
+            p = pending.pop(f, None)
+            if p is not None and p[0] == c:
+                last[f] = p[1]
             else:
                 fresh = False
-        imu = self.pending.pop(FrameId.SOCKET_IMU, None)
+        imu = pending.pop(_IMU, None)
         pitch = math.nan
         if imu is not None and imu[0] == v.counter:
             self.imu_seen = True
@@ -173,7 +190,7 @@ class ControllerNode:
             out.append(codec.torque_frame(0.0, 0.0, self._next(), enable=False,
                                           timestamp=v.timestamp))
             return out
-        k, a, ld = (self.last[f] for f in FEEDBACK)
+        k, a, ld = last[_KNEE], last[_ANKLE], last[_LOAD]
         meas = ProsthesisMeasurement(t, k.angle, a.angle, k.velocity, a.velocity, ld.load,
                                      bool(ld.contact), pitch)
         t0 = time.perf_counter_ns()
@@ -181,25 +198,25 @@ class ControllerNode:
         self.tick_time.add(time.perf_counter_ns() - t0)
         d = res.diagnostics
         self._last_diag = d
-        if d.qp_status.is_failure:
+        if d.qp_status in _QP_FAILURES:
             self._flags |= FaultFlag.QP_FAILED
         if int(d.active) & _OUTPUT_CLAMP:
             self._flags |= FaultFlag.TORQUE_SATURATED
-        self.state = CtrlState.RUNNING
-        if self.ticks % self.heartbeat_every == 0:
-            out.append(self._heartbeat(v.timestamp))
+        self.state = _RUNNING
+        ts, ticks = v.timestamp, self.ticks
+        if ticks % self.heartbeat_every == 0:
+            out.append(self._heartbeat(ts))
         c = self._clf_counter
         self._clf_counter = (c + 1) % 16
-        out.append(codec.clf_frame(d.V, d.rho if self.sends_rho else None, c,
-                                   timestamp=v.timestamp))
-        if self.ticks % self.status_every == 0:
-            out.extend(self.status_frames(v.timestamp))
+        out.append(codec.clf_frame(d.V, d.rho if self.sends_rho else None, c, timestamp=ts))
+        if ticks % self.status_every == 0:
+            out.extend(self.status_frames(ts))
         if d.disturbance_valid:
-            out.append(_disturbance_frame(d, v.timestamp))
-        self.ticks += 1
+            out.append(_disturbance_frame(d, ts))
+        self.ticks = ticks + 1
         u = res.torque
         out.append(codec.torque_frame(float(u[0]), float(u[1]), self._next(), enable=True,
-                                      timestamp=v.timestamp))
+                                      timestamp=ts))
         return out
 
     def _next(self) -> int:
@@ -274,23 +291,21 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
     first: int | None = None
     usage = Usage()
     frames = FrameReader(bus)
+    clock = time.perf_counter_ns
     try:
         while stop is None or not stop.is_set():
-            msg = frames.recv(timeout)
-            if msg is not None and first is None:
-                first = time.perf_counter_ns()
+            got = frames.recv_all(timeout)  # a sample's frames: the plant's cycle
             now = time.monotonic()
-            out: list[codec.Frame] = []
-            while msg is not None:  # the frames already here, up to a cycle's end
-                out = node.handle(msg, now)
-                if out:
-                    break
-                msg = frames.recv(0.0)
-            out += node.poll(now)
-            send_frames(bus, out)
-            if first is not None and out and out[-1].arbitration_id == FrameId.TORQUE_CMD:
-                cycle.add(time.perf_counter_ns() - first)
-                first = None
+            if got:
+                if first is None:
+                    first = clock()
+                out = node.handle_frames(got, now)
+                if out:  # the reply first; the watchdog after it
+                    send_frames(bus, out)
+                    if first is not None and out[-1].arbitration_id == _TORQUE:
+                        cycle.add(clock() - first)
+                        first = None
+            send_frames(bus, node.poll(now))
             if plant_watch is not None:
                 for alive in plant_watch.poll():
                     if alive:

@@ -495,6 +495,48 @@ def test_checker_gives_the_same_verdicts_for_frames_and_messages():
     assert (a.lost, a.resyncs) == (b.lost, b.resyncs)
 
 
+def test_checker_check_all_is_check_of_each_frame():
+    """FrameChecker.check_all over a cycle's frames at once: the same verdicts, counts,
+    losses and resynchronizations as check() frame by frame, over every class (corrupted,
+    short, unknown or unaccepted ids, counters out of sequence and replayed, unprotected
+    frames, can.Messages mixed in)."""
+    rng = np.random.default_rng(11)
+    a, b = FrameChecker(), FrameChecker()
+    c, d = FrameChecker(accept=protocol.PLANT_TO_CTRL), FrameChecker(
+        accept=protocol.PLANT_TO_CTRL)
+    for k in range(3000):
+        counter = k % 16 if rng.random() > 0.1 else int(rng.integers(0, 16))
+        fr = codec.feedback_frames(*rng.uniform(-1, 1, 4), 100.0, True, counter,
+                                   sim_time_us=k, socket_pitch=0.1, timestamp=k * 1e-3)
+        fr.append(codec.disturbance_frame(0.1, 0.2, 0.3, True, False, 0.01,
+                                          timestamp=k * 1e-3))
+        sample: list = []
+        for f in fr:
+            r = rng.random()
+            data, fid = bytearray(f.data), f.arbitration_id
+            if r < 0.03:
+                data[int(rng.integers(0, 8))] ^= 1 << int(rng.integers(0, 8))
+            elif r < 0.05:
+                data = data[:int(rng.integers(0, 8))]
+            elif r < 0.07:
+                fid = int(rng.choice([0x010, 0x7FF, 0x300, 0x5]))
+            if rng.random() < 0.05:
+                sample.append(can.Message(timestamp=f.timestamp, arbitration_id=fid,
+                                          is_extended_id=False, data=data, dlc=8))
+            else:
+                sample.append(codec.Frame(f.timestamp, fid, bytes(data)))
+            if rng.random() < 0.02:
+                sample.append(sample[-1])  # replayed
+        for x, y in ((a, b), (c, d)):
+            got = x.check_all(sample)
+            assert len(got) == len(sample)
+            for v, m in zip(got, sample, strict=True):
+                _same(v, y.check(m))
+    for x, y in ((a, b), (c, d)):
+        assert x.counts == y.counts and (x.lost, x.resyncs) == (y.lost, y.resyncs)
+        assert all(x.counts[s] for s in FrameStatus) and x.counts[FrameStatus.OK] > 9000
+
+
 def test_generated_decoders_equal_the_layout_loop_and_cantools():
     """The per-frame decoders generated from the DBC (bus_schemas.fastcodec), over random
     data of every frame (most with a wrong checksum, the rest with a right one): the same

@@ -346,6 +346,12 @@ def _pct(a: list[float], q: float) -> float:
 # --------------------------------------------------------------------------- the run
 
 
+_CLF, _TORQUE, _STATUS, _DISTURBANCE, _HEARTBEAT, _REJECTS = (
+    int(FrameId.CTRL_CLF), int(FrameId.TORQUE_CMD), int(FrameId.CTRL_STATUS),
+    int(FrameId.CTRL_DISTURBANCE), int(FrameId.CTRL_HEARTBEAT), int(FrameId.CTRL_REJECTS))
+_OK = codec.FrameStatus.OK
+
+
 class Plant:
     """The plant side of one run: rx frame checking, the controller state it implies, and
     the bound on what it applies: every torque command is clamped to the device's motor
@@ -377,12 +383,13 @@ class Plant:
     def on_rx(self, msg: can.Message | codec.Frame) -> codec.Verdict:
         """Classify one controller frame (never raises) and track heartbeat and status."""
         v = self.checker.check(msg)
-        if v.ok:
-            if v.frame_id == FrameId.CTRL_HEARTBEAT:
+        if v.status is _OK:
+            fid = v.frame_id  # plain ints below: an IntEnum member's lookup is Python code
+            if fid == _HEARTBEAT:
                 self.ctrl_state = int(v.value.state)
-            elif v.frame_id == FrameId.CTRL_REJECTS:
+            elif fid == _REJECTS:
                 self.ctrl_rejects = {k: int(n) for k, n in v.value._asdict().items()}
-            elif v.frame_id == FrameId.CTRL_STATUS:
+            elif fid == _STATUS:
                 self.last_status = v.value
         return v
 
@@ -565,7 +572,9 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
     return d
 
 
-_CLF = int(FrameId.CTRL_CLF)
+#: record queue entries the plant may leave for later waits when the controller's reply
+#: comes before the serialization is done (a few ticks' worth)
+MAX_BACKLOG = 64
 
 
 class CanLink:
@@ -615,32 +624,29 @@ class CanLink:
     def log_ns(self, t: float) -> int:
         return round((time.perf_counter() - self.wall0 if self.realtime else t) * 1e9)
 
-    def on_rx(self, msg: can.Message, t: float) -> codec.Verdict:
+    def on_rx(self, msg: can.Message, t: float,
+              items: list[tuple[Any, codec.Verdict]] | None = None) -> codec.Verdict:
+        """Check one controller frame (:meth:`Plant.on_rx`), take the cycle's V and rho from
+        a good ``CtrlClf``; with a recording, the frame and what it carries go to ``items``
+        (queued for the MCAP per sample by :meth:`_defer_rx`; a ``CtrlStatus``'s
+        diagnostics record, every 100 ticks, is queued here with the torque and CLF values
+        of the moment)."""
         v = self.plant.on_rx(msg)
         self.res.frames_rx += 1
-        if v.frame_id == _CLF and v.ok:
+        fid = v.frame_id
+        if fid == _CLF and v.status is _OK:
             c = v.value
             self.clf = (msg.timestamp, c.V if c.v_valid else None,
                         c.rho if c.rho_valid else None)
-        rec = self.rec
-        if rec is None:
+        if items is None or self.rec is None:
             return v
-        ns = self.log_ns(t)
-        rec.defer_can(msg, "rx", ns, name=v.name, status=v.status)  # str() when written
-        if not v.ok:
-            return v
-        if v.frame_id == FrameId.TORQUE_CMD:
-            rec.defer_call("/prosthesis/torque_command", ns, torque_record, v.value,
-                           v.counter, msg.timestamp, self.ratio)
-        elif v.frame_id == FrameId.CTRL_DISTURBANCE:
-            rec.defer_call("/controller/disturbance", ns, disturbance_record, v.value,
-                           msg.timestamp)
-        elif v.frame_id == FrameId.CTRL_STATUS:
+        items.append((msg, v))
+        if fid == _STATUS and v.status is _OK:
             st = v.value
             u, r = self.u, self.ratio
             c = self.clf  # the node sends its cycle's CtrlClf before CtrlStatus
             V, rho = (c[1], c[2]) if c is not None and c[0] == msg.timestamp else (None, None)
-            rec.defer("/controller/diagnostics", {
+            self.rec.defer("/controller/diagnostics", {
                 "t": msg.timestamp, "controller": self.cfg.controller, "domain": None,
                 "tau": None, "V": V, "rho": rho, "u": [u[0] * r[0], u[1] * r[1]],
                 "qp_status": getattr(st.qp_status, "name", str(st.qp_status)),
@@ -649,8 +655,19 @@ class CanLink:
                 "fallback_count": st.fallback_count, "fault_flags": int(st.fault_flags),
                 "coverage_flag": bool(st.coverage_flag), "coverage_count": st.coverage_count,
                 "solve_time_us": None, "source": "CtrlStatus frame",
-                "ctrl_rejects": self.plant.ctrl_rejects}, ns)
+                "ctrl_rejects": self.plant.ctrl_rejects}, self.log_ns(t))
         return v
+
+    def _reply_here(self) -> bool:
+        """Stop serializing records: a controller frame is here, and at most
+        :data:`MAX_BACKLOG` queue entries are left (serializing keeps up with the run; what
+        is left goes in the next waits)."""
+        return self.rec.deferred <= MAX_BACKLOG and self.frames.ready()
+
+    def _defer_rx(self, items: list[tuple[Any, codec.Verdict]], t: float) -> None:
+        """Queue the records of one received sample's frames (one queue entry)."""
+        if items and self.rec is not None:
+            self.rec.defer_many(self.log_ns(t), rx_records, items, self.ratio)
 
     def _inject(self, what: str) -> None:
         self.injected[what] = self.injected.get(what, 0) + 1
@@ -671,12 +688,6 @@ class CanLink:
                                        s.ankle_velocity, s.foot_load, s.contact, k % 16,
                                        sim_time_us=t_us, socket_pitch=s.socket_pitch,
                                        timestamp=t)
-        if rec is not None:
-            ns = self.log_ns(t)
-            for m in frames:
-                rec.defer_can(m, "tx", ns, name=self.names[m.arbitration_id])
-            rec.defer_call("/prosthesis/measurements", ns, measurement_record, s, t_us,
-                           k % 16)
         send, what = plan.apply(k, frames)
         if what:
             self._inject(what)
@@ -684,9 +695,11 @@ class CanLink:
         s0 = clock()
         send_frames(self.bus, send)
         res.frames_tx += len(send)
-        if rec is not None:  # while the controller works: serialize what is queued
+        if rec is not None:  # while the controller works: queue and serialize the records,
+            # stopping as soon as the reply is here (the rest waits for the next tick's wait)
             r0 = clock()
-            rec.write_deferred()
+            rec.defer_many(self.log_ns(t), tx_records, frames, self.names, s, t_us, k % 16)
+            rec.write_deferred(self._reply_here)
             self.t_rec.append(clock() - r0)
         w0 = clock()
         # this cycle's torque: lockstep up to reply_timeout; realtime until 0.8 dt into the
@@ -695,20 +708,26 @@ class CanLink:
         got = answered = False
         deadline = (max(self.sched0 + (k + 0.8) * self.dt, s0 * 1e-9 + 0.8 * self.dt)
                     if self.realtime else s0 * 1e-9 + cfg.reply_timeout)
-        while True:
+        reader, rtol = self.frames, self.rtol
+        while not got:
             left = deadline - time.perf_counter()
             if left <= 0 or self.lost.is_set():
                 break
-            msg = self.frames.recv(min(left, 0.005))
-            if msg is None:
+            sample = reader.recv_all(min(left, 0.005))
+            if not sample:
                 continue
-            v = self.on_rx(msg, t)
-            if v.ok and v.frame_id == FrameId.TORQUE_CMD:
-                self.u = self.plant.command(v.value)
-                answered = True
-                if abs(msg.timestamp - t) <= self.rtol:
-                    got = True
-                    break
+            items: list[tuple[Any, codec.Verdict]] = []
+            for i, msg in enumerate(sample):  # a sample's frames: the reply batch
+                v = self.on_rx(msg, t, items)
+                if v.frame_id == _TORQUE and v.status is _OK:
+                    self.u = self.plant.command(v.value)
+                    answered = True
+                    if abs(msg.timestamp - t) <= rtol:
+                        got = True
+                        if i + 1 < len(sample):  # frames after this cycle's reply
+                            reader.unread(sample[i + 1:])
+                        break
+            self._defer_rx(items, t)
         if got:
             r1 = clock()
             self.lat.append((r1 - s0) * 1e-9)
@@ -762,11 +781,12 @@ class CanLink:
             left = end - time.perf_counter()
             if left <= 0:
                 break
-            msg = self.frames.recv(left)
-            if msg is not None:
-                v = self.on_rx(msg, t)
-                if v.ok and v.frame_id == FrameId.TORQUE_CMD and v.value.enable:
+            items: list[tuple[Any, codec.Verdict]] = []
+            for msg in self.frames.recv_all(left):
+                v = self.on_rx(msg, t, items)
+                if v.frame_id == _TORQUE and v.status is _OK and v.value.enable:
                     self.u = (v.value.knee, v.value.ankle)
+            self._defer_rx(items, t)
 
 
 def _loop(cfg: CosimConfig, plan: FaultPlan, fmu: HumanFmu, bus: Any, rec: Any, proc: Any,
@@ -828,6 +848,38 @@ def _catch_up(res: CosimResult, rec: Any, t: float, k: int, dt: float, sched0: f
     return sched0 + skip * dt
 
 
+def tx_records(frames: list[Any], names: dict[int, str], s: Sensed, t_us: int,
+               counter: int) -> list[tuple[str, Any]]:
+    """The records of one cycle's plant frames (as encoded, before any injected fault):
+    each frame on ``/can/tx`` and the measurement they carry."""
+    from bus_schemas.mcap_schemas import can_frame_message  # the recorder's module, loaded
+
+    out: list[tuple[str, Any]] = [
+        ("/can/tx", can_frame_message(m, "tx", name=names[m.arbitration_id]))
+        for m in frames]
+    out.append(("/prosthesis/measurements", measurement_record(s, t_us, counter)))
+    return out
+
+
+def rx_records(items: list[tuple[Any, codec.Verdict]], ratio: tuple[float, float]
+               ) -> list[tuple[str, Any]]:
+    """The records of one received sample's controller frames: each on ``/can/rx`` with the
+    plant's verdict, and a good ``TorqueCmd`` or ``CtrlDisturbance`` on its own channel."""
+    from bus_schemas.mcap_schemas import can_frame_message
+
+    out: list[tuple[str, Any]] = []
+    for m, v in items:
+        out.append(("/can/rx", can_frame_message(m, "rx", name=v.name, status=str(v.status))))
+        if v.status is not _OK:
+            continue
+        if v.frame_id == _TORQUE:
+            out.append(("/prosthesis/torque_command",
+                        torque_record(v.value, v.counter, m.timestamp, ratio)))
+        elif v.frame_id == _DISTURBANCE:
+            out.append(("/controller/disturbance", disturbance_record(v.value, m.timestamp)))
+    return out
+
+
 def measurement_record(s: Sensed, t_us: int, counter: int) -> dict[str, Any]:
     """``/prosthesis/measurements``: what AMPRO3 senses (``s``) as the controller decodes it
     (codec quantization)."""
@@ -863,7 +915,9 @@ def tick_breakdown(tick: list[int], fmu: list[int], rt: list[int], rec: list[int
     cycle's reply in hand: zenoh both ways, the node's frame handling and controller tick,
     and the plant's MCAP serialization done meanwhile), and the overhead beyond FMU + round
     trip (FMU-output encoding, frame checks, queuing records); ``record``: serialization
-    inside the round trip; ``wait``: blocked after it (see :func:`reply_early_share`)."""
+    inside the round trip (it stops once a controller frame is here: ``MAX_BACKLOG``);
+    ``wait``: polling or blocked after it, and the reply's frame checks (see
+    :func:`reply_early_share`)."""
     n = max(1, len(tick))
 
     def mean(a: list[int], over: int | None = None) -> float:
