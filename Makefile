@@ -23,7 +23,7 @@ demo: $(STAMP)
 
 # The suite in two phases (README, Tests; docs/tests.md): first every test not marked `serial`
 # on pytest-xdist workers, one per core (TEST_WORKERS), the tests of a file together on one
-# worker (--dist loadgroup; tests/conftest.py groups them and starts the longest first); then
+# worker (--dist loadfile; tests/conftest.py groups them and starts the longest first); then
 # the `serial` tests (judged against wall-clock time: real-time co-simulation, reply
 # deadlines) in one process, with the machine to themselves.  Both phases always run and
 # report; the target fails if either fails.  They share one cache of compiled models and
@@ -33,7 +33,7 @@ TEST_WORKERS ?= auto
 test: $(STAMP)
 	cache=$$(mktemp -d "$${TMPDIR:-/tmp}/hpcosim-test-cache.XXXXXX") || exit 1; \
 	trap 'rm -rf "$$cache"' EXIT; export HPCOSIM_TEST_CACHE="$$cache"; \
-	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder \
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder \
 	    -m "not serial" --durations=15; parallel=$$?; \
 	$(VENV)/bin/python -m pytest -m serial --durations=5; serial=$$?; \
 	test $$parallel -eq 0 && test $$serial -eq 0

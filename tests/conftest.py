@@ -124,11 +124,12 @@ def ctx(model, subsystem, template_gait):
 # --------------------------------------------------------------- parallel runs (pytest-xdist)
 
 #: ``make test`` runs the tests not marked ``serial`` on pytest-xdist workers with
-#: ``--dist loadgroup``: the tests of one file go to one worker (its module fixtures are built
-#: once), except the tests named here (a file, or one test), which form the group given.
-#: test_phzd checks the template gait's optimization that test_committed_gaits[template]
-#: reruns (the session fixture ``regenerated``): one worker solves it once for both.  The
-#: other two recipes are each heavy enough to go beside the rest of their file.
+#: ``--dist loadfile``: the tests of one file go to one worker (its module fixtures are built
+#: once), except the tests named here (a file, or one test), which form the group given
+#: (:func:`pytest_xdist_make_scheduler`).  test_phzd checks the template gait's optimization
+#: that test_committed_gaits[template] reruns (the session fixture ``regenerated``): one
+#: worker solves it once for both.  The other two recipes are each heavy enough to go beside
+#: the rest of their file.
 XDIST_GROUPS = {
     "tests/test_phzd.py": "template-gait",
     "tests/test_committed_gaits.py::test_recipe_makes_the_committed_gait[template]":
@@ -139,9 +140,10 @@ XDIST_GROUPS = {
         "playback-gait",
 }
 
-#: The heaviest groups' cost (s of one core, from ``--durations``, setup included): workers
-#: take groups in this order, longest first, and the short files fill in at the end.  Only the
-#: order depends on it (a group missing here goes after these, in collection order).
+#: The heaviest groups' cost (s of one core, from ``--durations``, setup included, on a loaded
+#: machine): workers take groups in this order, longest first, and the short files fill in at
+#: the end.  Only the order depends on it (a group missing here goes after these, in
+#: collection order).
 XDIST_COST: dict[str, float] = {
     "tests/test_experiments.py": 300,  # hpcosim demo end to end
     "tests/test_sweep.py": 160,
@@ -164,22 +166,36 @@ XDIST_COST: dict[str, float] = {
 }
 
 
-def xdist_group(item: pytest.Item) -> str:
-    """The group of ``item`` in a parallel run: its file's, unless :data:`XDIST_GROUPS`
-    names it (or its file); every ``serial`` test in one group (when they are run on
-    workers at all: ``make test`` runs them apart, without xdist)."""
-    if item.get_closest_marker("serial"):
-        return "serial"
-    path = item.nodeid.split("::", 1)[0]
-    return XDIST_GROUPS.get(item.nodeid) or XDIST_GROUPS.get(path) or path
+def xdist_group(nodeid: str) -> str:
+    """The group of the test ``nodeid`` in a parallel run: its file, unless
+    :data:`XDIST_GROUPS` names it (or its file)."""
+    nodeid = nodeid.split("@", 1)[0]
+    path = nodeid.split("::", 1)[0]
+    return XDIST_GROUPS.get(nodeid) or XDIST_GROUPS.get(path) or path
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the xdist_group marks
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadfile`` with the groups of :func:`xdist_group` (xdist's own ``loadgroup``
+    marks the test ids, which pytest 9 no longer lets a plugin change)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_group(nodeid)
+
+    return GroupScheduling(config, log)
+
+
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On a worker, the collection in :data:`XDIST_COST` order (the scheduler hands out the
+    groups in the order of the collection, with ``--no-loadscope-reorder``)."""
     if not os.environ.get("PYTEST_XDIST_WORKER"):
         return  # one process: the files' order, unchanged
-    first_seen = {g: i for i, g in enumerate(dict.fromkeys(map(xdist_group, items)))}
-    for item in items:
-        item.add_marker(pytest.mark.xdist_group(xdist_group(item)))
-    items.sort(key=lambda it: (-XDIST_COST.get(xdist_group(it), 0.0),
-                               first_seen[xdist_group(it)]))
+    group = {it.nodeid: xdist_group(it.nodeid) for it in items}
+    first_seen = {g: i for i, g in enumerate(dict.fromkeys(group.values()))}
+    items.sort(key=lambda it: (-XDIST_COST.get(group[it.nodeid], 0.0),
+                               first_seen[group[it.nodeid]]))
