@@ -21,9 +21,22 @@ demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
 	$(VENV)/bin/hpcosim demo --out out/demo
 
-# --durations: the slowest tests are printed with every run (the suite's time is a target)
+# The suite in two phases (README, Tests; docs/tests.md): first every test not marked `serial`
+# on pytest-xdist workers, one per core (TEST_WORKERS), the tests of a file together on one
+# worker (--dist loadfile; tests/conftest.py groups them and starts the longest first); then
+# the `serial` tests (judged against wall-clock time: real-time co-simulation, reply
+# deadlines) in one process, with the machine to themselves.  Both phases always run and
+# report; the target fails if either fails.  They share one cache of compiled models and
+# FMUs, made for this run and removed after it.  --durations: the slowest tests are printed
+# with every run (the suite's time is a target).
+TEST_WORKERS ?= auto
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest --durations=15
+	cache=$$(mktemp -d "$${TMPDIR:-/tmp}/hpcosim-test-cache.XXXXXX") || exit 1; \
+	trap 'rm -rf "$$cache"' EXIT; export HPCOSIM_TEST_CACHE="$$cache"; \
+	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder \
+	    -m "not serial" --durations=15; parallel=$$?; \
+	$(VENV)/bin/python -m pytest -m serial --durations=5; serial=$$?; \
+	test $$parallel -eq 0 && test $$serial -eq 0
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

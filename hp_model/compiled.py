@@ -13,6 +13,7 @@ arrays it returns are overwritten by its next call; copy them to keep them.
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import os
 import shutil
@@ -87,18 +88,25 @@ def compile_library(functions: Sequence[ca.Function], name: str) -> Path:
     if so.exists():
         return so
     out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
-        c_path = Path(tmp) / f"{name}.c"
-        c_path.write_text(src)
-        tmp_so = Path(tmp) / f"{name}.so"
-        proc = subprocess.run(
-            [cc, *CFLAGS, str(c_path), "-o", str(tmp_so), "-lm"],
-            capture_output=True, text=True,
-        )
-        if proc.returncode != 0:
-            first = (proc.stderr.strip().splitlines() or ["unknown error"])[0]
-            raise CompileError(f"compiling {name}.c failed: {first}")
-        os.replace(tmp_so, so)  # atomic: concurrent builders race harmlessly
+    # one builder per library: processes sharing the cache (parallel test workers, Dask
+    # workers) that want the same library wait for the first one's build instead of
+    # compiling it again; the rename keeps a half-written library from ever being seen
+    with open(out_dir / f".{so.name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if so.exists():
+            return so
+        with tempfile.TemporaryDirectory(dir=out_dir) as tmp:
+            c_path = Path(tmp) / f"{name}.c"
+            c_path.write_text(src)
+            tmp_so = Path(tmp) / f"{name}.so"
+            proc = subprocess.run(
+                [cc, *CFLAGS, str(c_path), "-o", str(tmp_so), "-lm"],
+                capture_output=True, text=True,
+            )
+            if proc.returncode != 0:
+                first = (proc.stderr.strip().splitlines() or ["unknown error"])[0]
+                raise CompileError(f"compiling {name}.c failed: {first}")
+            os.replace(tmp_so, so)  # atomic: a reader never sees a partial library
     return so
 
 

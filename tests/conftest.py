@@ -17,10 +17,23 @@ from tests.committed_gaits import load_committed
 
 @pytest.fixture(scope="session", autouse=True)
 def private_cache(tmp_path_factory) -> Iterator[Path]:
-    """A cache of compiled models and FMUs for this session only (HPCOSIM_CACHE, inherited by
+    """A cache of compiled models and FMUs for this test run only (HPCOSIM_CACHE, inherited by
     the CLI and controller processes the tests start): the suite never reads or writes the
-    user's ~/.cache/hpcosim, and never reuses a build from another checkout."""
-    path = tmp_path_factory.mktemp("hpcosim-cache")
+    user's ~/.cache/hpcosim, and never reuses a build from another checkout.  The parallel
+    workers of one run (pytest-xdist) share it, in the run's own temporary folder, and so do
+    the two phases of ``make test`` (``HPCOSIM_TEST_CACHE``, a folder it makes for the run):
+    each library and FMU is built once per run (the builders lock and rename, so a worker
+    waits for another's build and never sees half of it)."""
+    if os.environ.get("HPCOSIM_TEST_CACHE"):
+        # make test's two phases (Makefile): a folder it made for this run, removed after
+        path = Path(os.environ["HPCOSIM_TEST_CACHE"])
+        path.mkdir(parents=True, exist_ok=True)
+    elif os.environ.get("PYTEST_XDIST_WORKER"):
+        # <run's basetemp>/popen-gwN is this worker's; its parent is the run's, shared
+        path = tmp_path_factory.getbasetemp().parent / "hpcosim-cache"
+        path.mkdir(exist_ok=True)
+    else:
+        path = tmp_path_factory.mktemp("hpcosim-cache")
     before = os.environ.get("HPCOSIM_CACHE")
     os.environ["HPCOSIM_CACHE"] = str(path)
     yield path
@@ -106,3 +119,83 @@ def ctx(model, subsystem, template_gait):
 
     return ControllerContext(template_gait, tube_about_nominal(template_gait, (40, 60, 8)),
                              model, subsystem=subsystem)
+
+
+# --------------------------------------------------------------- parallel runs (pytest-xdist)
+
+#: ``make test`` runs the tests not marked ``serial`` on pytest-xdist workers with
+#: ``--dist loadfile``: the tests of one file go to one worker (its module fixtures are built
+#: once), except the tests named here (a file, or one test), which form the group given
+#: (:func:`pytest_xdist_make_scheduler`).  test_phzd checks the template gait's optimization
+#: that test_committed_gaits[template] reruns (the session fixture ``regenerated``): one
+#: worker solves it once for both.  The other two recipes are each heavy enough to go beside
+#: the rest of their file.
+XDIST_GROUPS = {
+    "tests/test_phzd.py": "template-gait",
+    "tests/test_committed_gaits.py::test_recipe_makes_the_committed_gait[template]":
+        "template-gait",
+    "tests/test_committed_gaits.py::test_recipe_makes_the_committed_gait[reference]":
+        "reference-gait",
+    "tests/test_committed_gaits.py::test_recipe_makes_the_committed_gait[playback]":
+        "playback-gait",
+}
+
+#: The heaviest groups' cost (s of one core, from ``--durations``, setup included, on a loaded
+#: machine): workers take groups in this order, longest first, and the short files fill in at
+#: the end.  Only the order depends on it (a group missing here goes after these, in
+#: collection order).
+XDIST_COST: dict[str, float] = {
+    "tests/test_experiments.py": 300,  # hpcosim demo end to end
+    "tests/test_sweep.py": 160,
+    "tests/test_gait_cli.py": 100,
+    "tests/test_controller_closed_loop.py": 100,
+    "template-gait": 80,
+    "playback-gait": 65,
+    "tests/test_sweep_families.py": 60,
+    "tests/test_fmu_build.py": 50,
+    "reference-gait": 45,
+    "tests/test_animation.py": 40,
+    "tests/test_fmu_equivalence.py": 30,
+    "tests/test_cosim.py": 25,  # its tests that are not serial
+    "tests/test_model_error.py": 22,
+    "tests/test_playback_truth.py": 18,
+    "tests/test_mocap_checks.py": 18,
+    "tests/test_mocap_readers.py": 16,
+    "tests/test_mocap_synthetic.py": 16,
+    "tests/test_playback_cli.py": 16,
+}
+
+
+def xdist_group(nodeid: str) -> str:
+    """The group of the test ``nodeid`` in a parallel run: its file, unless
+    :data:`XDIST_GROUPS` names it (or its file)."""
+    nodeid = nodeid.split("@", 1)[0]
+    path = nodeid.split("::", 1)[0]
+    return XDIST_GROUPS.get(nodeid) or XDIST_GROUPS.get(path) or path
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log):
+    """``--dist loadfile`` with the groups of :func:`xdist_group` (xdist's own ``loadgroup``
+    marks the test ids, which pytest 9 no longer lets a plugin change)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_group(nodeid)
+
+    return GroupScheduling(config, log)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """On a worker, the collection in :data:`XDIST_COST` order (the scheduler hands out the
+    groups in the order of the collection, with ``--no-loadscope-reorder``)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return  # one process: the files' order, unchanged
+    group = {it.nodeid: xdist_group(it.nodeid) for it in items}
+    first_seen = {g: i for i, g in enumerate(dict.fromkeys(group.values()))}
+    items.sort(key=lambda it: (-XDIST_COST.get(group[it.nodeid], 0.0),
+                               first_seen[group[it.nodeid]]))

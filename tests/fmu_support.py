@@ -1,17 +1,21 @@
-"""Shared pieces of the FMU tests: one FMU build per test session (cached in the process), the
+"""Shared pieces of the FMU tests: one FMU build per test run (shared by parallel workers), the
 nominal-PD policy table of a gait, and the matching in-process simulator run."""
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.compiled import cache_root
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
 from human_fmu import build_fmu
+from human_fmu.build import builder_digest
 from tests.fmu_runner import DOMAINS, NominalPD
 
 #: PD gains (joint N m/rad, N m s/rad): stiff in stance, softer on the light swinging leg.
@@ -25,14 +29,22 @@ _BUILT: dict[str, Path] = {}
 
 def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait,
               fmi_version: int = 2) -> tuple[Path, Path]:
-    """(fmu path, gait path), built once per process for this gait and FMI version."""
-    key = f"{gait.hash()}-fmi{fmi_version}"
-    if key not in _BUILT:
-        d = tmp_path_factory.mktemp(f"fmu{fmi_version}")
-        save_gait(d / "gait.json", gait)
-        build_fmu(d / "gait.json", d / "human.fmu", model=model, fmi_version=fmi_version)
-        _BUILT[key] = d
-    d = _BUILT[key]
+    """(fmu path, gait path), built once per test run for this gait and FMI version: in the
+    session's private cache (tests/conftest.py, ``private_cache``), which parallel workers
+    share; a worker that wants an FMU another one is building waits for it (a file lock).
+    Read only: a test that changes an FMU or its gait copies it first."""
+    key = hashlib.sha256(f"{gait.hash()}\0{model.parameter_hash()}\0{builder_digest()}"
+                         .encode()).hexdigest()[:16] + f"-fmi{fmi_version}"
+    d = cache_root() / "test-fmu" / key
+    if str(d) not in _BUILT:
+        d.mkdir(parents=True, exist_ok=True)
+        with open(d.parent / f".{key}.lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not (d / "human.fmu").is_file():
+                save_gait(d / "gait.json", gait)
+                build_fmu(d / "gait.json", d / "human.fmu", model=model,
+                          fmi_version=fmi_version)
+        _BUILT[str(d)] = d
     return d / "human.fmu", d / "gait.json"
 
 

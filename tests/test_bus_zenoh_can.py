@@ -296,6 +296,7 @@ def test_malformed_payloads_and_foreign_keys_are_skipped(pair):
         pub.undeclare()
 
 
+@pytest.mark.serial  # all 40 frames must arrive within the 0.3 s sleep (wall time)
 def test_full_receive_ring_drops_the_oldest_frames():
     ep = loopback_endpoint()
     with ZenohBus("t5/plant", listen=ep) as plant, \

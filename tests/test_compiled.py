@@ -46,6 +46,41 @@ def test_cache_and_interpreter(tmp_path, monkeypatch):
         assert s[0] == pytest.approx(np.sum(xv**2))
 
 
+def test_concurrent_builders_compile_a_library_once(tmp_path, monkeypatch):
+    """Processes sharing a cache (parallel test workers, Dask workers) that want the same
+    library at once: one compiles it, the others wait and load it; nothing half-written is
+    ever in the cache."""
+    import subprocess
+    import threading
+
+    import hp_model.compiled as compiled
+
+    monkeypatch.setenv("HPCOSIM_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f_race", [x], [ca.cos(x)])
+    calls: list[list[str]] = []
+    real_run = subprocess.run
+
+    def slow_compiler(cmd, **kw):
+        calls.append(cmd)
+        threading.Event().wait(0.3)  # the others arrive while this one compiles
+        return real_run(cmd, **kw)
+
+    monkeypatch.setattr(compiled.subprocess, "run", slow_compiler)
+    got: list = []
+    threads = [threading.Thread(target=lambda: got.append(compiled.compile_library([f], "race")))
+               for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert len(calls) == 1 and len(got) == 4 and len(set(got)) == 1
+    assert [p.name for p in (tmp_path / "casadi").glob("race_*")] == [got[0].name]
+    assert not [p for p in (tmp_path / "casadi").iterdir() if p.is_dir()]  # no temp left
+    y = FunctionSet([f], "race")["f_race"](np.array([0.0, 1.0]))[0]
+    np.testing.assert_allclose(y, np.cos([0.0, 1.0]), rtol=1e-15)
+
+
 def test_numeric_function_rejects_wrong_arity():
     x = ca.SX.sym("x")
     nf = NumericFunction(ca.Function("g", [x], [x * 2]))

@@ -53,6 +53,17 @@ from tests.full_disk import run_with_file_limit
 ROOT = Path(__file__).resolve().parents[1]
 CTRL = "clfqp"  # the default controller: walks the template gait
 
+#: Serial (``make test`` runs these after the parallel phase, alone on the machine): these
+#: tests judge a co-simulation against wall-clock limits a busy CPU can break.  Lockstep: every
+#: reply within ``reply_timeout`` (0.25 s of wall time), else the period counts as missed and
+#: the plant holds the last torque, so ``missed == 0`` and the bit-for-bit comparisons of the
+#: ``lockstep`` fixture's run fail; realtime: 2 ms slots, the watchdog's 5 periods and the
+#: stall's wall-time accounting.  The two processes of a lockstep run are each pinned to one of
+#: the two CPUs and poll for the other's frames: a parallel test worker would compete with both.
+#: The co-simulations here that only check what a late reply cannot change (a kill, a signal,
+#: a full disk) run in parallel.
+serial = pytest.mark.serial
+
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory, model, template_gait):
@@ -82,6 +93,7 @@ def lockstep(files, model):
 # --------------------------------------------------------------------------- evidence
 
 
+@serial
 def test_lockstep_run_completes(lockstep):
     res, _ = lockstep
     assert not res.faulted and not res.fell, res
@@ -101,6 +113,7 @@ def test_lockstep_run_completes(lockstep):
     assert 0 < t["fmu"] < t["tick"] and 0 < t["record"] < t["round_trip"] < t["tick"]
 
 
+@serial
 def test_recording_reads_back_every_channel_decodes(lockstep):
     res, path = lockstep
     with open(path, "rb") as f:
@@ -131,6 +144,7 @@ def test_recording_reads_back_every_channel_decodes(lockstep):
     assert rec.counts["/can/tx"] == res.frames_tx
 
 
+@serial
 def test_lockstep_equals_in_process_simulation(lockstep, files, model):
     """Same scenario in process: the controller fed codec-quantized measurements (the IMU's
     socket pitch included), its torque quantized as on the bus; prosthesis angles agree to
@@ -198,6 +212,7 @@ def _clf_in_process(path: Path, files, model, name: str) -> dict[int, tuple[floa
     return out
 
 
+@serial
 def test_clf_values_travel_in_ctrlclf_frames(lockstep, files, model):
     """clfqp's V and rho of every tick go out in a CtrlClf frame (protected: none rejected,
     one per tick), become Command.V/.rho and /controller/clf: finite, >= 0, present in every
@@ -225,6 +240,7 @@ def test_clf_values_travel_in_ctrlclf_frames(lockstep, files, model):
     assert diag and all((o["V"], o["rho"]) == ref[round(o["t"] * 1e6)] for o in diag)
 
 
+@serial
 def test_pd_sends_its_v_and_no_rho(files, model):
     """A controller without a relaxation (PD): CtrlClf carries its V (the CLF evaluated in
     ps, as in process) and rho absent, so Command.rho and /controller/clf's rho are null.
@@ -241,6 +257,7 @@ def test_pd_sends_its_v_and_no_rho(files, model):
     assert len(ref) == res.ticks and all(clf[us]["V"] == ref[us][0] for us in ref)
 
 
+@serial
 def test_replay_same_controller_zero_difference(lockstep, model):
     _, path = lockstep
     r = replay(path, model=model)
@@ -248,11 +265,13 @@ def test_replay_same_controller_zero_difference(lockstep, model):
     assert r.max_torque_diff == 0.0
 
 
+@serial
 def test_replay_other_controller_differs(lockstep, model):
     _, path = lockstep
     assert replay(path, "pd", model=model).max_torque_diff > 0
 
 
+@serial
 def test_play_to_virtual_bus(lockstep):
     res, path = lockstep
     tx = can.Bus(interface="virtual", channel="cosim-replay")
@@ -268,6 +287,7 @@ def test_play_to_virtual_bus(lockstep):
     assert n == res.frames_tx == got
 
 
+@serial
 def test_refit_tube(lockstep, files, model):
     _, path = lockstep
     out = files["dir"] / "refit.json"
@@ -276,6 +296,7 @@ def test_refit_tube(lockstep, files, model):
     assert 0.0 <= rep["old_coverage_samples"] <= 1.0
 
 
+@serial
 def test_recorded_model_error_estimates_and_refit(lockstep, files, tmp_path):
     """clfqp's online model-error estimates travel in CtrlDisturbance frames, are recorded
     (/controller/disturbance, finite, with phase and time since touchdown), the status
@@ -326,6 +347,7 @@ def test_controller_killed_mid_run(files, model):
         or r.metadata["summary"]["faulted"] == "true"
 
 
+@serial
 @pytest.mark.parametrize("mode", ["lockstep", "realtime"])
 def test_controller_hung_alive_is_detected_by_missing_replies(files, model, mode):
     """SIGSTOP: the controller process stays alive (its zenoh liveliness token too), only
@@ -361,6 +383,7 @@ EXPECTED = {"duplicate": "duplicate", "corrupt-counter": "bad_counter",
             "drop": None, "delay": None}
 
 
+@serial
 @pytest.mark.parametrize("case", list(EXPECTED))
 def test_frame_faults_rejected_and_counted(files, model, case):
     res = run_cosim(cfg(files, steps=1, perturb=f"{case}:50:37:5", max_time=0.35),
@@ -634,6 +657,7 @@ def test_fault_plan_parse():
         FaultPlan.parse("melt")
 
 
+@serial
 def test_realtime_mode_reports_latency(files, model):
     # 2 ms period (the DBC cycle): 1 ms is marginal on these loaded 2-core machines
     res = run_cosim(cfg(files, mode="realtime", max_time=0.3, steps=5, dt=2e-3), model=model)
@@ -642,6 +666,7 @@ def test_realtime_mode_reports_latency(files, model):
     assert res.latency_us["n"] > 0 and res.latency_us["median"] > 0
 
 
+@serial
 def test_realtime_watchdog_is_five_periods(files, model):
     """Real time: a controller killed at period 100 leaves the plant on safe torque after 5
     silent periods, as in lockstep (a late reply to an earlier period counts as late, not
@@ -686,6 +711,7 @@ def test_recording_interrupted_by_signal_is_readable(files, sig):
     assert len(gt) > 0 and int(summary["ticks"]) == len(gt)
 
 
+@serial
 def test_refit_refuses_another_gait_and_writes_nothing(lockstep, files, model, tmp_path,
                                                        template_gait):
     """A recording made with one gait refitted against another: one line naming the
@@ -712,6 +738,7 @@ def test_refit_refuses_another_gait_and_writes_nothing(lockstep, files, model, t
     assert not out.exists()
 
 
+@serial
 def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model, lockstep,
                                                                     monkeypatch):
     """Another process joins the run's link as a controller would (same run id, the plant's
@@ -748,6 +775,7 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
     assert len(a) == res.ticks and a == b
 
 
+@serial
 def test_realtime_plant_that_falls_behind_skips_and_records(files, model):
     """Real time: a plant stalled for 60 ms (30 periods of 2 ms) neither bursts through the
     backlog nor faults on its own lateness: its schedule moves forward past ``max_lag``,

@@ -74,8 +74,10 @@ def test_constrained_motion_keeps_constraints_and_energy(model, rng, record_prop
             drift_v = max(drift_v, np.abs(J @ x[n:]).max())
         E = np.array([_energy(fs, x[:n], x[n:])[0] for x in sol.y.T])
         Tmax = max(_energy(fs, x[:n], x[n:])[1] for x in sol.y.T)
-        record_property(f"{dom}_constraint_drift_m_rad", drift_h)
-        record_property(f"{dom}_constraint_velocity_drift", drift_v)
+        # plain floats: a parallel worker sends the properties to pytest-xdist's controller,
+        # which cannot serialize numpy scalars
+        record_property(f"{dom}_constraint_drift_m_rad", float(drift_h))
+        record_property(f"{dom}_constraint_velocity_drift", float(drift_v))
         print(f"{dom}: over 0.5 s, max |h - h0| = {drift_h:.2e}, max |J qd| = {drift_v:.2e}")
         assert drift_h < 1e-7, f"{dom}: constraint drift {drift_h:.2e}"
         assert drift_v < 1e-7, f"{dom}: constraint velocity drift {drift_v:.2e}"
