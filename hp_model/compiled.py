@@ -138,6 +138,8 @@ class NumericFunction:
             self._buf.set_res(i, memoryview(flat))
             self.outputs.append(flat if m == 1 else flat.reshape((n, m), order="F"))
         self._n_in = f.n_in()
+        #: the bound evaluation itself (what :meth:`call_inplace` calls), for hot loops
+        self.trigger = self._trigger
 
     def __call__(self, *args: np.ndarray | Sequence[float] | float) -> tuple[np.ndarray, ...]:
         if len(args) != self._n_in:

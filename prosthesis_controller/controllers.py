@@ -33,7 +33,7 @@ from prosthesis_controller.interface import (
     Diagnostics,
     QpOutcome,
 )
-from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, validate
+from prosthesis_controller.measurement import Fault, ProsthesisMeasurement, read
 from prosthesis_controller.polish import polish
 from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_SIGMA_UNIT, ControllerTerms
 
@@ -48,6 +48,8 @@ _ACTIVE_KL, _ACTIVE_KU = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
 _ACTIVE_AL, _ACTIVE_AU = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
 _ACTIVE_CLAMP = int(Active.OUTPUT_CLAMP)
 _NO_ESTIMATE = ((0.0, 0.0), False, False, 0)
+_tuple_new = tuple.__new__  # a NamedTuple without its Python-level __new__: all fields given
+assert len(Diagnostics._fields) == 14 and len(ControlOutput._fields) == 2
 
 
 def socket_pitch_fit(gait: Gait, model: HumanProsthesisModel, degree: int = PITCH_DEGREE
@@ -422,7 +424,8 @@ class BaseController:
 
     # -- the tick ---------------------------------------------------------------------
     def tick(self, meas: ProsthesisMeasurement) -> ControlOutput:
-        fault = validate(meas, self._t_prev, *self._vargs)
+        fault, t, qk, qa, vk, va, load, contact, pitch = read(meas, self._t_prev,
+                                                               *self._vargs)
         active = 0
         since = 0.0
         if fault:
@@ -433,15 +436,12 @@ class BaseController:
             status, mode = QpOutcome.NOT_RUN, ControllerMode.FAULT
             self._estimator_gap()
         else:
-            t = float(meas.t)
             self._t_prev = t
-            qk, qa = float(meas.knee_angle), float(meas.ankle_angle)
-            vk, va = float(meas.knee_vel), float(meas.ankle_vel)
-            if self._update_domain(t, bool(meas.contact), float(meas.foot_load)) == "ps":
+            if self._update_domain(t, contact, load) == "ps":
                 u0, u1, tau, V, rho, status, active, mode = self._stance(t, qk, qa, vk, va)
                 since = t - self._t_switch  # type: ignore[operator]
             else:
-                u0, u1, tau = self._swing_torque(t, qk, qa, vk, va, float(meas.socket_pitch))
+                u0, u1, tau = self._swing_torque(t, qk, qa, vk, va, pitch)
                 V = rho = 0.0
                 self._estimator_gap()
                 status, mode = QpOutcome.NOT_RUN, ControllerMode.SWING
@@ -459,10 +459,10 @@ class BaseController:
             active |= _ACTIVE_CLAMP
         self._u0, self._u1 = c0, c1
         est, valid, flag, count = self._estimate()
-        return ControlOutput(
-            np.array((c0, c1)),
-            Diagnostics(tau, V, rho, status, active, self.fallback_count, int(fault),
-                        self._domain, mode, est, valid, flag, count, since))
+        # the same NamedTuples, built without their Python-level __new__ (~0.4 us less)
+        return _tuple_new(ControlOutput, (np.array((c0, c1)), _tuple_new(
+            Diagnostics, (tau, V, rho, status, active, self.fallback_count, int(fault),
+                          self._domain, mode, est, valid, flag, count, since))))
 
 
 class PDController(BaseController):

@@ -50,6 +50,21 @@ def validate(m: object, t_prev: float, knee_range: tuple[float, float],
              ankle_range: tuple[float, float], max_speed: float,
              load_range: tuple[float, float]) -> Fault:
     """Fault flags of a measurement; ``t_prev`` is the last accepted time (-inf at first)."""
+    return read(m, t_prev, knee_range, ankle_range, max_speed, load_range)[0]
+
+
+_UNREAD = (math.nan,) * 6 + (False, math.nan)
+_ANGLE, _SPEED = int(Fault.ANGLE_RANGE), int(Fault.SPEED_RANGE)
+_LOAD, _TIME = int(Fault.LOAD_RANGE), int(Fault.TIME)
+
+
+def read(m: object, t_prev: float, knee_range: tuple[float, float],
+         ankle_range: tuple[float, float], max_speed: float,
+         load_range: tuple[float, float]
+         ) -> tuple[Fault, float, float, float, float, float, float, bool, float]:
+    """:func:`validate` and the fields it read, as the controller's tick uses them:
+    (fault, t, knee_angle, ankle_angle, knee_vel, ankle_vel, foot_load, contact,
+    socket_pitch), floats and a bool (NaNs and False for a ``Fault.TYPE``)."""
     try:
         t = float(m.t)  # type: ignore[attr-defined]
         qk, qa = float(m.knee_angle), float(m.ankle_angle)  # type: ignore[attr-defined]
@@ -58,20 +73,21 @@ def validate(m: object, t_prev: float, knee_range: tuple[float, float],
         contact = m.contact  # type: ignore[attr-defined]
         pitch = float(getattr(m, "socket_pitch", math.nan))
     except (AttributeError, TypeError, ValueError):
-        return Fault.TYPE
+        return (Fault.TYPE, *_UNREAD)
     if contact not in (True, False):  # bool, 0/1, numpy bools; not "yes", NaN or 0.5
-        return Fault.TYPE
-    f = Fault.NONE
+        return (Fault.TYPE, *_UNREAD)
     isf = math.isfinite
     if not (isf(t) and isf(qk) and isf(qa) and isf(vk) and isf(va) and isf(load)) \
             or math.isinf(pitch):  # a NaN pitch: no IMU
-        return Fault.NON_FINITE
+        return Fault.NON_FINITE, t, qk, qa, vk, va, load, bool(contact), pitch
+    # plain ints on the valid path (IntFlag operations cost ~0.5 us each)
+    f = 0
     if not (knee_range[0] <= qk <= knee_range[1] and ankle_range[0] <= qa <= ankle_range[1]):
-        f |= Fault.ANGLE_RANGE
+        f |= _ANGLE
     if abs(vk) > max_speed or abs(va) > max_speed:
-        f |= Fault.SPEED_RANGE
+        f |= _SPEED
     if not load_range[0] <= load <= load_range[1]:
-        f |= Fault.LOAD_RANGE
+        f |= _LOAD
     if not t > t_prev:
-        f |= Fault.TIME
-    return f
+        f |= _TIME
+    return Fault(f) if f else Fault.NONE, t, qk, qa, vk, va, load, bool(contact), pitch
