@@ -17,9 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from characterization.mocap.butterworth import butter_sos, padlen, sosfiltfilt
-from characterization.mocap.spline import cubic_spline
+from scipy.interpolate import CubicSpline
+from scipy.signal import butter, sosfiltfilt
 
 NONE, RIGID_BODY, MARKERS, INTERPOLATED = 0, 1, 2, 3
 SOURCE_NAMES = {NONE: "none", RIGID_BODY: "rigid_body", MARKERS: "markers",
@@ -91,13 +90,9 @@ def fill_short_gaps(t: np.ndarray, y: np.ndarray, max_gap: int
         return y, filled, gaps
     todo = [(a, b) for a, b in gaps if b - a <= max_gap and a > 0 and b < len(y)]
     if todo:
+        spline = CubicSpline(t[ok], y[ok])
         idx = np.concatenate([np.arange(a, b) for a, b in todo])
-        if ok.sum() >= 4:
-            y[idx] = cubic_spline(t[ok], y[ok], t[idx])
-        else:  # scipy's lower-order fallbacks (a line, a parabola)
-            from scipy.interpolate import CubicSpline
-
-            y[idx] = CubicSpline(t[ok], y[ok])(t[idx])
+        y[idx] = spline(t[idx])
         filled[idx] = True
     return y, filled, gaps
 
@@ -106,9 +101,9 @@ def lowpass(y: np.ndarray, rate: float, cutoff: float, order: int = 2) -> np.nda
     """Zero-phase Butterworth low-pass over each finite run (NaN runs kept)."""
     if cutoff <= 0:
         return y
-    sos = butter_sos(order, cutoff / (rate / 2))
+    sos = butter(order, cutoff / (rate / 2), output="sos")
     out = np.array(y, dtype=float)
-    pad = padlen(sos)
+    pad = 3 * (2 * len(sos) + 1)
     for a, b in runs(np.isfinite(out)):
         if b - a > pad:
             out[a:b] = sosfiltfilt(sos, out[a:b])

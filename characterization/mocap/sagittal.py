@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from characterization.mocap.take import MocapError
 
@@ -79,7 +80,7 @@ class SagittalFrame:
         ok = np.all(np.isfinite(quat), axis=1)
         if not ok.any():
             return out
-        R = quaternion_matrix(quat[ok])  # (m, 3, 3) lab <- body
+        R = Rotation.from_quat(quat[ok]).as_matrix()  # (m, 3, 3) lab <- body
         if axis == "up":
             a = R @ self.up  # the body's up axis, in lab coordinates
             out[ok] = np.arctan2(a @ self.forward, a @ self.up)
@@ -89,17 +90,6 @@ class SagittalFrame:
         else:
             raise MocapError(f"rigid-body axis '{axis}': expected 'up' or 'forward'")
         return out
-
-
-def quaternion_matrix(quat: np.ndarray) -> np.ndarray:
-    """(m, 3, 3) rotation matrices of (m, 4) quaternions (x, y, z, w: scalar last, Motive's
-    order), normalised first; the same as scipy's ``Rotation.from_quat(q).as_matrix()``."""
-    x, y, z, w = (quat / np.linalg.norm(quat, axis=1, keepdims=True)).T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], 1)
 
 
 def auto_forward(trajectory: np.ndarray, up: np.ndarray, source: str, what: str) -> np.ndarray:
