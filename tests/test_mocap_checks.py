@@ -5,6 +5,8 @@ inferred from the data where the mapping leaves them to it."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -177,6 +179,25 @@ def test_inspect_prints_the_take_and_writes_a_mapping_that_processes(model, tmp_
                  str(tmp_path / "s2.npz")]) == 2
     err = capsys.readouterr().err
     assert f"no marker column '{TODO}' (mapping entry limbs.hat.markers)" in err
+
+
+@pytest.mark.parametrize("names,pair", [
+    (["LASI", "RASI", "LPSI", "RPSI"], ["LPSI", "LASI"]),  # Plug-in Gait lower body
+    (["RASI", "LASI", "SACR"], ["SACR", "RASI"]),
+    (["R.ASIS", "L.ASIS", "V.Sacral"], ["V.Sacral", "R.ASIS"]),
+    (["RPSIS", "LPSIS", "LASIS"], ["LPSIS", "LASIS"]),  # the same side where there is one
+    (["LASI", "RASI", "LPSI", "RPSI", "C7"], None),  # a trunk marker: distal -> proximal
+    (["LASI", "RASI"], None),  # no posterior marker: no pelvis pair
+    (["Pelvis:Marker1", "Pelvis:Marker2"], None),  # a rigid body's markers
+])
+def test_inspect_takes_the_pelvis_for_the_trunk_of_a_lower_body_marker_set(names, pair):
+    """A lower-body marker set has no marker above the pelvis: the skeleton's trunk is then
+    a posterior -> anterior pelvis pair (``pair_axis = "forward"``), not TODO (issue 19:
+    openOFM's Vicon C3D, ``tests/test_mocap_real.py``)."""
+    from characterization.mocap.inspection import LIMB_PATTERNS, _pelvis_pair
+
+    assert all(re.search(LIMB_PATTERNS["hat"], n, re.I) for n in names if ":" not in n)
+    assert _pelvis_pair(names) == pair
 
 
 def test_a_static_trial_calibrates_a_misplaced_skin_marker(model, coef, tmp_path, monkeypatch,

@@ -7,7 +7,9 @@ the file format's default, which ``mocap process`` then checks against the trunk
 feet), the walking axis the one the markers' centroid travels along the most.
 :func:`mapping_skeleton` writes a mapping TOML with every limb, joint and the segmentation
 filled by name patterns where the names allow it and ``"TODO"`` where they do not, every
-column name of the take listed in comments, for the user to edit.
+column name of the take listed in comments, for the user to edit.  A lower-body marker set
+(Plug-in Gait's LASI/RASI/LPSI/RPSI, no marker on the trunk) gets the pelvis as the trunk:
+a PSIS -> ASIS pair along the hat's forward axis.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ TODO = "TODO"
 TREADMILL_TRAVEL = 0.2
 #: limb -> name pattern (case-insensitive, searched in a rigid body's or marker's name)
 LIMB_PATTERNS = {
-    "hat": r"hat|trunk|torso|thorax|pelvis|sacr|back|chest|c7|strn|stern|clav|neck|mid_?hip",
+    "hat": r"hat|trunk|torso|thorax|pelvis|sacr|back|chest|c7|strn|stern|clav|neck|mid_?hip"
+           r"|(^|[^a-z])(l|r|left|right)?[_\s:.\-]?(asis?|psis?)($|[^a-z])",
     "l_thigh": r"(^|[^a-z])(l|left)[_\s:.\-]?(thigh|thi|femur|hip|knee|kne)",
     "l_shank": r"(^|[^a-z])(l|left)[_\s:.\-]?(shank|tib|shin|leg|knee|kne|ankle|ank)",
     "l_foot": r"(^|[^a-z])(l|left)[_\s:.\-]?(foot|big_?toe|toe|heel|hee|mt|meta)",
@@ -37,6 +40,12 @@ LIMB_PATTERNS = {
               r"|meta)",
 }
 _HEEL, _TOE = re.compile(r"heel|hee|cal", re.I), re.compile(r"toe|mt|meta", re.I)
+#: pelvis landmarks (Plug-in Gait's LASI/RASI/LPSI/RPSI/SACR, R.ASIS, V.Sacral): a lower-body
+#: marker set has no trunk marker above them, so the pelvis's pitch stands in for the trunk's
+#: (a posterior -> anterior pair along the hat's forward axis)
+_PELVIS = re.compile(r"(^|[^a-z])(l|r|left|right)?[_\s:.\-]?(asis?|psis?|sacr\w*)($|[^a-z])",
+                     re.I)
+_ANTERIOR = re.compile(r"asis?($|[^a-z])", re.I)
 _AXES = "xyz"
 
 
@@ -137,6 +146,20 @@ def _distal_proximal(take: Take, names: list[str], up: str | None) -> list[str]:
     return [known[0], known[-1]] if len(known) >= 2 else names[:2]
 
 
+def _pelvis_pair(names: list[str]) -> list[str] | None:
+    """For a trunk known only by its pelvis landmarks: a posterior (PSIS or sacrum) and an
+    anterior (ASIS) marker, of the same side where the names tell; None if the names are
+    not all pelvis landmarks or either kind is missing."""
+    if not names or not all(_PELVIS.search(n.split(":")[-1]) for n in names):
+        return None
+    front = [n for n in names if _ANTERIOR.search(n.split(":")[-1])]
+    back = [n for n in names if n not in front]
+    if not front or not back:
+        return None
+    same = [(b, f) for b in back for f in front if b[:1].lower() == f[:1].lower()]
+    return list(same[0]) if same else [back[0], front[0]]
+
+
 def _q(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
@@ -161,7 +184,9 @@ def mapping_skeleton(take: Take) -> str:
     for limb in LIMBS:
         rb, mk = _limb_guess(limb, take)
         foot = limb.endswith("foot")
-        pair = mk[:2] if foot else _distal_proximal(take, mk, s.up_axis)
+        pelvis = _pelvis_pair(mk) if limb == "hat" else None
+        pair = (mk[:2] if foot else pelvis if pelvis
+                else _distal_proximal(take, mk, s.up_axis))
         if foot and len(mk) >= 2:
             heel = next((m for m in mk if _HEEL.search(m.split(":")[-1])), None)
             toe = next((m for m in mk if _TOE.search(m.split(":")[-1]) and m != heel), None)
@@ -172,10 +197,14 @@ def mapping_skeleton(take: Take) -> str:
             lines.append(f"rigid_body = {_q(rb) if rb else _q(TODO)}"
                          + ("" if rb else "   # or delete this line if the limb has none"))
         a, b = [*pair, TODO, TODO][:2]
-        axis = "heel -> toe" if foot else "distal -> proximal"
+        axis = ("heel -> toe" if foot else
+                "posterior -> anterior (no trunk marker: the pelvis stands in)" if pelvis
+                else "distal -> proximal")
         lines.append(f"markers = [{_q(a)}, {_q(b)}]   # {axis}")
         if foot:
             lines += ['pair_axis = "forward"', 'rigid_body_axis = "forward"']
+        elif pelvis:
+            lines.append('pair_axis = "forward"')
         lines.append("")
         first[limb] = pair[0] if pair else TODO
     for j, (a, b) in JOINTS.items():
