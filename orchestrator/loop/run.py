@@ -16,7 +16,9 @@ in lockstep) gets the loop's bookkeeping into its wait: ``link.exchange(obs, idl
 its Command may be provisional (``V``/``rho`` not read yet: ``link.settle(cmd)`` completes
 it).  The loop logs and records period k's sample there, in period k + 1's ``idle`` (or
 after the last period): the same samples, recorded in the same order (a recorder's queue
-sees period k's records before anything the link queues after period k + 1's send).
+sees period k's records before anything the link queues after period k + 1's send); a
+plant with ``read_truth`` (the FMU: its state) reads what the period's truth needs beyond
+the observation there too, else in ``actuate``.
 
 The experiments, the sweeps (both backends) and the co-simulation all run through
 :func:`run_loop`; the order above is :meth:`hp_model.simulator.HybridSimulator.run`'s, so
@@ -96,6 +98,7 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
     k = 0
     late = bool(getattr(link, "idle_after_send", False))
     last: tuple[Observation, Command, Truth] | None = None  # late: not yet logged, recorded
+    read_truth = getattr(plant, "read_truth", None)
 
     def settle() -> None:
         """Log and record the last period (late links: in the next period's wait)."""
@@ -110,6 +113,12 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
         if recorder is not None:
             recorder.record(o, c, tr)
 
+    def idle() -> None:
+        """While the controller works: the last period's sample, this period's truth."""
+        settle()
+        if read_truth is not None:
+            read_truth()
+
     try:
         while stop is None or not stop.is_set():
             t0 = clock()
@@ -117,7 +126,7 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
             t1 = clock()
             if obs.held:
                 break
-            cmd = link.exchange(obs, settle) if late else link.exchange(obs)  # type: ignore[call-arg]
+            cmd = link.exchange(obs, idle) if late else link.exchange(obs)  # type: ignore[call-arg]
             t2 = clock()
             truth = plant.actuate(cmd.torque)
             if late:
