@@ -3,7 +3,8 @@ in its own process, CAN frames (AMPRO3 protocol) over zenoh between them, MCAP r
 
 Per tick k (t = k dt, dt = 1 ms by default) the plant
 
-1. reads the FMU outputs (sensors as AMPRO3 senses them, ground truth);
+1. reads the FMU outputs (sensors as AMPRO3 senses them; in lockstep the state for the
+   ground truth after step 2, while the controller works);
 2. emulates the AMPRO3 drives: encodes ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad``,
    ``SimTime`` (rolling counter k mod 16, timestamp t) and sends them (through the fault
    injector of the ``perturb`` case);
@@ -11,10 +12,12 @@ Per tick k (t = k dt, dt = 1 ms by default) the plant
    *lockstep* blocks for it (deterministic), *realtime* waits at most until the tick's wall
    deadline and otherwise holds the last torque (counted late; latency stats kept);
    other controller frames (heartbeat, status, rejects, CLF) are checked and recorded on
-   the way; the cycle's ``CtrlClf`` gives the period's ``Command.V`` and ``.rho`` (None when
-   absent or not received);
+   the way (lockstep: those of the reply sample before its TorqueCmd after the next
+   cycle's send, :meth:`CanLink.settle`); the cycle's ``CtrlClf`` gives the period's
+   ``Command.V`` and ``.rho`` (None when absent or not received);
 4. sets the torque inputs, reads the socket force (it depends on them), records ground
-   truth, and steps the FMU by dt.
+   truth (lockstep: queued after the next cycle's send, in the same order), and steps the
+   FMU by dt.
 
 Fault handling: a missing reply holds the last torque; ``watchdog_periods`` (5) missed
 replies in a row, the controller's liveliness token disappearing, or its heartbeat reporting
@@ -591,7 +594,16 @@ class CanLink:
     :attr:`Command.fault`.  Recording is deferred: the tick's frames are queued as they
     happen and serialized while the plant waits for the reply.  The cycle's ``CtrlClf``
     frame gives :attr:`Command.V` and :attr:`Command.rho` (None when the frame says absent,
-    or when no good frame of this cycle came)."""
+    or when no good frame of this cycle came).
+
+    In lockstep under :func:`orchestrator.loop.run_loop` (:attr:`idle_after_send`) only what
+    the torque needs is on the way from the reply to the next send: the reply sample's
+    ``TorqueCmd`` is checked first (a frame's verdict depends on its own id's counter state
+    alone, so it is the verdict it gets after the frames before it); the frames before it
+    are checked, and their records queued, in the loop's ``idle`` after the next cycle's
+    send (:meth:`settle`), before any other controller frame: the same verdicts, counts,
+    Command and records in the same order.  A reply sample of another shape (a fault, a
+    python-can bus) is taken frame by frame as before."""
 
     def __init__(self, cfg: CosimConfig, plan: FaultPlan, bus: Any, rec: Any, proc: Any,
                  lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
