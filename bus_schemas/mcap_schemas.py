@@ -273,12 +273,6 @@ def can_frame_message(msg: can.Message, direction: str, *, name: str | None = No
             "status": None if status is None else str(status)}
 
 
-def _built(pairs: list[tuple[str, Any]]) -> list[tuple[str, Any]]:
-    """The (topic, message) pairs of a :meth:`Recorder.defer_many` entry already built,
-    the rest of one that :meth:`Recorder.write_deferred` stopped in."""
-    return pairs
-
-
 def _can_record(msg: can.Message, direction: str, name: str | None, status: str | None
                 ) -> dict[str, Any]:
     return can_frame_message(msg, direction, name=name, status=status)
@@ -674,10 +668,8 @@ class Recorder:
 
     def write_deferred(self, stop: Callable[[], bool] | None = None) -> int:
         """Write the queued messages in queue order; returns how many. ``stop``: asked
-        before each message, True leaves the rest queued (for a later call or
-        :meth:`finish`: the file's records and their order are the same either way; the
-        messages of a :meth:`defer_many` entry are built together, and those not yet
-        written stay first in the queue)."""
+        before each queue entry, True leaves the rest queued (for a later call or
+        :meth:`finish`: the file's records and their order are the same either way)."""
         n = 0
         q = self._deferred
         while q and not self.finished:
@@ -685,11 +677,7 @@ class Recorder:
                 break
             topic, build, args, ns = q.popleft()
             if topic is None:
-                pairs = list(build(*args))  # type: ignore[misc]
-                for i, (tp, message) in enumerate(pairs):
-                    if i and stop is not None and stop():
-                        q.appendleft((None, _built, (pairs[i:],), ns))
-                        return n
+                for tp, message in build(*args):  # type: ignore[misc]
                     self.write(tp, message, ns)
                     n += 1
                 continue

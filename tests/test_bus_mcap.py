@@ -238,29 +238,6 @@ def test_append_messages_writes_the_bytes_add_message_writes(compression):
     assert got == sorted((t, seq, data) for _, seq, t, _, data in rows)
 
 
-def test_write_deferred_stops_between_the_messages_of_an_entry(tmp_path):
-    """``write_deferred(stop)`` asks before each message: a ``defer_many`` entry stopped in
-    leaves its unwritten messages first in the queue; the file holds the same messages in
-    the same order as one uninterrupted write."""
-    pairs = [("/prosthesis/measurements", measurements(i)) for i in range(3)]
-    paths = []
-    for stops in ([], [True], [False, True, True, False, True]):
-        path = tmp_path / f"s{len(paths)}.mcap"
-        paths.append(path)
-        asked = iter(stops)
-        rec = Recorder(path)
-        rec.register_all()
-        rec.defer_many(5, lambda: pairs)
-        rec.defer_call("/ground_truth", 7, ground_truth, 7)
-        while rec.deferred:
-            rec.write_deferred(lambda asked=asked: next(asked, False))
-        rec.finish()
-    want = list(read_messages(paths[0]))
-    assert [topic for topic, _, _ in want] == ["/prosthesis/measurements"] * 3 + [
-        "/ground_truth"]
-    assert all(list(read_messages(p)) == want for p in paths[1:])
-
-
 def test_deferred_writes_are_built_late_written_in_order_and_on_finish(tmp_path):
     path = tmp_path / "d.mcap"
     built = []

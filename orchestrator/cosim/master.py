@@ -579,9 +579,6 @@ def _summary_dict(res: CosimResult) -> dict[str, Any]:
 #: record queue entries the plant may leave for later waits when the controller's reply
 #: comes before the serialization is done (a few ticks' worth)
 MAX_BACKLOG = 64
-#: while serializing records, the plant asks whether the controller's reply is here at most
-#: this often [ns] (CanLink._reply_here)
-ASK_NS = 8_000
 
 
 class CanLink:
@@ -642,7 +639,6 @@ class CanLink:
         self._held: tuple[list[Any], Any, codec.Verdict, float, tuple[float, float]] | None = None
         #: the Command :meth:`settle` completes, and its cycle's time
         self._provisional: tuple[Command, float] | None = None
-        self._asked = 0  # perf_counter_ns of the last question to the bus (_reply_here)
 
     @property
     def idle_after_send(self) -> bool:
@@ -694,13 +690,7 @@ class CanLink:
     def _reply_here(self) -> bool:
         """Stop serializing records: a controller frame is here, and at most
         :data:`MAX_BACKLOG` queue entries are left (serializing keeps up with the run; what
-        is left goes in the next waits).  Asked before each record; the bus is asked at
-        most every :data:`ASK_NS` of serializing (a reply waits for at most about that
-        much of it, the asking costing a fraction of it)."""
-        now = time.perf_counter_ns()
-        if now - self._asked < ASK_NS:
-            return False
-        self._asked = now
+        is left goes in the next waits)."""
         return self.rec.deferred <= MAX_BACKLOG and self.frames.ready()
 
     def _defer_rx(self, items: list[tuple[Any, codec.Verdict]], t: float) -> None:
@@ -797,7 +787,6 @@ class CanLink:
             # stopping as soon as the reply is here (the rest waits for the next tick's wait)
             r0 = clock()
             rec.defer_many(self.log_ns(t), tx_records, frames, self.names, s, t_us, k % 16)
-            self._asked = 0  # the first entry waits for the bus's answer
             rec.write_deferred(self._reply_here)
             self.t_rec.append(clock() - r0)
         w0 = clock()
