@@ -980,15 +980,21 @@ def rx_records(items: list[tuple[Any, codec.Verdict]], ratio: tuple[float, float
     return out
 
 
+_Q_ANGLE = codec.scalar_quantizer(FrameId.KNEE_FEEDBACK, "KneeAngle")  # quantize_angle
+_Q_VELOCITY = codec.scalar_quantizer(FrameId.KNEE_FEEDBACK, "KneeVelocity")
+_Q_LOAD = codec.scalar_quantizer(FrameId.FOOT_LOAD, "FootNormalLoad")
+_Q_PITCH = codec.scalar_quantizer(FrameId.SOCKET_IMU, "SocketPitch")
+
+
 def measurement_record(s: Sensed, t_us: int, counter: int) -> dict[str, Any]:
     """``/prosthesis/measurements``: what AMPRO3 senses (``s``) as the controller decodes it
-    (codec quantization)."""
-    return {"knee_angle": codec.quantize_angle(s.knee_angle),
-            "knee_velocity": codec.quantize_velocity(s.knee_velocity),
-            "ankle_angle": codec.quantize_angle(s.ankle_angle),
-            "ankle_velocity": codec.quantize_velocity(s.ankle_velocity),
-            "foot_load": codec.quantize_load(s.foot_load), "contact": s.contact,
-            "socket_pitch": (codec.quantize_pitch(s.socket_pitch)
+    (codec quantization: ``quantize_angle`` etc., their constants bound once)."""
+    return {"knee_angle": _Q_ANGLE(s.knee_angle),
+            "knee_velocity": _Q_VELOCITY(s.knee_velocity),
+            "ankle_angle": _Q_ANGLE(s.ankle_angle),
+            "ankle_velocity": _Q_VELOCITY(s.ankle_velocity),
+            "foot_load": _Q_LOAD(s.foot_load), "contact": s.contact,
+            "socket_pitch": (_Q_PITCH(s.socket_pitch)
                              if math.isfinite(s.socket_pitch) else None),
             "sim_time_us": t_us % (1 << 32), "counter": counter}
 
