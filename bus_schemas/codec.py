@@ -576,6 +576,24 @@ def quantize(frame: int | str, signal: str, x: Any) -> Any:
     return round((v - sig.offset) / sig.scale) * sig.scale + sig.offset
 
 
+def scalar_quantizer(frame: int | str, signal: str) -> Callable[[float], float]:
+    """:func:`quantize` of ``frame.signal`` for a scalar, the signal's constants bound once
+    (the same operations, so the same floats: for a hot path quantizing every tick)."""
+    spec, sig = _signal(frame, signal)
+    lo, hi, off, scale, linear = sig.minimum, sig.maximum, sig.offset, sig.scale, sig.linear
+    name = f"{spec.name}.{signal}"
+
+    def q(x: float) -> float:
+        v = float(x)
+        if v != v:
+            raise ValueError(f"{name}: NaN cannot be encoded")
+        v = lo if v < lo else hi if v > hi else v
+        if not linear:
+            return round(v)
+        return round((v - off) / scale) * scale + off
+    return q
+
+
 def quantize_angle(x: Any) -> Any:
     """Joint angle as decoded (step 1e-5 rad, clamped to +-3.2 rad)."""
     return quantize(FrameId.KNEE_FEEDBACK, "KneeAngle", x)

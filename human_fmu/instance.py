@@ -130,6 +130,8 @@ class HumanFmu:
         self.fmu.instantiate()
         self._c = self.fmu.component
         self._out = _Buffer(self.vr, SENSORS + STATE, fmi2Real)
+        self._sensors = _Buffer(self.vr, SENSORS, fmi2Real)
+        self._state = _Buffer(self.vr, STATE, fmi2Real)
         self._ints = _Buffer(self.vr, COUNTS, fmi2Integer)
         self._fall = _Buffer(self.vr, ("fall",), fmi2Boolean)
         self._u = _Buffer(self.vr, INPUTS, fmi2Real)
@@ -192,16 +194,32 @@ class HumanFmu:
         return (self.unzipdir / "modelDescription.xml").read_bytes()
 
     # -- the per-tick exchange -------------------------------------------------------------
-    def read(self) -> FmuReading:
-        """The outputs at the start of the current period."""
+    def read(self, state: bool = True) -> FmuReading:
+        """The outputs at the start of the current period; ``state`` False: all but the
+        state (``FmuReading.state`` empty; :meth:`read_state` reads it, the same values
+        until the next step)."""
         c = self._c
-        s, i, b = self._out, self._ints, self._fall
+        i, b = self._ints, self._fall
+        if not state:
+            s = self._sensors
+            self._get_real(c, s.refs, s.n, s.values)
+            self._get_integer(c, i.refs, i.n, i.values)
+            self._get_boolean(c, b.refs, b.n, b.values)
+            dom, steps, code = i.values
+            return FmuReading(s.values[:], [], dom, steps, code, b.values[0] != 0)
+        s = self._out
         self._get_real(c, s.refs, s.n, s.values)
         self._get_integer(c, i.refs, i.n, i.values)
         self._get_boolean(c, b.refs, b.n, b.values)
         n, v = self._n_sensors, s.values
         dom, steps, code = i.values
         return FmuReading(v[:n], v[n:], dom, steps, code, b.values[0] != 0)
+
+    def read_state(self) -> list[float]:
+        """The state (``STATE``: q, qd) at the start of the current period."""
+        s = self._state
+        self._get_real(self._c, s.refs, s.n, s.values)
+        return s.values[:]
 
     def set_torque(self, knee: float, ankle: float) -> None:
         """The prosthesis motor torques held over the next step [N m]."""

@@ -133,6 +133,9 @@ class ControllerNode:
         self._wrap = 0
         self._last_us: int | None = None
         self.tick_time = Durations()  # controller.tick per cycle
+        #: the last tick's bookkeeping (diagnostics, its fault flags, its duration [ns]),
+        #: done after its reply is sent (:meth:`after_send`)
+        self._book: tuple[Any, int] | None = None
         controller.reset()
 
     # -- frames in, frames out
@@ -163,7 +166,25 @@ class ControllerNode:
         self._last_us = us
         return (us + self._wrap) * 1e-6
 
+    def after_send(self) -> None:
+        """The last tick's bookkeeping (its duration, diagnostics and the fault flags they
+        raise), left for after its reply was sent; done at the latest before anything reads
+        it (the next cycle, a status frame, the watchdog, the summary)."""
+        b = self._book
+        if b is None:
+            return
+        self._book = None
+        d, ns = b
+        self.tick_time.add(ns)
+        self._last_diag = d
+        if d.qp_status in _QP_FAILURES:
+            self._flags |= FaultFlag.QP_FAILED
+        if int(d.active) & _OUTPUT_CLAMP:
+            self._flags |= FaultFlag.TORQUE_SATURATED
+
     def _cycle(self, v: codec.Verdict, now: float) -> list[codec.Frame]:
+        if self._book is not None:
+            self.after_send()
         self._last_cycle = now
         fresh = True
         pending, last, c = self.pending, self.last, v.counter
@@ -195,13 +216,8 @@ class ControllerNode:
                                      bool(ld.contact), pitch)
         t0 = time.perf_counter_ns()
         res = self.controller.tick(meas)
-        self.tick_time.add(time.perf_counter_ns() - t0)
         d = res.diagnostics
-        self._last_diag = d
-        if d.qp_status in _QP_FAILURES:
-            self._flags |= FaultFlag.QP_FAILED
-        if int(d.active) & _OUTPUT_CLAMP:
-            self._flags |= FaultFlag.TORQUE_SATURATED
+        self._book = (d, time.perf_counter_ns() - t0)  # after the reply (after_send)
         self.state = _RUNNING
         ts, ticks = v.timestamp, self.ticks
         if ticks % self.heartbeat_every == 0:
@@ -230,6 +246,8 @@ class ControllerNode:
         return codec.heartbeat_frame(self.state, self.ticks, c, timestamp=ts)
 
     def status_frames(self, ts: float = 0.0) -> list[codec.Frame]:
+        if self._book is not None:
+            self.after_send()  # this tick's diagnostics and flags go in its status
         d = self._last_diag
         qp = QP_STATUS[d.qp_status] if d is not None else QpStatus.NOT_RUN
         frames = codec.encode_status(self._flags, qp, 0,
@@ -246,6 +264,8 @@ class ControllerNode:
         """Watchdog: SAFE state (zero torque, disabled) when no cycle came for
         ``watchdog`` s; repeated every ``watchdog`` s while it lasts."""
         now = time.monotonic() if now is None else now
+        if self._book is not None:
+            self.after_send()
         if self._last_cycle is None or now - self._last_cycle < self.watchdog:
             return []
         if self.state != CtrlState.SAFE:
@@ -300,11 +320,12 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
                 if first is None:
                     first = clock()
                 out = node.handle_frames(got, now)
-                if out:  # the reply first; the watchdog after it
+                if out:  # the reply first; the bookkeeping and the watchdog after it
                     send_frames(bus, out)
                     if first is not None and out[-1].arbitration_id == _TORQUE:
                         cycle.add(clock() - first)
                         first = None
+                    node.after_send()
             send_frames(bus, node.poll(now))
             if plant_watch is not None:
                 for alive in plant_watch.poll():
@@ -327,6 +348,7 @@ def _summary(node: ControllerNode, why: str, cycle: Durations, usage: Usage
     tick, encoding, sending); ``usage``: the process's CPU time and context switches
     while serving (all threads, zenoh's included); ``coverage_count``: ticks whose
     model-error estimate left the tube's characterised bound (0 without one)."""
+    node.after_send()
     d = node._last_diag
     return {"reason": why, "ticks": node.ticks, "stale_cycles": node.stale_cycles,
             "safe_entries": node.safe_entries,

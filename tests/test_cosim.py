@@ -549,6 +549,89 @@ def test_can_link_takes_v_and_rho_from_the_cycles_ctrlclf():
         ctrl_bus.shutdown()
 
 
+class _SampleBus:
+    """A bus giving prepared samples (lists of Frames), one per receive."""
+
+    def __init__(self, samples):
+        self.samples, self.sent = list(samples), []
+
+    def recv_frames(self, timeout=None):
+        return self.samples.pop(0) if self.samples else []
+
+    def poll_frames(self):
+        return []
+
+    def send_batch(self, msgs):
+        self.sent.append(list(msgs))
+
+
+def test_can_link_settled_late_equals_taken_at_once():
+    """CanLink in lockstep under run_loop (``exchange(obs, idle)``, then ``settle``): the
+    reply frames before this cycle's TorqueCmd checked after the next send give the same
+    Commands (torque, V, rho), verdict counts, controller state, rejects and status as
+    taking every frame at once; samples of another shape (the TorqueCmd not last, a bad
+    TorqueCmd) are taken frame by frame."""
+    def f(m):
+        return codec.Frame(m.timestamp, m.arbitration_id, bytes(m.data))
+
+    def samples():
+        out = []
+        for k in range(8):
+            ts = k * 1e-3
+            s = [codec.heartbeat_frame(CtrlState.RUNNING, k, k % 16, timestamp=ts)]
+            s.append(codec.clf_frame(0.01 * (k + 1), 0.5 if k % 2 else None,
+                                     k % 16 if k != 3 else 1, timestamp=ts))  # 3: replayed
+            if k == 2:  # a corrupted CtrlClf
+                s[-1] = codec.Frame(ts, s[-1].arbitration_id,
+                                    bytes([s[-1].data[0] ^ 1]) + s[-1].data[1:])
+            if k == 4:
+                s += [f(m) for m in codec.encode_status(0, 1, 0, 3, 0, {"bad_checksum": 2},
+                                                        timestamp=ts)]
+            if k == 5:
+                s.append(codec.disturbance_frame(0.1, 0.2, 0.3, True, False, 0.01,
+                                                 timestamp=ts))
+            torque = codec.torque_frame(0.1 * k, -0.1, k % 16, timestamp=ts)
+            if k == 6:  # the TorqueCmd first: taken frame by frame
+                s = [torque, *s]
+            else:
+                s.append(torque)
+            out.append(s)
+        return out
+
+    sensed = Sensed(0.1, 0.2, 0.0, 0.0, 500.0, True, math.nan)
+    results = []
+    for late in (False, True):
+        res = CosimResult()
+        link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.5),
+                       FaultPlan.parse("none"), _SampleBus(samples()), None, None,
+                       threading.Event(), res, (50.0, 50.0), (2.0, 2.0))
+        assert link.idle_after_send
+        cmds, held = [], []
+
+        def idle(link=link, cmds=cmds, held=held):
+            if held:
+                cmds.append(link.settle(held.pop()))
+
+        for k in range(8):
+            obs = Observation(k, k * 1e-3, "ps", 0, 0.1, sensed)
+            if late:
+                held.append(link.exchange(obs, idle))
+            else:
+                cmds.append(link.exchange(obs))
+        idle()
+        p = link.plant
+        results.append(([(tuple(c.torque), c.V, c.rho, c.fault) for c in cmds],
+                        p.checker.counts, p.ctrl_state, p.ctrl_rejects, p.last_status,
+                        res.frames_rx, res.missed, link.u))
+    assert results[0] == results[1]
+    V = [c[1] for c in results[0][0]]
+    assert V[0] == codec.quantize_clf_v(0.01) and V[1] == codec.quantize_clf_v(0.02)
+    assert V[2] is None and V[3] is None and V[4] is None and V[5] is not None
+    counts = results[0][1]
+    assert (counts["bad_checksum"], counts["duplicate"], counts["bad_counter"]) == (1, 1, 1)
+    assert results[0][3]["bad_checksum"] == 2 and results[0][4] is not None
+
+
 def test_node_watchdog_is_armed_by_the_first_cycle(ctx):
     """Before any measurement the node stays quiet (a SAFE torque frame, timestamp 0,
     sent while a slow plant starts would pass for the reply to the cycle at t = 0)."""

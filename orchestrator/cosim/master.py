@@ -3,7 +3,8 @@ in its own process, CAN frames (AMPRO3 protocol) over zenoh between them, MCAP r
 
 Per tick k (t = k dt, dt = 1 ms by default) the plant
 
-1. reads the FMU outputs (sensors as AMPRO3 senses them, ground truth);
+1. reads the FMU outputs (sensors as AMPRO3 senses them; in lockstep the state for the
+   ground truth after step 2, while the controller works);
 2. emulates the AMPRO3 drives: encodes ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad``,
    ``SimTime`` (rolling counter k mod 16, timestamp t) and sends them (through the fault
    injector of the ``perturb`` case);
@@ -11,10 +12,12 @@ Per tick k (t = k dt, dt = 1 ms by default) the plant
    *lockstep* blocks for it (deterministic), *realtime* waits at most until the tick's wall
    deadline and otherwise holds the last torque (counted late; latency stats kept);
    other controller frames (heartbeat, status, rejects, CLF) are checked and recorded on
-   the way; the cycle's ``CtrlClf`` gives the period's ``Command.V`` and ``.rho`` (None when
-   absent or not received);
+   the way (lockstep: those of the reply sample before its TorqueCmd after the next
+   cycle's send, :meth:`CanLink.settle`); the cycle's ``CtrlClf`` gives the period's
+   ``Command.V`` and ``.rho`` (None when absent or not received);
 4. sets the torque inputs, reads the socket force (it depends on them), records ground
-   truth, and steps the FMU by dt.
+   truth (lockstep: queued after the next cycle's send, in the same order), and steps the
+   FMU by dt.
 
 Fault handling: a missing reply holds the last torque; ``watchdog_periods`` (5) missed
 replies in a row, the controller's liveliness token disappearing, or its heartbeat reporting
@@ -48,6 +51,7 @@ import numpy as np
 
 from bus_schemas import codec, keys
 from bus_schemas.bus_config import FrameReader, send_frames
+from bus_schemas.frame import Frame
 from bus_schemas.protocol import (
     CTRL_TO_PLANT,
     PLANT_TO_CTRL,
@@ -587,7 +591,16 @@ class CanLink:
     :attr:`Command.fault`.  Recording is deferred: the tick's frames are queued as they
     happen and serialized while the plant waits for the reply.  The cycle's ``CtrlClf``
     frame gives :attr:`Command.V` and :attr:`Command.rho` (None when the frame says absent,
-    or when no good frame of this cycle came)."""
+    or when no good frame of this cycle came).
+
+    In lockstep under :func:`orchestrator.loop.run_loop` (:attr:`idle_after_send`) only what
+    the torque needs is on the way from the reply to the next send: the reply sample's
+    ``TorqueCmd`` is checked first (a frame's verdict depends on its own id's counter state
+    alone, so it is the verdict it gets after the frames before it); the frames before it
+    are checked, and their records queued, in the loop's ``idle`` after the next cycle's
+    send (:meth:`settle`), before any other controller frame: the same verdicts, counts,
+    Command and records in the same order.  A reply sample of another shape (a fault, a
+    python-can bus) is taken frame by frame as before."""
 
     def __init__(self, cfg: CosimConfig, plan: FaultPlan, bus: Any, rec: Any, proc: Any,
                  lost: threading.Event, res: CosimResult, ratio: tuple[float, float],
@@ -620,18 +633,34 @@ class CanLink:
         self.armed = not self.realtime
         #: the last good CtrlClf: (timestamp [s], V or None, rho or None)
         self.clf: tuple[float, float | None, float | None] | None = None
+        #: lockstep under run_loop (:attr:`idle_after_send`): the reply frames before this
+        #: cycle's TorqueCmd, checked after the next cycle's send (:meth:`settle`): (frames,
+        #: the TorqueCmd, its verdict, t, the torque applied before it)
+        self._held: tuple[list[Any], Any, codec.Verdict, float, tuple[float, float]] | None = None
+        #: the Command :meth:`settle` completes, and its cycle's time
+        self._provisional: tuple[Command, float] | None = None
+
+    @property
+    def idle_after_send(self) -> bool:
+        """Lockstep: :meth:`exchange` takes the loop's ``idle`` work (run_loop) and checks
+        only this cycle's TorqueCmd before it returns (realtime: everything at once, the log
+        times of its records being wall times)."""
+        return not self.realtime
 
     def log_ns(self, t: float) -> int:
         return round((time.perf_counter() - self.wall0 if self.realtime else t) * 1e9)
 
     def on_rx(self, msg: can.Message, t: float,
-              items: list[tuple[Any, codec.Verdict]] | None = None) -> codec.Verdict:
-        """Check one controller frame (:meth:`Plant.on_rx`), take the cycle's V and rho from
+              items: list[tuple[Any, codec.Verdict]] | None = None,
+              v: codec.Verdict | None = None) -> codec.Verdict:
+        """Check one controller frame (:meth:`Plant.on_rx`; ``v``: a TorqueCmd's verdict
+        already taken), take the cycle's V and rho from
         a good ``CtrlClf``; with a recording, the frame and what it carries go to ``items``
         (queued for the MCAP per sample by :meth:`_defer_rx`; a ``CtrlStatus``'s
         diagnostics record, every 100 ticks, is queued here with the torque and CLF values
         of the moment)."""
-        v = self.plant.on_rx(msg)
+        if v is None:
+            v = self.plant.on_rx(msg)
         self.res.frames_rx += 1
         fid = v.frame_id
         if fid == _CLF and v.status is _OK:
@@ -672,7 +701,62 @@ class CanLink:
     def _inject(self, what: str) -> None:
         self.injected[what] = self.injected.get(what, 0) + 1
 
-    def exchange(self, obs: Observation) -> Command:
+    def _take_torque(self, sample: list[Any], t: float) -> codec.Verdict | None:
+        """Lockstep's common reply: a sample of Frames ending in its only TorqueCmd. That
+        frame checked alone (its verdict depends on its own id's counter state only, as
+        every frame's: the same verdict as after the frames before it); when it is this
+        cycle's and good, the torque applied and the frames before it held for
+        :meth:`settle`: None. Else its verdict, for the frames to be taken in order."""
+        m = sample[-1]
+        if type(m) is not Frame or m[1] != _TORQUE:
+            return None
+        for f in sample[:-1]:
+            if type(f) is not Frame or f[1] == _TORQUE:
+                return None
+        v = self.plant.checker.check_all((m,))[0]
+        if v.status is not _OK or abs(m[0] - t) > self.rtol:
+            return v
+        self._held = (sample[:-1], m, v, t, self.u)
+        self.u = self.plant.command(v.value)
+        return None
+
+    def _settle_held(self) -> None:
+        """The held reply frames checked and queued for the MCAP, with the torque frame
+        after them: as if taken in order when they came (:meth:`_take_torque`)."""
+        h = self._held
+        if h is None:
+            return
+        self._held = None
+        frames, m, v, t, u_before = h
+        items: list[tuple[Any, codec.Verdict]] = []
+        u, self.u = self.u, u_before  # the diagnostics record's torque of the moment
+        try:
+            for f in frames:
+                self.on_rx(f, t, items)
+        finally:
+            self.u = u
+        self.on_rx(m, t, items, v)
+        self._defer_rx(items, t)
+
+    def settle(self, cmd: Command) -> Command:
+        """``cmd`` complete: the provisional Command of a cycle whose reply frames were
+        held (:meth:`exchange` with ``idle``) gets its ``V``/``rho`` from the cycle's
+        ``CtrlClf`` once they are checked; any other Command is already complete."""
+        p = self._provisional
+        if p is None or cmd is not p[0]:
+            return cmd
+        self._provisional, t = None, p[1]
+        self._settle_held()
+        c = self.clf
+        if c is not None and abs(c[0] - t) <= self.rtol:
+            return cmd._replace(V=c[1], rho=c[2])
+        return cmd._replace(V=None, rho=None)
+
+    def exchange(self, obs: Observation, idle: Callable[[], None] | None = None) -> Command:
+        """This period's Command (class docstring); ``idle`` (lockstep, run_loop's
+        bookkeeping): called once after the send, and the reply's frames before this
+        cycle's TorqueCmd are checked later, in :meth:`settle` (the Command returned is
+        then provisional: ``V``/``rho`` None until settled)."""
         cfg, plan, rec, res, k, t = self.cfg, self.plan, self.rec, self.res, obs.k, obs.t
         if plan.case in PLANT_CASES and plan.hits(k):
             time.sleep(plan.stall_ms * 1e-3)
@@ -695,6 +779,10 @@ class CanLink:
         s0 = clock()
         send_frames(self.bus, send)
         res.frames_tx += len(send)
+        if idle is not None:  # the last period's bookkeeping, while the controller works
+            idle()
+        if self._held is not None:
+            self._settle_held()  # before any other controller frame is checked
         if rec is not None:  # while the controller works: queue and serialize the records,
             # stopping as soon as the reply is here (the rest waits for the next tick's wait)
             r0 = clock()
@@ -716,9 +804,16 @@ class CanLink:
             sample = reader.recv_all(min(left, 0.005))
             if not sample:
                 continue
+            pre = None
+            if idle is not None:
+                pre = self._take_torque(sample, t)
+                if self._held is not None:
+                    got = answered = True
+                    break
+            last = len(sample) - 1
             items: list[tuple[Any, codec.Verdict]] = []
             for i, msg in enumerate(sample):  # a sample's frames: the reply batch
-                v = self.on_rx(msg, t, items)
+                v = self.on_rx(msg, t, items, pre if i == last else None)
                 if v.frame_id == _TORQUE and v.status is _OK:
                     self.u = self.plant.command(v.value)
                     answered = True
@@ -752,6 +847,10 @@ class CanLink:
             self.u = (0.0, 0.0)
             first = self.fault_first_miss if self.fault_first_miss >= 0 else k
             res.detection_periods = k - first + 1
+        if self._held is not None:  # V and rho once settled
+            cmd = Command(self.u, V=None, rho=None, fault=reason)
+            self._provisional = (cmd, t)
+            return cmd
         c = self.clf
         if c is not None and abs(c[0] - t) <= self.rtol:  # this cycle's CtrlClf
             return Command(self.u, V=c[1], rho=c[2], fault=reason)
@@ -777,6 +876,7 @@ class CanLink:
             return
         end = self.sched0 + k * self.dt
         t = (k - 1) * self.dt
+        self._settle_held()
         while True:
             left = end - time.perf_counter()
             if left <= 0:
@@ -880,15 +980,21 @@ def rx_records(items: list[tuple[Any, codec.Verdict]], ratio: tuple[float, float
     return out
 
 
+_Q_ANGLE = codec.scalar_quantizer(FrameId.KNEE_FEEDBACK, "KneeAngle")  # quantize_angle
+_Q_VELOCITY = codec.scalar_quantizer(FrameId.KNEE_FEEDBACK, "KneeVelocity")
+_Q_LOAD = codec.scalar_quantizer(FrameId.FOOT_LOAD, "FootNormalLoad")
+_Q_PITCH = codec.scalar_quantizer(FrameId.SOCKET_IMU, "SocketPitch")
+
+
 def measurement_record(s: Sensed, t_us: int, counter: int) -> dict[str, Any]:
     """``/prosthesis/measurements``: what AMPRO3 senses (``s``) as the controller decodes it
-    (codec quantization)."""
-    return {"knee_angle": codec.quantize_angle(s.knee_angle),
-            "knee_velocity": codec.quantize_velocity(s.knee_velocity),
-            "ankle_angle": codec.quantize_angle(s.ankle_angle),
-            "ankle_velocity": codec.quantize_velocity(s.ankle_velocity),
-            "foot_load": codec.quantize_load(s.foot_load), "contact": s.contact,
-            "socket_pitch": (codec.quantize_pitch(s.socket_pitch)
+    (codec quantization: ``quantize_angle`` etc., their constants bound once)."""
+    return {"knee_angle": _Q_ANGLE(s.knee_angle),
+            "knee_velocity": _Q_VELOCITY(s.knee_velocity),
+            "ankle_angle": _Q_ANGLE(s.ankle_angle),
+            "ankle_velocity": _Q_VELOCITY(s.ankle_velocity),
+            "foot_load": _Q_LOAD(s.foot_load), "contact": s.contact,
+            "socket_pitch": (_Q_PITCH(s.socket_pitch)
                              if math.isfinite(s.socket_pitch) else None),
             "sim_time_us": t_us % (1 << 32), "counter": counter}
 

@@ -160,7 +160,10 @@ class FmuPlant:
         self._k = 0
         self._fall: Fall | None = None
         self._obs: Observation | None = None
-        self._state: list[float] = []
+        self._state: list[float] | None = []
+        #: the state read apart from the sensors (:meth:`read_truth`): a HumanFmu (a
+        #: wrapper overriding its ``read`` keeps the one full read)
+        self._apart = type(fmu) is HumanFmu
         self._ended_at: float | None = None  # fmi2LastSuccessfulTime once the run has ended
 
     @property
@@ -168,7 +171,7 @@ class FmuPlant:
         return self._fall
 
     def observe(self) -> Observation:
-        r = self.fmu.read()
+        r = self.fmu.read(False) if self._apart else self.fmu.read()
         y = r.sensors
         dom = DOMAINS[r.domain]
         s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
@@ -184,17 +187,27 @@ class FmuPlant:
             at = self._obs if held and self._obs is not None else obs
             self._fall = Fall(FallReason(r.fall_code), at.t, at.domain, at.tau)
             obs = obs._replace(held=held)
-        self._state = r.state
+        self._state = None if self._apart else r.state
         if not obs.held:
             self._obs = obs
         return obs
+
+    def read_truth(self) -> None:
+        """Read the state the period's ground truth holds (q, qd at its start), apart from
+        the sensors :meth:`observe` read: the loop calls it while the controller works
+        (run_loop's ``idle``), else :meth:`actuate` reads it.  (The socket force depends
+        on the torque: :meth:`actuate` reads it.)"""
+        if self._state is None:
+            self._state = self.fmu.read_state()
 
     def actuate(self, torque: np.ndarray | None) -> Truth:
         if torque is None:
             raise ValueError("the FMU plant needs a prosthesis torque (no oracle mode)")
         u0, u1 = float(torque[0]), float(torque[1])
-        self.fmu.set_torque(u0, u1)
         st = self._state
+        if st is None:
+            st = self._state = self.fmu.read_state()
+        self.fmu.set_torque(u0, u1)
         return Truth(st[:12], st[12:], self.fmu.forces(), (u0, u1))
 
     def advance(self) -> None:

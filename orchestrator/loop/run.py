@@ -10,6 +10,16 @@ Per period k (t = k dt):
 4. the loop ends on a fall (``plant.fall``), a link fault, ``steps`` impacts, ``periods``
    periods, or ``stop``; else ``plant.advance()`` and ``link.pace(k)``.
 
+A link that sends before it waits (``link.idle_after_send``: the co-simulation's CAN link
+in lockstep) gets the loop's bookkeeping into its wait: ``link.exchange(obs, idle)`` calls
+``idle()`` once, after the period's frames went out and before it waits for the reply, and
+its Command may be provisional (``V``/``rho`` not read yet: ``link.settle(cmd)`` completes
+it).  The loop logs and records period k's sample there, in period k + 1's ``idle`` (or
+after the last period): the same samples, recorded in the same order (a recorder's queue
+sees period k's records before anything the link queues after period k + 1's send); a
+plant with ``read_truth`` (the FMU: its state) reads what the period's truth needs beyond
+the observation there too, else in ``actuate``.
+
 The experiments, the sweeps (both backends) and the co-simulation all run through
 :func:`run_loop`; the order above is :meth:`hp_model.simulator.HybridSimulator.run`'s, so
 every plant logs the same samples.
@@ -86,39 +96,70 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
     log = LoopLog()
     clock = time.perf_counter_ns
     k = 0
-    while stop is None or not stop.is_set():
-        t0 = clock()
-        obs = plant.observe()
-        t1 = clock()
-        if obs.held:
-            break
-        cmd = link.exchange(obs)
-        t2 = clock()
-        truth = plant.actuate(cmd.torque)
+    late = bool(getattr(link, "idle_after_send", False))
+    last: tuple[Observation, Command, Truth] | None = None  # late: not yet logged, recorded
+    read_truth = getattr(plant, "read_truth", None)
+
+    def settle() -> None:
+        """Log and record the last period (late links: in the next period's wait)."""
+        nonlocal last
+        if last is None:
+            return
+        o, c, tr = last
+        last = None
+        c = link.settle(c)  # type: ignore[attr-defined]
         if samples:
-            log.add(obs, cmd, truth)
-        else:
-            log.t.append(obs.t)
-        log.steps = obs.steps
+            log.add(o, c, tr)
         if recorder is not None:
-            recorder.record(obs, cmd, truth)
-        t3 = clock()
-        if cmd.fault:
-            log.fault = cmd.fault
-        done = (plant.fall is not None or bool(cmd.fault) or obs.steps >= steps
-                or (periods is not None and k + 1 >= periods))
-        if not done:
-            plant.advance()
-        t4 = clock()
-        if timed:
-            log.plant_ns.append((t1 - t0) + (t4 - t3) + (t3 - t2))
-            log.link_ns.append(t2 - t1)
-            log.tick_ns.append(t4 - t0)
-        if done:
-            break
-        k += 1
-        link.pace(k)
-        if progress is not None and k % 100 == 0:
-            progress(k, obs.t, obs.steps)
+            recorder.record(o, c, tr)
+
+    def idle() -> None:
+        """While the controller works: the last period's sample, this period's truth."""
+        settle()
+        if read_truth is not None:
+            read_truth()
+
+    try:
+        while stop is None or not stop.is_set():
+            t0 = clock()
+            obs = plant.observe()
+            t1 = clock()
+            if obs.held:
+                break
+            cmd = link.exchange(obs, idle) if late else link.exchange(obs)  # type: ignore[call-arg]
+            t2 = clock()
+            truth = plant.actuate(cmd.torque)
+            if late:
+                last = (obs, cmd, truth)
+                if not samples:
+                    log.t.append(obs.t)
+            else:
+                if samples:
+                    log.add(obs, cmd, truth)
+                else:
+                    log.t.append(obs.t)
+                if recorder is not None:
+                    recorder.record(obs, cmd, truth)
+            log.steps = obs.steps
+            t3 = clock()
+            if cmd.fault:
+                log.fault = cmd.fault
+            done = (plant.fall is not None or bool(cmd.fault) or obs.steps >= steps
+                    or (periods is not None and k + 1 >= periods))
+            if not done:
+                plant.advance()
+            t4 = clock()
+            if timed:
+                log.plant_ns.append((t1 - t0) + (t4 - t3) + (t3 - t2))
+                log.link_ns.append(t2 - t1)
+                log.tick_ns.append(t4 - t0)
+            if done:
+                break
+            k += 1
+            link.pace(k)
+            if progress is not None and k % 100 == 0:
+                progress(k, obs.t, obs.steps)
+    finally:
+        settle()
     log.fall = plant.fall
     return log
