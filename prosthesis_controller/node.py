@@ -20,7 +20,8 @@ runs on its clock; a cycle that lacks an IMU frame after one was seen is flagged
 
 Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
 zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
-``watchdog`` seconds; the next good cycle resumes RUNNING (the controller's state is kept,
+``watchdog`` seconds; the next good cycle resumes RUNNING, with a heartbeat in its reply
+whatever ``heartbeat_every`` (the controller's state is kept,
 so a lockstep run stays deterministic when a slow plant trips the watchdog). The first
 cycle arms it: before any measurement there is nothing to stop (and a SAFE torque frame,
 timestamp 0, sent while a slow plant starts up would pass for the reply to its cycle at
@@ -218,9 +219,10 @@ class ControllerNode:
         res = self.controller.tick(meas)
         d = res.diagnostics
         self._book = (d, time.perf_counter_ns() - t0)  # after the reply (after_send)
+        resumed = self.state == CtrlState.SAFE
         self.state = _RUNNING
         ts, ticks = v.timestamp, self.ticks
-        if ticks % self.heartbeat_every == 0:
+        if ticks % self.heartbeat_every == 0 or resumed:  # leaving SAFE is said at once
             out.append(self._heartbeat(ts))
         c = self._clf_counter
         self._clf_counter = (c + 1) % 16

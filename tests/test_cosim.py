@@ -415,6 +415,15 @@ def test_node_rejects_bad_frames_and_goes_safe(ctx):
     safe = node.poll(now=1.0)
     assert node.state == CtrlState.SAFE
     assert codec.decode(safe[-1]).value.enable == 0
+    # the next good cycle resumes, and says so at once (not at the next 10th tick): the
+    # plant must not take the SAFE heard during its own silence for the controller's state
+    out = []
+    for m in codec.encode_feedback(0.1, 0.0, 0.2, 0.0, 500.0, True, 1, sim_time_us=1000):
+        out += node.handle(m, now=1.01)
+    assert node.state == CtrlState.RUNNING and node.ticks == 2
+    hb = [codec.decode(f) for f in out if f.arbitration_id == FrameId.CTRL_HEARTBEAT]
+    assert [h.value.state for h in hb] == [CtrlState.RUNNING]
+    assert codec.decode(out[-1]).value.enable == 1
 
 
 class _Spy:
@@ -565,6 +574,22 @@ class _SampleBus:
         self.sent.append(list(msgs))
 
 
+class _ReplyBus(_SampleBus):
+    """A bus answering each send with the next prepared sample (an empty one: no reply)."""
+
+    def __init__(self, samples):
+        super().__init__(samples)
+        self.due: list = []
+
+    def recv_frames(self, timeout=None):
+        got, self.due = self.due, []
+        return got
+
+    def send_batch(self, msgs):
+        super().send_batch(msgs)
+        self.due = self.samples.pop(0) if self.samples else []
+
+
 def test_can_link_settled_late_equals_taken_at_once():
     """CanLink in lockstep under run_loop (``exchange(obs, idle)``, then ``settle``): the
     reply frames before this cycle's TorqueCmd checked after the next send give the same
@@ -630,6 +655,47 @@ def test_can_link_settled_late_equals_taken_at_once():
     counts = results[0][1]
     assert (counts["bad_checksum"], counts["duplicate"], counts["bad_counter"]) == (1, 1, 1)
     assert results[0][3]["bad_checksum"] == 2 and results[0][4] is not None
+
+
+def test_safe_heard_after_the_plants_own_silence_is_not_the_controllers_fault():
+    """The node goes SAFE when the plant is silent past its watchdog (50 ms); the plant that
+    was itself silent that long (a stall, a descheduled process) excuses that SAFE for
+    ``watchdog_periods`` ticks while the node comes back, instead of ending the run on a
+    reply a little late; the same SAFE without the plant's silence ends it at once, and a
+    controller that does not come back is still caught within the watchdog's periods."""
+    ts_safe = 0.0
+
+    def run(gap: float, resumes: bool):
+        ok = [codec.heartbeat_frame(CtrlState.RUNNING, 0, 0, timestamp=0.0),
+              codec.torque_frame(0.1, -0.1, 0, timestamp=0.0)]
+        safe = [codec.heartbeat_frame(CtrlState.SAFE, 1, 1, timestamp=ts_safe),
+                codec.torque_frame(0.0, 0.0, 1, enable=False, timestamp=ts_safe)]
+        samples = [ok, safe]
+        if resumes:
+            samples += [[codec.heartbeat_frame(CtrlState.RUNNING, k, k % 16, timestamp=k * 1e-3),
+                         codec.torque_frame(0.1, -0.1, k % 16, timestamp=k * 1e-3)]
+                        for k in range(2, 10)]
+        res = CosimResult()
+        link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.01),
+                       FaultPlan.parse("none"), _ReplyBus(samples), None, None,
+                       threading.Event(), res, (50.0, 50.0), (2.0, 2.0))
+        faults = []
+        for k in range(10):
+            if k == 1:
+                time.sleep(gap)
+            c = link.exchange(Observation(k, k * 1e-3, "ps", 0, 0.1,
+                                          Sensed(0.1, 0.2, 0.0, 0.0, 500.0, True, math.nan)))
+            faults.append(c.fault)
+            if c.fault:
+                break
+        return faults
+
+    # the plant silent for 80 ms: SAFE at tick 1 (no reply to it) is excused
+    assert run(0.08, resumes=True) == [""] * 10
+    f = run(0.08, resumes=False)
+    assert f == [""] * 5 + ["5 control periods without a torque reply"], f  # ticks 1-5
+    # the plant on time: the controller's SAFE is its fault, at once
+    assert run(0.0, resumes=True) == ["", "controller reports state SAFE"]
 
 
 def test_node_watchdog_is_armed_by_the_first_cycle(ctx):
@@ -742,8 +808,12 @@ def test_fault_plan_parse():
 
 @serial
 def test_realtime_mode_reports_latency(files, model):
-    # 2 ms period (the DBC cycle): 1 ms is marginal on these loaded 2-core machines
-    res = run_cosim(cfg(files, mode="realtime", max_time=0.3, steps=5, dt=2e-3), model=model)
+    # 2 ms period (the DBC cycle): 1 ms is marginal on these loaded 2-core machines.  The
+    # missed-reply watchdog widened to 25 periods (50 ms): judged here is the report; both
+    # processes descheduled for 10 ms on a loaded machine would end the run as a silent
+    # controller (test_realtime_watchdog_is_five_periods judges the default)
+    res = run_cosim(cfg(files, mode="realtime", max_time=0.3, steps=5, dt=2e-3,
+                        watchdog_periods=25), model=model)
     assert not res.faulted, res
     assert res.ticks == 150
     assert res.latency_us["n"] > 0 and res.latency_us["median"] > 0
@@ -754,8 +824,14 @@ def test_realtime_watchdog_is_five_periods(files, model):
     """Real time: a controller killed at period 100 leaves the plant on safe torque after 5
     silent periods, as in lockstep (a late reply to an earlier period counts as late, not
     as silence)."""
-    res = run_cosim(cfg(files, mode="realtime", perturb="kill:100", max_time=1.0, steps=5,
-                        dt=2e-3), model=model)
+    # a run ended before the kill by the machine's own 10 ms stall of both processes says
+    # nothing of the kill (see test_controller_hung_alive_is_detected_by_missing_replies):
+    # run again, at most 3 times; the run that reaches the kill is judged
+    for _ in range(3):
+        res = run_cosim(cfg(files, mode="realtime", perturb="kill:100", max_time=1.0, steps=5,
+                            dt=2e-3), model=model)
+        if res.ticks > 100:
+            break
     assert res.faulted, res
     assert res.detection_periods <= 5 and 100 < res.ticks <= 106, res
 
@@ -865,8 +941,14 @@ def test_realtime_plant_that_falls_behind_skips_and_records(files, model):
     the slots skipped are counted and recorded (/cosim/timing), and the run completes."""
     rec = files["dir"] / "stall.mcap"
     dt, stall = 2e-3, 60.0
+    # The node goes SAFE in the stall (its watchdog is 50 ms): the plant excuses that SAFE
+    # while the node comes back.  The missed-reply watchdog is widened from 5 periods (10 ms)
+    # to 25 (50 ms): what is judged here is the plant's own lateness, and on a loaded 2-core
+    # machine both processes are now and then descheduled for 10 ms, which the default
+    # watchdog rightly ends as a silent controller (its own test:
+    # test_controller_hung_alive_is_detected_by_missing_replies)
     res = run_cosim(cfg(files, mode="realtime", perturb=f"stall:50:{stall:g}", max_time=0.3,
-                        steps=5, dt=dt, record=rec), model=model)
+                        steps=5, dt=dt, record=rec, watchdog_periods=25), model=model)
     assert not res.faulted, res
     assert res.ticks == 150 and res.injected == {"stall": 1}
     assert res.overruns >= 1 and res.max_lag_ms >= stall

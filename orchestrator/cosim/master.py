@@ -639,6 +639,14 @@ class CanLink:
         self._held: tuple[list[Any], Any, codec.Verdict, float, tuple[float, float]] | None = None
         #: the Command :meth:`settle` completes, and its cycle's time
         self._provisional: tuple[Command, float] | None = None
+        #: the last cycle's send [ns, perf_counter_ns] and the first tick at which a SAFE
+        #: heartbeat is again the controller's fault: a plant silent for longer than the
+        #: node's own watchdog (its stall, a descheduled process) put the node in SAFE
+        #: itself; the node resumes with the next cycle, so that SAFE is excused for
+        #: ``watchdog_periods`` ticks (a controller that does not come back is then caught
+        #: by the missed replies or by its SAFE state, as any other)
+        self._sent_ns: int | None = None
+        self.safe_excused_until = 0
 
     @property
     def idle_after_send(self) -> bool:
@@ -777,6 +785,9 @@ class CanLink:
             self._inject(what)
         clock = time.perf_counter_ns
         s0 = clock()
+        if self._sent_ns is not None and (s0 - self._sent_ns) * 1e-9 > cfg.controller_watchdog:
+            self.safe_excused_until = k + cfg.watchdog_periods
+        self._sent_ns = s0
         send_frames(self.bus, send)
         res.frames_tx += len(send)
         if idle is not None:  # the last period's bookkeeping, while the controller works
@@ -866,7 +877,8 @@ class CanLink:
             return (f"no torque reply within {self.cfg.reply_timeout} s of the start "
                     f"({k + 1} periods)")
         state = self.plant.ctrl_state
-        if state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 and not got:
+        if state in (CtrlState.SAFE, CtrlState.FAULT) and k > 0 and not got and not (
+                state == CtrlState.SAFE and k < self.safe_excused_until):
             return f"controller reports state {CtrlState(state).name}"
         return ""
 
