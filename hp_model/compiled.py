@@ -67,13 +67,9 @@ def generate_c(functions: Sequence[ca.Function], name: str) -> str:
         cg = ca.CodeGenerator(f"{name}.c", {"with_header": False})
         for f in functions:
             cg.add(f)
-        cwd = os.getcwd()
-        try:
-            os.chdir(tmp)
-            cg.generate()
-        finally:
-            os.chdir(cwd)
-        return (Path(tmp) / f"{name}.c").read_text()
+        # into the directory given as the prefix: never chdir, the process's one working
+        # directory (threads building at once would each restore another's, deleted, one)
+        return Path(cg.generate(tmp + os.sep)).read_text()
 
 
 def compile_library(functions: Sequence[ca.Function], name: str) -> Path:

@@ -3,6 +3,8 @@ the interpreter fallback gives the same numbers."""
 
 from __future__ import annotations
 
+import os
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -68,12 +70,16 @@ def test_concurrent_builders_compile_a_library_once(tmp_path, monkeypatch):
 
     monkeypatch.setattr(compiled.subprocess, "run", slow_compiler)
     got: list = []
+    cwd = os.getcwd()
     threads = [threading.Thread(target=lambda: got.append(compiled.compile_library([f], "race")))
                for _ in range(4)]
     for t in threads:
         t.start()
     for t in threads:
         t.join(60)
+    # the builders never touch the process's working directory (one per process: threads
+    # that chdir'd each restored another's temporary, deleted, directory)
+    assert os.getcwd() == cwd
     assert len(calls) == 1 and len(got) == 4 and len(set(got)) == 1
     assert [p.name for p in (tmp_path / "casadi").glob("race_*")] == [got[0].name]
     assert not [p for p in (tmp_path / "casadi").iterdir() if p.is_dir()]  # no temp left
