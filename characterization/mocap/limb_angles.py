@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
-from scipy.signal import butter, sosfiltfilt
+
+from characterization.mocap.butterworth import butter_lowpass_sos, pad_length, sosfiltfilt
 
 NONE, RIGID_BODY, MARKERS, INTERPOLATED = 0, 1, 2, 3
 SOURCE_NAMES = {NONE: "none", RIGID_BODY: "rigid_body", MARKERS: "markers",
@@ -101,9 +102,9 @@ def lowpass(y: np.ndarray, rate: float, cutoff: float, order: int = 2) -> np.nda
     """Zero-phase Butterworth low-pass over each finite run (NaN runs kept)."""
     if cutoff <= 0:
         return y
-    sos = butter(order, cutoff / (rate / 2), output="sos")
+    sos = butter_lowpass_sos(order, cutoff / (rate / 2))
     out = np.array(y, dtype=float)
-    pad = 3 * (2 * len(sos) + 1)
+    pad = pad_length(sos)
     for a, b in runs(np.isfinite(out)):
         if b - a > pad:
             out[a:b] = sosfiltfilt(sos, out[a:b])
