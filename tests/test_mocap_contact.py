@@ -253,3 +253,20 @@ def test_warnings_are_printed_one_line_each(short_take, tmp_path, capsys) -> Non
     qa = json.loads((tmp_path / "steps.qa.json").read_text())
     assert qa["warnings"] == [lines[0].removeprefix("warning: ")]
     assert "## Warnings" in (tmp_path / "steps.qa.md").read_text()
+
+
+def test_a_take_sampled_below_twice_the_contact_cutoff_is_not_filtered() -> None:
+    """At 16 Hz the contact low-pass (10 Hz) is above Nyquist: the markers are used as
+    sampled (the filter would refuse the cutoff) and the stance is still found."""
+    from characterization.mocap.foot_contact import foot_contact
+
+    t = np.arange(0, 6.0, 1 / 16)
+    phase = (t / 1.2) % 1.0
+    stance = phase < 0.6
+    # heel and toe: at rest on the floor in stance, moving forward 1.3 m/s and up in swing
+    x = np.cumsum(np.where(stance, 0.0, 1.3 / 16))
+    z = np.where(stance, 0.0, 0.08 * np.sin(np.pi * (phase - 0.6) / 0.4))
+    heel = np.column_stack([x, z + 0.05])
+    toe = np.column_stack([x + 0.2, z + 0.03])
+    fc = foot_contact(heel, toe, t, ContactOptions(cutoff_hz=10.0))
+    assert fc.contact[stance].mean() > 0.8 and fc.contact[~stance].mean() < 0.3

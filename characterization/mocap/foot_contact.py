@@ -152,7 +152,8 @@ def foot_contact(heel: np.ndarray, toe: np.ndarray, time: np.ndarray,
     P = []
     for m in (heel, toe):
         xz = np.column_stack([_filled(m[:, 0]), _filled(m[:, 1])])
-        if opt.cutoff_hz > 0 and np.all(np.isfinite(xz)):
+        # a take sampled at or below twice the cutoff has nothing above it to remove
+        if 0 < opt.cutoff_hz < rate / 2 and np.all(np.isfinite(xz)):
             xz = np.column_stack([lowpass(xz[:, k], rate, opt.cutoff_hz) for k in range(2)])
         P.append(xz)
     V = [np.gradient(p, time, axis=0) for p in P]
