@@ -17,9 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from characterization.mocap.butterworth import butter_lowpass_sos, pad_length, sosfiltfilt
+from characterization.mocap.cubic_spline import not_a_knot_spline
 
 NONE, RIGID_BODY, MARKERS, INTERPOLATED = 0, 1, 2, 3
 SOURCE_NAMES = {NONE: "none", RIGID_BODY: "rigid_body", MARKERS: "markers",
@@ -91,9 +91,8 @@ def fill_short_gaps(t: np.ndarray, y: np.ndarray, max_gap: int
         return y, filled, gaps
     todo = [(a, b) for a, b in gaps if b - a <= max_gap and a > 0 and b < len(y)]
     if todo:
-        spline = CubicSpline(t[ok], y[ok])
         idx = np.concatenate([np.arange(a, b) for a, b in todo])
-        y[idx] = spline(t[idx])
+        y[idx] = not_a_knot_spline(t[ok], y[ok], t[idx])
         filled[idx] = True
     return y, filled, gaps
 

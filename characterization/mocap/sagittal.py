@@ -15,8 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from characterization.mocap.quaternion import quaternion_matrices
 from characterization.mocap.take import MocapError
 
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -80,7 +80,7 @@ class SagittalFrame:
         ok = np.all(np.isfinite(quat), axis=1)
         if not ok.any():
             return out
-        R = Rotation.from_quat(quat[ok]).as_matrix()  # (m, 3, 3) lab <- body
+        R = quaternion_matrices(quat[ok])  # (m, 3, 3) lab <- body
         if axis == "up":
             a = R @ self.up  # the body's up axis, in lab coordinates
             out[ok] = np.arctan2(a @ self.forward, a @ self.up)
