@@ -387,11 +387,12 @@ def test_a_lowpass_at_or_above_nyquist_is_a_one_line_error(files, tmp_path, caps
 
 
 @pytest.mark.parametrize("body", ["1,2,3", "1,,3", "1,2,", "1,,,\n2,,3,", ",1,,2\n3,4,5,,",
-                                  "1,,\n,,\n", "a,,,,,b,,\n,"])
+                                  "1,,\n,,\n", "a,,,,,b,,\n,", "", ",", "\n", "1,\u00b0,,2"])
 def test_empty_cells_read_as_nan_like_the_regex(body: str) -> None:
-    """The plain-replace filling of empty cells equals the regex it replaced."""
+    """The numpy filling of empty cells equals the regex it replaced."""
     import re
 
     from characterization.mocap.motive_csv import _fill_empty
 
-    assert _fill_empty(body) == re.sub(r"(?<=,)(?=,|$)", "nan", body, flags=re.MULTILINE)
+    want = re.sub(r"(?<=,)(?=,|$)", "nan", body, flags=re.MULTILINE)
+    assert _fill_empty(body) == want.encode()

@@ -35,15 +35,25 @@ LENGTH_UNITS = {"meters": 1.0, "centimeters": 0.01, "millimeters": 0.001}
 EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
 
-def _fill_empty(body: str) -> str:
-    """Empty cells (occluded markers) after a comma read as 'nan': what the regex
-    ``(?<=,)(?=,|$)`` (multiline) substitutes, in plain string replaces (twice as fast on
-    a 12 MB take).  The second ``,,`` pass catches runs: ``,,,`` -> ``,nan,,`` -> ..."""
-    if ",," in body:
-        body = body.replace(",,", ",nan,").replace(",,", ",nan,")
-    if ",\n" in body:
-        body = body.replace(",\n", ",nan\n")
-    return body + "nan" if body.endswith(",") else body
+_NAN = np.frombuffer(b"nan", dtype=np.uint8)
+
+
+def _fill_empty(body: str) -> bytes:
+    """``body`` as ASCII bytes with 'nan' in every empty cell after a comma (occluded
+    markers): what the regex ``(?<=,)(?=,|$)`` (multiline) substitutes, as one numpy insert
+    at the commas followed by a comma, a line end or the end (a quarter of the time of
+    three ``str.replace`` passes on a 12 MB take).  Bytes, for ``np.loadtxt`` reads a
+    bytes stream a third faster than a text one."""
+    a = np.frombuffer(body.encode(), dtype=np.uint8)
+    if a.size == 0:
+        return b""
+    after = np.empty_like(a)
+    after[:-1] = a[1:]
+    after[-1] = ord("\n")
+    at = np.flatnonzero((a == ord(",")) & ((after == ord(",")) | (after == ord("\n")))) + 1
+    if at.size == 0:
+        return a.tobytes()
+    return np.insert(a, np.repeat(at, 3), np.tile(_NAN, at.size)).tobytes()
 
 
 #: frame times further apart than this many frame periods are a jump, not dropped frames
@@ -225,7 +235,7 @@ def _parse_data(lines: list[str], ncol: int, offset: int, src: str) -> np.ndarra
         return np.zeros((0, ncol))
     body = _fill_empty("\n".join(ln.rstrip("\r") for ln in lines))
     try:
-        return np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2)
+        return np.loadtxt(io.BytesIO(body), delimiter=",", ndmin=2)
     except ValueError:
         for i, ln in enumerate(lines):
             for j, cell in enumerate(ln.split(",")):
