@@ -46,6 +46,23 @@ def test_round_trip(artifact, tmp_path, ext) -> None:
     assert [x.name for x in tmp_path.iterdir()] == [p.name]  # no temp file left
 
 
+def test_npz_is_numpys_zip_with_the_same_bytes_for_the_same_steps(artifact) -> None:
+    """np.load reads every field back exactly; float arrays are stored (zlib gains little
+    on them for most of the write's time), the rest deflated; no timestamp in the bytes."""
+    import zipfile
+
+    data = steps_bytes("s.npz", artifact)
+    assert steps_bytes("other.npz", artifact) == data
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        for f in ("q", "time", "pitch_source", "step_domain", "joint_well_posed"):
+            want = np.asarray(getattr(artifact, f))
+            np.testing.assert_array_equal(z[f], want)
+            assert z[f].dtype == want.dtype
+    kinds = {i.filename: i.compress_type for i in zipfile.ZipFile(io.BytesIO(data)).infolist()}
+    assert kinds["q.npy"] == kinds["tau.npy"] == zipfile.ZIP_STORED
+    assert kinds["pitch_source.npy"] == kinds["step_domain.npy"] == zipfile.ZIP_DEFLATED
+
+
 def _write_npz(path, d) -> None:
     buf = io.BytesIO()
     np.savez(buf, **d)
