@@ -68,37 +68,39 @@ def not_a_knot_spline(x: np.ndarray, y: np.ndarray, xq: np.ndarray) -> np.ndarra
 def _gtsv(dl: list[float], d: list[float], du: list[float], b: list[float]) -> list[float]:
     """The solution of the tridiagonal system (sub-, main and super-diagonal ``dl``, ``d``,
     ``du``; right-hand side ``b``), as LAPACK's ``dgtsv`` computes it for one right-hand
-    side (the lists are overwritten)."""
+    side (the lists are overwritten).  dgtsv leaves the last sub-diagonal entry unused where
+    this sets it to zero: the back substitution's ``- 0 * 0`` changes no value."""
     n = len(d)
     for i in range(n - 1):
-        last = i == n - 2
-        if abs(d[i]) >= abs(dl[i]):  # no row interchange
-            if d[i] == 0.0:
+        di, li = d[i], dl[i]
+        if (di if di >= 0.0 else -di) >= (li if li >= 0.0 else -li):  # no row interchange
+            if di == 0.0:
                 raise ValueError(f"singular spline system at sample {i}")
-            fact = dl[i] / d[i]
-            d[i + 1] = d[i + 1] - fact * du[i]
-            b[i + 1] = b[i + 1] - fact * b[i]
-            if not last:
-                dl[i] = 0.0
+            fact = li / di
+            d[i + 1] -= fact * du[i]
+            b[i + 1] -= fact * b[i]
+            dl[i] = 0.0
         else:  # interchange rows i and i + 1
-            fact = d[i] / dl[i]
-            d[i] = dl[i]
+            fact = di / li
+            d[i] = li
             temp = d[i + 1]
             d[i + 1] = du[i] - fact * temp
-            if not last:
+            if i < n - 2:
                 dl[i] = du[i + 1]
                 du[i + 1] = -fact * dl[i]
+            else:
+                dl[i] = 0.0
             du[i] = temp
             temp = b[i]
             b[i] = b[i + 1]
             b[i + 1] = temp - fact * b[i + 1]
     if d[n - 1] == 0.0:
         raise ValueError(f"singular spline system at sample {n - 1}")
-    b[n - 1] = b[n - 1] / d[n - 1]
-    if n > 1:
-        b[n - 2] = (b[n - 2] - du[n - 2] * b[n - 1]) / d[n - 2]
-    for i in range(n - 3, -1, -1):
-        b[i] = (b[i] - du[i] * b[i + 1] - dl[i] * b[i + 2]) / d[i]
+    x1 = b[n - 1] = b[n - 1] / d[n - 1]
+    x2 = 0.0
+    for i in range(n - 2, -1, -1):
+        x0 = b[i] = (b[i] - du[i] * x1 - dl[i] * x2) / d[i]
+        x2, x1 = x1, x0
     return b
 
 
