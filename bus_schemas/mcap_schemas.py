@@ -616,6 +616,63 @@ class Recorder:
         if not outer and self._pending is not None:
             self._handle_pending()
 
+    def write_many(self, rows: Iterable[tuple[str, Any, int]]) -> int:
+        """Write ``(topic, message, log time [ns])`` rows in order, each as :meth:`write`
+        writes it (publish time = log time; the ``/can/rates`` windows a frame closes
+        before it), with one append into the chunk for all of them: the same records, the
+        same bytes.  Returns how many rows (``/can/rates`` records not counted)."""
+        if not self._append:
+            n = 0
+            for topic, message, ns in rows:
+                self.write(topic, message, ns)
+                n += 1
+            return n
+        if self.finished:
+            if self.interrupted is not None:
+                k = sum(1 for _ in rows)
+                self.dropped += k
+                return k
+            raise RuntimeError(f"recorder {self.path} is finished")
+        out: list[tuple[int, int, int, int, bytes]] = []
+        channels, sequence, rates = self._channels, self._sequence, self._rates
+
+        def channel(topic: str) -> int:
+            if topic in channels:
+                return channels[topic]
+            flush()  # a new channel's records go after the messages before it
+            return self.add_channel(topic)
+
+        def flush() -> None:
+            append_messages(self._writer, out)
+            self.message_count += len(out)
+            out.clear()
+
+        n = 0
+        outer = self._busy
+        self._busy = True
+        try:
+            for topic, message, ns in rows:
+                t = int(ns)
+                if rates is not None and topic in _CAN_TOPICS and isinstance(message, dict):
+                    for rns, rate in rates.add(message, t):
+                        rate_data = encode_json(rate)
+                        cid = channel("/can/rates")
+                        seq = sequence[cid] = sequence[cid] + 1
+                        out.append((cid, seq, rns, rns, rate_data))
+                data = message if isinstance(message, bytes) else encode_json(message)
+                cid = channel(topic)
+                seq = sequence[cid] = sequence[cid] + 1
+                out.append((cid, seq, t, t, data))
+                n += 1
+        finally:  # what was built is written, as one write at a time would have
+            try:
+                flush()
+            finally:
+                self._busy = outer
+        if not outer and self._pending is not None:
+            self._handle_pending()
+        return n
+
     def write_can(self, msg: can.Message, direction: str, log_time_ns: int | None = None,
                   *, name: str | None = None, status: str | None = None) -> None:
         """Write a frame to ``/can/tx`` or ``/can/rx``."""
@@ -676,10 +733,9 @@ class Recorder:
             if stop is not None and stop():
                 break
             topic, build, args, ns = q.popleft()
-            if topic is None:
-                for tp, message in build(*args):  # type: ignore[misc]
-                    self.write(tp, message, ns)
-                    n += 1
+            if topic is None:  # one event's records: one append
+                n += self.write_many([(tp, message, ns) for tp, message
+                                      in build(*args)])  # type: ignore[misc]
                 continue
             self.write(topic, build(*args) if build else args[0], ns)
             n += 1

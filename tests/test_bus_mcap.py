@@ -268,6 +268,42 @@ def test_deferred_writes_are_built_late_written_in_order_and_on_finish(tmp_path)
     assert got[3][2] == json.loads(encode_json(ground_truth(9)))
 
 
+@pytest.mark.parametrize("compression", ["none", "zstd"])
+def test_write_many_leaves_the_bytes_of_one_write_at_a_time(tmp_path, compression):
+    """A batch of an event's records (what ``write_deferred`` appends at once) gives the file
+    that writing them one by one gives: CAN frames closing ``/can/rates`` windows, several
+    chunks, pre-encoded bytes; a bad record mid-batch leaves the records before it written
+    and raises as ``write`` does."""
+    frames = [codec.encode_torque(0.1 * k, -0.1 * k, k % 16) for k in range(40)]
+    rows = []
+    for k, f in enumerate(frames):
+        ns = 250_000 * k
+        rows.append(("/can/rx", can_frame_message(f, "rx", name="TorqueCmd", status="ok"), ns))
+        rows.append(("/ground_truth", ground_truth(k), ns))
+        rows.append(("/prosthesis/measurements", encode_json(measurements(k)), ns))
+    files = []
+    for batched in (False, True):
+        path = tmp_path / f"{batched}.mcap"
+        rec = Recorder(path, compression=compression, chunk_size=2048, can_rates=0.001)
+        if batched:
+            for i in range(0, len(rows), 6):
+                assert rec.write_many(rows[i:i + 6]) == len(rows[i:i + 6])
+        else:
+            for topic, message, ns in rows:
+                rec.write(topic, message, ns)
+        count = rec.message_count
+        rec.finish()
+        files.append((path.read_bytes(), count))
+    assert files[0] == files[1]
+    topics = Counter(t for t, _, _ in read_messages(tmp_path / "True.mcap"))
+    assert topics["/can/rates"] == 9 and topics["/can/rx"] == 40
+    rec = Recorder(tmp_path / "bad.mcap", compression=compression)
+    with pytest.raises(KeyError, match="no schema"):
+        rec.write_many([rows[1], ("/unknown", {"a": 1}, 5), rows[4]])
+    rec.finish()
+    assert [t for t, _, _ in read_messages(tmp_path / "bad.mcap")] == ["/ground_truth"]
+
+
 def test_writes_after_finish_are_refused(tmp_path):
     rec = Recorder(tmp_path / "a.mcap", compression="none")
     rec.write("/ground_truth", ground_truth(0), 0)

@@ -67,16 +67,25 @@ class GroundTruthRecorder:
 
     def record(self, obs: Observation, cmd: Command, truth: Truth) -> None:
         ns = self.log_ns(obs.t)
-        put = self.rec.defer_call if self.deferred else self._write
-        put("/ground_truth", ns, ground_truth_record, obs, truth)
-        put(CLF_TOPIC, ns, clf_record, obs.t, cmd.V, cmd.rho)
-        w = self.walker
-        if w is not None and obs.t >= self._next:
+        walk = self.walker is not None and obs.t >= self._next
+        if walk:
             self._next = obs.t + self.period * (1.0 - 1e-6)
-            put(TRANSFORMS_TOPIC, ns, w.transforms, ns, truth.q)
-            put(SCENE_TOPIC, ns, w.scene, ns, obs.t, truth.q, truth.socket_force, obs.domain,
-                obs.tau, obs.steps)
-            put(REFERENCE_TOPIC, ns, w.reference, obs.t, obs.domain, obs.tau)
+        if self.deferred:  # one queue entry: the period's records, built when written
+            self.rec.defer_many(ns, self._messages, ns, obs, cmd, truth, walk)
+            return
+        for topic, message in self._messages(ns, obs, cmd, truth, walk):
+            self.rec.write(topic, message, ns)
 
-    def _write(self, topic: str, ns: int, build: Callable[..., Any], *args: Any) -> None:
-        self.rec.write(topic, build(*args), ns)
+    def _messages(self, ns: int, obs: Observation, cmd: Command, truth: Truth, walk: bool
+                  ) -> list[tuple[str, Any]]:
+        """The period's (topic, message) pairs in their file order."""
+        out: list[tuple[str, Any]] = [
+            ("/ground_truth", ground_truth_record(obs, truth)),
+            (CLF_TOPIC, clf_record(obs.t, cmd.V, cmd.rho))]
+        w = self.walker
+        if walk and w is not None:
+            out += [(TRANSFORMS_TOPIC, w.transforms(ns, truth.q)),
+                    (SCENE_TOPIC, w.scene(ns, obs.t, truth.q, truth.socket_force, obs.domain,
+                                          obs.tau, obs.steps)),
+                    (REFERENCE_TOPIC, w.reference(obs.t, obs.domain, obs.tau))]
+        return out
