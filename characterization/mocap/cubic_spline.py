@@ -11,7 +11,7 @@ coefficients of ``CubicHermiteSpline`` and the power-basis evaluation of ``PPoly
 On x86-64, where neither scipy's LAPACK nor its evaluation fuses a multiply and an add,
 the values are scipy's bit for bit (``tests/test_mocap_filter.py``; the gait fits
 downstream amplify a last-bit difference); elsewhere they agree to rounding.  The solve is a
-Python loop over the samples: about 5 ms per 5 000 samples.  Three samples (scipy draws a
+Python loop over the samples: about 2-3 ms per 5 000 samples.  Three samples (scipy draws a
 parabola through them with a dense solve) go to scipy itself.
 """
 

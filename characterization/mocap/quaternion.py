@@ -7,7 +7,7 @@ mocap process`` end to end), for one conversion.  The operations are those of sc
 compiled backend for 2-D numpy input, in its order (each quaternion divided by its norm,
 the sum of squares accumulated from x to w; the matrix from the products of the normalized
 components), so the matrices are scipy's bit for bit on x86-64
-(``tests/test_mocap_sagittal.py``; the gait fits downstream amplify a last-bit difference).
+(``tests/test_mocap_filter.py``; the gait fits downstream amplify a last-bit difference).
 """
 
 from __future__ import annotations
