@@ -225,6 +225,23 @@ def cosim_rows(j: dict[str, Any]) -> list[Row]:
     return out
 
 
+def cold_tick_rows(j: dict[str, Any]) -> list[Row]:
+    def median(v: list[float]) -> float:
+        v = sorted(v)
+        return v[len(v) // 2] if len(v) % 2 else (v[len(v) // 2 - 1] + v[len(v) // 2]) / 2
+
+    out = []
+    for name, c in j["controllers"].items():
+        for mode, rounds in c["medians_cpu_wall_us"].items():
+            cpu = [x[0] for x in rounds]
+            rr = c["ratios"].get(mode)
+            label = "back to back" if mode == "back-to-back" else f"{mode} of {j['gap_us']:g} us"
+            out.append(Row(f"{name}: tick {label} (us CPU)", median(cpu),
+                           f"{fmt(min(cpu))}-{fmt(max(cpu))}",
+                           median(rr) if rr else None))
+    return out
+
+
 def realtime_rows(j: list[dict[str, Any]]) -> list[Row]:
     n = len(j)
     done = sum(bool(r["completed"]) for r in j)
@@ -278,6 +295,11 @@ BENCHES = (
     Bench("cosim", "lockstep co-simulation (clfqp, demo gait, MCAP recording)",
           ["--gait", GAIT, "--tube", TUBE, "--steps", "10", "--runs", "3"],
           ["--gait", GAIT, "--tube", TUBE, "--steps", "1", "--runs", "1"], cosim_rows),
+    Bench("cold_tick", "the same controller ticks back to back and after a pause (what a "
+          "lockstep side meets each tick)",
+          ["--gait", GAIT, "--tube", TUBE, "--ticks", "2000", "--rounds", "5"],
+          ["--gait", GAIT, "--tube", TUBE, "--ticks", "100", "--rounds", "1"],
+          cold_tick_rows, "back to back, same round"),
     Bench("realtime", "real-time co-simulation (paced to the wall clock)",
           ["--gait", GAIT, "--tube", TUBE, "--steps", "3", "--runs", "3"],
           ["--gait", GAIT, "--tube", TUBE, "--steps", "1", "--runs", "1"], realtime_rows),

@@ -62,3 +62,35 @@ def test_run_all_bad_input_is_a_one_line_error(tmp_path):
         assert r.returncode == 2 and msg in r.stderr, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not page.exists()
+
+
+def test_cold_tick_table_is_its_json(tmp_path):
+    """``bench_cold_tick``: every controller and way of running gets a row whose median is
+    the rounds' median CPU time and whose ratio is to back to back of the same round."""
+    page, res = tmp_path / "performance.md", tmp_path / "results"
+    r = run_all("--only", "cold_tick", "--quick", "--out", str(page), "--results", str(res))
+    assert r.returncode == 0, r.stdout + r.stderr
+    text = page.read_text()
+    j = json.loads((res / "cold_tick.json").read_text())
+    assert set(j["controllers"]) == {"clfqp", "pd"}
+    for name, c in j["controllers"].items():
+        modes = c["medians_cpu_wall_us"]
+        assert list(modes) == ["back-to-back", "after a sleep", "after a yield-poll",
+                               "after a busy spin"]
+        for mode, rounds in modes.items():
+            assert len(rounds) == j["rounds"] == 1
+            cpu, wall = rounds[0]
+            # a tick's CPU time cannot exceed its wall time (beyond the clocks' resolution)
+            assert 0 < cpu <= wall + 1.0, (name, mode, cpu, wall)
+            label = ("back to back" if mode == "back-to-back"
+                     else f"{mode} of {j['gap_us']:g} us")
+            row = next(x for x in text.splitlines()
+                       if x.startswith(f"| {name}: tick {label} (us CPU) |"))
+            cells = [x.strip() for x in row.split("|")]
+            assert abs(float(cells[2]) - cpu) <= 0.01 * cpu + 0.05, (row, cpu)
+            if mode == "back-to-back":
+                assert cells[4] == ""
+            else:
+                ratio = c["ratios"][mode][0]
+                assert abs(ratio - cpu / modes["back-to-back"][0][0]) < 1e-12
+                assert abs(float(cells[4]) - ratio) <= 0.01 * ratio, (row, ratio)
