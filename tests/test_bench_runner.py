@@ -94,3 +94,24 @@ def test_cold_tick_table_is_its_json(tmp_path):
                 ratio = c["ratios"][mode][0]
                 assert abs(ratio - cpu / modes["back-to-back"][0][0]) < 1e-12
                 assert abs(float(cells[4]) - ratio) <= 0.01 * ratio, (row, ratio)
+
+
+def test_lockstep_floor_walks_and_its_table_is_its_json(tmp_path):
+    """``bench_lockstep_floor``: the real FMU and controller walk a step in two processes
+    over zenoh; the period holds its two measured parts (round trip, FMU) and the table
+    holds the JSON's figures."""
+    page, res = tmp_path / "performance.md", tmp_path / "results"
+    r = run_all("--only", "lockstep_floor", "--quick", "--out", str(page), "--results", str(res))
+    assert r.returncode == 0, r.stdout + r.stderr
+    f = json.loads((res / "lockstep_floor.json").read_text())["figures"]
+    period, rtt, fmu = f["period"]["median"], f["round trip"]["median"], f["fmu"]["median"]
+    # one step of the demo gait is about 0.5-0.6 s: that many 1 ms periods, all exchanged
+    assert 300 <= f["periods"]["median"] <= 1000
+    assert rtt > 0 and fmu > 0 and rtt + fmu <= period
+    assert abs(f["real_time_factor"]["median"] - 1e3 / period) <= 1e-9 * 1e3 / period
+    assert 0 < f["controller tick (controller process)"]["median"] < rtt
+    text = page.read_text()
+    row = next(x for x in text.splitlines() if x.startswith("| real time factor |"))
+    rtf = f["real_time_factor"]["median"]
+    assert abs(float(row.split("|")[2]) - rtf) <= 0.01 * rtf
+    assert ">= 5 (the co-simulation's ceiling)" in row
