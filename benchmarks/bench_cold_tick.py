@@ -81,9 +81,11 @@ def run(make, meas, u0, gap_s: float, block: int) -> dict[str, tuple[np.ndarray,
             tick, c_m, w_m = ctl.tick, cpu[m], wall[m]
             for k in range(b, min(n, b + block)):
                 pause(m, gap_ns)
-                c0, w0 = tc(), pc()
+                w0 = pc()  # the CPU-time interval nested inside the wall-time one
+                c0 = tc()
                 tick(meas[k])
-                c_m[k], w_m[k] = tc() - c0, pc() - w0
+                c1 = tc()
+                w_m[k], c_m[k] = pc() - w0, c1 - c0
     return {m: (cpu[m] / 1e3, wall[m] / 1e3) for m in MODES}
 
 

@@ -80,8 +80,9 @@ def test_cold_tick_table_is_its_json(tmp_path):
         for mode, rounds in modes.items():
             assert len(rounds) == j["rounds"] == 1
             cpu, wall = rounds[0]
-            # a tick's CPU time cannot exceed its wall time (beyond the clocks' resolution)
-            assert 0 < cpu <= wall + 1.0, (name, mode, cpu, wall)
+            # each tick's CPU-time interval lies inside its wall-time one, so CPU <= wall
+            # tick by tick, hence for the medians too (to the two clocks' agreement)
+            assert 0 < cpu <= wall + 0.5, (name, mode, cpu, wall)
             label = ("back to back" if mode == "back-to-back"
                      else f"{mode} of {j['gap_us']:g} us")
             row = next(x for x in text.splitlines()
