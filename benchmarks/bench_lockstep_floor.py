@@ -22,12 +22,14 @@ steps are counted from the FMU; a fall ends the run and is reported.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
 import struct
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -118,13 +120,31 @@ def one_run(a: argparse.Namespace, fmu_path: Path) -> dict[str, float]:
            str(a.gait), "--tube", str(a.tube), "--poll-us", str(a.poll_us)]
     proc = subprocess.Popen(cmd + (["--no-pin"] if a.no_pin else []), stdout=subprocess.PIPE,
                             text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+
+    def watch() -> None:  # the controller process gone: wake a blocked receive (empty)
+        proc.wait()
+        with contextlib.suppress(Exception):
+            s.put(KEY_BACK, b"", allowed_destination=zenoh.Locality.SESSION_LOCAL)
+
+    def reply() -> bytes:
+        data = _wait(sub.handler, poll).payload.to_bytes()
+        if not data:
+            raise SystemExit(f"bench_lockstep_floor: the controller process exited "
+                             f"({proc.returncode}) during the run")
+        return data
+
+    poll = a.poll_us * 1e-6
+    threading.Thread(target=watch, daemon=True).start()
     try:
         assert proc.stdout is not None
         if proc.stdout.readline().strip() != "ready":
             raise SystemExit("bench_lockstep_floor: the controller process did not start")
         while not getattr(pub.matching_status, "matching", False):
+            if proc.poll() is not None:
+                raise SystemExit("bench_lockstep_floor: the controller process exited "
+                                 f"({proc.returncode}) before it subscribed")
             time.sleep(0.01)
-        pack, unpack, poll = MEAS.pack, TORQUE.unpack, a.poll_us * 1e-6
+        pack, unpack = MEAS.pack, TORQUE.unpack
         clock = time.perf_counter_ns
         fmu_ns = rtt_ns = 0
         k = 0
@@ -142,7 +162,7 @@ def one_run(a: argparse.Namespace, fmu_path: Path) -> dict[str, float]:
             t1 = clock()
             pub.put(pack(obs.t, y.knee_angle, y.ankle_angle, y.knee_velocity,
                          y.ankle_velocity, y.foot_load, y.contact, y.socket_pitch))
-            u = unpack(_wait(sub.handler, poll).payload.to_bytes())
+            u = unpack(reply())
             t2 = clock()
             plant.actuate(u)
             plant.advance()
@@ -151,7 +171,7 @@ def one_run(a: argparse.Namespace, fmu_path: Path) -> dict[str, float]:
             k += 1
         wall_ns = clock() - t_start
         pub.put(b"")
-        mean_tick, n = TIMES.unpack(_wait(sub.handler, 1.0).payload.to_bytes())
+        mean_tick, n = TIMES.unpack(reply())
         proc.wait(10)
     finally:
         if proc.poll() is None:
