@@ -38,6 +38,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 import hp_model
+from hp_model.atomic_io import atomic_write_text
 from hp_model.force_tube import load_tube
 from hp_model.gait_artifact import load_gait
 from prosthesis_controller import ControllerContext, make_controller
@@ -143,9 +144,7 @@ def main() -> None:
         print(f"| {n} | " + " | ".join(cells) + " |")
         out["controllers"][n] = {"medians_cpu_wall_us": med[n], "ratios": ratios}
     if a.json:
-        tmp = Path(a.json).with_suffix(".tmp")
-        tmp.write_text(json.dumps(out, indent=2))
-        tmp.replace(a.json)
+        atomic_write_text(a.json, json.dumps(out, indent=2))
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from hp_model.atomic_io import atomic_write_text
 from orchestrator.cosim.master import CosimConfig, CosimResult, run_cosim
 
 
@@ -59,6 +60,37 @@ def figures(res: CosimResult, mcap_bytes: int) -> dict[str, float]:
     }
 
 
+def check_inputs(p: argparse.ArgumentParser, a: argparse.Namespace) -> None:
+    """A one-line usage error for a missing gait, tube or FMU file or a count below 1."""
+    for name in ("gait", "tube", "fmu"):
+        f = getattr(a, name)
+        if f is not None and not Path(f).is_file():
+            p.error(f"--{name} {f}: no such file")
+    if a.steps < 1 or a.runs < 1:
+        p.error("--steps and --runs must be >= 1")
+
+
+def summarize(runs: list[dict[str, float]], unit: str) -> dict[str, Any]:
+    """Each figure's median, min, max and per-run values over ``runs``; printed as a
+    table."""
+    summary: dict[str, Any] = {}
+    width = max(map(len, runs[0]))
+    print(f"\n{f'figure ({unit} unless named)':<{width}}  median  [min .. max] over "
+          f"{len(runs)} runs")
+    for key in runs[0]:
+        vals = [r[key] for r in runs]
+        med = statistics.median(vals)
+        summary[key] = {"median": med, "min": min(vals), "max": max(vals), "runs": vals}
+        print(f"{key:<{width}}  {med:8.2f}  [{min(vals):.2f} .. {max(vals):.2f}]")
+    return summary
+
+
+def write_json(path: Path, args: argparse.Namespace, summary: dict[str, Any]) -> None:
+    """The arguments and the figures, written atomically."""
+    atomic_write_text(path, json.dumps({"config": {k: str(v) for k, v in vars(args).items()},
+                                        "figures": summary}, indent=2))
+
+
 def one_run(a: argparse.Namespace) -> tuple[dict[str, float], CosimResult]:
     with tempfile.TemporaryDirectory() as td:
         path = Path(td) / "b.mcap"
@@ -87,6 +119,7 @@ def main() -> None:
                    help="receive polling before blocking, both sides (0: block at once)")
     p.add_argument("--json", type=Path)
     a = p.parse_args()
+    check_inputs(p, a)
     runs: list[dict[str, float]] = []
     for i in range(a.runs):
         load0 = os.getloadavg()[0]
@@ -96,25 +129,14 @@ def main() -> None:
               f"{res.wall_time:.3f} s, RTF {fig['real_time_factor']:.2f}, tick "
               f"{fig['tick']:.0f} us, overhead {fig['overhead % of (round trip + FMU)']:.1f} %,"
               f" load average {load0:.1f} -> {os.getloadavg()[0]:.1f}", flush=True)
-    summary: dict[str, Any] = {}
-    width = max(map(len, runs[0]))
-    print(f"\n{'figure (us per tick unless named)':<{width}}  median  [min .. max] over "
-          f"{len(runs)} runs")
-    for key in runs[0]:
-        vals = [r[key] for r in runs]
-        med = statistics.median(vals)
-        summary[key] = {"median": med, "min": min(vals), "max": max(vals), "runs": vals}
-        print(f"{key:<{width}}  {med:8.2f}  [{min(vals):.2f} .. {max(vals):.2f}]")
+    summary = summarize(runs, "us per tick")
     rtf = summary["real_time_factor"]["median"]
     ovh = summary["overhead % of (round trip + FMU)"]["median"]
     print(f"\ntargets: real-time factor >= 5 (issue 22): {'met' if rtf >= 5 else 'NOT met'} "
           f"(median {rtf:.2f}); overhead <= 30 % of (round trip + FMU): "
           f"{'met' if ovh <= 30 else 'NOT met'} (median {ovh:.1f} %)")
     if a.json:
-        tmp = a.json.with_name(a.json.name + ".tmp")
-        tmp.write_text(json.dumps({"config": {k: str(v) for k, v in vars(a).items()},
-                                   "figures": summary}, indent=2))
-        tmp.replace(a.json)
+        write_json(a.json, a, summary)
 
 
 if __name__ == "__main__":

@@ -23,9 +23,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import os
-import statistics
 import struct
 import subprocess
 import sys
@@ -37,6 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import zenoh  # noqa: E402
+from bench_cosim import check_inputs, summarize, write_json  # noqa: E402  (this folder)
+from bench_zenoh_floor import _pin, _publisher, _wait  # noqa: E402
 
 from bus_schemas.zenoh_config import loopback_endpoint, make_config  # noqa: E402
 
@@ -46,30 +46,6 @@ TIMES = struct.Struct("<dQ")  # the controller's mean tick (us) and its tick cou
 KEY_OUT, KEY_BACK = "floor/meas", "floor/torque"
 GAIT = ROOT / "tests/data/controller/gait_demo.json"
 TUBE = ROOT / "tests/data/controller/tube_demo.json"
-
-
-def _pin(cpu: int | None) -> None:
-    avail = sorted(os.sched_getaffinity(0))
-    if cpu is not None and len(avail) >= 2:
-        os.sched_setaffinity(0, {avail[cpu]})
-
-
-def _wait(handler: zenoh.Handler, poll_s: float) -> zenoh.Sample:
-    """The next sample: poll (yielding) up to ``poll_s``, then block (as the co-simulation's
-    receivers do)."""
-    end = time.perf_counter() + poll_s
-    while time.perf_counter() < end:
-        s = handler.try_recv()
-        if s is not None:
-            return s
-        os.sched_yield()
-    return handler.recv()
-
-
-def _publisher(s: zenoh.Session, key: str) -> zenoh.Publisher:
-    return s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                               priority=zenoh.Priority.REAL_TIME, express=True,
-                               reliability=zenoh.Reliability.RELIABLE)
 
 
 def controller_process(a: argparse.Namespace) -> None:
@@ -206,8 +182,7 @@ def main() -> None:
     if a.serve:
         controller_process(a)
         return
-    if a.steps < 1 or a.runs < 1:
-        p.error("--steps and --runs must be >= 1")
+    check_inputs(p, a)
 
     import hp_model
     from orchestrator.cosim.master import ensure_fmu
@@ -218,20 +193,9 @@ def main() -> None:
         f = one_run(a, fmu_path)
         runs.append(f)
         print(f"run {r + 1}: " + ", ".join(f"{k} {v:.2f}" for k, v in f.items()), flush=True)
-    summary = {}
-    print(f"\n{'figure (us per period unless named)':<40} median  [min .. max] over "
-          f"{len(runs)} runs")
-    for key in runs[0]:
-        vals = [x[key] for x in runs]
-        summary[key] = {"median": statistics.median(vals), "min": min(vals), "max": max(vals),
-                        "runs": vals}
-        print(f"{key:<40} {statistics.median(vals):7.2f}  [{min(vals):.2f} .. {max(vals):.2f}]")
+    summary = summarize(runs, "us per period")
     if a.json:
-        tmp = a.json.with_name(a.json.name + ".tmp")
-        tmp.write_text(json.dumps({"config": {k: str(v) for k, v in vars(a).items()},
-                                   "figures": summary}, indent=2))
-        tmp.replace(a.json)
-
+        write_json(a.json, a, summary)
 
 if __name__ == "__main__":
     main()
