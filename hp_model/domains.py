@@ -1,16 +1,25 @@
-"""The two domains of the walk and the roles their coordinates and frames play.
+"""The domains of the walk: :class:`Domain`, the one type that names them, and the roles
+their coordinates and frames play.
 
-``DOMAINS`` = ("ps", "pns") is the one list of domain names: prosthesis stance (the
-prosthesis foot flat on the ground) and prosthesis non-stance (the human's left foot flat).
-Artifacts, recordings and the FMU store these names (the FMU and the logs number them by
-their index here).
+A domain is a member of :class:`Domain` (a :class:`~hp_model.choices.Choice`: the member is
+its word in artifacts, recordings and JSON).  Everything the rest of the code needs to know
+about a domain is its row of ``_SPECS`` below: its stance leg, the joints whose angles are
+its y2 outputs, the rows the human's torques control, the domain its guard leads to.  Adding
+a domain is one member of :class:`Domain` and one row of ``_SPECS``; the hybrid model's
+constraint stacks (:mod:`hp_model.human_prosthesis`), the FMU's tables, the gait artifact
+and the optimizer iterate over :class:`Domain`.
 
-Per domain, the static tables name the coordinates that play each role:
+    Domain.PS   prosthesis stance (the prosthesis foot flat on the ground)
+    Domain.PNS  prosthesis non-stance (the human's left foot flat)
 
-    STANCE_LEG[d]     (hip, knee, ankle) coordinates of the stance leg and its ankle frame
-    STANCE[d]         (knee, ankle) of the stance leg: delta_p_hip = c_k th_k + c_a th_a
-    Y2_COORDS[d]      the 5 joints whose angles are the y2 outputs, in output order
-    HUMAN_OUTPUTS[d]  rows of the stacked outputs (y1, y2) the human's 4 torques control
+Per domain (``Domain.X.<property>``):
+
+    stance_leg      (hip, knee, ankle) coordinates of the stance leg and its frames' side
+    stance          (knee, ankle) of the stance leg: delta_p_hip = c_k th_k + c_a th_a
+    y2_coords       the 5 joints whose angles are the y2 outputs, in output order
+    human_outputs   rows of the stacked outputs (y1, y2) the human's 4 torques control
+    next            the domain the swing foot's touchdown leads to
+    code            its number (definition order: 0 = ps, 1 = pns), as logs and the FMU store it
 
 :class:`DomainRoles` resolves them once per model into indices (``model.roles[d]``).
 """
@@ -20,14 +29,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from hp_model.choices import Choice
+
 if TYPE_CHECKING:
     from hp_model.hybrid import HybridModel
 
-DOMAINS: tuple[str, str] = ("ps", "pns")
-#: each domain's number (its index in ``DOMAINS``: 0 = ps, 1 = pns), as logs and the FMU store it
-DOMAIN_CODE = {d: i for i, d in enumerate(DOMAINS)}
 #: the prosthesis joints (knee, ankle)
 PROSTHESIS = ("th_pk", "th_pa")
+#: the number of y2 outputs of every domain
+N_Y2 = 5
 
 
 @dataclass(frozen=True)
@@ -44,21 +54,103 @@ class StanceLeg:
     def ankle_frame(self) -> str:
         return f"{self.side}_ankle"
 
+    @property
+    def sole_frame(self) -> str:
+        """The frame held flat on the ground while this leg is the stance leg."""
+        return f"{self.side}_sole"
 
-STANCE_LEG = {"ps": StanceLeg("th_rh", "th_pk", "th_pa", "p"),
-              "pns": StanceLeg("th_lh", "th_lk", "th_la", "l")}
-STANCE = {d: (leg.knee, leg.ankle) for d, leg in STANCE_LEG.items()}
-Y2_COORDS = {
-    "ps": ("th_lh", "th_lk", "th_la", "th_rh", "th_pk"),
-    "pns": ("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"),
+
+@dataclass(frozen=True)
+class DomainSpec:
+    """One domain's row of ``_SPECS`` (module docstring)."""
+
+    stance_leg: StanceLeg
+    y2_coords: tuple[str, ...]
+    human_outputs: tuple[int, ...]
+    next: str
+
+
+class Domain(Choice):
+    """A domain of the walk (module docstring): its word, its code and its roles."""
+
+    PS = "ps"
+    PNS = "pns"
+
+    @property
+    def code(self) -> int:
+        """Its number (definition order), as logs and the FMU store it."""
+        return _CODES[self]
+
+    @classmethod
+    def from_code(cls, code: int) -> Domain:
+        """The domain numbered ``code`` (ValueError naming the valid codes otherwise)."""
+        members = tuple(cls)
+        if not 0 <= int(code) < len(members):
+            raise ValueError(f"unknown domain code {code}; valid codes are 0..{len(members) - 1}")
+        return members[int(code)]
+
+    @property
+    def spec(self) -> DomainSpec:
+        return _SPECS[self]
+
+    @property
+    def stance_leg(self) -> StanceLeg:
+        return _SPECS[self].stance_leg
+
+    @property
+    def stance(self) -> tuple[str, str]:
+        """(knee, ankle) coordinates of the stance leg."""
+        leg = _SPECS[self].stance_leg
+        return leg.knee, leg.ankle
+
+    @property
+    def y2_coords(self) -> tuple[str, ...]:
+        return _SPECS[self].y2_coords
+
+    @property
+    def human_outputs(self) -> tuple[int, ...]:
+        return _SPECS[self].human_outputs
+
+    @property
+    def next(self) -> Domain:
+        return Domain(_SPECS[self].next)
+
+    @property
+    def is_prosthesis_stance(self) -> bool:
+        """Whether the prosthesis foot is the stance foot."""
+        return _SPECS[self].stance_leg.side == "p"
+
+    def y2_row(self, coord: str) -> int:
+        """The y2 row of joint ``coord`` (ValueError if it is not an output here)."""
+        return _SPECS[self].y2_coords.index(coord)
+
+
+_SPECS: dict[Domain, DomainSpec] = {
+    Domain.PS: DomainSpec(
+        stance_leg=StanceLeg("th_rh", "th_pk", "th_pa", "p"),
+        y2_coords=("th_lh", "th_lk", "th_la", "th_rh", "th_pk"),
+        human_outputs=(1, 2, 3, 4), next="pns"),
+    Domain.PNS: DomainSpec(
+        stance_leg=StanceLeg("th_lh", "th_lk", "th_la", "l"),
+        y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"),
+        human_outputs=(0, 1, 2, 3), next="ps"),
 }
-N_Y2 = 5
-HUMAN_OUTPUTS = {"ps": (1, 2, 3, 4), "pns": (0, 1, 2, 3)}
+_CODES: dict[Domain, int] = {d: i for i, d in enumerate(Domain)}
+
+#: every domain, in code order
+DOMAINS: tuple[Domain, ...] = tuple(Domain)
+#: each domain's number (:attr:`Domain.code`), as logs and the FMU store it
+DOMAIN_CODE: dict[Domain, int] = dict(_CODES)
+#: tables by domain, derived from ``_SPECS`` (kept for the many callers that index by name)
+STANCE_LEG: dict[Domain, StanceLeg] = {d: d.stance_leg for d in Domain}
+STANCE: dict[Domain, tuple[str, str]] = {d: d.stance for d in Domain}
+Y2_COORDS: dict[Domain, tuple[str, ...]] = {d: d.y2_coords for d in Domain}
+HUMAN_OUTPUTS: dict[Domain, tuple[int, ...]] = {d: d.human_outputs for d in Domain}
 
 
 def y2_row(domain: str, coord: str) -> int:
     """The y2 row of joint ``coord`` in ``domain`` (ValueError if it is not an output)."""
-    return Y2_COORDS[domain].index(coord)
+    return Domain(domain).y2_row(coord)
 
 
 @dataclass(frozen=True)
@@ -74,9 +166,9 @@ class DomainRoles:
     ``human_rows``: rows of (y1, y2) the human's torques control; ``stance_foot`` and
     ``swing_foot``: the frames (heel, toe) of the stance and the swing foot."""
 
-    name: str
+    name: Domain
     code: int
-    next: str
+    next: Domain
     stance_frame: str
     swing_frame: str
     stance_frame_index: int
@@ -95,25 +187,27 @@ class DomainRoles:
 
 def domain_roles(model: HybridModel, domain: str) -> DomainRoles:
     """The roles of ``domain`` in ``model`` (built once per model: ``model.roles``)."""
+    d = Domain(domain)
     idx = model.coord_names.index
-    dom = model.domains[domain]
+    dom = model.domains[d]
     if dom.next is None or dom.swing_frame is None:
-        raise ValueError(f"domain '{domain}' has no swing frame or next domain")
-    names = Y2_COORDS[domain]
-    knee, ankle = STANCE[domain]
+        raise ValueError(f"domain '{d}' has no swing frame or next domain")
+    names = d.y2_coords
+    knee, ankle = d.stance
     rows = tuple(r for r, n in enumerate(names) if n != knee and n not in PROSTHESIS)
-    stance = model.stance_frame(domain)
+    stance = model.stance_frame(d)
+    nxt = Domain(dom.next)
+    prosthesis_rows = tuple(d.y2_row(n) if n in names else -1 for n in PROSTHESIS)
     return DomainRoles(
-        name=domain, code=DOMAIN_CODE[domain], next=dom.next, stance_frame=stance,
+        name=d, code=d.code, next=nxt, stance_frame=stance,
         swing_frame=dom.swing_frame, stance_frame_index=model.frame_index(stance),
         swing_frame_index=model.frame_index(dom.swing_frame), knee=idx(knee), ankle=idx(ankle),
         y2=tuple(idx(n) for n in names), on_outputs=tuple(idx(names[r]) for r in rows),
         on_outputs_rows=rows, prosthesis=(idx(PROSTHESIS[0]), idx(PROSTHESIS[1])),
-        prosthesis_rows=tuple(y2_row(domain, n) if n in names else -1  # type: ignore[arg-type]
-                              for n in PROSTHESIS),
-        human_rows=HUMAN_OUTPUTS[domain],
-        stance_foot=_heel_toe(STANCE_LEG[domain].side),
-        swing_foot=_heel_toe(STANCE_LEG[dom.next].side))
+        prosthesis_rows=(prosthesis_rows[0], prosthesis_rows[1]),
+        human_rows=d.human_outputs,
+        stance_foot=_heel_toe(d.stance_leg.side),
+        swing_foot=_heel_toe(nxt.stance_leg.side))
 
 
 def _heel_toe(side: str) -> tuple[str, str]:

@@ -31,8 +31,8 @@ import numpy as np
 from hp_model import anthropometry as anth
 from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
-from hp_model.domains import DOMAINS, STANCE_LEG, DomainRoles, domain_roles
-from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
+from hp_model.domains import Domain, DomainRoles, domain_roles
+from hp_model.hybrid import Constraint, ConstraintKind, ContactDomain, HybridModel
 from hp_model.tree import Body, Frame, JointKind, PlanarTree, frame_pose
 
 COORDS = ("x_B", "z_B", "th_B", "th_lh", "th_lk", "th_la", "th_rh",
@@ -159,12 +159,12 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
 
 
 SOCKET = Constraint("socket", ConstraintKind.COORDS, SOCKET_COORDS)
-DOMAIN_DEFS = (
-    Domain("ps", (Constraint("p_foot", ConstraintKind.FRAME, "p_sole"), SOCKET),
-           swing_frame="l_sole", next="pns"),
-    Domain("pns", (Constraint("l_foot", ConstraintKind.FRAME, "l_sole"), SOCKET),
-           swing_frame="p_sole", next="ps"),
-)
+#: each domain's constraint stack: its stance foot flat, the socket's fixed joint
+DOMAIN_DEFS = tuple(
+    ContactDomain(d, (Constraint(f"{d.stance_leg.side}_foot", ConstraintKind.FRAME,
+                                 d.stance_leg.sole_frame), SOCKET),
+                  swing_frame=d.next.stance_leg.sole_frame, next=d.next)
+    for d in Domain)
 
 
 def hip_progress_coefficients(tree: PlanarTree, domain: str) -> tuple[float, float]:
@@ -176,7 +176,7 @@ def hip_progress_coefficients(tree: PlanarTree, domain: str) -> tuple[float, flo
     over the foot is a negative ankle angle).  From the tree alone (:func:`build_tree`),
     without the model's dynamics: ``hpcosim mocap process`` needs only these.
     """
-    leg = STANCE_LEG[domain]
+    leg = Domain(domain).stance_leg
     q = ca.SX.sym("q", tree.nq)
     ih, ik, ia = (tree.coord_index(c) for c in (leg.hip, leg.knee, leg.ankle))
     rel = frame_pose(tree, q, "hip")[0] - frame_pose(tree, q, leg.ankle_frame)[0]
@@ -210,7 +210,7 @@ class HumanProsthesisModel(HybridModel):
         self.torque_limits.setflags(write=False)
         super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12", backend=backend)
         #: each domain's roles resolved to indices (:mod:`hp_model.domains`)
-        self.roles: dict[str, DomainRoles] = {d: domain_roles(self, d) for d in DOMAINS}
+        self.roles: dict[Domain, DomainRoles] = {d: domain_roles(self, d) for d in Domain}
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)

@@ -65,7 +65,7 @@ class Constraint:
 
 
 @dataclass(frozen=True)
-class Domain:
+class ContactDomain:
     """A continuous domain: its constraint stack, the frame whose touchdown is its guard,
     and the domain the guard leads to."""
 
@@ -101,7 +101,7 @@ class HybridModel:
         tree: PlanarTree,
         actuated: Sequence[str],
         gear_ratios: Sequence[float],
-        domains: Sequence[Domain],
+        domains: Sequence[ContactDomain],
         name: str,
         backend: CompileBackend | str = CompileBackend.AUTO,
     ) -> None:

@@ -29,7 +29,8 @@ import numpy as np
 
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.hybrid import Constraint, ConstraintKind, Domain, HybridModel
+from hp_model.domains import Domain
+from hp_model.hybrid import Constraint, ConstraintKind, ContactDomain, HybridModel
 from hp_model.tree import frame_pose, rot
 
 SUB_COORDS = ("x_Bp", "z_Bp", "th_Bp", "th_pk", "th_pa")
@@ -44,7 +45,7 @@ class ProsthesisSubsystem(HybridModel):
         foot = Constraint("p_foot", ConstraintKind.FRAME, "p_sole")
         super().__init__(
             tree, ("th_pk", "th_pa"), (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-            (Domain("ps", (foot,)),), name="prosthesis5",
+            (ContactDomain(Domain.PS, (foot,)),), name="prosthesis5",
         )
         self.full = full
         self.torque_limits = full.torque_limits[4:]
@@ -55,7 +56,7 @@ class ProsthesisSubsystem(HybridModel):
         base = frame_pose(tree, q, "socket", self.poses)
         Jw = ca.jacobian(base, q)
         Js = ca.vertcat(rot(base[2]).T @ Jw[0:2, :], Jw[2, :])
-        h = self.h["ps"]
+        h = self.h[Domain.PS]
         J, Jdqd = constraint_terms(h, q, qd)
         qdd, lam = constrained_accel(self.D, self.H, ca.DM(self.B) @ u + Js.T @ Fs, J, Jdqd)
         self.functions["sub_dyn"] = ca.Function(
