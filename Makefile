@@ -38,8 +38,12 @@ test: $(STAMP)
 	$(VENV)/bin/python -m pytest -m serial --durations=5; serial=$$?; \
 	test $$parallel -eq 0 && test $$serial -eq 0
 
+# ruff: style, imports and the size and complexity guards; mypy: the six product packages
+# (both configured in pyproject.toml: [tool.ruff.lint], [tool.mypy]).  Both always run.
 lint: $(STAMP)
-	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff check .; ruff=$$?; \
+	$(VENV)/bin/mypy; mypy=$$?; \
+	test $$ruff -eq 0 && test $$mypy -eq 0
 
 # Every benchmark (about 10 min on 2 cores) -> docs/performance.md, generated with the machine,
 # the date and the commit (never edited by hand; the prose is docs/performance-notes.md)

@@ -27,11 +27,12 @@ from pathlib import Path
 
 import can
 
-from bus_schemas import codec, protocol
-from bus_schemas.crc8 import frame_checksum
-from bus_schemas.mcap_schemas import Recorder
-from bus_schemas.zenoh_can import ZenohBus
-from bus_schemas.zenoh_config import loopback_endpoint
+from bus_schemas.recording.recorder import Recorder
+from bus_schemas.transport import codec, protocol
+from bus_schemas.transport.crc8 import frame_checksum
+from bus_schemas.transport.zenoh_can import ZenohBus
+from bus_schemas.transport.zenoh_config import loopback_endpoint
+from hp_model.domains import Domain
 
 
 def per_call_us(fn, number: int = 20_000, repeat: int = 7) -> float:
@@ -73,7 +74,7 @@ def codec_figures() -> dict[str, float]:
 def mcap_figures() -> dict[str, float]:
     frame = codec.encode_torque(1.0, 2.0, 3)
     gt = {"t": 0.1, "socket_force": {"Fx": 1.0, "Fz": -700.0, "My": 0.5},
-          "q": [0.1] * 12, "qd": [0.2] * 12, "domain": "ps", "tau": 0.3, "step": 1,
+          "q": [0.1] * 12, "qd": [0.2] * 12, "domain": Domain.PS, "tau": 0.3, "step": 1,
           "fallen": False}
     with tempfile.TemporaryDirectory() as d, Recorder(Path(d) / "b.mcap") as rec:
         rec.register_all()

@@ -11,7 +11,7 @@ running, all along the same measurements, taking turns every ``--block`` ticks:
   - ``after a sleep``: each tick after ``time.sleep(gap)`` (the thread blocks; the CPU may
     idle or run something else);
   - ``after a yield-poll``: each tick after ``gap`` of ``os.sched_yield()`` polling (what a
-    receiving side does while it waits: ``bus_schemas.zenoh_can._Receiver``);
+    receiving side does while it waits: ``bus_schemas.transport.receiver.Receiver``);
   - ``after a busy spin``: each tick after ``gap`` of a Python loop reading the clock (no
     system call: the thread keeps the CPU).
 

@@ -2,7 +2,7 @@
 
 10,000 consecutive ticks (1 kHz) along the gait's prosthesis-stance collocation trajectory
 (th_pk, th_pa and their rates interpolated at 1 kHz, small noise added, repeated with time
-running on), for the relaxed robust CLF-QP, the exact one, PD and robust-passive; then the
+running on), for every controller of the registry; then the
 bare piqp update + solve of the very QPs the relaxed controller solved, in the same run,
 and the ratio of the relaxed tick to the bare solve.  Prints a markdown table.
 
@@ -34,6 +34,7 @@ import hp_model
 from hp_model.force_tube import ForceTube, load_tube
 from hp_model.gait_artifact import Gait, load_gait
 from prosthesis_controller import (
+    CONTROLLERS,
     ControllerContext,
     ControllerName,
     QpOutcome,
@@ -139,11 +140,7 @@ def main() -> None:
           f"repeats; tube {a.tube or f'+-{HALF}'}; {platform.processor() or platform.machine()}\n")
     print("| controller | median per tick (us) | p99 (us) | modes (last repeat) |")
     print("|---|---:|---:|---|")
-    labels = {"clfqp": "interaction-aware robust CLF-QP, relaxed",
-              "clfqp-exact": "interaction-aware robust CLF-QP, exact",
-              "clfqp-paper": "paper's robust CLF-QP, relaxed",
-              "clfqp-paper-exact": "paper's robust CLF-QP, exact", "pd": "PD",
-              "passive": "robust-passive", "phase-pd": "phase-PD reference",
+    labels = {**{n: f"{n}: {e.description}" for n, e in CONTROLLERS.items()},
               "piqp": "bare piqp update + solve (relaxed QPs)"}
     for n in [*ControllerName, "piqp"]:
         r = rows[n]

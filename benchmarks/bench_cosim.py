@@ -30,7 +30,9 @@ from pathlib import Path
 from typing import Any
 
 from hp_model.atomic_io import atomic_write_text
-from orchestrator.cosim.master import CosimConfig, CosimResult, run_cosim
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.master import run_cosim
+from orchestrator.cosim.result import CosimResult
 
 
 def figures(res: CosimResult, mcap_bytes: int) -> dict[str, float]:

@@ -37,6 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 import hp_model
+from hp_model.domains import Domain
 from hp_model.gait_artifact import load_gait, save_gait
 from human_fmu import build_fmu
 from tests.fmu_runner import HumanFMU, NominalPD
@@ -80,7 +81,7 @@ def main() -> None:
         q0, qd0 = start_state(gait)
         python_run(sim, pd, q0, qd0, duration=0.1)  # warm-up
         torques: list[np.ndarray] = []
-        rec = sim.run(q0, qd0, "ps", duration=a.periods * 1e-3,
+        rec = sim.run(q0, qd0, Domain.PS, duration=a.periods * 1e-3,
                       policy=lambda t, st: torques.append(
                           pd(st.domain, st.tau, st.q[10:12], st.qd[10:12])) or torques[-1])
         if rec.failed:
@@ -89,7 +90,7 @@ def main() -> None:
         u = np.array(torques)
         replay = iter(u)
         t0 = time.perf_counter()
-        rep = sim.run(q0, qd0, "ps", duration=n * 1e-3, policy=lambda t, st: next(replay))
+        rep = sim.run(q0, qd0, Domain.PS, duration=n * 1e-3, policy=lambda t, st: next(replay))
         py_per_period = (time.perf_counter() - t0) / n * 1e6
         assert np.array_equal(rep.q, rec.q)
 

@@ -38,7 +38,7 @@ import zenoh  # noqa: E402
 from bench_cosim import check_inputs, summarize, write_json  # noqa: E402  (this folder)
 from bench_zenoh_floor import _pin, _publisher, _wait  # noqa: E402
 
-from bus_schemas.zenoh_config import loopback_endpoint, make_config  # noqa: E402
+from bus_schemas.transport.zenoh_config import loopback_endpoint, make_config  # noqa: E402
 
 MEAS = struct.Struct("<6d?d")  # t, qk, qa, vk, va, load, contact, pitch
 TORQUE = struct.Struct("<2d")
@@ -79,6 +79,19 @@ def controller_process(a: argparse.Namespace) -> None:
     s.close()
 
 
+def _await_controller(proc: subprocess.Popen[str], pub: zenoh.Publisher) -> None:
+    """Until the controller process is ready and subscribed to the measurements (an exit
+    before that is a one-line error)."""
+    assert proc.stdout is not None
+    if proc.stdout.readline().strip() != "ready":
+        raise SystemExit("bench_lockstep_floor: the controller process did not start")
+    while not getattr(pub.matching_status, "matching", False):
+        if proc.poll() is not None:
+            raise SystemExit("bench_lockstep_floor: the controller process exited "
+                             f"({proc.returncode}) before it subscribed")
+        time.sleep(0.01)
+
+
 def one_run(a: argparse.Namespace, fmu_path: Path) -> dict[str, float]:
     from human_fmu.instance import HumanFmu
     from orchestrator.loop.plant import FmuPlant
@@ -112,14 +125,7 @@ def one_run(a: argparse.Namespace, fmu_path: Path) -> dict[str, float]:
     poll = a.poll_us * 1e-6
     threading.Thread(target=watch, daemon=True).start()
     try:
-        assert proc.stdout is not None
-        if proc.stdout.readline().strip() != "ready":
-            raise SystemExit("bench_lockstep_floor: the controller process did not start")
-        while not getattr(pub.matching_status, "matching", False):
-            if proc.poll() is not None:
-                raise SystemExit("bench_lockstep_floor: the controller process exited "
-                                 f"({proc.returncode}) before it subscribed")
-            time.sleep(0.01)
+        _await_controller(proc, pub)
         pack, unpack = MEAS.pack, TORQUE.unpack
         clock = time.perf_counter_ns
         fmu_ns = rtt_ns = 0
@@ -185,7 +191,7 @@ def main() -> None:
     check_inputs(p, a)
 
     import hp_model
-    from orchestrator.cosim.master import ensure_fmu
+    from orchestrator.cosim.human import ensure_fmu
 
     fmu_path = ensure_fmu(a.gait, hp_model.load_model(), a.fmu, lambda m: print(m))
     runs = []

@@ -1,11 +1,17 @@
-"""Benchmark: a 37-step-cycle synthetic take at 120 Hz (markers + rigid bodies), end to end.
+"""Benchmark: ``hpcosim mocap process`` on a 37-step-cycle synthetic take at 120 Hz (markers
++ rigid bodies).
 
-Stages timed per repeat: reading the Motive CSV, processing (limb pitches, joint centres,
-joint angles, segmentation), rendering the QA report and figures, writing the steps file.
-"Core" = read + process + steps file; "all" adds the report and figures.  The take is
-generated once (not timed).  Target (issues 3 and 19): end to end under 2 s, measured as a
-user runs it: ``hpcosim mocap process`` in a fresh process (interpreter start, imports,
-model, figures; wall time, the "CLI" rows), alternating with ``--no-figures``.
+Target (issue 36): the command's own work at most 1 s median, imports not counted.  Its own
+work is ``process_file()`` (read the Motive CSV, the subject's model tree, processing, QA
+report and figures, steps file: all the command does after its imports), timed in this
+process after a first call that pays the imports left (scipy's filter, spline and rotations
+are imported lazily by the command, but already here by the synthetic subject; Pillow),
+reported apart and not in the target.  Also timed per repeat, by stage: reading,
+processing (limb pitches, joint centres, joint angles, segmentation), the QA report and
+figures, writing the steps file ("core" = read + process + write; "all" adds the report and
+figures).  For information, the command as a user runs it: a fresh process timed from outside
+(interpreter start and imports included; wall time, the "CLI" rows), alternating with
+``--no-figures``.  The take is generated once (not timed).
 
     PYTHONPATH=. python benchmarks/bench_mocap.py [--repeats 7] [--json out.json]
 """
@@ -30,9 +36,12 @@ from characterization.mocap.pipeline import process_take, to_artifact
 from characterization.mocap.report import render_report
 from characterization.mocap.steps_artifact import save_steps
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 
 CLI = "CLI: hpcosim mocap process"
+WORK = "process_file()"  # the command's own work, after its imports
+FIRST = "process_file(), first call"  # with the imports left: not in the target
+TARGET_S = 1.0  # the command's own work, median (issue 36)
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -53,32 +62,34 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     model = hp_model.load_model()
-    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
+    coef = {d: model.hip_progress_coefficients(d) for d in Domain}
     mapping = default_mapping()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         s = synthesize(model, SynthOptions(n_strides=37, seed=0))
         write_motive_csv(d / "take.csv", s.take)
         size = (d / "take.csv").stat().st_size / 1e6
-        rows: dict[str, list[float]] = {k: [] for k in ("read", "process", "report+figures",
-                                                        "write", "core", "all",
-                                                        "process_file()")}
-        process_file(d / "take.csv", d / "warm.npz", mapping=mapping)  # warm caches
+        rows: dict[str, list[float]] = {k: [] for k in (WORK, FIRST, "read", "process",
+                                                        "report+figures", "write", "core",
+                                                        "all")}
+        t0 = time.perf_counter()
+        process_file(d / "take.csv", d / "warm.npz", mapping=mapping)
+        rows[FIRST].append(time.perf_counter() - t0)
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            take = read_take(d / "take.csv")
-            t1 = time.perf_counter()
-            p = process_take(take, mapping, coef)
-            t2 = time.perf_counter()
-            render_report(d / "steps.npz", p, True)
-            t3 = time.perf_counter()
-            save_steps(d / "steps.npz", to_artifact(p))
-            t4 = time.perf_counter()
             process_file(d / "take.csv", d / "steps2.npz", mapping=mapping)
+            t1 = time.perf_counter()
+            take = read_take(d / "take.csv")
+            t2 = time.perf_counter()
+            p = process_take(take, mapping, coef)
+            t3 = time.perf_counter()
+            render_report(d / "steps.npz", p, True)
+            t4 = time.perf_counter()
+            save_steps(d / "steps.npz", to_artifact(p))
             t5 = time.perf_counter()
-            for k, v in (("read", t1 - t0), ("process", t2 - t1), ("report+figures", t3 - t2),
-                         ("write", t4 - t3), ("core", (t2 - t0) + (t4 - t3)),
-                         ("all", t4 - t0), ("process_file()", t5 - t4)):
+            for k, v in ((WORK, t1 - t0), ("read", t2 - t1), ("process", t3 - t2),
+                         ("report+figures", t4 - t3), ("write", t5 - t4),
+                         ("core", (t3 - t1) + (t5 - t4)), ("all", t5 - t1)):
                 rows[k].append(v)
         cli = {CLI: [], CLI + " --no-figures": []}
         for _ in range(max(5, args.repeats)):
@@ -91,10 +102,14 @@ def main() -> None:
     print(f"{'stage':<44}{'median (s)':>12}{'min':>9}{'max':>9}")
     for k, v in rows.items():
         print(f"{k:<44}{statistics.median(v):>12.3f}{min(v):>9.3f}{max(v):>9.3f}")
+    work = statistics.median(rows[WORK])
+    met = work <= TARGET_S
+    print(f"\ntarget: the command's own work ({WORK}, imports not counted) <= {TARGET_S:g} s "
+          f"median: {work:.3f} s, {'met' if met else 'NOT met'}")
     if args.json:
         args.json.write_text(json.dumps({
             "frames": take.n_frames, "csv_mb": size, "steps": len(p.steps),
-            "repeats": args.repeats,
+            "repeats": args.repeats, "target_s": TARGET_S, "met": met,
             "stages_s": {k: {"median": statistics.median(v), "min": min(v), "max": max(v)}
                          for k, v in rows.items()}}, indent=1))
 

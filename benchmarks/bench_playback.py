@@ -38,6 +38,7 @@ import hp_model
 from characterization.mocap.steps_artifact import load_steps
 from characterization.tube.playback import (
     PlaybackOptions,
+    TubeOptions,
     fit_force_tube,
     socket_forces,
     write_outputs,
@@ -84,11 +85,12 @@ def main() -> None:
           f"{args.steps} ps steps")
 
     # 1. playback + tube, end to end
-    res = fit_force_tube(model, gait, steps, args.degree, args.steps)  # warm-up (compiles)
+    res = fit_force_tube(model, gait, steps, TubeOptions(degree=args.degree),
+                         args.steps)  # warm-up (compiles)
     total, play, tube = [], [], []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        res = fit_force_tube(model, gait, steps, args.degree, args.steps)
+        res = fit_force_tube(model, gait, steps, TubeOptions(degree=args.degree), args.steps)
         total.append(time.perf_counter() - t0)
         play.append(res.seconds["playback"])
         tube.append(res.seconds["tube"])
@@ -153,7 +155,7 @@ def main() -> None:
                                                                    noise_deg=0.1))):
             take = synthesize(model, gait, opt)
             for mg in (PlaybackOptions().fit_margin, 0.0, None):
-                r = fit_force_tube(model, gait, take.steps, args.degree,
+                r = fit_force_tube(model, gait, take.steps, TubeOptions(degree=args.degree),
                                    options=PlaybackOptions(fit_margin=mg))
                 e = 100 * relative_rms_errors(r, take).max(axis=0)
                 x = 100 * tube_excess(r, take).max()

@@ -19,7 +19,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from orchestrator.cosim.master import CosimConfig, run_cosim
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.master import run_cosim
 
 COLUMNS = ("completed", "ticks", "late", "missed", "overruns", "skipped_slots", "max_lag_ms",
            "latency_median_us", "latency_p99_us", "real_time_factor")

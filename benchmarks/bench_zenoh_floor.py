@@ -32,7 +32,7 @@ from pathlib import Path
 import zenoh
 import zenoh.shm
 
-from bus_schemas.zenoh_config import loopback_endpoint, make_config
+from bus_schemas.transport.zenoh_config import loopback_endpoint, make_config
 
 OUT, BACK = 122, 26  # bytes: the plant's 5-frame batch, the controller's 1-frame reply
 KEY_OUT, KEY_BACK = "floor/out", "floor/back"

@@ -1,9 +1,9 @@
-"""The AMPRO3-style CAN protocol (DBC), its codec, zenoh key expressions, MCAP channel
-schemas and the python-can interface that carries CAN frames over zenoh.
+"""The AMPRO3-style CAN bus of hpcosim, in two parts that a newcomer can change apart:
 
-Modules: :mod:`~bus_schemas.protocol` (DBC, ids, enums, steps), :mod:`~bus_schemas.crc8`,
-:mod:`~bus_schemas.codec` (encode/decode/quantize, ``FrameChecker``),
-:mod:`~bus_schemas.keys`, :mod:`~bus_schemas.zenoh_config`, :mod:`~bus_schemas.zenoh_can`
-(``ZenohBus``), :mod:`~bus_schemas.mcap_schemas` (``Recorder``). See ``README.md`` here.
-Nothing is imported eagerly: ``import bus_schemas`` stays cheap.
+- :mod:`bus_schemas.transport`: the CAN protocol (DBC), its codec, zenoh key expressions and
+  sessions, the python-can interface that carries CAN frames over zenoh, bus configs and
+  liveliness (what the controller process loads; no ``hp_model``);
+- :mod:`bus_schemas.recording`: the MCAP channel schemas, the ``Recorder`` and the readers.
+
+See ``README.md`` here. Nothing is imported eagerly: ``import bus_schemas`` stays cheap.
 """

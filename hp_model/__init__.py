@@ -17,7 +17,7 @@ from hp_model.config import (
     load_device,
     load_subject,
 )
-from hp_model.domains import DOMAINS
+from hp_model.domains import DOMAINS, Domain
 from hp_model.human_prosthesis import ACTUATED, COORDS, HumanProsthesisModel
 from hp_model.prosthesis import SUB_COORDS, ProsthesisSubsystem
 
@@ -30,6 +30,7 @@ __all__ = [
     "SUB_COORDS",
     "ConfigError",
     "DeviceConfig",
+    "Domain",
     "HumanProsthesisModel",
     "ProsthesisSubsystem",
     "SubjectConfig",

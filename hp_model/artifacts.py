@@ -1,10 +1,12 @@
-"""Shared plumbing of the versioned JSON artifacts (gait, tube): canonical hashing, array
-encoding, one-line validation errors naming the file and the field, atomic saving."""
+"""Shared plumbing of the versioned JSON artifacts (gait, tube): canonical hashing, one-line
+validation errors naming the file and the field, atomic saving (through the one JSON
+encoder, :mod:`hp_model.json_io`: a non-finite number is written as ``null``)."""
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 from collections.abc import Mapping
 from pathlib import Path
@@ -12,27 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from hp_model.atomic_io import atomic_write_text
+from hp_model.json_io import dumps, to_jsonable, write_json
 
 
 class ArtifactError(ValueError):
     """A gait or tube file is unreadable, of another version, or has a bad field."""
-
-
-def to_jsonable(v: Any) -> Any:
-    """numpy arrays and scalars to lists and floats, recursively (non-finite floats kept as
-    the strings 'nan', 'inf', '-inf' would be lossy; they are refused instead)."""
-    if isinstance(v, np.ndarray):
-        if v.dtype.kind == "f" and not np.all(np.isfinite(v)):
-            raise ValueError("non-finite values cannot be stored in an artifact")
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, Mapping):
-        return {str(k): to_jsonable(x) for k, x in v.items()}
-    if isinstance(v, list | tuple):
-        return [to_jsonable(x) for x in v]
-    return v
 
 
 def canonical_hash(obj: Any) -> str:
@@ -47,13 +33,13 @@ def canonical_hash(obj: Any) -> str:
             return [rnd(x) for x in v]
         return v
 
-    text = json.dumps(rnd(to_jsonable(obj)), sort_keys=True, separators=(",", ":"))
+    text = dumps(rnd(to_jsonable(obj)), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def save_json(path: str | os.PathLike[str], doc: Mapping[str, Any]) -> None:
     """Write the document atomically (temp file + rename)."""
-    atomic_write_text(path, json.dumps(to_jsonable(doc), indent=1) + "\n")
+    write_json(path, doc, indent=1)
 
 
 def load_json(path: str | os.PathLike[str], kind: str, version: int | tuple[int, ...]
@@ -115,6 +101,15 @@ class FieldReader:
         if not lo <= v <= hi:
             raise self.fail(field, f"{v} outside [{lo}, {hi}]")
         return float(v)
+
+    def settings(self, field: str) -> dict[str, Any]:
+        """An object of settings as written (numbers, strings, lists), each ``null`` read as
+        +inf: a bound that is off (a non-finite number is written as null,
+        :mod:`hp_model.json_io`)."""
+        v = self.get(field)
+        if not isinstance(v, Mapping):
+            raise self.fail(field, "not an object")
+        return {str(k): math.inf if x is None else x for k, x in v.items()}
 
     def string(self, field: str) -> str:
         v = self.get(field)

@@ -10,15 +10,26 @@ and the controllers evaluate the same curves.
 from __future__ import annotations
 
 from math import comb
+from typing import TypeVar
 
 import casadi as ca
 import numpy as np
 
+#: a CasADi symbol type (the basis of an SX scalar is an SX row, of an MX an MX row)
+Sym = TypeVar("Sym", ca.SX, ca.MX)
+
+
+def _basis_symbolic(m: int, s: Sym) -> Sym:
+    """Row (1, m+1) of the Bernstein basis values at a CasADi scalar s."""
+    return ca.horzcat(*[comb(m, i) * s**i * (1 - s) ** (m - i) for i in range(m + 1)])
+
 
 def basis(m: int, s):
     """Row of the m+1 Bernstein basis values at s (numpy: shape (len(s), m+1) for arrays)."""
-    if isinstance(s, ca.SX | ca.MX):
-        return ca.horzcat(*[comb(m, i) * s**i * (1 - s) ** (m - i) for i in range(m + 1)])
+    if isinstance(s, ca.SX):
+        return _basis_symbolic(m, s)
+    if isinstance(s, ca.MX):
+        return _basis_symbolic(m, s)
     s = np.asarray(s, dtype=float)
     i = np.arange(m + 1)
     c = np.array([comb(m, k) for k in i], dtype=float)

@@ -125,13 +125,14 @@ class NumericFunction:
                 raise ValueError(f"{self.name}: input {i} must be dense")
             arr = np.zeros(f.numel_in(i))
             self.inputs.append(arr)
-            self._buf.set_arg(i, memoryview(arr))
+            # the stubs list the byte size the SWIG wrapper takes from the buffer itself
+            self._buf.set_arg(i, arr.data)  # type: ignore[call-arg]  # casadi stubs
         for i in range(f.n_out()):
             if f.sparsity_out(i).nnz() != f.numel_out(i):
                 raise ValueError(f"{self.name}: output {i} must be dense")
             n, m = f.size_out(i)
             flat = np.zeros(n * m)
-            self._buf.set_res(i, memoryview(flat))
+            self._buf.set_res(i, flat.data)  # type: ignore[call-arg]  # casadi stubs
             self.outputs.append(flat if m == 1 else flat.reshape((n, m), order="F"))
         self._n_in = f.n_in()
         #: the bound evaluation itself (what :meth:`call_inplace` calls), for hot loops

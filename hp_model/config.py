@@ -1,19 +1,29 @@
-"""Subject and device configuration files (TOML), validated on load.
+"""Subject and device configuration files (TOML), validated on load; and the one base and
+range types of every validated config in hpcosim (this module's, the controller's, the
+mocap mapping's, the sweep spec's).
 
 A subject config holds what is measured on the person (body mass, sex, limb lengths) and
 names the radius-of-gyration table.  A device config holds AMPRO3 and iWalk parameters;
 none of them is public, so every numeric value carries ``estimate`` and ``source``.
 
-Errors are :class:`ConfigError` with one line naming the file and the field, e.g.
+Every config model derives from :class:`StrictConfig`: frozen, an unknown field is an
+error (a typo is never a silently ignored option), and **every float is finite** (NaN and
++-inf refused) unless its type says otherwise; of the range types below only
+:data:`PositiveOrInf` does (+inf: no bound).  The range types carry the rule themselves,
+so they hold in any pydantic model.
+
+Errors are :class:`ConfigError` with one line naming the file and the field
+(:func:`validation_message`), e.g.
 ``subject.toml: field 'lengths.thigh': Input should be greater than 0``.
 """
 
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Collection
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeVar
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -21,20 +31,41 @@ from hp_model.anthropometry import RadiiTable, Sex
 
 SCHEMA_VERSION = 1
 
+#: > 0, finite
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+#: >= 0, finite
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: in [0, 1]
+UnitInterval = Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)]
+#: > 0 or +inf (a bound that is off); NaN refused
+PositiveOrInf = Annotated[float, Field(gt=0, allow_inf_nan=True)]
 
 
 class ConfigError(ValueError):
     """A configuration file that cannot be used; the message is one line."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+class StrictConfig(BaseModel):
+    """The base of every config model: frozen, unknown fields refused, floats finite."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
-class SubjectLengths(_Strict):
+AnyConfig = TypeVar("AnyConfig", bound=StrictConfig)
+
+
+def validation_message(e: ValidationError, skip: Collection[str] = ()) -> str:
+    """One line for a failed validation: ``field 'a.b': <reason>`` of the first error, with
+    ``(and N more)`` when there are more; ``skip`` drops location parts that name no field
+    (the tags of a tagged union)."""
+    errors = e.errors()
+    loc = ".".join(str(p) for p in errors[0]["loc"] if p not in skip) or "<top>"
+    msg = errors[0]["msg"].removeprefix("Value error, ")
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"field '{loc}': {msg}{more}"
+
+
+class SubjectLengths(StrictConfig):
     """Measured segment lengths, metres."""
 
     thigh: Positive  # hip centre to knee centre
@@ -45,7 +76,7 @@ class SubjectLengths(_Strict):
     trunk: Positive  # hip to shoulder: the head-arms-trunk (HAT) length
 
 
-class SubjectConfig(_Strict):
+class SubjectConfig(StrictConfig):
     """A person: body mass (kg), sex (selects the table column), segment lengths."""
 
     schema_version: Literal[1]
@@ -57,10 +88,10 @@ class SubjectConfig(_Strict):
     notes: str = ""
 
 
-class Estimate(_Strict):
+class Estimate(StrictConfig):
     """A device parameter with its provenance."""
 
-    value: Finite
+    value: float
     estimate: bool
     source: str
 
@@ -73,14 +104,14 @@ class NonNegativeEstimate(Estimate):
     value: NonNegative
 
 
-class IWalkConfig(_Strict):
+class IWalkConfig(StrictConfig):
     """The iWalk hands-free crutch carrying the bent shank (lumped into the right thigh)."""
 
     mass: PositiveEstimate  # kg
     length: PositiveEstimate  # m, knee platform to the pin connection (socket point)
 
 
-class LinkConfig(_Strict):
+class LinkConfig(StrictConfig):
     """A prosthesis link along its own -z axis from its proximal joint."""
 
     length: PositiveEstimate  # m, proximal joint to distal joint
@@ -89,7 +120,7 @@ class LinkConfig(_Strict):
     inertia: PositiveEstimate  # kg m^2 about the COM
 
 
-class FootConfig(_Strict):
+class FootConfig(StrictConfig):
     """The prosthesis foot: sole below the ankle, heel behind it."""
 
     ankle_height: PositiveEstimate  # m
@@ -101,14 +132,14 @@ class FootConfig(_Strict):
     inertia: PositiveEstimate  # kg m^2 about the COM
 
 
-class ActuatorConfig(_Strict):
+class ActuatorConfig(StrictConfig):
     """One prosthesis joint drive: joint torque = gear_ratio * motor torque."""
 
     gear_ratio: PositiveEstimate
     torque_limit: PositiveEstimate  # N m, motor side
 
 
-class ProsthesisConfig(_Strict):
+class ProsthesisConfig(StrictConfig):
     top: LinkConfig  # socket adapter and pylon: pin connection to knee axis
     shin: LinkConfig  # knee axis to ankle axis
     foot: FootConfig
@@ -116,7 +147,7 @@ class ProsthesisConfig(_Strict):
     ankle: ActuatorConfig
 
 
-class DeviceConfig(_Strict):
+class DeviceConfig(StrictConfig):
     """AMPRO3 worn through an iWalk adapter."""
 
     schema_version: Literal[1]
@@ -142,7 +173,7 @@ def read_toml(path: Path | str, error: type[Exception] = ValueError) -> dict[str
         raise error(f"{path}: not valid TOML: {e}") from None
 
 
-def _load(path: Path | str, model: type[_Strict]) -> _Strict:
+def _load(path: Path | str, model: type[AnyConfig]) -> AnyConfig:
     path = Path(path)
     data = read_toml(path, ConfigError)
     if "schema_version" in data and data["schema_version"] != SCHEMA_VERSION:
@@ -153,20 +184,17 @@ def _load(path: Path | str, model: type[_Strict]) -> _Strict:
     try:
         return model.model_validate(data)
     except ValidationError as e:
-        err = e.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"]) or "<top>"
-        more = f" (and {len(e.errors()) - 1} more)" if len(e.errors()) > 1 else ""
-        raise ConfigError(f"{path}: field '{loc}': {err['msg']}{more}") from None
+        raise ConfigError(f"{path}: {validation_message(e)}") from None
 
 
 def load_subject(path: Path | str) -> SubjectConfig:
     """Load and validate a subject TOML file."""
-    return _load(path, SubjectConfig)  # type: ignore[return-value]
+    return _load(path, SubjectConfig)
 
 
 def load_device(path: Path | str) -> DeviceConfig:
     """Load and validate a device TOML file."""
-    return _load(path, DeviceConfig)  # type: ignore[return-value]
+    return _load(path, DeviceConfig)
 
 
 def default_subject_path() -> Path:

@@ -43,7 +43,7 @@ def energies(tree: PlanarTree, q: ca.SX, qd: ca.SX) -> tuple[ca.SX, ca.SX]:
     """Kinetic and potential energy (J) with the potential zero at z = 0."""
     D, _ = mass_matrix_and_bias(tree, q, qd)
     poses = body_poses(tree, q)
-    V = 0
+    V = ca.SX(0)
     for b in tree.bodies:
         if b.mass > 0:
             V += b.mass * tree.gravity * point_position(tree, q, b.name, b.com, poses)[1]

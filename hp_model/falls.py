@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
 
+from hp_model.domains import Domain
+
 
 class FallReason(IntEnum):
     """Why the walker fell; the value is the FMU's ``fall_code`` (0: walking)."""
@@ -55,18 +57,18 @@ _DESCRIPTION = {
 
 @dataclass(frozen=True)
 class Fall:
-    """A fall: its reason, simulation time t (s), domain ("ps"/"pns"), phase tau, and the
-    reason's numbers (``values``, SI units: e.g. ``hip_height`` m, ``F_x``/``F_z`` N,
-    ``pitch`` rad)."""
+    """A fall: its reason, simulation time t (s), domain, phase tau, and the reason's numbers
+    (``values``, SI units: e.g. ``hip_height`` m, ``F_x``/``F_z`` N, ``pitch`` rad)."""
 
     reason: FallReason
     t: float
-    domain: str
+    domain: Domain
     tau: float
     values: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "reason", FallReason(self.reason))
+        object.__setattr__(self, "domain", Domain(self.domain))
         object.__setattr__(self, "values", {k: float(x) for k, x in self.values.items()})
 
     @property
@@ -109,7 +111,7 @@ class Fall:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> Fall:
-        return cls(FallReason(int(d["code"])), float(d["t"]), str(d["domain"]),
+        return cls(FallReason(int(d["code"])), float(d["t"]), Domain(str(d["domain"])),
                    float(d["tau"]), d.get("values", {}))
 
 

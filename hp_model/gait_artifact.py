@@ -1,6 +1,6 @@
 """The gait artifact: the optimized periodic gait (paper Sec. IV-A) as a versioned JSON file.
 
-Layout (``kind = "hpcosim-gait"``, ``schema_version = 1``; SI units, angles in rad):
+Layout (``kind = "hpcosim-gait"``, ``schema_version = 2``; SI units, angles in rad):
 
     model_hash            hash of the model parameters the gait was made for
     degree                Bezier degree m of y2
@@ -14,12 +14,18 @@ Layout (``kind = "hpcosim-gait"``, ``schema_version = 1``; SI units, angles in r
         fit {rms (5,), r2 (5,), n}                its goodness of fit
     socket_nominal        {degree, coeffs (3, k+1)}: F*(tau) = (F_x, F_z, M_y) in N, N, N m over
                           the ps phase tau in [0, 1] (Bezier)
+    controller_curves     what the prosthesis controllers read, fitted once from the trajectory
+                          (:mod:`characterization.gait.controller_curves`), Bezier {degree, coeffs}:
+        socket_pitch (1, k+1)     world pitch (rad) of the socket over the pns phase t / T_pns
+        stance_torque (2, k+1)    nominal motor torques (knee, ankle; N m) over the ps phase tau
     trajectory.<d>        the collocation trajectory {t, q (12, P), qd, qdd, u (6, P), lam (6, P)}
-    options               the optimization settings and weights used
+    options               the optimization settings and weights used (null: a bound that is off,
+                          +inf, e.g. ``touchdown_slip``; older files say ``Infinity``)
     solver                IPOPT status, iterations, wall time, cost, time in function evaluation
     verification          closed-loop checks (return-map eigenvalues, output RMS), when run
 
 Loading validates every field and, given a model, refuses a gait made for other parameters.
+A schema-1 gait (without ``controller_curves``) is refused with the command that remakes it.
 """
 
 from __future__ import annotations
@@ -33,44 +39,56 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.artifacts import ArtifactError, FieldReader, canonical_hash, load_json, save_json
-from hp_model.domains import DOMAINS, N_Y2
+from hp_model.domains import DOMAINS, N_Y2, Domain
 from hp_model.outputs import GaitParams
 
 KIND = "hpcosim-gait"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+
+
+@dataclass(frozen=True)
+class ControllerCurves:
+    """The Bezier curves the prosthesis controllers read (module docstring,
+    ``controller_curves``): ``socket_pitch`` (1, k+1) over the pns phase, ``stance_torque``
+    (2, k+1) over the ps phase."""
+
+    socket_pitch: np.ndarray
+    stance_torque: np.ndarray
 
 
 @dataclass(frozen=True)
 class Gait:
     """A loaded or freshly optimized gait; see the module docstring for the fields."""
 
-    params: Mapping[str, GaitParams]
+    params: Mapping[Domain, GaitParams]
     model_hash: str
     gains: tuple[float, float, float]
     socket_nominal: np.ndarray
-    offsets: Mapping[str, np.ndarray] = field(default_factory=dict)
-    durations: Mapping[str, float] = field(default_factory=dict)
-    data_params: Mapping[str, GaitParams] = field(default_factory=dict)
-    fit_quality: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
-    trajectory: Mapping[str, Mapping[str, np.ndarray]] = field(default_factory=dict)
+    controller_curves: ControllerCurves
+    offsets: Mapping[Domain, np.ndarray] = field(default_factory=dict)
+    durations: Mapping[Domain, float] = field(default_factory=dict)
+    data_params: Mapping[Domain, GaitParams] = field(default_factory=dict)
+    fit_quality: Mapping[Domain, Mapping[str, Any]] = field(default_factory=dict)
+    trajectory: Mapping[Domain, Mapping[str, np.ndarray]] = field(default_factory=dict)
     options: Mapping[str, Any] = field(default_factory=dict)
     solver: Mapping[str, Any] = field(default_factory=dict)
     verification: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def degree(self) -> int:
-        return self.params["ps"].degree
+        return self.params[Domain.PS].degree
 
     @property
     def gains_array(self) -> np.ndarray:
         return np.asarray(self.gains, dtype=float)
 
-    def theta(self, domain: str) -> np.ndarray:
+    def theta(self, domain: Domain) -> np.ndarray:
         """Packed parameter vector of a domain (``GaitParams.pack``)."""
         return self.params[domain].pack()
 
     def hash(self) -> str:
-        """Identity of the gait: its parameters, gains, nominal force and model hash."""
+        """Identity of the gait: its parameters, gains, nominal force and model hash (not
+        what is fitted from the trajectory: the controller curves)."""
         return canonical_hash({
             "model_hash": self.model_hash, "gains": list(self.gains),
             "socket_nominal": self.socket_nominal,
@@ -94,6 +112,10 @@ class Gait:
         return replace(self, verification=dict(verification))
 
 
+def _curve_doc(coeffs: np.ndarray) -> dict[str, Any]:
+    return {"degree": coeffs.shape[1] - 1, "coeffs": coeffs}
+
+
 def _params_doc(p: GaitParams) -> dict[str, Any]:
     return {"alpha": p.alpha, "v_hip": p.v_hip, "p_min": p.p_min, "p_max": p.p_max}
 
@@ -114,7 +136,9 @@ def to_document(g: Gait) -> dict[str, Any]:
         "model_hash": g.model_hash, "degree": g.degree,
         "gains": dict(zip(("eps", "kp", "kd"), g.gains, strict=True)),
         "domains": domains,
-        "socket_nominal": {"degree": g.socket_nominal.shape[1] - 1, "coeffs": g.socket_nominal},
+        "socket_nominal": _curve_doc(g.socket_nominal),
+        "controller_curves": {"socket_pitch": _curve_doc(g.controller_curves.socket_pitch),
+                              "stance_torque": _curve_doc(g.controller_curves.stance_torque)},
         "trajectory": {d: dict(t) for d, t in g.trajectory.items()},
         "options": dict(g.options), "solver": dict(g.solver),
         "verification": dict(g.verification),
@@ -135,13 +159,23 @@ def _read_params(r: FieldReader, base: str, degree: int) -> GaitParams:
     return GaitParams(alpha, v_hip, p_min, p_max)
 
 
+def _read_curve(r: FieldReader, field: str, rows: int) -> np.ndarray:
+    k = int(r.number(f"{field}.degree", 0, 30))
+    return r.array(f"{field}.coeffs", (rows, k + 1))
+
+
 def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Gait:
     """Read and validate a gait file; with ``model_hash``, refuse a gait for another model."""
     src = str(path)
-    doc = load_json(path, KIND, SCHEMA_VERSION)
+    doc = load_json(path, KIND, (1, SCHEMA_VERSION))
+    if doc["schema_version"] == 1:
+        raise ArtifactError(
+            f"{src}: field 'schema_version': a version-1 gait has no controller curves "
+            f"(this program reads {SCHEMA_VERSION}); remake it with `hpcosim gait fit STEPS "
+            f"--out {src}`")
     r = FieldReader(src, doc)
     degree = int(r.number("degree", 1, 20))
-    gains = tuple(r.number(f"gains.{k}", 0.0, 1e6) for k in ("eps", "kp", "kd"))
+    eps, kp, kd = (r.number(f"gains.{k}", 0.0, 1e6) for k in ("eps", "kp", "kd"))
     params, data, offsets, durations, fit = {}, {}, {}, {}, {}
     for d in DOMAINS:
         base = f"domains.{d}"
@@ -153,15 +187,19 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
             data[d] = _read_params(r, f"{base}.data", degree)
         if "fit" in dd:
             fit[d] = dict(dd["fit"])
-    k = int(r.number("socket_nominal.degree", 0, 30))
-    nominal = r.array("socket_nominal.coeffs", (3, k + 1))
-    traj: dict[str, dict[str, np.ndarray]] = {}
+    nominal = _read_curve(r, "socket_nominal", 3)
+    curves = ControllerCurves(_read_curve(r, "controller_curves.socket_pitch", 1),
+                              _read_curve(r, "controller_curves.stance_torque", 2))
+    traj: dict[Domain, dict[str, np.ndarray]] = {}
     for d, t in (r.get("trajectory") or {}).items():
-        traj[d] = {name: r.array(f"trajectory.{d}.{name}") for name in t}
-    g = Gait(params=params, model_hash=r.string("model_hash"), gains=gains,  # type: ignore[arg-type]
-             socket_nominal=nominal, offsets=offsets, durations=durations, data_params=data,
-             fit_quality=fit, trajectory=traj, options=dict(r.get("options")),
-             solver=dict(r.get("solver")), verification=dict(doc.get("verification", {})))
+        if d not in DOMAINS:
+            raise r.fail(f"trajectory.{d}", f"is not a domain ({Domain.choices()})")
+        traj[Domain(d)] = {name: r.array(f"trajectory.{d}.{name}") for name in t}
+    g = Gait(params=params, model_hash=r.string("model_hash"), gains=(eps, kp, kd),
+             socket_nominal=nominal, controller_curves=curves, offsets=offsets,
+             durations=durations, data_params=data, fit_quality=fit, trajectory=traj,
+             options=r.settings("options"), solver=dict(r.get("solver")),
+             verification=dict(doc.get("verification", {})))
     stored = doc.get("gait_hash")
     if stored is not None and stored != g.hash():
         raise r.fail("gait_hash", "does not match the file's contents (edited by hand?)")

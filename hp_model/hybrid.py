@@ -183,7 +183,8 @@ class HybridModel:
         rows = []
         for c in constraints:
             if c.kind == ConstraintKind.FRAME:
-                rows.append(frame_pose(self.tree, q, c.target, poses))  # type: ignore[arg-type]
+                assert isinstance(c.target, str)  # a frame constraint names one frame
+                rows.append(frame_pose(self.tree, q, c.target, poses))
             else:
                 rows.append(ca.vertcat(*[q[self.tree.coord_index(n)] for n in c.target]))
         return ca.vertcat(*rows)

@@ -52,11 +52,12 @@ import casadi as ca
 import numpy as np
 
 from hp_model.compiled import FunctionSet
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints, stance_outputs
 from hp_model.placement import place
 
-DOMAIN = "ps"
+DOMAIN = Domain.PS
 
 
 def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_p: ca.SX,
@@ -68,10 +69,10 @@ def nominal_walker_state(model: HumanProsthesisModel, vc: VirtualConstraints, x_
     if vc.domain != DOMAIN:
         raise ValueError("the restricted model is defined in prosthesis stance (ps)")
     nq = model.nq
-    q, qd = [ca.SX(0)] * nq, [ca.SX(0)] * nq
+    q0, qd0 = [ca.SX(0)] * nq, [ca.SX(0)] * nq
     for k, i in enumerate(model.roles[DOMAIN].prosthesis):
-        q[i], qd[i] = x_p[k], x_p[2 + k]
-    q, qd, tau = vc.on_outputs(ca.vertcat(*q), ca.vertcat(*qd), theta)
+        q0[i], qd0[i] = x_p[k], x_p[2 + k]
+    q, qd, tau = vc.on_outputs(ca.vertcat(*q0), ca.vertcat(*qd0), theta)
     q, qd = place(model, DOMAIN, q, qd)
     return q, qd, tau
 

@@ -13,7 +13,7 @@ stance knee th_sk and stance ankle th_sa (ps: th_pk, th_pa; pns: th_lk, th_la;
     dy2            = d/dt y2_a - dB/dtau tau_dot,  ddy2 = d2/dt2 y2_a - d2B/dtau2 tau_dot^2
                      - dB/dtau tau_ddot                                     (:func:`outputs`)
 
-y2_a are the joint angles other than the stance ankle, in the order of ``Y2_COORDS``.  The
+y2_a are the joint angles other than the stance ankle, in the order of ``Domain.y2_coords``.  The
 nominal posture at a phase puts the y2 joints on B(tau) and the stance ankle where
 delta_p_hip = p_min + tau (p_max - p_min) (:func:`delta_p_at`, :meth:`HipProgress.ankle`).
 The curve B is the gait's Bezier polynomial (:func:`plain`), continued linearly outside
@@ -41,7 +41,7 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.compiled import FunctionSet
-from hp_model.domains import HUMAN_OUTPUTS, N_Y2, Y2_COORDS
+from hp_model.domains import N_Y2, Domain
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
 
@@ -105,6 +105,7 @@ class ThetaLayout:
 
     def unpack(self, theta: Num) -> tuple[Num, Num, Num, Num]:
         """(alpha (5, m+1), v_hip, p_min, p_max) of a numeric or symbolic vector."""
+        alpha: Num
         if isinstance(theta, ca.SX | ca.MX):
             alpha = ca.reshape(theta[self.alpha], self.degree + 1, N_Y2).T
         else:
@@ -232,18 +233,32 @@ class Outputs:
     ddy2: Num = None
 
 
-def outputs(y2_a: Num, y2_a_dot: Num, delta_p: Num, delta_p_dot: Num, alpha: Num, v_hip: Num,
-            p_min: Num, p_max: Num, curve: Curve = plain, *, y2_a_ddot: Num = None,
+@dataclass(frozen=True)
+class GaitTerms:
+    """The four terms of a domain's gait as :func:`outputs` takes them, numbers or CasADi
+    expressions: the curves' coefficients ``alpha`` (one row per output, m+1 columns, rad),
+    v_hip (m/s), p_min and p_max (m) (:class:`GaitParams`, unchecked and unpacked)."""
+
+    alpha: Num
+    v_hip: Num
+    p_min: Num
+    p_max: Num
+
+
+def outputs(y2_a: Num, y2_a_dot: Num, delta_p: Num, delta_p_dot: Num, gait: GaitTerms,
+            curve: Curve = plain, *, y2_a_ddot: Num = None,
             delta_p_ddot: Num = None) -> Outputs:
-    """The outputs (module docstring) of joint angles ``y2_a`` (the rows of ``alpha``) and
-    hip progress ``delta_p``, with their time derivatives (and, optionally, accelerations)."""
+    """The outputs (module docstring) of joint angles ``y2_a`` (the rows of ``gait.alpha``)
+    and hip progress ``delta_p``, with their time derivatives (and, optionally,
+    accelerations)."""
+    p_min, p_max = gait.p_min, gait.p_max
     if delta_p_ddot is None:
         tau, tau_dot = phase(delta_p, p_min, p_max, delta_p_dot)
         tau_ddot = None
     else:
         tau, tau_dot, tau_ddot = phase(delta_p, p_min, p_max, delta_p_dot, delta_p_ddot)
-    B, dB, ddB = curve(alpha, tau)
-    y1 = delta_p_dot - v_hip
+    B, dB, ddB = curve(gait.alpha, tau)
+    y1 = delta_p_dot - gait.v_hip
     y2 = y2_a - B
     dy2 = y2_a_dot - dB * tau_dot
     ddy2 = None if y2_a_ddot is None else y2_a_ddot - ddB * tau_dot**2 - dB * tau_ddot
@@ -260,8 +275,8 @@ def stance_outputs(hip: HipProgress, x: Num, alpha: Num, v_hip: Num, p_min: Num,
     th, dth = x[0:2], x[2:4]
     acc = {} if accel is None else {"y2_a_ddot": accel[0],
                                     "delta_p_ddot": hip(accel[0], accel[1])}
-    return outputs(th[0], dth[0], hip(th[0], th[1]), hip(dth[0], dth[1]), alpha, v_hip,
-                   p_min, p_max, continued, **acc)
+    return outputs(th[0], dth[0], hip(th[0], th[1]), hip(dth[0], dth[1]),
+                   GaitTerms(alpha, v_hip, p_min, p_max), continued, **acc)
 
 
 # -- gait parameters ----------------------------------------------------------------------------
@@ -343,7 +358,7 @@ class VirtualConstraints:
         hflv_<d>(q, qd, theta, v_h, u_p)  -> u    hfl with the human rows' v_h (4) given
 
     ``hfl`` is the human's feedback linearization given the prosthesis motor torque u_p (2,)
-    it cannot choose: the 4 human torques make the 4 human outputs (``HUMAN_OUTPUTS``: in ps
+    it cannot choose: the 4 human torques make the 4 human outputs (``Domain.human_outputs``: in ps
     the swing leg and stance hip angles, in pns y1 and the stance leg and prosthesis-side hip
     angles) follow their closed-loop dynamics; u = (u_h, u_p).  The simulated human's curves
     come to rest past tau = 1 (:func:`resting`).
@@ -354,8 +369,7 @@ class VirtualConstraints:
     """
 
     def __init__(self, model: HumanProsthesisModel, domain: str, degree: int = 5) -> None:
-        if domain not in Y2_COORDS:
-            raise ValueError(f"unknown domain '{domain}'")
+        domain = Domain(domain)
         if degree < 1:
             raise ValueError("y2 needs a Bezier degree >= 1")
         self.model, self.domain, self.degree = model, domain, degree
@@ -392,7 +406,7 @@ class VirtualConstraints:
         u = -ca.solve(A, Lf + v)
         # human side: rows of its outputs, columns of its torques; u_p is given
         u_p = ca.SX.sym("u_p", 2)
-        rows = list(HUMAN_OUTPUTS[domain])
+        rows = list(domain.human_outputs)
         A_h, A_p = A[rows, 0:4], A[rows, 4:6]
         u_h = -ca.solve(A_h, Lf[rows] + v[rows] + A_p @ u_p)
         u_hfl = ca.vertcat(u_h, u_p)
@@ -433,13 +447,13 @@ class VirtualConstraints:
         """The outputs and their derivatives (second ones with ``qdd``) of the walker at
         (q, qd) for the packed gait ``theta``, on ``curve`` (default the simulated human's);
         symbolic."""
-        alpha, v_hip, p_min, p_max = self.layout.unpack(theta)
+        gait = GaitTerms(*self.layout.unpack(theta))
         k, a = self.roles.knee, self.roles.ankle
         S = ca.DM(self.S)
         acc = {} if qdd is None else {"y2_a_ddot": S @ qdd,
                                       "delta_p_ddot": self.hip(qdd[k], qdd[a])}
-        return outputs(S @ q, S @ qd, self.hip(q[k], q[a]), self.hip(qd[k], qd[a]), alpha,
-                       v_hip, p_min, p_max, curve, **acc)
+        return outputs(S @ q, S @ qd, self.hip(q[k], q[a]), self.hip(qd[k], qd[a]), gait,
+                       curve, **acc)
 
     def on_outputs(self, q: Num, qd: Num, theta: Num) -> tuple[Num, Num, Num]:
         """(q, qd, tau): the stance knee and ankle (and the prosthesis joints) of (q, qd)

@@ -27,9 +27,9 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from hp_model.domains import Domain
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.domains import Domain
 from hp_model.hybrid import Constraint, ConstraintKind, ContactDomain, HybridModel
 from hp_model.tree import frame_pose, rot
 

@@ -68,17 +68,22 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
-from hp_model.domains import DOMAIN_CODE, HUMAN_OUTPUTS
+from hp_model.domains import Domain
 from hp_model.falls import Fall, FallOutcome, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 
 #: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period (the plant
 #: clamps it to the device's motor limits, ``model.torque_limits``)
 Policy = Callable[[float, "SimState"], np.ndarray]
+
+#: one RK4 step from a fixed state under fixed inputs, as a function of its length (s): the
+#: new state and the swing sole height (m) at its end (:meth:`HybridSimulator._rk4` bound)
+StepFrom = Callable[[float], tuple[np.ndarray, float]]
 
 
 @dataclass(frozen=True)
@@ -111,7 +116,7 @@ class SimState:
     controller must restrict itself to the prosthesis's own measurements)."""
 
     t: float
-    domain: str
+    domain: Domain
     q: np.ndarray
     qd: np.ndarray
     tau: float
@@ -122,7 +127,7 @@ class SimState:
 @dataclass
 class Impact:
     t: float
-    into: str
+    into: Domain
     q: np.ndarray
     qd_minus: np.ndarray
     qd_plus: np.ndarray
@@ -148,19 +153,28 @@ class SimResult(FallOutcome):
     def steps(self) -> int:
         return len(self.impacts)
 
-    def post_impact_states(self, into: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    def post_impact_states(self, into: Domain | str) -> list[tuple[np.ndarray, np.ndarray]]:
         return [(i.q, i.qd_plus) for i in self.impacts if i.into == into]
 
 
-def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau_peak: float,
-               t_step: float, bad_cone: int, lam: np.ndarray, heel_pitch: float | None
-               ) -> Fall | None:
-    """The fall at the start of a period (t s, domain d, state x, phase tau), if any: the
-    checks of the module docstring, first found in the order non-finite, diverged, hip
-    height, phase backward, tau_max, stalled, friction cone, heel or toe; given the running
-    phase peak, the start of the step t_step (s), the periods the friction cone has been left
-    (bad_cone), the stance wrench lam and the pitch (rad) of a touchdown on heel or toe in
-    the last period."""
+@dataclass(frozen=True)
+class StepWatch:
+    """What the fall checks remember of the current step: the phase's running peak
+    tau_peak, the start of the step t_step (s), the periods the friction cone has been left
+    (bad_cone) and the pitch (rad) of a touchdown on heel or toe in the last period (None:
+    there was none)."""
+
+    tau_peak: float
+    t_step: float
+    bad_cone: int
+    heel_pitch: float | None
+
+
+def fall_check(opt: SimOptions, t: float, d: Domain, x: np.ndarray, tau: float,
+               lam: np.ndarray, watch: StepWatch) -> Fall | None:
+    """The fall at the start of a period (t s, domain d, state x, phase tau, stance wrench
+    lam), if any: the checks of the module docstring, first found in the order non-finite,
+    diverged, hip height, phase backward, tau_max, stalled, friction cone, heel or toe."""
     nq = x.size // 2
     q, qd = x[:nq], x[nq:]
     fz, fx = float(lam[1]), float(lam[0])
@@ -172,20 +186,20 @@ def fall_check(opt: SimOptions, t: float, d: str, x: np.ndarray, tau: float, tau
     if q[1] < opt.min_hip_height:
         return Fall(FallReason.HIP_LOW, t, d, tau,
                     {"hip_height": q[1], "limit": opt.min_hip_height})
-    if tau < tau_peak - opt.tau_backward:
+    if tau < watch.tau_peak - opt.tau_backward:
         return Fall(FallReason.PHASE_BACKWARD, t, d, tau,
-                    {"tau_peak": tau_peak, "limit": opt.tau_backward})
+                    {"tau_peak": watch.tau_peak, "limit": opt.tau_backward})
     if tau > opt.tau_max:
         return Fall(FallReason.NO_TOUCHDOWN, t, d, tau, {"limit": opt.tau_max})
-    if t - t_step > opt.max_step_time:
+    if t - watch.t_step > opt.max_step_time:
         return Fall(FallReason.PHASE_STALLED, t, d, tau,
-                    {"step_time": t - t_step, "limit": opt.max_step_time})
-    if bad_cone >= opt.cone_periods:
+                    {"step_time": t - watch.t_step, "limit": opt.max_step_time})
+    if watch.bad_cone >= opt.cone_periods:
         return Fall(FallReason.FRICTION_CONE, t, d, tau,
-                    {"F_x": fx, "F_z": fz, "mu": opt.mu, "periods": bad_cone})
-    if heel_pitch is not None:
+                    {"F_x": fx, "F_z": fz, "mu": opt.mu, "periods": watch.bad_cone})
+    if watch.heel_pitch is not None:
         return Fall(FallReason.HEEL_OR_TOE, t, d, tau,
-                    {"pitch": heel_pitch, "limit": opt.max_touchdown_pitch})
+                    {"pitch": watch.heel_pitch, "limit": opt.max_touchdown_pitch})
     return None
 
 
@@ -242,7 +256,7 @@ class HybridSimulator:
         self._landing = {d: (r.stance_frame_index, r.ankle) for d, r in model.roles.items()}
 
     # -- pieces ------------------------------------------------------------------------------
-    def _rk4(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray, h: float,
+    def _rk4(self, mode: str, d: Domain, x: np.ndarray, u_p: np.ndarray, h: float,
              vhold: np.ndarray | None, k1: np.ndarray | None = None
              ) -> tuple[np.ndarray, float]:
         """One RK4 step of h s: the new state and the swing sole height (m) at its end;
@@ -257,6 +271,7 @@ class HybridSimulator:
                 xn, z = f(x, self.thetas[d], self.gains, u_p, h, k1)
             return xn.copy(), float(z[0])
         if vhold is not None:
+            assert self.dfs is not None  # a held feedback is the delayed human's
             f = self.dfs[f"rk4_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
                 xn, z = f(x, self.thetas[d], vhold, h)
@@ -270,29 +285,30 @@ class HybridSimulator:
             xn, z = f(x, self.thetas[d], self.gains, u_p, h)
         return xn.copy(), float(z[0])
 
-    def _feedback(self, d: str, x: np.ndarray) -> np.ndarray:
+    def _feedback(self, d: Domain, x: np.ndarray) -> np.ndarray:
         """The feedback term v (6) of the outputs at state x: (eps y1, kp y2 + kd dy2)."""
         y1, y2, dy2, _ = self.fs[f"outputs_{d}"](x[:self.nq], x[self.nq:], self.thetas[d])
         g = self.gains
         return np.r_[g[0] * y1, g[1] * y2 + g[2] * dy2]
 
     @staticmethod
-    def _hold(mode: str, d: str, pipeline: deque[np.ndarray], v_now: np.ndarray
+    def _hold(mode: str, d: Domain, pipeline: deque[np.ndarray], v_now: np.ndarray
               ) -> np.ndarray:
         """The feedback held over the period: the human rows from the pipeline's oldest
         entry, in mode full the prosthesis rows of ``v_now``."""
-        rows = list(HUMAN_OUTPUTS[d])
+        rows = list(d.human_outputs)
         if mode == ClosedLoopMode.FULL:
             v = v_now.copy()
             v[rows] = pipeline[0][rows]
             return v
         return pipeline[0][rows].copy()
 
-    def _eval(self, mode: str, d: str, x: np.ndarray, u_p: np.ndarray,
+    def _eval(self, mode: str, d: Domain | str, x: np.ndarray, u_p: np.ndarray,
               vhold: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The vector field xdot (24), the torques u (6, N m) and the constraint wrenches
         lam (6) at state x."""
         if vhold is not None:
+            assert self.dfs is not None  # a held feedback is the delayed human's
             f = self.dfs[f"xdot_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
                 xdot, u, lam = f(x, self.thetas[d], vhold)
@@ -306,12 +322,12 @@ class HybridSimulator:
             xdot, u, lam = f(x, self.thetas[d], self.gains, u_p)
         return xdot.copy(), u.copy(), lam.copy()
 
-    def phase(self, d: str, q: np.ndarray) -> float:
+    def phase(self, d: Domain | str, q: np.ndarray) -> float:
         """tau of q in domain d for the tracked gait (``VirtualConstraints.phase``: the same
         arithmetic as the FMU's generated ``phase_<d>``)."""
         return float(self.cl.vcs[d].phase(q, self.thetas[d]))
 
-    def _flatten_landing_foot(self, into: str, q: np.ndarray) -> float:
+    def _flatten_landing_foot(self, into: Domain, q: np.ndarray) -> float:
         """Rotate the foot that becomes the stance foot of ``into`` flat about its ankle
         (in place); returns the pitch removed."""
         frame, ankle = self._landing[into]
@@ -320,17 +336,16 @@ class HybridSimulator:
         q[ankle] -= pitch
         return pitch
 
-    def _locate(self, mode: str, d: str, x0: np.ndarray, u_p: np.ndarray, h: float,
-                vhold: np.ndarray | None, z0: float, z1: float,
-                k1: np.ndarray | None = None, s1: float = 1.0) -> tuple[float, np.ndarray]:
-        """s in (0, s1] with swing height of rk4(x0, s h) = 0 (Illinois method), z0 and z1
-        the heights at 0 and s1; ``k1``: the vector field at x0, if known."""
+    def _locate(self, step: StepFrom, h: float, z0: float, z1: float, s1: float = 1.0
+                ) -> tuple[float, np.ndarray]:
+        """s in (0, s1] with swing height of ``step(s h)`` = 0 (Illinois method), z0 and z1
+        the heights at 0 and s1."""
         a, b, fa, fb = 0.0, s1, z0, z1
         xs, side = None, 0
         s = 1.0
         for _ in range(self.opt.event_iters):
             s = (a * fb - b * fa) / (fb - fa)
-            xs, z = self._rk4(mode, d, x0, u_p, s * h, vhold, k1)
+            xs, z = step(s * h)
             if abs(z) <= self.opt.event_tol:
                 break
             if z > 0:
@@ -346,12 +361,12 @@ class HybridSimulator:
         assert xs is not None
         return s, xs
 
-    def _touchdown(self, mode: str, d: str, x: np.ndarray, xn: np.ndarray, u_p: np.ndarray,
-                   h: float, vhold: np.ndarray | None, z0: float, z1: float,
-                   k1: np.ndarray | None) -> tuple[float, float]:
+    def _touchdown(self, d: Domain, x: np.ndarray, xn: np.ndarray, h: float, z0: float,
+                   z1: float, step: StepFrom) -> tuple[float, float]:
         """(s1, z(s1)): the end of the bracket of a touchdown in the step of h s from x to xn
-        whose sole heights are z0 > 0 and z1 (module docstring): (1, z1) if z1 <= 0, else the
-        sole's lowest point inside the step if it is below ground there, else (1, z1)."""
+        (``step(h)``, domain d) whose sole heights are z0 > 0 and z1 (module docstring):
+        (1, z1) if z1 <= 0, else the sole's lowest point inside the step if it is below
+        ground there, else (1, z1)."""
         if z1 <= 0:
             return 1.0, z1
         g = self.mfs[f"guard_{d}"]
@@ -360,13 +375,13 @@ class HybridSimulator:
         v1 = float(g(xn[:nq], xn[nq:])[1][0])
         s = dip(z0, z1, h * v0, h * v1)
         if s is not None:
-            zs = self._rk4(mode, d, x, u_p, s * h, vhold, k1)[1]
+            zs = step(s * h)[1]
             if zs <= 0:
                 return s, zs
         return 1.0, z1
 
     # -- runs ---------------------------------------------------------------------------------
-    def start(self, q0: np.ndarray, qd0: np.ndarray, domain: str,
+    def start(self, q0: np.ndarray, qd0: np.ndarray, domain: Domain | str,
               mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
               ) -> SimulationRun:
         """A run from (q0, qd0) in ``domain``, to be stepped one period at a time (module
@@ -374,7 +389,8 @@ class HybridSimulator:
         :meth:`SimulationRun.apply`; "full": feedback linearization of all six torques."""
         return SimulationRun(self, q0, qd0, domain, mode)
 
-    def run(self, q0: np.ndarray, qd0: np.ndarray, domain: str, *, steps: int | None = None,
+    def run(self, q0: np.ndarray, qd0: np.ndarray, domain: Domain | str, *,
+            steps: int | None = None,
             duration: float | None = None, policy: Policy | None = None,
             progress: Callable[[float, int], None] | None = None) -> SimResult:
         """Simulate from (q0, qd0) in ``domain`` until ``steps`` impacts or ``duration`` s
@@ -405,13 +421,14 @@ class SimulationRun:
     None), then :meth:`advance` unless :attr:`fall` is set.  Holds the run's mutable state
     (hybrid state, log, impacts, fall-check counters, the delayed human's pipeline)."""
 
-    def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray, domain: str,
+    def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
+                 domain: Domain | str,
                  mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN) -> None:
         mode = ClosedLoopMode(mode)
         if domain not in sim.model.domains:
             raise ValueError(f"unknown domain {domain!r}")
         self.sim, self.mode = sim, mode
-        self.domain = domain
+        self.domain = Domain(domain)
         self.t = 0.0  # s, start of the current period
         self.periods = 0  # periods integrated
         self.impacts: list[Impact] = []
@@ -493,15 +510,16 @@ class SimulationRun:
         self._applied = True
         nq = sim.nq
         for log, v in zip(self._log, (self.t, x[:nq].copy(), x[nq:].copy(), u, lam, tau,
-                                      DOMAIN_CODE[d]), strict=True):
+                                      d.code), strict=True):
             log.append(v)
         opt = sim.opt
         self._tau_peak = max(self._tau_peak, tau)
         fz, fx = lam[1], lam[0]
         self._bad_cone = (self._bad_cone + 1
                           if (fz < opt.min_normal_force or abs(fx) > opt.mu * fz) else 0)
-        self.fall = fall_check(opt, self.t, d, x, tau, self._tau_peak, self._t_step,
-                               self._bad_cone, lam, self._heel)
+        self.fall = fall_check(opt, self.t, d, x, tau, lam,
+                               StepWatch(self._tau_peak, self._t_step, self._bad_cone,
+                                         self._heel))
         return self.fall
 
     def advance(self) -> None:
@@ -518,15 +536,14 @@ class SimulationRun:
         for j in range(opt.substeps):
             rest = h
             while rest > 0:
-                xn, z = sim._rk4(mode, d, x, u_p, rest, self._vhold, k1)
+                step = partial(sim._rk4, mode, d, x, u_p, vhold=self._vhold, k1=k1)
+                xn, z = step(rest)
                 armed = self._phase[d](x) >= opt.guard_tau_min
                 s1, z1 = 1.0, z
                 if armed and self._z_prev > 0:
-                    s1, z1 = sim._touchdown(mode, d, x, xn, u_p, rest, self._vhold,
-                                            self._z_prev, z, k1)
+                    s1, z1 = sim._touchdown(d, x, xn, rest, self._z_prev, z, step)
                 if armed and self._z_prev > 0 and z1 <= 0:
-                    s, xe = sim._locate(mode, d, x, u_p, rest, self._vhold, self._z_prev, z1,
-                                        k1, s1)
+                    s, xe = sim._locate(step, rest, self._z_prev, z1, s1)
                     k1 = None
                     nxt = sim.model.roles[d].next
                     qe, qdm = xe[:nq].copy(), xe[nq:]

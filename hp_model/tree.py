@@ -211,12 +211,12 @@ def rot(th: ca.SX) -> ca.SX:
 
 def _joint_transform(b: Body, qj: ca.SX) -> tuple[ca.SX, ca.SX]:
     """Pose of the child body frame in the parent frame: (position (2,), angle)."""
-    p0 = ca.DM(b.placement)
+    p0 = ca.SX(ca.DM(b.placement))
     a0 = b.placement_angle
     if b.joint == JointKind.REVOLUTE:
         return p0, a0 + qj[0]
     # planar: translate along the joint frame's axes, then rotate
-    return p0 + rot(a0) @ qj[0:2], a0 + qj[2]
+    return p0 + rot(ca.SX(a0)) @ qj[0:2], a0 + qj[2]
 
 
 def body_poses(tree: PlanarTree, q: ca.SX) -> list[tuple[ca.SX, ca.SX]]:

@@ -58,7 +58,8 @@ def model_description_3(table: _Table, token: str, *, model_identifier: str,
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": model_identifier, "instantiationToken": token,
         "description": description, "author": "hpcosim", "version": hp_model.__version__,
-        "generationTool": f"hpcosim human_fmu {hp_model.__version__} (CasADi {ca.__version__})",
+        "generationTool":
+            f"hpcosim human_fmu {hp_model.__version__} (CasADi {ca.CasadiMeta.version()})",
         "generationDateAndTime": generated, "variableNamingConvention": "flat"})
     ET.SubElement(root, "CoSimulation", {
         "modelIdentifier": model_identifier, "needsExecutionTool": "false",

@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hp_model.domains import DOMAIN_CODE, DOMAINS
+from hp_model.domains import Domain
 from hp_model.outputs import ThetaLayout
 
 MASK = (1 << 64) - 1
@@ -46,17 +46,17 @@ def uniform(seed: int, k: int) -> float:
 
 
 def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: int
-                     ) -> dict[str, np.ndarray]:
+                     ) -> dict[Domain, np.ndarray]:
     """The packed gait parameters the human tracks: ``thetas`` with every Bezier coefficient
     moved by the generator's delta (see the module docstring)."""
     if not (np.isfinite(amplitude) and amplitude >= 0):
         raise ValueError(f"amplitude must be finite and >= 0, got {amplitude}")
-    out = {d: np.array(thetas[d], dtype=float) for d in DOMAINS}
+    out = {d: np.array(thetas[d], dtype=float) for d in Domain}
     if amplitude == 0:
         return out
-    n_alpha = ThetaLayout.of_size(out["ps"].size).n_alpha
-    for d in DOMAINS:
-        k0 = DOMAIN_CODE[d] * n_alpha
+    n_alpha = ThetaLayout.of_size(out[Domain.PS].size).n_alpha
+    for d in Domain:
+        k0 = d.code * n_alpha
         for i in range(n_alpha):
             out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)
     return out

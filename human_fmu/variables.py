@@ -8,13 +8,13 @@ element, the rest follow consecutively).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from hp_model.domains import DOMAINS, Y2_COORDS
+from hp_model.domains import Domain
 from hp_model.falls import FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
@@ -91,7 +91,7 @@ def coord_unit(name: str, derivative: bool = False) -> str:
 
 def theta_descriptions(domain: str, degree: int) -> tuple[list[str], list[str]]:
     desc, units = [], []
-    for row, coord in enumerate(Y2_COORDS[domain]):
+    for row, coord in enumerate(Domain(domain).y2_coords):
         for j in range(degree + 1):
             desc.append(f"{domain} gait: Bezier coefficient alpha[{row},{j}] of {coord}")
             units.append("rad")
@@ -101,7 +101,7 @@ def theta_descriptions(domain: str, degree: int) -> tuple[list[str], list[str]]:
     return desc, units
 
 
-def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
+def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray],
                 gains: Sequence[float], q0: np.ndarray, qd0: np.ndarray, degree: int,
                 options: SimOptions | None = None) -> _Table:
     """The variable table with start values from the gait (thetas, gains, initial state)."""
@@ -152,7 +152,7 @@ def build_table(model: HumanProsthesisModel, thetas: dict[str, np.ndarray],
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains
-    for d in DOMAINS:
+    for d in Domain:
         desc, units = theta_descriptions(d, degree)
         t.array(f"theta_{d}", "Real", "parameter", desc, units,
                 [float(v) for v in thetas[d]])

@@ -3,27 +3,23 @@ subject and device (``hp_model.load_model()``).
 
 Units: torques are MOTOR torques in N m (the model's ``u_p``; joint torque = gear ratio x
 motor torque) unless a field says "joint"; angles rad, rates rad/s, forces N, times s.
-All models are frozen pydantic models that refuse unknown fields, so a typo in a config
-file is an error, never a silently ignored option.
+Every model derives from :class:`hp_model.config.StrictConfig` (frozen, unknown fields
+refused, so a typo in a config file is an error, never a silently ignored option; every
+float finite unless typed ``PositiveOrInf``) and uses its range types.
 """
 
 from __future__ import annotations
 
-from typing import Annotated
-
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-Positive = Annotated[float, Field(gt=0)]
-NonNegative = Annotated[float, Field(ge=0)]
+from hp_model.config import NonNegative, Positive, PositiveOrInf, StrictConfig, UnitInterval
+from hp_model.domains import Domain
+
 Pair = tuple[float, float]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class ClfConfig(_Strict):
+class ClfConfig(StrictConfig):
     """Robust CLF-QP (paper eqs. robust_CLF_QP and robust_CLF_QP_relax).
 
     - ``eps``: RES-CLF epsilon, 0 < eps < 1; V_eps = eta^T I_eps P I_eps eta with
@@ -34,7 +30,8 @@ class ClfConfig(_Strict):
       cost weight (units of the cost |nu|^2 per unit of rho).  Only the relaxed variant.
       The default rho_max keeps the QP feasible along the default subject's nominal stance
       with its fitted tube (largest rho measured 3.7e3; README).
-    - ``delta_u``: rate bound |u - u_prev| per tick (motor N m), relaxed variant only.
+    - ``delta_u``: rate bound |u - u_prev| per tick (motor N m), relaxed variant only
+      (+inf: none).
     - ``limits_in_qp``: put the torque limits into the relaxed QP as bounds (paper: yes).
     - ``exact_limits_in_qp``: torque limits as bounds of the exact QP too (paper eq.
       robust_CLF_QP has none: off); the output is clamped to the limits either way.
@@ -55,7 +52,7 @@ class ClfConfig(_Strict):
     R: tuple[tuple[float, float], ...] = ((1.0, 0.0), (0.0, 1.0))
     rho_max: NonNegative = 1.0e4
     c_rho: NonNegative = 1.0e3
-    delta_u: Positive = 0.25
+    delta_u: PositiveOrInf = 0.25
     limits_in_qp: bool = True
     exact_limits_in_qp: bool = False
     solver_eps: Positive = 1e-10
@@ -73,7 +70,7 @@ class ClfConfig(_Strict):
         return self
 
 
-class ContactConfig(_Strict):
+class ContactConfig(StrictConfig):
     """Stance-foot contact rows of the interaction-aware CLF-QP (``clfqp``): the ground
     reaction w = (F_x, F_z, M_y) at the prosthesis sole, affine in the motor torque, is kept
     in the friction cone |F_x| <= ``mu`` F_z, with F_z >= ``f_min`` and its centre of pressure
@@ -97,7 +94,7 @@ class ContactConfig(_Strict):
     c_sigma: Positive = 1.0e6
 
 
-class UncertaintyConfig(_Strict):
+class UncertaintyConfig(StrictConfig):
     """The characterised model error of ``clfqp`` (the tube's ``model_error``, issue 17) and
     its online estimate.
 
@@ -144,7 +141,7 @@ class UncertaintyConfig(_Strict):
     monitor_tolerance: Pair = (0.05, 1.0)
 
 
-class PdConfig(_Strict):
+class PdConfig(StrictConfig):
     """Joint PD on the nominal prosthesis trajectory as a function of the state-based stance
     phase tau(th_pk, th_pa), reference velocities at the nominal phase rate (JOINT-side gains,
     N m/rad and N m s/rad; no model information, as the paper's PD).  Defaults chosen by
@@ -155,7 +152,7 @@ class PdConfig(_Strict):
     kd: Pair = (150.0, 150.0)
 
 
-class PhasePdConfig(_Strict):
+class PhasePdConfig(StrictConfig):
     """Phase-PD reference (not one of the paper's controllers): on the CLF-QP's state-based
     phase tau(th_pk, th_pa) and outputs, the gait's nominal stance motor torque u*(tau) plus
     the JOINT-side feedback knee -kp y2 - kd dy2 and ankle k_vhip y1 (N m per m/s of hip
@@ -169,7 +166,7 @@ class PhasePdConfig(_Strict):
     feedforward: bool = True
 
 
-class PassiveConfig(_Strict):
+class PassiveConfig(StrictConfig):
     """Spong's robust passivity-based law (REFERENCE.md Sec. 2), JOINT-side gains.
 
     ``lam``: Lambda (1/s) in e_dot + Lambda e; ``k``: K (N m s/rad); ``rho_theta``: bound
@@ -184,7 +181,7 @@ class PassiveConfig(_Strict):
     boundary: Positive = 0.5
 
 
-class SwingConfig(_Strict):
+class SwingConfig(StrictConfig):
     """Shared swing (pns) controller: PD + gravity feedforward on the pns Bezier rows of
     th_pk and th_pa at the time-based phase tau_hat = (t - t_liftoff) / T_pns. JOINT gains.
 
@@ -210,7 +207,7 @@ class SwingConfig(_Strict):
     kp: Pair = (2000.0, 135.0)
     kd: Pair = (24.0, 1.6)
     gravity: bool = True
-    landing_reach: float = Field(0.1, ge=0, le=1)
+    landing_reach: UnitInterval = 0.1
     landing_start: float = Field(0.8, gt=0, lt=1)
     landing_flatten: Positive = 0.05
     thigh_lead: bool = True
@@ -227,7 +224,7 @@ class SwingConfig(_Strict):
         return self
 
 
-class DomainConfig(_Strict):
+class DomainConfig(StrictConfig):
     """Domain detection with hysteresis from the foot-load cell and the contact switch.
 
     Stance (ps) starts when ``contact`` and load >= ``load_on``; swing (pns) starts when
@@ -240,7 +237,7 @@ class DomainConfig(_Strict):
     load_off: NonNegative = 40.0
     off_hold: NonNegative = 0.01
     min_dwell: NonNegative = 0.08
-    initial: str = Field("ps", pattern="^(ps|pns)$")
+    initial: Domain = Domain.PS
 
     @model_validator(mode="after")
     def _hysteresis(self) -> DomainConfig:
@@ -249,7 +246,7 @@ class DomainConfig(_Strict):
         return self
 
 
-class SafetyConfig(_Strict):
+class SafetyConfig(StrictConfig):
     """Measurement validation and output limits.
 
     ``torque_limits``: motor N m (knee, ankle); ``None`` takes the device's
@@ -266,7 +263,7 @@ class SafetyConfig(_Strict):
     load_range: Pair = (-100.0, 5000.0)
 
 
-class ControllerConfig(_Strict):
+class ControllerConfig(StrictConfig):
     """All settings of every controller; each controller reads the parts it uses."""
 
     clf: ClfConfig = ClfConfig()

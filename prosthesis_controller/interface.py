@@ -20,6 +20,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from hp_model.choices import Choice
+from hp_model.domains import Domain
 from prosthesis_controller.measurement import ProsthesisMeasurement
 
 
@@ -38,8 +39,8 @@ class Active(IntFlag):
 
 
 class ControllerName(Choice):
-    """The prosthesis controllers :func:`~prosthesis_controller.controllers.make_controller`
-    builds (its docstring says what each is)."""
+    """The prosthesis controllers :func:`~prosthesis_controller.registry.make_controller`
+    builds (:data:`~prosthesis_controller.registry.CONTROLLERS` says what each is)."""
 
     CLFQP = "clfqp"
     CLFQP_EXACT = "clfqp-exact"
@@ -93,7 +94,8 @@ class Diagnostics(NamedTuple):
     ticks since ``reset`` whose torque came from a fallback (QP failure, non-finite law
     output or a faulty measurement); fault: the
     :class:`~prosthesis_controller.measurement.Fault` bits of this tick's measurement;
-    domain: "ps" or "pns"; mode: :class:`ControllerMode`.
+    domain: the controller's :class:`~hp_model.domains.Domain` (``PS`` or ``PNS``); mode:
+    :class:`ControllerMode`.
 
     Model-error estimate and coverage monitor (``clfqp``, ``clfqp-exact``;
     :mod:`prosthesis_controller.disturbance`; zero / False for the other controllers):
@@ -107,10 +109,10 @@ class Diagnostics(NamedTuple):
     V: float
     rho: float
     qp_status: QpOutcome
-    active: int
+    active: Active
     fallback_count: int
     fault: int
-    domain: str
+    domain: Domain
     mode: ControllerMode
     disturbance: tuple[float, float] = (0.0, 0.0)
     disturbance_valid: bool = False

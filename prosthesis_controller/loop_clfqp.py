@@ -19,101 +19,67 @@ import math
 import numpy as np
 import piqp
 
-from prosthesis_controller.controllers import BaseController, ControllerContext
+from hp_model.domains import Domain
+from prosthesis_controller.base import StanceResult, State
+from prosthesis_controller.context import ControllerContext
 from prosthesis_controller.disturbance import DisturbanceEstimator
-from prosthesis_controller.interface import Active, ControllerMode, ControllerName, QpOutcome
+from prosthesis_controller.interface import Active, ControllerName, QpOutcome
+from prosthesis_controller.qp import DUAL_TOL, QpController, dense_solver, set_tolerance
 from prosthesis_controller.terms import LOOP_RHO_UNIT, LOOP_ROWS, LOOP_SIGMA_UNIT
 
-_INF = math.inf
-_DUAL_TOL = 1e-7
-_N_ROWS = len(LOOP_ROWS)
-_CLF, _CONTACT = int(Active.CLF), int(Active.CONTACT)
-_KNEE_LOWER, _KNEE_UPPER = int(Active.KNEE_LOWER), int(Active.KNEE_UPPER)
-_ANKLE_LOWER, _ANKLE_UPPER = int(Active.ANKLE_LOWER), int(Active.ANKLE_UPPER)
-_RHO_MAX = int(Active.RHO_MAX)
-_SOLVED = piqp.PIQP_SOLVED
-assert _N_ROWS == 6, "LoopClfQpController._stance reads the row multipliers one by one"
 
-
-class LoopClfQpController(BaseController):
+class LoopClfQpController(QpController):
     """Interaction-aware robust CLF-QP, relaxed (``clfqp``) or exact (``clfqp-exact``)."""
 
     name = ControllerName.CLFQP
 
     def __init__(self, ctx: ControllerContext, relaxed: bool = True) -> None:
-        self.relaxed = relaxed
         c = ctx.config.clf
-        n = 4 if relaxed else 2
-        self._n = n
-        lk, la = ctx.limits
-        with_limits = c.limits_in_qp if relaxed else c.exact_limits_in_qp
-        self._qlim = (lk, la) if with_limits else (_INF, _INF)
-        self._du = float(c.delta_u) if relaxed else _INF
-        self._rho_scale, self._sigma_scale = LOOP_RHO_UNIT, LOOP_SIGMA_UNIT
-        self._xl = np.full(n, -_INF)
-        self._xu = np.full(n, _INF)
+        un = ctx.config.uncertainty
+        self.estimator = DisturbanceEstimator(un.filter_time, un.max_dt,
+                                              un.monitor_tolerance)
+        f = ctx.terms.numeric["clf_qp_loop"]
+        layout = ctx.terms.clf_loop_layout
+        # the online compensation's d_hat and the margin's gate: views into the generated
+        # call's parameters
+        self._d_hat = f.inputs[1][layout.offset("d_hat"):][:2]
+        self._margin_gate = f.inputs[1][layout.offset("margin_gate"):][:1]
+        super().__init__(ctx, relaxed, 4 if relaxed else 2)
+        self.name = ControllerName.CLFQP if relaxed else ControllerName.CLFQP_EXACT
         if relaxed:
             self._xl[2:] = 0.0
             self._xu[2] = float(c.rho_max) / LOOP_RHO_UNIT
             self._xu[3] = float(ctx.config.contact.sigma_max) / LOOP_SIGMA_UNIT
+        f.inputs[1][:] = ctx.clf_loop_params
+        self._f = f
+        #: the generated call's outputs by name (overwritten by every stance tick)
+        self.terms_out = dict(zip(f.function.name_out(), f.outputs, strict=True))
+        rows = len(LOOP_ROWS)
         self._P = np.zeros((2, 2), order="F")  # the exact QP's blocks
-        self._G = np.zeros((_N_ROWS, 2), order="F")
-        self._c2 = np.zeros(2)
-        self._hl = np.full(_N_ROWS, -_INF)
-        self._solver = piqp.DenseSolver()
+        self._G = np.zeros((rows, 2), order="F")
+        self._c = np.zeros(2)
         self._eps = float(c.loop_solver_eps)
-        self._set_eps(self._eps)
-        self._solver.settings.verbose = False
-        xl0, xu0 = np.maximum(self._xl, -1.0), np.minimum(self._xu, 1.0)
-        self._solver.setup(P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
-                           G=np.asfortranarray(np.ones((_N_ROWS, n))), h_l=self._hl,
-                           h_u=np.ones(_N_ROWS), x_l=xl0, x_u=xu0)
-        # views of the solver's result vectors, made once: piqp keeps the result in place
-        # (resized by setup only, which runs here once), and making a view costs ~0.3 us
-        res = self._solver.result
-        self._rx, self._rzu, self._rzbl, self._rzbu = res.x, res.z_u, res.z_bl, res.z_bu
-        # memoryviews of the small numpy buffers written and read per tick: their items are
-        # Python floats, set and got in ~half the time of numpy's scalar indexing
-        self._xlm, self._xum = memoryview(self._xl), memoryview(self._xu)
-        self._z2_max, self._z3_max = (float(self._xu[2]), float(self._xu[3])) if relaxed \
-            else (0.0, 0.0)
-        self.name = ControllerName.CLFQP if relaxed else ControllerName.CLFQP_EXACT
+        n = self._n
+        self._use_solver(dense_solver(
+            self._eps, P=np.asfortranarray(np.eye(n)), c=np.zeros(n),
+            G=np.asfortranarray(np.ones((rows, n))), h_l=np.full(rows, -math.inf),
+            h_u=np.ones(rows), x_l=np.maximum(self._xl, -1.0), x_u=np.minimum(self._xu, 1.0)))
         self._qp_x: list[float] | None = None
         self.sigma = 0.0  # contact relaxation of the last solve (torque-equivalent units)
-        un = ctx.config.uncertainty
-        self.estimator = DisturbanceEstimator(un.filter_time, un.max_dt,
-                                              un.monitor_tolerance)
         me = ctx.tube.model_error
-        self._exclude = float(me.exclude_after_touchdown) if me is not None else _INF
+        self._exclude = float(me.exclude_after_touchdown) if me is not None else math.inf
         self._margin_on = bool(un.margin) and me is not None
-        self._monitored = False  # the previous stance tick's state is where the bound is
-        # the online compensation's d_hat: a view into the generated call's parameters
         self._compensate = bool(un.compensate)
         self._comp_after = float(un.compensate_after)
         self._comp_tc = float(un.compensate_filter)
         self._comp_max_dt = float(un.max_dt)
-        self._t_comp: float | None = None
-        self._pdhat = ctx.terms.numeric["clf_qp_loop"].inputs[1][
-            ctx.terms.clf_loop_layout.offset("d_hat"):][:2]
-        super().__init__(ctx)
-        f = ctx.terms.numeric["clf_qp_loop"]
-        f.inputs[1][:] = ctx.clf_loop_params
-        self._f = f
-        self._call = f.trigger  # f.call_inplace without the method call
-        self._fx = memoryview(f.inputs[0])
-        o = dict(zip(f.function.name_out(), f.outputs, strict=True))
-        self.terms_out = o
-        self._oP, self._oc, self._oG, self._oh = o["P"], o["c"], o["G"], o["h"]
-        self._ochk, self._otau, self._oV = o["check"], o["tau"], o["V"]
-        self._mchk, self._mtau, self._mV = (memoryview(o[k]) for k in ("check", "tau", "V"))
-        self._oest = o["estimator"]
-        self._pgate = f.inputs[1][ctx.terms.clf_loop_layout.offset("margin_gate"):][:1]
 
+    # -- the model-error estimate -----------------------------------------------------
     def _reset_estimator(self) -> None:
         self.estimator.reset()
-        self._pdhat[:] = 0.0
-        self._t_comp = None
-        self._monitored = False
+        self._d_hat[:] = 0.0
+        self._t_comp: float | None = None
+        self._monitored = False  # the previous stance tick's state is where the bound is
 
     def _estimator_gap(self) -> None:
         self.estimator.restart()
@@ -121,27 +87,33 @@ class LoopClfQpController(BaseController):
 
     def _estimate(self) -> tuple[tuple[float, float], bool, bool, int]:
         e = self.estimator
-        if self._domain != "ps" or not e.valid:
+        if self._domain is not Domain.PS or not e.valid:
             return (0.0, 0.0), False, False, e.count
         return (e.d0, e.d1), True, e.flag, e.count
 
-    def _set_eps(self, eps: float) -> None:
-        st = self._solver.settings
-        st.eps_abs = st.eps_rel = eps
-        st.eps_duality_gap_abs = st.eps_duality_gap_rel = eps
+    def _compensation(self, t: float, since: float) -> None:
+        """The online compensation's d_hat: the valid estimate low-passed again (T_c) from
+        ``compensate_after`` after touchdown on; held otherwise."""
+        est = self.estimator
+        if since >= self._comp_after and est.valid:
+            dt = t - self._t_comp if self._t_comp is not None else 0.0
+            g = dt / (self._comp_tc + dt) if 0.0 < dt <= self._comp_max_dt else 0.0
+            self._d_hat += g * (np.array((est.d0, est.d1)) - self._d_hat)
+            self._t_comp = t
+        else:
+            self._t_comp = None
 
+    # -- the QP -----------------------------------------------------------------------
     def _solve(self) -> bool:
         """piqp at the tolerance; once more at 100x it if that fails."""
-        return self._solver.solve() == _SOLVED or self._retry()
-
-    def _retry(self) -> bool:
-        """The failed solve once more at 100x the tolerance."""
         s = self._solver
-        self._set_eps(100.0 * self._eps)
+        if s.solve() == piqp.PIQP_SOLVED:
+            return True
+        set_tolerance(s, 100.0 * self._eps)
         try:
             return s.solve() == piqp.PIQP_SOLVED
         finally:
-            self._set_eps(self._eps)
+            set_tolerance(s, self._eps)
 
     @property
     def qp_solution(self) -> np.ndarray | None:
@@ -158,106 +130,74 @@ class LoopClfQpController(BaseController):
     def qp_data(self) -> tuple[np.ndarray, ...]:
         """The last stance tick's QP as the solver got it (copies): (P, c, G, h, x_l, x_u),
         min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u."""
-        n = self._n
-        return (np.array(self._oP[:n, :n]), np.array(self._oc[:n]), np.array(self._oG[:, :n]),
-                np.array(self._oh), self._xl.copy(), self._xu.copy())
+        n, o = self._n, self.terms_out
+        return (np.array(o["P"][:n, :n]), np.array(o["c"][:n]), np.array(o["G"][:, :n]),
+                np.array(o["h"]), self._xl.copy(), self._xu.copy())
 
-    def _stance(self, t, qk, qa, vk, va):
-        # Hot path (every stance tick, on the co-simulation's critical path): plain floats
-        # wherever numpy would cost a scalar conversion (~0.1 us each); the solver's result
-        # read through views made once (self._rx, ...); see the package README, "Tick".
+    def _update_solver(self) -> None:
+        """The generated QP into piqp: as it is (relaxed) or its torque columns (exact)."""
+        o = self.terms_out
+        if self.relaxed:
+            P, c, G = o["P"], o["c"], o["G"]
+        else:
+            P, c, G = self._P, self._c, self._G
+            P[:] = o["P"][:2, :2]
+            G[:] = o["G"][:, :2]
+            c[:] = o["c"][:2]
+        self._solver.update(P=P, c=c, G=G, h_u=o["h"], x_l=self._xl, x_u=self._xu)
+
+    def _active_set(self) -> Active:
+        """The constraints active at piqp's solution, from its multipliers."""
+        rows = self._row_dual.tolist()
+        lower, upper = self._lower_dual.tolist(), self._upper_dual.tolist()
+        active = Active.CLF if rows[0] > DUAL_TOL else Active.NONE
+        if any(v > DUAL_TOL for v in rows[1:]):  # a contact row
+            active |= Active.CONTACT
+        if lower[0] > DUAL_TOL:
+            active |= Active.KNEE_LOWER
+        elif upper[0] > DUAL_TOL:
+            active |= Active.KNEE_UPPER
+        if lower[1] > DUAL_TOL:
+            active |= Active.ANKLE_LOWER
+        elif upper[1] > DUAL_TOL:
+            active |= Active.ANKLE_UPPER
+        if self.relaxed and upper[2] > DUAL_TOL:
+            active |= Active.RHO_MAX
+        return active
+
+    # -- the stance law ---------------------------------------------------------------
+    def _stance(self, t: float, since: float, x: State) -> StanceResult:
         self._qp_x = None
         est = self.estimator
-        est.update(t, vk, va, self._u0, self._u1, self._monitored)
+        est.update(t, x[2], x[3], self._u[0], self._u[1], self._monitored)
         # the bound is defined (and, if configured, in the CLF row) from the excluded time
         # after the switch to stance on, and over its phase range (in the generated call)
-        late = t - self._t_switch >= self._exclude  # type: ignore[operator]
-        self._monitored = late
+        self._monitored = since >= self._exclude
         if self._margin_on:
-            self._pgate[0] = 1.0 if late else 0.0
-        if self._compensate:  # the estimate, low-passed again (T_c), once settled
-            if t - self._t_switch >= self._comp_after and est.valid:  # type: ignore[operator]
-                dt = t - self._t_comp if self._t_comp is not None else 0.0
-                g = dt / (self._comp_tc + dt) if 0.0 < dt <= self._comp_max_dt else 0.0
-                self._pdhat[0] += g * (est.d0 - self._pdhat[0])
-                self._pdhat[1] += g * (est.d1 - self._pdhat[1])
-                self._t_comp = t
-            else:
-                self._t_comp = None
-        x = self._fx
-        x[0], x[1], x[2], x[3] = qk, qa, vk, va
-        self._call()
-        tau, V = self._mtau[0], self._mV[0]
-        if not math.isfinite(self._mchk[0]):
+            self._margin_gate[0] = 1.0 if self._monitored else 0.0
+        if self._compensate:
+            self._compensation(t, since)
+        f, o = self._f, self.terms_out
+        f.inputs[0][:] = x
+        f.call_inplace()
+        tau, V = float(o["tau"][0]), float(o["V"][0])
+        if not math.isfinite(o["check"][0]):
             est.restart()
-            uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
-        est.store(t, vk, va, self._oest.tolist())
-        # the torques' box (BaseController._bounds, in floats): max(-u_max, u_prev - du)
-        # <= u <= min(u_max, u_prev + du)
-        du = self._du
-        lk, la = self._qlim
-        a, b = self._u0 - du, self._u0 + du
-        l0 = -lk if a < -lk else a
-        h0 = lk if b > lk else b
-        a, b = self._u1 - du, self._u1 + du
-        l1 = -la if a < -la else a
-        h1 = la if b > la else b
-        xl, xu = self._xlm, self._xum
-        xl[0], xu[0], xl[1], xu[1] = l0, h0, l1, h1
-        xl, xu = self._xl, self._xu
-        s = self._solver
-        # positional: (P, c, A, b, G, h_l, h_u, x_l, x_u); keywords cost piqp's binding
-        # ~0.8 us more
-        if self.relaxed:  # the generated function's own (Fortran-ordered) buffers
-            s.update(self._oP, self._oc, None, None, self._oG, None, self._oh, xl, xu)
-        else:  # the (u, u) block and the torque columns
-            P, G, c = self._P, self._G, self._c2
-            P[:, :] = self._oP[:2, :2]
-            G[:, :] = self._oG[:, :2]
-            c[:] = self._oc[:2]
-            s.update(P, c, None, None, G, None, self._oh, xl, xu)
-        if s.solve() != _SOLVED and not self._retry():
-            uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QpOutcome.FAILED, 0, ControllerMode.FALLBACK
-        # piqp meets the bounds to its tolerance only: clamp.  Written out, min(max(v, lo),
-        # hi) is `v = lo if lo > v else v; v = hi if hi < v else v` (the same for a NaN)
-        z = self._rx.tolist()
-        uk, ua = z[0], z[1]
-        uk = l0 if l0 > uk else uk
-        z[0] = uk = h0 if h0 < uk else uk
-        ua = l1 if l1 > ua else ua
-        z[1] = ua = h1 if h1 < ua else ua
-        if self.relaxed:
-            z2, z3, hi = z[2], z[3], self._z2_max
-            z2 = 0.0 if z2 < 0.0 else z2
-            z[2] = z2 = hi if hi < z2 else z2
-            hi = self._z3_max
-            z3 = 0.0 if z3 < 0.0 else z3
-            z[3] = z3 = hi if hi < z3 else z3
-            # max(0, v): 0 for a NaN
-            rho = (z2 if z2 > 0.0 else 0.0) * self._rho_scale
-            self.sigma = (z3 if z3 > 0.0 else 0.0) * self._sigma_scale
+            return self._fall_back(x, tau, V, QpOutcome.NONFINITE)
+        est.store(t, x[2], x[3], o["estimator"].tolist())
+        self._torque_box()
+        self._update_solver()
+        if not self._solve():
+            return self._fall_back(x, tau, V, QpOutcome.FAILED)
+        # piqp meets the bounds to its tolerance only: clamp
+        z = [min(max(v, lo), hi) for v, lo, hi in
+             zip(self._z.tolist(), self._xl.tolist(), self._xu.tolist(), strict=False)]
+        if self.relaxed:  # max(0, v): 0 for a NaN
+            rho = max(0.0, z[2]) * LOOP_RHO_UNIT
+            self.sigma = max(0.0, z[3]) * LOOP_SIGMA_UNIT
         else:
             rho = self.sigma = 0.0
-        if not (math.isfinite(uk) and math.isfinite(ua) and math.isfinite(rho)):
-            uk, ua = self._fallback(t, qk, qa, vk, va)
-            return uk, ua, tau, V, 0.0, QpOutcome.NONFINITE, 0, ControllerMode.FALLBACK
-        d = _DUAL_TOL
-        zu = self._rzu.tolist()
-        active = _CLF if zu[0] > d else 0
-        if zu[1] > d or zu[2] > d or zu[3] > d or zu[4] > d or zu[5] > d:
-            active |= _CONTACT
-        zbl, zbu = self._rzbl.tolist(), self._rzbu.tolist()
-        if zbl[0] > d:
-            active |= _KNEE_LOWER
-        elif zbu[0] > d:
-            active |= _KNEE_UPPER
-        if zbl[1] > d:
-            active |= _ANKLE_LOWER
-        elif zbu[1] > d:
-            active |= _ANKLE_UPPER
-        if self.relaxed and zbu[2] > d:
-            active |= _RHO_MAX
+        if not (math.isfinite(z[0]) and math.isfinite(z[1]) and math.isfinite(rho)):
+            return self._fall_back(x, tau, V, QpOutcome.NONFINITE)
         self._qp_x = z
-        return uk, ua, tau, V, rho, QpOutcome.SOLVED, active, ControllerMode.STANCE
+        return StanceResult(z[0], z[1], tau, V, rho, QpOutcome.SOLVED, self._active_set())

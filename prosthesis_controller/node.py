@@ -2,33 +2,31 @@
 
 Per control cycle the plant sends ``KneeFeedback``, ``AnkleFeedback``, ``FootLoad``, if it
 has an IMU ``SocketImu``, and, last, ``SimTime``, all with the same rolling counter. The
-node checks every frame (:class:`bus_schemas.codec.FrameChecker`: id, length, CRC, counter;
-rejects are counted and reported in ``CtrlRejects``), collects the cycle, and on ``SimTime``
-ticks the controller and answers with (heartbeat every ``heartbeat_every`` ticks,
-``CtrlClf`` (the tick's CLF value V and relaxation rho; rho absent for a controller without
-a relaxation) on every tick, ``CtrlStatus`` + ``CtrlRejects`` every ``status_every`` ticks,
-``CtrlDisturbance`` on every tick with a valid model-error estimate (``clfqp``'s stance),
-then) one ``TorqueCmd``. The
-torque frame's timestamp echoes the ``SimTime`` frame's timestamp, so the plant knows which
-cycle a reply answers (lockstep plants stamp frames with simulation time). A feedback frame
-missing from a cycle (dropped, corrupted, late) is replaced by its last accepted value and
-flagged ``stale_feedback``; before the first complete cycle the node answers with torque
-disabled. The IMU is optional: the socket pitch is the cycle's ``SocketImu`` value when it
-came with the cycle's counter and ``ImuValid``, NaN otherwise (the controller's swing then
-runs on its clock; a cycle that lacks an IMU frame after one was seen is flagged
-``stale_feedback`` too).
+node checks every frame (:class:`bus_schemas.transport.codec.FrameChecker`: id, length, CRC,
+counter; rejects are counted and reported in ``CtrlRejects``), collects the cycle, and on
+``SimTime`` ticks the controller and answers with (heartbeat every ``heartbeat_every``
+ticks, ``CtrlClf`` (the tick's CLF value V and relaxation rho; rho absent for a controller
+without a relaxation) on every tick, ``CtrlStatus`` + ``CtrlRejects`` every
+``status_every`` ticks, ``CtrlDisturbance`` on every tick with a valid model-error estimate
+(``clfqp``'s stance), then) one ``TorqueCmd``. The torque frame's timestamp echoes the
+``SimTime`` frame's timestamp, so the plant knows which cycle a reply answers (lockstep
+plants stamp frames with simulation time). A feedback frame missing from a cycle (dropped,
+corrupted, late) is replaced by its last accepted value and flagged ``stale_feedback``;
+before the first complete cycle the node answers with torque disabled. The IMU is optional:
+the socket pitch is the cycle's ``SocketImu`` value when it came with the cycle's counter
+and ``ImuValid``, NaN otherwise (the controller's swing then runs on its clock; a cycle that
+lacks an IMU frame after one was seen is flagged ``stale_feedback`` too).
 
 Watchdog: when no cycle arrives for ``watchdog`` seconds of wall time the node goes SAFE:
 zero torque with ``TorqueEnable = 0`` and heartbeats in state SAFE, repeated every
 ``watchdog`` seconds; the next good cycle resumes RUNNING, with a heartbeat in its reply
-whatever ``heartbeat_every`` (the controller's state is kept,
-so a lockstep run stays deterministic when a slow plant trips the watchdog). The first
-cycle arms it: before any measurement there is nothing to stop (and a SAFE torque frame,
-timestamp 0, sent while a slow plant starts up would pass for the reply to its cycle at
-t = 0). Over zenoh the
-node declares the liveliness token ``hpcosim/run/<id>/ctrl/alive`` only once the controller
-is built and the
-bus subscribed (so a plant seeing it can start), and leaves when the plant's token goes away.
+whatever ``heartbeat_every`` (the controller's state is kept, so a lockstep run stays
+deterministic when a slow plant trips the watchdog). The first cycle arms it: before any
+measurement there is nothing to stop (and a SAFE torque frame, timestamp 0, sent while a
+slow plant starts up would pass for the reply to its cycle at t = 0). On a bus with
+liveliness (:class:`~bus_schemas.transport.liveliness.Liveliness`; over zenoh the token
+``hpcosim/run/<id>/ctrl/alive``) the node says it is alive only once the controller is built
+and the bus subscribed (so a plant seeing it can start), and leaves when the plant goes away.
 
 Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube T
 [--bus bus.toml | --run-id ID --connect tcp/127.0.0.1:PORT]`` or
@@ -38,8 +36,6 @@ Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import json
 import math
 import signal
 import sys
@@ -49,8 +45,8 @@ from typing import Any
 
 import can
 
-from bus_schemas import codec
-from bus_schemas.bus_config import (
+from bus_schemas.transport import codec
+from bus_schemas.transport.bus_config import (
     BusConfig,
     FrameReader,
     bus_config_from_dict,
@@ -58,8 +54,17 @@ from bus_schemas.bus_config import (
     make_bus,
     send_frames,
 )
-from bus_schemas.protocol import PLANT_TO_CTRL, CtrlState, FaultFlag, FrameId, QpStatus
-from bus_schemas.run_auth import RunCredentials
+from bus_schemas.transport.liveliness import liveliness
+from bus_schemas.transport.protocol import (
+    PLANT_TO_CTRL,
+    ActiveConstraint,
+    CtrlState,
+    FaultFlag,
+    FrameId,
+    QpStatus,
+)
+from bus_schemas.transport.run_auth import RunCredentials
+from hp_model import json_io
 from prosthesis_controller.interface import Active, Controller, ControllerName, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.timing import Durations, Usage, pin_thread
@@ -84,14 +89,20 @@ _QP_FAILURES = frozenset(q for q in QpOutcome if q.is_failure)
 _RUNNING = CtrlState.RUNNING
 
 
-def _active_bits(a: int) -> int:
-    out = 0
-    if a & (Active.KNEE_LOWER | Active.KNEE_UPPER):
-        out |= 1
-    if a & (Active.ANKLE_LOWER | Active.ANKLE_UPPER):
-        out |= 2
-    if a & Active.RHO_MAX:
-        out |= 16
+#: the controller's active QP constraints (``Active``) as the bus reports them
+#: (CtrlStatus.ActiveConstraints)
+ACTIVE_CONSTRAINTS: tuple[tuple[Active, ActiveConstraint], ...] = (
+    (Active.KNEE_LOWER | Active.KNEE_UPPER, ActiveConstraint.KNEE_TORQUE),
+    (Active.ANKLE_LOWER | Active.ANKLE_UPPER, ActiveConstraint.ANKLE_TORQUE),
+    (Active.RHO_MAX, ActiveConstraint.RELAXATION))
+
+
+def _active_bits(a: int) -> ActiveConstraint:
+    """The ``ActiveConstraint`` bits of a tick's ``Active`` flags."""
+    out = ActiveConstraint.NONE
+    for active, bit in ACTIVE_CONSTRAINTS:
+        if a & active:
+            out |= bit
     return out
 
 
@@ -105,7 +116,7 @@ def _disturbance_frame(d: Any, ts: float) -> codec.Frame:
 class ControllerNode:
     """Frame handling and controller ticking, independent of the transport (testable
     without a bus): :meth:`handle` one received frame -> frames to send; :meth:`poll` the
-    watchdog. Frames out are light :class:`bus_schemas.codec.Frame` s (``send_frames``
+    watchdog. Frames out are light :class:`bus_schemas.transport.frame.Frame` s (``send_frames``
     sends them as ``can.Message`` s on a bus that needs those)."""
 
     def __init__(self, controller: Controller, *, watchdog: float = 0.05,
@@ -115,7 +126,7 @@ class ControllerNode:
         self.heartbeat_every = max(1, int(heartbeat_every))
         self.status_every = max(1, int(status_every))
         self.checker = codec.FrameChecker(accept=PLANT_TO_CTRL)
-        self.pending: dict[int, tuple[int, Any]] = {}
+        self.pending: dict[int, tuple[int | None, Any]] = {}  # id -> (counter, payload)
         self.last: dict[int, Any] = {}
         self.state = CtrlState.INIT
         self.ticks = 0
@@ -289,7 +300,7 @@ def build_controller(name: str, gait_path: str, tube_path: str,
     import hp_model
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import load_gait
-    from prosthesis_controller.controllers import make_controller
+    from prosthesis_controller.registry import make_controller
 
     model = hp_model.load_model(subject, device)
     gait = load_gait(gait_path, model.parameter_hash())
@@ -297,17 +308,40 @@ def build_controller(name: str, gait_path: str, tube_path: str,
     return make_controller(name, gait, tube, model)
 
 
+class _PlantPresence:
+    """The plant's liveliness, on a bus that has it (CAN over zenoh; any other bus: never
+    gone): watched first, then this node says it is alive (the plant may start)."""
+
+    def __init__(self, bus: can.BusABC) -> None:
+        live = liveliness(bus)
+        self._watch = live.watch_peer() if live is not None else None
+        self._seen = False
+        if live is not None:
+            live.announce_alive()
+
+    def gone(self) -> bool:
+        """True once the plant went away after having been seen."""
+        if self._watch is None:
+            return False
+        for alive in self._watch.poll():
+            if alive:
+                self._seen = True
+            elif self._seen:
+                return True
+        return False
+
+    def close(self) -> None:
+        if self._watch is not None:
+            self._watch.close()
+
+
 def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
           exit_with_plant: bool = True, on_ready: Any = None) -> dict[str, Any]:
-    """Serve until ``stop`` (a threading.Event) is set, SIGTERM/SIGINT, or (zenoh) the
-    plant's liveliness token disappears after having been seen. Returns counts."""
-    # a bus with liveliness (CAN over zenoh): watch the plant, then say this node is alive
-    plant_watch = bus.watch_peer() if hasattr(bus, "watch_peer") else None
-    if hasattr(bus, "announce_alive"):
-        bus.announce_alive()
+    """Serve until ``stop`` (a threading.Event) is set, SIGTERM/SIGINT, or (a bus with
+    liveliness) the plant goes away after having been seen. Returns counts."""
+    plant = _PlantPresence(bus)
     if on_ready is not None:
         on_ready()
-    plant_seen = False
     timeout = max(1e-3, node.watchdog / 2)
     cycle = Durations()  # first frame of a cycle received -> its reply sent
     first: int | None = None
@@ -329,17 +363,12 @@ def serve(node: ControllerNode, bus: can.BusABC, *, stop: Any = None,
                         first = None
                     node.after_send()
             send_frames(bus, node.poll(now))
-            if plant_watch is not None:
-                for alive in plant_watch.poll():
-                    if alive:
-                        plant_seen = True
-                    elif plant_seen and exit_with_plant:
-                        return _summary(node, "plant gone", cycle, usage)
+            if plant.gone() and exit_with_plant:
+                return _summary(node, "plant gone", cycle, usage)
     except can.CanOperationError:
         return _summary(node, "bus closed", cycle, usage)
     finally:
-        if plant_watch is not None:
-            plant_watch.close()
+        plant.close()
     return _summary(node, "stopped", cycle, usage)
 
 
@@ -369,18 +398,12 @@ def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
 
 
 def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
-             watchdog: float = 0.05, status_every: int = 100, heartbeat_every: int = 10,
-             subject: str | None = None, device: str | None = None,
-             cpu: int | None = None) -> dict[str, Any]:
-    """Build the controller, open the bus, serve (see :func:`serve`). ``cpu``: run this
-    process (the serving thread and the bus's threads, started after) on that CPU only."""
-    if cpu is not None:
-        pin_thread(cpu)
+             watchdog: float = 0.05, status_every: int = 100,
+             subject: str | None = None, device: str | None = None) -> dict[str, Any]:
+    """Build the controller, open the bus, serve (see :func:`serve`)."""
     ctrl = build_controller(controller, gait, tube, subject, device)
-    node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every,
-                          heartbeat_every=heartbeat_every)
-    bus = make_bus(cfg, "ctrl", declare_alive=False) if cfg.interface == "zenoh" \
-        else make_bus(cfg, "ctrl")
+    node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every)
+    bus = make_bus(cfg, "ctrl", declare_alive=False)  # alive once serving (see serve)
 
     def _term(signum: int, _frame: Any) -> None:
         raise SystemExit(128 + signum)
@@ -416,16 +439,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--device")
     p.add_argument("--auth-stdin", action="store_true",
                    help="zenoh: read the run's secret from the first line of stdin and "
-                   "authenticate the link with it (bus_schemas.run_auth)")
+                   "authenticate the link with it (bus_schemas.transport.run_auth)")
     a = p.parse_args(argv)
     cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
                                channel=a.channel, listen=a.listen, connect=a.connect)
-    if cfg.interface == "zenoh" and (a.low_latency or a.poll_us):
-        cfg = dataclasses.replace(cfg, options={**cfg.options, "low_latency": a.low_latency,
-                                                "poll_us": a.poll_us})
+    if a.low_latency or a.poll_us:
+        cfg = cfg.with_zenoh_options(low_latency=a.low_latency, poll_us=a.poll_us)
     creds = None
     if a.auth_stdin:
-        if cfg.interface != "zenoh":
+        if not cfg.authenticates:
             print("controller node: error: --auth-stdin needs the zenoh interface",
                   file=sys.stderr)
             return 2
@@ -434,12 +456,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         except ValueError as e:
             print(f"controller node: error: {e}", file=sys.stderr)
             return 2
-        zo = {**cfg.options.get("zenoh_options", {}), **creds.zenoh_options("ctrl")}
-        cfg = dataclasses.replace(cfg, options={**cfg.options, "zenoh_options": zo})
+        cfg = cfg.with_zenoh_options(zenoh_options=creds.zenoh_options("ctrl"))
     try:
+        if a.cpu is not None:  # this process: the serving thread and the bus's, started after
+            pin_thread(a.cpu)
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
-                     status_every=a.status_every, subject=a.subject, device=a.device,
-                     cpu=a.cpu)
+                     status_every=a.status_every, subject=a.subject, device=a.device)
     except KeyboardInterrupt:
         return 130
     except ValueError as e:  # a bad option value (e.g. --cpu): one line, no traceback
@@ -448,7 +470,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if creds is not None:
             creds.close()
-    print(f"{SUMMARY_PREFIX}{json.dumps(s)}", file=sys.stderr)
+    print(f"{SUMMARY_PREFIX}{json_io.dumps(s)}", file=sys.stderr)
     return 0
 
 

@@ -11,108 +11,174 @@ The u-space QP (``clf_qp`` outputs Pu, cu, Gu, hu), z = (u_k, u_a[, rho]):
 
     min 1/2 u^T P u + c^T u + c_r rho   s.t.  g^T u - k rho <= h,  box bounds on u and rho
 
-Pure float arithmetic on 2 x 2 blocks (no numpy in the tick).
+Float arithmetic on 2 x 2 blocks.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
+
+import numpy as np
 
 _TOL = 1e-9
 
 
-def polish(P, c, g_row, h: float, xl, xu, relaxed: bool,
-           row: bool, fix_k: int, fix_a: int, fix_r: int) -> tuple[float, float, float] | None:
-    """The exact optimum for the guessed active set, or None if the guess is not optimal.
+class PolishQp(NamedTuple):
+    """The QP as :func:`polish` takes it: ``P`` (3x3 or 2x2), ``c``, ``g`` (the normalised
+    row incl. the rho coefficient -k when ``relaxed``), ``h``; ``lower``/``upper`` the
+    bounds of z."""
 
-    ``P`` (3x3 or 2x2 array), ``c``, ``g_row`` (the normalised row incl. the rho
-    coefficient -k when ``relaxed``), ``h``; ``xl``/``xu`` the bounds of z; ``row``: the CLF
-    row is active; ``fix_*``: -1 at the lower bound, +1 at the upper bound, 0 free."""
-    p00, p01, p11 = P[0, 0], P[0, 1], P[1, 1]
-    c0, c1 = c[0], c[1]
-    g0, g1 = g_row[0], g_row[1]
-    if relaxed:
-        cr, k = c[2], -g_row[2]
+    P: np.ndarray
+    c: np.ndarray
+    g: np.ndarray
+    h: float
+    lower: np.ndarray
+    upper: np.ndarray
+    relaxed: bool
+
+
+class ActiveGuess(NamedTuple):
+    """A guessed active set: ``row`` the CLF row; ``knee``, ``ankle``, ``rho`` -1 at the
+    variable's lower bound, +1 at its upper bound, 0 free."""
+
+    row: bool
+    knee: int
+    ankle: int
+    rho: int
+
+
+class _Point(NamedTuple):
+    """A candidate: the torques, rho and the row's multiplier."""
+
+    u0: float
+    u1: float
+    rho: float
+    lam: float
+
+
+def polish(qp: PolishQp, guess: ActiveGuess) -> tuple[float, float, float] | None:
+    """The exact optimum (u_k, u_a, rho) for the guessed active set, or None if the guess
+    is not optimal."""
+    c, g, xl, xu = qp.c, qp.g, qp.lower, qp.upper
+    if qp.relaxed:
+        cr, k = c[2], -g[2]
         if k <= 0.0:
             return None
     else:
         cr = k = 0.0
     rho = 0.0
-    rho_free = relaxed and fix_r == 0
-    if relaxed and fix_r:
-        rho = xl[2] if fix_r < 0 else xu[2]
-    if rho_free and not row:
+    rho_free = qp.relaxed and guess.rho == 0
+    if qp.relaxed and guess.rho:
+        rho = xl[2] if guess.rho < 0 else xu[2]
+    if rho_free and not guess.row:
         return None  # rho only in a linear cost, unconstrained: not an optimum
-    eq = row and not rho_free
+    eq = guess.row and not rho_free
     lam = 0.0
-    if row and rho_free:  # rho absorbs the row: rho = (g u - h) / k, multiplier c_r / k
+    c0, c1 = c[0], c[1]
+    if guess.row and rho_free:  # rho absorbs the row: rho = (g u - h) / k, multiplier c_r / k
         lam = cr / k
-        c0 += lam * g0
-        c1 += lam * g1
-    hh = h + k * rho
-    u0 = xl[0] if fix_k < 0 else xu[0] if fix_k > 0 else 0.0
-    u1 = xl[1] if fix_a < 0 else xu[1] if fix_a > 0 else 0.0
-    if fix_k == 0 and fix_a == 0:
-        det = p00 * p11 - p01 * p01
-        if det <= 0.0:
-            return None
-        a0 = -(p11 * c0 - p01 * c1) / det  # unconstrained minimiser
-        a1 = -(p00 * c1 - p01 * c0) / det
-        if eq:
-            q0 = (p11 * g0 - p01 * g1) / det  # P^-1 g
-            q1 = (p00 * g1 - p01 * g0) / det
-            den = g0 * q0 + g1 * q1
-            if den <= 0.0:
-                return None
-            mu = (g0 * a0 + g1 * a1 - hh) / den
-            u0, u1 = a0 - mu * q0, a1 - mu * q1
-            lam = mu
-        else:
-            u0, u1 = a0, a1
-    elif fix_k == 0 or fix_a == 0:  # one torque free
-        if fix_k == 0:
-            pii, pij, ci, gi, gj, uj = p00, p01, c0, g0, g1, u1
-        else:
-            pii, pij, ci, gi, gj, uj = p11, p01, c1, g1, g0, u0
-        if eq:
-            if abs(gi) < 1e-300:
-                return None
-            ui = (hh - gj * uj) / gi
-            lam = -(pii * ui + pij * uj + ci) / gi
-        else:
-            if pii <= 0.0:
-                return None
-            ui = -(pij * uj + ci) / pii
-        if fix_k == 0:
-            u0 = ui
-        else:
-            u1 = ui
-    elif eq:
-        return None  # both torques fixed and an equality row: degenerate vertex, skip
-    if row and rho_free:
-        rho = (g0 * u0 + g1 * u1 - h) / k
-    # primal feasibility
-    if lam < -_TOL:
+        c0 += lam * g[0]
+        c1 += lam * g[1]
+    u = _torques(qp, (c0, c1), qp.h + k * rho, eq, guess)
+    if u is None:
         return None
-    if g0 * u0 + g1 * u1 - k * rho > h + _TOL * (1.0 + abs(h)):
+    u0, u1, lam_row = u
+    if eq:
+        lam = lam_row
+    if guess.row and rho_free:
+        rho = (g[0] * u0 + g[1] * u1 - qp.h) / k
+    p = _Point(u0, u1, rho, lam)
+    if not (_primal_feasible(qp, p, k) and _dual_feasible(qp, p, k, guess)):
         return None
-    for v, lo, hi in ((u0, xl[0], xu[0]), (u1, xl[1], xu[1])):
-        if not (lo - _TOL * (1.0 + abs(lo)) <= v <= hi + _TOL * (1.0 + abs(hi))):
-            return None
-    if relaxed and not (-_TOL <= rho <= xu[2] + _TOL * (1.0 + xu[2])):
-        return None
-    # bound multipliers from stationarity: grad + lam g = mu_lower - mu_upper
-    gk = p00 * u0 + p01 * u1 + c[0] + lam * g0
-    ga = p01 * u0 + p11 * u1 + c[1] + lam * g1
-    # (a variable whose two bounds coincide is fixed either way: no sign condition)
-    for i, fix, grad in ((0, fix_k, gk), (1, fix_a, ga)):
-        if xl[i] < xu[i] and ((fix < 0 and grad < -_TOL) or (fix > 0 and grad > _TOL)):
-            return None
-    if relaxed and fix_r and xl[2] < xu[2]:
-        grad = c[2] - lam * k
-        if (fix_r < 0 and grad < -_TOL) or (fix_r > 0 and grad > _TOL):
-            return None
     if not (math.isfinite(u0) and math.isfinite(u1) and math.isfinite(rho)):
         return None
     return u0, u1, rho
 
+
+def _torques(qp: PolishQp, c: tuple[float, float], hh: float, eq: bool, guess: ActiveGuess
+             ) -> tuple[float, float, float] | None:
+    """(u_k, u_a, the row's multiplier if ``eq``) stationary with the fixed torques at their
+    bounds and, if ``eq``, the row g u = hh held; linear cost ``c``; None if singular."""
+    xl, xu = qp.lower, qp.upper
+    u0 = xl[0] if guess.knee < 0 else xu[0] if guess.knee > 0 else 0.0
+    u1 = xl[1] if guess.ankle < 0 else xu[1] if guess.ankle > 0 else 0.0
+    if guess.knee == 0 and guess.ankle == 0:
+        return _both_free(qp, c, hh, eq)
+    if guess.knee == 0 or guess.ankle == 0:
+        return _one_free(qp, c, hh, eq, guess.knee == 0, (u0, u1))
+    if eq:
+        return None  # both torques fixed and an equality row: degenerate vertex, skip
+    return u0, u1, 0.0
+
+
+def _both_free(qp: PolishQp, c: tuple[float, float], hh: float, eq: bool
+               ) -> tuple[float, float, float] | None:
+    P, g = qp.P, qp.g
+    p00, p01, p11 = P[0, 0], P[0, 1], P[1, 1]
+    c0, c1 = c
+    g0, g1 = g[0], g[1]
+    det = p00 * p11 - p01 * p01
+    if det <= 0.0:
+        return None
+    a0 = -(p11 * c0 - p01 * c1) / det  # unconstrained minimiser
+    a1 = -(p00 * c1 - p01 * c0) / det
+    if not eq:
+        return a0, a1, 0.0
+    q0 = (p11 * g0 - p01 * g1) / det  # P^-1 g
+    q1 = (p00 * g1 - p01 * g0) / det
+    den = g0 * q0 + g1 * q1
+    if den <= 0.0:
+        return None
+    mu = (g0 * a0 + g1 * a1 - hh) / den
+    return a0 - mu * q0, a1 - mu * q1, mu
+
+
+def _one_free(qp: PolishQp, c: tuple[float, float], hh: float, eq: bool, knee_free: bool,
+              u: tuple[float, float]) -> tuple[float, float, float] | None:
+    P, g = qp.P, qp.g
+    if knee_free:
+        pii, pij, ci, gi, gj, uj = P[0, 0], P[0, 1], c[0], g[0], g[1], u[1]
+    else:
+        pii, pij, ci, gi, gj, uj = P[1, 1], P[0, 1], c[1], g[1], g[0], u[0]
+    lam = 0.0
+    if eq:
+        if abs(gi) < 1e-300:
+            return None
+        ui = (hh - gj * uj) / gi
+        lam = -(pii * ui + pij * uj + ci) / gi
+    else:
+        if pii <= 0.0:
+            return None
+        ui = -(pij * uj + ci) / pii
+    return (ui, u[1], lam) if knee_free else (u[0], ui, lam)
+
+
+def _primal_feasible(qp: PolishQp, p: _Point, k: float) -> bool:
+    """The row's multiplier is not negative and the point meets the row and the bounds."""
+    g, h, xl, xu = qp.g, qp.h, qp.lower, qp.upper
+    if p.lam < -_TOL:
+        return False
+    if g[0] * p.u0 + g[1] * p.u1 - k * p.rho > h + _TOL * (1.0 + abs(h)):
+        return False
+    for v, lo, hi in ((p.u0, xl[0], xu[0]), (p.u1, xl[1], xu[1])):
+        if not (lo - _TOL * (1.0 + abs(lo)) <= v <= hi + _TOL * (1.0 + abs(hi))):
+            return False
+    return not qp.relaxed or -_TOL <= p.rho <= xu[2] + _TOL * (1.0 + xu[2])
+
+
+def _dual_feasible(qp: PolishQp, p: _Point, k: float, guess: ActiveGuess) -> bool:
+    """The bound multipliers from stationarity (grad + lam g = mu_lower - mu_upper) have
+    the signs of the guessed active bounds (a variable whose two bounds coincide is fixed
+    either way: no sign condition)."""
+    P, c, g, xl, xu = qp.P, qp.c, qp.g, qp.lower, qp.upper
+    gk = P[0, 0] * p.u0 + P[0, 1] * p.u1 + c[0] + p.lam * g[0]
+    ga = P[0, 1] * p.u0 + P[1, 1] * p.u1 + c[1] + p.lam * g[1]
+    for i, fix, grad in ((0, guess.knee, gk), (1, guess.ankle, ga)):
+        if xl[i] < xu[i] and ((fix < 0 and grad < -_TOL) or (fix > 0 and grad > _TOL)):
+            return False
+    if qp.relaxed and guess.rho and xl[2] < xu[2]:
+        grad = c[2] - p.lam * k
+        if (guess.rho < 0 and grad < -_TOL) or (guess.rho > 0 and grad > _TOL):
+            return False
+    return True

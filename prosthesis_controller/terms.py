@@ -71,6 +71,7 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.compiled import CompileBackend, FunctionSet
+from hp_model.domains import Domain
 from hp_model.dynamics import mass_matrix_and_bias
 from hp_model.interaction import InteractionModel
 from hp_model.outputs import HipProgress, delta_p_at, stance_outputs, step_length
@@ -286,13 +287,13 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     rows_h = [mu * fz0 - fx0, mu * fz0 + fx0, fz0 - f_min, toe * fz0 + my0,
               heel * fz0 - my0]
     n_clf = ca.norm_2(ca.horzcat(g_clf, g_over_eps * rho_scale))
-    Gq = [ca.horzcat(g_clf, -g_over_eps * rho_scale, 0) / n_clf]
-    hq = [h_clf / n_clf]
+    G_rows = [ca.horzcat(g_clf, -g_over_eps * rho_scale, 0) / n_clf]
+    h_rows = [h_clf / n_clf]
     for gu, hh in zip(rows_u, rows_h, strict=True):
         n = ca.norm_2(gu) + 1e-12
-        Gq.append(ca.horzcat(gu / n, 0, -sigma_scale))
-        hq.append(hh / n)
-    Gq, hq = ca.vertcat(*Gq), ca.vertcat(*hq)
+        G_rows.append(ca.horzcat(gu / n, 0, -sigma_scale))
+        h_rows.append(hh / n)
+    Gq, hq = ca.vertcat(*G_rows), ca.vertcat(*h_rows)
     H = A.T @ A
     sc = ca.trace(H)
     Pq = ca.SX.zeros(4, 4)
@@ -309,6 +310,172 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     return L, fn
 
 
+def clf_qp_function(hip: HipProgress, x: ca.SX, reduced: Sequence[ca.SX], degree: int,
+                    nominal_degree: int, bound_degree: int) -> tuple[Layout, ca.Function]:
+    """The paper's robust CLF-QP in u-space (``clf_qp``, module docstring) at state x: its
+    parameter layout and function; ``reduced`` = (f_p, g_m, g_s) at x."""
+    f_p, g_m, g_s = reduced
+    L = Layout()
+    alpha = L.add("alpha_pk", (1, degree + 1))
+    v_hip, p_min, p_max = L.add("v_hip"), L.add("p_min"), L.add("p_max")
+    P_eps = L.add("P_eps", (3, 3))
+    g_over_eps = L.add("gamma_over_eps")
+    c_rho = L.add("c_rho")
+    nom = L.add("nominal", (3, nominal_degree + 1))
+    lo_c = L.add("lower", (3, bound_degree + 1))
+    hi_c = L.add("upper", (3, bound_degree + 1))
+    tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
+
+    o = stance_outputs(hip, x, alpha, v_hip, p_min, p_max)
+    tau = o.tau
+    eta = ca.vertcat(o.y1, o.y2, o.dy2)
+    Jo = ca.jacobian(ca.vertcat(o.y1, o.dy2), x)
+    Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
+    F, G = ca.DM(F_OUT), ca.DM(G_OUT)
+    V = eta.T @ P_eps @ eta
+    LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
+    LGV = 2 * eta.T @ P_eps @ G  # 1 x 2
+    s = ca.fmin(ca.fmax((tau - tau_lo) / (tau_hi - tau_lo), 0), 1)
+    Fstar = bezier.evaluate(nom, s)
+    lo, hi = bezier.evaluate(lo_c, s), bezier.evaluate(hi_c, s)
+    c_box = Fstar + 0.5 * (lo + hi)
+    r_box = 0.5 * ca.fmax(hi - lo, 0)
+    g_u = LGV @ Am  # 1 x 2
+    a_F = As.T @ LGV.T  # 3
+    h = -g_over_eps * V - LFV - LGV @ Lf - a_F.T @ c_box - ca.fabs(a_F).T @ r_box
+    H = Am.T @ Am
+    b0 = Lf + As @ Fstar
+    b = Am.T @ b0
+    sc = ca.trace(H)
+    Pu = ca.SX.zeros(3, 3)
+    Pu[0:2, 0:2] = 2 * H / sc
+    cu = ca.vertcat(2 * b / sc, c_rho / sc)
+    row_u = ca.horzcat(g_u, -g_over_eps)
+    n_u = ca.norm_2(row_u)
+    Gu, hu = row_u / n_u, h / n_u
+    # one number that is non-finite iff any QP datum is (NaN and inf propagate)
+    chk = ca.sum1(ca.sum2(Pu)) + ca.sum1(cu) + ca.sum2(Gu) + hu + V
+    return L, ca.Function(
+        "clf_qp", [x, L.symbol],
+        [Pu, cu, Gu, hu, chk, eta, tau, V, LFV, LGV, Lf, Am, As, Fstar, c_box, r_box],
+        ["x", "p"],
+        ["Pu", "cu", "Gu", "hu", "check", "eta", "tau", "V", "LFV", "LGV", "Lf", "Am", "As",
+         "Fstar", "c", "r"])
+
+
+def stance_ref_function(hip: HipProgress, degree: int) -> tuple[Layout, ca.Function]:
+    """The nominal stance trajectory of (th_pk, th_pa) at a phase and phase rate
+    (``stance_ref``)."""
+    R = Layout()
+    alpha_r = R.add("alpha_pk", (1, degree + 1))
+    rp_min, rp_max = R.add("p_min"), R.add("p_max")
+    tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
+    Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
+    qd_ = ca.vertcat(Bk, hip.ankle(delta_p_at(tau_s, rp_min, rp_max), Bk))
+    dqd_ = rate * ca.vertcat(dBk, hip.ankle(step_length(rp_min, rp_max), dBk))
+    ddqd_ = rate**2 * ca.vertcat(ddBk, -hip.c_knee * ddBk / hip.c_ankle)
+    return R, ca.Function("stance_ref", [tau_s, rate, R.symbol], [qd_, dqd_, ddqd_],
+                          ["tau", "rate", "p"], ["q_d", "qd_d", "qdd_d"])
+
+
+def swing_ref_function(sub: ProsthesisSubsystem, x: ca.SX, degree: int, pitch_degree: int
+                       ) -> tuple[Layout, ca.Function]:
+    """The swing target with the landing offset and its gravity torque (``swing_ref``)."""
+    th = x[0:2]
+    S = Layout()
+    alpha_s = S.add("alpha", (2, degree + 1))
+    pitch_c = S.add("pitch", (1, pitch_degree + 1))
+    reach, s_land = S.add("landing_reach"), S.add("landing_start")
+    flat_span = S.add("landing_flatten")
+    s_raw, rate_raw = ca.SX.sym("s_raw"), ca.SX.sym("rate_raw")
+    s_c = ca.fmin(ca.fmax(s_raw, 0), 1)  # the Bezier rows hold their end values
+    pitch = bezier.evaluate(pitch_c, s_c)
+    Bs = bezier.evaluate(alpha_s, s_c)
+    # landing, about the Bezier posture with the socket at its nominal pitch: the knee
+    # turns the shank toward the vertical under the knee (the lowest the sole gets at a
+    # fixed foot pitch) by the fraction w of its angle psi, and the ankle keeps the foot
+    # flat in the world; both are exact (psi and the foot pitch are linear in the joint
+    # angles, slopes +-1)
+    qj, th_s = ca.SX.sym("qj", 2), ca.SX.sym("th_s")
+    q5 = ca.vertcat(0, 0, th_s, qj)
+    knee, ankle = (frame_pose(sub.tree, q5, f) for f in ("p_knee", "p_ankle"))
+    psi = ca.atan2(ankle[0] - knee[0], knee[1] - ankle[1])  # shank from vertical
+    foot = frame_pose(sub.tree, q5, "p_sole")[2]
+    geo = ca.Function("landing_geometry", [qj, th_s],
+                      [psi, ca.jacobian(psi, qj)[0], foot])
+    psi0, dpsi_dk, pitch0 = geo(Bs, pitch)
+    w = ca.fmin(ca.fmax(reach * (s_raw - s_land) / (1 - s_land), 0), 1)
+    w_flat = ca.fmin(ca.fmax((s_raw - s_land) / flat_span, 0), 1)
+    dk = -w * psi0 / dpsi_dk
+    q_sw = Bs + ca.vertcat(dk, -dk - pitch0 * w_flat)
+    qd_sw = ca.jacobian(q_sw, s_raw) * rate_raw
+    qdd_sw = ca.jacobian(qd_sw, s_raw) * rate_raw
+    _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
+    grav_free = ca.substitute(H_free, sub.qd, ca.SX.zeros(sub.nq))
+    q_hang = ca.vertcat(0, 0, pitch, th)
+    g_sw = ca.substitute(grav_free, sub.q, q_hang)[3:5]
+    return S, ca.Function("swing_ref", [x, s_raw, rate_raw, S.symbol],
+                          [q_sw, qd_sw, qdd_sw, g_sw, s_c],
+                          ["x", "s_raw", "rate_raw", "p"],
+                          ["q_d", "qd_d", "qdd_d", "gravity", "tau"])
+
+
+def phase_pd_function(hip: HipProgress, x: ca.SX, degree: int, feedforward_degree: int
+                      ) -> tuple[Layout, ca.Function]:
+    """The phase-PD reference's feedforward and joint-side feedback (``phase_pd``)."""
+    Q = Layout()
+    alpha_q = Q.add("alpha_pk", (1, degree + 1))
+    v_hip_q, p_min_q, p_max_q = Q.add("v_hip"), Q.add("p_min"), Q.add("p_max")
+    ff = Q.add("feedforward", (2, feedforward_degree + 1))
+    kp_q, kd_q, kv_q = Q.add("kp"), Q.add("kd"), Q.add("k_vhip")
+    oq = stance_outputs(hip, x, alpha_q, v_hip_q, p_min_q, p_max_q)
+    u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(oq.tau, 0), 1))
+    fb = ca.vertcat(-kp_q * oq.y2 - kd_q * oq.dy2, kv_q * oq.y1)
+    return Q, ca.Function("phase_pd", [x, Q.symbol],
+                          [u_ff, fb, oq.tau, ca.vertcat(oq.y1, oq.y2, oq.dy2)],
+                          ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
+
+
+def passive_function(sub: ProsthesisSubsystem, x: ca.SX, stance_ref: ca.Function,
+                     degree: int) -> tuple[Layout, ca.Function, list[str]]:
+    """Spong's robust passivity-based law on the stance reference (``passive``), and the
+    links whose standard parameters it adapts."""
+    th, dth = x[0:2], x[2:4]
+    Pl = Layout()
+    alpha_p = Pl.add("alpha_pk", (1, degree + 1))
+    pp_min, pp_max = Pl.add("p_min"), Pl.add("p_max")
+    lam, kgain = Pl.add("lam", (2,)), Pl.add("k", (2,))
+    rho_th, bl = Pl.add("rho_theta"), Pl.add("boundary")
+    links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
+    theta0 = Pl.add("theta0", (4 * len(links),))
+    tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
+    q_d, qd_d, qdd_d = stance_ref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
+    e, ed = th - q_d, dth - qd_d
+    vv = qd_d - lam * e
+    aa = qdd_d - lam * ed
+    rr = ed + lam * e
+    Y, _ = regressor(sub, x, aa, vv)
+    YTr = Y.T @ rr
+    dtheta = -rho_th * YTr / ca.fmax(ca.norm_2(YTr), bl)
+    u_pass = Y @ (theta0 + dtheta) - kgain * rr
+    return Pl, ca.Function("passive", [x, tau_s, rate, Pl.symbol],
+                           [u_pass, e, rr, Y @ theta0],
+                           ["x", "tau", "rate", "p"], ["u_joint", "e", "r", "Ytheta0"]), links
+
+
+def reduced_model_functions(sub: ProsthesisSubsystem, x: ca.SX, reduced: Sequence[ca.SX]
+                            ) -> list[ca.Function]:
+    """The reduced model's pieces for tests and simulation: ``lagrangian``, ``regressor``,
+    ``reduced`` (f_p, g_m, g_s)."""
+    xs, M, g, C = reduced_lagrangian(sub)
+    lag = ca.Function("lagrangian", [xs], [M, g, C @ xs[2:4]], ["x"], ["M", "g", "Cqd"])
+    a_sym, v_sym = ca.SX.sym("a", 2), ca.SX.sym("v", 2)
+    Y2, _ = regressor(sub, x, a_sym, v_sym)
+    reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
+    red = ca.Function("reduced", [x], list(reduced), ["x"], ["f_p", "g_m", "g_s"])
+    return [lag, reg, red]
+
+
 class ControllerTerms:
     """The compiled controller functions of one subsystem and Bezier degrees.
 
@@ -322,163 +489,22 @@ class ControllerTerms:
                  backend: CompileBackend | str = CompileBackend.AUTO,
                  feedforward_degree: int = 9, margin_degree: int = 0) -> None:
         self.sub = sub
-        hip = HipProgress.of(sub.full, "ps")
+        hip = HipProgress.of(sub.full, Domain.PS)
         self.hip = hip
         m = gait_degree
         x = ca.SX.sym("x", 4)
-        th, dth = x[0:2], x[2:4]
         f_p, g_m, g_s = sub.functions["reduced"](x)
-
-        # ---- clf_qp --------------------------------------------------------------------
-        L = Layout()
-        alpha = L.add("alpha_pk", (1, m + 1))
-        v_hip, p_min, p_max = L.add("v_hip"), L.add("p_min"), L.add("p_max")
-        P_eps = L.add("P_eps", (3, 3))
-        g_over_eps = L.add("gamma_over_eps")
-        c_rho = L.add("c_rho")
-        nom = L.add("nominal", (3, nominal_degree + 1))
-        lo_c = L.add("lower", (3, bound_degree + 1))
-        hi_c = L.add("upper", (3, bound_degree + 1))
-        tau_lo, tau_hi = L.add("tau_lo"), L.add("tau_hi")
-        self.clf_layout = L
-
-        o = stance_outputs(hip, x, alpha, v_hip, p_min, p_max)
-        tau = o.tau
-        eta = ca.vertcat(o.y1, o.y2, o.dy2)
-        Jo = ca.jacobian(ca.vertcat(o.y1, o.dy2), x)
-        Lf, Am, As = Jo @ f_p, Jo @ g_m, Jo @ g_s
-        F, G = ca.DM(F_OUT), ca.DM(G_OUT)
-        V = eta.T @ P_eps @ eta
-        LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
-        LGV = 2 * eta.T @ P_eps @ G  # 1 x 2
-        s = ca.fmin(ca.fmax((tau - tau_lo) / (tau_hi - tau_lo), 0), 1)
-        Fstar = bezier.evaluate(nom, s)
-        lo, hi = bezier.evaluate(lo_c, s), bezier.evaluate(hi_c, s)
-        c_box = Fstar + 0.5 * (lo + hi)
-        r_box = 0.5 * ca.fmax(hi - lo, 0)
-        g_u = LGV @ Am  # 1 x 2
-        a_F = As.T @ LGV.T  # 3
-        h = -g_over_eps * V - LFV - LGV @ Lf - a_F.T @ c_box - ca.fabs(a_F).T @ r_box
-        H = Am.T @ Am
-        b0 = Lf + As @ Fstar
-        b = Am.T @ b0
-        sc = ca.trace(H)
-        Pu = ca.SX.zeros(3, 3)
-        Pu[0:2, 0:2] = 2 * H / sc
-        cu = ca.vertcat(2 * b / sc, c_rho / sc)
-        row_u = ca.horzcat(g_u, -g_over_eps)
-        n_u = ca.norm_2(row_u)
-        Gu, hu = row_u / n_u, h / n_u
-        # one number that is non-finite iff any QP datum is (NaN and inf propagate)
-        chk = ca.sum1(ca.sum2(Pu)) + ca.sum1(cu) + ca.sum2(Gu) + hu + V
-        clf = ca.Function(
-            "clf_qp", [x, L.symbol],
-            [Pu, cu, Gu, hu, chk, eta, tau, V, LFV, LGV, Lf, Am, As, Fstar, c_box, r_box],
-            ["x", "p"],
-            ["Pu", "cu", "Gu", "hu", "check", "eta", "tau", "V", "LFV", "LGV", "Lf", "Am", "As",
-             "Fstar", "c", "r"])
-
-        # ---- clf_qp_loop: the interaction-aware robust CLF-QP ----------------------------
+        reduced = (f_p, g_m, g_s)
+        self.clf_layout, clf = clf_qp_function(hip, x, reduced, m, nominal_degree,
+                                               bound_degree)
         self.clf_loop_layout, clf_loop = clf_qp_loop_function(sub, m, margin_degree)
-
-        # ---- stance_ref ----------------------------------------------------------------
-        R = Layout()
-        alpha_r = R.add("alpha_pk", (1, m + 1))
-        rp_min, rp_max = R.add("p_min"), R.add("p_max")
-        self.stance_layout = R
-        tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
-        Bk, dBk, ddBk = bezier.evaluate_continued(alpha_r, tau_s)
-        qd_ = ca.vertcat(Bk, hip.ankle(delta_p_at(tau_s, rp_min, rp_max), Bk))
-        dqd_ = rate * ca.vertcat(dBk, hip.ankle(step_length(rp_min, rp_max), dBk))
-        ddqd_ = rate**2 * ca.vertcat(ddBk, -hip.c_knee * ddBk / hip.c_ankle)
-        sref = ca.Function("stance_ref", [tau_s, rate, R.symbol], [qd_, dqd_, ddqd_],
-                           ["tau", "rate", "p"], ["q_d", "qd_d", "qdd_d"])
-
-        # ---- swing_ref -----------------------------------------------------------------
-        S = Layout()
-        alpha_s = S.add("alpha", (2, m + 1))
-        pitch_c = S.add("pitch", (1, pitch_degree + 1))
-        reach, s_land = S.add("landing_reach"), S.add("landing_start")
-        flat_span = S.add("landing_flatten")
-        self.swing_layout = S
-        s_raw, rate_raw = ca.SX.sym("s_raw"), ca.SX.sym("rate_raw")
-        s_c = ca.fmin(ca.fmax(s_raw, 0), 1)  # the Bezier rows hold their end values
-        pitch = bezier.evaluate(pitch_c, s_c)
-        Bs = bezier.evaluate(alpha_s, s_c)
-        # landing, about the Bezier posture with the socket at its nominal pitch: the knee
-        # turns the shank toward the vertical under the knee (the lowest the sole gets at a
-        # fixed foot pitch) by the fraction w of its angle psi, and the ankle keeps the foot
-        # flat in the world; both are exact (psi and the foot pitch are linear in the joint
-        # angles, slopes +-1)
-        qj, th_s = ca.SX.sym("qj", 2), ca.SX.sym("th_s")
-        q5 = ca.vertcat(0, 0, th_s, qj)
-        knee, ankle = (frame_pose(sub.tree, q5, f) for f in ("p_knee", "p_ankle"))
-        psi = ca.atan2(ankle[0] - knee[0], knee[1] - ankle[1])  # shank from vertical
-        foot = frame_pose(sub.tree, q5, "p_sole")[2]
-        geo = ca.Function("landing_geometry", [qj, th_s],
-                          [psi, ca.jacobian(psi, qj)[0], foot])
-        psi0, dpsi_dk, pitch0 = geo(Bs, pitch)
-        w = ca.fmin(ca.fmax(reach * (s_raw - s_land) / (1 - s_land), 0), 1)
-        w_flat = ca.fmin(ca.fmax((s_raw - s_land) / flat_span, 0), 1)
-        dk = -w * psi0 / dpsi_dk
-        q_sw = Bs + ca.vertcat(dk, -dk - pitch0 * w_flat)
-        qd_sw = ca.jacobian(q_sw, s_raw) * rate_raw
-        qdd_sw = ca.jacobian(qd_sw, s_raw) * rate_raw
-        _, H_free = mass_matrix_and_bias(sub.tree, sub.q, sub.qd)
-        grav_free = ca.substitute(H_free, sub.qd, ca.SX.zeros(sub.nq))
-        q_hang = ca.vertcat(0, 0, pitch, th)
-        g_sw = ca.substitute(grav_free, sub.q, q_hang)[3:5]
-        swref = ca.Function("swing_ref", [x, s_raw, rate_raw, S.symbol],
-                            [q_sw, qd_sw, qdd_sw, g_sw, s_c],
-                            ["x", "s_raw", "rate_raw", "p"],
-                            ["q_d", "qd_d", "qdd_d", "gravity", "tau"])
-
-        # ---- phase_pd ------------------------------------------------------------------
-        Q = Layout()
-        alpha_q = Q.add("alpha_pk", (1, m + 1))
-        v_hip_q, p_min_q, p_max_q = Q.add("v_hip"), Q.add("p_min"), Q.add("p_max")
-        ff = Q.add("feedforward", (2, feedforward_degree + 1))
-        kp_q, kd_q, kv_q = Q.add("kp"), Q.add("kd"), Q.add("k_vhip")
-        self.phase_pd_layout = Q
-        oq = stance_outputs(hip, x, alpha_q, v_hip_q, p_min_q, p_max_q)
-        u_ff = bezier.evaluate(ff, ca.fmin(ca.fmax(oq.tau, 0), 1))
-        fb = ca.vertcat(-kp_q * oq.y2 - kd_q * oq.dy2, kv_q * oq.y1)
-        phase_pd = ca.Function("phase_pd", [x, Q.symbol],
-                               [u_ff, fb, oq.tau, ca.vertcat(oq.y1, oq.y2, oq.dy2)],
-                               ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
-
-        # ---- passive -------------------------------------------------------------------
-        Pl = Layout()
-        alpha_p = Pl.add("alpha_pk", (1, m + 1))
-        pp_min, pp_max = Pl.add("p_min"), Pl.add("p_max")
-        lam, kgain = Pl.add("lam", (2,)), Pl.add("k", (2,))
-        rho_th, bl = Pl.add("rho_theta"), Pl.add("boundary")
-        links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
-        theta0 = Pl.add("theta0", (4 * len(links),))
-        self.passive_layout = Pl
+        self.stance_layout, sref = stance_ref_function(hip, m)
+        self.swing_layout, swref = swing_ref_function(sub, x, m, pitch_degree)
+        self.phase_pd_layout, phase_pd = phase_pd_function(hip, x, m, feedforward_degree)
+        self.passive_layout, passive, links = passive_function(sub, x, sref, m)
         self.passive_links = links
-        q_d, qd_d, qdd_d = sref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
-        e, ed = th - q_d, dth - qd_d
-        vv = qd_d - lam * e
-        aa = qdd_d - lam * ed
-        rr = ed + lam * e
-        Y, _ = regressor(sub, x, aa, vv)
-        YTr = Y.T @ rr
-        dtheta = -rho_th * YTr / ca.fmax(ca.norm_2(YTr), bl)
-        u_pass = Y @ (theta0 + dtheta) - kgain * rr
-        passive = ca.Function("passive", [x, tau_s, rate, Pl.symbol],
-                              [u_pass, e, rr, Y @ theta0],
-                              ["x", "tau", "rate", "p"], ["u_joint", "e", "r", "Ytheta0"])
-
-        # ---- reduced-model pieces for tests and simulation ----------------------------
-        xs, M, g, C = reduced_lagrangian(sub)
-        lag = ca.Function("lagrangian", [xs], [M, g, C @ xs[2:4]], ["x"], ["M", "g", "Cqd"])
-        a_sym, v_sym = ca.SX.sym("a", 2), ca.SX.sym("v", 2)
-        Y2, _ = regressor(sub, x, a_sym, v_sym)
-        reg = ca.Function("regressor", [x, a_sym, v_sym], [Y2], ["x", "a", "v"], ["Y"])
-        red = ca.Function("reduced", [x], [f_p, g_m, g_s], ["x"], ["f_p", "g_m", "g_s"])
-
-        fns = [clf, clf_loop, sref, swref, phase_pd, passive, lag, reg, red]
+        fns = [clf, clf_loop, sref, swref, phase_pd, passive,
+               *reduced_model_functions(sub, x, reduced)]
         name = (f"{sub.name}_ctrl_m{m}_k{nominal_degree}_l{bound_degree}_p{pitch_degree}"
                 f"_f{feedforward_degree}_d{margin_degree}")
         self.functions = {f.name(): f for f in fns}

@@ -13,7 +13,7 @@ import sys
 
 import can
 
-from bus_schemas.zenoh_can import ZenohBus
+from bus_schemas.transport.zenoh_can import ZenohBus
 
 
 def main() -> int:

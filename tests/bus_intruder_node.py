@@ -16,8 +16,8 @@ import select
 import sys
 import time
 
-from bus_schemas import codec
-from bus_schemas.zenoh_can import ZenohBus
+from bus_schemas.transport import codec
+from bus_schemas.transport.zenoh_can import ZenohBus
 
 
 def main() -> int:

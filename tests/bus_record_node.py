@@ -12,8 +12,8 @@ from __future__ import annotations
 import sys
 import time
 
-from bus_schemas import codec
-from bus_schemas.mcap_schemas import Recorder
+from bus_schemas.recording.recorder import Recorder
+from bus_schemas.transport import codec
 
 
 def main() -> int:

@@ -9,8 +9,7 @@ import numpy as np
 
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
-from prosthesis_controller import ProsthesisMeasurement
-from prosthesis_controller.controllers import BaseController, ControllerContext
+from prosthesis_controller import BaseController, ControllerContext, ProsthesisMeasurement
 
 STANCE_LOAD = 600.0  # N on the foot load cell: clearly stance
 

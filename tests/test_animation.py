@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from orchestrator.experiments.animation import ARROW_COLOUR, MAX_ARROW, arrow_vector, walker_gif
+from orchestrator.experiments.animation import (
+    ARROW_COLOUR,
+    MAX_ARROW,
+    WalkSeries,
+    arrow_vector,
+    walker_gif,
+)
 from orchestrator.experiments.scenarios import NOMINAL, Scenario, run_scenario
 from tests.controller_support import tube_about_nominal
 
@@ -19,7 +25,7 @@ def test_walker_gif_of_a_short_run(model, template_gait):
     tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
     r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 2))
     assert r.q is not None and r.q.shape == (r.t.size, model.nq)
-    data = walker_gif(model, r.t, r.q, r.domain, r.tau, r.socket_force, fps=20.0,
+    data = walker_gif(model, WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force), fps=20.0,
                       title="test")
     with Image.open(io.BytesIO(data)) as im:
         n = im.n_frames
@@ -36,7 +42,7 @@ def test_walker_gif_of_a_short_run(model, template_gait):
         assert np.any((img[..., 0] > 200) & (img[..., 1] > 90) & (img[..., 2] < 60))  # orange
     assert np.abs(first.astype(int) - last.astype(int)).sum() > 0
     with pytest.raises(ValueError, match="empty run"):
-        walker_gif(model, r.t[:0], r.q[:0], r.domain[:0], r.tau[:0])
+        walker_gif(model, WalkSeries(r.t[:0], r.q[:0], r.domain[:0], r.tau[:0]))
 
 
 def _frame(data: bytes) -> np.ndarray:
@@ -56,8 +62,9 @@ def test_socket_force_arrow_drawn_at_peak_load(model, template_gait):
     assert r.domain[k] == 0 and mag[k] > 300.0
     force = 5.0 * r.socket_force[k:k + 1]
     assert np.hypot(*arrow_vector(force[0, 0], force[0, 1])) == pytest.approx(MAX_ARROW)
-    args = (model, r.t[k:k + 1], r.q[k:k + 1], r.domain[k:k + 1], r.tau[k:k + 1])
-    with_force, without = _frame(walker_gif(*args, force)), _frame(walker_gif(*args))
+    args = (r.t[k:k + 1], r.q[k:k + 1], r.domain[k:k + 1], r.tau[k:k + 1])
+    with_force = _frame(walker_gif(model, WalkSeries(*args, force)))
+    without = _frame(walker_gif(model, WalkSeries(*args)))
     rgb = np.array([int(ARROW_COLOUR[i:i + 2], 16) for i in (1, 3, 5)])
 
     def arrow_pixels(img: np.ndarray) -> int:
@@ -71,7 +78,7 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
     """``hpcosim animate RUN.mcap``: the walker of a recording's /ground_truth channel (here
     written by the recorder from an in-process run, as the co-simulation writes it, with
     the Foxglove channels /walker/* beside it)."""
-    from bus_schemas.mcap_schemas import Recorder
+    from bus_schemas.recording.recorder import Recorder
     from orchestrator.cli import main
     from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
     from orchestrator.loop.foxglove import WalkerFoxglove

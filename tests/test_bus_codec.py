@@ -13,10 +13,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bus_schemas import codec, protocol
-from bus_schemas.codec import FrameChecker, FrameStatus
-from bus_schemas.crc8 import crc8, frame_checksum
-from bus_schemas.protocol import CtrlState, FaultFlag, FrameId, QpStatus
+from bus_schemas.transport import codec, protocol
+from bus_schemas.transport.codec import FrameChecker, FrameStatus
+from bus_schemas.transport.crc8 import crc8, frame_checksum
+from bus_schemas.transport.protocol import CtrlState, FaultFlag, FrameId, QpStatus
 
 PROTECTED = {FrameId.TORQUE_CMD, FrameId.CTRL_HEARTBEAT, FrameId.SIM_TIME,
              FrameId.KNEE_FEEDBACK, FrameId.ANKLE_FEEDBACK, FrameId.FOOT_LOAD,
@@ -426,7 +426,7 @@ def test_random_payloads_on_known_ids(fid, data):
 
 
 def test_light_frames_are_the_messages_bytes():
-    from bus_schemas import frame
+    from bus_schemas.transport import frame
 
     assert frame.FRAME_LENGTH == protocol.FRAME_LENGTH and codec.Frame is frame.Frame
     rng = np.random.default_rng(22)
@@ -537,10 +537,10 @@ def test_checker_check_all_is_check_of_each_frame():
 
 
 def test_generated_decoders_equal_the_layout_loop_and_cantools():
-    """The per-frame decoders generated from the DBC (bus_schemas.fastcodec), over random
-    data of every frame (most with a wrong checksum, the rest with a right one): the same
-    classification as the CRC rule and the same values, bit for bit, as the layout loop
-    (decode_signals) and as cantools."""
+    """The per-frame decoders generated from the DBC
+    (bus_schemas.transport.codec.fastcodec), over random data of every frame (most with a
+    wrong checksum, the rest with a right one): the same classification as the CRC rule and
+    the same values, bit for bit, as the layout loop (decode_signals) and as cantools."""
     rng = np.random.default_rng(77)
     for fid in (int(i) for i in FrameId):
         names = [s.name for s in protocol.frame_spec(fid).payload]

@@ -8,10 +8,10 @@ import time
 import pytest
 import zenoh
 
-from bus_schemas import keys
-from bus_schemas.keys import Direction
-from bus_schemas.zenoh_can import publisher_matched
-from bus_schemas.zenoh_config import (
+from bus_schemas.transport import keys
+from bus_schemas.transport.keys import Direction
+from bus_schemas.transport.zenoh_can import publisher_matched
+from bus_schemas.transport.zenoh_config import (
     ZenohMode,
     free_tcp_port,
     is_loopback_endpoint,

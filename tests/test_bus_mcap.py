@@ -20,21 +20,20 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from bus_schemas import codec
-from bus_schemas.mcap_append import append_messages, supports
-from bus_schemas.mcap_schemas import (
+from bus_schemas.recording.chunk_append import append_messages, supports
+from bus_schemas.recording.json_encoding import encode_json
+from bus_schemas.recording.reader import JsonDecoderFactory, read_messages
+from bus_schemas.recording.recorder import Recorder
+from bus_schemas.recording.schemas import (
     CHANNELS,
     COORDS,
     FOXGLOVE_CHANNELS,
     MESSAGE_ENCODING,
     SCHEMA_ENCODING,
-    JsonDecoderFactory,
-    Recorder,
     can_frame_message,
-    encode_json,
-    read_messages,
 )
-from bus_schemas.protocol import DBC_PATH, FaultFlag, QpStatus
+from bus_schemas.transport import codec
+from bus_schemas.transport.protocol import DBC_PATH, FaultFlag, QpStatus
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -184,9 +183,8 @@ def test_recorder_round_trip_every_channel(tmp_path):
     assert [s for _, s, _ in tx[:5]] == [1, 2, 3, 4, 5]
     rx = by_topic["/can/rx"]
     assert rx[7][0] == 7_500_000 and rx[7][2]["status"] == "ok"
-    assert codec.decode(codec.can.Message(arbitration_id=rx[7][2]["id"],
-                                          is_extended_id=False,
-                                          data=bytes(rx[7][2]["data"]))).value == \
+    assert codec.decode(can.Message(arbitration_id=rx[7][2]["id"], is_extended_id=False,
+                                    data=bytes(rx[7][2]["data"]))).value == \
         codec.TorqueCmd(0.5, -0.5, 1)
     gt = by_topic["/ground_truth"][42]
     assert gt[0] == 42_000_000
@@ -383,12 +381,12 @@ def test_two_runs_never_write_the_same_recording(tmp_path):
     locked and is reused."""
     import textwrap
 
-    from bus_schemas.mcap_schemas import RecordingInUseError
+    from bus_schemas.recording.part_file import RecordingInUseError
 
     path = tmp_path / "run.mcap"
     code = textwrap.dedent(f"""
         import sys
-        from bus_schemas.mcap_schemas import Recorder
+        from bus_schemas.recording.recorder import Recorder
         rec = Recorder({str(path)!r})
         rec.register_all()
         print("open", flush=True)

@@ -21,21 +21,20 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bus_schemas import codec
-from bus_schemas.bus_config import FrameReader, send_frames
-from bus_schemas.codec import FrameChecker
-from bus_schemas.keys import Direction
-from bus_schemas.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState
-from bus_schemas.zenoh_can import (
-    ZenohBus,
+from bus_schemas.transport import codec
+from bus_schemas.transport.bus_config import FrameReader, send_frames
+from bus_schemas.transport.codec import FrameChecker
+from bus_schemas.transport.keys import Direction
+from bus_schemas.transport.protocol import CTRL_TO_PLANT, PLANT_TO_CTRL, CtrlState
+from bus_schemas.transport.wire import (
     pack_batch,
     pack_message,
-    parse_channel,
     unpack_frames,
     unpack_message,
     unpack_payload,
 )
-from bus_schemas.zenoh_config import loopback_endpoint
+from bus_schemas.transport.zenoh_can import ZenohBus, parse_channel
+from bus_schemas.transport.zenoh_config import loopback_endpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -390,7 +389,7 @@ def test_shutdown_closes_session_and_liveliness(pair):
 def test_entry_point_is_declared():
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())
     eps = meta["project"]["entry-points"]["can.interface"]
-    assert eps == {"zenoh": "bus_schemas.zenoh_can:ZenohBus"}
+    assert eps == {"zenoh": "bus_schemas.transport.zenoh_can:ZenohBus"}
     assert "*.dbc" in meta["tool"]["setuptools"]["package-data"]["bus_schemas"]
 
 
@@ -418,8 +417,8 @@ def test_can_bus_finds_the_entry_point_in_a_fresh_process(tmp_path):
                                       eps["can.interface"].items()))
     code = textwrap.dedent("""
         import can
-        from bus_schemas import codec
-        from bus_schemas.zenoh_config import loopback_endpoint
+        from bus_schemas.transport import codec
+        from bus_schemas.transport.zenoh_config import loopback_endpoint
         ep = loopback_endpoint()
         with can.Bus(interface="zenoh", channel="t4/plant", listen=ep) as p, \\
                 can.Bus(interface="zenoh", channel="t4/ctrl", connect=ep) as c:

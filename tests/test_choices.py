@@ -16,6 +16,7 @@ from hp_model.compiled import CompileBackend, FunctionSet
 from hp_model.force_tube import TubePhase
 from hp_model.hybrid import Constraint, ConstraintKind
 from hp_model.tree import Body, JointKind, ModelError
+from orchestrator.cosim.faults import PerturbCase
 from orchestrator.modes import CosimMode, SweepBackend
 from prosthesis_controller.interface import ControllerMode, ControllerName, QpOutcome
 
@@ -30,6 +31,8 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (ControllerName, ("clfqp", "clfqp-exact", "clfqp-paper", "clfqp-paper-exact", "pd",
                       "passive", "phase-pd")),
     (CosimMode, ("lockstep", "realtime")),
+    (PerturbCase, ("none", "drop", "delay", "duplicate", "corrupt-counter", "corrupt-checksum",
+                   "corrupt-length", "kill", "hang", "stall", "human")),
     (SweepBackend, ("simulator", "fmu")),
     (SegmentationMethod, ("paper", "contact")),
     (FitSegments, ("touchdown", "paper")),
@@ -90,7 +93,7 @@ def test_function_set_and_constraint_parse_their_choice():
 
 
 def test_qp_outcome_maps_to_the_bus_status_unchanged():
-    from bus_schemas.protocol import QpStatus
+    from bus_schemas.transport.protocol import QpStatus
     from prosthesis_controller.node import QP_STATUS
 
     assert set(QP_STATUS) == set(QpOutcome)
@@ -101,16 +104,16 @@ def test_qp_outcome_maps_to_the_bus_status_unchanged():
 
 
 def test_mode_counts_serialize_as_the_words():
-    from orchestrator.experiments.scenarios import as_jsonable
+    from hp_model.json_io import dumps
 
     modes = [ControllerMode.STANCE] * 3 + [ControllerMode("fallback")]
     counts = {m: modes.count(m) for m in sorted(set(modes))}
-    assert json.dumps(as_jsonable({"modes": counts})) == '{"modes": {"fallback": 1, "stance": 3}}'
+    assert dumps({"modes": counts}) == '{"modes": {"fallback": 1, "stance": 3}}'
     assert counts.get("fallback") == 1 and {"stance": 3}.get(ControllerMode.STANCE) == 3
 
 
 def test_cosim_config_parses_its_mode_and_records_the_word(tmp_path):
-    from orchestrator.cosim.master import CosimConfig
+    from orchestrator.cosim.config import CosimConfig
 
     cfg = CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="realtime")
     assert cfg.mode is CosimMode.REALTIME

@@ -105,7 +105,7 @@ def test_rows_hold_at_the_solution(demo_ctx, model, demo_gait):
     ctl = make_controller("clfqp", None, None, None, context=demo_ctx)
     ct = demo_ctx.config.contact
     c = demo_ctx.config.clf
-    from prosthesis_controller.controllers import foot_extent
+    from prosthesis_controller.context import foot_extent
 
     toe, heel = (ct.cop_fraction * v for v in foot_extent(model))
     rng = np.random.default_rng(5)

@@ -150,8 +150,6 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     """On the nominal (y = 0) the phase-PD torque is the fitted nominal stance torque; a
     knee error adds -kp y2 - kd dy2 and a hip-velocity error k_vhip y1 (joint side); the
     feedforward fit reproduces the gait's collocation torques."""
-    from prosthesis_controller.controllers import stance_torque_fit
-
     ps = template_gait.params["ps"]
     hip = ctx.terms.hip
     ck, ca_ = hip.c_knee, hip.c_ankle
@@ -160,7 +158,7 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     ctl = make_controller("phase-pd", None, None, None, context=ctx)
     ctl.reset()
     ctl.tick(m(0.0, load=600, contact=True))
-    ff = stance_torque_fit(template_gait, ctx.model)
+    ff = template_gait.controller_curves.stance_torque
     tr = template_gait.trajectory["ps"]
     q, u = np.asarray(tr["q"]), np.asarray(tr["u"])
     tau_c = hip.phase(q[10], q[11], ps.p_min, ps.p_max)

@@ -11,7 +11,7 @@ import pytest
 from hp_model import bezier
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 from prosthesis_controller.config import ControllerConfig, SwingConfig
-from prosthesis_controller.controllers import socket_pitch_fit, thigh_phase_table
+from prosthesis_controller.context import thigh_phase_table
 from prosthesis_controller.measurement import Fault, validate
 from tests.controller_support import tube_about_nominal
 
@@ -81,7 +81,7 @@ def test_a_thigh_ahead_of_the_nominal_advances_the_swing_low_pass_filtered(lead_
     assert ctx.thigh_table is not None
     T = ctx.durations["pns"]
     tc = ctx.config.swing.lead_time_constant
-    pitch_c = socket_pitch_fit(ctx.gait, model)
+    pitch_c = ctx.gait.controller_curves.socket_pitch
     p_at = lambda s: float(bezier.evaluate(pitch_c, s)[0])  # noqa: E731
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
@@ -115,7 +115,7 @@ def test_a_late_thigh_or_no_imu_leaves_the_clock(lead_ctx, model, offset):
     """The lead never retards the swing; without a pitch (NaN) the phase is the clock."""
     ctx = lead_ctx
     T = ctx.durations["pns"]
-    pitch_c = socket_pitch_fit(ctx.gait, model)
+    pitch_c = ctx.gait.controller_curves.socket_pitch
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
     t0 = 2.0
@@ -135,7 +135,7 @@ def test_without_thigh_lead_the_pitch_is_ignored(model, subsystem, playback_gait
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
     ctl.tick(ProsthesisMeasurement(0.0, 0.1, 0.1, 0.0, 0.0, 0.0, False, 0.3))
-    pitch_c = socket_pitch_fit(playback_gait, model)
+    pitch_c = playback_gait.controller_curves.socket_pitch
     for s in np.arange(0.2, 0.6, 0.01):
         p = float(bezier.evaluate(pitch_c, s + 0.1)[0])
         assert _swing_tau(ctl, ctx, 0.0, T, float(s), p) == pytest.approx(s, abs=1e-12)
@@ -148,7 +148,7 @@ def test_the_deadband_is_taken_off_the_lead(model, subsystem, playback_gait):
                             model, ControllerConfig(swing=SwingConfig(lead_deadband=0.03)),
                             subsystem=subsystem)
     T = ctx.durations["pns"]
-    pitch_c = socket_pitch_fit(playback_gait, model)
+    pitch_c = playback_gait.controller_curves.socket_pitch
     s_hi = float(ctx.thigh_table[1][0])
     for d, expect in ((0.02, 0.0), (0.06, 0.03)):
         ctl = make_controller("clfqp", None, None, None, context=ctx)

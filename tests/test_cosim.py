@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -19,32 +18,28 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from bus_schemas import codec
-from bus_schemas.mcap_schemas import (
-    CHANNELS,
-    FOXGLOVE_CHANNELS,
+from bus_schemas.recording.reader import (
     JsonDecoderFactory,
     ProtobufDecoderFactory,
     read_messages,
 )
-from bus_schemas.protocol import CTRL_TO_PLANT, CtrlState, FrameId
+from bus_schemas.recording.schemas import CHANNELS, FOXGLOVE_CHANNELS
+from bus_schemas.transport import codec
+from bus_schemas.transport.protocol import CTRL_TO_PLANT, CtrlState, FrameId
 from hp_model.force_tube import save_tube
 from hp_model.gait_artifact import load_gait
 from human_fmu.instance import FORCES, INPUTS, SENSORS, STATE, HumanFmu
-from orchestrator.cosim.master import (
-    CanLink,
-    CosimConfig,
-    CosimResult,
-    FaultPlan,
-    Plant,
-    cpu_plan,
-    node_summary,
-    run_cosim,
-    tick_breakdown,
-)
+from orchestrator.cosim.can_link import CanLink
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.controller_process import node_summary
+from orchestrator.cosim.cpus import cpu_plan
+from orchestrator.cosim.drives import Drives, Plant
+from orchestrator.cosim.faults import FaultPlan
+from orchestrator.cosim.master import run_cosim
 from orchestrator.cosim.recording import play_to_bus, read_recording, refit_tube, replay
+from orchestrator.cosim.result import CosimResult, tick_breakdown
 from orchestrator.loop import ControllerLink, Observation, Sensed, SimulatorPlant, run_loop
-from prosthesis_controller.controllers import make_controller
+from prosthesis_controller import make_controller
 from prosthesis_controller.node import ControllerNode
 from tests.controller_support import tube_about_nominal
 from tests.fmu_support import built_fmu, simulator, start_state
@@ -255,6 +250,74 @@ def test_pd_sends_its_v_and_no_rho(files, model):
     assert max(o["V"] for o in clf.values()) > 0.01
     ref = _clf_in_process(rec, files, model, "pd")
     assert len(ref) == res.ticks and all(clf[us]["V"] == ref[us][0] for us in ref)
+
+
+def _config_copies(tmp_path: Path, body_mass: float | None = None) -> tuple[Path, Path]:
+    """Copies of the shipped subject and device configs (the subject's body mass [kg]
+    changed if given: a model no gait here was made for)."""
+    from hp_model.config import default_device_path, default_subject_path
+
+    subject, device = tmp_path / "subject.toml", tmp_path / "device.toml"
+    text = default_subject_path().read_text()
+    if body_mass is not None:
+        assert "body_mass = 60.0" in text
+        text = text.replace("body_mass = 60.0", f"body_mass = {body_mass}")
+    subject.write_text(text)
+    device.write_bytes(default_device_path().read_bytes())
+    return subject, device
+
+
+def _spawned(monkeypatch) -> list[list[str]]:
+    """The controller processes' command lines of the runs that follow, as spawned."""
+    import orchestrator.cosim.controller_process as process
+
+    make, commands = process.controller_command, []
+
+    def recorded(*args, **kw):
+        commands.append(make(*args, **kw))
+        return commands[-1]
+
+    monkeypatch.setattr(process, "controller_command", recorded)
+    return commands
+
+
+@serial
+def test_run_takes_subject_and_device_to_the_controller_process(files, tmp_path, monkeypatch):
+    """``hpcosim run --subject S --device D``: the plant's model and the controller process
+    are built from S and D (the node's command line names them, as absolute paths) and the
+    recording says so; copies of the shipped configs walk as the defaults do."""
+    from orchestrator.cli import main
+
+    subject, device = _config_copies(tmp_path)
+    commands = _spawned(monkeypatch)
+    rec = tmp_path / "subject.mcap"
+    assert main(["run", "--controller", CTRL, "--gait", str(files["gait"]), "--tube",
+                 str(files["tube"]), "--fmu", str(files["fmu"]), "--steps", "2", "--record",
+                 str(rec), "--subject", str(subject), "--device", str(device)]) == 0
+    (cmd,) = commands
+    assert cmd[cmd.index("--subject") + 1] == str(subject.resolve())
+    assert cmd[cmd.index("--device") + 1] == str(device.resolve())
+    r = read_recording(rec, messages=False)
+    assert (r.config["subject"], r.config["device"]) == (str(subject), str(device))
+    summary = r.metadata["summary"]
+    assert (summary["steps"], summary["fell"], summary["faulted"]) == ("2", "false", "false")
+
+
+def test_controller_process_builds_its_model_from_the_subject(files, model, tmp_path,
+                                                              monkeypatch):
+    """The controller process loads ``--subject``/``--device`` itself: given a subject the
+    gait was not made for (and the plant the default model), it refuses the gait and the
+    run ends before it starts, in one line."""
+    from orchestrator.cosim.config import CosimError
+
+    subject, device = _config_copies(tmp_path, body_mass=61.0)
+    commands = _spawned(monkeypatch)
+    with pytest.raises(CosimError, match=r"controller process exited .* before it was alive"
+                       ) as e:
+        run_cosim(cfg(files, subject=subject, device=device), model=model)
+    assert "\n" not in str(e.value) and "gait" in str(e.value)
+    (cmd,) = commands
+    assert cmd[cmd.index("--subject") + 1] == str(subject.resolve())
 
 
 @serial
@@ -524,9 +587,8 @@ def test_can_link_takes_v_and_rho_from_the_cycles_ctrlclf():
     plant_bus = can.Bus(interface="virtual", channel=ch)
     ctrl_bus = can.Bus(interface="virtual", channel=ch, preserve_timestamps=True)
     res = CosimResult()
-    link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.5),
-                   FaultPlan.parse("none"), plant_bus, None, None, threading.Event(), res,
-                   (50.0, 50.0), (2.0, 2.0))
+    link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.5), plant_bus,
+                   res, Drives((50.0, 50.0), (2.0, 2.0)))
     sensed = Sensed(0.1, 0.2, 0.0, 0.0, 500.0, True, math.nan)
 
     def cycle(k, *clf):
@@ -590,46 +652,49 @@ class _ReplyBus(_SampleBus):
         self.due = self.samples.pop(0) if self.samples else []
 
 
+def _reply_samples() -> list[list[codec.Frame]]:
+    """8 cycles' reply samples (heartbeat, CtrlClf, TorqueCmd) with a corrupted CtrlClf
+    (cycle 2), a replayed one (3), status frames (4), a CtrlDisturbance (5) and the
+    TorqueCmd first (6)."""
+    def f(m):
+        return codec.Frame(m.timestamp, m.arbitration_id, bytes(m.data))
+
+    out = []
+    for k in range(8):
+        ts = k * 1e-3
+        s = [codec.heartbeat_frame(CtrlState.RUNNING, k, k % 16, timestamp=ts)]
+        s.append(codec.clf_frame(0.01 * (k + 1), 0.5 if k % 2 else None,
+                                 k % 16 if k != 3 else 1, timestamp=ts))  # 3: replayed
+        if k == 2:  # a corrupted CtrlClf
+            s[-1] = codec.Frame(ts, s[-1].arbitration_id,
+                                bytes([s[-1].data[0] ^ 1]) + s[-1].data[1:])
+        if k == 4:
+            s += [f(m) for m in codec.encode_status(0, 1, 0, 3, 0, {"bad_checksum": 2},
+                                                    timestamp=ts)]
+        if k == 5:
+            s.append(codec.disturbance_frame(0.1, 0.2, 0.3, True, False, 0.01,
+                                             timestamp=ts))
+        torque = codec.torque_frame(0.1 * k, -0.1, k % 16, timestamp=ts)
+        if k == 6:  # the TorqueCmd first: taken frame by frame
+            s = [torque, *s]
+        else:
+            s.append(torque)
+        out.append(s)
+    return out
+
+
 def test_can_link_settled_late_equals_taken_at_once():
     """CanLink in lockstep under run_loop (``exchange(obs, idle)``, then ``settle``): the
     reply frames before this cycle's TorqueCmd checked after the next send give the same
     Commands (torque, V, rho), verdict counts, controller state, rejects and status as
     taking every frame at once; samples of another shape (the TorqueCmd not last, a bad
     TorqueCmd) are taken frame by frame."""
-    def f(m):
-        return codec.Frame(m.timestamp, m.arbitration_id, bytes(m.data))
-
-    def samples():
-        out = []
-        for k in range(8):
-            ts = k * 1e-3
-            s = [codec.heartbeat_frame(CtrlState.RUNNING, k, k % 16, timestamp=ts)]
-            s.append(codec.clf_frame(0.01 * (k + 1), 0.5 if k % 2 else None,
-                                     k % 16 if k != 3 else 1, timestamp=ts))  # 3: replayed
-            if k == 2:  # a corrupted CtrlClf
-                s[-1] = codec.Frame(ts, s[-1].arbitration_id,
-                                    bytes([s[-1].data[0] ^ 1]) + s[-1].data[1:])
-            if k == 4:
-                s += [f(m) for m in codec.encode_status(0, 1, 0, 3, 0, {"bad_checksum": 2},
-                                                        timestamp=ts)]
-            if k == 5:
-                s.append(codec.disturbance_frame(0.1, 0.2, 0.3, True, False, 0.01,
-                                                 timestamp=ts))
-            torque = codec.torque_frame(0.1 * k, -0.1, k % 16, timestamp=ts)
-            if k == 6:  # the TorqueCmd first: taken frame by frame
-                s = [torque, *s]
-            else:
-                s.append(torque)
-            out.append(s)
-        return out
-
     sensed = Sensed(0.1, 0.2, 0.0, 0.0, 500.0, True, math.nan)
     results = []
     for late in (False, True):
         res = CosimResult()
         link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.5),
-                       FaultPlan.parse("none"), _SampleBus(samples()), None, None,
-                       threading.Event(), res, (50.0, 50.0), (2.0, 2.0))
+                       _SampleBus(_reply_samples()), res, Drives((50.0, 50.0), (2.0, 2.0)))
         assert link.idle_after_send
         cmds, held = [], []
 
@@ -677,8 +742,7 @@ def test_safe_heard_after_the_plants_own_silence_is_not_the_controllers_fault():
                         for k in range(2, 10)]
         res = CosimResult()
         link = CanLink(CosimConfig("clfqp", Path("g"), Path("t"), reply_timeout=0.01),
-                       FaultPlan.parse("none"), _ReplyBus(samples), None, None,
-                       threading.Event(), res, (50.0, 50.0), (2.0, 2.0))
+                       _ReplyBus(samples), res, Drives((50.0, 50.0), (2.0, 2.0)))
         faults = []
         for k in range(10):
             if k == 1:
@@ -904,8 +968,8 @@ def test_an_intruder_without_the_run_secret_cannot_drive_the_plant(files, model,
     endpoint, torque frames at the limits, liveliness token) but without the run's secret:
     zenoh refuses it at the transport, nothing it sends reaches the plant and nothing the
     plant sends reaches it; the run walks exactly as the undisturbed lockstep run."""
-    import orchestrator.cosim.master as cosim_mod
-    from bus_schemas.zenoh_config import loopback_endpoint
+    import orchestrator.cosim.controller_process as cosim_mod
+    from bus_schemas.transport.zenoh_config import loopback_endpoint
 
     endpoint = loopback_endpoint()
     monkeypatch.setattr(cosim_mod, "loopback_endpoint", lambda: endpoint)

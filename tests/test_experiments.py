@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from orchestrator.experiments.scenarios import (
 )
 from orchestrator.loop import measurement, observe_state
 from tests.controller_support import tube_about_nominal
+from tests.strict_json import assert_strict_json_files
 
 
 @pytest.fixture(scope="module")
@@ -113,6 +115,27 @@ def test_perturbation_changes_the_human_only(template_gait):
     np.testing.assert_array_equal(th["ps"][progress], template_gait.theta("ps")[progress])
 
 
+def test_experiments_build_the_model_from_subject_and_device(tmp_path, capsys):
+    """``hpcosim experiments --subject S --device D`` runs on S and D's model: a gait made
+    for the shipped subject is refused for a heavier one, in one line (exit 2), before any
+    run."""
+    from hp_model.config import default_device_path, default_subject_path
+    from orchestrator.cli import main
+
+    data = Path(__file__).resolve().parent / "data" / "controller"
+    subject, device = tmp_path / "subject.toml", tmp_path / "device.toml"
+    subject.write_text(default_subject_path().read_text().replace("body_mass = 60.0",
+                                                                  "body_mass = 61.0"))
+    device.write_bytes(default_device_path().read_bytes())
+    capsys.readouterr()
+    assert main(["experiments", "--gait", str(data / "gait_demo.json"), "--tube",
+                 str(data / "tube_demo_v2.json"), "--out", str(tmp_path / "out"),
+                 "--subject", str(subject), "--device", str(device)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gait_demo.json" in err[0] and "refit the gait" in err[0], err
+    assert not (tmp_path / "out" / "metrics.json").exists()
+
+
 @pytest.mark.slow
 def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path, capsys, monkeypatch):
     """``hpcosim demo`` (the whole pipeline, 20 steps per run) and the numbers the docs
@@ -132,6 +155,9 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path, capsys, m
     for f in ("gait.json", "tube.json", "metrics.json", "report.md", "fig6_torques.png",
               "fig7_phase_portraits.png", "fig8_robustness.png"):
         assert (out / f).stat().st_size > 0, f
+    # every JSON file of the pipeline parses by JavaScript's rules (no NaN, Infinity)
+    assert {f.name for f in assert_strict_json_files(out)} >= {
+        "options.json", "steps.qa.json", "gait.json", "tube.json", "metrics.json"}
     m = json.loads((out / "metrics.json").read_text())
     assert m["schema_version"] == 2 and m["steps"] == 20
     claims = {c["id"]: c for c in m["claims"]}

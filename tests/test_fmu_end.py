@@ -229,6 +229,6 @@ def test_a_discard_without_a_fall_code_ends_the_run(human, model, template_gait,
     with pytest.raises(FmuEndError, match="without a fall code"):
         # a walking controller, a step-time bound it breaks (0.1 s)
         run_fmu_scenario(NoFallOutput(human, {"max_step_time": 0.1}), model, template_gait, ctx,
-                         Scenario("phase-pd", NOMINAL, 4), thetas, q0, qd0)
+                         Scenario("phase-pd", NOMINAL, 4), (q0, qd0))
     # a run's periods are bounded: (steps + 1) max_step_time (3 s) at 1 kHz, plus one
     assert period_bound(human, 4, 1e-3) == 15001

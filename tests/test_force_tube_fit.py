@@ -357,8 +357,8 @@ def test_save_load_round_trip(tube, tmp_path):
 def test_allowance_widens_every_bound_in_use_and_round_trips(profiles, nominal, tmp_path):
     allow = np.array([2.0, 3.0, 0.5])
     bare = ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, gait_hash="g")
-    wide = ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, gait_hash="g",
-                        allowance=allow)
+    wide = ftf.with_allowance(ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3,
+                                           gait_hash="g"), allow)
     # the certified LP bounds are the same; the bounds in use are shifted by the allowance
     np.testing.assert_array_equal(wide.lower, bare.lower)
     tau = np.linspace(TAU_LO, TAU_HI, 7)
@@ -373,7 +373,8 @@ def test_allowance_widens_every_bound_in_use_and_round_trips(profiles, nominal, 
     save_tube(p, wide)
     np.testing.assert_array_equal(load_tube(p).allowance, allow)
     with pytest.raises(ftf.TubeFitError, match="allowance"):
-        ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3, allowance=(1.0, -1.0, 0))
+        ftf.with_allowance(ftf.fit_tube(profiles, nominal, TAU_LO, TAU_HI, degree=3),
+                           (1.0, -1.0, 0))
 
 
 def test_figure_written_atomically(tube, profiles, tmp_path):

@@ -19,9 +19,11 @@ from google.protobuf.descriptor_pb2 import FileDescriptorProto, FileDescriptorSe
 from google.protobuf.unknown_fields import UnknownFieldSet
 from mcap.reader import make_reader
 
-from bus_schemas.mcap_schemas import FOXGLOVE_CHANNELS, read_messages
+from bus_schemas.recording.reader import read_messages
+from bus_schemas.recording.schemas import FOXGLOVE_CHANNELS
 from hp_model.force_tube import save_tube
-from orchestrator.cosim.master import CosimConfig, run_cosim
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.master import run_cosim
 from orchestrator.loop.foxglove import PERIOD, WORLD
 from orchestrator.loop.walker_figure import FORCE_SCALE
 from tests.controller_support import tube_about_nominal

@@ -38,7 +38,7 @@ def test_recording_on_a_full_disk_leaves_nothing(tmp_path):
     out = tmp_path / "run.mcap"
     r = _py(f"""
         import os
-        from bus_schemas.mcap_schemas import Recorder
+        from bus_schemas.recording.recorder import Recorder
         try:
             with Recorder({str(out)!r}, compression="none", chunk_size=4096) as rec:
                 rec.register_all()

@@ -1,5 +1,6 @@
 """The gait artifact: round trip, hash, refusal of a gait for other parameters or edited by
-hand, one-line errors naming the field."""
+hand or of an older version, one-line errors naming the field; the controllers' curves
+stored by ``gait fit``."""
 
 from __future__ import annotations
 
@@ -8,9 +9,15 @@ import json
 import numpy as np
 import pytest
 
+from characterization.gait.controller_curves import (
+    SOCKET_PITCH_DEGREE,
+    STANCE_TORQUE_DEGREE,
+    fit_controller_curves,
+)
 from hp_model.artifacts import ArtifactError
 from hp_model.domains import DOMAINS
 from hp_model.gait_artifact import load_gait, save_gait
+from tests.committed_gaits import RECIPES, ROOT
 
 
 def test_round_trip_keeps_everything(tmp_path, model, template_gait):
@@ -54,3 +61,47 @@ def test_bad_fields_are_named(tmp_path, template_gait, edit, field):
     with pytest.raises(ArtifactError, match=field.replace(".", r"\.")) as e:
         load_gait(p)
     assert "\n" not in str(e.value)
+
+
+def test_round_trip_keeps_the_controller_curves(tmp_path, template_gait):
+    p = tmp_path / "gait.json"
+    save_gait(p, template_gait)
+    g = load_gait(p)
+    for name in ("socket_pitch", "stance_torque"):
+        np.testing.assert_array_equal(getattr(g.controller_curves, name),
+                                      getattr(template_gait.controller_curves, name))
+
+
+def test_a_version_1_gait_is_refused_with_the_command_that_remakes_it(tmp_path,
+                                                                      template_gait):
+    p = tmp_path / "old.json"
+    save_gait(p, template_gait)
+    doc = json.loads(p.read_text())
+    doc["schema_version"] = 1
+    doc.pop("controller_curves")
+    p.write_text(json.dumps(doc))
+    with pytest.raises(ArtifactError, match="hpcosim gait fit") as e:
+        load_gait(p)
+    assert str(p) in str(e.value) and "\n" not in str(e.value)
+
+
+def test_bad_controller_curves_are_named(tmp_path, template_gait):
+    p = tmp_path / "gait.json"
+    save_gait(p, template_gait)
+    doc = json.loads(p.read_text())
+    doc["controller_curves"]["stance_torque"]["coeffs"] = [[0.0]]
+    p.write_text(json.dumps(doc))
+    with pytest.raises(ArtifactError, match=r"controller_curves\.stance_torque\.coeffs"):
+        load_gait(p)
+
+
+@pytest.mark.parametrize("name", sorted(RECIPES))
+def test_committed_gaits_carry_the_curves_fitted_from_their_trajectory(model, name):
+    """``gait fit`` stores what :mod:`characterization.gait.controller_curves` fits from the
+    gait's own trajectory (bit for bit): the controllers read these instead of refitting."""
+    g = load_gait(ROOT / RECIPES[name].path, model.parameter_hash())
+    fitted = fit_controller_curves(model, g.params, g.trajectory)
+    assert g.controller_curves.socket_pitch.shape == (1, SOCKET_PITCH_DEGREE + 1)
+    assert g.controller_curves.stance_torque.shape == (2, STANCE_TORQUE_DEGREE + 1)
+    np.testing.assert_array_equal(g.controller_curves.socket_pitch, fitted.socket_pitch)
+    np.testing.assert_array_equal(g.controller_curves.stance_torque, fitted.stance_torque)

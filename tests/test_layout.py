@@ -12,24 +12,28 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("hp_model", "characterization", "human_fmu", "prosthesis_controller",
             "bus_schemas", "orchestrator")
 
+BUS = ("bus_schemas", "bus_schemas.transport", "bus_schemas.recording")
 #: unit -> the units it may import (besides itself); a unit is a package or a subpackage
 ALLOWED = {
     "hp_model": set(),
-    "bus_schemas": {"hp_model"},
+    # the transport loads nothing of the project (the controller process imports it)
+    "bus_schemas": set(),
+    "bus_schemas.transport": set(),
+    "bus_schemas.recording": {"hp_model", "bus_schemas.transport"},
     "human_fmu": {"hp_model"},
-    "prosthesis_controller": {"hp_model", "bus_schemas"},
+    "prosthesis_controller": {"hp_model", "bus_schemas.transport"},
     "characterization": {"hp_model"},
     "characterization.mocap": {"hp_model"},
     "characterization.gait": {"hp_model", "characterization.mocap"},
     "characterization.tube": {"hp_model", "characterization.mocap", "characterization.gait"},
     "orchestrator": {"hp_model"},
-    "orchestrator.loop": {"hp_model", "human_fmu", "prosthesis_controller", "bus_schemas"},
+    "orchestrator.loop": {"hp_model", "human_fmu", "prosthesis_controller", *BUS},
     # the recordings refit the tube
-    "orchestrator.cosim": {"hp_model", "human_fmu", "prosthesis_controller", "bus_schemas",
+    "orchestrator.cosim": {"hp_model", "human_fmu", "prosthesis_controller", *BUS,
                            "characterization.mocap", "characterization.gait",
                            "characterization.tube", "orchestrator", "orchestrator.loop"},
     "orchestrator.experiments": {"hp_model", "human_fmu", "prosthesis_controller",
-                                 "bus_schemas", "characterization", "characterization.mocap",
+                                 *BUS, "characterization", "characterization.mocap",
                                  "characterization.gait", "characterization.tube",
                                  "orchestrator", "orchestrator.loop", "orchestrator.cosim"},
 }
@@ -102,3 +106,29 @@ def test_no_folder_holds_a_prefix_or_suffix_family() -> None:
                         bad.append(f"{folder.relative_to(ROOT)}: {n} files with the {label} "
                                    f"{word!r} (a subpackage?)")
     assert not bad, "\n".join(bad)
+
+
+def test_no_domain_is_named_by_a_string_literal() -> None:
+    """A domain is a member of ``hp_model.domains.Domain`` wherever the product code names
+    one: adding a domain is then one edit there (issue 36).  A string constant equal to a
+    domain's word anywhere else is a second place to edit."""
+    from hp_model.domains import Domain
+
+    words = {d.value for d in Domain}
+    home = ROOT / "hp_model" / "domains.py"
+    bad = []
+    for _, path in _modules():
+        if path == home:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Constant) and node.value in words:
+                bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {node.value!r}")
+    assert not bad, "domain words outside hp_model/domains.py:\n" + "\n".join(bad)
+
+
+def test_orchestrator_modules_are_small() -> None:
+    """No module of the orchestrator over 450 lines (issue 36: a module a reader can hold)."""
+    files = sorted((ROOT / "orchestrator").rglob("*.py"))
+    big = [f"{p.relative_to(ROOT)}: {n} lines" for p in files
+           if (n := len(p.read_text().splitlines())) > 450]
+    assert not big, "\n".join(big)

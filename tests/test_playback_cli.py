@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from characterization.mocap.steps_artifact import save_steps
-from characterization.tube.playback import PlaybackError, fit_force_tube
+from characterization.tube.playback import PlaybackError, TubeOptions, fit_force_tube
 from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.artifacts import ArtifactError
 from hp_model.force_tube import load_tube
@@ -120,7 +120,7 @@ def test_library_errors(model, gait, take):
     with pytest.raises(ArtifactError, match="model_hash"):
         fit_force_tube(model, replace(gait, model_hash="0123456789abcdef"), take.steps)
     with pytest.raises(PlaybackError, match="need at least degree"):
-        fit_force_tube(model, gait, take.steps, degree=6)
+        fit_force_tube(model, gait, take.steps, TubeOptions(degree=6))
     other = replace(take.steps, hip_coefficients=take.steps.hip_coefficients * 1.1)
     with pytest.raises(PlaybackError, match="hip_coefficients"):
         fit_force_tube(model, gait, other)
@@ -132,7 +132,7 @@ def test_steps_without_single_support_are_skipped(model, gait, take):
     ss_a, ss_b = s.step_ss_start.copy(), s.step_ss_end.copy()
     ss_a[ps[0]] = ss_b[ps[0]] = -1
     res = fit_force_tube(model, gait, replace(s, step_ss_start=ss_a, step_ss_end=ss_b),
-                         degree=2)
+                         TubeOptions(degree=2))
     assert ps[0] not in res.used and len(res.used) == len(ps) - 1
     assert res.playback.skipped == [(ps[0], "no single support found by the foot-marker "
                                             "rule")]

@@ -15,6 +15,7 @@ import pytest
 from characterization.tube.playback import (
     DEFAULT_ALLOWANCE,
     PlaybackOptions,
+    TubeOptions,
     fit_force_tube,
     fit_window,
     play_step,
@@ -47,7 +48,7 @@ def gait(playback_gait):
 @pytest.fixture(scope="module", params=list(CASES))
 def case(request, model, gait):
     take = synthesize(model, gait, CASES[request.param])
-    result = fit_force_tube(model, gait, take.steps, degree=3)
+    result = fit_force_tube(model, gait, take.steps, TubeOptions(degree=3))
     return request.param, take, result
 
 

@@ -419,10 +419,11 @@ def test_replay_reproduces_a_stored_run(reference, capsys):
 
 @pytest.mark.slow
 def test_two_workers_give_identical_rows(reference, spec_path, tmp_path):
-    from orchestrator.sweep.engine import run_sweep
+    from orchestrator.sweep.engine import Streaming, run_sweep
 
     _, ref = reference
-    o = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2, window=3)
+    o = run_sweep(load_spec(spec_path), tmp_path / "out", workers=2,
+                  streaming=Streaming(window=3))
     assert o.status == "completed" and o.workers == 2 and o.done == len(ref)
     rows = read_results(tmp_path / "out").to_pylist()
     assert len({r["worker"] for r in rows if r["error"] is None}) == 2  # both worked

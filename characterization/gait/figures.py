@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import os
 
 import numpy as np
@@ -10,7 +9,8 @@ import numpy as np
 from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import DOMAINS, Y2_COORDS
+from hp_model.domains import Domain
+from hp_model.figures import figure_bytes
 from hp_model.gait_artifact import Gait
 
 LABELS = {"th_lh": "human hip", "th_lk": "human knee", "th_la": "human ankle",
@@ -31,8 +31,8 @@ def gait_figure_bytes(gait: Gait, steps: StepsArtifact | None = None, fmt: str =
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.05, hspace=0.35, wspace=0.25)
     axes = fig.subplots(5, 2, sharex=True)
     s = np.linspace(0, 1, 201)
-    for col, d in enumerate(DOMAINS):
-        names = Y2_COORDS[d]
+    for col, d in enumerate(Domain):
+        names = d.y2_coords
         if steps is not None:
             cn = list(steps.coord_names)
             for i in range(steps.n_steps):
@@ -58,9 +58,7 @@ def gait_figure_bytes(gait: Gait, steps: StepsArtifact | None = None, fmt: str =
                 ax.set_ylabel("deg")
         axes[-1, col].set_xlabel(r"$\tau$")
     axes[0, 0].legend(fontsize=7, loc="best")
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=110)
-    return buf.getvalue()
+    return figure_bytes(fig, fmt)
 
 
 def save_gait_figure(path: str | os.PathLike[str], gait: Gait,

@@ -35,7 +35,7 @@ from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.choices import Choice
-from hp_model.domains import DOMAINS, STANCE, Y2_COORDS
+from hp_model.domains import DOMAINS, STANCE, Y2_COORDS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HipProgress, phase
@@ -61,12 +61,12 @@ class Regression:
     """The data's gait: targets for the optimization and the goodness of fit."""
 
     targets: DataTargets
-    fits: dict[str, BezierFit]  # y2 per domain
-    hip_velocity_rms: dict[str, float]  # m/s, spread of d/dt delta_p_hip about its mean
-    n_steps: dict[str, int]
+    fits: dict[Domain, BezierFit]  # y2 per domain
+    hip_velocity_rms: dict[Domain, float]  # m/s, spread of d/dt delta_p_hip about its mean
+    n_steps: dict[Domain, int]
     segments: FitSegments = FitSegments.TOUCHDOWN
 
-    def quality(self) -> dict[str, dict]:
+    def quality(self) -> dict[Domain, dict]:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
                     "n": self.fits[d].n, "steps": self.n_steps[d],
                     "hip_velocity_rms": self.hip_velocity_rms[d],
@@ -86,7 +86,7 @@ class DomainRegression:
     n_steps: int
 
 
-def _hip_velocity(vfit: BezierFit, domain: str, src: str) -> float:
+def _hip_velocity(vfit: BezierFit, domain: Domain, src: str) -> float:
     """The degree-0 fit of d/dt delta_p_hip (m/s); an error if the hip does not progress."""
     v_hip = float(vfit.alpha[0, 0])
     if not v_hip > 0.05:
@@ -96,7 +96,7 @@ def _hip_velocity(vfit: BezierFit, domain: str, src: str) -> float:
 
 
 def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: Sequence[int],
-                   domain: str, degree: int, src: str = "steps",
+                   domain: Domain, degree: int, src: str = "steps",
                    windows: Mapping[int, tuple[int, int]] | None = None) -> DomainRegression:
     """Bezier regression of the stacked steps ``indices`` (all of ``domain``); one index
     gives the fit of a single step (playback).  ``windows`` optionally restricts step i's
@@ -153,7 +153,7 @@ def _segment_phase(delta: np.ndarray, rate: float) -> tuple[float, float, slice]
 
 
 def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
-                     segments: Sequence[StepBounds], domain: str, degree: int,
+                     segments: Sequence[StepBounds], domain: Domain, degree: int,
                      src: str = "steps") -> DomainRegression:
     """Bezier regression of the stacked touchdown portions ``segments`` (all of
     ``domain``) of the take; tau over each from the stance leg's delta_p_hip and the
@@ -208,7 +208,7 @@ def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int
     return Regression(DataTargets(alpha, v_hip, p_min, p_max), fits, vrms, counts, segments)
 
 
-def output_rms(gait: Gait, n: int = 201) -> dict[str, np.ndarray]:
+def output_rms(gait: Gait, n: int = 201) -> dict[Domain, np.ndarray]:
     """Per domain, RMS over tau of y_d(alpha*) - (y_d(alpha_mc) + delta), per output (rad)."""
     s = np.linspace(0.0, 1.0, n)
     out = {}
@@ -225,10 +225,10 @@ def verify_gait(model: HumanProsthesisModel, gait: Gait, steps: int = 20) -> dic
     run = simulate_gait(sim, gait, steps)
     result: dict = {"steps_simulated": run.steps, "simulation_failed": run.failed,
                     "failure": run.reason}
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     ps0 = np.r_[tr["q"][3:, 0], tr["qd"][3:, 0]]
     dev = [float(np.abs(np.r_[q[3:], qd[3:]] - ps0).max())
-           for q, qd in run.post_impact_states("ps")]
+           for q, qd in run.post_impact_states(Domain.PS)]
     result["max_deviation_from_optimized_start"] = max(dev) if dev else float("nan")
     try:
         p = poincare(sim, gait)

@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+from numpy.typing import ArrayLike
 
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
-from hp_model.domains import DOMAINS, N_Y2
+from hp_model.domains import N_Y2, Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import (
     GaitParams,
@@ -92,18 +93,18 @@ class DataTargets:
     """What the regression of the mocap data gives per domain: alpha_mc (5, m+1), the mean
     hip velocity, and the mean phase bounds."""
 
-    alpha: dict[str, np.ndarray]
-    v_hip: dict[str, float]
-    p_min: dict[str, float]
-    p_max: dict[str, float]
+    alpha: dict[Domain, np.ndarray]
+    v_hip: dict[Domain, float]
+    p_min: dict[Domain, float]
+    p_max: dict[Domain, float]
 
 
 @dataclass
 class PHZDResult:
-    params: dict[str, GaitParams]
-    offsets: dict[str, np.ndarray]
-    durations: dict[str, float]
-    trajectory: dict[str, dict[str, np.ndarray]]
+    params: dict[Domain, GaitParams]
+    offsets: dict[Domain, np.ndarray]
+    durations: dict[Domain, float]
+    trajectory: dict[Domain, dict[str, np.ndarray]]
     status: str
     success: bool
     iterations: int
@@ -167,147 +168,192 @@ def initial_guess(model: HumanProsthesisModel, vc: VirtualConstraints, p: GaitPa
     return {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(p.nominal_duration)}
 
 
-def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
-                  opt: PHZDOptions | None = None) -> PHZDResult:
-    """Solve the two-domain PHZD optimization with IPOPT (exact Hessian, MUMPS)."""
-    opt = opt or PHZDOptions()
-    N, P = opt.nodes, 2 * opt.nodes - 1
-    G = bezier.gram(opt.degree)
-    vcs = {d: VirtualConstraints(model, d, opt.degree) for d in DOMAINS}
-    w, g, lbg, ubg, w0, lbw, ubw = [], [], [], [], [], [], []
+class _NLP:
+    """The NLP under construction: the decision variables w (initial guess w0, bounds lbw,
+    ubw) and the constraints g (bounds lbg, ubg), in the order they are added."""
 
-    def var(name, shape, init, lb=-np.inf, ub=np.inf):
+    def __init__(self) -> None:
+        self.w: list[ca.MX] = []
+        self.w0: list[np.ndarray] = []
+        self.lbw: list[np.ndarray] = []
+        self.ubw: list[np.ndarray] = []
+        self.g: list[ca.MX] = []
+        self.lbg: list[np.ndarray] = []
+        self.ubg: list[np.ndarray] = []
+
+    def var(self, name: str, shape: tuple[int, int], init: ArrayLike, lb: ArrayLike = -np.inf,
+            ub: ArrayLike = np.inf) -> ca.MX:
+        """A new block of variables (column-major in w) with its initial guess and bounds."""
         v = ca.MX.sym(name, *shape)
-        w.append(ca.vec(v))
+        self.w.append(ca.vec(v))
         init = np.asarray(init, dtype=float)
         if init.ndim == 1 and shape[1] == 1:
             init = init[:, None]
-        w0.append(np.broadcast_to(init, shape).ravel(order="F"))
-        lbw.append(np.broadcast_to(lb, shape).ravel(order="F"))
-        ubw.append(np.broadcast_to(ub, shape).ravel(order="F"))
+        self.w0.append(np.broadcast_to(init, shape).ravel(order="F"))
+        self.lbw.append(np.broadcast_to(lb, shape).ravel(order="F"))
+        self.ubw.append(np.broadcast_to(ub, shape).ravel(order="F"))
         return v
 
-    def eq(expr):
-        g.append(ca.vec(expr))
-        lbg.append(np.zeros(g[-1].shape[0]))
-        ubg.append(np.zeros(g[-1].shape[0]))
+    def eq(self, expr: ca.MX) -> None:
+        """expr = 0 (every element)."""
+        self.g.append(ca.vec(expr))
+        self.lbg.append(np.zeros(self.g[-1].shape[0]))
+        self.ubg.append(np.zeros(self.g[-1].shape[0]))
 
-    def geq(expr, lo=0.0):
-        g.append(ca.vec(expr))
-        lbg.append(np.full(g[-1].shape[0], lo))
-        ubg.append(np.full(g[-1].shape[0], np.inf))
+    def geq(self, expr: ca.MX, lo: float = 0.0) -> None:
+        """expr >= lo (every element)."""
+        self.g.append(ca.vec(expr))
+        self.lbg.append(np.full(self.g[-1].shape[0], lo))
+        self.ubg.append(np.full(self.g[-1].shape[0], np.inf))
 
+    def within(self, expr: ca.MX, lo: float, hi: float) -> None:
+        """lo <= expr <= hi, expr a scalar."""
+        self.g.append(expr)
+        self.lbg.append(np.array([lo]))
+        self.ubg.append(np.array([hi]))
+
+
+def _domain_variables(nlp: _NLP, model: HumanProsthesisModel, vc: VirtualConstraints,
+                      p_mc: GaitParams, opt: PHZDOptions) -> dict[str, ca.MX]:
+    """The decision variables of one domain (states, accelerations, torques u, wrenches
+    lam at the 2 nodes - 1 points; duration T; gait parameters theta; offsets delta), with
+    :func:`initial_guess` on the data's curves ``p_mc`` as their start."""
+    d, P = vc.domain, 2 * opt.nodes - 1
     ulim = np.where(np.isfinite(model.torque_limits), model.torque_limits, 1e4)
-    dec: dict[str, dict] = {}
-    cost = 0
-    for d in DOMAINS:
-        vc = vcs[d]
-        a_mc = np.asarray(targets.alpha[d])
-        p_mc = GaitParams(a_mc, targets.v_hip[d], targets.p_min[d], targets.p_max[d])
-        guess = initial_guess(model, vc, p_mc, P)
-        X = {
-            "q": var(f"q_{d}", (model.nq, P), guess["q"]),
-            "qd": var(f"qd_{d}", (model.nq, P), guess["qd"]),
-            "qdd": var(f"qdd_{d}", (model.nq, P), guess["qdd"]),
-            "u": var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
-            "lam": var(f"lam_{d}", (6, P), guess["lam"]),
-            "T": var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
-            "theta": var(f"theta_{d}", (vc.n_params, 1), p_mc.pack()),
-            "delta": var(f"delta_{d}", (N_Y2, 1), 0.0, -opt.offset_bound, opt.offset_bound),
-        }
-        dec[d] = X
-        f_eq, f_in, f_out = _point_functions(model, vc, opt)
-        th = ca.repmat(X["theta"], 1, P)
-        args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"], th]
-        eq(f_eq.map(P)(*args))
-        ineq = f_in.map(P)(*args)
-        geq(ineq[:5, :])
-        geq(ineq[5:, 1:-1])  # swing foot above ground between lift-off and touchdown
-        # Hermite-Simpson (separated): nodes at even points, midpoints at odd points
-        h = X["T"] / (N - 1)
-        q, qd, qdd = X["q"], X["qd"], X["qdd"]
-        k0, kc, k1 = slice(0, P - 2, 2), slice(1, P - 1, 2), slice(2, P, 2)
-        eq(q[:, kc] - (q[:, k0] + q[:, k1]) / 2 - h / 8 * (qd[:, k0] - qd[:, k1]))
-        eq(qd[:, kc] - (qd[:, k0] + qd[:, k1]) / 2 - h / 8 * (qdd[:, k0] - qdd[:, k1]))
-        eq(q[:, k1] - q[:, k0] - h / 6 * (qd[:, k0] + 4 * qd[:, kc] + qd[:, k1]))
-        eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
-        # start: on the PHZD surface (y2 = dy2 = 0), tau = 0, stance foot constraint
-        y2s, tau0 = f_out(q[:, 0], qd[:, 0], X["theta"])
-        eq(y2s)
-        eq(tau0)
-        _, tau1 = f_out(q[:, -1], qd[:, -1], X["theta"])
-        eq(tau1 - 1.0)
-        h_d = ca.Function("h", [model.q], [model.h[d]])
-        eq(h_d(q[:, 0])[1:])  # stance sole z = 0, pitch = 0; socket q_f = 0
-        # guard: swing sole on the ground, flat, moving down; mid-step clearance
-        swing = model.domains[d].swing_frame
-        fe = model.frame_expr(swing)
-        sw = ca.Function("sw", [model.q, model.qd],
-                         [fe, ca.jtimes(fe[1], model.q, model.qd)])
-        pose_e, vz_e = sw(q[:, -1], qd[:, -1])
-        eq(pose_e[1:])
-        g.append(vz_e)
-        lbg.append(np.array([-np.inf]))
-        ubg.append(np.array([-opt.touchdown_velocity]))
-        # optional: nearly still along the ground and in pitch at touchdown
-        for i, bound in ((0, opt.touchdown_slip), (2, opt.touchdown_pitch_rate)):
-            if np.isfinite(bound):
-                vi = ca.Function("v", [model.q, model.qd], [ca.jtimes(fe[i], model.q, model.qd)])
-                g.append(vi(q[:, -1], qd[:, -1]))
-                lbg.append(np.array([-bound]))
-                ubg.append(np.array([bound]))
-        pose_m, _ = sw(q[:, P // 2], qd[:, P // 2])
-        geq(pose_m[1], opt.clearance)
-        # cost (paper): integral of squared Bezier differences + step-length term
-        alpha, v_hip, p_min, p_max = unpack_symbolic(X["theta"], opt.degree)
-        for k in range(N_Y2):
-            e = alpha[k, :].T - a_mc[k, :] - X["delta"][k]
-            cost += opt.w_y2[k] * (e.T @ G @ e)
-        cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
-        cost += opt.w_offset * ca.sumsqr(X["delta"])
-        cost += opt.w_step * (step_length(targets.p_min[d], targets.p_max[d])
-                              - step_length(p_min, p_max)) ** 2
-        if d == "ps":
-            eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
+    guess = initial_guess(model, vc, p_mc, P)
+    return {
+        "q": nlp.var(f"q_{d}", (model.nq, P), guess["q"]),
+        "qd": nlp.var(f"qd_{d}", (model.nq, P), guess["qd"]),
+        "qdd": nlp.var(f"qdd_{d}", (model.nq, P), guess["qdd"]),
+        "u": nlp.var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
+        "lam": nlp.var(f"lam_{d}", (6, P), guess["lam"]),
+        "T": nlp.var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
+        "theta": nlp.var(f"theta_{d}", (vc.n_params, 1), p_mc.pack()),
+        "delta": nlp.var(f"delta_{d}", (N_Y2, 1), 0.0, -opt.offset_bound, opt.offset_bound),
+    }
 
-    # impacts: ps -> pns, pns -> ps (periodic up to a forward translation)
-    for d in DOMAINS:
+
+def _collocation(nlp: _NLP, X: dict[str, ca.MX], f_eq: ca.Function, f_in: ca.Function,
+                 opt: PHZDOptions) -> None:
+    """One domain's path constraints at every point (:func:`_point_functions`) and its
+    Hermite-Simpson defects (separated form: nodes at even points, midpoints at odd)."""
+    N, P = opt.nodes, 2 * opt.nodes - 1
+    th = ca.repmat(X["theta"], 1, P)
+    args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"], th]
+    nlp.eq(f_eq.map(P)(*args))
+    ineq = f_in.map(P)(*args)
+    nlp.geq(ineq[:5, :])
+    nlp.geq(ineq[5:, 1:-1])  # swing foot above ground between lift-off and touchdown
+    h = X["T"] / (N - 1)
+    q, qd, qdd = X["q"], X["qd"], X["qdd"]
+    k0, kc, k1 = slice(0, P - 2, 2), slice(1, P - 1, 2), slice(2, P, 2)
+    nlp.eq(q[:, kc] - (q[:, k0] + q[:, k1]) / 2 - h / 8 * (qd[:, k0] - qd[:, k1]))
+    nlp.eq(qd[:, kc] - (qd[:, k0] + qd[:, k1]) / 2 - h / 8 * (qdd[:, k0] - qdd[:, k1]))
+    nlp.eq(q[:, k1] - q[:, k0] - h / 6 * (qd[:, k0] + 4 * qd[:, kc] + qd[:, k1]))
+    nlp.eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
+
+
+def _boundaries(nlp: _NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
+                f_out: ca.Function, opt: PHZDOptions) -> None:
+    """One domain's ends: the start on the PHZD surface (y2 = dy2 = 0) at tau = 0 with the
+    stance foot flat on the ground, the end at tau = 1; the guard (swing sole on the ground,
+    flat, moving down; optionally nearly still along the ground and in pitch) and the
+    mid-step clearance; in ps the prosthesis sole at x = 0 at the start."""
+    P = 2 * opt.nodes - 1
+    q, qd = X["q"], X["qd"]
+    y2s, tau0 = f_out(q[:, 0], qd[:, 0], X["theta"])
+    nlp.eq(y2s)
+    nlp.eq(tau0)
+    _, tau1 = f_out(q[:, -1], qd[:, -1], X["theta"])
+    nlp.eq(tau1 - 1.0)
+    h_d = ca.Function("h", [model.q], [model.h[d]])
+    nlp.eq(h_d(q[:, 0])[1:])  # stance sole z = 0, pitch = 0; socket q_f = 0
+    fe = model.frame_expr(model.roles[d].swing_frame)
+    sw = ca.Function("sw", [model.q, model.qd],
+                     [fe, ca.jtimes(fe[1], model.q, model.qd)])
+    pose_e, vz_e = sw(q[:, -1], qd[:, -1])
+    nlp.eq(pose_e[1:])
+    nlp.within(vz_e, -np.inf, -opt.touchdown_velocity)
+    for i, bound in ((0, opt.touchdown_slip), (2, opt.touchdown_pitch_rate)):
+        if np.isfinite(bound):
+            vi = ca.Function("v", [model.q, model.qd], [ca.jtimes(fe[i], model.q, model.qd)])
+            nlp.within(vi(q[:, -1], qd[:, -1]), -bound, bound)
+    pose_m, _ = sw(q[:, P // 2], qd[:, P // 2])
+    nlp.geq(pose_m[1], opt.clearance)
+    if d == Domain.PS:
+        nlp.eq(h_d(q[:, 0])[0])  # the cycle starts with the prosthesis sole at x = 0
+
+
+def _add_domain_cost(cost: ca.MX, X: dict[str, ca.MX], targets: DataTargets, d: Domain,
+                     opt: PHZDOptions) -> ca.MX:
+    """``cost`` plus one domain's terms (paper): the integral of the squared Bezier
+    differences from the data's curves (shifted by the offsets), the hip-velocity and the
+    step-length terms; plus ``w_offset`` times the squared offsets."""
+    G = bezier.gram(opt.degree)
+    a_mc = np.asarray(targets.alpha[d])
+    alpha, v_hip, p_min, p_max = unpack_symbolic(X["theta"], opt.degree)
+    for k in range(N_Y2):
+        e = alpha[k, :].T - a_mc[k, :] - X["delta"][k]
+        cost += opt.w_y2[k] * (e.T @ G @ e)
+    cost += opt.w_y1 * (v_hip - targets.v_hip[d]) ** 2
+    cost += opt.w_offset * ca.sumsqr(X["delta"])
+    cost += opt.w_step * (step_length(targets.p_min[d], targets.p_max[d])
+                          - step_length(p_min, p_max)) ** 2
+    return cost
+
+
+def _impacts(nlp: _NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str, ca.MX]]
+             ) -> None:
+    """The impacts ps -> pns and pns -> ps (impulse variables; periodic up to a forward
+    translation)."""
+    for d in Domain:
         nxt = model.roles[d].next
         qe, qde = dec[d]["q"][:, -1], dec[d]["qd"][:, -1]
-        qd_plus = var(f"qdplus_{d}", (model.nq, 1), 0.0)
-        F_I = var(f"impulse_{d}", (6, 1), 0.0)
+        qd_plus = nlp.var(f"qdplus_{d}", (model.nq, 1), 0.0)
+        F_I = nlp.var(f"impulse_{d}", (6, 1), 0.0)
         terms = model.function(f"terms_{nxt}")
         D, _, E, _ = terms(qe, qde)
-        eq(D @ (qd_plus - qde) - E.T @ F_I)
-        eq(E @ qd_plus)
-        geq(F_I[1])  # the landing foot pushes on the ground, never pulls
+        nlp.eq(D @ (qd_plus - qde) - E.T @ F_I)
+        nlp.eq(E @ qd_plus)
+        nlp.geq(F_I[1])  # the landing foot pushes on the ground, never pulls
         q0n = dec[nxt]["q"][:, 0]
-        eq(dec[nxt]["qd"][:, 0] - qd_plus)
-        if nxt == "pns":
-            eq(q0n - qe)
+        nlp.eq(dec[nxt]["qd"][:, 0] - qd_plus)
+        if nxt == Domain.PNS:
+            nlp.eq(q0n - qe)
         else:
-            eq(q0n[1:] - qe[1:])  # x_B free: the ps start fixes the sole at x = 0
+            nlp.eq(q0n[1:] - qe[1:])  # x_B free: the ps start fixes the sole at x = 0
 
-    # initial impact-variable guesses: zero is poor; use the next domain's start velocity
-    nlp = {"x": ca.vertcat(*w), "f": cost, "g": ca.vertcat(*g)}
-    ipopt = {"max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
-             "linear_solver": "mumps", "mu_strategy": opt.mu_strategy, "sb": "yes"}
-    solver = ca.nlpsol("phzd", "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
-                                              "expand": opt.expand})
-    x0 = np.concatenate(w0)
+
+def _solve(nlp: _NLP, cost: ca.MX, opt: PHZDOptions) -> tuple[dict, dict, float]:
+    """IPOPT's solution, its statistics and the solve's wall time (s)."""
+    problem = {"x": ca.vertcat(*nlp.w), "f": cost, "g": ca.vertcat(*nlp.g)}
+    ipopt: dict[str, int | float | str] = {
+        "max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
+        "linear_solver": "mumps", "mu_strategy": opt.mu_strategy, "sb": "yes"}
+    solver = ca.nlpsol("phzd", "ipopt", problem, {"ipopt": ipopt, "print_time": False,
+                                                  "expand": opt.expand})
+    x0 = np.concatenate(nlp.w0)
     t0 = time.perf_counter()
     with single_threaded_blas():  # the same iterates whatever the thread settings
-        sol = solver(x0=x0, lbx=np.concatenate(lbw), ubx=np.concatenate(ubw),
-                     lbg=np.concatenate(lbg), ubg=np.concatenate(ubg))
-    elapsed = time.perf_counter() - t0
-    stats = solver.stats()
+        sol = solver(x0=x0, lbx=np.concatenate(nlp.lbw), ubx=np.concatenate(nlp.ubw),
+                     lbg=np.concatenate(nlp.lbg), ubg=np.concatenate(nlp.ubg))
+    return sol, solver.stats(), time.perf_counter() - t0
+
+
+def _result(nlp: _NLP, dec: dict[Domain, dict[str, ca.MX]], sol: dict, stats: dict,
+            elapsed: float, opt: PHZDOptions) -> PHZDResult:
+    """The solution's gait parameters, offsets, durations and trajectories per domain."""
+    P = 2 * opt.nodes - 1
     xs = np.array(sol["x"]).ravel()
-    unpack = ca.Function("unpack", [ca.vertcat(*w)],
-                         [dec[d][k] for d in DOMAINS for k in ("q", "qd", "qdd", "u", "lam", "T",
+    unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
+                         [dec[d][k] for d in Domain for k in ("q", "qd", "qdd", "u", "lam", "T",
                                                              "theta", "delta")])
     vals = [np.array(v) for v in unpack(xs)]
-    params, offsets, durations, traj = {}, {}, {}, {}
-    for i, d in enumerate(DOMAINS):
+    params: dict[Domain, GaitParams] = {}
+    offsets: dict[Domain, np.ndarray] = {}
+    durations: dict[Domain, float] = {}
+    traj: dict[Domain, dict[str, np.ndarray]] = {}
+    for i, d in enumerate(Domain):
         q, qd, qdd, u, lam, T, theta, delta = vals[8 * i: 8 * i + 8]
         params[d] = GaitParams.unpack(theta.ravel(), opt.degree)
         offsets[d] = delta.ravel()
@@ -319,3 +365,24 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
                       iterations=int(stats["iter_count"]), solve_seconds=elapsed,
                       cost=float(sol["f"]), stats={k: v for k, v in stats.items()
                                                    if isinstance(v, int | float | str)})
+
+
+def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
+                  opt: PHZDOptions | None = None) -> PHZDResult:
+    """Solve the two-domain PHZD optimization with IPOPT (exact Hessian, MUMPS)."""
+    opt = opt or PHZDOptions()
+    nlp = _NLP()
+    dec: dict[Domain, dict[str, ca.MX]] = {}
+    cost = ca.MX(0)
+    for d in Domain:
+        vc = VirtualConstraints(model, d, opt.degree)
+        p_mc = GaitParams(np.asarray(targets.alpha[d]), targets.v_hip[d], targets.p_min[d],
+                          targets.p_max[d])
+        X = dec[d] = _domain_variables(nlp, model, vc, p_mc, opt)
+        f_eq, f_in, f_out = _point_functions(model, vc, opt)
+        _collocation(nlp, X, f_eq, f_in, opt)
+        _boundaries(nlp, model, d, X, f_out, opt)
+        cost = _add_domain_cost(cost, X, targets, d, opt)
+    _impacts(nlp, model, dec)
+    sol, stats, elapsed = _solve(nlp, cost, opt)
+    return _result(nlp, dec, sol, stats, elapsed, opt)

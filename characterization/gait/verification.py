@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
@@ -28,13 +28,13 @@ JOINTS = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 def make_simulator(model: HumanProsthesisModel, gait: Gait, gains: np.ndarray | None = None,
                    options: SimOptions | None = None) -> HybridSimulator:
     cl = ClosedLoop(model, gait.degree)
-    return HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
+    return HybridSimulator(model, cl, {d: gait.theta(d) for d in Domain},
                            gait.gains_array if gains is None else gains, options)
 
 
 def simulate_gait(sim: HybridSimulator, gait: Gait, steps: int = 20) -> SimResult:
-    tr = gait.trajectory["ps"]
-    return sim.run(tr["q"][:, 0], tr["qd"][:, 0], "ps", steps=steps)
+    tr = gait.trajectory[Domain.PS]
+    return sim.run(tr["q"][:, 0], tr["qd"][:, 0], Domain.PS, steps=steps)
 
 
 class _Section:
@@ -51,7 +51,7 @@ class _Section:
         m = self.model
         q, qd = np.zeros(m.nq), np.zeros(m.nq)
         q[self.j], qd[self.j] = s[:6], s[6:]
-        return m.stance_state(q, qd, "ps")
+        return m.stance_state(q, qd, Domain.PS)
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ class PoincareResult:
 
 def return_map(sim: HybridSimulator, sec: _Section, s: np.ndarray) -> np.ndarray:
     q, qd = sec.expand(s)
-    r = sim.run(q, qd, "ps", steps=2)
+    r = sim.run(q, qd, Domain.PS, steps=2)
     if r.failed or r.steps < 2:
         raise RuntimeError(f"return map: the cycle did not complete ({r.reason})")
     imp = r.impacts[-1]
@@ -78,7 +78,7 @@ def return_map(sim: HybridSimulator, sec: _Section, s: np.ndarray) -> np.ndarray
 def poincare(sim: HybridSimulator, gait: Gait, iterations: int = 6,
              delta: float = 1e-5) -> PoincareResult:
     sec = _Section(sim.model)
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     s = sec.reduce(tr["q"][:, 0], tr["qd"][:, 0])
     for _ in range(iterations):
         s = return_map(sim, sec, s)

@@ -32,9 +32,10 @@ import numpy as np
 from characterization.mocap.limb_angles import runs
 from characterization.mocap.step_segmentation import StepBounds
 from characterization.mocap.steps_artifact import StepsArtifact
+from hp_model.domains import Domain
 
 #: ankle joint centre of the foot that lands at the start of each domain
-LANDING_ANKLE = {"ps": "ankle_p", "pns": "ankle_l"}
+LANDING_ANKLE = {Domain.PS: "ankle_p", Domain.PNS: "ankle_l"}
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TypedDict
 
 import numpy as np
 
@@ -310,8 +311,21 @@ def contact_from_events(events: Sequence[LabEvent], time: np.ndarray, side: str,
                        stride_time(on, 1.0 / float(np.median(np.diff(time)))), "lab events")
 
 
+class EventComparison(TypedDict):
+    """One foot's events of one kind found from the markers against the lab's in the file:
+    the number of lab events inside the take, for each the signed difference in frames of
+    the nearest found event (found - lab; None if that foot has none), and the largest and
+    median absolute differences (None without any)."""
+
+    lab_events: int
+    diff_frames: list[float | None]
+    max_abs_frames: float | None
+    median_abs_frames: float | None
+
+
 def compare_events(contacts: dict[str, FootContact], events: Sequence[LabEvent],
-                   time: np.ndarray, sides: dict[str, str]) -> dict[str, dict[str, object]]:
+                   time: np.ndarray, sides: dict[str, str]
+                   ) -> dict[str, dict[str, EventComparison]]:
     """The found touchdowns and lift-offs against the lab's events in the file.
 
     ``events``: the file's (label, context, time);
@@ -319,7 +333,7 @@ def compare_events(contacts: dict[str, FootContact], events: Sequence[LabEvent],
     and kind ("touchdown", "liftoff"): the number of lab events inside the take, and for
     each the signed difference in frames of the nearest found event (found - lab; None if
     that foot has none)."""
-    out: dict[str, dict[str, object]] = {}
+    out: dict[str, dict[str, EventComparison]] = {}
     rate = 1.0 / float(np.median(np.diff(time)))
     for foot, side in sides.items():
         c = contacts.get(foot)

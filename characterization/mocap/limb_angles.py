@@ -18,9 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from characterization.mocap.butterworth import butter_lowpass_sos, pad_length, sosfiltfilt
-from characterization.mocap.cubic_spline import not_a_knot_spline
-
 NONE, RIGID_BODY, MARKERS, INTERPOLATED = 0, 1, 2, 3
 SOURCE_NAMES = {NONE: "none", RIGID_BODY: "rigid_body", MARKERS: "markers",
                 INTERPOLATED: "interpolated"}
@@ -91,19 +88,26 @@ def fill_short_gaps(t: np.ndarray, y: np.ndarray, max_gap: int
         return y, filled, gaps
     todo = [(a, b) for a, b in gaps if b - a <= max_gap and a > 0 and b < len(y)]
     if todo:
+        from scipy.interpolate import CubicSpline  # lazily: 0.4 s of imports
+
         idx = np.concatenate([np.arange(a, b) for a, b in todo])
-        y[idx] = not_a_knot_spline(t[ok], y[ok], t[idx])
+        y[idx] = CubicSpline(t[ok], y[ok])(t[idx])  # not-a-knot at both ends
         filled[idx] = True
     return y, filled, gaps
 
 
 def lowpass(y: np.ndarray, rate: float, cutoff: float, order: int = 2) -> np.ndarray:
-    """Zero-phase Butterworth low-pass over each finite run (NaN runs kept)."""
+    """Zero-phase Butterworth low-pass over each finite run (NaN runs kept); ``rate`` and
+    ``cutoff`` in Hz, the cutoff below the Nyquist frequency ``rate / 2`` (callers check).
+    A run no longer than the filter's padding (9 samples at order 2) is left as it is."""
     if cutoff <= 0:
         return y
-    sos = butter_lowpass_sos(order, cutoff / (rate / 2))
+    from scipy.signal import butter, sosfiltfilt  # lazily: 0.4-0.9 s of imports
+
+    sos = butter(order, cutoff / (rate / 2), output="sos")
     out = np.array(y, dtype=float)
-    pad = pad_length(sos)
+    # sosfiltfilt's default padding: 3 taps per side, a first-order section counting one less
+    pad = 3 * (2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
     for a, b in runs(np.isfinite(out)):
         if b - a > pad:
             out[a:b] = sosfiltfilt(sos, out[a:b])

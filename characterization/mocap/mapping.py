@@ -40,13 +40,12 @@ A limb may also state an offset: ``offset_deg = 5.0`` (its measured pitch at zer
 
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
     field_validator,
@@ -55,6 +54,7 @@ from pydantic import (
 
 from characterization.mocap.take import MocapError
 from hp_model.choices import Choice
+from hp_model.config import NonNegative, Positive, StrictConfig, validation_message
 
 SCHEMA_VERSION = 1
 LIMBS = ("hat", "l_thigh", "l_shank", "l_foot", "r_thigh", "p_shin", "p_foot")
@@ -71,11 +71,7 @@ Axis = Literal["up", "forward"]
 AxisSpec = str | Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class LimbSource(_Strict):
+class LimbSource(StrictConfig):
     """Where a limb's pitch comes from."""
 
     rigid_body: str | None = None
@@ -93,7 +89,7 @@ class LimbSource(_Strict):
         return self
 
 
-class JointMarkers(_Strict):
+class JointMarkers(StrictConfig):
     """One marker on the proximal limb and one on the distal limb of a joint."""
 
     markers: tuple[str, str]
@@ -106,7 +102,7 @@ class SegmentationMethod(Choice):
     CONTACT = "contact"  # each foot's touchdowns (markers or lab events, :mod:`foot_contact`)
 
 
-class Segmentation(_Strict):
+class Segmentation(StrictConfig):
     """The feet's markers and the :class:`SegmentationMethod`."""
 
     human_foot_marker: str
@@ -115,17 +111,17 @@ class Segmentation(_Strict):
     #: the lab's event contexts (C3D EVENT:CONTEXTS) of the human and the prosthesis foot
     human_side: str = "Left"
     prosthesis_side: str = "Right"
-    foot_speed_threshold: Annotated[float, Field(gt=0)] = 0.25  # m/s: foot "moving"
-    min_excursion: Annotated[float, Field(gt=0)] = 0.05  # m: delta_p_hip turning hysteresis
+    foot_speed_threshold: Positive = 0.25  # m/s: foot "moving"
+    min_excursion: Positive = 0.05  # m: delta_p_hip turning hysteresis
 
 
-class Processing(_Strict):
-    max_gap: Annotated[float, Field(ge=0)] = 0.1  # s
-    lowpass_hz: Annotated[float, Field(ge=0)] = 15.0
-    min_joint_rotation_deg: Annotated[float, Field(gt=0)] = 5.0
+class Processing(StrictConfig):
+    max_gap: NonNegative = 0.1  # s
+    lowpass_hz: NonNegative = 15.0
+    min_joint_rotation_deg: Positive = 5.0
 
 
-class Calibration(_Strict):
+class Calibration(StrictConfig):
     """Anatomical calibration: a static trial of the subject standing in the neutral
     posture (every joint angle and the trunk pitch zero); each limb's median pitch in it is
     that limb's offset.  The path is relative to the mapping file."""
@@ -133,7 +129,7 @@ class Calibration(_Strict):
     static_trial: str
 
 
-class MocapMapping(_Strict):
+class MocapMapping(StrictConfig):
     """The whole mapping config."""
 
     schema_version: Literal[1] = 1
@@ -164,7 +160,7 @@ def _known_keys(v: dict, allowed, what: str) -> dict:
     return v
 
 
-def load_mapping(path: str | Path) -> MocapMapping:
+def load_mapping(path: str | os.PathLike[str]) -> MocapMapping:
     """Read and validate a mapping TOML; errors name the file and the field."""
     p = Path(path)
     try:
@@ -176,9 +172,7 @@ def load_mapping(path: str | Path) -> MocapMapping:
     try:
         m = MocapMapping.model_validate(raw)
     except ValidationError as e:
-        err = e.errors()[0]
-        loc = ".".join(str(x) for x in err["loc"]) or "(top level)"
-        raise MocapError(f"{p}: field '{loc}': {err['msg']}") from None
+        raise MocapError(f"{p}: {validation_message(e)}") from None
     if m.calibration is not None:  # relative to the mapping file
         trial = p.parent / m.calibration.static_trial
         m = m.model_copy(update={"calibration": Calibration(static_trial=str(trial))})

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAIN_CODE, DOMAINS, N_Y2
+from hp_model.domains import N_Y2, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
@@ -56,14 +56,14 @@ class WalkedStep:
     """One simulated step: domain, the theta it tracked, and its log (global time t in s,
     q and qd (m, 12)); the last sample is the pre-impact state at the impact time."""
 
-    domain: str
+    domain: Domain
     theta: np.ndarray
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
 
 
-def perturbed_theta(gait: Gait, domain: str, rng: np.random.Generator, opt: WalkOptions
+def perturbed_theta(gait: Gait, domain: Domain, rng: np.random.Generator, opt: WalkOptions
                     ) -> np.ndarray:
     """The gait's packed theta of ``domain`` with the perturbation of one step."""
     p = gait.params[domain]
@@ -84,11 +84,11 @@ def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.G
     """``n_steps`` consecutive steps from the start of the gait's ps collocation trajectory
     (t = 0), each with its own perturbed theta (module docstring)."""
     cl = closed_loop or ClosedLoop(model, gait.degree)
-    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
+    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in Domain},
                           gait.gains_array, SimOptions(dt=opt.dt))
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)
-    d, t0 = "ps", 0.0
+    d, t0 = Domain.PS, 0.0
     out = []
     for k in range(n_steps):
         theta = perturbed_theta(gait, d, rng, opt)
@@ -98,7 +98,7 @@ def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.G
             raise WalkError(f"the simulated walker fell in step {k} ({d}): "
                             f"{r.reason or 'no touchdown'}")
         imp = r.impacts[0]
-        rows = (r.domain == DOMAIN_CODE[d]) & (r.t < imp.t)
+        rows = (r.domain == d.code) & (r.t < imp.t)
         q_end = imp.q.copy()
         # undo the flat-foot correction: the pre-impact pose
         q_end[model.roles[imp.into].ankle] += imp.foot_pitch

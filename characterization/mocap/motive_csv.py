@@ -24,6 +24,7 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -90,17 +91,19 @@ def _split_header(lines: list[str], src: str) -> tuple[dict[str, list[str]], int
                      "before the data; export with header information switched on)")
 
 
-def read_motive_csv(path: str | os.PathLike[str]) -> Take:
-    """Read a Motive CSV export into a :class:`Take` (metres, lab axes, Y up)."""
-    src = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise MocapError(f"{src}: not a text file ({e.reason})") from None
-    lines = text.splitlines()
-    if not lines:
-        raise MocapError(f"{src}: empty file")
-    meta = _metadata(lines[0], src)
+@dataclass(frozen=True)
+class _Columns:
+    """How the metadata line says the columns are written: the length unit's scale to
+    metres, the rotation type (``Quaternion`` or an Euler order) and the frame rate (Hz;
+    NaN when not given)."""
+
+    scale: float
+    rot_type: str
+    rate: float
+
+
+def _columns(meta: dict[str, str], src: str) -> _Columns:
+    """The checked length units, rotation type, coordinate space and frame rate."""
     units = meta.get("Length Units", "Meters")
     if units.lower() not in LENGTH_UNITS:
         raise MocapError(f"{src}: line 1, field 'Length Units': unknown units '{units}' "
@@ -120,17 +123,26 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
     except ValueError:
         raise MocapError(f"{src}: line 1, field 'Export Frame Rate': not a number "
                          f"'{rate_s}'") from None
+    return _Columns(scale, rot_type, rate)
 
-    rows, data_start = _split_header(lines, src)
-    body = lines[data_start:]
+
+def _drop_timecode(rows: dict[str, list[str]], body: list[str], meta: dict[str, str]
+                   ) -> tuple[dict[str, list[str]], list[str], dict[str, str]]:
+    """Header rows, data lines and metadata without Motive's optional SMPTE TimeCode column
+    (hh:mm:ss:ff), its first value kept as the metadata's ``TimeCode start``; unchanged
+    when there is none."""
     tc = [j for j, c in enumerate(rows["axis"]) if c.strip().lower() == "timecode"]
-    if tc:  # Motive's optional SMPTE TimeCode column (hh:mm:ss:ff): kept as metadata only
-        j = tc[0]
-        rows = {k: r[:j] + r[j + 1:] for k, r in rows.items()}
-        body = [_drop_cell(ln, j) for ln in body]
-        first = next((ln for ln in lines[data_start:] if ln.strip()), "")
-        cells = first.split(",")
-        meta = {**meta, "TimeCode start": cells[j].strip() if len(cells) > j else ""}
+    if not tc:
+        return rows, body, meta
+    j = tc[0]
+    first = next((ln for ln in body if ln.strip()), "")
+    cells = first.split(",")
+    return ({k: r[:j] + r[j + 1:] for k, r in rows.items()}, [_drop_cell(ln, j) for ln in body],
+            {**meta, "TimeCode start": cells[j].strip() if len(cells) > j else ""})
+
+
+def _header_width(rows: dict[str, list[str]], src: str) -> int:
+    """The number of columns, once the header rows needed are there and all that wide."""
     for need in ("Type", "Name", "quantity"):
         if need not in rows:
             raise MocapError(f"{src}: header row '{need}' missing")
@@ -139,10 +151,12 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
         if len(r) != ncol:
             raise MocapError(f"{src}: header row '{k}' has {len(r)} cells, the 'Frame' row "
                              f"has {ncol}")
-    data = _parse_data(body, ncol, data_start, src)
-    if data.shape[0] == 0:
-        raise MocapError(f"{src}: no data rows")
-    time = data[:, 1]
+    return ncol
+
+
+def _frame_rate(time: np.ndarray, rate: float, data_start: int, src: str) -> float:
+    """The frame rate (Hz): ``rate`` from the metadata, else from the median frame period;
+    the frame times (s) checked present, increasing and without a jump (one take)."""
     if not np.all(np.isfinite(time)) or np.any(np.diff(time) <= 0):
         bad = int(np.argmax(~np.isfinite(time) | np.r_[False, np.diff(time) <= 0]))
         raise MocapError(f"{src}: column 'Time (Seconds)', data row {data_start + bad + 1}: "
@@ -159,8 +173,17 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
                              f"{data_start + i + 2}: the time jumps by {dt[i]:.3f} s "
                              f"({dt[i] / period:.0f} frame periods of {period * 1e3:.2f} ms): "
                              "not one continuous take (export one take per file)")
+    return rate
 
-    groups: dict[tuple[str, str], dict[tuple[str, str], int]] = {}
+
+#: the columns of one (Type, Name) by (quantity, axis)
+_Group = dict[tuple[str, str], int]
+
+
+def _column_groups(rows: dict[str, list[str]], ncol: int, src: str
+                   ) -> dict[tuple[str, str], _Group]:
+    """The data columns (from the third) grouped by (Type, Name), each by (quantity, axis)."""
+    groups: dict[tuple[str, str], _Group] = {}
     for j in range(2, ncol):
         typ, name = rows["Type"][j].strip(), rows["Name"][j].strip()
         qty, axis = rows["quantity"][j].strip(), rows["axis"][j].strip()
@@ -171,42 +194,74 @@ def read_motive_csv(path: str | os.PathLike[str]) -> Take:
             raise MocapError(f"{src}: column {j + 1}: duplicate column {typ} '{name}' "
                              f"{qty} {axis}")
         cols[(qty, axis)] = j
+    return groups
 
+
+def _take_cols(data: np.ndarray, src: str, typ: str, name: str, cols: _Group, qty: str,
+               axes: Sequence[str]) -> np.ndarray:
+    """The columns of ``qty`` along ``axes`` of one group, else a MocapError naming them."""
+    try:
+        return data[:, [cols[(qty, a)] for a in axes]]
+    except KeyError:
+        missing = [a for a in axes if (qty, a) not in cols]
+        raise MocapError(f"{src}: {typ} '{name}': missing column {qty} "
+                         f"{','.join(missing)}") from None
+
+
+def _rigid_body(data: np.ndarray, src: str, name: str, cols: _Group, fmt: _Columns,
+                data_start: int) -> RigidBodyTrack:
+    """One rigid body's track (position in m, quaternion scalar last, lost where any
+    rotation cell is; its mean marker error in m if exported); its quaternions checked of
+    unit norm."""
+    typ = "Rigid Body"
+    pos = _take_cols(data, src, typ, name, cols, "Position", "XYZ") * fmt.scale
+    if fmt.rot_type == "Quaternion":
+        quat = _take_cols(data, src, typ, name, cols, "Rotation", "XYZW")
+    else:
+        eul = _take_cols(data, src, typ, name, cols, "Rotation", "XYZ")
+        quat = _euler_to_quat(eul, fmt.rot_type.upper())
+    lost = ~np.all(np.isfinite(quat), axis=1)
+    quat[lost] = np.nan
+    norms = np.linalg.norm(quat[~lost], axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-3):
+        bad = int(np.flatnonzero(~lost)[np.argmax(np.abs(norms - 1.0) > 1e-3)])
+        raise MocapError(f"{src}: Rigid Body '{name}' Rotation, data row "
+                         f"{data_start + bad + 1}: quaternion norm "
+                         f"{np.linalg.norm(quat[bad]):.4f} is not 1")
+    err = (data[:, cols[("Mean Marker Error", "")]] * fmt.scale
+           if ("Mean Marker Error", "") in cols else None)
+    return RigidBodyTrack(pos, quat, err)
+
+
+def read_motive_csv(path: str | os.PathLike[str]) -> Take:
+    """Read a Motive CSV export into a :class:`Take` (metres, lab axes, Y up)."""
+    src = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise MocapError(f"{src}: not a text file ({e.reason})") from None
+    lines = text.splitlines()
+    if not lines:
+        raise MocapError(f"{src}: empty file")
+    meta = _metadata(lines[0], src)
+    fmt = _columns(meta, src)
+    rows, data_start = _split_header(lines, src)
+    rows, body, meta = _drop_timecode(rows, lines[data_start:], meta)
+    ncol = _header_width(rows, src)
+    data = _parse_data(body, ncol, data_start, src)
+    if data.shape[0] == 0:
+        raise MocapError(f"{src}: no data rows")
+    time = data[:, 1]
+    rate = _frame_rate(time, fmt.rate, data_start, src)
     markers: dict[str, np.ndarray] = {}
     rb_markers: dict[str, np.ndarray] = {}
     bodies: dict[str, RigidBodyTrack] = {}
-
-    def take_cols(typ: str, name: str, cols: dict, qty: str, axes: Sequence[str]) -> np.ndarray:
-        try:
-            return data[:, [cols[(qty, a)] for a in axes]]
-        except KeyError:
-            missing = [a for a in axes if (qty, a) not in cols]
-            raise MocapError(f"{src}: {typ} '{name}': missing column {qty} "
-                             f"{','.join(missing)}") from None
-
-    for (typ, name), cols in groups.items():
+    for (typ, name), cols in _column_groups(rows, ncol, src).items():
         if typ == "Rigid Body":
-            pos = take_cols(typ, name, cols, "Position", "XYZ") * scale
-            if rot_type == "Quaternion":
-                quat = take_cols(typ, name, cols, "Rotation", "XYZW")
-            else:
-                eul = take_cols(typ, name, cols, "Rotation", "XYZ")
-                quat = _euler_to_quat(eul, rot_type.upper())
-            lost = ~np.all(np.isfinite(quat), axis=1)
-            quat[lost] = np.nan
-            norms = np.linalg.norm(quat[~lost], axis=1)
-            if np.any(np.abs(norms - 1.0) > 1e-3):
-                bad = int(np.flatnonzero(~lost)[np.argmax(np.abs(norms - 1.0) > 1e-3)])
-                raise MocapError(f"{src}: Rigid Body '{name}' Rotation, data row "
-                                 f"{data_start + bad + 1}: quaternion norm "
-                                 f"{np.linalg.norm(quat[bad]):.4f} is not 1")
-            err = (data[:, cols[("Mean Marker Error", "")]] * scale
-                   if ("Mean Marker Error", "") in cols else None)
-            bodies[name] = RigidBodyTrack(pos, quat, err)
-        elif typ == "Rigid Body Marker":
-            rb_markers[name] = take_cols(typ, name, cols, "Position", "XYZ") * scale
-        elif typ == "Marker":
-            markers[name] = take_cols(typ, name, cols, "Position", "XYZ") * scale
+            bodies[name] = _rigid_body(data, src, name, cols, fmt, data_start)
+        elif typ in ("Rigid Body Marker", "Marker"):
+            into = rb_markers if typ == "Rigid Body Marker" else markers
+            into[name] = _take_cols(data, src, typ, name, cols, "Position", "XYZ") * fmt.scale
         # other types (Bone, Force Plate, ...) are ignored
     for d in (markers, rb_markers):
         for v in d.values():

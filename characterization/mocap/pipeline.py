@@ -33,6 +33,7 @@ from characterization.mocap.checks import (
     trunk_trajectory,
 )
 from characterization.mocap.foot_contact import (
+    EventComparison,
     FootContact,
     alternate,
     compare_events,
@@ -41,7 +42,14 @@ from characterization.mocap.foot_contact import (
 )
 from characterization.mocap.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.mocap.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
-from characterization.mocap.mapping import JOINTS, LIMBS, MocapMapping, SegmentationMethod
+from characterization.mocap.mapping import (
+    JOINTS,
+    LIMBS,
+    AxisSpec,
+    MocapMapping,
+    Segmentation,
+    SegmentationMethod,
+)
 from characterization.mocap.sagittal import SagittalFrame, auto_forward, axis_vector
 from characterization.mocap.step_segmentation import (
     StepBounds,
@@ -53,7 +61,7 @@ from characterization.mocap.steps_artifact import StepsArtifact
 from characterization.mocap.take import MocapError, Take
 from hp_model import COORDS
 from hp_model.config import SubjectLengths, default_subject_path, load_subject
-from hp_model.domains import STANCE
+from hp_model.domains import Domain
 from hp_model.outputs import HipProgress
 
 #: coordinate -> (distal limb, proximal limb or None)
@@ -61,7 +69,8 @@ ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
               "th_lk": ("l_shank", "l_thigh"), "th_la": ("l_foot", "l_shank"),
               "th_rh": ("r_thigh", "hat"), "th_pk": ("p_shin", "r_thigh"),
               "th_pa": ("p_foot", "p_shin")}
-HipCoefficients = dict[str, tuple[float, float]]
+#: (c_k, c_a) of delta_p_hip per domain (``model.hip_progress_coefficients``)
+HipCoefficients = Mapping[Domain, tuple[float, float]]
 #: frames: marker-found events further than this from the lab's are a warning (issue 19)
 LAB_EVENT_FRAMES = 3
 
@@ -70,7 +79,7 @@ LAB_EVENT_FRAMES = 3
 class Step:
     """One kept step: bounds, tau over its frames, delta bounds, single-support frames."""
 
-    domain: str
+    domain: Domain
     start: int
     end: int
     tau: np.ndarray
@@ -81,7 +90,7 @@ class Step:
 
 @dataclass(frozen=True)
 class DroppedStep:
-    domain: str
+    domain: Domain
     start: int
     end: int
     reason: str
@@ -99,7 +108,7 @@ class ProcessedTake:
     q: np.ndarray
     joints: dict[str, JointCentreFit]
     delta_ps: np.ndarray
-    coefficients: HipCoefficients
+    coefficients: dict[Domain, tuple[float, float]]
     steps: tuple[Step, ...]
     dropped: tuple[DroppedStep, ...]
     notes: tuple[str, ...]
@@ -107,7 +116,7 @@ class ProcessedTake:
     contacts: dict[str, FootContact] = field(default_factory=dict)
     segmentation: SegmentationMethod = SegmentationMethod.PAPER
     #: the found events against the lab's in the file (:func:`foot_contact.compare_events`)
-    lab_events: dict[str, dict[str, object]] = field(default_factory=dict)
+    lab_events: dict[str, dict[str, EventComparison]] = field(default_factory=dict)
     #: failed checks that processing went on after (QA report and terminal), one line each
     warnings: tuple[str, ...] = ()
 
@@ -154,8 +163,8 @@ def contact_steps(contacts: dict[str, FootContact], n: int) -> list[StepBounds]:
     """Steps from the feet's touchdowns: ps from a prosthesis touchdown to the frame before
     the next human touchdown, pns from a human touchdown to the frame before the next
     prosthesis touchdown."""
-    ev = sorted([(f, "ps") for f in contacts["prosthesis"].touchdowns]
-                + [(f, "pns") for f in contacts["human"].touchdowns])
+    ev = sorted([(f, Domain.PS) for f in contacts["prosthesis"].touchdowns]
+                + [(f, Domain.PNS) for f in contacts["human"].touchdowns])
     out = []
     for (a, d), (b, d2) in itertools.pairwise(ev):
         if d != d2 and b - 1 > a:
@@ -223,8 +232,8 @@ def _hip_height(lengths: SubjectLengths) -> float:
     return lengths.thigh + lengths.shank + lengths.ankle_height
 
 
-def _spec(a: object) -> str:
-    return f'"{a}"' if isinstance(a, str) else str(list(a))  # type: ignore[call-overload]
+def _spec(a: AxisSpec) -> str:
+    return f'"{a}"' if isinstance(a, str) else str(list(a))
 
 
 def _vec3(v: np.ndarray) -> str:
@@ -337,7 +346,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
                  offsets: Mapping[str, float] | None = None) -> ProcessedTake:
     """Limb pitches, joint angles, joint centres and steps of one take.
 
-    ``coefficients``: {"ps": (c_k, c_a), "pns": (c_k, c_a)} from
+    ``coefficients``: {Domain.PS: (c_k, c_a), Domain.PNS: (c_k, c_a)} from
     ``model.hip_progress_coefficients``; ``lengths``: the subject's segment lengths (the
     units and joint-centre checks; default: the shipped subject's); ``offsets``: per-limb
     pitch offsets (rad, :func:`static_offsets`), subtracted with the mapping's
@@ -345,36 +354,23 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     :class:`MocapError` if no complete step or a plausibility check fails
     (:mod:`characterization.mocap.checks`).
     """
-    if mapping.segmentation is None:
-        raise MocapError("mapping: section [segmentation] is required to find steps")
-    if "hip_l" not in mapping.joints and "hip_r" not in mapping.joints:
-        raise MocapError("mapping: joint 'hip_l' or 'hip_r' is required (hip position)")
+    seg = _segmentation(mapping)
     check_names(take, mapping)
     if lengths is None:
         lengths = load_subject(default_subject_path()).lengths
     checks: list[str] = []
     frame = resolve_frame(take, mapping, checks, _hip_height(lengths))
     check_units(take, frame, infer_up(take, mapping), _hip_height(lengths))
-    pitches = limb_pitches(take, mapping, frame)
-    calib = {k: (offsets or {}).get(k, 0.0) + np.radians(mapping.limbs[k].offset_deg)
-             for k in pitches}
-    if any(calib.values()):
-        pitches = {k: _shifted(lp, calib[k]) for k, lp in pitches.items()}
-        checks.append("calibration (pitch offsets subtracted, deg): " + ", ".join(
-            f"{k} {np.degrees(v):+.2f}" for k, v in calib.items()))
+    pitches = _calibrated(limb_pitches(take, mapping, frame), mapping, offsets, checks)
     joints = fit_joints(take, mapping, frame, pitches)
     check_joint_residuals(take.source, {j: f.residual_rms for j, f in joints.items()},
                           joint_segment_lengths(lengths))
     notes = [*checks, *(f.message for f in joints.values() if f.well_posed)]
     warnings = [*frame_time_warnings(take),
                 *(f"{take.source}: {f.message}" for f in joints.values() if not f.well_posed)]
-    hips = np.stack([joints[j].position for j in ("hip_l", "hip_r") if j in joints])
-    cnt = np.isfinite(hips).sum(axis=0)
-    hip = np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
-    q = joint_coordinates(pitches, hip)
+    q = joint_coordinates(pitches, _hip_centre(joints))
     check_joint_angles(take.source, q, COORDS)
-    delta = _hip_progress(q, coefficients, "ps")
-    seg = mapping.segmentation
+    delta = _hip_progress(q, coefficients, Domain.PS)
     marker_contacts = foot_contacts(take, mapping, frame)
     check_walking(take.source, marker_contacts, q[:, COORDS.index("x_B")], take.time)
     contacts = lab_contacts(take, mapping, marker_contacts)
@@ -382,15 +378,10 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
         if c.source != marker_contacts[foot].source:
             notes.append(f"{foot} foot contact from the lab's events in the file "
                          f"(the markers' outside their span)")
-    if seg.method == SegmentationMethod.CONTACT:
-        if set(contacts) != {"human", "prosthesis"}:
-            raise MocapError(f"{take.source}: segmentation 'contact' needs both feet")
-        bounds = contact_steps(contacts, len(q))
-    else:
-        bounds = segment_steps(delta, seg.min_excursion)
+    bounds = _step_bounds(seg, contacts, delta, len(q), take.source)
     rate = take.frame_rate
-    foot_x = {"ps": frame.project(take.marker(seg.human_foot_marker))[:, 0],
-              "pns": frame.project(take.marker(seg.prosthesis_foot_marker))[:, 0]}
+    foot_x = {Domain.PS: frame.project(take.marker(seg.human_foot_marker))[:, 0],
+              Domain.PNS: frame.project(take.marker(seg.prosthesis_foot_marker))[:, 0]}
     steps: list[Step] = []
     dropped: list[DroppedStep] = []
     for b in bounds:
@@ -402,32 +393,87 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
             dropped.append(DroppedStep(b.domain, b.start, b.end, _gap_reason(
                 pitches, b.start, b.end, rate, mapping.processing.max_gap)))
     if not steps:
-        why = (f"{len(dropped)} found but dropped: {dropped[0].reason}" if dropped else
-               "delta_p_hip(th_pk, th_pa) has fewer than two turning points"
-               if seg.method == SegmentationMethod.PAPER
-               else "no touchdown of one foot between two of the other's")
-        raise MocapError(f"{take.source}: no complete step ({why})")
+        raise MocapError(f"{take.source}: no complete step ({_no_step_reason(dropped, seg)})")
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
                      f"{bounds[-1].end} are not complete steps")
     lab = compare_events(marker_contacts, take.events, take.time,
                          {"human": seg.human_side, "prosthesis": seg.prosthesis_side})
-    for foot, kinds in lab.items():
-        for kind, v in kinds.items():
-            line = (f"lab events, {foot} foot {kind}s: {v['lab_events']} in the file, "
-                    f"found from the markers within {v['max_abs_frames']} frames (median "
-                    f"{v['median_abs_frames']})")
-            far = v["max_abs_frames"] is None or v["max_abs_frames"] > LAB_EVENT_FRAMES
-            (warnings if far else notes).append(
-                f"{take.source}: {line}, more than {LAB_EVENT_FRAMES}" if far else line)
+    _report_lab_events(lab, take.source, notes, warnings)
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
                          dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
                          contacts, SegmentationMethod(seg.method), lab, tuple(warnings))
 
 
-def _hip_progress(q: np.ndarray, coefficients: HipCoefficients, domain: str) -> np.ndarray:
+def _segmentation(mapping: MocapMapping) -> Segmentation:
+    """The mapping's step segmentation, once the mapping has it and a hip joint."""
+    if mapping.segmentation is None:
+        raise MocapError("mapping: section [segmentation] is required to find steps")
+    if "hip_l" not in mapping.joints and "hip_r" not in mapping.joints:
+        raise MocapError("mapping: joint 'hip_l' or 'hip_r' is required (hip position)")
+    return mapping.segmentation
+
+
+def _calibrated(pitches: dict[str, LimbPitch], mapping: MocapMapping,
+                offsets: Mapping[str, float] | None, checks: list[str]
+                ) -> dict[str, LimbPitch]:
+    """The pitches less each limb's calibration (``offsets`` (rad) plus the mapping's
+    ``offset_deg``), noted in ``checks``; unchanged when every offset is zero."""
+    calib = {k: (offsets or {}).get(k, 0.0) + np.radians(mapping.limbs[k].offset_deg)
+             for k in pitches}
+    if not any(calib.values()):
+        return pitches
+    checks.append("calibration (pitch offsets subtracted, deg): " + ", ".join(
+        f"{k} {np.degrees(v):+.2f}" for k, v in calib.items()))
+    return {k: _shifted(lp, calib[k]) for k, lp in pitches.items()}
+
+
+def _hip_centre(joints: dict[str, JointCentreFit]) -> np.ndarray:
+    """The hip position (n, 2): the mean of the hip joint centres found in each frame."""
+    hips = np.stack([joints[j].position for j in ("hip_l", "hip_r") if j in joints])
+    cnt = np.isfinite(hips).sum(axis=0)
+    return np.where(cnt > 0, np.nansum(hips, axis=0) / np.maximum(cnt, 1), np.nan)
+
+
+def _step_bounds(seg: Segmentation, contacts: dict[str, FootContact], delta: np.ndarray,
+                 n: int, source: str) -> list[StepBounds]:
+    """The steps of the take's ``n`` frames by the segmentation's method: from the feet's
+    touchdowns (``contact``) or from the turning points of delta_p_hip (``paper``)."""
+    if seg.method == SegmentationMethod.CONTACT:
+        if set(contacts) != {"human", "prosthesis"}:
+            raise MocapError(f"{source}: segmentation 'contact' needs both feet")
+        return contact_steps(contacts, n)
+    return segment_steps(delta, seg.min_excursion)
+
+
+def _no_step_reason(dropped: list[DroppedStep], seg: Segmentation) -> str:
+    """Why a take has no complete step: the first dropped step's reason, else the method's."""
+    if dropped:
+        return f"{len(dropped)} found but dropped: {dropped[0].reason}"
+    if seg.method == SegmentationMethod.PAPER:
+        return "delta_p_hip(th_pk, th_pa) has fewer than two turning points"
+    return "no touchdown of one foot between two of the other's"
+
+
+def _report_lab_events(lab: dict[str, dict[str, EventComparison]], source: str,
+                       notes: list[str], warnings: list[str]) -> None:
+    """One line per foot and kind of lab event in the file: a note when the markers found
+    every one within ``LAB_EVENT_FRAMES`` frames, else a warning."""
+    for foot, kinds in lab.items():
+        for kind, v in kinds.items():
+            line = (f"lab events, {foot} foot {kind}s: {v['lab_events']} in the file, "
+                    f"found from the markers within {v['max_abs_frames']} frames (median "
+                    f"{v['median_abs_frames']})")
+            most = v["max_abs_frames"]
+            far = most is None or most > LAB_EVENT_FRAMES
+            (warnings if far else notes).append(
+                f"{source}: {line}, more than {LAB_EVENT_FRAMES}" if far else line)
+
+
+def _hip_progress(q: np.ndarray, coefficients: HipCoefficients, domain: Domain
+                  ) -> np.ndarray:
     """delta_p_hip (m) of the frames q (n, 12) from the domain's stance knee and ankle."""
-    knee, ankle = STANCE[domain]
+    knee, ankle = domain.stance
     return HipProgress(*coefficients[domain])(q[:, COORDS.index(knee)],
                                               q[:, COORDS.index(ankle)])
 
@@ -471,7 +517,7 @@ def to_artifact(p: ProcessedTake) -> StepsArtifact:
         pitch_source=np.column_stack([p.pitches[k].source for k in LIMBS]).astype(np.int64),
         joint_position=jpos, joint_lambda=jlam, joint_residual=jres, joint_well_posed=jwell,
         delta_ps=p.delta_ps,
-        hip_coefficients=np.array([p.coefficients["ps"], p.coefficients["pns"]]),
+        hip_coefficients=np.array([p.coefficients[Domain.PS], p.coefficients[Domain.PNS]]),
         step_domain=np.array([s.domain for s in p.steps]),
         step_start=np.array([s.start for s in p.steps], dtype=np.int64),
         step_end=np.array([s.end for s in p.steps], dtype=np.int64),

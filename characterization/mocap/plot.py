@@ -79,12 +79,12 @@ class Figure:
             d.line((px, top, px, bottom), fill=GRID)
             d.text((px, bottom + 3), f"{v:g}", fill=INK, font=f, anchor="ma")
         for seg, col in zip(segments, colors, strict=True):
-            px = left + (seg[:, 0] - x0) * sx
-            py = bottom - (seg[:, 1] - y0) * sy
-            ok = np.isfinite(px) & np.isfinite(py)
+            xs = left + (seg[:, 0] - x0) * sx
+            ys = bottom - (seg[:, 1] - y0) * sy
+            ok = np.isfinite(xs) & np.isfinite(ys)
             for a, b in runs(ok):
                 if b - a > 1:
-                    d.line(np.column_stack([px[a:b], py[a:b]]).ravel().tolist(), fill=col)
+                    d.line(np.column_stack([xs[a:b], ys[a:b]]).ravel().tolist(), fill=col)
         d.rectangle((left, top, right, bottom), outline=INK)
         d.text(((left + right) / 2, top - 3), title, fill=INK, font=f, anchor="md")
         if xlabel:

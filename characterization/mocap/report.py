@@ -9,7 +9,6 @@ Pillow (``plot.py``: matplotlib took 1.2 s of the stage's 2 s budget).
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -18,7 +17,8 @@ from characterization.mocap.limb_angles import SOURCE_NAMES
 from characterization.mocap.pipeline import ProcessedTake
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
+from hp_model.json_io import dumps
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
@@ -45,7 +45,7 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
     return {
         "source": p.source, "frames": len(p.time), "frame_rate_hz": rate,
         "walking_direction_lab": p.frame.forward.tolist(), "up_lab": p.frame.up.tolist(),
-        "steps": {d: sum(s.domain == d for s in p.steps) for d in DOMAINS},
+        "steps": {d: sum(s.domain == d for s in p.steps) for d in Domain},
         "steps_without_single_support": sum(s.single_support is None for s in p.steps),
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
                     for d in p.dropped],
@@ -71,7 +71,7 @@ def qa_markdown(summary: dict) -> str:
              f"{s['frames']} frames at {s['frame_rate_hz']:g} Hz; walking direction (lab) "
              f"{np.round(s['walking_direction_lab'], 3).tolist()}, up "
              f"{np.round(s['up_lab'], 3).tolist()}.", "",
-             f"Steps kept: {s['steps']['ps']} ps, {s['steps']['pns']} pns "
+             "Steps kept: " + ", ".join(f"{s['steps'][d]} {d}" for d in Domain) + " "
              f"({s['steps_without_single_support']} without a detected single-support part);"
              f" dropped: {len(s['dropped'])}.", ""]
     if s["dropped"]:
@@ -125,7 +125,7 @@ def figures(p: ProcessedTake) -> dict[str, bytes]:
 
     out = {}
     fig = plot.Figure(1260, 495, 2, len(ANGLES))
-    for r, dom in enumerate(DOMAINS):
+    for r, dom in enumerate(Domain):
         steps = [s for s in p.steps if s.domain == dom]
         for c, name in enumerate(ANGLES):
             col = COORDS.index(name)
@@ -139,14 +139,14 @@ def figures(p: ProcessedTake) -> dict[str, bytes]:
     for c, name in enumerate(("th_pk", "th_pa")):
         col = COORDS.index(name)
         segs, colors = [], []
-        for dom, color in (("ps", plot.GREEN), ("pns", plot.PINK)):
+        for dom, color in ((Domain.PS, plot.GREEN), (Domain.PNS, plot.PINK)):
             for s in (s for s in p.steps if s.domain == dom):
                 th = p.q[s.start:s.end + 1, col]
                 segs.append(np.column_stack([np.degrees(th),
                                              np.degrees(np.gradient(th) * p.frame_rate)]))
                 colors.append(color)
         fig.panel(0, c, segs, colors, f"d{name}/dt (deg/s)", f"{name} (deg)",
-                  legend=(("ps", plot.GREEN), ("pns", plot.PINK)))
+                  legend=((Domain.PS, plot.GREEN), (Domain.PNS, plot.PINK)))
     out["phase_portraits"] = fig.png()
     return out
 
@@ -158,7 +158,7 @@ def render_report(steps_path: str | Path, p: ProcessedTake, with_figures: bool =
     base = Path(steps_path).with_suffix("")
     summary = qa_summary(p)
     out = {base.with_name(base.name + ".qa.md"): qa_markdown(summary).encode(),
-           base.with_name(base.name + ".qa.json"): json.dumps(summary, indent=2).encode()}
+           base.with_name(base.name + ".qa.json"): dumps(summary, indent=2).encode()}
     if with_figures:
         for name, png in figures(p).items():
             out[base.with_name(f"{base.name}_{name}.png")] = png

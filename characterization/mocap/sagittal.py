@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from characterization.mocap.quaternion import quaternion_matrices
 from characterization.mocap.take import MocapError
 
 _AXES = {"x": 0, "y": 1, "z": 2}
@@ -75,12 +74,15 @@ class SagittalFrame:
         """Sagittal pitch (rad) of a rigid body whose local axes coincided with the lab axes
         at zero pitch (Motive's default when a rigid body is created in the model's zero
         pose).  ``axis`` is the body axis projected: ``"up"`` (long axis of a leg segment or
-        the trunk) or ``"forward"`` (a foot).  NaN where the quaternion is NaN."""
+        the trunk) or ``"forward"`` (a foot).  ``quat``: (n, 4), scalar last (x, y, z, w),
+        normalized here.  NaN where the quaternion is NaN."""
+        from scipy.spatial.transform import Rotation  # lazily: 0.4 s of imports
+
         out = np.full(quat.shape[0], np.nan)
         ok = np.all(np.isfinite(quat), axis=1)
         if not ok.any():
             return out
-        R = quaternion_matrices(quat[ok])  # (m, 3, 3) lab <- body
+        R = Rotation.from_quat(quat[ok]).as_matrix()  # (m, 3, 3) lab <- body
         if axis == "up":
             a = R @ self.up  # the body's up axis, in lab coordinates
             out[ok] = np.arctan2(a @ self.forward, a @ self.up)

@@ -27,14 +27,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from characterization.mocap.limb_angles import runs
+from hp_model.domains import Domain
 from hp_model.outputs import phase
 
 
 @dataclass(frozen=True)
 class StepBounds:
-    """A step: domain ``ps``/``pns`` and frames [start, end] (both included)."""
+    """A step: its domain and frames [start, end] (both included)."""
 
-    domain: str
+    domain: Domain
     start: int
     end: int
 
@@ -74,7 +75,7 @@ def segment_steps(delta_ps: np.ndarray, min_excursion: float) -> list[StepBounds
     idx = np.arange(len(d))
     d = np.interp(idx, idx[ok], d[ok])
     pts = turning_points(d, min_excursion)
-    return [StepBounds("ps" if ka == "min" else "pns", a, b)
+    return [StepBounds(Domain.PS if ka == "min" else Domain.PNS, a, b)
             for (a, ka), (b, _) in itertools.pairwise(pts)]
 
 

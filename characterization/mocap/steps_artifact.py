@@ -21,7 +21,7 @@ units, radians, sagittal world frame x forward / z up):
 | joint_well_posed | (6,) bool | |
 | delta_ps | (n,) | delta_p_hip(th_pk, th_pa), m |
 | hip_coefficients | (2, 2) | rows ps, pns: (c_k, c_a) |
-| step_domain | (k,) str | "ps" / "pns" |
+| step_domain | (k,) str | a domain's word (`hp_model.domains.Domain`: ps / pns) |
 | step_start, step_end | (k,) int | first and last frame (both included) |
 | step_delta_lower, step_delta_upper | (k,) | delta_p_hip at the step's first / last frame, m |
 | step_ss_start, step_ss_end | (k,) int | single-support frames (double support |
@@ -32,8 +32,9 @@ units, radians, sagittal world frame x forward / z up):
 
 An ``.npz`` is numpy's zip of ``.npy`` arrays: the float arrays stored (deflating them
 made the file about 15 % smaller for 70 ms on a take of 5 000 frames), the others
-deflated.  Saving is atomic (temp file + rename).  Loading validates everything and raises
-:class:`StepsFileError` with one line naming the file and the field.
+deflated.  A ``.json`` holds the same fields as (nested) lists, a NaN as ``null``
+(:mod:`hp_model.json_io`).  Saving is atomic (temp file + rename).  Loading validates
+everything and raises :class:`StepsFileError` with one line naming the file and the field.
 """
 
 from __future__ import annotations
@@ -44,11 +45,14 @@ import os
 import zipfile
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from characterization.mocap.take import MocapError
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import Domain
+from hp_model.json_io import dumps
 
 SCHEMA_VERSION = 1
 
@@ -146,13 +150,7 @@ def steps_bytes(path: str | os.PathLike[str], a: StepsArtifact) -> bytes:
                     np.lib.format.write_array(f, arr, allow_pickle=False)
         return buf.getvalue()
     if p.suffix == ".json":
-        def enc(v: object) -> object:
-            if isinstance(v, np.ndarray):
-                if v.dtype.kind == "f":
-                    return np.where(np.isfinite(v), v, None).tolist()
-                return v.tolist()
-            return v
-        return json.dumps({k: enc(v) for k, v in d.items()}).encode()
+        return dumps(d).encode()
     raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}' (use .npz or .json)")
 
 
@@ -188,7 +186,7 @@ def load_steps(path: str | os.PathLike[str]) -> StepsArtifact:
     if int(np.asarray(ver)) != SCHEMA_VERSION:
         raise StepsFileError(f"{p}: field 'schema_version': version {int(np.asarray(ver))} is "
                              f"not supported (this program reads {SCHEMA_VERSION})")
-    vals = {}
+    vals: dict[str, Any] = {}  # field -> value, coerced to the field's type by _coerce
     for f in fields(StepsArtifact):
         if f.name not in raw:
             raise StepsFileError(f"{p}: field '{f.name}' missing")
@@ -224,8 +222,8 @@ def validate_steps(a: StepsArtifact, src: str) -> None:
         need(name, getattr(a, name).shape == (k,), f"expected {k} values")
     need("pitch_source", bool(np.all((a.pitch_source >= 0) & (a.pitch_source <= 3))),
          "codes must be 0..3")
-    need("step_domain", bool(np.all(np.isin(a.step_domain, ["ps", "pns"]))),
-         "values must be 'ps' or 'pns'")
+    need("step_domain", bool(np.all(np.isin(a.step_domain, [d.value for d in Domain]))),
+         f"values must be one of {Domain.choices()}")
     need("step_start", bool(np.all((a.step_start >= 0) & (a.step_start < a.step_end)
                                    & (a.step_end < n))), "steps must lie inside the take")
     need("tau_offsets", a.tau_offsets.shape == (k + 1,) and bool(

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+from scipy.signal import butter, sosfiltfilt
 
-from characterization.mocap.butterworth import butter_lowpass_sos, sosfiltfilt
 from characterization.mocap.take import MocapError
 
 
@@ -175,7 +175,7 @@ def gait_q(t: np.ndarray, ev: GaitEvents, p: GaitParams, left: LegGeometry,
     z_hip = lo - k * np.log(np.exp(-(hs - lo) / k).sum(0))
     if p.height_lowpass_hz > 0 and len(t) > 30:
         dt = float(np.median(np.diff(t)))
-        sos = butter_lowpass_sos(2, p.height_lowpass_hz * 2 * dt)
+        sos = butter(2, p.height_lowpass_hz * 2 * dt, output="sos")
         z_hip = sosfiltfilt(sos, z_hip)
         # the filter may overshoot the reach a little: lower the whole path to fit
         hard = np.min([a[:, 1] + np.sqrt(np.maximum(

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import io
 import itertools
-import json
 import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -36,7 +35,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from characterization.mocap.c3d_io import write_c3d
-from characterization.mocap.mapping import JOINTS, LIMBS, default_mapping, synthetic_names
+from characterization.mocap.mapping import (
+    JOINTS,
+    LIMBS,
+    MocapMapping,
+    default_mapping,
+    synthetic_names,
+)
 from characterization.mocap.model_walk import WalkError, WalkOptions, resample, walk
 from characterization.mocap.motive_csv import write_motive_csv
 from characterization.mocap.synthetic_gait import (
@@ -51,7 +56,9 @@ from hp_model import HumanProsthesisModel
 from hp_model.artifacts import ArtifactError
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 from hp_model.choices import Choice
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait, load_gait
+from hp_model.json_io import dumps
 from hp_model.outputs import HipProgress
 
 #: the packaged reference gait of the default subject and device (NOTICE.md beside it)
@@ -178,7 +185,7 @@ def _truth_steps(delta: np.ndarray, t: np.ndarray, ev_p_land: np.ndarray,
     maxs = [extremum(tl, 0.10, 0.25, np.argmax) for tl in ev_p_lift]
     pts = sorted([(i, "min") for i in mins if i is not None]
                  + [(i, "max") for i in maxs if i is not None])
-    return [("ps" if ka == "min" else "pns", a, b)
+    return [(Domain.PS if ka == "min" else Domain.PNS, a, b)
             for (a, ka), (b, _) in itertools.pairwise(pts)]
 
 
@@ -226,8 +233,8 @@ def _model_motion(model: HumanProsthesisModel, opts: SynthOptions,
         steps = walk(model, gait, 2 * (opts.n_strides + 2), rng, wopt)
     except WalkError as e:
         raise MocapError(f"synthetic subject: {e}; lower --variability") from None
-    p_land = np.array([s.t[0] for s in steps if s.domain == "ps"])
-    h_land = np.array([s.t[0] for s in steps if s.domain == "pns"])
+    p_land = np.array([s.t[0] for s in steps if s.domain == Domain.PS])
+    h_land = np.array([s.t[0] for s in steps if s.domain == Domain.PNS])
     # start in the pns before stride 1 and end in the last ps: at most halfway into them,
     # so that the take's ends are not turning points of delta_p_hip
     t0 = p_land[1] - min(opts.lead, 0.5 * (p_land[1] - h_land[0]))
@@ -279,8 +286,8 @@ def _markers(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, opts: Sy
              for k, v in exact.items()}
     visible = {k: ~_gaps(rng, n, opts.dropout_rate / opts.rate, opts.dropout_max_frames)
                for k in noisy}
-    for k, v in noisy.items():
-        v[~visible[k]] = np.nan
+    for name, v in noisy.items():
+        v[~visible[name]] = np.nan
 
     # rigid bodies: fit in the model frame, then express in the lab frame
     def to_lab(p: np.ndarray) -> np.ndarray:
@@ -357,11 +364,11 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     ci = {c: k for k, c in enumerate(model.coord_names)}
 
     # truth
-    delta = HipProgress.of(model, "ps")(q[:, ci["th_pk"]], q[:, ci["th_pa"]])
+    delta = HipProgress.of(model, Domain.PS)(q[:, ci["th_pk"]], q[:, ci["th_pa"]])
     steps = _truth_steps(delta, t, ev.p_land, ev.p_lift, stride_time)
     ss = []
     for dom, a, b in steps:
-        lifts, lands = ((ev.h_lift, ev.h_land) if dom == "ps" else (ev.p_lift[:-1],
+        lifts, lands = ((ev.h_lift, ev.h_land) if dom == Domain.PS else (ev.p_lift[:-1],
                                                                     ev.p_land[1:]))
         mid = t[(a + b) // 2]
         k = int(np.argmin(np.abs(0.5 * (lifts + lands) - mid)))
@@ -405,16 +412,15 @@ def write_synthetic(out_dir: str | os.PathLike[str], synth: SyntheticTake,
     write_motive_csv(paths["csv"], synth.take, take_name=f"synthetic-seed{opts.seed}")
     write_c3d(paths["c3d"], synth.take_c3d)
     buf = io.BytesIO()
-    np.savez_compressed(buf, **synth.truth)
+    np.savez_compressed(buf, allow_pickle=False, **synth.truth)  # numeric arrays only
     atomic_write_bytes(paths["truth"], buf.getvalue())
     atomic_write_text(paths["mapping"], mapping_toml(default_mapping()))
-    atomic_write_text(paths["options"], json.dumps(asdict(opts), indent=2))
+    atomic_write_text(paths["options"], dumps(asdict(opts), indent=2))
     return paths
 
 
-def mapping_toml(m: object) -> str:
+def mapping_toml(m: MocapMapping) -> str:
     """A mapping config as TOML text."""
     import tomli_w
 
-    data = m.model_dump(exclude_none=True)  # type: ignore[attr-defined]
-    return tomli_w.dumps(data)
+    return tomli_w.dumps(m.model_dump(exclude_none=True))

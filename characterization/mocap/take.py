@@ -15,6 +15,7 @@ import difflib
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -116,7 +117,7 @@ class Take:
         return self.rigid_bodies[_lookup(name, list(self.rigid_bodies), self.source,
                                          "rigid body")]
 
-    def replace(self, **changes: object) -> Take:
+    def replace(self, **changes: Any) -> Take:
         """A copy with some fields replaced (e.g. markers with a gap cut in)."""
         return replace(self, **changes)
 

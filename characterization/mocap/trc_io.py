@@ -38,37 +38,58 @@ def read_trc(path: str | os.PathLike[str]) -> Take:
         raise MocapError(f"{src}: line 1: not a TRC file (no 'PathFileType' header)")
     if len(lines) < 5:
         raise MocapError(f"{src}: the header is cut short ({len(lines)} lines, 5 expected)")
-    keys = [k.strip() for k in lines[1].split("\t")]
-    vals = [v.strip() for v in lines[2].split("\t")]
+    rate, n_markers, units = _data_header(lines[1], lines[2], src)
+    names = _marker_names(lines[3], n_markers, src)
+    data = _data_rows(lines, 2 + 3 * n_markers, src)
+    time = data[:, 1]
+    _check_time(time, rate, src)
+    s = UNITS[units.lower()]
+    markers = {n: data[:, 2 + 3 * j:5 + 3 * j] * s for j, n in enumerate(names)}
+    return Take(source=src, frame_rate=rate, time=time, markers=markers, up_axis="+y",
+                metadata={"format": "trc", "Units": units})
+
+
+def _data_header(keys_line: str, values_line: str, src: str) -> tuple[float, int, str]:
+    """(DataRate (Hz), NumMarkers, Units as written) of the header's lines 2 and 3."""
+    keys = [k.strip() for k in keys_line.split("\t")]
+    vals = [v.strip() for v in values_line.split("\t")]
     meta = dict(zip(keys, vals, strict=False))
-    for k in ("DataRate", "NumMarkers", "Units"):
-        if not meta.get(k):
-            raise MocapError(f"{src}: line 3: no value for '{k}'")
+    for key in ("DataRate", "NumMarkers", "Units"):
+        if not meta.get(key):
+            raise MocapError(f"{src}: line 3: no value for '{key}'")
     try:
         rate, n_markers = float(meta["DataRate"]), int(float(meta["NumMarkers"]))
     except ValueError:
         raise MocapError(f"{src}: line 3: DataRate '{meta['DataRate']}' or NumMarkers "
                          f"'{meta['NumMarkers']}' is not a number") from None
-    unit = meta["Units"].lower()
-    if unit not in UNITS:
+    if meta["Units"].lower() not in UNITS:
         raise MocapError(f"{src}: line 3: unknown Units '{meta['Units']}' (expected "
                          f"{', '.join(UNITS)})")
     if not rate > 0 or n_markers < 1:
         raise MocapError(f"{src}: line 3: DataRate must be > 0 and NumMarkers >= 1")
-    cells = lines[3].split("\t")
-    names = [c.strip() for c in cells[2::3]][:n_markers]
+    return rate, n_markers, meta["Units"]
+
+
+def _marker_names(names_line: str, n_markers: int, src: str) -> list[str]:
+    """The ``n_markers`` marker names of the header's line 4 (every third cell from the
+    third), checked present and distinct."""
+    names = [c.strip() for c in names_line.split("\t")[2::3]][:n_markers]
     if len(names) < n_markers or not all(names):
         raise MocapError(f"{src}: line 4: {len([n for n in names if n])} marker names for "
                          f"NumMarkers {n_markers}")
     if len(set(names)) != len(names):
         dup = next(n for n in names if names.count(n) > 1)
         raise MocapError(f"{src}: line 4: duplicate marker name '{dup}'")
-    ncol = 2 + 3 * n_markers
-    rows, first = [], None
+    return names
+
+
+def _data_rows(lines: list[str], ncol: int, src: str) -> np.ndarray:
+    """The data rows after the header's 5 lines as an (n, ncol) array (Frame#, Time, then
+    X, Y, Z per marker; an empty cell is NaN); blank lines skipped."""
+    rows = []
     for i, line in enumerate(lines[5:], start=6):
         if not line.strip():
             continue
-        first = first or i
         c = line.split("\t")
         if len(c) > ncol and any(x.strip() for x in c[ncol:]):
             raise MocapError(f"{src}: line {i}: {len(c)} cells, expected {ncol}")
@@ -80,8 +101,11 @@ def read_trc(path: str | os.PathLike[str]) -> Take:
             raise MocapError(f"{src}: line {i}: not a number '{bad.strip()[:20]}'") from None
     if not rows:
         raise MocapError(f"{src}: no frames")
-    data = np.asarray(rows)
-    time = data[:, 1]
+    return np.asarray(rows)
+
+
+def _check_time(time: np.ndarray, rate: float, src: str) -> None:
+    """The frame times (s) present, increasing and without a jump (one continuous take)."""
     if not np.all(np.isfinite(time)):
         k = int(np.flatnonzero(~np.isfinite(time))[0])
         raise MocapError(f"{src}: data row {k + 1}: no time")
@@ -93,10 +117,6 @@ def read_trc(path: str | os.PathLike[str]) -> Take:
         k = int(np.flatnonzero(dt > MAX_GAP_PERIODS / rate)[0])
         raise MocapError(f"{src}: data rows {k + 1}-{k + 2}: the time jumps by {dt[k]:.3f} s "
                          f"({dt[k] * rate:.0f} frame periods): not one continuous take")
-    s = UNITS[unit]
-    markers = {n: data[:, 2 + 3 * j:5 + 3 * j] * s for j, n in enumerate(names)}
-    return Take(source=src, frame_rate=rate, time=time, markers=markers, up_axis="+y",
-                metadata={"format": "trc", "Units": meta["Units"]})
 
 
 def _is_number(x: str) -> bool:

@@ -63,12 +63,11 @@ all for N steps at confidence 1 - beta:
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -81,6 +80,8 @@ from characterization.mocap.limb_angles import runs
 from characterization.mocap.step_segmentation import single_support
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.domains import Domain
+from hp_model.figures import figure_bytes
 from hp_model.force_tube import COMPONENTS, ForceTube
 
 UNITS = ("N", "N", "N m")
@@ -159,7 +160,7 @@ def tube_interval(intervals: Sequence[tuple[float, float]]) -> tuple[float, floa
     return lo, hi
 
 
-def tube_interval_from_steps(steps: Any, domain: str = "ps"
+def tube_interval_from_steps(steps: Any, domain: str = Domain.PS
                              ) -> tuple[float, float, list[tuple[float, float] | None]]:
     """tau_lo, tau_hi from a :class:`characterization.mocap.steps_artifact.StepsArtifact` (its
     single-support frames, found with the paper's foot-marker rule), and the per-step
@@ -259,7 +260,10 @@ class _Data:
         return self.B.shape[1] - 1
 
 
-def _pool(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int) -> _Data:
+def _check_window(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int
+                  ) -> int:
+    """The degree as an int, once [tau_lo, tau_hi], the degree and the number of profiles
+    can make a bound (else TubeFitError)."""
     if not (math.isfinite(tau_lo) and math.isfinite(tau_hi) and tau_hi > tau_lo):
         raise TubeFitError(f"need finite tau_lo < tau_hi, got [{tau_lo}, {tau_hi}]")
     if isinstance(degree, bool) or int(degree) != degree or not 0 <= degree <= 20:
@@ -271,30 +275,45 @@ def _pool(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int
     if n_steps < degree + 1:
         raise TubeFitError(f"{n_steps} profiles cannot support a degree-{degree} bound: need at "
                            f"least degree + 1 = {degree + 1} (scenario theory needs N >= d)")
+    return degree
+
+
+def _checked_profile(i: int, prof: Profile, tau_lo: float, tau_hi: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Profile ``i`` as float arrays (tau (n,), dF (n, 3)), refused (TubeFitError) when
+    malformed, non-finite or outside [tau_lo, tau_hi]."""
+    if len(prof) != 2:
+        raise TubeFitError(f"profile {i}: expected (tau, dF)")
+    tau, dF = np.asarray(prof[0], float), np.asarray(prof[1], float)
+    if tau.ndim != 1 or tau.size == 0:
+        raise TubeFitError(f"profile {i}: tau must be a non-empty 1-D array, got shape "
+                           f"{tau.shape}")
+    if dF.shape != (tau.size, 3):
+        raise TubeFitError(f"profile {i}: dF has shape {dF.shape}, expected "
+                           f"({tau.size}, 3)")
+    if not np.all(np.isfinite(tau)):
+        raise TubeFitError(f"profile {i}: non-finite tau ({np.sum(~np.isfinite(tau))} "
+                           "samples)")
+    bad = ~np.isfinite(dF)
+    if bad.any():
+        c = COMPONENTS[int(np.flatnonzero(bad.any(axis=0))[0])]
+        raise TubeFitError(f"profile {i}: non-finite dF ({int(bad.any(axis=1).sum())} "
+                           f"samples, first in {c})")
+    tol = 1e-9 * (tau_hi - tau_lo)
+    if tau.min() < tau_lo - tol or tau.max() > tau_hi + tol:
+        raise TubeFitError(f"profile {i}: tau in [{tau.min():.4f}, {tau.max():.4f}] "
+                           f"outside [tau_lo, tau_hi] = [{tau_lo:.4f}, {tau_hi:.4f}]")
+    return tau, dF
+
+
+def _pool(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int) -> _Data:
+    """The profiles' samples pooled over [tau_lo, tau_hi] (s = normalized phase), with the
+    degree-``degree`` Bernstein basis at them and each component's scale."""
+    degree = _check_window(profiles, tau_lo, tau_hi, degree)
     span = tau_hi - tau_lo
     ss, ys, ks = [], [], []
     for i, prof in enumerate(profiles):
-        if len(prof) != 2:
-            raise TubeFitError(f"profile {i}: expected (tau, dF)")
-        tau, dF = np.asarray(prof[0], float), np.asarray(prof[1], float)
-        if tau.ndim != 1 or tau.size == 0:
-            raise TubeFitError(f"profile {i}: tau must be a non-empty 1-D array, got shape "
-                               f"{tau.shape}")
-        if dF.shape != (tau.size, 3):
-            raise TubeFitError(f"profile {i}: dF has shape {dF.shape}, expected "
-                               f"({tau.size}, 3)")
-        if not np.all(np.isfinite(tau)):
-            raise TubeFitError(f"profile {i}: non-finite tau ({np.sum(~np.isfinite(tau))} "
-                               "samples)")
-        bad = ~np.isfinite(dF)
-        if bad.any():
-            c = COMPONENTS[int(np.flatnonzero(bad.any(axis=0))[0])]
-            raise TubeFitError(f"profile {i}: non-finite dF ({int(bad.any(axis=1).sum())} "
-                               f"samples, first in {c})")
-        tol = 1e-9 * span
-        if tau.min() < tau_lo - tol or tau.max() > tau_hi + tol:
-            raise TubeFitError(f"profile {i}: tau in [{tau.min():.4f}, {tau.max():.4f}] "
-                               f"outside [tau_lo, tau_hi] = [{tau_lo:.4f}, {tau_hi:.4f}]")
+        tau, dF = _checked_profile(i, prof, tau_lo, tau_hi)
         ss.append(np.clip((tau - tau_lo) / span, 0.0, 1.0))
         ys.append(dF)
         ks.append(np.full(tau.size, i))
@@ -306,7 +325,7 @@ def _pool(profiles: Sequence[Profile], tau_lo: float, tau_hi: float, degree: int
     y = np.concatenate(ys)
     scale = np.max(np.abs(y), axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    return _Data(s, y, np.concatenate(ks), bezier.basis(degree, s), scale, n_steps)
+    return _Data(s, y, np.concatenate(ks), bezier.basis(degree, s), scale, len(profiles))
 
 
 def _linprog(B: np.ndarray, y: np.ndarray, sign: float, method: str) -> Any:
@@ -611,13 +630,9 @@ def credibility(profiles: Sequence[Profile], lower: np.ndarray, upper: np.ndarra
 
 def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: float,
              tau_hi: float, degree: int = 3, gait_hash: str = "",
-             source: Mapping[str, Any] | None = None, beta: float = 0.05,
-             allowance: Sequence[float] | np.ndarray = (0.0, 0.0, 0.0)) -> ForceTube:
-    """Fit, certify and assess the force tube of N deviation profiles (module docstring).
-
-    ``allowance`` (3,) >= 0 (N, N, N m) widens the certified bounds for the estimation error
-    of the profiles (:class:`hp_model.force_tube.ForceTube`); the certificate and the
-    credibility are those of the certified bounds (widening only adds margin).
+             source: Mapping[str, Any] | None = None, beta: float = 0.05) -> ForceTube:
+    """Fit, certify and assess the force tube of N deviation profiles (module docstring);
+    the tube carries no allowance (:func:`with_allowance` widens it).
     ``profiles``: N pairs (tau (n_i,), dF (n_i, 3)) inside [tau_lo, tau_hi];
     ``nominal_coeffs``: F* as (3, k+1) Bezier coefficients over s (:func:`nominal_coefficients`).
     Raises :class:`TubeFitError` on bad input, or when a sample is outside or a bound has no
@@ -633,9 +648,6 @@ def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: fl
         raise TubeFitError("nominal coefficients: non-finite values")
     if not 0 < beta < 1:
         raise TubeFitError(f"beta must be in (0, 1), got {beta}")
-    allow = np.asarray(allowance, float).reshape(-1)
-    if allow.shape != (3,) or not np.all(np.isfinite(allow)) or np.any(allow < 0):
-        raise TubeFitError(f"allowance must be 3 finite values >= 0, got {allow}")
     data = _pool(profiles, tau_lo, tau_hi, degree)
     lower, upper = _fit(data, np.ones(data.s.size, bool))
     t_lp = time.perf_counter() - t0
@@ -664,7 +676,17 @@ def fit_tube(profiles: Sequence[Profile], nominal_coeffs: np.ndarray, tau_lo: fl
                 "fit_seconds": time.perf_counter() - t0, "lp_seconds": t_lp})
     return ForceTube(gait_hash=gait_hash, tau_lo=float(tau_lo), tau_hi=float(tau_hi),
                      nominal=nominal, lower=lower, upper=upper, n_steps=data.n_steps,
-                     credibility=cred, source=src, allowance=allow)
+                     credibility=cred, source=src)
+
+
+def with_allowance(tube: ForceTube, allowance: Sequence[float] | np.ndarray) -> ForceTube:
+    """``tube`` widened by ``allowance`` (3,) >= 0 (N, N, N m) for the estimation error of
+    its profiles (:class:`hp_model.force_tube.ForceTube`); the certificate and the
+    credibility stay those of the certified bounds (widening only adds margin)."""
+    allow = np.asarray(allowance, float).reshape(-1)
+    if allow.shape != (3,) or not np.all(np.isfinite(allow)) or np.any(allow < 0):
+        raise TubeFitError(f"allowance must be 3 finite values >= 0, got {allow}")
+    return replace(tube, allowance=allow)
 
 
 # ---------------------------------------------------------------------- figure, report
@@ -702,9 +724,7 @@ def tube_figure_bytes(tube: ForceTube, profiles: Sequence[Profile], fmt: str = "
     axes[-1].set_xlim(tube.tau_lo, tube.tau_hi)
     fig.suptitle(f"Socket-force deviation from nominal: {len(profiles)} steps, "
                  f"degree-{tube.degree} tube", fontsize=10)
-    buf = io.BytesIO()
-    fig.savefig(buf, format=fmt, dpi=110)
-    return buf.getvalue()
+    return figure_bytes(fig, fmt)
 
 
 def save_tube_figure(path: str | os.PathLike[str], tube: ForceTube,

@@ -46,6 +46,7 @@ from characterization.tube.fit import (
     scenario_epsilon,
 )
 from hp_model import bezier
+from hp_model.domains import Domain
 from hp_model.force_tube import (
     ERROR_COMPONENTS,
     ERROR_UNITS,
@@ -77,8 +78,8 @@ def model_error_samples(model: Any, gait: Any, q: np.ndarray, qd: np.ndarray, u:
     inter = interaction or InteractionModel(model, gait.degree)
     f = inter.numeric()["model_error_ps"]
     dyn = model.numeric()["dyn_ps"]
-    k, a = model.roles["ps"].knee, model.roles["ps"].ankle
-    theta, gains = gait.theta("ps"), gait.gains_array
+    k, a = model.roles[Domain.PS].knee, model.roles[Domain.PS].ankle
+    theta, gains = gait.theta(Domain.PS), gait.gains_array
     n = len(q)
     tau, d = np.empty(n), np.empty((n, 2))
     for j in range(n):

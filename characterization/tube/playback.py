@@ -4,7 +4,7 @@ Playback, per prosthesis-stance (``ps``) step i of a steps artifact:
 
 1. The step's joint trajectories are fitted with Bezier curves in the step's own tau, by the
    same regression as the gait's (:func:`characterization.gait.fit.regress_domain` with this
-   one step; degree = the gait's): y2 = the 5 joint angles of ``Y2_COORDS["ps"]``; v_hip =
+   one step; degree = the gait's): y2 = the 5 joint angles of ``Domain.PS.y2_coords``; v_hip =
    the mean of the per-frame d/dt delta_p_hip over the fitted frames; the phase bounds are
    the step's own delta_p_hip at its first and last frame. These parameters alpha^pb_i are
    the step's gait theta_i. Frames fitted (:func:`fit_window`,
@@ -74,6 +74,7 @@ from characterization.tube.fit import (
     peak_socket_force,
     save_tube_figure,
     tube_interval,
+    with_allowance,
 )
 from characterization.tube.model_error import (
     fit_model_error,
@@ -82,14 +83,14 @@ from characterization.tube.model_error import (
 from characterization.tube.model_error import markdown as model_error_markdown
 from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, TubePhase, save_tube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
 from hp_model.simulator import HybridSimulator, SimOptions
 
-DOMAIN = "ps"
+DOMAIN = Domain.PS
 #: default estimation allowance of the tube, a fraction of each component's peak |F_s|: on
 #: the model-generated subject the true profiles leave the bare tube by <= 0.3 % of peak
 #: without noise and <= 0.8 % with 0.05 deg of angle noise (README table)
@@ -130,6 +131,22 @@ class PlaybackOptions:
                           guard_tau_min=0.6 if self.stop_at_touchdown else math.inf,
                           min_hip_height=self.min_hip_height, tau_max=1.3,
                           cone_periods=2**62, mu=self.mu)
+
+
+@dataclass(frozen=True)
+class TubeOptions:
+    """What the fitted tube is: the Bezier degree of its bounds, the confidence parameter
+    beta of its credibility, its widening for the playback's estimation error (a fraction
+    of each component's peak |F_s| over the played-back window; 0: the paper's bare tube),
+    and the model-error bound of ``clfqp`` (:mod:`characterization.tube.model_error`):
+    whether to fit it, its degree and the time after each touchdown left out (s)."""
+
+    degree: int = 3
+    beta: float = 0.05
+    allowance: float = DEFAULT_ALLOWANCE
+    model_error: bool = True
+    error_degree: int = 3
+    exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN
 
 
 def phase_map(step: GaitParams, gait: GaitParams, tau: np.ndarray | float) -> np.ndarray:
@@ -233,7 +250,7 @@ def check_inputs(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
     if names != list(model.coord_names):
         raise PlaybackError(f"{src}: field 'coord_names' {names} are not the model's "
                             f"coordinates {list(model.coord_names)}")
-    for r, d in enumerate(DOMAINS):
+    for r, d in enumerate(Domain):
         mine = np.array(model.hip_progress_coefficients(d))
         if not np.allclose(steps.hip_coefficients[r], mine, rtol=1e-9, atol=1e-12):
             raise PlaybackError(
@@ -315,7 +332,8 @@ def play_step(model: HumanProsthesisModel, closed_loop: ClosedLoop, gait: Gait,
     ss = single_support_tau(steps, i)
     span = fit_window(steps, i, opt.fit_margin)[:2]
     q0, qd0 = zero_dynamics_state(closed_loop, params, span[0])
-    sim = HybridSimulator(model, closed_loop, {DOMAIN: params.pack(), "pns": gait.theta("pns")},
+    sim = HybridSimulator(model, closed_loop,
+                          {DOMAIN: params.pack(), Domain.PNS: gait.theta(Domain.PNS)},
                           gait.gains_array, opt.sim_options())
     T = (span[1] - span[0]) * params.nominal_duration
     run = sim.run(q0, qd0, DOMAIN, steps=1, duration=math.ceil(T / opt.dt - 1e-9) * opt.dt)
@@ -370,31 +388,29 @@ def playback(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
 
 
 def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
-                   degree: int = 3, n_steps: int | None = None,
+                   tube_options: TubeOptions | None = None, n_steps: int | None = None,
                    options: PlaybackOptions | None = None, progress: Progress | None = None,
-                   src: str = "steps", beta: float = 0.05,
-                   allowance: float = DEFAULT_ALLOWANCE, model_error: bool = True,
-                   error_degree: int = 3,
-                   exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN) -> TubeResult:
+                   src: str = "steps") -> TubeResult:
     """Playback of the ps steps, their deviations from F*, the single-support interval by
-    the foot-marker rule, and the certified force tube (module docstring).
+    the foot-marker rule, and the certified force tube (module docstring), widened by the
+    allowance of ``tube_options`` (:class:`TubeOptions`).
 
-    ``allowance``: the tube's widening for the playback's estimation error, as a fraction of
-    each component's peak |F_s| over the played-back window (0: the paper's bare tube).
-
-    ``model_error``: also characterise what the nominal-human model of ``clfqp`` does not
-    explain along the same playbacks (:mod:`characterization.tube.model_error`), bounded by
-    degree-``error_degree`` curves over the tube's single support in the gait's phase with the
-    first ``exclude_after_touchdown`` s after touchdown excluded, stored in the tube
+    With ``tube_options.model_error``, also characterise what the nominal-human model of
+    ``clfqp`` does not explain along the same playbacks
+    (:mod:`characterization.tube.model_error`), bounded by degree-``error_degree`` curves
+    over the tube's single support in the gait's phase with the first
+    ``exclude_after_touchdown`` s after touchdown excluded, stored in the tube
     (``model_error``); when those samples cannot determine a bound, the tube carries none and
     ``source["model_error"]`` says why."""
     t0 = time.perf_counter()
+    to = tube_options or TubeOptions()
+    degree = to.degree
     check_inputs(model, gait, steps, src)
     idx = ps_steps(steps, n_steps, src)
     if isinstance(degree, bool) or int(degree) != degree or degree < 0:
         raise PlaybackError(f"--degree must be a non-negative integer, got {degree}")
-    if not 0.0 <= allowance < 1.0:
-        raise PlaybackError(f"--allowance must be a fraction in [0, 1), got {allowance}")
+    if not 0.0 <= to.allowance < 1.0:
+        raise PlaybackError(f"--allowance must be a fraction in [0, 1), got {to.allowance}")
     with_ss = [i for i in idx if single_support_tau(steps, i) is not None]
     if len(with_ss) < degree + 1:
         raise PlaybackError(
@@ -411,12 +427,8 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
     opt = options or PlaybackOptions()
     gait_ps = gait.params[DOMAIN]
     inner = [s.in_phase_of(gait_ps) for s in good] if opt.tube_phase == TubePhase.GAIT else good
-    tau_lo, tau_hi = tube_interval([s.single_support for s in inner])  # type: ignore[misc]
-    if opt.tube_phase == TubePhase.GAIT:  # the gait's F* is defined on its ps, tau in [0, 1]
-        tau_lo, tau_hi = max(tau_lo, 0.0), min(tau_hi, 1.0)
-        if not tau_hi > tau_lo:
-            raise PlaybackError(f"{src}: the steps' common single support [{tau_lo:.3f}, "
-                                f"{tau_hi:.3f}] in the gait's phase is empty")
+    supports = {s.step: s.single_support for s in inner if s.single_support is not None}
+    tau_lo, tau_hi = _tube_window(list(supports.values()), opt.tube_phase, src)
     nominal = nominal_coefficients(gait, tau_lo, tau_hi)
     profiles = deviation_profiles([s.profile for s in inner], nominal, tau_lo, tau_hi)
     peak = peak_socket_force([s.profile for s in inner], tau_lo, tau_hi)
@@ -425,34 +437,22 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
     source = {
         "steps_file": src, "steps": [s.step for s in good],
         "skipped": [{"step": i, "reason": r} for i, r in pb.skipped],
-        "playback": {
-            "method": "full-model feedback linearization of each step's own Bezier fit, "
-                      "F_s by eq. (Fsocket) (socket_ps)",
-            "dt": (options or PlaybackOptions()).dt,
-            "stop_at_touchdown": (options or PlaybackOptions()).stop_at_touchdown,
-            "fit_margin": (options or PlaybackOptions()).fit_margin,
-            "tube_phase": opt.tube_phase,
-            "bezier_degree": gait.degree,
-            "max_kkt_residual": max(s.kkt_residual for s in good),
-            "max_fit_rms_rad": float(max(s.fit_rms.max() for s in good)),
-            "cone_frames": {str(s.step): s.cone_frames for s in good if s.cone_frames},
-            "seconds": pb.seconds},
+        "playback": _playback_source(pb, opt, gait.degree),
         "single_support": {"rule": "human foot marker x moving forward (steps artifact)",
                            "phase": opt.tube_phase,
-                           "per_step": {str(s.step): list(s.single_support)  # type: ignore
-                                        for s in inner}},
-        "allowance": {"fraction_of_peak": allowance, "peak_abs_F_s": peak,
+                           "per_step": {str(k): list(v) for k, v in supports.items()}},
+        "allowance": {"fraction_of_peak": to.allowance, "peak_abs_F_s": peak,
                       "why": "estimation error of the playback (README: evidence on a "
                              "subject generated by the model)"},
     }
-    tube = fit_tube(profiles, nominal, tau_lo, tau_hi, degree, gait_hash=gait.hash(),
-                    source=source, beta=beta, allowance=allowance * np.asarray(peak))
-    if model_error:
+    tube = with_allowance(fit_tube(profiles, nominal, tau_lo, tau_hi, degree,
+                                   gait_hash=gait.hash(), source=source, beta=to.beta),
+                          to.allowance * np.asarray(peak))
+    if to.model_error:
         if progress is not None:
             progress("model error of the nominal-human model", 0, 1)
-        tube = with_model_error(tube, model, gait, good, error_degree,
-                                exclude_after_touchdown, opt.tube_phase == TubePhase.GAIT,
-                                src, beta)
+        tube = with_model_error(tube, model, gait, good, to,
+                                opt.tube_phase == TubePhase.GAIT, src)
     t2 = time.perf_counter()
     if progress is not None:
         progress("force tube done", 1, 1)
@@ -461,23 +461,54 @@ def fit_force_tube(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact
                       opt.tube_phase, gait_ps if opt.tube_phase == TubePhase.GAIT else None)
 
 
+def _tube_window(supports: list[tuple[float, float]], phase: TubePhase, src: str
+                 ) -> tuple[float, float]:
+    """[tau_lo, tau_hi]: the part of single support every step shares (in the gait's phase
+    within [0, 1], where the gait's F* is defined)."""
+    tau_lo, tau_hi = tube_interval(supports)
+    if phase == TubePhase.GAIT:  # the gait's F* is defined on its ps, tau in [0, 1]
+        tau_lo, tau_hi = max(tau_lo, 0.0), min(tau_hi, 1.0)
+        if not tau_hi > tau_lo:
+            raise PlaybackError(f"{src}: the steps' common single support [{tau_lo:.3f}, "
+                                f"{tau_hi:.3f}] in the gait's phase is empty")
+    return tau_lo, tau_hi
+
+
+def _playback_source(pb: Playback, opt: PlaybackOptions, bezier_degree: int
+                     ) -> dict[str, object]:
+    """The tube's ``source["playback"]``: how the steps were played back and how well."""
+    good = pb.good
+    return {
+        "method": "full-model feedback linearization of each step's own Bezier fit, "
+                  "F_s by eq. (Fsocket) (socket_ps)",
+        "dt": opt.dt,
+        "stop_at_touchdown": opt.stop_at_touchdown,
+        "fit_margin": opt.fit_margin,
+        "tube_phase": opt.tube_phase,
+        "bezier_degree": bezier_degree,
+        "max_kkt_residual": max(s.kkt_residual for s in good),
+        "max_fit_rms_rad": float(max(s.fit_rms.max() for s in good)),
+        "cone_frames": {str(s.step): s.cone_frames for s in good if s.cone_frames},
+        "seconds": pb.seconds}
+
+
 def with_model_error(tube: ForceTube, model: HumanProsthesisModel, gait: Gait,
-                     steps: list[StepPlayback], degree: int = 3,
-                     exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN,
-                     within_tube: bool = True, src: str = "steps", beta: float = 0.05
-                     ) -> ForceTube:
+                     steps: list[StepPlayback], options: TubeOptions | None = None,
+                     within_tube: bool = True, src: str = "steps") -> ForceTube:
     """``tube`` with the model-error bound of the played-back ``steps`` (each in its own
-    phase; d is evaluated at the gait's phase), over the tube's [tau_lo, tau_hi] when
-    ``within_tube`` (the tube is in the gait's phase); on a failure the tube unchanged, the
-    reason in ``source["model_error"]``."""
+    phase; d is evaluated at the gait's phase) of ``options``' degree, exclusion after
+    touchdown and beta, over the tube's [tau_lo, tau_hi] when ``within_tube`` (the tube is
+    in the gait's phase); on a failure the tube unchanged, the reason in
+    ``source["model_error"]``."""
+    opt = options or TubeOptions()
     samples = playback_error_samples(model, gait, steps)
     try:
         bound = fit_model_error(
-            samples, error_degree_checked(degree), exclude_after_touchdown,
+            samples, error_degree_checked(opt.error_degree), opt.exclude_after_touchdown,
             (tube.tau_lo, tube.tau_hi) if within_tube else None,
             {"steps_file": src, "steps": [s.step for s in steps],
              "method_d": "nu_true from the playback's constrained dynamics (dyn_ps) minus "
-                         "a + A u_p of the interaction model (model_error_ps)"}, beta)
+                         "a + A u_p of the interaction model (model_error_ps)"}, opt.beta)
     except (TubeFitError, FitError) as e:
         return replace(tube, source={**tube.source, "model_error": f"not fitted: {e}"})
     return replace(tube, model_error=bound)

@@ -31,7 +31,7 @@ from characterization.mocap.model_walk import WalkError, WalkOptions, resample, 
 from characterization.mocap.step_segmentation import phase_tau, segment_steps, single_support
 from characterization.mocap.steps_artifact import StepsArtifact, validate_steps
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAIN_CODE, STANCE
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import COORDS, HumanProsthesisModel
 from hp_model.outputs import HipProgress
@@ -40,7 +40,7 @@ from hp_model.outputs import HipProgress
 JOINT_FRAMES = {"hip_l": "hip", "knee_l": "l_knee", "ankle_l": "l_ankle", "hip_r": "hip",
                 "knee_p": "p_knee", "ankle_p": "p_ankle"}
 #: the foot "marker" of the single-support rule, per stance domain (the swing foot's sole)
-FOOT_MARKER = {"ps": "l_sole", "pns": "p_sole"}
+FOOT_MARKER = {Domain.PS: "l_sole", Domain.PNS: "p_sole"}
 
 
 class TruthError(WalkError):
@@ -83,7 +83,7 @@ class SyntheticTake:
     truth: list[TruthStep]
 
     def ps_truth(self) -> list[TruthStep]:
-        return [s for s in self.truth if s.domain == "ps"]
+        return [s for s in self.truth if s.domain == Domain.PS]
 
 
 def synthesize(model: HumanProsthesisModel, gait: Gait, options: TruthOptions | None = None
@@ -123,22 +123,24 @@ def _package(model, fs, segs, gait: Gait, opt: TruthOptions) -> SyntheticTake:
         Q[:, angles] += np.radians(opt.noise_deg) * noise[:, angles]
     names = list(COORDS)
     cidx = {c: names.index(c) for c in names}
-    delta_ps = HipProgress.of(model, "ps")(Q[:, cidx["th_pk"]], Q[:, cidx["th_pa"]])
-    dom_code = np.array([DOMAIN_CODE[segs[k].domain] if k >= 0 else -1 for k in owner])
-    steps_dom, starts, ends, lows, highs, ss_a, ss_b, taus, truth = ([] for _ in range(9))
+    delta_ps = HipProgress.of(model, Domain.PS)(Q[:, cidx["th_pk"]], Q[:, cidx["th_pa"]])
+    dom_code = np.array([Domain(segs[k].domain).code if k >= 0 else -1 for k in owner])
+    steps_dom: list[Domain] = []
+    starts, ends, ss_a, ss_b = [], [], [], []  # frames (ints)
+    lows, highs, taus, truth = [], [], [], []
     n_ps = 0
     for b in segment_steps(delta_ps, opt.min_excursion):
-        if n_ps == opt.n_ps and b.domain == "ps":
+        if n_ps == opt.n_ps and b.domain == Domain.PS:
             break
         a, e = b.start, b.end
-        kn, an = STANCE[b.domain]
+        kn, an = Domain(b.domain).stance
         hip = HipProgress.of(model, b.domain)
         tau, lo, hi = phase_tau(hip(Q[a:e + 1, cidx[kn]], Q[a:e + 1, cidx[an]]))
         foot_x = pos[:, fidx[FOOT_MARKER[b.domain]], 0]
         ss = single_support(foot_x, rate, a, e, opt.foot_speed) or (-1, -1)
         truth.append(TruthStep(len(steps_dom), b.domain, time[a:e + 1], tau, F[a:e + 1],
                                dom_code[a:e + 1], [segs[k].theta for k in owner[a:e + 1]]))
-        n_ps += b.domain == "ps"
+        n_ps += b.domain == Domain.PS
         steps_dom.append(b.domain)
         starts.append(a)
         ends.append(e)
@@ -164,8 +166,8 @@ def _package(model, fs, segs, gait: Gait, opt: TruthOptions) -> SyntheticTake:
         joint_position=jpos, joint_lambda=np.full((len(jn), 2, 2), np.nan),
         joint_residual=np.full(len(jn), np.nan), joint_well_posed=np.zeros(len(jn), bool),
         delta_ps=delta_ps,
-        hip_coefficients=np.array([model.hip_progress_coefficients("ps"),
-                                   model.hip_progress_coefficients("pns")]),
+        hip_coefficients=np.array([model.hip_progress_coefficients(Domain.PS),
+                                   model.hip_progress_coefficients(Domain.PNS)]),
         step_domain=np.array(steps_dom), step_start=np.array(starts, dtype=np.int64),
         step_end=np.array(ends, dtype=np.int64), step_delta_lower=np.array(lows),
         step_delta_upper=np.array(highs), step_ss_start=np.array(ss_a, dtype=np.int64),

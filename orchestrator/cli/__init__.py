@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Protocol
 
 import typer
 from rich.console import Console
@@ -123,10 +123,16 @@ def model_check(
         raise typer.Exit(1)
 
 
-def _click_exceptions() -> tuple[type[BaseException], ...]:
+class _ClickError(Protocol):
+    """What the CLI reads of a click usage error (``click.ClickException``)."""
+
+    def format_message(self) -> str: ...
+
+
+def _click_exceptions() -> tuple[type[_ClickError], ...]:
     """Usage-error classes of every click a CLI may raise: typer >= 0.16 vendors its own
     (``typer._click``) beside an installed click."""
-    out: list[type[BaseException]] = []
+    out: list[type[_ClickError]] = []
     for mod in ("typer._click.exceptions", "click.exceptions"):
         with contextlib.suppress(ImportError):
             out.append(__import__(mod, fromlist=["ClickException"]).ClickException)
@@ -136,8 +142,8 @@ def _click_exceptions() -> tuple[type[BaseException], ...]:
 #: user errors of modules the CLI loads only when a verb needs them: (module, class)
 #: (the gait optimizer and the FMU build are not loaded by the verbs that do not use them)
 LAZY_USER_ERRORS = (("orchestrator.cosim.recording", "RecordingError"),
-                    ("orchestrator.cosim.master", "CosimError"),
-                    ("bus_schemas.bus_config", "BusConfigError"),
+                    ("orchestrator.cosim.config", "CosimError"),
+                    ("bus_schemas.transport.bus_config", "BusConfigError"),
                     ("characterization.gait.phzd", "GaitOptimizationError"),
                     ("human_fmu.build", "FmuBuildError"))
 #: a check that ran and failed (exit 1): (module, class), as :data:`LAZY_USER_ERRORS`

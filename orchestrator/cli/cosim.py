@@ -14,19 +14,22 @@ from rich.table import Table
 from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_folder
 from orchestrator.cli.tube import tube_app  # `tube refit` joins `tube fit`
 from orchestrator.modes import CosimMode
+from prosthesis_controller.interface import ControllerName
+from prosthesis_controller.registry import describe
 
 controller_app = typer.Typer(help="The prosthesis controller node.", no_args_is_help=True)
 recording_app = typer.Typer(help="Co-simulation recordings (MCAP).", no_args_is_help=True)
 
+#: the registry's controllers and what each is, as the help of every --controller option
+CONTROLLER_HELP = describe("; ") + "."
+ControllerOpt = Annotated[ControllerName, typer.Option("--controller", help=CONTROLLER_HELP)]
 GaitOpt = Annotated[Path, typer.Option("--gait", help="Gait file.", dir_okay=False)]
 TubeOpt = Annotated[Path, typer.Option("--tube", help="Force-tube file.", dir_okay=False)]
 
 
 @controller_app.command("serve")
 def serve(
-    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
-                                            "choice), clfqp-exact, clfqp-paper, "
-                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
+    controller: ControllerOpt,
     gait: GaitOpt,
     tube: TubeOpt,
     bus: Annotated[Path | None, typer.Option("--bus", help="Bus config (TOML/JSON): "
@@ -53,9 +56,7 @@ def serve(
 
 
 def run(
-    controller: Annotated[str, typer.Option("--controller", help="clfqp (default "
-                                            "choice), clfqp-exact, clfqp-paper, "
-                                            "clfqp-paper-exact, pd, passive, phase-pd.")],
+    controller: ControllerOpt,
     gait: GaitOpt,
     tube: TubeOpt,
     steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
@@ -74,17 +75,19 @@ def run(
                         ] = 60.0,
     pin: Annotated[bool, typer.Option(help="Run the plant and the controller each on its "
                                       "own CPU.")] = True,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
 ) -> None:
     """Co-simulate the human FMU with the controller in its own process over zenoh."""
-    from orchestrator.cosim.master import CosimConfig, run_cosim
+    from orchestrator.cosim.config import CosimConfig, CosimError
+    from orchestrator.cosim.master import run_cosim
 
     console = Console()
     if record is not None:  # before the FMU build and the controller start
         check_output_folder(record.parent, "--record")
-    cfg = CosimConfig(controller=controller, gait=gait, tube=tube, steps=steps,
-                      perturb=perturb, mode=mode, record=record, fmu=fmu, max_time=max_time,
-                      pin_cpus=pin)
-    from orchestrator.cosim.master import CosimError
+    cfg = CosimConfig(controller=controller, gait=gait, tube=tube, subject=subject,
+                      device=device, steps=steps, perturb=perturb, mode=mode, record=record,
+                      fmu=fmu, max_time=max_time, pin_cpus=pin)
 
     with console.status("starting") as status:
         try:
@@ -134,8 +137,8 @@ def run(
 
 def replay_cmd(
     recording: Annotated[Path, typer.Argument(help="MCAP recording.", dir_okay=False)],
-    controller: Annotated[str | None, typer.Option(help="Controller (default: recorded).")
-                          ] = None,
+    controller: Annotated[ControllerName | None, typer.Option(
+        help=f"Controller (default: the recorded one). {CONTROLLER_HELP}")] = None,
     to_bus: Annotated[Path | None, typer.Option("--to-bus", help="Play the recorded frames "
                                                 "onto this bus config instead.")] = None,
     speed: Annotated[float, typer.Option(min=0.0, help="Playback speed for --to-bus (0: fast).")
@@ -145,7 +148,7 @@ def replay_cmd(
     difference, or play the recorded frames onto a CAN bus at recorded timing."""
     console = Console()
     if to_bus is not None:
-        from bus_schemas.bus_config import load_bus_config, make_bus
+        from bus_schemas.transport.bus_config import load_bus_config, make_bus
         from orchestrator.cosim.recording import play_to_bus
 
         bus = make_bus(load_bus_config(to_bus), "plant")
@@ -205,7 +208,7 @@ def recover_cmd(
 ) -> None:
     """Restore every completely written chunk of a killed run's recording into a complete
     MCAP file that replay and tube refit read."""
-    from orchestrator.cosim.recording import recover
+    from orchestrator.cosim.recovery import recover
 
     rep = recover(part, out)
     ended = "the whole recording" if rep["complete_input"] else \
@@ -263,6 +266,7 @@ def animate_cmd(
         assert gait is not None and tube is not None
         g = load_gait(gait, model.parameter_hash())
         r = run_scenario(model, g, load_tube(tube, g.hash()), sc)
+        assert r.q is not None  # a scenario run keeps the configuration
         ended = f"{r.steps} steps" + (f", fell: {r.fall.reason.label}" if r.fall else "")
         data = walker_gif(model, r.t, r.q, r.domain, r.tau, r.socket_force, fps=fps,
                           max_seconds=seconds, title=f"{sc.label} ({ended})")

@@ -9,6 +9,8 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 
+from orchestrator.cli.options import DeviceOpt, SubjectOpt
+
 STAGES = ("synthetic subject", "mocap processing", "gait fit", "tube fit", "experiments",
           "report")
 
@@ -41,6 +43,8 @@ def experiments(
     steps: Annotated[int, typer.Option("--steps", min=1, help="Steps per run.")] = 20,
     eigen: Annotated[bool, typer.Option(help="Closed-loop return-map eigenvalues (finite "
                                         "differences, 24 extra runs).")] = True,
+    subject: SubjectOpt = None,
+    device: DeviceOpt = None,
 ) -> None:
     """Paper Sec. V on the full closed loop: nominal walking (Fig. 7), exact vs relaxed
     CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md."""
@@ -51,7 +55,8 @@ def experiments(
     from orchestrator.experiments.report import write_report
 
     console = Console()
-    model = hp_model.load_model()
+    model = hp_model.load_model(str(subject) if subject else None,
+                                str(device) if device else None)
     g = load_gait(gait, model.parameter_hash())
     tb = load_tube(tube, g.hash())
     with console.status("experiments") as st:

@@ -10,6 +10,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from hp_model.domains import Domain
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
 
 gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimization.",
@@ -82,7 +83,6 @@ def fit(
 
 
 def _summary(console: Console, gait, out: Path) -> None:
-    from hp_model.domains import DOMAINS
 
     s = gait.solver
     console.print(f"[bold]gait[/bold] {out}  (hash {gait.hash()})")
@@ -91,7 +91,7 @@ def _summary(console: Console, gait, out: Path) -> None:
     t = Table("domain", "v_hip m/s", "step m", "duration s", "fit RMS deg (data)",
               "RMS deg (optimized vs data+offset)")
     v = gait.verification
-    for d in DOMAINS:
+    for d in Domain:
         p = gait.params[d]
         fitq = gait.fit_quality.get(d, {})
         rms = v.get("output_rms_deg", {}).get(d)

@@ -9,6 +9,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from hp_model.domains import Domain
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
 
 mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectories.",
@@ -38,7 +39,7 @@ def process(
                          device=str(device) if device else None, mapping=mapping,
                          with_figures=figures)
     p = r.processed
-    n_ps = sum(s.domain == "ps" for s in p.steps)
+    n_ps = sum(s.domain == Domain.PS for s in p.steps)
     console.print(f"[bold]{take}[/]: {len(p.time)} frames at {p.frame_rate:g} Hz; steps "
                   f"{n_ps} ps + {len(p.steps) - n_ps} pns kept, {len(p.dropped)} dropped")
     t = Table(title="joint centres")
@@ -88,8 +89,8 @@ def inspect(
     tab = Table(title="columns")
     for c in ("kind", "name", "valid %", "longest gap (frames)"):
         tab.add_column(c)
-    for c in s.columns:
-        tab.add_row(c.kind, c.name, f"{100 * c.valid:.1f}", str(c.longest_gap))
+    for col in s.columns:
+        tab.add_row(col.kind, col.name, f"{100 * col.valid:.1f}", str(col.longest_gap))
     console.print(tab)
     if mapping_out is not None:
         atomic_write_bytes(mapping_out, mapping_skeleton(t).encode())
@@ -125,12 +126,22 @@ def synth(
 ) -> None:
     """A synthetic subject on the prosthesis: Motive CSV, C3D and ground truth."""
     import hp_model
-    from characterization.mocap.synthetic_subject import SynthOptions, synthesize, write_synthetic
+    from characterization.mocap.synthetic_subject import (
+        SynthOptions,
+        SynthSource,
+        synthesize,
+        write_synthetic,
+    )
+    from characterization.mocap.take import MocapError
 
+    try:
+        motion = SynthSource(source)
+    except ValueError as e:  # as synthesize says it, before the model is loaded
+        raise MocapError(f"synthetic subject: {e}") from None
     console = Console()
     opts = SynthOptions(n_strides=steps, seed=seed, noise_mm=noise_mm,
                         dropout_rate=dropout_rate, dropout_max_frames=dropout_frames,
-                        rate=rate, source=source, gait_file=str(gait) if gait else None,
+                        rate=rate, source=motion, gait_file=str(gait) if gait else None,
                         sigma=variability, sigma_v_hip=speed_variability)
     with console.status("generating the synthetic take"):
         model = hp_model.load_model(str(subject) if subject else None,

@@ -10,6 +10,7 @@ import numpy as np
 
 from hp_model import HumanProsthesisModel, ProsthesisSubsystem
 from hp_model.compiled import CompileBackend
+from hp_model.domains import Domain
 from hp_model.statics import standing_posture, static_equilibrium
 
 
@@ -33,7 +34,7 @@ def run_checks(model: HumanProsthesisModel, backend: CompileBackend = CompileBac
 
     # 1. static stance on the prosthesis: F_s carries everything above the socket
     q0 = standing_posture(model)
-    _, lam = static_equilibrium(model, "ps", q0)
+    _, lam = static_equilibrium(model, Domain.PS, q0)
     fz, grf = lam[4], lam[1]
     rows.append(CheckRow("standing on prosthesis: socket F_z [N]", f"{fz:.3f}",
                          f"{-(M - mp) * g:.3f}", abs(fz + (M - mp) * g) < 1e-6 * M * g))

@@ -70,6 +70,7 @@ def fit(
     from characterization.tube.playback import (
         PlaybackError,
         PlaybackOptions,
+        TubeOptions,
         fit_force_tube,
         write_outputs,
     )
@@ -92,14 +93,16 @@ def fit(
         def progress(what: str, done: int, total: int) -> None:
             prog.update(task, description=what, completed=done, total=total)
 
-        res = fit_force_tube(model, g, s, degree=degree, n_steps=n_steps,
+        res = fit_force_tube(model, g, s,
+                             TubeOptions(degree=degree, allowance=allowance,
+                                         model_error=model_error, error_degree=error_degree,
+                                         exclude_after_touchdown=exclude_ms * 1e-3),
+                             n_steps=n_steps,
                              options=PlaybackOptions(
                                  stop_at_touchdown=stop_at_touchdown,
                                  fit_margin=None if whole_step_fit else fit_margin,
                                  tube_phase=phase),
-                             progress=progress, src=str(steps), allowance=allowance,
-                             model_error=model_error, error_degree=error_degree,
-                             exclude_after_touchdown=exclude_ms * 1e-3)
+                             progress=progress, src=str(steps))
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility
     console.print(f"[bold]{steps}[/]: {len(res.playback.steps)} ps steps played back in "
@@ -109,8 +112,8 @@ def fit(
     for i, why in res.playback.skipped:
         console.print(f"  [yellow]skipped[/] step {i}: {why}")
     table = Table(title=f"force tube (degree {t.degree}) around F* of gait {t.gait_hash}")
-    for c in ("component", "lower min", "upper max", "mean width"):
-        table.add_column(c, justify="right")
+    for head in ("component", "lower min", "upper max", "mean width"):
+        table.add_column(head, justify="right")
     lo, hi = t.delta_bounds(np.linspace(t.tau_lo, t.tau_hi, 201))
     for c, (name, unit) in enumerate(zip(("F_x", "F_z", "M_y"), ("N", "N", "N m"),
                                          strict=True)):

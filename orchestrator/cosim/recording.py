@@ -1,5 +1,6 @@
 """Working with co-simulation recordings (MCAP): read back, replay against a controller,
-play frames onto a CAN bus, refit the force tube from recorded ground truth.
+play frames onto a CAN bus, refit the force tube from recorded ground truth (a recording cut
+short: :mod:`orchestrator.cosim.recovery`).
 
 A recording carries what it needs: the gait and tube as attachments, the run config,
 versions and hashes as metadata (docs/cosim.md).
@@ -9,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import struct
 import tempfile
 import time
 from collections.abc import Iterable
@@ -21,8 +21,9 @@ import can
 import numpy as np
 from mcap.reader import make_reader
 
-from bus_schemas import codec
-from bus_schemas.mcap_schemas import JsonDecoderFactory, read_messages
+from bus_schemas.recording.reader import JsonDecoderFactory, read_messages
+from bus_schemas.transport import codec
+from hp_model.domains import Domain
 
 
 class RecordingError(ValueError):
@@ -180,13 +181,13 @@ def ps_profiles(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     out, cur, complete_start = [], [], True
     prev = None
     for o in rows:
-        d = o["domain"]
-        if d == "ps":
-            if prev == "pns":
+        d = o["domain"]  # the domain's word
+        if d == Domain.PS:
+            if prev == Domain.PNS:
                 cur, complete_start = [], True
             f = o["socket_force"]
             cur.append((o["tau"], f["Fx"], f["Fz"], f["My"]))
-        elif prev == "ps" and cur and complete_start:
+        elif prev == Domain.PS and cur and complete_start:
             a = np.array(cur, dtype=float)
             out.append((a[:, 0], a[:, 1:]))
             cur = []
@@ -242,7 +243,7 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
     return report
 
 
-def _check_gait(paths: Iterable[Path], gait: Any, gait_path: str | Path, model: Any) -> None:
+def _check_gait(paths: Iterable[str | Path], gait: Any, gait_path: str | Path, model: Any) -> None:
     """Every recording was made with ``gait`` (its attached gait has the same hash): a tube
     refitted against another gait's phase and nominal force would be mislabelled."""
     from hp_model.artifacts import ArtifactError
@@ -265,7 +266,7 @@ def _check_gait(paths: Iterable[Path], gait: Any, gait_path: str | Path, model: 
                                  f"({gait.hash()})")
 
 
-def _old_tube(first: Path, old_tube: str | Path | None, gait_hash: str) -> Any:
+def _old_tube(first: str | Path, old_tube: str | Path | None, gait_hash: str) -> Any:
     """The tube to compare with: ``old_tube``, else the one attached to the recording
     ``first`` (None when it has none)."""
     from hp_model.force_tube import load_tube
@@ -371,75 +372,3 @@ def refit_model_error(paths: Iterable[str | Path], gait_path: str | Path, out: s
                    "n_samples": bound.source["n_samples"],
                    "samples_inside": bound.credibility["samples_inside_fraction"]})
     return report
-
-
-# ----------------------------------------------------------------- recovery
-
-def recovered_name(part: Path) -> Path:
-    """``.<name>.part`` -> ``<name>`` next to it (other names: ``<name>.recovered.mcap``)."""
-    n = part.name
-    if n.startswith(".") and n.endswith(".part"):
-        return part.with_name(n[1:-len(".part")])
-    return part.with_name(f"{part.stem}.recovered.mcap")
-
-
-def recover(part: str | Path, out: str | Path | None = None) -> dict[str, Any]:
-    """Restore what a killed run's ``.part`` recording holds: every record of every chunk
-    that was completely written (schemas, channels, messages, attachments, metadata), read
-    sequentially up to the first incomplete or corrupt record, into a complete MCAP file
-    ``out`` (default :func:`recovered_name`; never overwritten, written atomically).
-    Returns the counts per topic and whether the input was complete."""
-    from mcap.exceptions import McapError
-    from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
-    from mcap.stream_reader import StreamReader
-    from mcap.writer import CompressionType, Writer
-
-    from hp_model.atomic_io import atomic_write_with
-
-    part = Path(part)
-    if not part.is_file():
-        raise FileNotFoundError(f"{part}: no such file")
-    out = Path(out) if out is not None else recovered_name(part)
-    if out.exists():
-        raise RecordingError(f"{out}: exists (pass another --out)")
-    counts: dict[str, int] = {}
-    state = {"complete": False, "stopped": ""}
-
-    def write(tmp: str) -> None:
-        with open(part, "rb") as f, open(tmp, "wb") as g:
-            w = Writer(g, compression=CompressionType.ZSTD)
-            w.start(profile="", library="hpcosim recover")
-            schemas: dict[int, int] = {}
-            channels: dict[int, tuple[int, str]] = {}
-            try:
-                for r in StreamReader(f, validate_crcs=True).records:
-                    if isinstance(r, Schema):
-                        schemas[r.id] = w.register_schema(r.name, r.encoding, r.data)
-                    elif isinstance(r, Channel):
-                        cid = w.register_channel(r.topic, r.message_encoding,
-                                                 schemas.get(r.schema_id, 0), dict(r.metadata))
-                        channels[r.id] = (cid, r.topic)
-                    elif isinstance(r, Message) and r.channel_id in channels:
-                        cid, topic = channels[r.channel_id]
-                        w.add_message(cid, r.log_time, r.data, r.publish_time, r.sequence)
-                        counts[topic] = counts.get(topic, 0) + 1
-                    elif isinstance(r, Attachment):
-                        w.add_attachment(r.create_time, r.log_time, r.name, r.media_type,
-                                         r.data)
-                    elif isinstance(r, Metadata):
-                        w.add_metadata(r.name, dict(r.metadata))
-                    elif isinstance(r, (DataEnd, Footer)):
-                        state["complete"] = True
-                        break
-            except (McapError, EOFError, ValueError, OSError, struct.error) as e:
-                state["stopped"] = f"{type(e).__name__}: {e}"
-            if not counts:
-                raise RecordingError(f"{part}: no complete chunk to recover "
-                                     f"({state['stopped'] or 'no messages'})")
-            w.add_metadata("recovered", {"from": str(part), "complete_input": str(
-                state["complete"]).lower(), "stopped_at": state["stopped"] or "end"})
-            w.finish()
-
-    atomic_write_with(out, write, suffix=".mcap")
-    return {"out": str(out), "messages": sum(counts.values()), "topics": counts,
-            "complete_input": state["complete"], "stopped_at": state["stopped"] or None}

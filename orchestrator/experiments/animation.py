@@ -15,13 +15,19 @@ from __future__ import annotations
 
 import math
 import tempfile
-from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from orchestrator.loop.walker_figure import FORCE_SCALE, HUMAN, IWALK, PROSTHESIS
+
+if TYPE_CHECKING:  # matplotlib is imported when a GIF is drawn
+    from matplotlib.artist import Artist
+    from matplotlib.axes import Axes
 
 MAX_ARROW = 0.45  # m: longer arrows are shortened (direction kept) to stay in the frame
 ARROW_OFFSET = 0.15  # m along x: the tail in front of the socket, clear of the shank and of
@@ -37,86 +43,118 @@ def arrow_vector(fx: float, fz: float) -> tuple[float, float]:
     return fx * k, fz * k
 
 
-def walker_gif(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, domain: np.ndarray,
-               tau: np.ndarray, socket_force: np.ndarray | None = None, *,
-               title: str = "", fps: float = 25.0, max_seconds: float | None = None,
+@dataclass(frozen=True)
+class WalkSeries:
+    """The time series of a run the walker is drawn from: ``t`` (n,) s, ``q`` (n, 12),
+    ``domain`` (n,) codes (0 = ps, 1 = pns), ``tau`` (n,), ``socket_force`` (n, 3) (F_x,
+    F_z, M_y in the prosthesis top link's frame) or None (no arrow)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    domain: np.ndarray
+    tau: np.ndarray
+    socket_force: np.ndarray | None = None
+
+
+class _WalkerScene:
+    """The artists of the walker's figure (ground, stick figure, head, force arrow and its
+    label, the status line) and how frame ``k`` of the GIF sets them; ``idx``: the log row
+    of each frame."""
+
+    def __init__(self, model: HumanProsthesisModel, walk: WalkSeries, t: np.ndarray,
+                 idx: np.ndarray, ax: Axes, title: str) -> None:
+        fr = model.numeric()["frames"]
+        self.names = list(model.frame_names)
+        zero = np.zeros(model.nq)
+        self.pose = np.stack([np.asarray(fr(walk.q[i], zero)[0]) for i in idx])  # (m, 3, fr)
+        self.ib, self.trunk = model.coord_names.index("th_B"), model.subject.lengths.trunk
+        self.pitch_row = model.pitch_row("socket")
+        self.steps = np.concatenate([[0], np.cumsum(np.diff(np.asarray(walk.domain)) != 0)])
+        self.walk, self.t, self.idx, self.ax = walk, t, idx, ax
+        ax.set_aspect("equal")
+        ax.set_ylim(-0.05, 1.55)
+        ax.set_yticks([])
+        ax.axhline(0.0, color="#5a4a3a", lw=2)
+        self.lines = []
+        for colour, chains in (HUMAN, IWALK, PROSTHESIS):
+            for _ in chains:
+                (ln,) = ax.plot([], [], "-o", color=colour, lw=3, ms=3)
+                self.lines.append(ln)
+        (self.head,) = ax.plot([], [], "-o", color=HUMAN[0], lw=4, ms=3)
+        # annotation_clip=False: an annotation whose point leaves the axes is not drawn at all
+        self.arrow = ax.annotate("", xy=(0, 0), xytext=(0, 0), annotation_clip=False,
+                                 arrowprops={"arrowstyle": "-|>", "color": ARROW_COLOUR,
+                                             "lw": 2.5, "mutation_scale": 14})
+        self.force_label = ax.text(0, 0, "", color=ARROW_COLOUR, fontsize=9, ha="left",
+                                   va="bottom")
+        self.label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=10)
+        ax.set_title(title, fontsize=10)
+
+    def draw(self, k: int) -> tuple[Artist, ...]:
+        """Set every artist to frame ``k``; the artists."""
+        p, i = self.pose[k], self.idx[k]
+        xy = {n: (p[0, j], p[1, j]) for j, n in enumerate(self.names)}
+        li = 0
+        for _, chains in (HUMAN, IWALK, PROSTHESIS):
+            for chain in chains:
+                self.lines[li].set_data([xy[n][0] for n in chain], [xy[n][1] for n in chain])
+                li += 1
+        qi = self.walk.q[i]
+        hx, hz = xy["hip"]
+        th = qi[self.ib]
+        self.head.set_data([hx, hx + self.trunk * math.sin(th)],
+                           [hz, hz + self.trunk * math.cos(th)])
+        if self.walk.socket_force is not None:
+            self._draw_force(self.walk.socket_force[i], qi, xy["socket"])
+        self.ax.set_xlim(hx - 1.0, hx + 1.0)
+        d = Domain.from_code(self.walk.domain[i])
+        self.label.set_text(f"t {self.t[i]:.2f} s  {d}  tau {self.walk.tau[i]:.2f}  "
+                            f"step {int(self.steps[i])}")
+        return (*self.lines, self.head, self.arrow, self.force_label, self.label)
+
+    def _draw_force(self, force: np.ndarray, qi: np.ndarray, socket: tuple[float, float]
+                    ) -> None:
+        """The socket force (F_x, F_z in the top link's frame, N) as an arrow in the world
+        frame, its tail ``ARROW_OFFSET`` m in front of the socket, its magnitude beside it."""
+        fx, fz = force[0], force[1]
+        a = float(self.pitch_row @ qi)  # top link's world pitch
+        wx = math.cos(a) * fx + math.sin(a) * fz  # rotation about +y
+        wz = -math.sin(a) * fx + math.cos(a) * fz
+        sx, sz = socket
+        sx += ARROW_OFFSET
+        dx, dz = arrow_vector(wx, wz)
+        self.arrow.xy = (sx + dx, sz + dz)
+        self.arrow.set_position((sx, sz))
+        self.force_label.set_position((sx + 0.02, sz))
+        self.force_label.set_text(f"F_s {math.hypot(fx, fz):.0f} N")
+
+
+def walker_gif(model: HumanProsthesisModel, walk: WalkSeries, *, title: str = "",
+               fps: float = 25.0, max_seconds: float | None = None,
                size: tuple[float, float] = (6.0, 4.0), dpi: int = 100) -> bytes:
-    """GIF bytes of the run (module docstring).  ``t`` (n,) s, ``q`` (n, 12), ``domain``
-    (n,) 0 = ps / 1 = pns, ``tau`` (n,), ``socket_force`` (n, 3) (F_x, F_z, M_y in the
-    prosthesis top link's frame) or None."""
+    """GIF bytes of the run ``walk`` (module docstring): a frame every ``1 / fps`` s of its
+    first ``max_seconds`` s (None: all of it), ``size`` in inches at ``dpi``."""
     import matplotlib
 
     matplotlib.use("Agg")
     from matplotlib import animation
     from matplotlib import pyplot as plt
 
-    t = np.asarray(t, float)
+    t = np.asarray(walk.t, float)
     if t.size == 0:
         raise ValueError("an empty run has nothing to animate")
     end = t[-1] if max_seconds is None else min(t[-1], t[0] + max_seconds)
     times = np.arange(t[0], end + 1e-9, 1.0 / fps)
     idx = np.minimum(np.searchsorted(t, times), t.size - 1)
-    fr = model.numeric()["frames"]
-    names = list(model.frame_names)
-    zero = np.zeros(model.nq)
-    pose = np.stack([np.asarray(fr(q[i], zero)[0]) for i in idx])  # (m, 3, frames)
-    ib, trunk = model.coord_names.index("th_B"), model.subject.lengths.trunk
-    pitch_row = model.pitch_row("socket")
-    steps = np.concatenate([[0], np.cumsum(np.diff(np.asarray(domain)) != 0)])
-
     fig, ax = plt.subplots(figsize=size, dpi=dpi)
-    ax.set_aspect("equal")
-    ax.set_ylim(-0.05, 1.55)
-    ax.set_yticks([])
-    ax.axhline(0.0, color="#5a4a3a", lw=2)
-    lines = []
-    for colour, chains in (HUMAN, IWALK, PROSTHESIS):
-        for _ in chains:
-            (ln,) = ax.plot([], [], "-o", color=colour, lw=3, ms=3)
-            lines.append(ln)
-    (head,) = ax.plot([], [], "-o", color=HUMAN[0], lw=4, ms=3)
-    # annotation_clip=False: an annotation whose point leaves the axes is not drawn at all
-    arrow = ax.annotate("", xy=(0, 0), xytext=(0, 0), annotation_clip=False,
-                        arrowprops={"arrowstyle": "-|>", "color": ARROW_COLOUR, "lw": 2.5,
-                                    "mutation_scale": 14})
-    force_label = ax.text(0, 0, "", color=ARROW_COLOUR, fontsize=9, ha="left", va="bottom")
-    label = ax.text(0.01, 0.97, "", transform=ax.transAxes, va="top", fontsize=10)
-    ax.set_title(title, fontsize=10)
-
-    def draw(k: int) -> Sequence[object]:
-        p = pose[k]
-        xy = {n: (p[0, j], p[1, j]) for j, n in enumerate(names)}
-        li = 0
-        for _, chains in (HUMAN, IWALK, PROSTHESIS):
-            for chain in chains:
-                lines[li].set_data([xy[n][0] for n in chain], [xy[n][1] for n in chain])
-                li += 1
-        qi = q[idx[k]]
-        hx, hz = xy["hip"]
-        th = qi[ib]
-        head.set_data([hx, hx + trunk * math.sin(th)], [hz, hz + trunk * math.cos(th)])
-        if socket_force is not None:
-            fx, fz = socket_force[idx[k], 0], socket_force[idx[k], 1]
-            a = float(pitch_row @ qi)  # top link's world pitch
-            wx = math.cos(a) * fx + math.sin(a) * fz  # rotation about +y
-            wz = -math.sin(a) * fx + math.cos(a) * fz
-            sx, sz = xy["socket"]
-            sx += ARROW_OFFSET
-            dx, dz = arrow_vector(wx, wz)
-            arrow.xy = (sx + dx, sz + dz)
-            arrow.set_position((sx, sz))
-            force_label.set_position((sx + 0.02, sz))
-            force_label.set_text(f"F_s {math.hypot(fx, fz):.0f} N")
-        ax.set_xlim(hx - 1.0, hx + 1.0)
-        d = "ps" if domain[idx[k]] == 0 else "pns"
-        label.set_text(f"t {t[idx[k]]:.2f} s  {d}  tau {tau[idx[k]]:.2f}  "
-                       f"step {int(steps[idx[k]])}")
-        return (*lines, head, arrow, force_label, label)
-
-    anim = animation.FuncAnimation(fig, draw, frames=len(idx), blit=False)
+    scene = _WalkerScene(model, walk, t, idx, ax, title)
+    anim = animation.FuncAnimation(fig, scene.draw, frames=len(idx), blit=False)
     with tempfile.TemporaryDirectory() as tmp:  # Pillow's writer wants a file name
         path = Path(tmp) / "walker.gif"
-        anim.save(str(path), writer=animation.PillowWriter(fps=fps))
+        # matplotlib's stub types fps as int; the writer only computes 1000 / fps (ms per
+        # frame), and a fractional --fps must keep its frame duration
+        writer = animation.PillowWriter(fps=fps)  # type: ignore[arg-type]
+        anim.save(str(path), writer=writer)
         data = path.read_bytes()
     plt.close(fig)
     return data
@@ -127,7 +165,7 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
     """GIF of a co-simulation recording's walk, from its ``/ground_truth`` channel (q, domain,
     tau, socket force every tick).  A recording without it is a
     :class:`~orchestrator.cosim.recording.RecordingError`."""
-    from bus_schemas.mcap_schemas import read_messages
+    from bus_schemas.recording.reader import read_messages
     from orchestrator.cosim.recording import RecordingError, read_recording
 
     rec = read_recording(path, messages=False)
@@ -139,12 +177,13 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
     if q.shape[1] != model.nq:
         raise RecordingError(f"{path}: /ground_truth q has {q.shape[1]} coordinates, the "
                              f"model {model.nq}")
-    dom = np.array([0 if o["domain"] == "ps" else 1 for o in rows])
+    dom = np.array([Domain(o["domain"]).code for o in rows])
     tau = np.array([o["tau"] for o in rows], float)
     fs = np.array([[o["socket_force"][k] for k in ("Fx", "Fz", "My")] for o in rows], float)
     ctrl = rec.config.get("controller", "")
-    return walker_gif(model, t, q, dom, tau, fs, fps=fps, max_seconds=max_seconds,
+    return walker_gif(model, WalkSeries(t, q, dom, tau, fs), fps=fps, max_seconds=max_seconds,
                       title=f"{Path(path).name}" + (f" ({ctrl})" if ctrl else ""))
 
 
-__all__ = ["ARROW_COLOUR", "MAX_ARROW", "arrow_vector", "recording_gif", "walker_gif"]
+__all__ = ["ARROW_COLOUR", "MAX_ARROW", "WalkSeries", "arrow_vector", "recording_gif",
+           "walker_gif"]

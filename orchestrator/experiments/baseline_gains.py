@@ -22,6 +22,7 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from hp_model.domains import Domain
 from hp_model.falls import Fall
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
@@ -75,7 +76,7 @@ def grid_search(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, contro
         ctx = ControllerContext(gait, tube, model, _config(controller, kp, kd))
         r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, steps), context=ctx,
                          closed_loop=cl)
-        out.append(GainResult(kp, kd, r.steps, r.success, r.knee_rms("ps"), r.fall))
+        out.append(GainResult(kp, kd, r.steps, r.success, r.knee_rms(Domain.PS), r.fall))
     return out
 
 

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import stance_outputs
@@ -33,9 +34,9 @@ def _full_output_accel(cl: ClosedLoop, gait: Gait, x: np.ndarray, u_p: np.ndarra
                        ) -> tuple[np.ndarray, np.ndarray]:
     """(dy1, d2y2) of the controller's outputs (:func:`hp_model.outputs.stance_outputs`)
     and F_s of the full loop at x under u_p."""
-    vc, p = cl.vcs["ps"], gait.params["ps"]
+    vc, p = cl.vcs[Domain.PS], gait.params[Domain.PS]
     r, nq = vc.roles, cl.model.nq
-    xd, _, lam = cl.numeric()["xdot_human_ps"](x, gait.theta("ps"), gait.gains_array, u_p)
+    xd, _, lam = cl.numeric()["xdot_human_ps"](x, gait.theta(Domain.PS), gait.gains_array, u_p)
     q, qd, qdd = x[:nq], x[nq:], xd[nq:]
     k = r.prosthesis_rows[0]
     o = stance_outputs(vc.hip, (q[r.knee], q[r.ankle], qd[r.knee], qd[r.ankle]),
@@ -50,10 +51,10 @@ def input_authority(model: HumanProsthesisModel, gait: Gait, ctx: ControllerCont
     A_s, the full loop's A and dF_s/du_p (module docstring), and the ratio of their
     Frobenius norms; the sign agreement is sign(A) == sign(A_m) entry by entry."""
     cl = ClosedLoop(model, gait.degree)
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     q, qd = np.asarray(tr["q"], float), np.asarray(tr["qd"], float)
-    tau_all = cl.vcs["ps"].phase(q, gait.params["ps"])
-    pk, pa = model.roles["ps"].prosthesis
+    tau_all = cl.vcs[Domain.PS].phase(q, gait.params[Domain.PS])
+    pk, pa = model.roles[Domain.PS].prosthesis
     f = ctx.terms.numeric["clf_qp"]
     out_names = f.function.name_out()
     rows = []

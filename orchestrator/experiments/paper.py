@@ -1,4 +1,5 @@
-"""The paper's Sec. V experiments on the closed loop (docs/experiments.md):
+"""The paper's Sec. V experiments on the closed loop (docs/experiments.md), their metrics
+(metrics.json) and the paper's claims checked against them:
 
 1. nominal walking (robust CLF-QP, relaxed, in ps + the shared swing controller in pns):
    phase portraits of the prosthesis knee and ankle (Fig. 7) and convergence to a periodic
@@ -12,36 +13,38 @@
 Next to the paper's controllers the phase-PD reference (``prosthesis_controller``, not in the
 paper) runs the nominal and robustness cases, and the diagnosis compares the torque's input
 authority in the reduced model and in the full loop (:mod:`orchestrator.experiments.diagnosis`).
+The figures and animations are :mod:`orchestrator.experiments.figures`', the stability
+evidence :mod:`orchestrator.experiments.stability`'.
 """
 
 from __future__ import annotations
 
-import io
-import json
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.json_io import to_jsonable, write_json
 from hp_model.outputs import HipProgress
+from orchestrator.experiments.bench import Bench
 from orchestrator.experiments.diagnosis import input_authority
+from orchestrator.experiments.figures import fig6, fig7, fig8, write_animations
 from orchestrator.experiments.scenarios import (
     NOMINAL,
+    PerturbationSearch,
     Scenario,
     ScenarioResult,
-    as_jsonable,
-    run_scenario,
     select_perturbations,
     summary,
 )
-from prosthesis_controller import ControllerContext, ControllerName
+from orchestrator.experiments.stability import orbit_stability
+from prosthesis_controller import ControllerName
 
 SCHEMA_VERSION = 2
 ROBUST_CONTROLLERS = (ControllerName.CLFQP, ControllerName.PASSIVE, ControllerName.PD)
@@ -62,144 +65,21 @@ PERTURBATION_AMPLITUDE = 0.01  # rad on every Bezier coefficient of the human's 
 Progress = Callable[[str], None]
 
 
-def _png(fig: Any) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def _plt() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 # ---------------------------------------------------------------- 1. nominal walking
 
 def knee_offset(model: HumanProsthesisModel, knee: float) -> tuple[float, float]:
     """Joint offsets (knee, ankle) that move the knee output y2 by ``knee`` rad at an
     unchanged phase: delta_p_hip is kept (:meth:`hp_model.outputs.HipProgress.ankle`)."""
-    return float(knee), float(HipProgress.of(model, "ps").ankle(0.0, knee))
+    return float(knee), float(HipProgress.of(model, Domain.PS).ankle(0.0, knee))
 
 
-#: finite-difference steps of the return-map estimate: a sampled controller's return map is
-#: not differentiable at the scale of its own quantization, so the estimate is shown at three
-#: steps and trusted only where they agree
-FD_STEPS = (1e-5, 1e-4, 1e-3)
-#: contraction measure: perturbed post-impact starts, cycles followed, and the size of the
-#: perturbation (angles rad, rates rad/s).  Under a 1 kHz controller the orbit is a thin
-#: band, not a point: the human's swing-leg rates after the prosthesis's touchdown vary
-#: by ~0.03 rad/s (std) from cycle to cycle with any prosthesis controller (the landing
-#: instant falls between ticks), the angles by ~3e-4 rad; the perturbation is well above it
-CONTRACTION_STARTS = 8
-CONTRACTION_CYCLES = 4
-CONTRACTION_DELTA = (1e-2, 2e-1)
-
-
-def _cycle_map(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-               ctx: ControllerContext, controller: str, cycles: int = 1,
-               closed_loop: ClosedLoop | None = None
-               ) -> Callable[[np.ndarray], list[np.ndarray]]:
-    """P: the post-impact ps joint state (12) -> the ones after each of ``cycles`` cycles
-    (ps -> pns -> ps), the controller reset at the section."""
-    from characterization.gait.verification import _Section
-
-    sec = _Section(model)
-
-    def P(s: np.ndarray) -> list[np.ndarray]:
-        q, qd = sec.expand(s)
-        r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, 2 * cycles),
-                         context=ctx, q0=q, qd0=qd, closed_loop=closed_loop)
-        if r.failed or r.steps < 2 * cycles or len(r.post_impact) < cycles:
-            raise RuntimeError(r.reason or "the cycles did not complete")
-        return r.post_impact[:cycles]  # one per cycle: after each impact into ps
-
-    return P
-
-
-def _return_map_radius(P: Callable[[np.ndarray], list[np.ndarray]], x0: np.ndarray,
-                       delta: float) -> float | None:
-    """Spectral radius of the central-difference Jacobian of the return map at x0."""
-    J = np.empty((12, 12))
-    try:
-        for i in range(12):
-            e = np.zeros(12)
-            e[i] = delta
-            J[:, i] = (P(x0 + e)[0] - P(x0 - e)[0]) / (2 * delta)
-    except RuntimeError:
-        return None
-    return float(np.abs(np.linalg.eigvals(J)).max())
-
-
-def orbit_stability(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-                    ctx: ControllerContext, controller: str, x_star: np.ndarray,
-                    seed: int = 0, closed_loop: ClosedLoop | None = None,
-                    fd: bool = True) -> dict[str, Any]:
-    """Stability evidence for a sampled controller.
-
-    - The return map's finite-difference spectral radius at the steps ``FD_STEPS``; they
-      agree (within 20 %) only where the map is differentiable at those scales.
-    - A contraction measure: ``CONTRACTION_STARTS`` starts perturbed off the orbit's
-      post-impact state x* in random directions (size ``CONTRACTION_DELTA``: the unit of a
-      scaled norm), each followed for ``CONTRACTION_CYCLES`` cycles next to the unperturbed
-      continuation from x*; per start the factor |x_K - x*_K|^(1/K) in that norm (|x_0 -
-      x*| = 1), and the worst over the starts; ``orbit_band``: the largest cycle-to-cycle
-      change of the unperturbed continuation in the same norm (the band the sampled loop
-      walks in).  The orbit counts as contracting when every perturbed start walks and the
-      worst factor is < 1.
-    """
-    cl = closed_loop or ClosedLoop(model, gait.degree)
-    P1 = _cycle_map(model, gait, tube, ctx, controller, 1, cl)
-    radii = {f"{d:g}": _return_map_radius(P1, x_star, d) for d in FD_STEPS} if fd else {}
-    vals = [v for v in radii.values() if v is not None]
-    agree = bool(fd and len(vals) == len(FD_STEPS) and max(vals) <= 1.2 * min(vals))
-    PK = _cycle_map(model, gait, tube, ctx, controller, CONTRACTION_CYCLES, cl)
-    scale = np.r_[np.full(6, CONTRACTION_DELTA[0]), np.full(6, CONTRACTION_DELTA[1])]
-    try:
-        base = PK(x_star)  # the unperturbed continuation: the deviation is measured from it
-        floor = float(max(np.linalg.norm((b - a) / scale) for a, b in
-                          zip([x_star, *base[:-1]], base, strict=True)))
-    except RuntimeError:
-        base, floor = None, None
-    rng = np.random.default_rng(seed)
-    factors: list[float | None] = []
-    for _ in range(CONTRACTION_STARTS if base is not None else 0):
-        d = rng.normal(size=12)
-        d /= np.linalg.norm(d)
-        x0 = x_star + scale * d
-        try:
-            xs = PK(x0)
-        except RuntimeError:
-            factors.append(None)
-            continue
-        eK = np.linalg.norm((xs[-1] - base[-1]) / scale)
-        factors.append(float(eK ** (1.0 / CONTRACTION_CYCLES)))  # e0 = 1 in these units
-    ok = [f for f in factors if f is not None]
-    worst = max(ok) if ok and len(ok) == len(factors) else None
-    return {"fd_spectral_radius": radii, "fd_steps_agree": agree,
-            "contraction_factor_per_cycle": factors, "contraction_worst": worst,
-            "orbit_band": floor, "perturbation": list(CONTRACTION_DELTA),
-            "contraction_starts": CONTRACTION_STARTS, "contraction_cycles": CONTRACTION_CYCLES,
-            "contracting": bool(worst is not None and worst < 1.0)}
-
-
-def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-                    ctx: ControllerContext, steps: int, eigen: bool = True,
+def nominal_walking(bench: Bench, steps: int, eigen: bool = True,
                     controller: str = ControllerName.CLFQP,
-                    closed_loop: ClosedLoop | None = None,
                     fd: bool = True) -> tuple[dict[str, Any], ScenarioResult]:
     """``steps`` steps of ``controller`` in ps (+ the shared swing controller) from the
     gait's start; stability by :func:`orbit_stability` about the last post-impact state
     (when the run completes), and the step-to-step deviation of the post-impact state."""
-    cl = closed_loop or ClosedLoop(model, gait.degree)
-    r = run_scenario(model, gait, tube, Scenario(controller, NOMINAL, steps), context=ctx,
-                     closed_loop=cl)
+    r = bench.run(Scenario(controller, NOMINAL, steps))
     m: dict[str, Any] = {"controller": controller, "run": summary(r)}
     post = np.array(r.post_impact)
     dev = [float(np.abs(post[k + 1] - post[k]).max()) for k in range(len(post) - 1)]
@@ -208,8 +88,7 @@ def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                                   else None)
     stab, why = None, "the nominal run did not complete two cycles"
     if eigen and len(post) >= 2 and r.success:
-        stab, why = orbit_stability(model, gait, tube, ctx, controller, post[-1],
-                                    closed_loop=cl, fd=fd), ""
+        stab, why = orbit_stability(bench, controller, post[-1], fd=fd), ""
     elif not eigen:
         why = "skipped (--quick)"
     m["stability"] = {"computed": stab is not None, "why_not": why, **(stab or {})}
@@ -217,42 +96,13 @@ def nominal_walking(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     return m, r
 
 
-def fig7(runs: dict[str, ScenarioResult], gait: Gait) -> bytes:
-    """Phase portraits of the prosthesis knee and ankle, one row per controller."""
-    plt = _plt()
-    fig, ax = plt.subplots(len(runs), 2, figsize=(10, 3.6 * len(runs)), squeeze=False)
-    for row, (c, r) in enumerate(runs.items()):
-        for j, name in enumerate(("knee th_pk", "ankle th_pa")):
-            a = ax[row, j]
-            for dcode, col, lab in ((0, "tab:green", f"ps ({c})"),
-                                    (1, "tab:pink", "pns (swing controller)")):
-                y = np.where(r.domain == dcode, r.q_p[:, j], np.nan)
-                a.plot(y, np.where(r.domain == dcode, r.qd_p[:, j], np.nan), color=col,
-                       lw=0.7, label=lab)
-            for d in DOMAINS:
-                tr = gait.trajectory.get(d)
-                if tr is not None:
-                    k = 10 + j
-                    a.plot(tr["q"][k], tr["qd"][k], "k--", lw=1,
-                           label="nominal (gait)" if d == "ps" else None)
-            a.set_xlabel(f"{name} (rad)")
-            a.set_ylabel("velocity (rad/s)")
-            state = "completed" if r.success else "FELL"
-            a.set_title(f"{c}: prosthesis {name.split()[0]}, {r.steps} steps, {state}",
-                        fontsize=9)
-        ax[row, 0].legend(fontsize=7)
-    fig.suptitle("Fig. 7: phase portraits, nominal human")
-    fig.tight_layout()
-    return _png(fig)
-
-
 # ---------------------------------------------------------------- 2. exact vs relaxed
 
-def exact_vs_relaxed(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-                     ctx: ControllerContext, steps: int, closed_loop: ClosedLoop | None = None
+def exact_vs_relaxed(bench: Bench, steps: int
                      ) -> tuple[dict[str, Any], dict[str, ScenarioResult]]:
-    runs = {c: run_scenario(model, gait, tube, Scenario(c, NOMINAL, steps), context=ctx,
-                            closed_loop=closed_loop)
+    """``steps`` nominal steps of the exact and the relaxed robust CLF-QP: their torques'
+    chatter and the relaxed law's tracking settling onto the orbit."""
+    runs: dict[str, ScenarioResult] = {c: bench.run(Scenario(c, NOMINAL, steps))
             for c in (ControllerName.CLFQP_EXACT, ControllerName.CLFQP)}
     m: dict[str, Any] = {}
     for c, r in runs.items():
@@ -281,33 +131,16 @@ def exact_vs_relaxed(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     return m, runs
 
 
-def fig6(runs: dict[str, ScenarioResult]) -> bytes:
-    plt = _plt()
-    fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
-    for c, col in ((ControllerName.CLFQP_EXACT, "tab:blue"), (ControllerName.CLFQP, "tab:pink")):
-        r = runs[c]
-        for j, name in enumerate(("knee", "ankle")):
-            u = np.where(r.domain == 0, r.torque[:, j], np.nan)
-            ax[j].plot(r.t, u, color=col, lw=0.7,
-                       label=("exact (eq. robust_CLF_QP)" if c == ControllerName.CLFQP_EXACT
-                              else "relaxed (eq. robust_CLF_QP_relax)"))
-            ax[j].set_ylabel(f"{name} motor torque (N m)")
-    ax[1].set_xlabel("t (s), ps only")
-    ax[0].legend(fontsize=7)
-    fig.suptitle("Fig. 6: prosthesis torques, exact vs relaxed robust CLF-QP")
-    fig.tight_layout()
-    return _png(fig)
-
-
 # ---------------------------------------------------------------- 3. robustness
 
-def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
-               ctx: ControllerContext, steps: int, progress: Progress | None = None,
-               closed_loop: ClosedLoop | None = None
+def robustness(bench: Bench, steps: int, progress: Progress | None = None
                ) -> tuple[dict[str, Any], dict[str, dict[str, ScenarioResult]]]:
-    offset = knee_offset(model, ROBUST_KNEE_OFFSET)
-    perts = select_perturbations(model, gait, tube, 3, PERTURBATION_AMPLITUDE, steps, offset,
-                                 closed_loop=closed_loop)
+    """Every controller on three perturbed human gaits, the prosthesis started off nominal
+    (:data:`ROBUST_KNEE_OFFSET`): knee tracking and success per case."""
+    offset = knee_offset(bench.model, ROBUST_KNEE_OFFSET)
+    perts = select_perturbations(bench.model, bench.gait, bench.tube,
+                                 PerturbationSearch(3, PERTURBATION_AMPLITUDE, steps, offset),
+                                 closed_loop=bench.closed_loop)
     cases = {p.name: p for p in perts}
     controllers = (*ROBUST_CONTROLLERS, REFERENCE_CONTROLLER, PAPER_CONTROLLER)
     runs: dict[str, dict[str, ScenarioResult]] = {}
@@ -316,8 +149,7 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         for c in controllers:
             if progress:
                 progress(f"robustness: {c} on {name}")
-            runs[name][c] = run_scenario(model, gait, tube, Scenario(c, p, steps, offset),
-                                         context=ctx, closed_loop=closed_loop)
+            runs[name][c] = bench.run(Scenario(c, p, steps, offset))
     m: dict[str, Any] = {"amplitude_rad": PERTURBATION_AMPLITUDE,
                          "knee_output_offset_rad": ROBUST_KNEE_OFFSET,
                          "initial_offset_rad": list(offset),
@@ -327,7 +159,7 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                                    for n, rr in runs.items()}}
     order_ok, clf_all = [], True
     for rr in runs.values():
-        k = {c: rr[c].knee_rms("ps") for c in ROBUST_CONTROLLERS}
+        k = {c: rr[c].knee_rms(Domain.PS) for c in ROBUST_CONTROLLERS}
         order_ok.append(bool(k[ControllerName.CLFQP] < k[ControllerName.PASSIVE]
                              < k[ControllerName.PD]))
         clf_all = clf_all and rr[ControllerName.CLFQP].success
@@ -341,44 +173,18 @@ def robustness(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     # that baseline completes the case (a baseline that falls is beaten on robustness)
     m["clfqp_below_each_completed_baseline"] = [
         bool(rr[ControllerName.CLFQP].success and all(
-            rr[ControllerName.CLFQP].knee_rms("ps") < rr[b].knee_rms("ps")
+            rr[ControllerName.CLFQP].knee_rms(Domain.PS) < rr[b].knee_rms(Domain.PS)
             for b in ROBUST_CONTROLLERS[1:] if rr[b].success)) for rr in runs.values()]
     # the paper's order of its baselines, as found (None where one of them fell)
+    passive, pd = ControllerName.PASSIVE, ControllerName.PD
     m["passive_lt_pd_where_both_complete"] = [
-        (bool(rr[ControllerName.PASSIVE].knee_rms("ps") < rr[ControllerName.PD].knee_rms("ps"))
-         if rr[ControllerName.PASSIVE].success and rr[ControllerName.PD].success else None)
+        (bool(rr[passive].knee_rms(Domain.PS) < rr[pd].knee_rms(Domain.PS))
+         if rr[passive].success and rr[pd].success else None)
         for rr in runs.values()]
     m["clfqp_succeeds_every_case"] = bool(clf_all)
     m["every_controller_completes_every_case"] = bool(
         all(rr[c].success for rr in runs.values() for c in ROBUST_CONTROLLERS))
     return m, runs
-
-
-def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
-    plt = _plt()
-    fig, ax = plt.subplots(len(runs), 1, figsize=(9, 2.6 * len(runs)), squeeze=False)
-    cols = {ControllerName.CLFQP: "tab:green", ControllerName.PASSIVE: "tab:orange",
-            ControllerName.PD: "tab:red", REFERENCE_CONTROLLER: "tab:gray",
-            PAPER_CONTROLLER: "tab:purple"}
-    for i, (n, rr) in enumerate(runs.items()):
-        a = ax[i, 0]
-        longest = max(rr.values(), key=lambda r: r.t.size)  # desired B_pk(tau) along it
-        m = longest.domain == 0
-        a.plot(longest.t, np.where(m, longest.knee_ref, np.nan), color="lightblue", lw=2.5,
-               zorder=0, label=f"desired (along {longest.scenario.controller})")
-        for c, r in rr.items():
-            m = r.domain == 0
-            a.plot(r.t, np.where(m, r.q_p[:, 0], np.nan), color=cols[c], lw=0.8,
-                   label=f"{c} ({'ok' if r.success else 'fell'})")
-            if r.failed and r.fail_t is not None:
-                a.axvline(r.fail_t, color=cols[c], ls=":", lw=1)
-        a.set_title(n, fontsize=9)
-        a.set_ylabel("th_pk (rad)")
-        a.legend(fontsize=7, ncol=4)
-    ax[-1, 0].set_xlabel("t (s), ps only")
-    fig.suptitle("Fig. 8: prosthesis knee under perturbed human gaits")
-    fig.tight_layout()
-    return _png(fig)
 
 
 def parse_scenario(model: HumanProsthesisModel, text: str, steps: int) -> Scenario:
@@ -416,31 +222,6 @@ def parse_scenario(model: HumanProsthesisModel, text: str, steps: int) -> Scenar
 
 # ---------------------------------------------------------------- all
 
-#: seconds of each run the animations show (the nominal run, each robustness case)
-ANIMATION_SECONDS = {"nominal": 6.0, "case": 4.0}
-
-
-def write_animations(model: HumanProsthesisModel, out: str, nominal: ScenarioResult,
-                     cases: Mapping[str, Mapping[str, ScenarioResult]]) -> dict[str, str]:
-    """GIFs of the walker (:mod:`orchestrator.experiments.animation`): the nominal `clfqp` run and
-    `clfqp` in each robustness case, the first seconds of each; name -> file in ``out``."""
-    from orchestrator.experiments.animation import walker_gif
-
-    runs = [("nominal", "walker_nominal.gif", nominal, "clfqp, nominal human",
-             ANIMATION_SECONDS["nominal"])]
-    for k, (case, rs) in enumerate(cases.items(), start=1):
-        if ControllerName.CLFQP in rs:
-            runs.append((case, f"walker_case{k}.gif", rs[ControllerName.CLFQP], f"clfqp, {case}",
-                         ANIMATION_SECONDS["case"]))
-    files = {}
-    for name, fname, r, title, secs in runs:
-        if r.q is None or r.t.size == 0:
-            continue
-        atomic_write_bytes(os.path.join(out, fname), walker_gif(
-            model, r.t, r.q, r.domain, r.tau, r.socket_force, title=title, max_seconds=secs))
-        files[name] = fname
-    return files
-
 
 def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                     out: str | os.PathLike[str], steps: int = 20, *, eigen: bool = True,
@@ -449,29 +230,27 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     into ``out``."""
     out = os.fspath(out)
     os.makedirs(out, exist_ok=True)
-    ctx = ControllerContext(gait, tube, model, None)
-    cl = ClosedLoop(model, gait.degree)  # compiled once, shared by every run
+    bench = Bench.of(model, gait, tube)  # the closed loop compiled once, shared by every run
     say = progress or (lambda s: None)
     say("nominal walking (robust CLF-QP, relaxed)")
-    m1, r1 = nominal_walking(model, gait, tube, ctx, steps, eigen=eigen, closed_loop=cl)
+    m1, r1 = nominal_walking(bench, steps, eigen=eigen)
     say(f"nominal walking ({REFERENCE_CONTROLLER} reference)")
-    m1r, r1r = nominal_walking(model, gait, tube, ctx, steps, eigen=eigen,
-                               controller=REFERENCE_CONTROLLER, closed_loop=cl, fd=False)
+    m1r, r1r = nominal_walking(bench, steps, eigen=eigen, controller=REFERENCE_CONTROLLER,
+                               fd=False)
     say(f"nominal walking ({PAPER_CONTROLLER}, the paper's literal formulation)")
-    m1p, _ = nominal_walking(model, gait, tube, ctx, steps, eigen=False,
-                             controller=PAPER_CONTROLLER, closed_loop=cl)
+    m1p, _ = nominal_walking(bench, steps, eigen=False, controller=PAPER_CONTROLLER)
     atomic_write_bytes(os.path.join(out, "fig7_phase_portraits.png"),
                        fig7({ControllerName.CLFQP: r1, REFERENCE_CONTROLLER: r1r}, gait))
     say("exact vs relaxed robust CLF-QP")
-    m2, r2 = exact_vs_relaxed(model, gait, tube, ctx, min(steps, 5), closed_loop=cl)
+    m2, r2 = exact_vs_relaxed(bench, min(steps, 5))
     atomic_write_bytes(os.path.join(out, "fig6_torques.png"), fig6(r2))
     say("robustness")
-    m3, r3 = robustness(model, gait, tube, ctx, steps, progress=say, closed_loop=cl)
+    m3, r3 = robustness(bench, steps, progress=say)
     atomic_write_bytes(os.path.join(out, "fig8_robustness.png"), fig8(r3))
     say("animating the walker")
     animations = write_animations(model, out, r1, r3)
     say("diagnosis: input authority, reduced model vs full loop")
-    auth = input_authority(model, gait, ctx)
+    auth = input_authority(model, gait, bench.ctx)
     w = tube.box(0.5)[1]
     tt = np.linspace(tube.tau_lo, tube.tau_hi, 201)
     lo, hi = tube.delta_bounds(tt)
@@ -493,9 +272,8 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         "animations": animations,
     }
     metrics["claims"] = claims(metrics)
-    atomic_write_bytes(os.path.join(out, "metrics.json"),
-                       json.dumps(as_jsonable(metrics), indent=1).encode())
-    return as_jsonable(metrics)
+    write_json(os.path.join(out, "metrics.json"), metrics)
+    return to_jsonable(metrics)
 
 
 def claims(m: dict[str, Any]) -> list[dict[str, Any]]:

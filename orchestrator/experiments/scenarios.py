@@ -29,7 +29,7 @@ from characterization.gait.verification import make_simulator
 from characterization.tube.fit import deviation_profiles, fit_tube, nominal_coefficients
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
-from hp_model.domains import DOMAINS, HUMAN_OUTPUTS, N_Y2, PROSTHESIS, y2_row
+from hp_model.domains import N_Y2, PROSTHESIS, Domain, y2_row
 from hp_model.falls import Fall, FallOutcome
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
@@ -64,8 +64,8 @@ class Perturbation:
     amplitude: float = 0.0
     seed: int = 0
 
-    def thetas(self, gait: Gait) -> dict[str, np.ndarray]:
-        return perturbed_thetas({d: gait.theta(d) for d in DOMAINS}, self.amplitude,
+    def thetas(self, gait: Gait) -> dict[Domain, np.ndarray]:
+        return perturbed_thetas({d: gait.theta(d) for d in Domain}, self.amplitude,
                                 self.seed)
 
 
@@ -101,7 +101,7 @@ class ScenarioResult(FallOutcome):
     qd_p: np.ndarray  # (n, 2)
     torque: np.ndarray  # (n, 2) motor torques the controller commanded
     knee_ref: np.ndarray  # (n,) nominal knee B_pk(tau) of the domain (gait, not perturbed)
-    mode: list[ControllerMode]
+    mode: list[ControllerMode | str]  # per period ("" where the link reports none)
     V: np.ndarray
     rho: np.ndarray
     fallback_count: int
@@ -131,10 +131,10 @@ class ScenarioResult(FallOutcome):
     def fail_domain(self) -> str | None:
         return None if self.fall is None else self.fall.domain
 
-    def knee_rms(self, domain: str | None = "ps") -> float:
+    def knee_rms(self, domain: str | None = Domain.PS) -> float:
         """RMS of th_pk - B_pk(tau) over the samples of ``domain`` (None: all), rad."""
         m = np.ones(self.t.size, bool) if domain is None else \
-            self.domain == (0 if domain == "ps" else 1)
+            self.domain == Domain(domain).code
         if not m.any():
             return float("nan")
         e = self.q_p[m, 0] - self.knee_ref[m]
@@ -155,7 +155,7 @@ def knee_reference(gait: Gait, domain: np.ndarray, tau: np.ndarray) -> np.ndarra
     (0 ps, 1 pns) at phase ``tau`` (clipped to [0, 1]); shape of ``tau``."""
     domain, tau = np.asarray(domain), np.clip(np.asarray(tau, float), 0.0, 1.0)
     ref = np.zeros(tau.shape)
-    for code, d in enumerate(DOMAINS):
+    for code, d in enumerate(Domain):
         m = domain == code
         if m.any():
             r = y2_row(d, PROSTHESIS[0])
@@ -172,59 +172,72 @@ def initial_state(model: HumanProsthesisModel, gait: Gait,
     FMU's offset_knee/offset_ankle start from the same state).  Only the prosthesis starts
     off its nominal trajectory, as in the paper's robustness test.  ``closed_loop``: of the
     model and the gait's degree (built here when absent)."""
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     cl = closed_loop or ClosedLoop(model, gait.degree)
-    return cl.start_state("ps", tr["q"][:, 0], tr["qd"][:, 0], gait.theta("ps"), offset)
+    return cl.start_state(Domain.PS, tr["q"][:, 0], tr["qd"][:, 0], gait.theta(Domain.PS), offset)
+
+
+@dataclass(frozen=True)
+class PlantSetup:
+    """How a run's plant departs from the default: the simulator's options (None: the
+    defaults), the human's tracking gains (eps, kp, kd; None: the gait's) and feedback delay
+    (s; None: the continuous human, :class:`hp_model.simulator.HybridSimulator`), and the
+    encoder the controller's measurements go through (the oracle ignores it)."""
+
+    options: SimOptions | None = None
+    human_gains: np.ndarray | None = None
+    human_delay: float | None = None
+    encoder: Encoder = IDEAL_ENCODER
+
+
+DEFAULT_PLANT = PlantSetup()
 
 
 def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                  scenario: Scenario, *, context: ControllerContext | None = None,
-                 options: SimOptions | None = None,
-                 q0: np.ndarray | None = None, qd0: np.ndarray | None = None,
-                 closed_loop: ClosedLoop | None = None,
-                 human_gains: np.ndarray | None = None, human_delay: float | None = None,
-                 encoder: Encoder = IDEAL_ENCODER) -> ScenarioResult:
+                 closed_loop: ClosedLoop | None = None, plant: PlantSetup = DEFAULT_PLANT,
+                 start: tuple[np.ndarray, np.ndarray] | None = None) -> ScenarioResult:
     """Run one scenario on the full hybrid model (module docstring).  ``model`` is the
     plant's; the controller's comes from ``context`` (default: the plant's).
     ``closed_loop``: the compiled closed-loop functions of the plant and the gait's degree,
     to reuse between runs (building them costs about 0.5 s); built here when absent.
-    ``human_gains``: the human's (eps, kp, kd) (default: the gait's); ``human_delay``: s,
-    None for the continuous human (:class:`hp_model.simulator.HybridSimulator`);
-    ``encoder``: what the controller's measurements go through (the oracle ignores it)."""
+    ``plant``: the simulator's options, the human's gains and delay, the encoder
+    (:class:`PlantSetup`); ``start``: the initial (q, qd) (default: :func:`initial_state` with
+    the scenario's offset)."""
     if closed_loop is None:
         closed_loop = ClosedLoop(model, gait.degree)
     elif closed_loop.degree != gait.degree or closed_loop.model is not model:
         raise ValueError("closed_loop was built for another model or Bezier degree")
-    gains = gait.gains_array if human_gains is None else np.asarray(human_gains, float)
+    gains = (gait.gains_array if plant.human_gains is None
+             else np.asarray(plant.human_gains, float))
     sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
-                          options or SimOptions(), human_delay=human_delay)
-    if q0 is None or qd0 is None:
-        q0, qd0 = initial_state(model, gait, scenario.initial_offset, closed_loop)
+                          plant.options or SimOptions(), human_delay=plant.human_delay)
+    q0, qd0 = start or initial_state(model, gait, scenario.initial_offset, closed_loop)
     link: Link
     if scenario.controller == ORACLE:
         sim.thetas = oracle_thetas(gait, sim.thetas)
-        plant = SimulatorPlant(sim, q0, qd0, mode=ClosedLoopMode.FULL)
+        sim_plant = SimulatorPlant(sim, q0, qd0, mode=ClosedLoopMode.FULL)
         link = OracleLink()
     else:
         ctx = context or ControllerContext(gait, tube, model, None)
         ctrl = make_controller(scenario.controller, gait, tube, model, context=ctx)
-        plant = SimulatorPlant(sim, q0, qd0)
-        link = ControllerLink(ctrl, encoder)
-    log = run_loop(plant, link, steps=scenario.steps)
-    return scenario_result(model, gait, tube, scenario, log, plant.run.impacts)
+        sim_plant = SimulatorPlant(sim, q0, qd0)
+        link = ControllerLink(ctrl, plant.encoder)
+    log = run_loop(sim_plant, link, steps=scenario.steps)
+    return scenario_result(model, gait, tube, scenario, log, sim_plant.run.impacts)
 
 
-def oracle_thetas(gait: Gait, thetas: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+def oracle_thetas(gait: Gait, thetas: Mapping[Domain, np.ndarray]) -> dict[Domain, np.ndarray]:
     """The outputs the oracle's walker tracks: the human's rows of ``thetas`` (the human's
     possibly perturbed gait) and the prosthesis's rows of the nominal gait (what a prosthesis
     controller is given)."""
-    L = gait.params["ps"].layout
-    out = {}
-    for d in DOMAINS:
+    L = gait.params[Domain.PS].layout
+    out: dict[Domain, np.ndarray] = {}
+    for d in Domain:
         th = np.array(thetas[d], float)
         nominal = gait.theta(d)
         for r in range(N_Y2):
-            if r + 1 not in HUMAN_OUTPUTS[d]:  # rows of (y1, y2): y2 row r is r + 1
+            if r + 1 not in d.human_outputs:  # rows of (y1, y2): y2 row r is r + 1
                 th[L.row(r)] = nominal[L.row(r)]
         th[L.progress] = nominal[L.progress]  # v_hip, p_min, p_max: the phase is the
         out[d] = th  # prosthesis's
@@ -255,8 +268,8 @@ def scenario_result(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
     fs = np.array(log.socket_force, float).reshape(n, 3)
     ps = domain == 0
     j = [model.coord_names.index(c) for c in JOINTS]
-    pk, pa = model.roles["ps"].prosthesis
-    post = [np.r_[im.q[j], im.qd_plus[j]] for im in impacts if im.into == "ps"]
+    pk, pa = model.roles[Domain.PS].prosthesis
+    post = [np.r_[im.q[j], im.qd_plus[j]] for im in impacts if im.into == Domain.PS]
     return ScenarioResult(
         scenario=scenario, t=np.array(log.t, float), tau=tau, domain=domain,
         q_p=q[:, [pk, pa]], qd_p=qd[:, [pk, pa]], torque=np.array(log.torque).reshape(n, 2),
@@ -290,34 +303,59 @@ def oracle_walks(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, scena
     return r.success, r.reason
 
 
-def select_perturbations(model: HumanProsthesisModel, gait: Gait, tube: ForceTube, n: int = 3,
-                         amplitude: float = 0.01, steps: int = 20,
-                         initial_offset: tuple[float, float] = (0.0, 0.0), max_seed: int = 50,
+@dataclass(frozen=True)
+class PerturbationSearch:
+    """What :func:`select_perturbations` looks for: ``n`` perturbed human gaits of
+    ``amplitude`` (rad) that the oracle walks for ``steps`` steps from ``initial_offset``
+    (knee, ankle; rad), among the seeds below ``max_seed``."""
+
+    n: int = 3
+    amplitude: float = 0.01
+    steps: int = 20
+    initial_offset: tuple[float, float] = (0.0, 0.0)
+    max_seed: int = 50
+
+
+def select_perturbations(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
+                         search: PerturbationSearch = PerturbationSearch(),
                          closed_loop: ClosedLoop | None = None) -> list[Perturbation]:
-    """The first ``n`` seeds (0, 1, ...) whose perturbed human gait the oracle walks for
-    ``steps`` steps from ``initial_offset`` (:func:`oracle_walks`): the cases every controller
-    is then run on.  A fixed rule, independent of any prosthesis controller."""
+    """The first ``search.n`` seeds (0, 1, ...) whose perturbed human gait the oracle walks
+    (:func:`oracle_walks`, :class:`PerturbationSearch`): the cases every controller is then
+    run on.  A fixed rule, independent of any prosthesis controller."""
     out: list[Perturbation] = []
-    for seed in range(max_seed):
-        p = Perturbation(f"human-{len(out) + 1} (seed {seed})", amplitude, seed)
-        sc = Scenario(ORACLE, p, steps, initial_offset)
+    for seed in range(search.max_seed):
+        p = Perturbation(f"human-{len(out) + 1} (seed {seed})", search.amplitude, seed)
+        sc = Scenario(ORACLE, p, search.steps, search.initial_offset)
         if oracle_walks(model, gait, tube, sc, closed_loop)[0]:
             out.append(p)
-            if len(out) == n:
+            if len(out) == search.n:
                 return out
-    raise RuntimeError(f"fewer than {n} of {max_seed} perturbed gaits (amplitude "
-                       f"{amplitude} rad) walk {steps} steps under the oracle")
+    raise RuntimeError(f"fewer than {search.n} of {search.max_seed} perturbed gaits (amplitude "
+                       f"{search.amplitude} rad) walk {search.steps} steps under the oracle")
+
+
+@dataclass(frozen=True)
+class SimulatedTubeOptions:
+    """The perturbed human gaits of :func:`simulated_tube` (amplitude, rad; seeds from
+    ``first_seed``) and its tube (Bezier degree, phase window [tau_lo, tau_hi])."""
+
+    amplitude: float = 0.01
+    degree: int = 3
+    tau_lo: float = 0.02
+    tau_hi: float = 0.98
+    first_seed: int = 1000
 
 
 def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20,
-                   amplitude: float = 0.01, degree: int = 3, tau_lo: float = 0.02,
-                   tau_hi: float = 0.98, first_seed: int = 1000,
+                   options: SimulatedTubeOptions = SimulatedTubeOptions(),
                    progress: Callable[[int], None] | None = None
                    ) -> tuple[ForceTube, list[tuple[np.ndarray, np.ndarray]]]:
     """Stand-in for socket-force playback (until ``characterization.tube.playback`` lands): the
     socket force F_s = lam[3:6] of the first ps step of ``n_profiles`` perturbed human gaits
-    (seeds first_seed, ...; prosthesis under feedback linearization, mode full), deviation
-    from F*(tau), fitted with :func:`characterization.tube.fit.fit_tube`."""
+    (seeds ``options.first_seed``, ...; prosthesis under feedback linearization, mode full),
+    deviation from F*(tau), fitted with :func:`characterization.tube.fit.fit_tube`."""
+    amplitude, first_seed = options.amplitude, options.first_seed
+    tau_lo, tau_hi = options.tau_lo, options.tau_hi
     base = make_simulator(model, gait)
     q0, qd0 = initial_state(model, gait, closed_loop=base.cl)
     steps: list[tuple[np.ndarray, np.ndarray]] = []
@@ -326,7 +364,7 @@ def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20
         p = Perturbation("tube", amplitude, seed)
         seed += 1
         sim = HybridSimulator(model, base.cl, p.thetas(gait), gait.gains_array, base.opt)
-        r = sim.run(q0, qd0, "ps", steps=1)
+        r = sim.run(q0, qd0, Domain.PS, steps=1)
         if r.failed or r.steps < 1:
             continue
         m = r.domain == 0
@@ -335,7 +373,7 @@ def simulated_tube(model: HumanProsthesisModel, gait: Gait, n_profiles: int = 20
             progress(len(steps))
     coef = nominal_coefficients(gait, tau_lo, tau_hi)
     prof = deviation_profiles(steps, coef, tau_lo, tau_hi)
-    tube = fit_tube(prof, coef, tau_lo, tau_hi, degree=degree, gait_hash=gait.hash(),
+    tube = fit_tube(prof, coef, tau_lo, tau_hi, degree=options.degree, gait_hash=gait.hash(),
                     source={"kind": "simulated perturbed human gaits (playback stand-in)",
                             "amplitude_rad": amplitude, "first_seed": first_seed})
     return tube, prof
@@ -352,25 +390,10 @@ def summary(r: ScenarioResult) -> dict[str, Any]:
             "fall_reason": r.fall.reason.label if r.fall is not None else None,
             "fail_t": r.fail_t, "fail_tau": r.fail_tau, "fail_domain": r.fail_domain,
             "duration_s": float(r.t[-1]) if r.t.size else 0.0,
-            "knee_rms_ps_rad": r.knee_rms("ps"), "knee_rms_all_rad": r.knee_rms(None),
+            "knee_rms_ps_rad": r.knee_rms(Domain.PS), "knee_rms_all_rad": r.knee_rms(None),
             "socket_force_in_tube": r.fs_in_tube,
             "max_touchdown_pitch_rad": (max(abs(p) for p in r.touchdown_pitch)
                                         if r.touchdown_pitch else None),
             "fallback_count": r.fallback_count,
             "modes": {m: r.mode.count(m) for m in sorted(set(r.mode))}}
 
-
-def as_jsonable(x: Any) -> Any:
-    if isinstance(x, Mapping):
-        return {str(k): as_jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [as_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return as_jsonable(x.tolist())
-    if isinstance(x, np.floating | float):
-        return float(x) if np.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.bool_):
-        return bool(x)
-    return x

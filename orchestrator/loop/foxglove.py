@@ -22,13 +22,14 @@ that seeks shows the right picture.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from hp_model.domains import DOMAINS, Y2_COORDS
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
+from orchestrator.loop.plant import Vector
 from orchestrator.loop.walker_figure import FORCE_SCALE, HUMAN, IWALK, PROSTHESIS
 
 TRANSFORMS_TOPIC = "/walker/tf"
@@ -92,7 +93,7 @@ class WalkerFoxglove:
 
     def __init__(self, model: HumanProsthesisModel, gait: Any = None, tube: Any = None
                  ) -> None:
-        from bus_schemas.mcap_schemas import foxglove_message_class
+        from bus_schemas.recording.foxglove import foxglove_message_class
 
         self._frames = model.numeric()["frames"]
         self._zero = np.zeros(model.nq)
@@ -152,11 +153,11 @@ class WalkerFoxglove:
         self.gait, self.tube = gait, tube
         self._ref: dict[str, tuple[tuple[str, ...], np.ndarray, Callable]] = {}
         if gait is not None:
-            for d in DOMAINS:
+            for d in Domain:
                 joints = tuple(j for j, c in (("knee", "th_pk"), ("ankle", "th_pa"))
-                               if c in Y2_COORDS[d])
-                rows = [Y2_COORDS[d].index(c) for c in ("th_pk", "th_pa")
-                        if c in Y2_COORDS[d]]
+                               if c in d.y2_coords)
+                rows = [d.y2_coords.index(c) for c in ("th_pk", "th_pa")
+                        if c in d.y2_coords]
                 alpha = np.asarray(gait.params[d].alpha, float)[rows]
                 self._ref[d] = (joints, alpha, _bernstein(alpha.shape[1] - 1))
         if tube is not None:
@@ -164,7 +165,7 @@ class WalkerFoxglove:
                           tube.widened_upper, _bernstein(tube.nominal.shape[1] - 1),
                           _bernstein(tube.lower.shape[1] - 1))
 
-    def pose(self, q: Sequence[float]) -> np.ndarray:
+    def pose(self, q: Vector) -> np.ndarray:
         """(3, frames) world x [m], z [m], pitch [rad] of every frame (the last q and its
         pose are kept: the transforms and the scene of one state evaluate the model once)."""
         qa = np.array(q, float)
@@ -174,7 +175,7 @@ class WalkerFoxglove:
         return self._pose
 
     # -- transforms
-    def transforms(self, ns: int, q: Sequence[float]) -> bytes:
+    def transforms(self, ns: int, q: Vector) -> bytes:
         """Serialized ``foxglove.FrameTransforms``: every frame in its parent at time
         ``ns`` [ns]."""
         p = self.pose(q)
@@ -197,9 +198,8 @@ class WalkerFoxglove:
         return msg.SerializeToString()
 
     # -- scene
-    def scene(self, ns: int, t: float, q: Sequence[float],
-              socket_force: Sequence[float] | None, domain: str, tau: float, step: int
-              ) -> bytes:
+    def scene(self, ns: int, t: float, q: Vector, socket_force: Vector | None, domain: str,
+              tau: float, step: int) -> bytes:
         """Serialized ``foxglove.SceneUpdate`` of the walker at log time ``ns`` [ns]
         (simulation time ``t`` [s] in its text); ``socket_force`` (Fx, Fz [N], My [N m]) in
         the prosthesis top link's frame."""
@@ -260,7 +260,7 @@ class WalkerFoxglove:
             joints, alpha, basis = self._ref[domain]
             s = min(max(float(tau), 0.0), 1.0)
             out.update(zip(joints, (alpha @ basis(s)).tolist(), strict=True))
-        if self.tube is not None and domain == "ps":
+        if self.tube is not None and domain == Domain.PS:
             t_lo, t_hi, nominal, lower, upper, bn, bd = self._tube
             s = min(max((float(tau) - t_lo) / (t_hi - t_lo), 0.0), 1.0)
             f = nominal @ bn(s)

@@ -7,18 +7,18 @@ motor torque of the period.
 - :class:`OracleLink`: no controller; the plant's own feedback linearization of the
   prosthesis outputs (perfect knowledge and sensing: the walkability label).
 - The CAN link over a python-can bus with the fault plan is
-  :class:`orchestrator.cosim.master.CanLink`.
+  :class:`orchestrator.cosim.can_link.CanLink`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from orchestrator.loop.plant import Observation
+from orchestrator.loop.plant import Observation, Vector
 from prosthesis_controller import ProsthesisMeasurement
 from prosthesis_controller.interface import Controller, ControllerMode
 
@@ -26,7 +26,7 @@ from prosthesis_controller.interface import Controller, ControllerMode
 class Command(NamedTuple):
     """A link's answer for one period."""
 
-    torque: Sequence[float] | None  # (2,) motor torques (N m); None: the plant's own law
+    torque: Vector | None  # (2,) motor torques (N m); None: the plant's own law
     mode: ControllerMode | str = ""  # the controller's mode of the tick ("" over CAN)
     V: float | None = 0.0  # CLF value V_eps; None: not reported (over CAN: CtrlClf absent)
     rho: float | None = 0.0  # CLF-QP relaxation; None: not reported (no relaxation)
@@ -41,6 +41,21 @@ class Link(Protocol):
     def exchange(self, obs: Observation) -> Command: ...
 
     def pace(self, k: int) -> None: ...
+
+
+class LateLink(Link, Protocol):
+    """A link that sends before it waits (``idle_after_send`` true: the co-simulation's CAN
+    link in lockstep): ``exchange(obs, idle)`` calls ``idle()`` once, after the period's
+    frames went out and before it waits for the reply; the Command it returns may be
+    provisional until ``settle(cmd)`` completes it (see :func:`orchestrator.loop.run_loop`)."""
+
+    @property
+    def idle_after_send(self) -> bool: ...
+
+    def exchange(self, obs: Observation, idle: Callable[[], None] | None = None
+                 ) -> Command: ...
+
+    def settle(self, cmd: Command) -> Command: ...
 
 
 @dataclass(frozen=True)
@@ -117,7 +132,7 @@ def measurement(obs: Observation, encoder: Encoder = IDEAL_ENCODER,
 def bus_quantized(m: ProsthesisMeasurement) -> ProsthesisMeasurement:
     """``m`` as the controller node decodes it from AMPRO3's frames (the codec's
     resolution; time in whole microseconds)."""
-    from bus_schemas import codec
+    from bus_schemas.transport import codec
 
     pitch = m.socket_pitch
     return ProsthesisMeasurement(
@@ -145,7 +160,7 @@ class ControllerLink:
         dg = out.diagnostics
         u = np.array(out.torque, float)
         if self.quantize:
-            from bus_schemas import codec
+            from bus_schemas.transport import codec
 
             u = np.array([codec.quantize_torque(float(u[0])),
                           codec.quantize_torque(float(u[1]))])

@@ -21,16 +21,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple, Protocol
+from typing import NamedTuple, Protocol, TypeAlias
 
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoopMode
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimState
 from human_fmu.instance import HumanFmu
+
+#: a short vector of floats as the plants and links give it: a tuple, a list or a 1-D array
+Vector: TypeAlias = Sequence[float] | np.ndarray
 
 
 class Sensed(NamedTuple):
@@ -51,7 +54,7 @@ def sensed(domain: str, angles: tuple[float, float], velocities: tuple[float, fl
            normal_force: float, socket_pitch: float) -> Sensed:
     """The one map from the plant's state to what AMPRO3 senses (module docstring);
     ``normal_force``: the ground's normal force on the prosthesis foot (N) when in ps."""
-    ps = domain == "ps"
+    ps = domain == Domain.PS
     return Sensed(float(angles[0]), float(angles[1]), float(velocities[0]),
                   float(velocities[1]), max(float(normal_force), 0.0) if ps else 0.0, ps,
                   float(socket_pitch))
@@ -62,7 +65,7 @@ class Observation(NamedTuple):
 
     k: int
     t: float  # s
-    domain: str  # "ps" / "pns"
+    domain: Domain
     steps: int  # impacts so far
     tau: float  # the plant's phase (ground truth, not a sensor)
     sensed: Sensed
@@ -74,10 +77,10 @@ class Observation(NamedTuple):
 class Truth(NamedTuple):
     """Ground truth of a period under the applied motor torque (for logs and recordings)."""
 
-    q: Sequence[float]  # (12,) rad / m, model coordinates
-    qd: Sequence[float]  # (12,)
-    socket_force: Sequence[float]  # (3,) F_x, F_z (N), M_y (N m) on the socket
-    torque: Sequence[float]  # (2,) motor torques applied (N m, after the plant's bound)
+    q: Vector  # (12,) rad / m, model coordinates
+    qd: Vector  # (12,)
+    socket_force: Vector  # (3,) F_x, F_z (N), M_y (N m) on the socket
+    torque: Vector  # (2,) motor torques applied (N m, after the plant's bound)
 
 
 class Plant(Protocol):
@@ -87,7 +90,7 @@ class Plant(Protocol):
 
     def observe(self) -> Observation: ...
 
-    def actuate(self, torque: np.ndarray | None) -> Truth: ...
+    def actuate(self, torque: Vector | None) -> Truth: ...
 
     def advance(self) -> None: ...
 
@@ -113,13 +116,13 @@ class SimulatorPlant:
     or "full" (the plant's own feedback linearization of all six torques: the oracle)."""
 
     def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
-                 domain: str = "ps", *, mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
+                 domain: str = Domain.PS, *, mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
                  ) -> None:
         self.sim = sim
         self.model: HumanProsthesisModel = sim.model
         self.dt = sim.opt.dt
         self.run = sim.start(q0, qd0, domain, mode=mode)
-        self._pk, self._pa = self.model.roles["ps"].prosthesis
+        self._pk, self._pa = self.model.roles[Domain.PS].prosthesis
         self._pitch = self.model.pitch_row("socket")
         self._k = 0
 
@@ -130,8 +133,8 @@ class SimulatorPlant:
     def observe(self) -> Observation:
         return observe_state(self._k, self.run.observe(), (self._pk, self._pa), self._pitch)
 
-    def actuate(self, torque: np.ndarray | None) -> Truth:
-        self.run.apply(torque)
+    def actuate(self, torque: Vector | None) -> Truth:
+        self.run.apply(None if torque is None else np.asarray(torque, dtype=float))
         q, qd, u, lam = self.run.last_sample()
         return Truth(q, qd, lam[3:6], u[4:6])
 
@@ -173,7 +176,7 @@ class FmuPlant:
     def observe(self) -> Observation:
         r = self.fmu.read(False) if self._apart else self.fmu.read()
         y = r.sensors
-        dom = DOMAINS[r.domain]
+        dom = Domain.from_code(r.domain)
         s = sensed(dom, (y[0], y[1]), (y[2], y[3]), y[4], y[6])
         obs = Observation(self._k, self._k * self.dt, dom, r.steps, float(y[5]), s)
         if self._ended_at is not None or r.fell:
@@ -200,7 +203,7 @@ class FmuPlant:
         if self._state is None:
             self._state = self.fmu.read_state()
 
-    def actuate(self, torque: np.ndarray | None) -> Truth:
+    def actuate(self, torque: Vector | None) -> Truth:
         if torque is None:
             raise ValueError("the FMU plant needs a prosthesis torque (no oracle mode)")
         u0, u1 = float(torque[0]), float(torque[1])

@@ -8,7 +8,7 @@ where the link reported none) and, given a
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -21,7 +21,7 @@ from orchestrator.loop.foxglove import (
     WalkerFoxglove,
 )
 from orchestrator.loop.link import Command
-from orchestrator.loop.plant import Observation, Truth
+from orchestrator.loop.plant import Observation, Truth, Vector
 
 
 def ground_truth_record(obs: Observation, truth: Truth) -> dict[str, Any]:
@@ -44,14 +44,14 @@ def clf_record(t: float, V: float | None, rho: float | None) -> dict[str, Any]:
     return {"t": t, "V": V, "rho": rho}
 
 
-def _floats(v: Sequence[float]) -> list[float]:
+def _floats(v: Vector) -> list[float]:
     """A list of floats (the FMU's values already are; the simulator's are an array)."""
     return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
 
 class GroundTruthRecorder:
     """Writes ``/ground_truth`` and ``/controller/clf`` to ``rec`` (a
-    :class:`bus_schemas.mcap_schemas.Recorder`) at log time ``log_ns(t)`` (default: the
+    :class:`bus_schemas.recording.recorder.Recorder`) at log time ``log_ns(t)`` (default: the
     simulation time); ``deferred``: queued and
     serialized when the owner calls ``rec.write_deferred()`` (the co-simulation does it
     while it waits for the controller); ``walker``: also the walker for Foxglove, at the

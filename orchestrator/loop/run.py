@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, TypedDict, TypeGuard, Unpack
 
+from hp_model.domains import Domain
 from hp_model.falls import Fall
-from orchestrator.loop.link import Command, Link
-from orchestrator.loop.plant import Observation, Plant, Truth
+from orchestrator.loop.link import Command, LateLink, Link
+from orchestrator.loop.plant import Observation, Plant, Truth, Vector
 from prosthesis_controller.interface import ControllerMode
 
 
@@ -50,10 +51,10 @@ class LoopLog:
     t: list[float] = field(default_factory=list)
     tau: list[float] = field(default_factory=list)
     domain: list[int] = field(default_factory=list)  # 0 ps, 1 pns
-    q: list[Sequence[float]] = field(default_factory=list)  # (12,) ground truth
-    qd: list[Sequence[float]] = field(default_factory=list)
-    torque: list[Sequence[float]] = field(default_factory=list)  # (2,) motor torques applied
-    socket_force: list[Sequence[float]] = field(default_factory=list)  # (3,)
+    q: list[Vector] = field(default_factory=list)  # (12,) ground truth
+    qd: list[Vector] = field(default_factory=list)
+    torque: list[Vector] = field(default_factory=list)  # (2,) motor torques applied
+    socket_force: list[Vector] = field(default_factory=list)  # (3,)
     mode: list[ControllerMode | str] = field(default_factory=list)
     V: list[float | None] = field(default_factory=list)  # None: the link reported none
     rho: list[float | None] = field(default_factory=list)
@@ -73,7 +74,7 @@ class LoopLog:
     def add(self, obs: Observation, cmd: Command, truth: Truth) -> None:
         self.t.append(obs.t)
         self.tau.append(obs.tau)
-        self.domain.append(0 if obs.domain == "ps" else 1)
+        self.domain.append(Domain(obs.domain).code)
         self.q.append(truth.q)
         self.qd.append(truth.qd)
         self.torque.append(truth.torque if cmd.torque is None else cmd.torque)
@@ -84,41 +85,85 @@ class LoopLog:
         self.fallback_count = cmd.fallback_count
 
 
-def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None,
-             recorder: Recorder | None = None, stop: threading.Event | None = None,
-             progress: Callable[[int, float, int], None] | None = None,
-             timed: bool = False, samples: bool = True) -> LoopLog:
+class LoopOptions(TypedDict, total=False):
+    """:func:`run_loop`'s optional keywords (each absent: its default)."""
+
+    periods: int | None  # end after this many periods (default None: no limit)
+    recorder: Recorder | None  # records each period's sample
+    stop: threading.Event | None  # set (from another thread): end after the period
+    progress: Callable[[int, float, int], None] | None  # (k, t, steps) every 100 periods
+    timed: bool  # default False; True: per-period timings in the log
+    samples: bool  # default True; False: only the counts and how the run ended
+
+
+def _sends_first(link: Link) -> TypeGuard[LateLink]:
+    """Whether ``link`` sends before it waits (``idle_after_send``: a :class:`LateLink`)."""
+    return bool(getattr(link, "idle_after_send", False))
+
+
+class _LateSamples:
+    """A :class:`LateLink`'s samples: period k's kept (``keep``: logged, recorded) in
+    period k + 1's ``idle``, once the link settled its Command, or at the end."""
+
+    def __init__(self, link: LateLink, keep: Callable[[Observation, Command, Truth], None],
+                 read_truth: Callable[[], None] | None) -> None:
+        self.link, self.keep, self.read_truth = link, keep, read_truth
+        self.last: tuple[Observation, Command, Truth] | None = None  # not yet kept
+
+    def exchange(self, obs: Observation) -> Command:
+        return self.link.exchange(obs, self.idle)
+
+    def hold(self, obs: Observation, cmd: Command, truth: Truth) -> None:
+        self.last = (obs, cmd, truth)
+
+    def settle(self) -> None:
+        """Keep the last period's sample (in the next period's wait, or at the end)."""
+        if self.last is None:
+            return
+        o, c, tr = self.last
+        self.last = None
+        self.keep(o, self.link.settle(c), tr)
+
+    def idle(self) -> None:
+        """While the controller works: the last period's sample, this period's truth."""
+        self.settle()
+        if self.read_truth is not None:
+            self.read_truth()
+
+
+def _keeper(log: LoopLog, recorder: Recorder | None, samples: bool
+            ) -> Callable[[Observation, Command, Truth], None]:
+    """What keeps a period's sample: the log (``samples``) and the recorder."""
+
+    def keep(obs: Observation, cmd: Command, truth: Truth) -> None:
+        if samples:
+            log.add(obs, cmd, truth)
+        if recorder is not None:
+            recorder.record(obs, cmd, truth)
+
+    return keep
+
+
+def run_loop(plant: Plant, link: Link, *, steps: int,
+             **options: Unpack[LoopOptions]) -> LoopLog:
     """Run the closed loop (module docstring) until a fall, a link fault, ``steps``
-    impacts, ``periods`` periods (None: no limit) or ``stop``; ``progress(k, t, steps)``
-    every 100 periods; ``timed``: per-period timings in the log; ``samples``: keep the
-    per-period samples (False: only the counts and how the run ended, e.g. when a
-    recorder keeps them)."""
+    impacts, ``periods`` periods or ``stop``; ``progress(k, t, steps)`` every 100
+    periods; ``timed``: per-period timings in the log; ``samples``: keep the per-period
+    samples (False: only the counts and how the run ended, e.g. when a recorder keeps
+    them). The options: :class:`LoopOptions`."""
+    periods, stop = options.get("periods"), options.get("stop")
+    progress, timed = options.get("progress"), options.get("timed", False)
+    samples = options.get("samples", True)
     log = LoopLog()
     clock = time.perf_counter_ns
     k = 0
-    late = bool(getattr(link, "idle_after_send", False))
-    last: tuple[Observation, Command, Truth] | None = None  # late: not yet logged, recorded
-    read_truth = getattr(plant, "read_truth", None)
-
-    def settle() -> None:
-        """Log and record the last period (late links: in the next period's wait)."""
-        nonlocal last
-        if last is None:
-            return
-        o, c, tr = last
-        last = None
-        c = link.settle(c)  # type: ignore[attr-defined]
-        if samples:
-            log.add(o, c, tr)
-        if recorder is not None:
-            recorder.record(o, c, tr)
-
-    def idle() -> None:
-        """While the controller works: the last period's sample, this period's truth."""
-        settle()
-        if read_truth is not None:
-            read_truth()
-
+    keep = _keeper(log, options.get("recorder"), samples)
+    exchange: Callable[[Observation], Command] = link.exchange
+    after = keep  # what takes the period's sample after the actuation
+    finish: Callable[[], None] | None = None  # what the run's end does with the last sample
+    if _sends_first(link):
+        late = _LateSamples(link, keep, getattr(plant, "read_truth", None))
+        exchange, after, finish = late.exchange, late.hold, late.settle
     try:
         while stop is None or not stop.is_set():
             t0 = clock()
@@ -126,20 +171,12 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
             t1 = clock()
             if obs.held:
                 break
-            cmd = link.exchange(obs, idle) if late else link.exchange(obs)  # type: ignore[call-arg]
+            cmd = exchange(obs)
             t2 = clock()
             truth = plant.actuate(cmd.torque)
-            if late:
-                last = (obs, cmd, truth)
-                if not samples:
-                    log.t.append(obs.t)
-            else:
-                if samples:
-                    log.add(obs, cmd, truth)
-                else:
-                    log.t.append(obs.t)
-                if recorder is not None:
-                    recorder.record(obs, cmd, truth)
+            if not samples:
+                log.t.append(obs.t)
+            after(obs, cmd, truth)
             log.steps = obs.steps
             t3 = clock()
             if cmd.fault:
@@ -160,6 +197,7 @@ def run_loop(plant: Plant, link: Link, *, steps: int, periods: int | None = None
             if progress is not None and k % 100 == 0:
                 progress(k, obs.t, obs.steps)
     finally:
-        settle()
+        if finish is not None:
+            finish()
     log.fall = plant.fall
     return log

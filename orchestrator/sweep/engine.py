@@ -108,7 +108,7 @@ def prepare_fmu(spec: SweepSpec) -> Path | None:
     if spec.fmu is not None:
         return spec.fmu
     import hp_model
-    from orchestrator.cosim.master import ensure_fmu
+    from orchestrator.cosim.human import ensure_fmu
 
     model = hp_model.load_model(str(spec.subject) if spec.subject else None,
                                 str(spec.device) if spec.device else None)
@@ -148,8 +148,30 @@ class _Parts:
         self.last = time.perf_counter()
 
 
-def _consume(client: Any, plugin: str, spec: SweepSpec, digest: str, session: str,
-             todo: list[RunKey], parts: _Parts, outcome: SweepOutcome, window: int,
+@dataclass(frozen=True)
+class Streaming:
+    """How runs flow through a session: at most ``window`` in flight (None: 8 per worker,
+    at least 32), buffered result rows written at least every ``flush_s`` seconds."""
+
+    window: int | None = None
+    flush_s: float = 10.0
+
+
+@dataclass(frozen=True)
+class _Session:
+    """One session of a sweep on a Dask client: the worker plugin's name, the spec and its
+    artifacts' digest, the session id, where its rows go and what it reports."""
+
+    client: Any
+    plugin: str
+    spec: SweepSpec
+    digest: str
+    session: str
+    parts: _Parts
+    outcome: SweepOutcome
+
+
+def _consume(ses: _Session, todo: list[RunKey], window: int,
              on_result: Callable[[dict[str, Any]], None] | None,
              progress: Progress | None, stop: threading.Event | None = None) -> None:
     """Submit ``todo`` (at most ``window`` in flight) and store each result as it comes;
@@ -157,12 +179,15 @@ def _consume(client: Any, plugin: str, spec: SweepSpec, digest: str, session: st
     stored."""
     from distributed import as_completed
 
+    spec, digest, parts, outcome = ses.spec, ses.digest, ses.parts, ses.outcome
     pending = iter(todo)
     by_future: dict[Any, RunKey] = {}
 
     def submit(k: RunKey) -> Any:
-        fut = client.submit(run_task, plugin, spec, k, make_draw(spec, k.family, k.draw),
-                            key=f"hpcosim-run-{digest[:8]}-{session}-{k.text}", pure=False)
+        fut = ses.client.submit(run_task, ses.plugin, spec, k,
+                                make_draw(spec, k.family, k.draw),
+                                key=f"hpcosim-run-{digest[:8]}-{ses.session}-{k.text}",
+                                pure=False)
         by_future[fut] = k
         return fut
 
@@ -213,11 +238,12 @@ def _interrupt_flag(stop: threading.Event) -> Iterator[None]:
 def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
               workers: int | None = None, progress: Progress | None = None,
               on_result: Callable[[dict[str, Any]], None] | None = None,
-              say: Callable[[str], None] | None = None, window: int | None = None,
-              flush_s: float = 10.0) -> SweepOutcome:
+              say: Callable[[str], None] | None = None,
+              streaming: Streaming = Streaming()) -> SweepOutcome:
     """Run (or resume) ``spec`` into ``out`` (module docstring).  Nothing is written
     before the cluster is up (a spec that does not fit ``out``, an unreachable scheduler or
-    an interrupt during start-up leave ``out`` as it was)."""
+    an interrupt during start-up leave ``out`` as it was).  ``streaming``: runs in flight
+    and how often rows are written (:class:`Streaming`)."""
     say = say or (lambda _m: None)
     t_setup = time.perf_counter()
     art = Artifacts.from_spec(spec, prepare_fmu(spec))
@@ -247,12 +273,13 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
         manifest["sessions"].append(entry)
         store.write_manifest(manifest)
         say(f"{outcome.workers} workers ready; {len(todo)} runs to do")
-        parts = _Parts(store, session, spec.batch, flush_s)
+        parts = _Parts(store, session, spec.batch, streaming.flush_s)
+        ses = _Session(client, plugin.name, spec, digest, session, parts, outcome)
         stop = threading.Event()
         try:
             with _interrupt_flag(stop):
-                _consume(client, plugin.name, spec, digest, session, todo, parts, outcome,
-                         window or max(32, 8 * outcome.workers), on_result, progress, stop)
+                _consume(ses, todo, streaming.window or max(32, 8 * outcome.workers),
+                         on_result, progress, stop)
             outcome.status = "completed"
         except KeyboardInterrupt:
             outcome.status = "interrupted"

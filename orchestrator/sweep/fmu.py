@@ -55,12 +55,13 @@ def period_bound(fmu: HumanFmu, steps: int, dt: float) -> int:
 
 
 def run_fmu_scenario(fmu: HumanFmu, model: HumanProsthesisModel, gait: Gait,
-                     ctx: ControllerContext, scenario: Scenario, thetas: dict[str, np.ndarray],
-                     q0: np.ndarray, qd0: np.ndarray, dt: float = 1e-3,
+                     ctx: ControllerContext, scenario: Scenario,
+                     start: tuple[np.ndarray, np.ndarray], dt: float = 1e-3,
                      encoder: Encoder = IDEAL_ENCODER) -> ScenarioResult:
-    """One scenario on the FMU (module docstring): the human tracks ``thetas`` from
-    (q0, qd0) in ps; the controller's measurements go through ``encoder``."""
-    fmu.start_walk(thetas, q0, qd0)
+    """One scenario on the FMU (module docstring): the human tracks the scenario's thetas
+    (``scenario.perturbation.thetas``) from ``start`` = (q0, qd0) in ps; the controller's
+    measurements go through ``encoder``."""
+    fmu.start_walk(scenario.perturbation.thetas(gait), *start)
     ctrl = make_controller(scenario.controller, gait, ctx.tube, model, context=ctx)
     bound = period_bound(fmu, scenario.steps, dt)
     log = run_loop(FmuPlant(fmu, dt), ControllerLink(ctrl, encoder), steps=scenario.steps,

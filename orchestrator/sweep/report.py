@@ -15,8 +15,6 @@ no controller could walk says nothing about a controller.
 
 from __future__ import annotations
 
-import io
-import json
 import math
 from collections import Counter
 from collections.abc import Mapping
@@ -26,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
+from hp_model.figures import figure_bytes
+from hp_model.json_io import write_json
 from orchestrator.sweep.draws import ORACLE, Draw
 from orchestrator.sweep.store import ResultStore, read_results
 
@@ -98,15 +98,9 @@ def _worst_order(r: dict[str, Any]) -> tuple:
             -(rms if rms is not None else math.inf))
 
 
-def summarize(out: str | Path) -> dict[str, Any]:
-    """Everything the report says, as a JSON-able dict."""
-    out = Path(out)
-    store = ResultStore(out)
-    man = store.manifest()
-    if man is None:
-        raise FileNotFoundError(f"{out}: no sweep here (sweep.json missing)")
-    spec = man["spec"]
-    rows = read_results(out).to_pylist()
+def _row_axes(spec: dict[str, Any], rows: list[dict[str, Any]]) -> tuple[list[str], list[str]]:
+    """The report's controllers and families: the spec's, then those only in the results
+    (they still count), the oracle first when its labels are stored."""
     controllers = list(spec["controllers"])
     families = list(spec["families"])
     for r in rows:  # results of controllers/families no longer in the spec still count
@@ -116,72 +110,92 @@ def summarize(out: str | Path) -> dict[str, Any]:
             families.append(r["family"])
     if any(r["controller"] == ORACLE for r in rows) and ORACLE not in controllers:
         controllers.insert(0, ORACLE)
-    cells = []
+    return controllers, families
+
+
+def _cell(out: Path, c: str, f: str, rs: list[dict[str, Any]],
+          walkable: dict[tuple[str, int], bool]) -> dict[str, Any]:
+    """The summary of controller ``c`` on family ``f`` (its rows ``rs``): success with Wilson
+    intervals (all runs, and the runs the oracle walks), knee RMS, failures, the worst runs."""
+    ok = [r for r in rs if r["error"] is None]
+    k = sum(bool(r["success"]) for r in ok)
+    lo, hi = wilson_interval(k, len(ok))
+    rms = [r["knee_rms_ps_rad"] for r in ok if r["knee_rms_ps_rad"] is not None]
+    dur = [r["duration_s"] for r in ok]
+    worst = sorted(ok, key=_worst_order)[:N_WORST]
+    wk = [r for r in ok if walkable.get((f, r["draw"]))]
+    kw = sum(bool(r["success"]) for r in wk)
+    wlo, whi = wilson_interval(kw, len(wk))
+    return {
+        "walkable_runs": len(wk), "walkable_successes": kw,
+        "walkable_rate": kw / len(wk) if wk else None,
+        "walkable_wilson95": [wlo, whi] if wk else None,
+        "controller": c, "family": f, "runs": len(rs), "errors": len(rs) - len(ok),
+        "error_examples": sorted({r["error"] for r in rs if r["error"]})[:3],
+        "successes": k, "success_rate": k / len(ok) if ok else None,
+        "wilson95": [lo, hi] if ok else None,
+        "steps_completed_mean": (float(np.mean([r["steps_completed"] for r in ok]))
+                                 if ok else None),
+        "duration_s_median": _q(dur, 50),
+        "knee_rms_ps_rad": {"n": len(rms), "median": _q(rms, 50), "p10": _q(rms, 10),
+                            "p90": _q(rms, 90),
+                            "max": float(max(rms)) if rms else None},
+        "torque_finite_all": all(bool(r["torque_finite"]) for r in ok),
+        "failure_reasons": dict(Counter(fall_label(r) for r in ok
+                                        if r["failed"]).most_common()),
+        "worst": [{"key": r["key"], "success": r["success"],
+                   "steps_completed": r["steps_completed"],
+                   "duration_s": r["duration_s"],
+                   "knee_rms_ps_rad": r["knee_rms_ps_rad"], "reason": r["reason"],
+                   "draw": {k2: v for k2, v in r.items() if k2.startswith("draw_")},
+                   "replay": replay_command(out, r["key"]),
+                   "cosim": cosim_command(out, r)} for r in worst]}
+
+
+def _pair(f: str, a: str, b: str, by_cell: dict[tuple[str, str], list[dict[str, Any]]],
+          walkable: dict[tuple[str, int], bool]) -> dict[str, Any]:
+    """Controllers ``a`` and ``b`` on the draws of family ``f`` both ran without error:
+    the draws only one of them walks, McNemar's exact test (and on the walkable draws)."""
+    sa = {r["draw"]: bool(r["success"]) for r in by_cell.get((a, f), [])
+          if r["error"] is None}
+    sb = {r["draw"]: bool(r["success"]) for r in by_cell.get((b, f), [])
+          if r["error"] is None}
+    common = sorted(set(sa) & set(sb))
+    a_only = sum(sa[i] and not sb[i] for i in common)
+    b_only = sum(sb[i] and not sa[i] for i in common)
+    entry = {"family": f, "a": a, "b": b, "pairs": len(common),
+             "a_only": a_only, "b_only": b_only,
+             "mcnemar_p": mcnemar_exact(a_only, b_only)}
+    if walkable:
+        cw = [i for i in common if walkable.get((f, i))]
+        wa = sum(sa[i] and not sb[i] for i in cw)
+        wb = sum(sb[i] and not sa[i] for i in cw)
+        entry.update(walkable_pairs=len(cw), walkable_a_only=wa,
+                     walkable_b_only=wb,
+                     walkable_mcnemar_p=mcnemar_exact(wa, wb))
+    return entry
+
+
+def summarize(out: str | Path) -> dict[str, Any]:
+    """Everything the report says, as a JSON-able dict."""
+    out = Path(out)
+    store = ResultStore(out)
+    man = store.manifest()
+    if man is None:
+        raise FileNotFoundError(f"{out}: no sweep here (sweep.json missing)")
+    spec = man["spec"]
+    rows = read_results(out).to_pylist()
+    controllers, families = _row_axes(spec, rows)
     by_cell: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for r in rows:
         by_cell.setdefault((r["controller"], r["family"]), []).append(r)
     walkable = {(r["family"], r["draw"]): bool(r["success"]) for r in rows
                 if r["controller"] == ORACLE and r["error"] is None}
-    for f in families:
-        for c in controllers:
-            rs = by_cell.get((c, f), [])
-            ok = [r for r in rs if r["error"] is None]
-            k = sum(bool(r["success"]) for r in ok)
-            lo, hi = wilson_interval(k, len(ok))
-            rms = [r["knee_rms_ps_rad"] for r in ok if r["knee_rms_ps_rad"] is not None]
-            dur = [r["duration_s"] for r in ok]
-            worst = sorted(ok, key=_worst_order)[:N_WORST]
-            wk = [r for r in ok if walkable.get((f, r["draw"]))]
-            kw = sum(bool(r["success"]) for r in wk)
-            wlo, whi = wilson_interval(kw, len(wk))
-            cells.append({
-                "walkable_runs": len(wk), "walkable_successes": kw,
-                "walkable_rate": kw / len(wk) if wk else None,
-                "walkable_wilson95": [wlo, whi] if wk else None,
-                "controller": c, "family": f, "runs": len(rs), "errors": len(rs) - len(ok),
-                "error_examples": sorted({r["error"] for r in rs if r["error"]})[:3],
-                "successes": k, "success_rate": k / len(ok) if ok else None,
-                "wilson95": [lo, hi] if ok else None,
-                "steps_completed_mean": (float(np.mean([r["steps_completed"] for r in ok]))
-                                         if ok else None),
-                "duration_s_median": _q(dur, 50),
-                "knee_rms_ps_rad": {"n": len(rms), "median": _q(rms, 50), "p10": _q(rms, 10),
-                                    "p90": _q(rms, 90),
-                                    "max": float(max(rms)) if rms else None},
-                "torque_finite_all": all(bool(r["torque_finite"]) for r in ok),
-                "failure_reasons": dict(Counter(fall_label(r) for r in ok
-                                                if r["failed"]).most_common()),
-                "worst": [{"key": r["key"], "success": r["success"],
-                           "steps_completed": r["steps_completed"],
-                           "duration_s": r["duration_s"],
-                           "knee_rms_ps_rad": r["knee_rms_ps_rad"], "reason": r["reason"],
-                           "draw": {k2: v for k2, v in r.items() if k2.startswith("draw_")},
-                           "replay": replay_command(out, r["key"]),
-                           "cosim": cosim_command(out, r)} for r in worst]})
-    paired = []
+    cells = [_cell(out, c, f, by_cell.get((c, f), []), walkable)
+             for f in families for c in controllers]
     ctrl_only = [c for c in controllers if c != ORACLE]
-    if len(ctrl_only) > 1:
-        a = ctrl_only[0]
-        for f in families:
-            for b in ctrl_only[1:]:
-                sa = {r["draw"]: bool(r["success"]) for r in by_cell.get((a, f), [])
-                      if r["error"] is None}
-                sb = {r["draw"]: bool(r["success"]) for r in by_cell.get((b, f), [])
-                      if r["error"] is None}
-                common = sorted(set(sa) & set(sb))
-                a_only = sum(sa[i] and not sb[i] for i in common)
-                b_only = sum(sb[i] and not sa[i] for i in common)
-                entry = {"family": f, "a": a, "b": b, "pairs": len(common),
-                         "a_only": a_only, "b_only": b_only,
-                         "mcnemar_p": mcnemar_exact(a_only, b_only)}
-                if walkable:
-                    cw = [i for i in common if walkable.get((f, i))]
-                    wa = sum(sa[i] and not sb[i] for i in cw)
-                    wb = sum(sb[i] and not sa[i] for i in cw)
-                    entry.update(walkable_pairs=len(cw), walkable_a_only=wa,
-                                 walkable_b_only=wb,
-                                 walkable_mcnemar_p=mcnemar_exact(wa, wb))
-                paired.append(entry)
+    paired = ([_pair(f, ctrl_only[0], b, by_cell, walkable)
+               for f in families for b in ctrl_only[1:]] if len(ctrl_only) > 1 else [])
     sessions = man.get("sessions", [])
     total_done = sum(s.get("runs_done", 0) for s in sessions)
     total_wall = sum(s.get("wall_s", 0.0) for s in sessions)
@@ -197,15 +211,6 @@ def summarize(out: str | Path) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ figures
-
-def _png(fig: Any) -> bytes:
-    import matplotlib.pyplot as plt
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
-
 
 def figures(summary: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, bytes]:
     """fig_success.png (rates with Wilson intervals), fig_knee_rms.png (distributions),
@@ -234,7 +239,7 @@ def figures(summary: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, by
     ax.set_ylabel("success rate (Wilson 95 %)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    out["fig_success.png"] = _png(fig)
+    out["fig_success.png"] = figure_bytes(fig)
 
     fig, ax = plt.subplots(figsize=(max(5, 1.6 * len(fams) + 2), 3.6))
     data, pos, labels = [], [], []
@@ -253,7 +258,7 @@ def figures(summary: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, by
     ax.set_ylabel("knee RMS error in ps (deg)")
     ax.legend([bp["boxes"][i] for i in range(len(ctrls))], ctrls, fontsize=8)
     fig.tight_layout()
-    out["fig_knee_rms.png"] = _png(fig)
+    out["fig_knee_rms.png"] = figure_bytes(fig)
 
     fig, axs = plt.subplots(1, len(fams), figsize=(3.2 * len(fams) + 1, 3.2), squeeze=False,
                             sharey=True)
@@ -275,7 +280,7 @@ def figures(summary: dict[str, Any], rows: list[dict[str, Any]]) -> dict[str, by
     axs[0, 0].set_ylabel("fraction not fallen")
     axs[0, -1].legend(fontsize=8)
     fig.tight_layout()
-    out["fig_survival.png"] = _png(fig)
+    out["fig_survival.png"] = figure_bytes(fig)
     return out
 
 
@@ -395,19 +400,6 @@ def write_report(out: str | Path) -> dict[str, Any]:
     figs = figures(s, rows) if rows else {}
     for name, data in figs.items():
         atomic_write_bytes(out / name, data)
-    atomic_write_text(out / "report.json", json.dumps(_jsonable(s), indent=1) + "\n")
+    write_json(out / "report.json", s)
     atomic_write_text(out / "report.md", markdown(s, list(figs)))
     return s
-
-
-def _jsonable(x: Any) -> Any:
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    if isinstance(x, np.generic):
-        return _jsonable(x.item())
-    return x
-

@@ -29,13 +29,15 @@ import numpy as np
 
 from hp_model.artifacts import canonical_hash
 from hp_model.compiled import CompileBackend
-from hp_model.domains import Y2_COORDS, y2_row
+from hp_model.domains import Y2_COORDS, Domain, y2_row
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
+from hp_model.json_io import finite_or_none
 from orchestrator.experiments.scenarios import (
     ORACLE,
     Perturbation,
+    PlantSetup,
     Scenario,
     ScenarioResult,
     initial_state,
@@ -94,13 +96,13 @@ def run_hash(spec: SweepSpec, artifacts_digest: str, key: RunKey) -> str:
 
 # ------------------------------------------------------------------ the draw, applied
 
-def human_thetas(gait: Gait, draw: Draw) -> dict[str, np.ndarray]:
+def human_thetas(gait: Gait, draw: Draw) -> dict[Domain, np.ndarray]:
     """The packed gait parameters the human tracks in this draw: the Bezier perturbation of
     ``human_fmu.perturbation`` (amplitude, seed), then each human output's constant offset
     added to every coefficient of its row (a Bezier curve moves by a constant when all its
     coefficients do), in every domain where the joint is an output."""
     th = Perturbation("sweep", draw.bezier_amplitude, draw.bezier_seed).thetas(gait)
-    L = gait.params["ps"].layout
+    L = gait.params[Domain.PS].layout
     for joint, off in zip(HUMAN_JOINTS, draw.output_offset, strict=True):
         if off == 0.0:
             continue
@@ -117,7 +119,7 @@ class DrawPerturbation(Perturbation):
 
     draw: Draw = field(default_factory=lambda: Draw("nominal", 0))
 
-    def thetas(self, gait: Gait) -> dict[str, np.ndarray]:
+    def thetas(self, gait: Gait) -> dict[Domain, np.ndarray]:
         return human_thetas(gait, self.draw)
 
 
@@ -192,19 +194,15 @@ class Resources:
         base = Path(workdir or tempfile.gettempdir()) / f"hpcosim-sweep-{self.digest[:12]}"
         base.mkdir(parents=True, exist_ok=True)
         self.workdir = Path(tempfile.mkdtemp(prefix=f"{os.getpid()}-", dir=base))
-        paths: dict[str, str | None] = {}
-        for name in ("gait", "tube", "fmu", "subject", "device"):
-            data = getattr(artifacts, name)
-            ext = {"fmu": ".fmu", "subject": ".toml", "device": ".toml"}.get(name, ".json")
-            if data is None:
-                paths[name] = None
-                continue
-            p = self.workdir / f"{name}{ext}"
-            p.write_bytes(data)
-            paths[name] = str(p)
-        self.model = hp_model.load_model(paths["subject"], paths["device"])
-        self.gait = load_gait(paths["gait"], self.model.parameter_hash())  # type: ignore[arg-type]
-        self.tube = load_tube(paths["tube"], self.gait.hash())  # type: ignore[arg-type]
+        gait_path = self._put("gait.json", artifacts.gait)
+        tube_path = self._put("tube.json", artifacts.tube)
+        fmu_path, subject_path, device_path = (
+            None if data is None else self._put(name, data)
+            for name, data in (("fmu.fmu", artifacts.fmu), ("subject.toml", artifacts.subject),
+                               ("device.toml", artifacts.device)))
+        self.model = hp_model.load_model(subject_path, device_path)
+        self.gait = load_gait(gait_path, self.model.parameter_hash())
+        self.tube = load_tube(tube_path, self.gait.hash())
         self.closed_loop = ClosedLoop(self.model, self.gait.degree)
         self.closed_loop.numeric()
         self.model.numeric()
@@ -215,10 +213,16 @@ class Resources:
         self._plants: OrderedDict[tuple[Any, ...], tuple[HumanProsthesisModel, Any]] = \
             OrderedDict()
         self.fmu = None
-        if paths["fmu"] is not None:
+        if fmu_path is not None:
             from orchestrator.sweep.fmu import open_fmu
 
-            self.fmu = open_fmu(Path(paths["fmu"]), self.workdir, self.gait)
+            self.fmu = open_fmu(Path(fmu_path), self.workdir, self.gait)
+
+    def _put(self, name: str, data: bytes) -> str:
+        """Write an artifact into the work folder as ``name``; its path."""
+        p = self.workdir / name
+        p.write_bytes(data)
+        return str(p)
 
     def context(self, draw: Draw) -> Any:
         """The controller context of a draw: its model errors and its tube scale."""
@@ -272,10 +276,6 @@ class Resources:
 
 # ------------------------------------------------------------------ the run
 
-def _finite(x: Any) -> float | None:
-    return float(x) if x is not None and math.isfinite(float(x)) else None
-
-
 def result_columns(r: ScenarioResult) -> dict[str, Any]:
     """The measured columns of one run (from :func:`orchestrator.experiments.scenarios.summary`)."""
     s = summary(r)
@@ -285,17 +285,17 @@ def result_columns(r: ScenarioResult) -> dict[str, Any]:
     return {"steps_completed": int(s["steps_completed"]), "success": bool(s["success"]),
             "failed": bool(s["failed"]), "reason": str(s["reason"]),
             "fall_reason": s["fall_reason"],
-            "fail_t": _finite(s["fail_t"]), "fail_tau": _finite(s["fail_tau"]),
+            "fail_t": finite_or_none(s["fail_t"]), "fail_tau": finite_or_none(s["fail_tau"]),
             "fail_domain": s["fail_domain"], "duration_s": float(s["duration_s"]),
-            "knee_rms_ps_rad": _finite(s["knee_rms_ps_rad"]),
-            "knee_rms_all_rad": _finite(s["knee_rms_all_rad"]),
+            "knee_rms_ps_rad": finite_or_none(s["knee_rms_ps_rad"]),
+            "knee_rms_all_rad": finite_or_none(s["knee_rms_all_rad"]),
             "fallback_count": int(s["fallback_count"]),
             "fallback_ticks": int(s["modes"].get(ControllerMode.FALLBACK, 0)),
             "fault_ticks": int(s["modes"].get(ControllerMode.FAULT, 0)),
-            "max_torque_knee": _finite(peak[0]) if finite else None,
-            "max_torque_ankle": _finite(peak[1]) if finite else None,
+            "max_torque_knee": finite_or_none(peak[0]) if finite else None,
+            "max_torque_ankle": finite_or_none(peak[1]) if finite else None,
             "torque_finite": finite,
-            "socket_force_in_tube": _finite(r.fs_in_tube) if r.fs_in_tube is not None
+            "socket_force_in_tube": finite_or_none(r.fs_in_tube) if r.fs_in_tube is not None
             else None}
 
 
@@ -330,17 +330,17 @@ def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[s
             spec.steps, (draw.knee_offset, draw.ankle_offset))
         if spec.backend == SweepBackend.SIMULATOR or key.controller == ORACLE:
             model, cl = res.plant(draw)
+            setup = PlantSetup(human_gains=human_gains(res.gait, draw),
+                               human_delay=draw.human_delay, encoder=encoder_of(draw))
             r = run_scenario(model, res.gait, ctx.tube, scenario, context=ctx,
-                             closed_loop=cl, human_gains=human_gains(res.gait, draw),
-                             human_delay=draw.human_delay, encoder=encoder_of(draw))
+                             closed_loop=cl, plant=setup)
         else:
             from orchestrator.sweep.fmu import run_fmu_scenario
 
             if res.fmu is None:
                 raise ValueError("backend fmu but no FMU was given to the worker")
             q0, qd0 = initial_state(res.model, res.gait, scenario.initial_offset)
-            r = run_fmu_scenario(res.fmu, res.model, res.gait, ctx, scenario,
-                                 human_thetas(res.gait, draw), q0, qd0,
+            r = run_fmu_scenario(res.fmu, res.model, res.gait, ctx, scenario, (q0, qd0),
                                  encoder=encoder_of(draw))
         row.update(result_columns(r))
         row.update(error=None, error_kind=None)
@@ -361,10 +361,10 @@ def plugin_name(artifacts_digest: str) -> str:
 try:  # distributed is a dependency; keep this module importable for replay without it
     from distributed.diagnostics.plugin import WorkerPlugin
 except ImportError:  # pragma: no cover
-    WorkerPlugin = object  # type: ignore[assignment,misc]
+    WorkerPlugin = object  # type: ignore[assignment,misc]  # a plain base stands in for it
 
 
-class SweepSetup(WorkerPlugin):  # type: ignore[misc,valid-type]
+class SweepSetup(WorkerPlugin):
     """Dask worker plugin: builds the :class:`Resources` once when a worker starts (or
     joins later, e.g. replacing a killed one)."""
 
@@ -386,6 +386,6 @@ def run_task(name: str, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[str, A
     from distributed import get_worker
 
     plugin = get_worker().plugins[name]
-    if plugin.resources is None:  # pragma: no cover - setup runs before any task
-        raise RuntimeError("worker resources not set up")
+    if not isinstance(plugin, SweepSetup) or plugin.resources is None:  # pragma: no cover
+        raise RuntimeError("worker resources not set up")  # setup runs before any task
     return run_draw(plugin.resources, spec, key, draw)

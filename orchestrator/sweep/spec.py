@@ -64,8 +64,6 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
     ValidationInfo,
@@ -74,7 +72,13 @@ from pydantic import (
 )
 
 from hp_model.artifacts import canonical_hash
-from hp_model.config import ConfigError, read_toml
+from hp_model.config import (
+    ConfigError,
+    NonNegative,
+    StrictConfig,
+    read_toml,
+    validation_message,
+)
 from orchestrator.modes import SweepBackend
 from prosthesis_controller import ControllerName
 
@@ -87,19 +91,15 @@ class SpecError(ConfigError):
     """A sweep spec that cannot be run (one line: file, field, reason)."""
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class Fixed(_Strict):
+class Fixed(StrictConfig):
     dist: Literal["fixed"] = "fixed"
-    value: float = Field(allow_inf_nan=False)
+    value: float
 
 
-class Uniform(_Strict):
+class Uniform(StrictConfig):
     dist: Literal["uniform"]
-    low: float = Field(allow_inf_nan=False)
-    high: float = Field(allow_inf_nan=False)
+    low: float
+    high: float
 
     @model_validator(mode="after")
     def _order(self) -> Uniform:
@@ -108,18 +108,20 @@ class Uniform(_Strict):
         return self
 
 
-class Normal(_Strict):
+class Normal(StrictConfig):
     dist: Literal["normal"]
-    mean: float = Field(allow_inf_nan=False)
-    std: float = Field(ge=0, allow_inf_nan=False)
+    mean: float
+    std: NonNegative
 
 
-class Choice(_Strict):
+class Choice(StrictConfig):
     dist: Literal["choice"]
-    values: tuple[Annotated[float, Field(allow_inf_nan=False)], ...] = Field(min_length=1)
+    values: tuple[float, ...] = Field(min_length=1)
 
 
 Dist = Annotated[Fixed | Uniform | Normal | Choice, Field(discriminator="dist")]
+#: the tags of :data:`Dist` (in a validation error's location, not fields)
+DISTRIBUTIONS = ("fixed", "uniform", "normal", "choice")
 
 
 def _as_dist(v: Any) -> Any:
@@ -140,7 +142,7 @@ def support(d: Fixed | Uniform | Normal | Choice) -> tuple[float, float] | None:
     return (d.mean, d.mean) if d.std == 0 else None
 
 
-class _Group(_Strict):
+class _Group(StrictConfig):
     @model_validator(mode="before")
     @classmethod
     def _numbers(cls, data: Any) -> Any:
@@ -255,7 +257,7 @@ GROUPS = ("human", "socket", "model", "initial", "plant", "sensor")
 SIMULATOR_ONLY = ("plant.", "human.stiffness", "human.delay")
 
 
-class Family(_Strict):
+class Family(StrictConfig):
     """One perturbation family (module docstring); empty = the nominal case."""
 
     human: HumanGroup = HumanGroup()
@@ -275,7 +277,7 @@ class Family(_Strict):
         return out
 
 
-class SweepSpec(_Strict):
+class SweepSpec(StrictConfig):
     """A validated sweep spec; artifact paths are absolute after :func:`load_spec`."""
 
     schema_version: Literal[1] = 1
@@ -358,12 +360,7 @@ def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
     try:
         spec = SweepSpec.model_validate(data)
     except ValidationError as e:
-        err = e.errors()[0]
-        loc = ".".join(str(p) for p in err["loc"] if p not in ("fixed", "uniform", "normal",
-                                                                 "choice")) or "<top>"
-        msg = err["msg"].removeprefix("Value error, ")
-        more = f" (and {len(e.errors()) - 1} more)" if len(e.errors()) > 1 else ""
-        raise _fail(path, loc, msg + more) from None
+        raise SpecError(f"{path}: {validation_message(e, skip=DISTRIBUTIONS)}") from None
     base = path.parent
     files: dict[str, Path] = {}
     for name in ("gait", "tube", "subject", "device", "fmu"):

@@ -11,6 +11,9 @@ Layout of ``--out DIR``::
                              read together as a pyarrow dataset
     report.md, report.json, fig_*.png       hpcosim sweep report
 
+The JSON files are written by :mod:`hp_model.json_io` (a number that is not finite is
+``null``).
+
 A row is one run (``COLUMNS``; a fall as ``fall_reason``, the
 :class:`hp_model.falls.FallReason` label, with ``fail_t``, ``fail_tau``, ``fail_domain``, and
 ``reason``, its one-line message for humans).  A key can appear twice only when an
@@ -32,7 +35,8 @@ import pyarrow as pa
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 
-from hp_model.atomic_io import atomic_write_text, atomic_write_with
+from hp_model.atomic_io import atomic_write_bytes, atomic_write_with
+from hp_model.json_io import write_json
 from orchestrator.sweep.spec import SpecError, SweepSpec, parse_spec
 
 MANIFEST = "sweep.json"
@@ -106,7 +110,7 @@ class ResultStore:
         return doc
 
     def write_manifest(self, doc: dict[str, Any]) -> None:
-        atomic_write_text(self.manifest_path, json.dumps(doc, indent=1) + "\n")
+        write_json(self.manifest_path, doc)
 
     def check(self, spec: SweepSpec, hashes: dict[str, str | None], artifacts_digest: str
               ) -> dict[str, Any] | None:
@@ -147,7 +151,7 @@ class ResultStore:
                 continue
             p = adir / ARTIFACT_NAMES[name]
             if not p.is_file() or p.read_bytes() != data:
-                atomic_write_with(p, lambda tmp, data=data: Path(tmp).write_bytes(data))
+                atomic_write_bytes(p, data)
             local[name] = str(p.relative_to(self.root))
         sdoc = spec.model_dump(mode="json")
         sdoc.update({k: None for k in ARTIFACT_NAMES})

@@ -2,7 +2,7 @@
 
 ``database()`` parses ``ampro3.dbc`` once per process (``functools.cache``; no other module
 state). ``frame_specs()`` turns it into precomputed bit layouts (:class:`FrameSpec`) that
-the fast codec path in :mod:`bus_schemas.codec` packs with integer shifts; the layouts are
+the fast codec path in :mod:`bus_schemas.transport.codec` packs with integer shifts; the layouts are
 derived from the DBC, never written a second time by hand.
 
 Units: angles rad, velocities rad/s, torques N m on the motor side (joint torque = gear
@@ -20,9 +20,9 @@ from pathlib import Path
 import cantools
 from cantools.database.can import Database
 
-from bus_schemas.crc8 import id_prefix_state
+from bus_schemas.transport.crc8 import id_prefix_state
 
-DBC_PATH = Path(__file__).with_name("ampro3.dbc")
+DBC_PATH = Path(__file__).parents[1] / "ampro3.dbc"  # bus_schemas/: transport and recording
 
 BITRATE = 500_000  # bit/s, classic CAN 2.0A
 FRAME_LENGTH = 8  # bytes; every frame of the protocol is 8 bytes

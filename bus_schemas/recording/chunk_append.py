@@ -8,7 +8,7 @@ one pack per message, and the chunk's message indexes write their records with o
 (:class:`PackedMessageIndex`; mcap writes two 8-byte packs per message, about 1 us a message
 at every chunk's end). It uses the internals of mcap 1.x's ``Writer`` (its statistics,
 chunk builder and chunk finalization); :func:`supports` checks that they are there (the
-:class:`bus_schemas.mcap_schemas.Recorder` falls back to ``add_message`` otherwise), and
+:class:`bus_schemas.recording.recorder.Recorder` falls back to ``add_message`` otherwise), and
 a test asserts the file bytes equal those ``add_message`` writes.
 """
 
@@ -55,9 +55,10 @@ def append_messages(writer: Writer, rows: Iterable[tuple[int, int, int, int, byt
     """Add ``(channel_id, sequence, log_time_ns, publish_time_ns, data)`` messages to
     ``writer`` exactly as ``writer.add_message`` would, one after the other (statistics,
     chunk message index, chunk finalized once over the chunk size). Returns how many."""
-    stats: Any = writer._Writer__statistics  # type: ignore[attr-defined]
-    cb: Any = writer._Writer__chunk_builder  # type: ignore[attr-defined]
-    size: int = writer._Writer__chunk_size  # type: ignore[attr-defined]
+    # the writer's private state (name-mangled, so not in its type; supports() checked it)
+    stats: Any = writer._Writer__statistics  # type: ignore[attr-defined]  # (see above)
+    cb: Any = writer._Writer__chunk_builder  # type: ignore[attr-defined]  # (see above)
+    size: int = writer._Writer__chunk_size  # type: ignore[attr-defined]  # (see above)
     pack = _MESSAGE.pack
     op = Opcode.MESSAGE
     counts = stats.channel_message_counts
@@ -84,5 +85,5 @@ def append_messages(writer: Writer, rows: Iterable[tuple[int, int, int, int, byt
         buf.write(data)
         n += 1
         if buf.tell() > size:
-            writer._Writer__finalize_chunk()  # type: ignore[attr-defined]
+            writer._Writer__finalize_chunk()  # type: ignore[attr-defined]  # private, as above
     return n

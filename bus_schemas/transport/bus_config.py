@@ -3,8 +3,8 @@
 A :class:`BusConfig` names a python-can interface and its arguments:
 
 - ``zenoh`` (default): CAN over zenoh, ``run_id`` + ``listen``/``connect`` endpoints
-  (loopback only unless ``allow_remote``); built as :class:`bus_schemas.zenoh_can.ZenohBus`
-  directly (no entry point needed);
+  (loopback only unless ``allow_remote``); built as
+  :class:`bus_schemas.transport.zenoh_can.ZenohBus` directly (no entry point needed);
 - ``virtual``: python-can's in-process virtual bus (``channel``);
 - anything else python-can knows (``socketcan`` with ``channel = "can0"`` for hardware in
   the loop, ``pcan``, ...), built with ``can.Bus(interface=..., channel=..., **options)``.
@@ -22,15 +22,16 @@ import json
 import tomllib
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import can
 
-from bus_schemas.frame import Frame
+from bus_schemas.transport.frame import Frame
 
 ROLES = ("plant", "ctrl", "monitor")
+ZENOH = "zenoh"  # the interface of CAN over zenoh (ZenohBus)
 
 
 class BusConfigError(ValueError):
@@ -39,7 +40,7 @@ class BusConfigError(ValueError):
 
 @dataclass(frozen=True)
 class BusConfig:
-    interface: str = "zenoh"
+    interface: str = ZENOH
     run_id: str = "cosim"
     channel: str | None = None  # non-zenoh interfaces; zenoh: derived from run_id + role
     listen: tuple[str, ...] = ()
@@ -51,6 +52,26 @@ class BusConfig:
         d = asdict(self)
         d["listen"], d["connect"] = list(self.listen), list(self.connect)
         return d
+
+    @property
+    def authenticates(self) -> bool:
+        """Its sessions can be opened with a run's credentials
+        (:mod:`bus_schemas.transport.run_auth`): CAN over zenoh. A physical CAN bus cannot
+        (access to the bus is what protects the prosthesis)."""
+        return self.interface == ZENOH
+
+    def with_zenoh_options(self, **options: Any) -> BusConfig:
+        """This config with zenoh bus options (``low_latency``, ``poll_us``,
+        ``zenoh_options``, ...: :class:`~bus_schemas.transport.zenoh_can.ZenohBus`'s
+        keywords) over its own, ``zenoh_options`` merged key by key; the same config for
+        another interface, which takes none of them."""
+        if self.interface != ZENOH:
+            return self
+        merged = {**self.options, **options}
+        if "zenoh_options" in options:
+            merged["zenoh_options"] = {**self.options.get("zenoh_options", {}),
+                                       **options["zenoh_options"]}
+        return replace(self, options=merged)
 
 
 def bus_config_from_dict(d: dict[str, Any], src: str = "bus config") -> BusConfig:
@@ -66,7 +87,7 @@ def bus_config_from_dict(d: dict[str, Any], src: str = "bus config") -> BusConfi
             return tuple(x.strip() for x in v.split(",") if x.strip())
         return tuple(str(x) for x in v)
 
-    return BusConfig(interface=str(d.get("interface", "zenoh")),
+    return BusConfig(interface=str(d.get("interface", ZENOH)),
                      run_id=str(d.get("run_id", "cosim")),
                      channel=None if d.get("channel") is None else str(d["channel"]),
                      listen=eps(d.get("listen")), connect=eps(d.get("connect")),
@@ -89,34 +110,40 @@ def load_bus_config(path: str | Path) -> BusConfig:
     return bus_config_from_dict(d, str(p))
 
 
-def make_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
-    """Open the bus of ``cfg`` for ``role`` (plant / ctrl / monitor)."""
+def make_bus(cfg: BusConfig, role: str, *, declare_alive: bool = True,
+             **extra: Any) -> can.BusABC:
+    """Open the bus of ``cfg`` for ``role`` (plant / ctrl / monitor); ``extra``: further
+    keyword arguments of the interface, over ``cfg.options``.
+
+    ``declare_alive``: a bus with liveliness
+    (:class:`~bus_schemas.transport.liveliness.Liveliness`, CAN over zenoh) says this node
+    is alive at once; False leaves it to the node (``announce_alive()`` once it is ready).
+    A bus without liveliness ignores it."""
     if role not in ROLES:
         raise ValueError(f"role {role!r}: expected one of {ROLES}")
     try:
-        return _open_bus(cfg, role, **extra)
+        return _open_bus(cfg, role, declare_alive, extra)
     except can.CanError as e:
         raise BusConfigError(f"bus (interface {cfg.interface!r}, channel "
                              f"{cfg.channel or cfg.run_id!r}): {e}") from None
 
 
-def _open_bus(cfg: BusConfig, role: str, **extra: Any) -> can.BusABC:
-    if cfg.interface == "zenoh":
-        from bus_schemas.zenoh_can import ZenohBus
+def _open_bus(cfg: BusConfig, role: str, declare_alive: bool, extra: dict[str, Any]
+              ) -> can.BusABC:
+    kw = {**cfg.options, **extra}
+    if cfg.interface == ZENOH:
+        from bus_schemas.transport.zenoh_can import ZenohBus
 
-        kw = dict(cfg.options)
-        kw.update(extra)
+        kw["declare_alive"] = declare_alive
         return ZenohBus(f"{cfg.run_id}/{role}", listen=list(cfg.listen) or None,
                         connect=list(cfg.connect) or None, allow_remote=cfg.allow_remote,
                         **kw)
-    kw = dict(cfg.options)
-    kw.update({k: v for k, v in extra.items() if k not in ("declare_alive",)})
     return can.Bus(interface=cfg.interface, channel=cfg.channel or cfg.run_id, **kw)
 
 
 def send_frames(bus: can.BusABC, msgs: Sequence[can.Message | Frame]) -> None:
     """Send the frames of one control cycle, in order: as one bulk transfer where the bus
-    has ``send_batch`` (:class:`bus_schemas.zenoh_can.ZenohBus`), else frame by frame
+    has ``send_batch`` (:class:`bus_schemas.transport.zenoh_can.ZenohBus`), else frame by frame
     (any python-can bus)."""
     if not msgs:
         return
@@ -130,7 +157,7 @@ def send_frames(bus: can.BusABC, msgs: Sequence[can.Message | Frame]) -> None:
 
 class FrameReader:
     """Receive frames one at a time from ``bus``, a cycle's frames taken together where
-    the bus can (``recv_frames`` of :class:`bus_schemas.zenoh_can.ZenohBus`: one call per
+    the bus can (``recv_frames`` of :class:`bus_schemas.transport.zenoh_can.ZenohBus`: one call per
     sample, light frames), else frame by frame through python-can's ``recv``. The
     counterpart of :func:`send_frames`."""
 
@@ -141,7 +168,7 @@ class FrameReader:
         self._queue: deque[Any] = deque()
 
     def recv(self, timeout: float | None = None) -> Any:
-        """The next frame (a ``can.Message`` or a :class:`bus_schemas.codec.Frame`), or
+        """The next frame (a ``can.Message`` or a :class:`bus_schemas.transport.codec.Frame`), or
         None when none came within ``timeout`` s."""
         q = self._queue
         if q:

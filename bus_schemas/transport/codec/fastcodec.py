@@ -1,13 +1,13 @@
 """Per-frame encode and decode functions generated once from the DBC's layouts.
 
-:func:`bus_schemas.protocol.frame_specs` gives each frame's signal layout (start bit,
+:func:`bus_schemas.transport.protocol.frame_specs` gives each frame's signal layout (start bit,
 length, sign, scale, offset, range) as read from ``ampro3.dbc``; this module writes, for
 each frame, a straight-line Python function from it (every shift, mask, sign fix, scale
 and CRC-table step unrolled, the constants as literals) and compiles it once per process.
 The generated code does what a loop over the layout does, in the same order with the same
 constants (so the same bytes and floats, bit for bit: the encoders tested against
 cantools, the decoders against cantools and the layout loop of
-:func:`bus_schemas.codec.decode_signals`), without the loop and the per-signal tuple
+:func:`bus_schemas.transport.codec.decode_signals`), without the loop and the per-signal tuple
 unpacking.
 
 - ``encoder(spec)(values, counter) -> bytes``: the 8 data bytes (clamped, rounded half to
@@ -22,8 +22,8 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from bus_schemas.crc8 import TABLE, XOROUT
-from bus_schemas.protocol import FrameSpec
+from bus_schemas.transport.crc8 import TABLE, XOROUT
+from bus_schemas.transport.protocol import FrameSpec
 
 
 def _lit(x: Any, consts: dict[str, Any]) -> str:
@@ -79,14 +79,14 @@ def encoder(spec: FrameSpec) -> Callable[[Any, int | None], bytes]:
 
     env = {"T": TABLE, "NAN": nan, "NOCOUNTER": no_counter, **consts}
     exec(compile("\n".join(lines), f"<encoder {spec.name}>", "exec"), env)
-    return env["enc"]  # type: ignore[no-any-return]
+    return env["enc"]
 
 
 def decoder(spec: FrameSpec, verdict: type, payload: type, ok: Any, bad_checksum: Any,
             fix: Callable[[list[Any]], None] | None = None
             ) -> Callable[[bytes | bytearray, float], Any]:
     """Checksum check and typed payload of 8 data bytes of ``spec``'s frame: a ``verdict``
-    (:class:`bus_schemas.codec.Verdict`) with status ``ok`` and ``payload(*values)``, or
+    (:class:`bus_schemas.transport.codec.Verdict`) with status ``ok`` and ``payload(*values)``, or
     ``bad_checksum``. ``fix`` edits the value list in place before the payload is built
     (enum members)."""
     consts: dict[str, Any] = {}
@@ -116,4 +116,4 @@ def decoder(spec: FrameSpec, verdict: type, payload: type, ok: Any, bad_checksum
     env = {"T": TABLE, "V": verdict, "P": payload, "OK": ok, "BAD": bad_checksum,
            "FIX": fix, **consts}
     exec(compile("\n".join(lines), f"<decoder {spec.name}>", "exec"), env)
-    return env["dec"]  # type: ignore[no-any-return]
+    return env["dec"]

@@ -1,0 +1,116 @@
+"""The recording of one co-simulation run (``hpcosim run --record``, MCAP; docs/cosim.md):
+:class:`RunRecord` opens it with what the run is made of (configuration, versions, hashes,
+the drives, the artifacts as attachments), gives the loop its deferred ground-truth recorder
+and finishes it with the run's summary, whatever happened (a full disk: no file at all)."""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+from human_fmu.instance import HumanFmu
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.controller_process import ROOT
+from orchestrator.cosim.human import sha256
+from orchestrator.cosim.inputs import RunInputs
+from orchestrator.cosim.result import CosimResult
+from orchestrator.loop.foxglove import WalkerFoxglove
+from orchestrator.loop.recorder import GroundTruthRecorder
+
+
+def versions() -> dict[str, str]:
+    """The versions of Python, the packages the run depends on and the checkout (git)."""
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for p in ("eclipse-zenoh", "python-can", "mcap", "fmpy", "numpy", "casadi", "piqp"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            out[p] = "missing"
+    try:
+        import hp_model
+
+        out["hpcosim"] = hp_model.__version__
+    except Exception:  # pragma: no cover
+        pass
+    try:
+        out["git"] = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"],
+                                    capture_output=True, text=True, timeout=5).stdout.strip()
+    except Exception:  # pragma: no cover
+        out["git"] = "unknown"
+    return out
+
+
+class RunRecord:
+    """The MCAP recording of one run at ``cfg.record`` (module docstring); ``rec`` is its
+    :class:`bus_schemas.recording.recorder.Recorder` (the link queues the CAN records on it).
+    On exit the summary of ``res`` (and the signal that ended the run, if one did) is
+    added and the file finished."""
+
+    def __init__(self, cfg: CosimConfig, run_id: str, inputs: RunInputs, fmu: HumanFmu,
+                 res: CosimResult) -> None:
+        from bus_schemas.recording.recorder import Recorder
+
+        assert cfg.record is not None
+        Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
+        self.rec = Recorder(cfg.record, metadata={"run_id": run_id}, can_rates=0.1)
+        self.inputs, self.res = inputs, res
+        try:
+            self.rec.register_all()
+            self._describe(cfg, fmu)
+            self._walker = WalkerFoxglove(inputs.model, inputs.gait, inputs.tube)
+        except BaseException:
+            self.close()
+            raise
+
+    def __enter__(self) -> RunRecord:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _describe(self, cfg: CosimConfig, fmu: HumanFmu) -> None:
+        """What the run is made of: metadata and attachments."""
+        from bus_schemas.transport.protocol import DBC_PATH
+
+        rec, inputs = self.rec, self.inputs
+        rec.add_metadata("config", cfg.to_dict())
+        rec.add_metadata("versions", versions())
+        rec.add_metadata("hashes", {"gait_sha256": sha256(cfg.gait),
+                                    "tube_sha256": sha256(cfg.tube),
+                                    "fmu_sha256": sha256(inputs.fmu_path),
+                                    "gait_hash": inputs.gait.hash(),
+                                    "model_hash": inputs.model.parameter_hash(),
+                                    "fmu_guid": fmu.md.guid})
+        ratio = inputs.drives.ratio
+        rec.add_metadata("device", {"gear_ratio_knee": ratio[0],
+                                    "gear_ratio_ankle": ratio[1], "dt": cfg.dt})
+        rec.add_attachment("gait.json", Path(cfg.gait).read_bytes(), "application/json")
+        rec.add_attachment("tube.json", Path(cfg.tube).read_bytes(), "application/json")
+        rec.add_attachment("modelDescription.xml", fmu.model_description_xml(),
+                           "application/xml")
+        rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")
+
+    def ground_truth(self, log_ns: Callable[[float], int]) -> GroundTruthRecorder:
+        """The loop's recorder: ``/ground_truth``, ``/controller/clf`` and the walker for
+        Foxglove, deferred (serialized while the plant waits for the controller), at log
+        times ``log_ns(t)``."""
+        return GroundTruthRecorder(self.rec, log_ns=log_ns, deferred=True, walker=self._walker)
+
+    def close(self) -> None:
+        """Finish the file with the run's summary; a failed write (a full disk) leaves no
+        partial file (the write's error names the file)."""
+        rec, res = self.rec, self.res
+        if rec.write_failed:
+            rec.abort()
+        elif not rec.finished:
+            try:
+                if res.interrupted:
+                    rec.add_metadata("signal", {"signal": res.interrupted,
+                                                "messages": str(rec.message_count)})
+                rec.add_metadata("summary", res.to_dict())
+            finally:
+                rec.finish()
