@@ -17,7 +17,7 @@ from hp_model.config import (
     load_device,
     load_subject,
 )
-from hp_model.domains import DOMAINS, Domain
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import ACTUATED, COORDS, HumanProsthesisModel
 from hp_model.prosthesis import SUB_COORDS, ProsthesisSubsystem
 
@@ -26,7 +26,6 @@ __version__ = "0.1.0"
 __all__ = [
     "ACTUATED",
     "COORDS",
-    "DOMAINS",
     "SUB_COORDS",
     "ConfigError",
     "DeviceConfig",

@@ -137,28 +137,12 @@ _SPECS: dict[Domain, DomainSpec] = {
 }
 _CODES: dict[Domain, int] = {d: i for i, d in enumerate(Domain)}
 
-#: every domain, in code order
-DOMAINS: tuple[Domain, ...] = tuple(Domain)
-#: each domain's number (:attr:`Domain.code`), as logs and the FMU store it
-DOMAIN_CODE: dict[Domain, int] = dict(_CODES)
-#: tables by domain, derived from ``_SPECS`` (kept for the many callers that index by name)
-STANCE_LEG: dict[Domain, StanceLeg] = {d: d.stance_leg for d in Domain}
-STANCE: dict[Domain, tuple[str, str]] = {d: d.stance for d in Domain}
-Y2_COORDS: dict[Domain, tuple[str, ...]] = {d: d.y2_coords for d in Domain}
-HUMAN_OUTPUTS: dict[Domain, tuple[int, ...]] = {d: d.human_outputs for d in Domain}
-
-
-def y2_row(domain: str, coord: str) -> int:
-    """The y2 row of joint ``coord`` in ``domain`` (ValueError if it is not an output)."""
-    return Domain(domain).y2_row(coord)
-
-
 @dataclass(frozen=True)
 class DomainRoles:
     """One domain's roles resolved to indices of a model (coordinates, frames, output rows).
 
     ``knee``/``ankle``: coordinate indices of the stance knee and ankle; ``y2``: coordinate
-    indices of the y2 outputs (``Y2_COORDS`` order); ``on_outputs``: coordinate indices of the
+    indices of the y2 outputs (``Domain.y2_coords`` order); ``on_outputs``: coordinate indices of the
     y2 joints that are neither the stance knee nor a prosthesis joint (the human joints a
     placement puts on their outputs, :mod:`hp_model.placement`) and ``on_outputs_rows`` their
     y2 rows; ``prosthesis``: coordinate indices of (th_pk, th_pa); ``prosthesis_rows``: their

@@ -234,7 +234,7 @@ class HybridSimulator:
     """
 
     def __init__(self, model: HumanProsthesisModel, closed_loop: ClosedLoop,
-                 thetas: Mapping[str, np.ndarray], gains: np.ndarray,
+                 thetas: Mapping[Domain, np.ndarray], gains: np.ndarray,
                  options: SimOptions | None = None, human_delay: float | None = None
                  ) -> None:
         if closed_loop.model is not model:
@@ -244,7 +244,7 @@ class HybridSimulator:
         self.human_delay = human_delay
         self.model, self.cl = model, closed_loop
         self._u_limit = np.asarray(model.torque_limits[4:6], dtype=float)  # motor N m
-        self.thetas = {d: np.asarray(thetas[d], dtype=float) for d in model.domains}
+        self.thetas = {d: np.asarray(thetas[Domain(d)], dtype=float) for d in model.domains}
         self.gains = np.asarray(gains, dtype=float)
         self.opt = options or SimOptions()
         self.fs = closed_loop.numeric()

@@ -173,7 +173,7 @@ class HumanFmu:
         f.exitInitializationMode()
         self._started = True
 
-    def start_walk(self, thetas: Mapping[str, np.ndarray], q0: np.ndarray, qd0: np.ndarray,
+    def start_walk(self, thetas: Mapping[Domain, np.ndarray], q0: np.ndarray, qd0: np.ndarray,
                    real: Mapping[str, float] | None = None) -> None:
         """Start a run where the human tracks ``thetas`` (packed gait per domain) from
         (q0, qd0) in ps, with no FMU-side perturbation or offset: the state the in-process

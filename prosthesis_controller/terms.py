@@ -267,7 +267,7 @@ def clf_qp_loop_function(sub: ProsthesisSubsystem, degree: int, margin_degree: i
     F, G = ca.DM(F_OUT), ca.DM(G_OUT)
     V = eta.T @ P_eps @ eta
     LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
-    LGV = 2 * eta.T @ P_eps @ G
+    LGV = 2 * eta.T @ P_eps @ G  # type: ignore[operator]  # casadi's stubs: SX.T as Sparsity
     s = ca.fmin(ca.fmax((tau - tau_lo) / ca.fmax(tau_hi - tau_lo, 1e-9), 0), 1)
     lo, hi = bezier.evaluate(d_lo, s), bezier.evaluate(d_hi, s)
     in_range = (tau >= tau_lo) * (tau <= tau_hi)  # the bound's phase range
@@ -334,7 +334,7 @@ def clf_qp_function(hip: HipProgress, x: ca.SX, reduced: Sequence[ca.SX], degree
     F, G = ca.DM(F_OUT), ca.DM(G_OUT)
     V = eta.T @ P_eps @ eta
     LFV = eta.T @ (P_eps @ F + F.T @ P_eps) @ eta
-    LGV = 2 * eta.T @ P_eps @ G  # 1 x 2
+    LGV = 2 * eta.T @ P_eps @ G  # type: ignore[operator]  # 1 x 2; casadi's stubs: SX.T
     s = ca.fmin(ca.fmax((tau - tau_lo) / (tau_hi - tau_lo), 0), 1)
     Fstar = bezier.evaluate(nom, s)
     lo, hi = bezier.evaluate(lo_c, s), bezier.evaluate(hi_c, s)

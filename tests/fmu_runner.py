@@ -20,6 +20,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave, fmi2Discard
 
+#: the FMU's domain words by code (hp_model.domains.Domain; this file may not import it)
 DOMAINS = ("ps", "pns")
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load",
            "tau", "t_impact", "socket_Fx", "socket_Fz", "socket_My")

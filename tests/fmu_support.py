@@ -11,18 +11,19 @@ import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
 from hp_model.compiled import cache_root
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
 from human_fmu import build_fmu
 from human_fmu.build import builder_digest
-from tests.fmu_runner import DOMAINS, NominalPD
+from tests.fmu_runner import NominalPD
 
 #: PD gains (joint N m/rad, N m s/rad): stiff in stance, softer on the light swinging leg.
 #: On the committed template gait every ps pair from (300, 10) to (2000, 40) with pns (200, 4)
 #: walks 10 steps; with pns (50, 1) the swing lags and (300, 10), (500, 20) fall: these are
 #: in the middle of the walking range, not on its edge.
-PD_GAINS = {"ps": (1000.0, 30.0), "pns": (200.0, 4.0)}
+PD_GAINS = {Domain.PS: (1000.0, 30.0), Domain.PNS: (200.0, 4.0)}
 
 _BUILT: dict[str, Path] = {}
 
@@ -51,18 +52,18 @@ def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait,
 def simulator(model: HumanProsthesisModel, gait: Gait, thetas=None,
               options: SimOptions | None = None) -> HybridSimulator:
     cl = ClosedLoop(model, gait.degree)
-    th = thetas or {d: gait.theta(d) for d in DOMAINS}
+    th = thetas or {d: gait.theta(d) for d in Domain}
     return HybridSimulator(model, cl, th, gait.gains_array, options)
 
 
 def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) -> dict:
     """The NominalPD table: nominal prosthesis angles, velocities and motor torques of the
     gait's collocation trajectory over its phase."""
-    k, a = model.roles["ps"].prosthesis
+    k, a = model.roles[Domain.PS].prosthesis
     ratio = [float(model.B[k, 4]), float(model.B[a, 5])]
-    table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in DOMAINS},
+    table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in Domain},
                    "phase": {}, "nominal": {}}
-    for d in DOMAINS:
+    for d in Domain:
         vc, th = sim.cl.vcs[d], sim.thetas[d]
         table["phase"][d] = {"c_row": vc.c_row.tolist(), "p_min": float(th[vc.layout.p_min]),
                              "p_max": float(th[vc.layout.p_max])}
@@ -74,12 +75,12 @@ def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) 
 
 
 def python_run(sim: HybridSimulator, pd: NominalPD, q0: np.ndarray, qd0: np.ndarray,
-               domain: str = "ps", **kw) -> SimResult:
+               domain: str = Domain.PS, **kw) -> SimResult:
     """The in-process run with the same policy (tau = the simulator's phase of q)."""
     return sim.run(q0, qd0, domain, policy=lambda t, st: pd(st.domain, st.tau, st.q[10:12],
                                                             st.qd[10:12]), **kw)
 
 
 def start_state(gait: Gait) -> tuple[np.ndarray, np.ndarray]:
-    tr = gait.trajectory["ps"]
+    tr = gait.trajectory[Domain.PS]
     return tr["q"][:, 0].copy(), tr["qd"][:, 0].copy()

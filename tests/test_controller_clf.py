@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from hp_model.domains import Domain
 from prosthesis_controller import ClfConfig, ControllerConfig, ControllerContext, make_controller
 from prosthesis_controller.clf import res_clf
 from prosthesis_controller.interface import QpOutcome
@@ -29,11 +30,11 @@ draws = st.tuples(st.floats(-0.05, 1.05), st.floats(-0.15, 0.15),
 
 def state_at(ctx, d) -> np.ndarray:
     tau, dk, vk, va = d
-    ps = ctx.gait.params["ps"]
+    ps = ctx.gait.params[Domain.PS]
     from hp_model import bezier
-    from hp_model.domains import PROSTHESIS, y2_row
+    from hp_model.domains import PROSTHESIS
 
-    qk = float(bezier.evaluate(ps.alpha[y2_row("ps", PROSTHESIS[0])][None, :],
+    qk = float(bezier.evaluate(ps.alpha[Domain.PS.y2_row(PROSTHESIS[0])][None, :],
                                float(np.clip(tau, 0, 1)))[0]) + dk
     qa = ctx.terms.hip.ankle(ps.delta_p_at(tau), qk)
     return np.array([qk, qa, vk, va])

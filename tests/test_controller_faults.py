@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from prosthesis_controller import (
     ClfConfig,
     ControllerConfig,
@@ -27,7 +27,7 @@ from tests.controller_support import stance_meas, tube_about_nominal
 
 @pytest.fixture(scope="module")
 def nominal_x(model, template_gait):
-    tr = template_gait.trajectory["ps"]
+    tr = template_gait.trajectory[Domain.PS]
     i = [model.coord_names.index(c) for c in ("th_pk", "th_pa")]
     return np.r_[tr["q"][i, 5], tr["qd"][i, 5]]
 
@@ -39,7 +39,7 @@ def _check_output(out, limits):
     d = out.diagnostics
     for v in (d.tau, d.V, d.rho, *d.disturbance, d.since_touchdown):
         assert math.isfinite(v)
-    assert d.domain in DOMAINS
+    assert d.domain in Domain
 
 
 BAD = [

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hp_model import bezier
+from hp_model.domains import Domain
 from hp_model.outputs import phase_rate
 from prosthesis_controller import (
     ControllerName,
@@ -27,42 +28,43 @@ def test_domain_switches_with_hysteresis_and_dwell(ctx):
     cfg = ctx.config.domain
     ctl = make_controller("pd", None, None, None, context=ctx)
     ctl.reset()
-    assert ctl.tick(m(0.0)).diagnostics.domain == "pns"  # first sample decides at once
+    assert ctl.tick(m(0.0)).diagnostics.domain == Domain.PNS  # first sample decides at once
     # stance evidence inside the dwell time is ignored
-    assert ctl.tick(m(cfg.min_dwell / 2, load=600, contact=True)).diagnostics.domain == "pns"
+    assert ctl.tick(m(cfg.min_dwell / 2, load=600, contact=True)).diagnostics.domain == Domain.PNS
     # load between the thresholds with contact: no evidence either way
     assert ctl.tick(m(0.2, load=0.5 * (cfg.load_on + cfg.load_off),
-                      contact=True)).diagnostics.domain == "pns"
+                      contact=True)).diagnostics.domain == Domain.PNS
     out = ctl.tick(m(0.3, load=600, contact=True))
-    assert out.diagnostics.domain == "ps" and out.diagnostics.mode == ControllerMode.STANCE
+    assert out.diagnostics.domain == Domain.PS and out.diagnostics.mode == ControllerMode.STANCE
     # a contact flicker within the dwell does not end stance
-    assert ctl.tick(m(0.3 + cfg.min_dwell / 2, load=0, contact=False)).diagnostics.domain == "ps"
+    out = ctl.tick(m(0.3 + cfg.min_dwell / 2, load=0, contact=False))
+    assert out.diagnostics.domain == Domain.PS
     # mid-band load keeps stance (hysteresis)
     assert ctl.tick(m(0.5, load=0.5 * (cfg.load_on + cfg.load_off),
-                      contact=True)).diagnostics.domain == "ps"
+                      contact=True)).diagnostics.domain == Domain.PS
     # a one-tick dip of the load below load_off with contact is not a lift-off
-    assert ctl.tick(m(0.6, load=10, contact=True)).diagnostics.domain == "ps"
-    assert ctl.tick(m(0.601, load=600, contact=True)).diagnostics.domain == "ps"
+    assert ctl.tick(m(0.6, load=10, contact=True)).diagnostics.domain == Domain.PS
+    assert ctl.tick(m(0.601, load=600, contact=True)).diagnostics.domain == Domain.PS
     # load held below load_off for off_hold ends stance
     t0 = 0.7
-    assert ctl.tick(m(t0, load=10, contact=True)).diagnostics.domain == "ps"
+    assert ctl.tick(m(t0, load=10, contact=True)).diagnostics.domain == Domain.PS
     assert ctl.tick(m(t0 + 0.5 * cfg.off_hold, load=10, contact=True)).diagnostics.domain \
-        == "ps"
+        == Domain.PS
     out = ctl.tick(m(t0 + cfg.off_hold, load=10, contact=True))
-    assert out.diagnostics.domain == "pns" and out.diagnostics.mode == ControllerMode.SWING
+    assert out.diagnostics.domain == Domain.PNS and out.diagnostics.mode == ControllerMode.SWING
     # losing contact ends stance at once
     ctl.reset()
     ctl.tick(m(0.0, load=600, contact=True))
-    assert ctl.tick(m(cfg.min_dwell, load=600, contact=False)).diagnostics.domain == "pns"
+    assert ctl.tick(m(cfg.min_dwell, load=600, contact=False)).diagnostics.domain == Domain.PNS
 
 
 def test_swing_tracks_the_pns_rows_with_gravity_at_the_time_based_phase(ctx, model,
                                                                        template_gait):
     """Before the landing starts, at the desired state the swing torque is the gravity
     torque alone; tau_hat is (t - t_liftoff) / T_pns."""
-    T = ctx.durations["pns"]
-    pns = template_gait.params["pns"]
-    rows = list(ctx.model.roles["pns"].prosthesis_rows)
+    T = ctx.durations[Domain.PNS]
+    pns = template_gait.params[Domain.PNS]
+    rows = list(ctx.model.roles[Domain.PNS].prosthesis_rows)
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
     t0 = 1.0
@@ -110,9 +112,9 @@ def test_swing_landing_straightens_the_shank_and_flattens_the_foot(stored_ctx):
     controller's terms)."""
     ctx = stored_ctx
     sw = ctx.config.swing
-    T = ctx.durations["pns"]
-    pns = ctx.gait.params["pns"]
-    rows = list(ctx.model.roles["pns"].prosthesis_rows)
+    T = ctx.durations[Domain.PNS]
+    pns = ctx.gait.params[Domain.PNS]
+    rows = list(ctx.model.roles[Domain.PNS].prosthesis_rows)
     pitch_c = ctx.swing_params[2 * (pns.degree + 1):2 * (pns.degree + 1) + 6]
     f = ctx.terms.numeric["swing_ref"]
     frames = ctx.subsystem.numeric()["frames"]
@@ -150,7 +152,7 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     """On the nominal (y = 0) the phase-PD torque is the fitted nominal stance torque; a
     knee error adds -kp y2 - kd dy2 and a hip-velocity error k_vhip y1 (joint side); the
     feedforward fit reproduces the gait's collocation torques."""
-    ps = template_gait.params["ps"]
+    ps = template_gait.params[Domain.PS]
     hip = ctx.terms.hip
     ck, ca_ = hip.c_knee, hip.c_ankle
     cfg = ctx.config.phase_pd
@@ -159,7 +161,7 @@ def test_phase_pd_is_feedforward_on_the_nominal_plus_pd_and_hip_velocity(ctx, te
     ctl.reset()
     ctl.tick(m(0.0, load=600, contact=True))
     ff = template_gait.controller_curves.stance_torque
-    tr = template_gait.trajectory["ps"]
+    tr = template_gait.trajectory[Domain.PS]
     q, u = np.asarray(tr["q"]), np.asarray(tr["u"])
     tau_c = hip.phase(q[10], q[11], ps.p_min, ps.p_max)
     fit = bezier.evaluate(ff, np.clip(tau_c, 0, 1))
@@ -192,7 +194,7 @@ def test_pd_reference_obeys_the_phase_relation_and_vanishes_on_it(ctx, template_
     paper's trajectories are), its velocities at the nominal phase rate v_hip* / dp: zero
     torque on it; off it, kp (q_d(tau(q)) - q) + kd (v_d - v), where q_d(tau(q)) - q has the
     ankle error -(c_k / c_a) times the knee's (the phase pins delta_p_hip)."""
-    ps = template_gait.params["ps"]
+    ps = template_gait.params[Domain.PS]
     hip = ctx.terms.hip
     rate = ps.nominal_rate
     f = ctx.terms.numeric["stance_ref"]
@@ -222,7 +224,7 @@ def test_pd_reference_obeys_the_phase_relation_and_vanishes_on_it(ctx, template_
 def test_passive_on_the_reference_is_inverse_dynamics_without_socket_force(ctx, template_gait):
     """On the reference at the state-based phase (e = 0, e_dot = 0): r = 0, the robust term
     vanishes, u = M qdd_d + C qd_d + g."""
-    ps = template_gait.params["ps"]
+    ps = template_gait.params[Domain.PS]
     rate = ps.nominal_rate
     f = ctx.terms.numeric["stance_ref"]
     lag = ctx.terms.numeric["lagrangian"]

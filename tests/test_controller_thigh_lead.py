@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hp_model import bezier
+from hp_model.domains import Domain
 from prosthesis_controller import ControllerContext, ProsthesisMeasurement, make_controller
 from prosthesis_controller.config import ControllerConfig, SwingConfig
 from prosthesis_controller.context import thigh_phase_table
@@ -67,10 +68,9 @@ def _swing_tau(ctl, ctx, t0, T, frac, pitch):
 
 
 def _rows(ctx):
-    from hp_model.domains import Y2_COORDS
 
-    idx = [Y2_COORDS["pns"].index(c) for c in ("th_pk", "th_pa")]
-    return ctx.gait.params["pns"].alpha[idx]
+    idx = [Domain.PNS.y2_coords.index(c) for c in ("th_pk", "th_pa")]
+    return ctx.gait.params[Domain.PNS].alpha[idx]
 
 
 def test_a_thigh_ahead_of_the_nominal_advances_the_swing_low_pass_filtered(lead_ctx, model):
@@ -79,7 +79,7 @@ def test_a_thigh_ahead_of_the_nominal_advances_the_swing_low_pass_filtered(lead_
     constant; it is held after the branch and reset at the next lift-off."""
     ctx = lead_ctx
     assert ctx.thigh_table is not None
-    T = ctx.durations["pns"]
+    T = ctx.durations[Domain.PNS]
     tc = ctx.config.swing.lead_time_constant
     pitch_c = ctx.gait.controller_curves.socket_pitch
     p_at = lambda s: float(bezier.evaluate(pitch_c, s)[0])  # noqa: E731
@@ -114,7 +114,7 @@ def test_a_thigh_ahead_of_the_nominal_advances_the_swing_low_pass_filtered(lead_
 def test_a_late_thigh_or_no_imu_leaves_the_clock(lead_ctx, model, offset):
     """The lead never retards the swing; without a pitch (NaN) the phase is the clock."""
     ctx = lead_ctx
-    T = ctx.durations["pns"]
+    T = ctx.durations[Domain.PNS]
     pitch_c = ctx.gait.controller_curves.socket_pitch
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
@@ -131,7 +131,7 @@ def test_without_thigh_lead_the_pitch_is_ignored(model, subsystem, playback_gait
                             model, ControllerConfig(swing=SwingConfig(thigh_lead=False)),
                             subsystem=subsystem)
     assert ctx.thigh_table is None
-    T = ctx.durations["pns"]
+    T = ctx.durations[Domain.PNS]
     ctl = make_controller("clfqp", None, None, None, context=ctx)
     ctl.reset()
     ctl.tick(ProsthesisMeasurement(0.0, 0.1, 0.1, 0.0, 0.0, 0.0, False, 0.3))
@@ -147,7 +147,7 @@ def test_the_deadband_is_taken_off_the_lead(model, subsystem, playback_gait):
     ctx = ControllerContext(playback_gait, tube_about_nominal(playback_gait, (40, 60, 8)),
                             model, ControllerConfig(swing=SwingConfig(lead_deadband=0.03)),
                             subsystem=subsystem)
-    T = ctx.durations["pns"]
+    T = ctx.durations[Domain.PNS]
     pitch_c = playback_gait.controller_curves.socket_pitch
     s_hi = float(ctx.thigh_table[1][0])
     for d, expect in ((0.02, 0.0), (0.06, 0.03)):

@@ -36,7 +36,7 @@ from characterization.mocap.mapping import default_mapping
 from characterization.mocap.pipeline import process_take, to_artifact
 from characterization.mocap.synthetic_subject import SynthOptions, reference_gait, synthesize
 from hp_model import bezier
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 
 RATE = 120.0
 N_STRIDES = 37
@@ -45,7 +45,7 @@ N_STRIDES = 37
 @pytest.fixture(scope="module")
 def take(model):
     s = synthesize(model, SynthOptions(n_strides=N_STRIDES, seed=4))
-    coef = {d: model.hip_progress_coefficients(d) for d in DOMAINS}
+    coef = {d: model.hip_progress_coefficients(d) for d in Domain}
     return s, to_artifact(process_take(s.take, default_mapping("paper"), coef))
 
 
@@ -56,8 +56,8 @@ def reference(model):
 
 def _true_touchdowns(truth) -> dict[str, np.ndarray]:
     """First frame after each impact, per domain entered."""
-    return {"ps": np.ceil(truth["p_land"] * RATE - 1e-9).astype(int),
-            "pns": np.ceil(truth["h_land"] * RATE - 1e-9).astype(int)}
+    return {Domain.PS: np.ceil(truth["p_land"] * RATE - 1e-9).astype(int),
+            Domain.PNS: np.ceil(truth["h_land"] * RATE - 1e-9).astype(int)}
 
 
 def test_touchdowns_are_the_impacts(take) -> None:
@@ -65,7 +65,7 @@ def test_touchdowns_are_the_impacts(take) -> None:
     true = _true_touchdowns(synth.truth)
     segs = domain_segments(steps)
     assert len(segs) == 2 * N_STRIDES
-    assert [s.domain for s in segs] == ["ps", "pns"] * N_STRIDES
+    assert [s.domain for s in segs] == [Domain.PS, Domain.PNS] * N_STRIDES
     err = np.array([s.start - true[s.domain][np.argmin(np.abs(true[s.domain] - s.start))]
                     for s in segs])
     assert np.all(np.abs(err) <= 1), np.unique(err, return_counts=True)
@@ -81,10 +81,10 @@ def test_paper_steps_are_not_the_model_domains(take) -> None:
     synth, steps = take
     true = _true_touchdowns(synth.truth)
     for i in range(steps.n_steps):
-        if steps.step_domain[i] == "ps":
+        if steps.step_domain[i] == Domain.PS:
             end = steps.step_end[i]
-            h_td = true["pns"][true["pns"] <= end].max()
-            p_td = true["ps"][true["ps"] > h_td].min()
+            h_td = true[Domain.PNS][true[Domain.PNS] <= end].max()
+            p_td = true[Domain.PS][true[Domain.PS] > h_td].min()
             assert h_td + 2 <= end < p_td, (i, h_td, end, p_td)
 
 
@@ -92,7 +92,7 @@ def test_regression_recovers_the_reference_gait(model, take, reference) -> None:
     _, steps = take
     reg = regress_steps(model, steps, reference.degree)
     s = np.linspace(0.0, 1.0, 201)
-    for d in DOMAINS:
+    for d in Domain:
         ref = reference.params[d]
         err = bezier.evaluate(reg.targets.alpha[d], s) - bezier.evaluate(ref.alpha, s)
         rms = np.degrees(np.sqrt(np.mean(err**2, axis=0)))
@@ -113,6 +113,6 @@ def test_paper_steps_regress_a_shifted_phase(model, take, reference) -> None:
     _, steps = take
     reg = regress_steps(model, steps, reference.degree, segments="paper")
     s = np.linspace(0.0, 1.0, 201)
-    err = (bezier.evaluate(reg.targets.alpha["pns"], s)
-           - bezier.evaluate(reference.params["pns"].alpha, s))
+    err = (bezier.evaluate(reg.targets.alpha[Domain.PNS], s)
+           - bezier.evaluate(reference.params[Domain.PNS].alpha, s))
     assert np.degrees(np.sqrt(np.mean(err**2, axis=0))).max() > 2.0

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.simulator import SimState
 from orchestrator.experiments.scenarios import (
     NOMINAL,
@@ -36,10 +36,10 @@ def tube(model, template_gait):
 def test_measurement_is_prosthesis_only():
     q, qd = np.arange(12.0), -np.arange(12.0)
     lam = np.array([1.0, 700.0, 0, 5, 6, 7])
-    m = measurement(observe_state(0, SimState(0.5, "ps", q, qd, 0.3, lam, 0), (10, 11)))
+    m = measurement(observe_state(0, SimState(0.5, Domain.PS, q, qd, 0.3, lam, 0), (10, 11)))
     assert (m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel) == (10, 11, -10, -11)
     assert m.foot_load == 700.0 and m.contact
-    m = measurement(observe_state(0, SimState(0.5, "pns", q, qd, 0.3, lam, 0), (10, 11)))
+    m = measurement(observe_state(0, SimState(0.5, Domain.PNS, q, qd, 0.3, lam, 0), (10, 11)))
     assert m.foot_load == 0.0 and not m.contact
 
 
@@ -50,11 +50,11 @@ def test_run_scenario_consistent(model, template_gait, tube):
     assert np.all(np.isfinite(r.torque)) and len(r.mode) == n
     assert r.success == (not r.failed and r.steps >= 1)
     if r.failed:
-        assert r.fail_tau is not None and r.fail_domain in DOMAINS
+        assert r.fail_tau is not None and r.fail_domain in Domain
     # at t = 0 the state is the gait's: knee error is the collocation error only
     assert abs(r.q_p[0, 0] - r.knee_ref[0]) < 0.05
     s = summary(r)
-    assert math.isclose(s["knee_rms_ps_rad"], r.knee_rms("ps"))
+    assert math.isclose(s["knee_rms_ps_rad"], r.knee_rms(Domain.PS))
 
 
 @pytest.fixture(scope="module")
@@ -69,9 +69,9 @@ def test_offset_start_moves_only_the_prosthesis_knee_output(model, stored_gait):
     from hp_model.closed_loop import ClosedLoop
     from orchestrator.experiments.paper import knee_offset
 
-    vc = ClosedLoop(model, stored_gait.degree).vcs["ps"]
+    vc = ClosedLoop(model, stored_gait.degree).vcs[Domain.PS]
     out = vc.numeric()["outputs_ps"]
-    th = stored_gait.theta("ps")
+    th = stored_gait.theta(Domain.PS)
     q0, qd0 = initial_state(model, stored_gait)
     q, qd = initial_state(model, stored_gait, knee_offset(model, 0.02))
     _, y2_0, _, tau0 = (a.copy() for a in out(q0, qd0, th))
@@ -103,16 +103,16 @@ def test_phase_pd_walks_the_stored_gait_with_flat_landings(model, stored_gait):
     r = run_scenario(model, stored_gait, tube, Scenario("phase-pd", NOMINAL, 4))
     assert r.success, r.reason
     assert max(abs(p) for p in r.touchdown_pitch) < 0.02
-    assert r.knee_rms("ps") < np.radians(2.0)
+    assert r.knee_rms(Domain.PS) < np.radians(2.0)
     assert all(m in ("stance", "swing") for m in r.mode)
 
 
 def test_perturbation_changes_the_human_only(template_gait):
     p = Perturbation("x", 0.01, 3)
     th = p.thetas(template_gait)
-    assert not np.allclose(th["ps"], template_gait.theta("ps"))
-    progress = template_gait.params["ps"].layout.progress
-    np.testing.assert_array_equal(th["ps"][progress], template_gait.theta("ps")[progress])
+    assert not np.allclose(th[Domain.PS], template_gait.theta(Domain.PS))
+    progress = template_gait.params[Domain.PS].layout.progress
+    np.testing.assert_array_equal(th[Domain.PS][progress], template_gait.theta(Domain.PS)[progress])
 
 
 def test_experiments_build_the_model_from_subject_and_device(tmp_path, capsys):

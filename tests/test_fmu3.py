@@ -17,7 +17,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from human_fmu import MODEL_IDENTIFIER
 from human_fmu.fmi3 import PLATFORM_TUPLE, VR_TIME
 from tests.fmu_runner import HumanFMU, NominalPD
@@ -133,7 +133,7 @@ def test_fmi3_walks_bit_for_bit_like_fmi2(built2, built3, model, template_gait):
             assert h3.fmu.getFloat64([VR_TIME])[0] == pytest.approx(k * dt, abs=1e-12)
             assert not h3.fmu.getBoolean(h3.vrs(["fall"]))[0], f"fell at period {k}"
             steps = i2[i_steps]
-            d = DOMAINS[i2[i_dom]]
+            d = Domain.from_code(i2[i_dom])
             u = pd(d, y2[i_tau], np.array([y2[i_knee], y2[i_ankle]]),
                    np.array([y2[i_vk], y2[i_va]])).tolist()
             h2.fmu.setReal(u2, u)

@@ -17,7 +17,7 @@ from fmpy import read_model_description
 from fmpy.model_description import read_build_description
 from fmpy.validation import validate_fmu
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from human_fmu import MODEL_IDENTIFIER, FmuBuildError, build_fmu
@@ -79,11 +79,11 @@ def test_model_description_variables(built, model, template_gait):
                  "steps", "fall", "fall_code", "t_impact", *[f"q[{i}]" for i in range(1, 13)],
                  *[f"qd[{i}]" for i in range(1, 13)]):
         assert v[name].causality == "output", name
-    for d in DOMAINS:
+    for d in Domain:
         th = np.array([float(v[f"theta_{d}[{i}]"].start) for i in range(1, 34)])
         assert np.array_equal(th, template_gait.theta(d))
     q0 = np.array([float(v[f"q0[{i}]"].start) for i in range(1, 13)])
-    assert np.array_equal(q0, template_gait.trajectory["ps"]["q"][:, 0])
+    assert np.array_equal(q0, template_gait.trajectory[Domain.PS]["q"][:, 0])
     assert v["substeps"].type == "Integer" and int(v["substeps"].start) == SimOptions().substeps
     assert v["model_hash"].start == model.parameter_hash()
     assert v["gait_hash"].start == template_gait.hash()

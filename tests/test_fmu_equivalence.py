@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from human_fmu import initial_state, perturbed_thetas
@@ -88,14 +88,14 @@ def test_perturbation_and_offsets_match_their_python_mirrors(fmu_path, model, te
     # within what the test's NominalPD walks on the committed template gait (3 steps): at
     # amplitude 0.003 the perturbed human touches down late in the third stance and it falls
     amp, seed, dk, da = 0.001, -7, 0.01, -0.005
-    thetas = perturbed_thetas({d: template_gait.theta(d) for d in DOMAINS}, amp, seed)
-    progress = template_gait.params["ps"].layout.progress
-    assert not np.array_equal(thetas["ps"], template_gait.theta("ps"))
-    assert np.array_equal(thetas["ps"][progress], template_gait.theta("ps")[progress])
+    thetas = perturbed_thetas({d: template_gait.theta(d) for d in Domain}, amp, seed)
+    progress = template_gait.params[Domain.PS].layout.progress
+    assert not np.array_equal(thetas[Domain.PS], template_gait.theta(Domain.PS))
+    assert np.array_equal(thetas[Domain.PS][progress], template_gait.theta(Domain.PS)[progress])
     sim = simulator(model, template_gait, thetas)
     pd = NominalPD(policy_table(model, template_gait, sim))
     q0, qd0 = start_state(template_gait)
-    q1, qd1 = initial_state(sim.cl, template_gait.theta("ps"), q0, qd0, "ps", dk, da)
+    q1, qd1 = initial_state(sim.cl, template_gait.theta(Domain.PS), q0, qd0, Domain.PS, dk, da)
     assert q1[10] == q0[10] + dk and q1[11] == q0[11] + da
     ref = python_run(sim, pd, q1, qd1, steps=3)
     log = fmu_run(fmu_path, pd, ref.t.size, "q",
@@ -120,7 +120,7 @@ def test_offsets_start_where_a_scenario_does(fmu_path, model, template_gait):
     q_s, qd_s = scenario_state(model, template_gait, (dk, da), sim.cl)
     q0, qd0 = start_state(template_gait)
     assert np.abs(q_s - q0).max() > 1e-3  # really moved (the human onto its outputs too)
-    q_p, qd_p = initial_state(sim.cl, template_gait.theta("ps"), q0, qd0, "ps", dk, da)
+    q_p, qd_p = initial_state(sim.cl, template_gait.theta(Domain.PS), q0, qd0, Domain.PS, dk, da)
     pd = NominalPD(policy_table(model, template_gait, sim))
     log = fmu_run(fmu_path, pd, 1, "q", real={"offset_knee": dk, "offset_ankle": da})
     for q, qd in ((q_p, qd_p), (log["q"][0], log["qd"][0])):
@@ -132,9 +132,9 @@ def test_start_in_pns(fmu_path, model, template_gait):
     """Initial state and domain as parameters: the gait's start of pns."""
     sim = simulator(model, template_gait)
     pd = NominalPD(policy_table(model, template_gait, sim))
-    tr = template_gait.trajectory["pns"]
+    tr = template_gait.trajectory[Domain.PNS]
     q0, qd0 = tr["q"][:, 0], tr["qd"][:, 0]
-    ref = python_run(sim, pd, q0, qd0, "pns", steps=2)
+    ref = python_run(sim, pd, q0, qd0, Domain.PNS, steps=2)
     real = {f"q0[{i + 1}]": v for i, v in enumerate(q0)}
     real |= {f"qd0[{i + 1}]": v for i, v in enumerate(qd0)}
     log = fmu_run(fmu_path, pd, ref.t.size, "q", real=real, integer={"initial_domain": 1})
@@ -161,7 +161,7 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
     depends on the inputs of the step and shows one communication step later)."""
     sim = simulator(model, template_gait)
     table = policy_table(model, template_gait, sim)
-    for d in DOMAINS:
+    for d in Domain:
         table["nominal"][d]["u"] = (factor * np.array(table["nominal"][d]["u"])).tolist()
     pd = NominalPD(table)
     q0, qd0 = start_state(template_gait)
@@ -207,13 +207,13 @@ def test_perturbation_generator_is_splitmix64():
     assert splitmix64(0, 1) == 0x6E789E6AA1B965F4
     assert splitmix64(1234567, 0) == 0x599ED017FB08FC85
     assert uniform(-1, 3) == uniform((1 << 64) - 1, 3)  # negative seeds: two's complement
-    th = {"ps": np.arange(33.0), "pns": -np.arange(33.0)}
+    th = {Domain.PS: np.arange(33.0), Domain.PNS: -np.arange(33.0)}
     assert all(np.array_equal(perturbed_thetas(th, 0.0, 5)[d], th[d]) for d in th)
     p = perturbed_thetas(th, 0.1, 5)
     for d in th:
         delta = p[d] - th[d]
         assert np.all(np.abs(delta[:30]) <= 0.1) and np.all(delta[30:] == 0)
         assert np.abs(delta[:30]).min() > 0
-    assert not np.array_equal(p["ps"] - th["ps"], -(p["pns"] - th["pns"]))
+    assert not np.array_equal(p[Domain.PS] - th[Domain.PS], -(p[Domain.PNS] - th[Domain.PNS]))
     with pytest.raises(ValueError):
         perturbed_thetas(th, -1.0, 0)

@@ -27,7 +27,7 @@ from fmpy.fmi2 import (
     fmi2Terminated,
 )
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from tests.fmu_runner import HumanFMU, NominalPD, run, stepper
@@ -119,7 +119,7 @@ def test_runs_in_a_python_without_this_project(fmu_path, model, template_gait, t
 # -- instances ----------------------------------------------------------------------------------
 def _solo(path, table, periods, factor=1.0):
     t = json.loads(json.dumps(table))
-    for d in DOMAINS:
+    for d in Domain:
         t["nominal"][d]["u"] = (factor * np.array(t["nominal"][d]["u"])).tolist()
     h = HumanFMU(str(path))
     h.setup()
@@ -186,7 +186,7 @@ def test_fmu_state_rollback(fmu_path, table):
         out = []
         for k in range(k0, k0 + n):
             q = np.array(f.getReal(qv))
-            d = DOMAINS[f.getInteger(h.vrs(["domain"]))[0]]
+            d = Domain.from_code(f.getInteger(h.vrs(["domain"]))[0])
             y = f.getReal(h.vrs(["knee_angle", "ankle_angle", "knee_velocity",
                                  "ankle_velocity"]))
             f.setReal(uv, pd(d, pd.phase(d, q), np.array(y[:2]), np.array(y[2:])).tolist())

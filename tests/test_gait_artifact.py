@@ -15,7 +15,7 @@ from characterization.gait.controller_curves import (
     fit_controller_curves,
 )
 from hp_model.artifacts import ArtifactError
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.gait_artifact import load_gait, save_gait
 from tests.committed_gaits import RECIPES, ROOT
 
@@ -25,7 +25,7 @@ def test_round_trip_keeps_everything(tmp_path, model, template_gait):
     save_gait(p, template_gait)
     g = load_gait(p, model.parameter_hash())
     assert g.hash() == template_gait.hash()
-    for d in DOMAINS:
+    for d in Domain:
         np.testing.assert_allclose(g.params[d].alpha, template_gait.params[d].alpha)
     np.testing.assert_allclose(g.socket_force(0.5), template_gait.socket_force(0.5))
     assert g.solver["status"] == "Solve_Succeeded"
@@ -47,9 +47,9 @@ def test_other_model_parameters_are_refused(tmp_path, template_gait):
 
 @pytest.mark.parametrize("edit, field", [
     (lambda d: d.update(schema_version=99), "schema_version"),
-    (lambda d: d["domains"]["ps"].update(v_hip=-1.0), "domains.ps.v_hip"),
-    (lambda d: d["domains"]["pns"].update(alpha=[[0.0]]), "domains.pns.alpha"),
-    (lambda d: d["domains"]["ps"]["alpha"][0].__setitem__(0, 0.3), "gait_hash"),
+    (lambda d: d["domains"][Domain.PS].update(v_hip=-1.0), "domains.ps.v_hip"),
+    (lambda d: d["domains"][Domain.PNS].update(alpha=[[0.0]]), "domains.pns.alpha"),
+    (lambda d: d["domains"][Domain.PS]["alpha"][0].__setitem__(0, 0.3), "gait_hash"),
     (lambda d: d.pop("model_hash"), "model_hash"),
 ])
 def test_bad_fields_are_named(tmp_path, template_gait, edit, field):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import Y2_COORDS
+from hp_model.domains import Domain
 from hp_model.interaction import InteractionModel
 
 HUMAN = ("th_lh", "th_lk", "th_la", "th_rh")
@@ -23,7 +23,7 @@ def setup(model, demo_gait):
 
 
 def _x_p(model, q, qd):
-    k, a = model.roles["ps"].prosthesis
+    k, a = model.roles[Domain.PS].prosthesis
     return np.r_[q[k], q[a], qd[k], qd[a]]
 
 
@@ -33,9 +33,9 @@ def test_walker_state_is_the_gaits_collocation_state(model, setup):
     (the collocation holds y2 = 0 at its points only to its accuracy); everything else
     (prosthesis, socket, base on the flat stance foot) is equal to solver precision."""
     im, cl, gait = setup
-    theta = gait.theta("ps")
-    tr = gait.trajectory["ps"]
-    rows = [Y2_COORDS["ps"].index(n) for n in HUMAN]
+    theta = gait.theta(Domain.PS)
+    tr = gait.trajectory[Domain.PS]
+    rows = [Domain.PS.y2_coords.index(n) for n in HUMAN]
     hj = [model.coord_names.index(n) for n in HUMAN]
     worst = 0.0
     for j in range(tr["q"].shape[1]):
@@ -49,7 +49,7 @@ def test_walker_state_is_the_gaits_collocation_state(model, setup):
         # the base: the prosthesis sole flat on the ground at x = 0, as in the collocation
         q_on = q.copy()
         q_on[hj] = qr[hj]
-        np.testing.assert_allclose(qr, model.place_stance_foot(q_on, "ps"), atol=1e-12)
+        np.testing.assert_allclose(qr, model.place_stance_foot(q_on, Domain.PS), atol=1e-12)
     assert worst < 1e-4  # the collocation's own off-surface error (rad)
 
 
@@ -58,9 +58,9 @@ def test_affine_terms_equal_the_full_loop(model, setup, rng):
     accelerations and stance-foot wrench, at reconstructed states along the gait and off it,
     for any motor torque."""
     im, cl, gait = setup
-    theta, gains = gait.theta("ps"), gait.gains_array
-    tr = gait.trajectory["ps"]
-    k, a = model.roles["ps"].prosthesis
+    theta, gains = gait.theta(Domain.PS), gait.gains_array
+    tr = gait.trajectory[Domain.PS]
+    k, a = model.roles[Domain.PS].prosthesis
     inter = im.numeric()["interaction_ps"]
     for j in range(0, tr["q"].shape[1], 3):
         x0 = _x_p(model, tr["q"][:, j], tr["qd"][:, j])
@@ -79,9 +79,9 @@ def test_torque_authority_is_the_loops_finite_difference(model, setup):
     """g's and W's columns are the full loop's response to each motor torque (central
     differences of 1 N m: the loop is affine in u_p, so only rounding remains)."""
     im, cl, gait = setup
-    theta, gains = gait.theta("ps"), gait.gains_array
-    tr = gait.trajectory["ps"]
-    k, a = model.roles["ps"].prosthesis
+    theta, gains = gait.theta(Domain.PS), gait.gains_array
+    tr = gait.trajectory[Domain.PS]
+    k, a = model.roles[Domain.PS].prosthesis
     inter = im.numeric()["interaction_ps"]
     j = tr["q"].shape[1] // 2
     x = _x_p(model, tr["q"][:, j], tr["qd"][:, j])

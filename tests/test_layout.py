@@ -132,3 +132,12 @@ def test_orchestrator_modules_are_small() -> None:
     big = [f"{p.relative_to(ROOT)}: {n} lines" for p in files
            if (n := len(p.read_text().splitlines())) > 450]
     assert not big, "\n".join(big)
+
+
+def test_the_standalone_fmu_runner_knows_the_domains() -> None:
+    """tests/fmu_runner.py runs where the project is not importable, so it spells the FMU's
+    domain codes itself: they must be :class:`~hp_model.domains.Domain`'s."""
+    from hp_model.domains import Domain
+    from tests.fmu_runner import DOMAINS
+
+    assert tuple(d.value for d in Domain) == DOMAINS

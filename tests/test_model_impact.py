@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from tests.conftest import random_state
 
 
-@pytest.mark.parametrize("target", DOMAINS)
+@pytest.mark.parametrize("target", list(Domain))
 def test_impact_zeroes_constraint_velocity_and_dissipates(model, rng, target):
     fs = model.numeric()
     for _ in range(50):
@@ -41,11 +41,12 @@ def test_ps_pns_ps_cycle_relabels_consistently(model, rng):
     map uses the new stance foot and the socket, keeps positions, and leaves the fixed joint
     still; the old stance foot is released (it may lift off)."""
     fs = model.numeric()
-    assert model.domains["ps"].next == "pns" and model.domains["pns"].next == "ps"
-    assert model.domains["ps"].swing_frame == "l_sole"
-    assert model.domains["pns"].swing_frame == "p_sole"
+    assert model.domains[Domain.PS].next == Domain.PNS
+    assert model.domains[Domain.PNS].next == Domain.PS
+    assert model.domains[Domain.PS].swing_frame == "l_sole"
+    assert model.domains[Domain.PNS].swing_frame == "p_sole"
     q, _ = random_state(model, rng, scale=0.1)
-    q = model.place_stance_foot(q, "ps")
+    q = model.place_stance_foot(q, Domain.PS)
     _, _, Jps, _ = fs["terms_ps"](q, np.zeros(model.nq))
     qd = rng.normal(size=model.nq)
     qd -= np.linalg.pinv(Jps) @ (Jps @ qd)  # moving in ps

@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.statics import standing_posture, static_equilibrium
 from tests.conftest import random_state
 
 
-@pytest.mark.parametrize("dom", DOMAINS)
+@pytest.mark.parametrize("dom", list(Domain))
 def test_paper_formula_equals_kkt_socket_rows(model, rng, dom):
     """eq. (Fsocket) with the stance-foot wrench on the known side = the KKT's socket rows."""
     fs = model.numeric()
@@ -70,7 +70,7 @@ def test_reduced_form_matches_subsystem_kkt(subsystem, rng):
         np.testing.assert_allclose((f + gm @ u + gs @ F)[:2], xp[2:], atol=0)
 
 
-@pytest.mark.parametrize("dom", DOMAINS)
+@pytest.mark.parametrize("dom", list(Domain))
 def test_static_stance_socket_force_is_the_weight_above_the_socket(model, dom):
     """Upright and still: the ground carries M g; in ps the socket carries everything above
     it, F_z = -(M - m_prosthesis) g; in pns the socket holds the hanging prosthesis,
@@ -81,14 +81,14 @@ def test_static_stance_socket_force_is_the_weight_above_the_socket(model, dom):
     foot, sock = lam[0:3], lam[3:6]
     assert foot[1] == pytest.approx(M * g, rel=1e-9)
     assert foot[0] == pytest.approx(0.0, abs=1e-9)
-    expected = -(M - mp) * g if dom == "ps" else mp * g
+    expected = -(M - mp) * g if dom == Domain.PS else mp * g
     assert sock[1] == pytest.approx(expected, rel=1e-9)
     assert sock[0] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_hip_progress_increases_as_the_shank_rolls_over_the_foot(model):
     """delta_p_hip linearises the hip's forward position over the stance ankle."""
-    ck, ca_ = model.hip_progress_coefficients("ps")
+    ck, ca_ = model.hip_progress_coefficients(Domain.PS)
     p = model.device.prosthesis
     above_knee = model.subject.lengths.thigh + model.device.iwalk.length.value + p.top.length.value
     assert ck == pytest.approx(-above_knee, rel=1e-12)
@@ -98,7 +98,7 @@ def test_hip_progress_increases_as_the_shank_rolls_over_the_foot(model):
     for th_k, th_a in [(0.01, -0.02), (-0.015, 0.005)]:
         q = np.zeros(model.nq)
         q[10], q[11] = th_k, th_a
-        q = model.place_stance_foot(q, "ps")
+        q = model.place_stance_foot(q, Domain.PS)
         pose, _ = fs["frames"](q, np.zeros(model.nq))
         dx = pose[0, model.frame_index("hip")] - pose[0, model.frame_index("p_ankle")]
         assert dx == pytest.approx(ck * th_k + ca_ * th_a, abs=1e-3 * 0.02)

@@ -15,7 +15,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 
 from hp_model import bezier
-from hp_model.domains import DOMAINS, STANCE
+from hp_model.domains import Domain
 from hp_model.outputs import GaitParams, VirtualConstraints
 
 
@@ -43,10 +43,10 @@ def test_bezier_properties(rng):
 def _params(domain: str) -> GaitParams:
     # an arbitrary smooth step; the test's claims hold for any gait
     rows = {
-        "ps": [[0.30, 0.20, 0.0, -0.2, -0.3, -0.35], [0.2, 0.7, 1.0, 0.8, 0.3, 0.1],
+        Domain.PS: [[0.30, 0.20, 0.0, -0.2, -0.3, -0.35], [0.2, 0.7, 1.0, 0.8, 0.3, 0.1],
                [0.1, 0.1, 0.0, 0.0, 0.0, 0.0], [-0.3, -0.2, 0.0, 0.1, 0.2, 0.25],
                [0.1, 0.1, 0.05, 0.05, 0.05, 0.05]],
-        "pns": [[-0.3, -0.2, 0.0, 0.1, 0.2, 0.25], [0.1, 0.1, 0.05, 0.05, 0.05, 0.05],
+        Domain.PNS: [[-0.3, -0.2, 0.0, 0.1, 0.2, 0.25], [0.1, 0.1, 0.05, 0.05, 0.05, 0.05],
                 [0.30, 0.20, 0.0, -0.2, -0.3, -0.35], [0.2, 0.7, 1.0, 0.8, 0.3, 0.1],
                 [0.1, 0.1, 0.0, 0.0, 0.0, 0.0]],
     }
@@ -55,10 +55,10 @@ def _params(domain: str) -> GaitParams:
 
 @pytest.fixture(scope="module")
 def vcs(model):
-    return {d: VirtualConstraints(model, d, degree=5) for d in DOMAINS}
+    return {d: VirtualConstraints(model, d, degree=5) for d in Domain}
 
 
-@pytest.mark.parametrize("domain", DOMAINS)
+@pytest.mark.parametrize("domain", list(Domain))
 def test_phase_and_outputs_on_the_surface(model, vcs, domain):
     vc = vcs[domain]
     p = _params(domain)
@@ -75,7 +75,7 @@ def test_phase_and_outputs_on_the_surface(model, vcs, domain):
         np.testing.assert_allclose(pose[:, model.frame_index(sole)][1:], 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("domain", DOMAINS)
+@pytest.mark.parametrize("domain", list(Domain))
 def test_feedback_linearization_gives_linear_output_dynamics(model, vcs, domain, rng):
     vc, p = vcs[domain], _params(domain)
     fs, mfs = vc.numeric(), model.numeric()
@@ -85,7 +85,7 @@ def test_feedback_linearization_gives_linear_output_dynamics(model, vcs, domain,
     gains = np.array([eps, kp, kd])
     n = model.nq
     q0 = vc.posture(0.2, p)
-    k = model.coord_names.index(STANCE[domain][0])
+    k = model.coord_names.index(Domain(domain).stance[0])
     q0[k] += 0.03  # off the surface (moves y2 and tau)
     q0 = model.place_stance_foot(q0, domain)
     _, _, J, _ = mfs[f"terms_{domain}"](q0, np.zeros(n))

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 
 pytestmark = pytest.mark.slow
 
@@ -20,14 +20,14 @@ def result(regenerated):
 
 def test_ipopt_converges(result):
     assert result.solver["success"], result.solver["status"]
-    for d in DOMAINS:
+    for d in Domain:
         assert np.all(np.abs(result.offsets[d]) <= 0.15 + 1e-6)
 
 
 def test_collocation_points_satisfy_the_forward_dynamics(model, result):
     """Our KKT forward dynamics, fed the optimizer's (q, qd, u), returns its qdd and lam."""
     fs = model.numeric()
-    for d in DOMAINS:
+    for d in Domain:
         tr = result.trajectory[d]
         for k in range(tr["q"].shape[1]):
             qdd, lam = fs[f"dyn_{d}"](tr["q"][:, k], tr["qd"][:, k], tr["u"][:, k])
@@ -39,7 +39,7 @@ def test_collocation_points_satisfy_the_forward_dynamics(model, result):
 
 def test_impacts_connect_the_domains_periodically(model, result):
     fs = model.numeric()
-    ps, pns = result.trajectory["ps"], result.trajectory["pns"]
+    ps, pns = result.trajectory[Domain.PS], result.trajectory[Domain.PNS]
     qd_plus = fs["impact_pns"](ps["q"][:, -1], ps["qd"][:, -1])[0]
     np.testing.assert_allclose(pns["qd"][:, 0], qd_plus, atol=1e-6)
     np.testing.assert_allclose(pns["q"][:, 0], ps["q"][:, -1], atol=1e-8)
@@ -52,10 +52,10 @@ _SMALL_SOLVE = """
 import hashlib, numpy as np, hp_model
 from characterization.gait.phzd import PHZDOptions, optimize_gait
 from hp_model.blas_threads import blas_thread_counts
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from tests.gait_template import template_targets
 r = optimize_gait(hp_model.load_model(), template_targets(), PHZDOptions(nodes=7, max_iter=15))
-x = np.concatenate([np.ravel(r.trajectory[d][k]) for d in DOMAINS
+x = np.concatenate([np.ravel(r.trajectory[d][k]) for d in Domain
                     for k in ("q", "qd", "qdd", "u", "lam")])
 print(hashlib.sha256(x.tobytes()).hexdigest(), max(blas_thread_counts().values()))
 """

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS, HUMAN_OUTPUTS, PROSTHESIS, STANCE, Y2_COORDS
+from hp_model.domains import PROSTHESIS, Domain
 from hp_model.outputs import GaitParams, HipProgress, ThetaLayout
 
 
@@ -19,25 +19,25 @@ def loop(model, template_gait):
 
 def test_roles_are_the_tables_resolved_to_indices(model):
     idx = model.coord_names.index
-    for d in DOMAINS:
+    for d in Domain:
         r = model.roles[d]
-        assert (r.name, r.code, r.next) == (d, DOMAINS.index(d), DOMAINS[1 - DOMAINS.index(d)])
-        assert (r.knee, r.ankle) == tuple(idx(n) for n in STANCE[d])
-        assert r.y2 == tuple(idx(n) for n in Y2_COORDS[d])
+        assert (r.name, r.code, r.next) == (d, Domain(d).code, Domain.from_code(1 - Domain(d).code))
+        assert (r.knee, r.ankle) == tuple(idx(n) for n in Domain(d).stance)
+        assert r.y2 == tuple(idx(n) for n in Domain(d).y2_coords)
         assert r.stance_frame_index == model.frame_index(model.stance_frame(d))
         assert r.swing_frame == model.domains[d].swing_frame
         assert r.prosthesis == tuple(idx(n) for n in PROSTHESIS)
-        assert r.human_rows == HUMAN_OUTPUTS[d]
+        assert r.human_rows == Domain(d).human_outputs
         for i, row in zip(r.on_outputs, r.on_outputs_rows, strict=True):
             assert r.y2[row] == i and i not in (r.knee, *r.prosthesis)
-    assert model.roles["ps"].on_outputs == tuple(idx(n) for n in ("th_lh", "th_lk", "th_la",
+    assert model.roles[Domain.PS].on_outputs == tuple(idx(n) for n in ("th_lh", "th_lk", "th_la",
                                                                   "th_rh"))
-    assert model.roles["pns"].prosthesis_rows == (3, 4)
-    assert model.roles["ps"].prosthesis_rows == (4, -1)
+    assert model.roles[Domain.PNS].prosthesis_rows == (3, 4)
+    assert model.roles[Domain.PS].prosthesis_rows == (4, -1)
 
 
 def test_theta_layout_packs_and_unpacks_the_gait(template_gait):
-    p = template_gait.params["ps"]
+    p = template_gait.params[Domain.PS]
     th = p.pack()
     L = ThetaLayout.of_size(th.size)
     assert p.layout == L and L.size == th.size == 5 * (p.degree + 1) + 3
@@ -54,11 +54,11 @@ def test_theta_layout_packs_and_unpacks_the_gait(template_gait):
 def test_phase_is_the_papers_formula_in_every_form(model, loop, template_gait, rng):
     """tau = (c_k th_k + c_a th_a - p_min) / (p_max - p_min) written out here; the numeric
     owner computes exactly it, and the generated phase_<d> (the FMU's) the same bits."""
-    for d in DOMAINS:
+    for d in Domain:
         vc, th = loop.vcs[d], template_gait.theta(d)
         p = template_gait.params[d]
         ck, ca = model.hip_progress_coefficients(d)
-        k, a = (model.coord_names.index(n) for n in STANCE[d])
+        k, a = (model.coord_names.index(n) for n in Domain(d).stance)
         f = loop.numeric()[f"phase_{d}"]
         for _ in range(200):
             q = rng.normal(scale=0.5, size=model.nq)
@@ -82,7 +82,7 @@ def _foot_at_rest(model, d, q, qd, x):
 
 
 def test_the_posture_is_on_the_outputs_and_its_foot_at_rest(model, loop, template_gait):
-    for d in DOMAINS:
+    for d in Domain:
         vc, p = loop.vcs[d], template_gait.params[d]
         for tau in (0.1, 0.5, 0.9):
             q, qd = loop.zero_dynamics_state(d, tau, p.pack())
@@ -100,7 +100,7 @@ def test_a_start_moves_the_prosthesis_and_puts_the_human_on_its_outputs(model, l
     """start_<d> (the scenarios' and the FMU's offsets): zero offsets keep the state; an
     offset moves th_pk and th_pa by it, the other human y2 joints onto their outputs at the
     new phase, the stance foot flat where it was and at rest."""
-    for d in DOMAINS:
+    for d in Domain:
         tr, th, r = template_gait.trajectory[d], template_gait.theta(d), model.roles[d]
         q0, qd0 = tr["q"][:, 0], tr["qd"][:, 0]
         q, qd = loop.start_state(d, q0, qd0, th)

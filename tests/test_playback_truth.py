@@ -23,7 +23,7 @@ from characterization.tube.playback import (
 )
 from characterization.tube.playback_truth import TruthOptions, synthesize
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.simulator import HybridSimulator
 from tests.playback_helpers import relative_rms_errors, tube_excess
 
@@ -58,7 +58,7 @@ def test_synthetic_subject_is_a_valid_steps_artifact(case):
     in pns), which the foot-marker rule must cut off."""
     _, take, _ = case
     s = take.steps
-    assert list(s.step_domain).count("ps") == 20 and s.frame_rate == 200.0
+    assert list(s.step_domain).count(Domain.PS) == 20 and s.frame_rate == 200.0
     for tr in take.ps_truth():
         i = tr.index
         assert np.all(np.isfinite(tr.socket)) and tr.tau[0] == 0.0 and tr.tau[-1] == 1.0
@@ -115,12 +115,12 @@ def test_gait_phase_is_the_hip_progress_normalised_by_the_gait(case, gait, model
     computed from the played-back q by the gait's own virtual constraints."""
     _, _, result = case
     cl = ClosedLoop(model, gait.degree)
-    sim_phase = HybridSimulator(model, cl, {d: gait.theta(d) for d in DOMAINS},
+    sim_phase = HybridSimulator(model, cl, {d: gait.theta(d) for d in Domain},
                                 gait.gains_array).phase
     sp = result.playback.good[0]
     for j in (0, len(sp.tau) // 2, len(sp.tau) - 1):
         assert float(result.tube_tau(sp, sp.tau[j])) == pytest.approx(
-            sim_phase("ps", sp.q[j]), abs=1e-9)
+            sim_phase(Domain.PS, sp.q[j]), abs=1e-9)
 
 
 def test_paper_formula_equals_the_constrained_solve(case):

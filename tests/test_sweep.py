@@ -18,7 +18,7 @@ import pytest
 from scipy.stats import binomtest
 
 from hp_model import bezier
-from hp_model.domains import Y2_COORDS
+from hp_model.domains import Domain
 from hp_model.falls import Fall, FallReason
 from hp_model.force_tube import save_tube
 from orchestrator.sweep.draws import SEED_LIMIT, Draw, RunKey, make_draw, run_keys
@@ -200,7 +200,7 @@ def test_report_counts_fall_reasons_from_the_stored_label(tmp_path):
                        "spec": {"controllers": ["pd"], "families": {"f": {}}, "draws": 5},
                        "sessions": []})
     st.results.mkdir()
-    cone = Fall(FallReason.FRICTION_CONE, 0.25, "ps", 0.5, {"F_x": 300.0, "F_z": 10.0})
+    cone = Fall(FallReason.FRICTION_CONE, 0.25, Domain.PS, 0.5, {"F_x": 300.0, "F_z": 10.0})
     base = {"controller": "pd", "family": "f", "session": "s", "seq": 0, "success": False,
             "failed": True, "steps_completed": 0, "duration_s": 0.2}
     rows = [{**base, **Draw("f", i).columns(), "key": f"pd/f/{i}", "draw": i,
@@ -223,8 +223,8 @@ def test_output_offsets_shift_the_human_curves_only(gait):
     base = human_thetas(gait, Draw("x", 0, 0.01, 5))
     th = human_thetas(gait, d)
     s = np.linspace(0, 1, 11)
-    L = gait.params["ps"].layout
-    for dom, rows in Y2_COORDS.items():
+    L = gait.params[Domain.PS].layout
+    for dom, rows in ((d, d.y2_coords) for d in Domain):
         for r, joint in enumerate(rows):
             a0 = base[dom][L.row(r)][None, :]
             a1 = th[dom][L.row(r)][None, :]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import DOMAINS
+from hp_model.domains import Domain
 from hp_model.falls import FallReason
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
@@ -104,7 +104,7 @@ def test_body_variation_scales_the_human_segments_only(model):
 @pytest.fixture(scope="module")
 def loop(model, playback_gait):
     cl = ClosedLoop(model, playback_gait.degree)
-    th = {d: playback_gait.theta(d) for d in DOMAINS}
+    th = {d: playback_gait.theta(d) for d in Domain}
     return cl, th, initial_state(model, playback_gait)
 
 
@@ -114,8 +114,8 @@ def test_a_human_without_delay_is_the_continuous_human_sampled(model, playback_g
     over a whole step, and both walk."""
     cl, th, (q0, qd0) = loop
     g = playback_gait.gains_array
-    a = HybridSimulator(model, cl, th, g).run(q0, qd0, "ps", steps=2)
-    b = HybridSimulator(model, cl, th, g, human_delay=0.0).run(q0, qd0, "ps", steps=2)
+    a = HybridSimulator(model, cl, th, g).run(q0, qd0, Domain.PS, steps=2)
+    b = HybridSimulator(model, cl, th, g, human_delay=0.0).run(q0, qd0, Domain.PS, steps=2)
     assert not a.failed and not b.failed and a.steps == b.steps == 2
     n = min(a.t.size, b.t.size) - 5
     assert np.max(np.abs(a.q[:n, 3:] - b.q[:n, 3:])) < 1e-3
@@ -129,8 +129,9 @@ def test_a_late_stiff_human_falls_where_a_soft_one_walks(model, playback_gait, l
     cl, th, (q0, qd0) = loop
     g = playback_gait.gains_array
     soft = g * np.array([0.5, 0.25, 0.5])
-    late_stiff = HybridSimulator(model, cl, th, g, human_delay=0.03).run(q0, qd0, "ps", steps=3)
-    late_soft = HybridSimulator(model, cl, th, soft, human_delay=0.03).run(q0, qd0, "ps",
+    late_stiff = HybridSimulator(model, cl, th, g, human_delay=0.03).run(q0, qd0, Domain.PS,
+                                                                         steps=3)
+    late_soft = HybridSimulator(model, cl, th, soft, human_delay=0.03).run(q0, qd0, Domain.PS,
                                                                            steps=3)
     assert late_stiff.fall is not None and late_stiff.fall.reason is FallReason.FRICTION_CONE
     assert not late_soft.failed and late_soft.steps == 3
@@ -222,17 +223,16 @@ def test_the_fmu_backend_refuses_what_it_does_not_model(tmp_path, spec_file):
 # ------------------------------------------------------------------ the oracle
 
 def test_oracle_tracks_the_humans_rows_and_the_nominal_prosthesis(playback_gait):
-    from hp_model.domains import HUMAN_OUTPUTS, Y2_COORDS
     from human_fmu.perturbation import perturbed_thetas
 
-    nominal = {d: playback_gait.theta(d) for d in DOMAINS}
+    nominal = {d: playback_gait.theta(d) for d in Domain}
     pert = perturbed_thetas(nominal, 0.02, 5)
     th = oracle_thetas(playback_gait, pert)
-    L = playback_gait.params["ps"].layout
-    for d in DOMAINS:
-        for r, name in enumerate(Y2_COORDS[d]):
+    L = playback_gait.params[Domain.PS].layout
+    for d in Domain:
+        for r, name in enumerate(Domain(d).y2_coords):
             rows = L.row(r)
-            src = pert if r + 1 in HUMAN_OUTPUTS[d] else nominal
+            src = pert if r + 1 in Domain(d).human_outputs else nominal
             assert np.array_equal(th[d][rows], src[d][rows]), (d, name)
             assert name.startswith("th_p") == (src is nominal)
 
@@ -243,7 +243,7 @@ def test_the_oracle_walks_the_nominal_gait_on_it(model, playback_gait, loop):
                      Scenario(ORACLE, steps=3), closed_loop=cl)
     assert r.success and r.steps == 3
     # feedback linearization from a state on the orbit: the knee stays on B_pk(tau)
-    assert r.knee_rms("ps") < 1e-4
+    assert r.knee_rms(Domain.PS) < 1e-4
     assert np.all(np.isfinite(r.torque))
 
 

@@ -1,7 +1,7 @@
 """``gait fit``: steps -> Bezier regression -> PHZD optimization -> verified gait artifact.
 
 Regression (paper Sec. IV-A): per domain, the data's portions of that domain are stacked;
-y2 (the 5 joint angles of ``Y2_COORDS``) is fitted with Bezier curves of the chosen degree
+y2 (the 5 joint angles of ``Domain.y2_coords``) is fitted with Bezier curves of the chosen degree
 in the portion's tau; y1's desired value, the hip velocity, is the degree-0 fit (the mean)
 of the per-frame d/dt delta_p_hip; the phase bounds are the means of the portions' initial
 and final delta_p_hip.
@@ -35,7 +35,7 @@ from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.choices import Choice
-from hp_model.domains import DOMAINS, STANCE, Y2_COORDS, Domain
+from hp_model.domains import Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HipProgress, phase
@@ -70,7 +70,7 @@ class Regression:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
                     "n": self.fits[d].n, "steps": self.n_steps[d],
                     "hip_velocity_rms": self.hip_velocity_rms[d],
-                    "segments": self.segments} for d in DOMAINS}
+                    "segments": self.segments} for d in Domain}
 
 
 @dataclass(frozen=True)
@@ -105,9 +105,9 @@ def regress_domain(model: HumanProsthesisModel, steps: StepsArtifact, indices: S
     if not len(indices):
         raise FitError(f"{src}: no '{domain}' step (need at least one step of each domain)")
     names = list(steps.coord_names)
-    cols = [names.index(c) for c in Y2_COORDS[domain]]
+    cols = [names.index(c) for c in Domain(domain).y2_coords]
     hip = HipProgress.of(model, domain)
-    k, a = (names.index(c) for c in STANCE[domain])
+    k, a = (names.index(c) for c in Domain(domain).stance)
     taus, ys, vels = [], [], []
     for i in indices:
         q = steps.step_q(i)
@@ -160,9 +160,9 @@ def regress_segments(model: HumanProsthesisModel, steps: StepsArtifact,
     phase bounds of :func:`_segment_phase`.  Portions too short for it, or where the hip
     does not progress, are left out."""
     names = list(steps.coord_names)
-    cols = [names.index(c) for c in Y2_COORDS[domain]]
+    cols = [names.index(c) for c in Domain(domain).y2_coords]
     hip = HipProgress.of(model, domain)
-    k, a = (names.index(c) for c in STANCE[domain])
+    k, a = (names.index(c) for c in Domain(domain).stance)
     taus, ys, vels, lo, hi = [], [], [], [], []
     for s in segments:
         q = steps.q[s.start:s.end + 1]
@@ -194,7 +194,7 @@ def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int
     segments = fit_segments(segments)
     found = domain_segments(steps) if segments == FitSegments.TOUCHDOWN else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
-    for d in DOMAINS:
+    for d in Domain:
         if segments == FitSegments.TOUCHDOWN:
             r = regress_segments(model, steps, [s for s in found if s.domain == d], d,
                                  degree, src)
@@ -212,7 +212,7 @@ def output_rms(gait: Gait, n: int = 201) -> dict[Domain, np.ndarray]:
     """Per domain, RMS over tau of y_d(alpha*) - (y_d(alpha_mc) + delta), per output (rad)."""
     s = np.linspace(0.0, 1.0, n)
     out = {}
-    for d in DOMAINS:
+    for d in Domain:
         opt = bezier.evaluate(gait.params[d].alpha, s)
         data = bezier.evaluate(gait.data_params[d].alpha, s) + gait.offsets[d]
         out[d] = np.sqrt(np.mean((opt - data) ** 2, axis=0))

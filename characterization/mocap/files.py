@@ -22,6 +22,8 @@ from characterization.mocap.trc_io import read_trc
 from hp_model.atomic_io import atomic_write_bytes
 from hp_model.domains import Domain
 
+#: the take formats, by file extension: a reader returns a :class:`Take` (a new format is a
+#: reader module and a row here)
 READERS = {".csv": read_motive_csv, ".c3d": read_c3d, ".trc": read_trc}
 
 
@@ -32,7 +34,8 @@ def read_take(path: str | os.PathLike[str]) -> Take:
         raise FileNotFoundError(f"{p}: no such file")
     reader = READERS.get(p.suffix.lower())
     if reader is None:
-        raise MocapError(f"{p}: unknown take format '{p.suffix}' (expected .csv, .c3d or .trc)")
+        raise MocapError(f"{p}: unknown take format '{p.suffix}' (expected one of "
+                         f"{', '.join(READERS)})")
     return reader(p)
 
 

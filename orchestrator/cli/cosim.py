@@ -242,7 +242,7 @@ def animate_cmd(
     import hp_model
     from hp_model.atomic_io import atomic_write_bytes
     from orchestrator.cli.options import check_output_file
-    from orchestrator.experiments.animation import recording_gif, walker_gif
+    from orchestrator.experiments.animation import WalkSeries, recording_gif, walker_gif
 
     check_output_file(out)
     recording = source.endswith(".mcap") or Path(source).is_file()
@@ -268,8 +268,9 @@ def animate_cmd(
         r = run_scenario(model, g, load_tube(tube, g.hash()), sc)
         assert r.q is not None  # a scenario run keeps the configuration
         ended = f"{r.steps} steps" + (f", fell: {r.fall.reason.label}" if r.fall else "")
-        data = walker_gif(model, r.t, r.q, r.domain, r.tau, r.socket_force, fps=fps,
-                          max_seconds=seconds, title=f"{sc.label} ({ended})")
+        walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force)
+        data = walker_gif(model, walk, fps=fps, max_seconds=seconds,
+                          title=f"{sc.label} ({ended})")
     atomic_write_bytes(out, data)
     Console().print(f"wrote {out} ({len(data) / 1024:.0f} KiB)")
 

@@ -29,7 +29,7 @@ from characterization.gait.verification import make_simulator
 from characterization.tube.fit import deviation_profiles, fit_tube, nominal_coefficients
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
-from hp_model.domains import N_Y2, PROSTHESIS, Domain, y2_row
+from hp_model.domains import N_Y2, PROSTHESIS, Domain
 from hp_model.falls import Fall, FallOutcome
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
@@ -155,10 +155,10 @@ def knee_reference(gait: Gait, domain: np.ndarray, tau: np.ndarray) -> np.ndarra
     (0 ps, 1 pns) at phase ``tau`` (clipped to [0, 1]); shape of ``tau``."""
     domain, tau = np.asarray(domain), np.clip(np.asarray(tau, float), 0.0, 1.0)
     ref = np.zeros(tau.shape)
-    for code, d in enumerate(Domain):
-        m = domain == code
+    for d in Domain:
+        m = domain == d.code
         if m.any():
-            r = y2_row(d, PROSTHESIS[0])
+            r = d.y2_row(PROSTHESIS[0])
             ref[m] = bezier.evaluate(gait.params[d].alpha[r:r + 1], tau[m])[:, 0]
     return ref
 
@@ -210,12 +210,14 @@ def run_scenario(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         raise ValueError("closed_loop was built for another model or Bezier degree")
     gains = (gait.gains_array if plant.human_gains is None
              else np.asarray(plant.human_gains, float))
-    sim = HybridSimulator(model, closed_loop, scenario.perturbation.thetas(gait), gains,
-                          plant.options or SimOptions(), human_delay=plant.human_delay)
+    thetas = scenario.perturbation.thetas(gait)
+    if scenario.controller == ORACLE:
+        thetas = oracle_thetas(gait, thetas)
+    sim = HybridSimulator(model, closed_loop, thetas, gains, plant.options or SimOptions(),
+                          human_delay=plant.human_delay)
     q0, qd0 = start or initial_state(model, gait, scenario.initial_offset, closed_loop)
     link: Link
     if scenario.controller == ORACLE:
-        sim.thetas = oracle_thetas(gait, sim.thetas)
         sim_plant = SimulatorPlant(sim, q0, qd0, mode=ClosedLoopMode.FULL)
         link = OracleLink()
     else:
