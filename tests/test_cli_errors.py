@@ -3,6 +3,7 @@ naming what is wrong, a non-zero exit, never a traceback and nothing on stdout."
 
 from __future__ import annotations
 
+from enum import Enum
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,9 @@ def _required(cmd, value: str, out: str) -> list[str]:
         if not p.required:
             continue
         v = out if p.name in OUTPUTS else value
+        kind = p.type_descriptor.annotation
+        if isinstance(kind, type) and issubclass(kind, Enum):  # a closed set: its first word
+            v = str(next(iter(kind)).value)
         args += [v] if p.param_type_name == "argument" else [p.opts[0], v]
     return args
 
