@@ -142,11 +142,11 @@ class DomainRoles:
     """One domain's roles resolved to indices of a model (coordinates, frames, output rows).
 
     ``knee``/``ankle``: coordinate indices of the stance knee and ankle; ``y2``: coordinate
-    indices of the y2 outputs (``Domain.y2_coords`` order); ``on_outputs``: coordinate indices of the
-    y2 joints that are neither the stance knee nor a prosthesis joint (the human joints a
-    placement puts on their outputs, :mod:`hp_model.placement`) and ``on_outputs_rows`` their
-    y2 rows; ``prosthesis``: coordinate indices of (th_pk, th_pa); ``prosthesis_rows``: their
-    y2 rows (-1 where the joint is not an output: the stance ankle);
+    indices of the y2 outputs (``Domain.y2_coords`` order); ``on_outputs``: coordinate
+    indices of the y2 joints that are neither the stance knee nor a prosthesis joint (the
+    human joints a placement puts on their outputs, :mod:`hp_model.placement`) and
+    ``on_outputs_rows`` their y2 rows; ``prosthesis``: coordinate indices of (th_pk, th_pa);
+    ``prosthesis_rows``: their y2 rows (-1 where the joint is not an output: the stance ankle);
     ``human_rows``: rows of (y1, y2) the human's torques control; ``stance_foot`` and
     ``swing_foot``: the frames (heel, toe) of the stance and the swing foot."""
 
