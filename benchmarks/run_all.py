@@ -1,7 +1,8 @@
 """Run the benchmarks and write docs/performance.md from their JSON (``make bench``).
 
 Each benchmark script runs in its own process with ``--json`` (settings below: ``make bench``
-takes about 10 minutes on 2 cores; ``--quick``: minimal repetitions, to check the generator);
+takes about 10 minutes on 2 cores, and ``memory``'s hour of simulated walking 15-40 more;
+``--quick``: minimal repetitions, to check the generator);
 its figures become one table (median, spread, ratio to the script's in-run reference, target,
 met) on a page made from ``benchmarks/performance.md.in`` with the machine, the date and the
 commit, written atomically.  A benchmark that fails is listed with its error and the exit
@@ -274,6 +275,24 @@ def realtime_rows(j: list[dict[str, Any]]) -> list[Row]:
     return out
 
 
+def memory_rows(j: dict[str, Any]) -> list[Row]:
+    p, n = j["plant"], j.get("node") or {}
+    dur, warm = j["duration_s"], j["warmup_s"]
+    out = [Row(f"orchestrator RSS after {fmt(warm)} s simulated (MB)", p["warm_mb"]),
+           Row(f"orchestrator RSS at {fmt(dur)} s simulated (MB)", p["end_mb"],
+               f"max {fmt(p['max_mb'])}"),
+           Row("orchestrator growth after the warm-up (%)", p["growth_pct"], "", None,
+               "<= 10 % over 3600 s (issue 39)",
+               abs(p["growth_pct"]) <= 10 if dur >= 3600 else None),
+           Row("orchestrator slope (MB per simulated hour)", p["slope_mb_per_h"], "", None,
+               "", None)]
+    if n:
+        out.append(Row("controller node growth after the warm-up (%)", n["growth_pct"],
+                       f"{fmt(n['warm_mb'])} -> {fmt(n['end_mb'])} MB"))
+    out.append(Row("restarts (the walker fell or the run faulted)", float(j["restarts"])))
+    return out
+
+
 BENCHES = (
     Bench("model", "12-DOF model from Python, against Pinocchio in the same run",
           ["--repeats", "15", "--calls", "2000"], ["--repeats", "2", "--calls", "50"],
@@ -322,6 +341,9 @@ BENCHES = (
     Bench("realtime", "real-time co-simulation (paced to the wall clock)",
           ["--gait", GAIT, "--tube", TUBE, "--steps", "3", "--runs", "3"],
           ["--gait", GAIT, "--tube", TUBE, "--steps", "1", "--runs", "1"], realtime_rows),
+    Bench("memory", "memory over a long lockstep co-simulation (clfqp, MCAP recording; "
+          "--duration: simulated s)", ["--gait", GAIT, "--tube", TUBE, "--duration", "3600"],
+          ["--gait", GAIT, "--tube", TUBE, "--duration", "20", "--warmup", "5"], memory_rows),
 )
 
 

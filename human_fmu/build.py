@@ -483,18 +483,16 @@ def _build_info(inp: _Inputs, srcs: _Sources, fmi_version: int, cc: str,
 
 def _zip_atomically(root: Path, out: Path) -> None:
     """Zip the tree under ``root`` into ``out`` through a temporary file next to it (a
-    failed build leaves no partial FMU)."""
-    fd, tmp_zip = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
-    os.close(fd)
-    try:
+    failed build leaves no partial FMU; mode 0o666 less the umask: hp_model.atomic_io)."""
+    from hp_model.atomic_io import atomic_write_with
+
+    def write(tmp_zip: str) -> None:
         with zipfile.ZipFile(tmp_zip, "w", zipfile.ZIP_DEFLATED) as zf:
             for p in sorted(root.rglob("*")):
                 if p.is_file():
                     zf.write(p, p.relative_to(root).as_posix())
-        os.replace(tmp_zip, out)
-    except BaseException:
-        Path(tmp_zip).unlink(missing_ok=True)
-        raise
+
+    atomic_write_with(out, write)
 
 
 def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],

@@ -17,9 +17,14 @@ check): the status is checked here the same way (above warning raises fmpy's
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import fcntl
 import json
+import os
+import re
 import shutil
+import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -88,6 +93,83 @@ def step_or_end(slave: Any, component: Any, t: float, dt: float,
     return False
 
 
+#: a private extraction folder in the temporary folder: ``hpcosim-fmu-<pid>-<random>``
+EXTRACT_PREFIX = "hpcosim-fmu-"
+_EXTRACTED = re.compile(rf"{EXTRACT_PREFIX}(\d+)-")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def _held(path: str) -> bool:
+    """The folder is locked by its (living) owner: a shared lock held while it is in use."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC | os.O_NOFOLLOW)
+    except OSError:
+        return True  # cannot tell: keep it
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return False
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)
+
+
+def sweep_dead_extractions(folder: str | Path | None = None) -> list[Path]:
+    """Remove this user's ``hpcosim-fmu-<pid>-*`` folders in ``folder`` (default: the
+    temporary folder) whose process is dead and whose lock nobody holds (left by a run
+    killed with SIGKILL); the paths removed."""
+    gone = []
+    with contextlib.suppress(OSError):
+        for e in os.scandir(folder or tempfile.gettempdir()):
+            m = _EXTRACTED.match(e.name)
+            if (m is None or not e.is_dir(follow_symlinks=False)
+                    or e.stat(follow_symlinks=False).st_uid != os.geteuid()
+                    or _pid_alive(int(m.group(1))) or _held(e.path)):
+                continue
+            shutil.rmtree(e.path, ignore_errors=True)
+            gone.append(Path(e.path))
+    return gone
+
+
+def extract_private(path: str | Path) -> tuple[Path, int]:
+    """Extract the FMU at ``path`` into a new private folder (mode 0700) named after this
+    process, first removing the folders of dead runs (:func:`sweep_dead_extractions`);
+    ``(folder, fd)``: ``fd`` holds the folder's shared lock until it is closed."""
+    from fmpy import extract
+
+    sweep_dead_extractions()
+    d = tempfile.mkdtemp(prefix=f"{EXTRACT_PREFIX}{os.getpid()}-")
+    try:
+        fd = os.open(d, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+        fcntl.flock(fd, fcntl.LOCK_SH)
+    except BaseException:
+        shutil.rmtree(d, ignore_errors=True)
+        raise
+    try:
+        extract(str(path), unzipdir=d)
+    except BaseException:
+        _release(Path(d), fd)
+        raise
+    return Path(d), fd
+
+
+def _release(folder: Path, fd: int | None) -> None:
+    """Remove an extraction folder and drop its lock."""
+    shutil.rmtree(folder, ignore_errors=True)
+    if fd is not None:
+        with contextlib.suppress(OSError):
+            os.close(fd)
+
+
 class _Buffer:
     """Preallocated value references and values of one fmi2 type."""
 
@@ -100,15 +182,15 @@ class _Buffer:
 
 
 class HumanFmu:
-    """The human FMU at ``path``, extracted into ``unzipdir`` (a fresh temporary folder by
-    default; removed by :meth:`free`) and instantiated once; :meth:`start` (re)initialises
-    it for a run.  Refuses an FMI 3.0 FMU (the loops drive FMI 2.0; the two are
-    bit-identical)."""
+    """The human FMU at ``path``, extracted into ``unzipdir`` (default: a private folder
+    named after this process, :func:`extract_private`; removed by :meth:`free`, or at the
+    next start by any process if this one is killed) and instantiated once; :meth:`start`
+    (re)initialises it for a run.  Refuses an FMI 3.0 FMU (the loops drive FMI 2.0; the two
+    are bit-identical)."""
 
     def __init__(self, path: str | Path, *, unzipdir: str | Path | None = None,
                  instance: str = "human") -> None:
         from fmpy import extract, read_model_description
-        from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Integer, fmi2Real
 
         self.path = Path(path)
         self.md = read_model_description(str(path))
@@ -118,8 +200,21 @@ class HumanFmu:
             raise FmuBuildError(f"{path}: an FMI {self.md.fmiVersion} FMU; the co-simulation "
                                 "and the sweeps drive FMI 2.0 FMUs (hpcosim fmu build "
                                 "without --fmi 3; the two are bit-identical)")
-        self.unzipdir = Path(extract(str(path),
-                                     unzipdir=None if unzipdir is None else str(unzipdir)))
+        self._lock: int | None = None
+        if unzipdir is None:
+            self.unzipdir, self._lock = extract_private(path)
+        else:
+            self.unzipdir = Path(extract(str(path), unzipdir=str(unzipdir)))
+        try:
+            self._instantiate(instance)
+        except BaseException:
+            _release(self.unzipdir, self._lock)
+            raise
+
+    def _instantiate(self, instance: str) -> None:
+        """Read the build info, instantiate the FMU and allocate the exchange buffers."""
+        from fmpy.fmi2 import FMU2Slave, fmi2Boolean, fmi2Integer, fmi2Real
+
         info = self.unzipdir / "resources" / "build_info.json"
         self.build_info: dict[str, Any] = json.loads(info.read_text()) if info.is_file() else {}
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
@@ -260,4 +355,5 @@ class HumanFmu:
             self.fmu.terminate()
             self.fmu.freeInstance()
         finally:
-            shutil.rmtree(self.unzipdir, ignore_errors=True)
+            _release(self.unzipdir, self._lock)
+            self._lock = None

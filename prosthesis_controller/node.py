@@ -29,8 +29,11 @@ liveliness (:class:`~bus_schemas.transport.liveliness.Liveliness`; over zenoh th
 and the bus subscribed (so a plant seeing it can start), and leaves when the plant goes away.
 
 Run as ``python -m prosthesis_controller.node --controller clfqp --gait G --tube T
-[--bus bus.toml | --run-id ID --connect tcp/127.0.0.1:PORT]`` or
-``hpcosim controller serve``.
+[--bus bus.toml | --run-id ID --connect tcp/127.0.0.1:PORT --key lab.key]`` or
+``hpcosim controller serve``. Over zenoh the node serves only a plant that authenticates:
+with the key file's secret (``--key`` / the bus config's ``key_file``) or the run's
+(``--auth-stdin``, :mod:`bus_schemas.transport.run_auth`); without either it refuses to
+start (:func:`require_plant_key`; docs/cosim.md, "Who may drive the controller").
 """
 
 from __future__ import annotations
@@ -48,10 +51,12 @@ import can
 from bus_schemas.transport import codec
 from bus_schemas.transport.bus_config import (
     BusConfig,
+    BusConfigError,
     FrameReader,
     bus_config_from_dict,
     load_bus_config,
     make_bus,
+    read_key,
     send_frames,
 )
 from bus_schemas.transport.liveliness import liveliness
@@ -65,6 +70,7 @@ from bus_schemas.transport.protocol import (
 )
 from bus_schemas.transport.run_auth import RunCredentials
 from hp_model import json_io
+from hp_model.config import ConfigError
 from prosthesis_controller.interface import Active, Controller, ControllerName, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.timing import Durations, Usage, pin_thread
@@ -390,17 +396,47 @@ def _summary(node: ControllerNode, why: str, cycle: Durations, usage: Usage
             "usage": usage.since()}
 
 
+#: the command-line option of each bus-config field a verb overrides
+OPTION_NAMES = {"interface": "--interface", "run_id": "--run-id", "channel": "--channel",
+                "listen": "--listen", "connect": "--connect", "key_file": "--key"}
+
+
 def bus_config_from_args(bus: str | None = None, **kw: Any) -> BusConfig:
-    """A bus file, overridden by the non-None keyword options (interface, run_id, ...)."""
+    """A bus file, overridden by the non-None keyword options (interface, run_id, ...,
+    key_file); every field checked, an error naming the file's field or the option
+    (:data:`OPTION_NAMES`) that set it."""
     base = load_bus_config(bus).to_dict() if bus else {}
-    base.update({k: v for k, v in kw.items() if v is not None})
-    return bus_config_from_dict(base)
+    over = {k: v for k, v in kw.items() if v is not None}
+    base.update(over)
+    return bus_config_from_dict(base, str(bus) if bus else "bus config",
+                                names={k: OPTION_NAMES.get(k, k) for k in over})
+
+
+def require_plant_key(cfg: BusConfig) -> None:
+    """Refuse to serve CAN over zenoh without a key: any local user (or, with
+    ``allow_remote``, anyone on the network) could otherwise play the plant and receive
+    torque commands. A key is a key file (``--key`` / ``key_file``) or a run's secret
+    (``--auth-stdin``). Other interfaces need none: virtual is in-process, a CAN bus is a
+    wire the lab controls (docs/cosim.md, "Who may drive the controller")."""
+    if cfg.authenticates and not cfg.authenticated:
+        raise BusConfigError(
+            "--key: a controller served over zenoh needs a key file (one line, a secret of "
+            "16 or more characters, mode 0600) that its plant's bus config names too "
+            "(key_file); e.g. python -c 'import secrets; print(secrets.token_urlsafe(32))' "
+            "> lab.key && chmod 600 lab.key")
 
 
 def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
              watchdog: float = 0.05, status_every: int = 100,
              subject: str | None = None, device: str | None = None) -> dict[str, Any]:
-    """Build the controller, open the bus, serve (see :func:`serve`)."""
+    """Check the bus config (a zenoh bus needs a key: :func:`require_plant_key`; a key
+    file is read here, before the controller is built), build the controller, open the
+    bus, serve (see :func:`serve`)."""
+    if not (math.isfinite(watchdog) and watchdog > 0):
+        raise ConfigError(f"--watchdog-ms {watchdog * 1e3:g}: expected a finite number > 0")
+    require_plant_key(cfg)
+    if cfg.key_file is not None:
+        read_key(cfg.key_file)  # a missing or unsafe key file: refused before the build
     ctrl = build_controller(controller, gait, tube, subject, device)
     node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every)
     bus = make_bus(cfg, "ctrl", declare_alive=False)  # alive once serving (see serve)
@@ -416,7 +452,7 @@ def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
         bus.shutdown()
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="prosthesis_controller.node", description=__doc__.split(
         "\n\n")[0])
     p.add_argument("--controller", required=True, help=f"one of {ControllerName.choices()}")
@@ -428,6 +464,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--channel")
     p.add_argument("--listen")
     p.add_argument("--connect")
+    p.add_argument("--key", help="zenoh: the key file (one line, mode 0600) the plant "
+                   "authenticates with (bus_config.read_key)")
     p.add_argument("--low-latency", action="store_true",
                    help="zenoh low-latency transport (the plant must use it too)")
     p.add_argument("--cpu", type=int, help="run the node on this CPU only")
@@ -440,24 +478,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--auth-stdin", action="store_true",
                    help="zenoh: read the run's secret from the first line of stdin and "
                    "authenticate the link with it (bus_schemas.transport.run_auth)")
-    a = p.parse_args(argv)
+    return p
+
+
+def _node_config(a: argparse.Namespace) -> tuple[BusConfig, RunCredentials | None]:
+    """The bus config of the command line ``a`` and the run's credentials of
+    ``--auth-stdin`` (to close after the run), ValueError for a bad one."""
     cfg = bus_config_from_args(a.bus, interface=a.interface, run_id=a.run_id,
-                               channel=a.channel, listen=a.listen, connect=a.connect)
+                               channel=a.channel, listen=a.listen, connect=a.connect,
+                               key_file=a.key)
     if a.low_latency or a.poll_us:
         cfg = cfg.with_zenoh_options(low_latency=a.low_latency, poll_us=a.poll_us)
+    if not a.auth_stdin:
+        return cfg, None
+    if not cfg.authenticates:
+        raise ValueError("--auth-stdin needs the zenoh interface")
+    if cfg.key_file is not None:
+        raise ValueError("--auth-stdin and --key: give one key")
+    creds = RunCredentials(sys.stdin.readline().strip())
+    return cfg.with_zenoh_options(zenoh_options=creds.zenoh_options("ctrl")), creds
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = _parser().parse_args(argv)
     creds = None
-    if a.auth_stdin:
-        if not cfg.authenticates:
-            print("controller node: error: --auth-stdin needs the zenoh interface",
-                  file=sys.stderr)
-            return 2
-        try:
-            creds = RunCredentials(sys.stdin.readline().strip())
-        except ValueError as e:
-            print(f"controller node: error: {e}", file=sys.stderr)
-            return 2
-        cfg = cfg.with_zenoh_options(zenoh_options=creds.zenoh_options("ctrl"))
     try:
+        cfg, creds = _node_config(a)
         if a.cpu is not None:  # this process: the serving thread and the bus's, started after
             pin_thread(a.cpu)
         s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
@@ -465,7 +511,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         return 130
     except ValueError as e:  # a bad option value (e.g. --cpu): one line, no traceback
-        print(f"controller node: error: {e}", file=sys.stderr)
+        print(f"controller node: error: {' '.join(str(e).split())}", file=sys.stderr)
         return 2
     finally:
         if creds is not None:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from hp_model.domains import Domain
 from orchestrator.experiments.animation import (
     ARROW_COLOUR,
     MAX_ARROW,
@@ -17,7 +18,7 @@ from orchestrator.experiments.animation import (
     arrow_vector,
     walker_gif,
 )
-from orchestrator.experiments.scenarios import NOMINAL, Scenario, run_scenario
+from orchestrator.experiments.scenarios import NOMINAL, Perturbation, Scenario, run_scenario
 from tests.controller_support import tube_about_nominal
 
 
@@ -102,6 +103,11 @@ def test_hpcosim_animate_a_recording(model, template_gait, tmp_path, capsys):
                  "20"]) == 0
     with Image.open(out) as im:
         assert im.n_frames == 11
+    # the recorded walk moves: the prosthesis's pixels differ 0.25 s apart (template gait:
+    # a step about 0.3 s)
+    gif = _gif_frames(out.read_bytes())
+    assert (_orange(gif[0]) ^ _orange(gif[5])).sum() > 200
+    assert (_orange(gif[5]) ^ _orange(gif[10])).sum() > 200
     empty = tmp_path / "empty.mcap"
     with Recorder(empty) as rec:
         rec.register_all()
@@ -149,3 +155,154 @@ def test_hpcosim_animate_a_scenario(tmp_path, capsys):
     assert main(["animate", "pd", "--out", str(tmp_path / "b.gif")]) == 2
     assert "needs --gait and --tube" in capsys.readouterr().err
     assert not (tmp_path / "b.gif").exists()
+
+
+# -- the walker moves (issue 40): what each frame draws, from the artists' own data --------
+
+DEMO = Path(__file__).resolve().parent / "data" / "controller"
+FPS = 20.0
+
+
+@pytest.fixture(scope="module")
+def demo(model):
+    """The demo subject's committed gait and force tube (tests/data/controller)."""
+    from hp_model.force_tube import load_tube
+    from hp_model.gait_artifact import load_gait
+
+    gait = load_gait(DEMO / "gait_demo.json", model.parameter_hash())
+    return gait, load_tube(DEMO / "tube_demo.json", gait.hash())
+
+
+def _drawn(model, r, fps: float = FPS):
+    """Every frame of the walker's scene of run ``r`` drawn as the GIF draws it: per frame
+    the log row, the drawn points of every line (x, z; hip first in the first chain), the
+    view's centre and whether the fall's banner is shown with its text."""
+    from matplotlib import pyplot as plt
+
+    from orchestrator.experiments.animation import walker_scene
+
+    walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force, r.fall)
+    fig, scene = walker_scene(model, walk, fps=fps)
+    frames = []
+    for k in range(len(scene.idx)):
+        scene.draw(k)
+        pts = np.concatenate([np.column_stack(ln.get_data()) for ln in scene.lines])
+        lo, hi = scene.ax.get_xlim()
+        frames.append((int(scene.idx[k]), pts, 0.5 * (lo + hi), scene.banner.get_visible(),
+                       scene.banner.get_text()))
+    plt.close(fig)
+    return frames
+
+
+def _orange(img: np.ndarray) -> np.ndarray:
+    """The prosthesis's pixels (#e07b00) of an RGB frame."""
+    return (img[..., 0] > 200) & (img[..., 1] > 90) & (img[..., 1] < 160) & (img[..., 2] < 60)
+
+
+def _gif_frames(data: bytes, durations: list[int] | None = None) -> list[np.ndarray]:
+    """The RGB frames of a GIF (Pillow merges equal consecutive frames into one of the
+    summed duration); their durations (ms) appended to ``durations`` if given."""
+    with Image.open(io.BytesIO(data)) as im:
+        out = []
+        for k in range(im.n_frames):
+            im.seek(k)
+            out.append(np.asarray(im.convert("RGB")).astype(int))
+            if durations is not None:
+                durations.append(int(im.info["duration"]))
+    return out
+
+
+def test_the_walker_walks(model, demo):
+    """Two steps of clfqp on the demo gait (the experiments' scenario path): the drawn hip
+    is the run's hip (x_B, z_B of each frame's row, so it advances as the walker does, about
+    0.8 m here), the view follows it, and the legs' drawn pose (relative to the hip) differs
+    between any two frames a quarter stride apart, in the artists' data and in the GIF's
+    pixels.  (Each frame's pose was the run's last when the frames were stacked from the
+    compiled function's reused output buffer.)"""
+    gait, tube = demo
+    r = run_scenario(model, gait, tube, Scenario("clfqp", NOMINAL, 2))
+    assert r.success and r.steps == 2
+    frames = _drawn(model, r)
+    ix, iz = model.coord_names.index("x_B"), model.coord_names.index("z_B")
+    rows = np.array([f[0] for f in frames])
+    hip = np.array([f[1][0] for f in frames])  # the first chain starts at the hip
+    np.testing.assert_allclose(hip[:, 0], r.q[rows, ix], atol=1e-12)
+    np.testing.assert_allclose(hip[:, 1], r.q[rows, iz], atol=1e-12)
+    np.testing.assert_allclose([f[2] for f in frames], hip[:, 0], atol=1e-12)  # the view
+    assert np.all(np.diff(hip[:, 0]) > 0.0)  # forward in every frame
+    assert hip[-1, 0] - hip[0, 0] > 0.7
+    # a stride: the time from the start (a ps touchdown) to the second touchdown
+    stride = r.t[np.flatnonzero(np.diff(r.domain))[1] + 1] - r.t[0]
+    quarter = round(stride / 4 * FPS)
+    assert quarter >= 4
+    legs = np.array([f[1] - f[1][0] for f in frames])  # every drawn point from the hip
+    moved = [float(np.abs(legs[k + quarter] - legs[k]).max())
+             for k in range(len(frames) - quarter)]
+    assert min(moved) > 0.05, moved
+    # the GIF itself: the prosthesis's pixels move between frames a quarter stride apart
+    gif = _gif_frames(walker_gif(model, WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force),
+                                 fps=FPS))
+    assert len(gif) == len(frames)
+    changed = [int((_orange(gif[k]) ^ _orange(gif[k + quarter])).sum())
+               for k in range(0, len(gif) - quarter, quarter)]
+    assert min(changed) > 200, changed
+
+
+def test_a_fall_is_shown(model, demo):
+    """A run that falls (robust-passive under a 0.05 rad human perturbation falls at its
+    second step's start: the human's stance foot leaves the friction cone) ends on its
+    last pose held ``FALL_HOLD`` s with a banner naming the fall: never before that row.
+    (In this model a fall is a detected event, the hip still about at its walking height:
+    the banner, not the pose, shows it.)"""
+    from orchestrator.experiments.animation import FALL_COLOUR, FALL_HOLD
+
+    gait, tube = demo
+    r = run_scenario(model, gait, tube, Scenario("passive", Perturbation("p", 0.05, 1), 2))
+    assert r.fall is not None and r.steps == 1
+    frames = _drawn(model, r)
+    last = r.t.size - 1
+    held = [f for f in frames if f[0] == last]
+    assert len(held) >= round(FALL_HOLD * FPS)
+    assert all(f[3] for f in held) and not any(f[3] for f in frames if f[0] != last)
+    text = held[0][4]
+    assert text.startswith(f"FELL at t = {r.fall.t:.3f} s ({r.fall.domain}")
+    assert " ".join(text.split("\n")[1:]) == r.fall.detail()
+    for f in held:
+        np.testing.assert_array_equal(f[1], held[0][1])  # the walker stays where it fell
+    ms: list[int] = []
+    gif = _gif_frames(walker_gif(model, WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force,
+                                                   r.fall), fps=FPS), ms)
+    assert sum(ms) == len(frames) * 1000 / FPS  # the held frames: one GIF frame
+    assert ms[-1] >= FALL_HOLD * 1000
+    rgb = np.array([int(FALL_COLOUR[i:i + 2], 16) for i in (1, 3, 5)])
+
+    def banner(img: np.ndarray) -> int:
+        return int((np.abs(img - rgb).max(axis=-1) < 40).sum())
+
+    assert banner(gif[0]) == 0 and banner(gif[-1]) > 300
+
+
+def test_a_recorded_fall(tmp_path):
+    """A co-simulation recording's fall (its ``summary`` metadata, as ``hpcosim run``
+    writes it: :meth:`CosimResult.to_dict` through the recorder) is the fall the animation
+    shows at its last /ground_truth row; a run that did not fall has none."""
+    from bus_schemas.recording.recorder import Recorder
+    from hp_model.falls import FallReason
+    from orchestrator.cosim.recording import read_recording
+    from orchestrator.cosim.result import CosimResult
+    from orchestrator.experiments.animation import _recorded_fall
+
+    for fell in (True, False):
+        path = tmp_path / f"run-{fell}.mcap"
+        res = CosimResult()
+        if fell:
+            res.fell, res.fall_code = True, int(FallReason.FRICTION_CONE)
+        with Recorder(path) as rec:
+            rec.add_metadata("summary", res.to_dict())
+        summary = read_recording(path, messages=False).metadata["summary"]
+        fall = _recorded_fall(summary, 1.25, 1, 0.4)
+        if not fell:
+            assert fall is None
+            continue
+        assert fall is not None and fall.reason is FallReason.FRICTION_CONE
+        assert (fall.t, fall.domain, fall.tau) == (1.25, Domain.PNS, 0.4)

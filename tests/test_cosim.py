@@ -360,7 +360,7 @@ def test_refit_tube(lockstep, files, model):
 
 
 @serial
-def test_recorded_model_error_estimates_and_refit(lockstep, files, tmp_path):
+def test_recorded_model_error_estimates_and_refit(lockstep, files, tmp_path, capsys):
     """clfqp's online model-error estimates travel in CtrlDisturbance frames, are recorded
     (/controller/disturbance, finite, with phase and time since touchdown), the status
     carries the coverage flag (never set: this tube has no bound), and `hpcosim tube refit
@@ -379,8 +379,11 @@ def test_recorded_model_error_estimates_and_refit(lockstep, files, tmp_path):
     diag = [o for _, _, o in read_messages(path, ["/controller/diagnostics"])]
     assert diag and not any(o["coverage_flag"] or o["coverage_count"] for o in diag)
     out = tmp_path / "refit_me.json"
+    # written; 5 stances, each of them on a bound of the fit: leave-one-out coverage 0, a
+    # negative result (issue 40: exit 1, the bound written all the same)
     assert main(["tube", "refit", str(path), "--gait", str(files["gait"]), "--out", str(out),
-                 "--model-error", "--degree", "2"]) == 0
+                 "--model-error", "--degree", "2"]) == 1
+    assert "leave-one-out coverage 0 " in capsys.readouterr().err
     assert json.loads(out.read_text())["schema_version"] == 2
     gait = load_gait(files["gait"])
     t, old = load_tube(out, gait.hash()), load_tube(files["tube"], gait.hash())

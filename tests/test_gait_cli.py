@@ -107,7 +107,12 @@ def test_a_gait_that_does_not_walk_is_not_written(steps_file, tmp_path):
     assert "return map" in lines[0] and "no gait written" in lines[0]
     assert not list(tmp_path.iterdir())
     r = run(*args, "--allow-unstable")
-    assert r.returncode == 0, r.stderr
+    # written, and still a negative result (issue 40: exit 1, the reason in one line)
+    assert r.returncode == 1, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hpcosim: check failed: the gait does "
+                                                   "not walk"), r.stderr
+    assert "written by --allow-unstable" in lines[0]
     v = json.loads(out.read_text())["verification"]
     assert v["walks"] is False and v["steps_simulated"] < 20
     assert "does NOT walk" in r.stdout

@@ -366,3 +366,100 @@ def test_inspect_skeleton_of_a_lower_body_c3d_processes_as_is(model, coef, tmp_p
     path.write_text(text + f'\n[calibration]\nstatic_trial = "{OPENOFM / "static.c3d"}"\n')
     p = process_take(take, load_mapping(path), coef, model.subject.lengths)
     assert len(p.steps) >= 2 and all(f.well_posed for f in p.joints.values())
+
+
+# --- the lab's processed copy: Vicon's model outputs are not markers (issue 40) ----------
+
+#: openOFM's dynamic_processed.c3d: the points Nexus's models wrote, by POINT group and unit
+#: (BONES: Plug-in Gait's segment points PELO/PELA/PELL/PELP ..., named by no group)
+OPENOFM_OUTPUTS = {("ANGLES", "deg"): 35, ("FORCES", "N"): 6, ("MOMENTS", "Nmm"): 6,
+                   ("POWERS", "W"): 6, ("SCALARS", "mm"): 2, ("MODELED_MARKERS", "mm"): 40,
+                   ("BONES", "mm"): 36}
+
+
+def test_openofm_processed_copy_keeps_the_labs_model_apart_from_the_markers():
+    """The lab's processed copy holds the same 36 markers (and Nexus's unlabelled one) as the
+    raw take and 131 model outputs: every output is in ``model_outputs`` with its group's
+    unit, none among the markers; Vicon's knee angle is there as the file has it; the up
+    axis is the file's (POINT:Y_SCREEN = +Z)."""
+    raw = read_take(OPENOFM / "dynamic.c3d")
+    take = read_take(OPENOFM / "dynamic_processed.c3d")
+    assert [m for m in take.markers if m != "*72"] == [m for m in raw.markers if m != "*36"]
+    for k, v in raw.markers.items():
+        if not k.startswith("*"):
+            np.testing.assert_array_equal(take.markers[k], v)
+    kinds: dict[tuple[str, str], int] = {}
+    for o in take.model_outputs.values():
+        kinds[o.kind, o.unit] = kinds.get((o.kind, o.unit), 0) + 1
+    assert kinds == OPENOFM_OUTPUTS
+    assert not set(take.model_outputs) & set(take.markers)
+    for name in ("LKneeAngles", "RHipMoment", "RKneeForce", "LHipPower", "PELO", "LHJC"):
+        assert name in take.model_outputs, name
+    lab = _c3d_points(OPENOFM / "dynamic_processed.c3d")
+    np.testing.assert_array_equal(take.model_outputs["LKneeAngles"].values, lab["LKneeAngles"].T)
+    moment = take.model_outputs["RHipMoment"].values
+    assert np.isnan(moment).any(axis=1).sum() == 8  # the kinetics' edges (96.1 % valid)
+    assert (take.up_axis, take.up_axis_source) == ("+z", "POINT:Y_SCREEN")
+    assert (raw.up_axis, raw.up_axis_source) == ("+z", "POINT:Y_SCREEN")
+    with pytest.raises(MocapError, match=r"'RHipMoment' is not a marker.*POINT:MOMENTS"):
+        take.marker("RHipMoment")
+
+
+def test_inspect_of_the_processed_copy_lists_and_maps_only_markers(capsys):
+    """``mocap inspect`` on the lab's processed copy: no model output in the markers' table,
+    the outputs counted apart, up +z from the file; its skeleton names only real markers and
+    is the raw take's skeleton (before: LKneeAngles, RHipAngles, RPelvisAngles in the limbs;
+    the issue's Nexus file had r_thigh = ["RHipMoment", ...] and up +x)."""
+    import tomllib
+
+    from characterization.mocap.inspection import mapping_skeleton, summarize
+    from orchestrator.cli import main
+
+    take = read_take(OPENOFM / "dynamic_processed.c3d")
+    assert main(["mocap", "inspect", str(OPENOFM / "dynamic_processed.c3d")]) == 0
+    out = capsys.readouterr().out
+    rows = [x.split("│")[2].strip() for x in out.splitlines() if x.startswith("│ marker")]
+    assert rows == list(take.markers)
+    assert "up +z" in out and "POINT:Y_SCREEN" in out
+    assert "model outputs (not markers): 36 BONES, 2 SCALARS, 35 ANGLES" in out.replace("\n", " ")
+    from tests.report_numbers import digits_beyond_meaning
+
+    assert digits_beyond_meaning(out) == []  # 1.03 m, 2.04 s, 100.0 %
+    s = summarize(take)
+    assert s.up_axis == "+z" and 0.9 < s.up_span < 1.2  # a body, not the angles' 57 "mm"
+    skel = tomllib.loads(mapping_skeleton(take))
+    named = {m for limb in skel["limbs"].values() for m in limb["markers"]}
+    named |= {m for j in skel["joints"].values() for m in j["markers"]}
+    named |= set(skel["segmentation"].values())
+    assert named <= set(take.markers), named - set(take.markers)
+    assert skel["up"] == "+z"
+    raw = tomllib.loads(mapping_skeleton(read_take(OPENOFM / "dynamic.c3d")))
+    assert skel["limbs"] == raw["limbs"] and skel["joints"] == raw["joints"]
+
+
+def test_the_processed_copy_gives_the_raw_takes_steps(openofm, tmp_path):
+    """The shipped mapping on the processed copy: the same angles and steps, bit for bit, as
+    on the raw take (the markers are the same; the model outputs change nothing)."""
+    got = process_file(OPENOFM / "dynamic_processed.c3d", tmp_path / "steps.npz",
+                       mapping=OPENOFM / "mapping.toml", with_figures=False).processed
+    p = openofm.processed
+    np.testing.assert_array_equal(got.q, p.q)
+    assert [(s.domain, s.start, s.end) for s in got.steps] == \
+        [(s.domain, s.start, s.end) for s in p.steps]
+
+
+@pytest.mark.parametrize("which", ["opensim", "opencap", "openofm"])
+def test_qa_reports_round_numbers_to_their_meaning(which, request):
+    """The QA report of each real take: no number with more decimals than its meaning
+    (frames integers or 0.1, angles 0.1 deg, lengths 0.1 mm, times 1 ms;
+    ``tests/report_numbers.py``), in the Markdown and the JSON (whose floats keep at most
+    4 decimals: metres to 0.1 mm)."""
+    from tests.report_numbers import digits_beyond_meaning
+
+    result = request.getfixturevalue(which)
+    md = next(x for x in result.report_paths if x.name.endswith(".qa.md")).read_text()
+    assert digits_beyond_meaning(md) == []
+    assert re.search(r"residual \d+\.\d mm RMS", md) and "| 0.0 |" in md  # the formats used
+    qa = next(x for x in result.report_paths if x.name.endswith(".qa.json")).read_text()
+    floats = re.findall(r"(?<![\w.\"])-?\d+\.(\d+)(?:e-?\d+)?(?![\w\"])", qa)
+    assert floats and max(len(d) for d in floats) <= 4

@@ -59,7 +59,12 @@ def test_tube_fit_writes_tube_figure_and_report(steps_file, gait, tmp_path):
     out = tmp_path / "tube.json"
     r = hpcosim("tube", "fit", str(steps_file), "--gait", str(GAIT), "--out", str(out),
                 "--steps", "5", "--degree", "2")
-    assert r.returncode == 0, r.stdout + r.stderr
+    # 5 steps, every one on a bound: no step lies inside the tube fitted without it, a
+    # negative result (issue 40: exit 1, one line; the outputs written all the same)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert r.stderr.strip().splitlines() == [
+        "hpcosim: check failed: force tube: leave-one-out coverage 0 (no step lies inside the "
+        "fit without it); written all the same"]
     said = " ".join(r.stdout.split())  # the console wraps long paths at its width
     assert "5 ps steps played back" in said and "wrote" in said
     tube = load_tube(out, gait.hash())

@@ -24,11 +24,17 @@ import can
 from mcap.writer import CompressionType, Writer
 
 from bus_schemas.recording.can_rates import CanRates
-from bus_schemas.recording.chunk_append import append_messages, supports
+from bus_schemas.recording.chunk_append import append_messages, pack_chunk_indexes, supports
 from bus_schemas.recording.deferred import DeferredWrites
 from bus_schemas.recording.foxglove import foxglove_message_class, protobuf_descriptor_set
 from bus_schemas.recording.json_encoding import encode_json
-from bus_schemas.recording.part_file import GuardedFile, error_naming, locked_part
+from bus_schemas.recording.part_file import (
+    GuardedFile,
+    UnsafePartFileError,
+    error_naming,
+    locked_part,
+    same_file,
+)
 from bus_schemas.recording.schemas import (
     CHANNELS,
     FOXGLOVE_CHANNELS,
@@ -65,7 +71,9 @@ class Recorder(DeferredWrites, SignalFinish):
 
     The file is written as ``.<name>.part`` next to ``path`` and renamed to ``path`` by
     :meth:`finish` (also called by ``with`` on exit, normal or not): a file under ``path``
-    is always complete, with summary and indexes. A process killed without a chance to
+    is always complete, with summary and indexes, mode 0o666 less the umask. A symbolic
+    link or another user's file under the ``.part`` name is refused, never written
+    (:class:`~.part_file.UnsafePartFileError`). A process killed without a chance to
     finish (SIGKILL, power loss) leaves only the ``.part`` file, whose completed chunks
     ``mcap recover`` can usually salvage. :meth:`install_signal_handlers` makes SIGTERM and
     SIGINT finish the file (at the next safe point if a write is in progress) before the
@@ -87,6 +95,7 @@ class Recorder(DeferredWrites, SignalFinish):
                               compression=self.compression)
         self._writer.start(profile="", library="hpcosim bus_schemas")
         self._append = supports(self._writer)  # the one-pack path (chunk_append)
+        pack_chunk_indexes(self._writer)  # ~200 bytes kept per chunk (chunk_append)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[int, int] = {}
@@ -278,16 +287,28 @@ class Recorder(DeferredWrites, SignalFinish):
                 self._writer.finish()
                 self._file.flush()
                 os.fsync(self._file.fileno())
+                self._check_part()
                 # renamed while still locked: no other run can take the part in between
                 os.replace(self.part_path, self.path)
             except OSError as e:  # a full disk: no partial file, an error naming the file
-                self.part_path.unlink(missing_ok=True)
+                self._unlink_part()
                 raise error_naming(e, self.path) from None
             finally:
                 with contextlib.suppress(OSError):  # closing flushes: the disk may be full
                     self._file.close()
                 self.restore_signal_handlers()
         return self.path
+
+    def _check_part(self) -> None:
+        """The part's name still holds this run's file (nothing renamed over it)."""
+        if not same_file(self._file.fileno(), self.part_path):
+            raise UnsafePartFileError(f"{self.part_path}: no longer this run's file (moved "
+                                      f"or replaced while recording); {self.path} not written")
+
+    def _unlink_part(self) -> None:
+        """Remove the part file if its name still holds this run's file."""
+        if same_file(self._file.fileno(), self.part_path):
+            self.part_path.unlink(missing_ok=True)
 
     @property
     def write_failed(self) -> bool:
@@ -300,7 +321,7 @@ class Recorder(DeferredWrites, SignalFinish):
         if self.finished:
             return
         self.finished = True
-        self.part_path.unlink(missing_ok=True)
+        self._unlink_part()
         with contextlib.suppress(OSError):
             self._file.close()
         self.restore_signal_handlers()

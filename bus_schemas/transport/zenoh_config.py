@@ -52,8 +52,9 @@ def _host(endpoint: str) -> tuple[str, str]:
     if proto in _LOCAL_PROTOCOLS:
         return proto, addr
     host, colon, port = addr.rpartition(":")
-    if not colon or not port.isdigit():
-        raise ValueError(f"zenoh endpoint {endpoint!r}: expected <protocol>/<host>:<port>")
+    if not colon or not host or not port.isdigit() or int(port) > 65535:
+        raise ValueError(f"zenoh endpoint {endpoint!r}: expected <protocol>/<host>:<port> "
+                         "(port 0-65535)")
     return proto, host.strip("[]")
 
 
@@ -78,6 +79,12 @@ def _endpoints(value: str | Iterable[str] | None, what: str, allow_remote: bool)
             raise ValueError(f"zenoh {what} endpoint {ep!r} is not loopback; pass "
                              "allow_remote=True to use it")
     return items
+
+
+def guarded_option(key: str) -> bool:
+    """A zenoh config key that may open a session beyond loopback (listen, connect,
+    scouting, mode): :func:`make_config` sets it only with ``allow_remote=True``."""
+    return key.split("/", 1)[0] in _GUARDED_KEYS
 
 
 #: zenoh's low-latency unicast transport: a sender writes to the link from its own thread
@@ -117,7 +124,7 @@ def make_config(*, listen: str | Iterable[str] | None = None,
     cfg.insert_json5("listen/endpoints", json.dumps(lst))
     cfg.insert_json5("connect/endpoints", json.dumps(con))
     for key, value in {**(LOW_LATENCY if low_latency else {}), **(options or {})}.items():
-        if key.split("/", 1)[0] in _GUARDED_KEYS and not allow_remote:
+        if guarded_option(key) and not allow_remote:
             raise ValueError(f"zenoh option {key!r} may open the session beyond loopback; "
                              "pass allow_remote=True to set it")
         cfg.insert_json5(key, json.dumps(value))

@@ -314,8 +314,9 @@ def contact_from_events(events: Sequence[LabEvent], time: np.ndarray, side: str,
 class EventComparison(TypedDict):
     """One foot's events of one kind found from the markers against the lab's in the file:
     the number of lab events inside the take, for each the signed difference in frames of
-    the nearest found event (found - lab; None if that foot has none), and the largest and
-    median absolute differences (None without any)."""
+    the nearest found event (found - lab, to 0.1 frame: the file's times are often float32;
+    None if that foot has none), and the largest and median absolute differences (None
+    without any)."""
 
     lab_events: int
     diff_frames: list[float | None]
@@ -352,10 +353,10 @@ def compare_events(contacts: dict[str, FootContact], events: Sequence[LabEvent],
                     continue
                 f_lab = (t - time[0]) * rate
                 d = found - f_lab
-                diffs.append(float(d[np.argmin(np.abs(d))]))
+                diffs.append(round(float(d[np.argmin(np.abs(d))]), 1))  # 0.1 frame
             ok = [abs(d) for d in diffs if d is not None]
             out.setdefault(foot, {})[kind] = {
                 "lab_events": len(lab), "diff_frames": diffs,
                 "max_abs_frames": max(ok) if ok else None,
-                "median_abs_frames": float(np.median(ok)) if ok else None}
+                "median_abs_frames": round(float(np.median(ok)), 1) if ok else None}
     return out

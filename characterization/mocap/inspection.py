@@ -1,10 +1,12 @@
 """What a take holds, and a mapping to start from (``hpcosim mocap inspect``, issue 19).
 
 :func:`summarize` lists the markers and rigid bodies with their valid frames and longest
-gap, the frame rate and length, and a guess of the axes: up is the lab axis along which the
+gap, the frame rate and length, what the lab's model computed (a processed C3D's angles,
+moments, ...: counted, never taken for markers), and a guess of the axes: up is the file's
+own up axis where it has one (C3D's POINT:Y_SCREEN), else the lab axis along which the
 markers span the most per frame (a standing body is taller than wide or deep; its sign is
-the file format's default, which ``mocap process`` then checks against the trunk and the
-feet), the walking axis the one the markers' centroid travels along the most.
+the file format's default); ``mocap process`` checks either against the trunk and the
+feet.  The walking axis is the one the markers' centroid travels along the most.
 :func:`mapping_skeleton` writes a mapping TOML with every limb, joint and the segmentation
 filled by name patterns where the names allow it and ``"TODO"`` where they do not, every
 column name of the take listed in comments, for the user to edit.  A lower-body marker set
@@ -67,10 +69,12 @@ class TakeSummary:
     duration: float  # s
     format_up: str
     columns: tuple[Column, ...]
-    up_axis: str | None  # e.g. "+y": the largest per-frame span, the format's sign
+    up_axis: str | None  # e.g. "+y": the file's, else the largest span with the format's sign
     up_span: float  # m, median per-frame span of the markers along it
     walk_axis: str | None  # e.g. "-x": the centroid's largest net travel
     walk_travel: float  # m
+    up_reason: str = ""  # where up_axis comes from, for the user
+    model_outputs: tuple[tuple[str, int], ...] = ()  # (kind, how many): not markers
 
 
 def _longest_run(bad: np.ndarray) -> int:
@@ -86,34 +90,60 @@ def _column(name: str, kind: str, p: np.ndarray) -> Column:
     return Column(name, kind, float(ok.mean()) if len(ok) else 0.0, _longest_run(~ok))
 
 
+def _spans(take: Take) -> tuple[np.ndarray, np.ndarray] | None:
+    """The markers' median per-frame span (3,) m and centroid (n, 3) m; None without any."""
+    pts = [p for p in take.markers.values()] or [p for p in take.rigid_body_markers.values()]
+    if not pts:
+        return None
+    P = np.stack(pts, axis=1)  # (n, m, 3)
+    with warnings.catch_warnings():  # all-NaN frames
+        warnings.simplefilter("ignore", RuntimeWarning)
+        span = np.nanmedian(np.nanmax(P, axis=1) - np.nanmin(P, axis=1), axis=0)
+        centroid = np.nanmean(P, axis=1)
+    return (span, centroid) if np.isfinite(span).any() else None
+
+
+def _up_guess(take: Take, span: np.ndarray) -> tuple[int, str, str]:
+    """(lab axis index, axis string, why): the file's up axis if it gives one, else the
+    largest span with the format's sign."""
+    k = int(np.nanargmax(span))
+    if take.up_axis_source:
+        k_file = _AXES.index(take.up_axis[1])
+        why = f"the file's {take.up_axis_source}"
+        if k_file != k:
+            why += f"; note: the markers span the most along {_AXES[k]}, check it"
+        return k_file, take.up_axis, why
+    default = take.up_axis
+    sign = default[0] if default[1] == _AXES[k] else "+"
+    return k, f"{sign}{_AXES[k]}", "the markers' largest span; sign from the format"
+
+
 def summarize(take: Take) -> TakeSummary:
-    """The take's columns, rate, length and axis guesses (module docstring)."""
+    """The take's columns, rate, length, model outputs and axis guesses (module
+    docstring)."""
     cols = [_column(n, "marker", p) for n, p in take.markers.items()]
     cols += [_column(n, "rigid body", rb.position) for n, rb in take.rigid_bodies.items()]
     cols += [_column(n, "rigid body marker", p) for n, p in take.rigid_body_markers.items()]
-    pts = [p for p in take.markers.values()] or [p for p in take.rigid_body_markers.values()]
-    up_axis, up_span, walk_axis, walk = None, 0.0, None, 0.0
-    if pts:
-        P = np.stack(pts, axis=1)  # (n, m, 3)
-        with warnings.catch_warnings():  # all-NaN frames
-            warnings.simplefilter("ignore", RuntimeWarning)
-            span = np.nanmedian(np.nanmax(P, axis=1) - np.nanmin(P, axis=1), axis=0)
-            centroid = np.nanmean(P, axis=1)
-        if np.isfinite(span).any():
-            k = int(np.nanargmax(span))
-            default = take.up_axis
-            sign = default[0] if default[1] == _AXES[k] else "+"
-            up_axis, up_span = f"{sign}{_AXES[k]}", float(span[k])
-            ok = np.all(np.isfinite(centroid), axis=1)
-            if ok.sum() >= 2:
-                d = centroid[ok][-1] - centroid[ok][0]
-                d[k] = 0.0
-                j = int(np.argmax(np.abs(d)))
-                walk_axis = f"{'+' if d[j] >= 0 else '-'}{_AXES[j]}"
-                walk = float(abs(d[j]))
+    kinds: dict[str, int] = {}
+    for o in take.model_outputs.values():
+        kinds[o.kind] = kinds.get(o.kind, 0) + 1
+    up_axis, up_span, walk_axis, walk, why = None, 0.0, None, 0.0, ""
+    got = _spans(take)
+    if got is not None:
+        span, centroid = got
+        k, up_axis, why = _up_guess(take, span)
+        up_span = float(span[k])
+        ok = np.all(np.isfinite(centroid), axis=1)
+        if ok.sum() >= 2:
+            d = centroid[ok][-1] - centroid[ok][0]
+            d[k] = 0.0
+            j = int(np.argmax(np.abs(d)))
+            walk_axis = f"{'+' if d[j] >= 0 else '-'}{_AXES[j]}"
+            walk = float(abs(d[j]))
     dur = float(take.time[-1] - take.time[0]) if take.n_frames else 0.0
     return TakeSummary(take.source, take.n_frames, take.frame_rate, dur, take.up_axis,
-                       tuple(cols), up_axis, up_span, walk_axis, walk)
+                       tuple(cols), up_axis, up_span, walk_axis, walk, why,
+                       tuple(kinds.items()))
 
 
 def _matches(limb: str, names: list[str]) -> list[str]:
@@ -172,9 +202,12 @@ def mapping_skeleton(take: Take) -> str:
              "# 'Mapping file'.  Columns in the take:"]
     for c in s.columns:
         lines.append(f"#   {c.kind:17s} {c.name}  ({100 * c.valid:.0f} % valid)")
+    if s.model_outputs:
+        lines.append("# and the lab's model outputs (not markers, not for the mapping): "
+                     + ", ".join(f"{n} {k}" for k, n in s.model_outputs))
     lines += ["", "schema_version = 1",
               f"up = {_q(s.up_axis) if s.up_axis else _q('auto')}"
-              f"        # guess: the body spans {s.up_span:.2f} m along it",
+              f"        # {s.up_reason or 'guess'}: the body spans {s.up_span:.2f} m along it",
               'forward = "auto"   # the trunk\'s travel (or the feet on a treadmill)'
               + (f"; the markers travel {s.walk_travel:.2f} m along {s.walk_axis}"
                  if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL else

@@ -78,10 +78,10 @@ def fit_joint_centre(joint: str, p1: np.ndarray, th1: np.ndarray, p2: np.ndarray
     cnt = np.isfinite(both).sum(axis=0)
     pos = np.where(cnt > 0, np.nansum(both, axis=0) / np.maximum(cnt, 1), np.nan)
     well = bool(sd >= min_rotation)
-    msg = (f"joint '{joint}': fitted on {n_ok} frames, residual {res * 1000:.2f} mm RMS, "
+    msg = (f"joint '{joint}': fitted on {n_ok} frames, residual {res * 1000:.1f} mm RMS, "
            f"rotation SD {np.degrees(sd):.1f} deg")
     if not well:
-        msg = (f"joint '{joint}': ill-posed: the joint rotates only {np.degrees(sd):.2f} deg "
+        msg = (f"joint '{joint}': ill-posed: the joint rotates only {np.degrees(sd):.1f} deg "
                f"(circular SD) < {np.degrees(min_rotation):.1f} deg, so the marker-to-joint "
                "vectors are not identifiable; positions are a minimum-norm guess")
     pos.setflags(write=False)

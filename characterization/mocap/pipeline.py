@@ -193,9 +193,11 @@ def resolve_frame(take: Take, mapping: MocapMapping, notes: list[str] | None = N
             f"the feet, {ev.angle_deg:.0f} deg off the axis)")
     else:
         up = axis_vector(take.up_axis)
-        given = f"the file format's default is up = {take.up_axis}"
-        say(f"up axis {take.up_axis}: the file format's default (the mapping has no trunk "
-            "and feet to check it against)")
+        whose = (f"the file's {take.up_axis_source}" if take.up_axis_source
+                 else "the file format's default")
+        given = f"{whose} is up = {take.up_axis}"
+        say(f"up axis {take.up_axis}: {whose} (the mapping has no trunk and feet to check it "
+            "against)")
     check_up(take, up, given, ev, hip_height)
     feet = feet_forward(take, mapping, up)
     if mapping.forward != "auto":
@@ -424,7 +426,7 @@ def _calibrated(pitches: dict[str, LimbPitch], mapping: MocapMapping,
     if not any(calib.values()):
         return pitches
     checks.append("calibration (pitch offsets subtracted, deg): " + ", ".join(
-        f"{k} {np.degrees(v):+.2f}" for k, v in calib.items()))
+        f"{k} {np.degrees(v):+.1f}" for k, v in calib.items()))
     return {k: _shifted(lp, calib[k]) for k, lp in pitches.items()}
 
 

@@ -1,7 +1,8 @@
 """QA report (Markdown + JSON) and figures of a processed take, written next to the steps file.
 
 Report: steps found per domain, steps dropped and why, frames from each pitch source per
-limb, gaps filled and left, joint-centre fits (residual, rotation, well-posedness), notes.
+limb, gaps filled and left, joint-centre fits (residual, rotation, well-posedness), notes;
+every number rounded to its meaning (:data:`DIGITS`), in the Markdown and the JSON alike.
 Figures: joint angles of every step over tau (one panel per coordinate and domain) and phase
 portraits (angle vs. angular velocity) of the prosthesis knee and ankle per step, drawn with
 Pillow (``plot.py``: matplotlib took 1.2 s of the stage's 2 s budget).
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.mocap.limb_angles import SOURCE_NAMES
+from characterization.mocap.limb_angles import SOURCE_NAMES, LimbPitch
 from characterization.mocap.pipeline import ProcessedTake
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
@@ -22,29 +23,55 @@ from hp_model.json_io import dumps
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
+#: decimals each kind of number is reported to, Markdown and JSON alike ("rounded to its
+#: meaning"): angles 0.1 deg, lengths 0.1 mm (residuals in mm; the joint-centre offsets in
+#: m, 4 decimals), times 1 ms, speeds 1 mm/s, lab directions 0.001, rates 0.001 Hz; frames
+#: are integers, or 0.1 frame where they are differences from the lab's events
+DIGITS = {"deg": 1, "mm": 1, "m": 4, "s": 3, "m_s": 3, "unit": 3, "hz": 3}
+
+
+def _r(x: float | None, kind: str) -> float | None:
+    """``x`` rounded to its kind's decimals (:data:`DIGITS`); None if None or not finite."""
+    if x is None or not np.isfinite(x):
+        return None
+    return round(float(x), DIGITS[kind])
+
+
+def _rv(v: np.ndarray | list[float], kind: str) -> list[float | None]:
+    return [_r(x, kind) for x in np.ravel(v)]
+
+
+def _f(x: float | None, spec: str) -> str:
+    """``x`` formatted with ``spec``; "-" for none."""
+    return "-" if x is None else format(x, spec)
+
+
+def _limb_summary(lp: LimbPitch, rate: float) -> dict[str, object]:
+    filled = [g for g in lp.gaps if g.filled]
+    left = [g for g in lp.gaps if not g.filled]
+    return {
+        "frames": lp.counts(),
+        "marker_pair_offset_deg": _r(np.degrees(lp.pair_offset), "deg"),
+        "gaps_filled": len(filled), "frames_filled": sum(g.length for g in filled),
+        "gaps_unfilled": len(left), "frames_unfilled": sum(g.length for g in left),
+        "longest_unfilled_s": _r(max((g.length for g in left), default=0) / rate, "s"),
+    }
+
 
 def qa_summary(p: ProcessedTake) -> dict[str, object]:
-    """The QA numbers as plain data (JSON-ready)."""
+    """The QA numbers as plain data (JSON-ready), each rounded to its meaning
+    (:data:`DIGITS`)."""
     rate = p.frame_rate
-    limbs = {}
-    for k, lp in p.pitches.items():
-        filled = [g for g in lp.gaps if g.filled]
-        left = [g for g in lp.gaps if not g.filled]
-        limbs[k] = {
-            "frames": lp.counts(),
-            "marker_pair_offset_deg": float(np.degrees(lp.pair_offset)),
-            "gaps_filled": len(filled), "frames_filled": sum(g.length for g in filled),
-            "gaps_unfilled": len(left), "frames_unfilled": sum(g.length for g in left),
-            "longest_unfilled_s": max((g.length for g in left), default=0) / rate,
-        }
-    joints = {j: {"residual_mm": f.residual_rms * 1000, "rotation_sd_deg":
-                  float(np.degrees(f.rotation_sd)), "frames": f.frames,
-                  "well_posed": f.well_posed, "lambda_proximal_m": f.lam1.tolist(),
-                  "lambda_distal_m": f.lam2.tolist(), "message": f.message}
+    limbs = {k: _limb_summary(lp, rate) for k, lp in p.pitches.items()}
+    joints = {j: {"residual_mm": _r(f.residual_rms * 1000, "mm"),
+                  "rotation_sd_deg": _r(np.degrees(f.rotation_sd), "deg"), "frames": f.frames,
+                  "well_posed": f.well_posed, "lambda_proximal_m": _rv(f.lam1, "m"),
+                  "lambda_distal_m": _rv(f.lam2, "m"), "message": f.message}
               for j, f in p.joints.items()}
     return {
-        "source": p.source, "frames": len(p.time), "frame_rate_hz": rate,
-        "walking_direction_lab": p.frame.forward.tolist(), "up_lab": p.frame.up.tolist(),
+        "source": p.source, "frames": len(p.time), "frame_rate_hz": _r(rate, "hz"),
+        "walking_direction_lab": _rv(p.frame.forward, "unit"),
+        "up_lab": _rv(p.frame.up, "unit"),
         "steps": {d: sum(s.domain == d for s in p.steps) for d in Domain},
         "steps_without_single_support": sum(s.single_support is None for s in p.steps),
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
@@ -53,27 +80,33 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
         "notes": list(p.notes),
         "segmentation": p.segmentation,
         "step_intervals": [{"domain": st.domain, "start": st.start, "end": st.end,
-                            "t_start_s": float(p.time[st.start]),
-                            "t_end_s": float(p.time[st.end])} for st in p.steps],
+                            "t_start_s": _r(p.time[st.start], "s"),
+                            "t_end_s": _r(p.time[st.end], "s")} for st in p.steps],
         "contacts": {f: {"touchdowns": list(c.touchdowns), "liftoffs": list(c.liftoffs),
-                         "ground_speed_m_s": c.ground_speed,
-                         "stride_time_s": c.stride_time if np.isfinite(c.stride_time)
-                         else None, "source": c.source,
+                         "ground_speed_m_s": _r(c.ground_speed, "m_s"),
+                         "stride_time_s": _r(c.stride_time, "s"), "source": c.source,
                          "liftoffs_moved_by_roll_frames": list(c.rolled)}
                      for f, c in p.contacts.items()},
         "lab_events": p.lab_events,
     }
 
 
-def qa_markdown(summary: dict) -> str:
-    s = summary
-    lines = [f"# Motion-capture QA: {Path(s['source']).name}", "",
-             f"{s['frames']} frames at {s['frame_rate_hz']:g} Hz; walking direction (lab) "
-             f"{np.round(s['walking_direction_lab'], 3).tolist()}, up "
-             f"{np.round(s['up_lab'], 3).tolist()}.", "",
-             "Steps kept: " + ", ".join(f"{s['steps'][d]} {d}" for d in Domain) + " "
-             f"({s['steps_without_single_support']} without a detected single-support part);"
-             f" dropped: {len(s['dropped'])}.", ""]
+def _vec(v: list[float]) -> str:
+    return "[" + ", ".join(f"{x:.3f}" for x in v) + "]"
+
+
+def _header(s: dict) -> list[str]:
+    return [f"# Motion-capture QA: {Path(s['source']).name}", "",
+            f"{s['frames']} frames at {s['frame_rate_hz']:g} Hz; walking direction (lab) "
+            f"{_vec(s['walking_direction_lab'])}, up {_vec(s['up_lab'])}.", "",
+            "Steps kept: " + ", ".join(f"{s['steps'][d]} {d}" for d in Domain) + " "
+            f"({s['steps_without_single_support']} without a detected single-support part);"
+            f" dropped: {len(s['dropped'])}.", ""]
+
+
+def _tables(s: dict) -> list[str]:
+    """The dropped steps, the limbs' pitch sources and the joint centres."""
+    lines = []
     if s["dropped"]:
         lines += ["| dropped | frames | reason |", "|---|---|---|"]
         lines += [f"| {d['domain']} | {d['start']}-{d['end']} | {d['reason']} |"
@@ -86,33 +119,50 @@ def qa_markdown(summary: dict) -> str:
     for k, v in s["limbs"].items():
         lines.append(f"| {k} | " + " | ".join(str(v["frames"][n]) for n in names)
                      + f" | {v['gaps_filled']} ({v['frames_filled']}) | {v['gaps_unfilled']} "
-                     f"({v['frames_unfilled']}) | {v['marker_pair_offset_deg']:.2f} |")
+                     f"({v['frames_unfilled']}) | {_f(v['marker_pair_offset_deg'], '.1f')} |")
     lines += ["", "## Joint centres", "",
               "| joint | residual (mm RMS) | rotation SD (deg) | frames | well posed |",
               "|---|---|---|---|---|"]
     for j, v in s["joints"].items():
-        lines.append(f"| {j} | {v['residual_mm']:.2f} | {v['rotation_sd_deg']:.1f} | "
+        lines.append(f"| {j} | {_f(v['residual_mm'], '.1f')} | {_f(v['rotation_sd_deg'], '.1f')} | "
                      f"{v['frames']} | {'yes' if v['well_posed'] else 'NO'} |")
-    lines += ["", f"## Steps (segmentation: {s['segmentation']})", "",
-              "| step | domain | frames | time (s) |", "|---|---|---|---|"]
-    lines += [f"| {k} | {v['domain']} | {v['start']}-{v['end']} | {v['t_start_s']:.3f}-"
-              f"{v['t_end_s']:.3f} |" for k, v in enumerate(s["step_intervals"])]
+    return lines
+
+
+def _contact_line(foot: str, c: dict) -> str:
+    stride = c["stride_time_s"]
+    rolled = c["liftoffs_moved_by_roll_frames"]
+    return (f"- {foot} ({c['source']}): touchdowns {c['touchdowns']}, lift-offs "
+            f"{c['liftoffs']} (ground {_f(c['ground_speed_m_s'], '+.2f')} m/s, stride "
+            + (f"{stride:.2f} s)" if stride is not None else "not found)")
+            + (f"; lift-offs moved by the foot's roll over its toes: "
+               f"{', '.join(f'+{k}' for k in rolled)} frames" if rolled else ""))
+
+
+def _events(s: dict) -> list[str]:
+    """The steps, the feet's contacts and the found events against the lab's."""
+    lines = ["", f"## Steps (segmentation: {s['segmentation']})", "",
+             "| step | domain | frames | time (s) |", "|---|---|---|---|"]
+    lines += [f"| {k} | {v['domain']} | {v['start']}-{v['end']} | {_f(v['t_start_s'], '.3f')}-"
+              f"{_f(v['t_end_s'], '.3f')} |" for k, v in enumerate(s["step_intervals"])]
     if s["contacts"]:
         lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
-        lines += [f"- {f} ({c['source']}): touchdowns {c['touchdowns']}, lift-offs "
-                  f"{c['liftoffs']} (ground {c['ground_speed_m_s']:+.2f} m/s, stride "
-                  f"{c['stride_time_s'] or float('nan'):.2f} s)"
-                  + (f"; lift-offs moved by the foot's roll over its toes: "
-                     f"{', '.join(f'+{k}' for k in c['liftoffs_moved_by_roll_frames'])} frames"
-                     if c["liftoffs_moved_by_roll_frames"] else "")
-                  for f, c in s["contacts"].items()]
+        lines += [_contact_line(f, c) for f, c in s["contacts"].items()]
     if s["lab_events"]:
         lines += ["", "## Found events against the lab's (frames, found - lab)", "",
                   "| foot | event | in the file | max abs | median abs |", "|---|---|---|---|---|"]
         for foot, kinds in s["lab_events"].items():
             for kind, v in kinds.items():
-                lines.append(f"| {foot} | {kind} | {v['lab_events']} | {v['max_abs_frames']} "
-                             f"| {v['median_abs_frames']} |")
+                lines.append(f"| {foot} | {kind} | {v['lab_events']} | "
+                             f"{_f(v['max_abs_frames'], '.1f')} | "
+                             f"{_f(v['median_abs_frames'], '.1f')} |")
+    return lines
+
+
+def qa_markdown(summary: dict) -> str:
+    """The QA report in Markdown: every number to its meaning (:data:`DIGITS`)."""
+    s = summary
+    lines = _header(s) + _tables(s) + _events(s)
     if s["warnings"]:
         lines += ["", "## Warnings", ""] + [f"- {w}" for w in s["warnings"]]
     lines += ["", "## Notes", ""] + [f"- {n}" for n in s["notes"]]

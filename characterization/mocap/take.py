@@ -5,6 +5,10 @@ walking direction is decided later (:mod:`characterization.mocap.sagittal`).  A 
 NaN in every coordinate.  Rigid-body orientations are unit quaternions (x, y, z, w), scalar
 last, mapping the rigid body's local axes to the lab axes; a lost rigid body is NaN.
 
+A file may also hold what a lab's model computed from the markers, stored as points beside
+them (Vicon's POINT:ANGLES, FORCES, MOMENTS, POWERS, ...): those are :class:`ModelOutput`
+values, never markers.
+
 Arrays are read-only; a :class:`Take` is never modified, derive a new one with
 :meth:`Take.replace`.
 """
@@ -63,12 +67,31 @@ class LabEvent:
 
 
 @dataclass(frozen=True)
+class ModelOutput:
+    """A quantity a lab's model computed and the file stores as a point: ``kind`` the group
+    that names it (the C3D POINT parameter, e.g. "ANGLES", "MOMENTS", "MODELED_MARKERS"),
+    ``unit`` the file's unit for that kind (e.g. "deg", "Nmm"; "" if the file gives none),
+    ``values`` (n, 3) in that unit as the file has them, NaN where the file has none."""
+
+    kind: str
+    unit: str
+    values: np.ndarray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "values", _frozen(self.values))
+
+
+@dataclass(frozen=True)
 class Take:
     """A take: frame times, markers and rigid bodies.
 
     ``markers``: reconstructed markers, name -> (n, 3) m.  ``rigid_body_markers``: positions
     solved from rigid bodies (Motive's "Rigid Body Marker"), name -> (n, 3) m.
-    ``up_axis`` is the file format's default up axis (``"+y"`` Motive, ``"+z"`` C3D).
+    ``up_axis`` is the file's up axis: the file's own word where it has one
+    (``up_axis_source`` names it, e.g. C3D's ``"POINT:Y_SCREEN"``), else the format's
+    default (``"+y"`` Motive and TRC, ``"+z"`` C3D; ``up_axis_source`` empty).
+    ``model_outputs``: name -> :class:`ModelOutput`, what the lab's model computed (not
+    markers: :meth:`marker` refuses them by name).
     """
 
     source: str
@@ -80,15 +103,20 @@ class Take:
     up_axis: str = "+y"
     metadata: Mapping[str, str] = field(default_factory=dict)
     events: tuple[LabEvent, ...] = ()
+    model_outputs: Mapping[str, ModelOutput] = field(default_factory=dict)
+    up_axis_source: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "time", _frozen(self.time))
         n = self.time.shape[0]
-        for what, d in (("marker", self.markers), ("rigid body marker", self.rigid_body_markers)):
+        outputs = {k: o.values for k, o in self.model_outputs.items()}
+        for what, d in (("marker", self.markers), ("rigid body marker", self.rigid_body_markers),
+                        ("model output", outputs)):
             for k, v in d.items():
                 if np.shape(v) != (n, 3):
                     raise MocapError(f"{self.source}: {what} '{k}' has shape {np.shape(v)}, "
                                      f"expected ({n}, 3)")
+        object.__setattr__(self, "model_outputs", MappingProxyType(dict(self.model_outputs)))
         object.__setattr__(self, "markers",
                            MappingProxyType({k: _frozen(v) for k, v in self.markers.items()}))
         object.__setattr__(self, "rigid_body_markers", MappingProxyType(
@@ -102,11 +130,15 @@ class Take:
 
     def marker(self, name: str) -> np.ndarray:
         """A marker by name: reconstructed markers first, then rigid-body markers; a name
-        that matches one marker only when case is ignored is that marker; else a
-        :class:`MocapError` with the closest names ("did you mean")."""
+        that matches one marker only when case is ignored is that marker; a model output's
+        name is a :class:`MocapError` saying so; else a :class:`MocapError` with the
+        closest names ("did you mean")."""
         for d in (self.markers, self.rigid_body_markers):
             if name in d:
                 return d[name]
+        if name in self.model_outputs:
+            raise MocapError(f"{self.source}: '{name}' is not a marker: the lab's model "
+                             f"computed it (POINT:{self.model_outputs[name].kind})")
         key = _lookup(name, [*self.markers, *self.rigid_body_markers], self.source, "marker")
         return self.markers[key] if key in self.markers else self.rigid_body_markers[key]
 

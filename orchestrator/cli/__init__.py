@@ -1,14 +1,19 @@
 """The ``hpcosim`` command line.
 
-Every verb is a thin layer over a plain Python function.  Errors a user can cause (bad
-files, bad values) print one line ``hpcosim: error: ...`` to stderr and exit with status 2;
-a check that runs but fails exits with status 1.
+Every verb is a thin layer over a plain Python function.  Exit status
+(:mod:`orchestrator.cli.outcome`): 0 done and the result holds; 1 done and the result is
+negative (one line ``hpcosim: check failed: ...``); 2 errors a user can cause (bad files,
+bad values: one line ``hpcosim: error: ...``); 3 an internal error (one line; the traceback
+with ``HPCOSIM_DEBUG=1``).  Every path option is taken from the user's working folder
+(:mod:`orchestrator.cli.paths`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
+import traceback
 from pathlib import Path
 from typing import Annotated, Protocol
 
@@ -25,9 +30,12 @@ from hp_model.config import ConfigError
 from hp_model.tree import ModelError
 from orchestrator.cli import experiments as experiments_cli
 from orchestrator.cli.cosim import register as register_cosim
+from orchestrator.cli.export import register as register_export
 from orchestrator.cli.fmu import fmu_app
 from orchestrator.cli.gait import gait_app
 from orchestrator.cli.mocap import mocap_app
+from orchestrator.cli.outcome import BAD_INPUT, INTERNAL, NEGATIVE, conclude, model_check_verdict
+from orchestrator.cli.paths import absolutize
 from orchestrator.cli.sweep import sweep_app
 from orchestrator.cli.tube import tube_app
 
@@ -49,6 +57,7 @@ app.add_typer(sweep_app, name="sweep")
 app.command("experiments")(experiments_cli.experiments)
 app.command("demo")(experiments_cli.demo)
 register_cosim(app)
+register_export()  # `gait export`, `recording export`
 
 #: exceptions that are the user's input, reported in one line (FitError covers
 #: characterization.tube.playback.PlaybackError and tube.fit.TubeFitError without importing
@@ -119,8 +128,7 @@ def model_check(
     table.add_row("prosthesis 4-state form f_p, g_m, g_s per call (us)",
                   f"{timing['sub_reduced_us']:.2f}", "", "")
     console.print(table)
-    if not all(r.ok for r in rows):
-        raise typer.Exit(1)
+    conclude(model_check_verdict(rows))
 
 
 class _ClickError(Protocol):
@@ -172,35 +180,48 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def _internal_error(e: Exception) -> int:
+    """A bug: one line (the traceback with ``HPCOSIM_DEBUG=1``), exit 3 (never 1, which
+    means a negative result)."""
+    if os.environ.get("HPCOSIM_DEBUG"):
+        traceback.print_exception(e)
+    print(f"hpcosim: internal error: {type(e).__name__}: {_one_line(str(e))} (a bug; "
+          "HPCOSIM_DEBUG=1 prints the traceback)", file=sys.stderr)
+    return INTERNAL
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: run the app, turning user errors into one-line messages."""
+    absolutize(app)  # every command, those registered after this module too
     try:
         # without standalone mode click returns (not raises) a command's typer.Exit code
         rc = app(args=argv, standalone_mode=False)
     except typer.Exit as e:
         return e.exit_code
-    except typer.Abort:
+    except (typer.Abort, KeyboardInterrupt):  # Ctrl-C where a verb does not handle it
         print("hpcosim: aborted", file=sys.stderr)
         return 130
     except USER_ERRORS as e:
         print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
-        return 2
+        return BAD_INPUT
     except OSError as e:  # the environment: a full disk, a read-only folder, a size limit
         print(f"hpcosim: error: {_os_error(e)}", file=sys.stderr)
-        return 2
+        return BAD_INPUT
     except Exception as e:  # click usage errors carry their own exit code
         if isinstance(e, _loaded_user_errors(LAZY_CHECK_FAILURES)):
-            print(f"hpcosim: check failed: {e}", file=sys.stderr)
-            return 1
+            print(f"hpcosim: check failed: {_one_line(str(e))}", file=sys.stderr)
+            return NEGATIVE
         if isinstance(e, _loaded_user_errors()):
             print(f"hpcosim: error: {_one_line(str(e))}", file=sys.stderr)
-            return 2
+            return BAD_INPUT
         if isinstance(e, _click_exceptions()):
             print(f"hpcosim: error: {_one_line(e.format_message())}", file=sys.stderr)
-            return int(getattr(e, "exit_code", 2))
-        raise
+            return int(getattr(e, "exit_code", BAD_INPUT))
+        return _internal_error(e)
     return rc if isinstance(rc, int) else 0
 
+
+absolutize(app)  # the verbs above: paths from the user's working folder
 
 if __name__ == "__main__":
     sys.exit(main())

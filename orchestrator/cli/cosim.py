@@ -12,6 +12,13 @@ from rich.console import Console
 from rich.table import Table
 
 from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_folder
+from orchestrator.cli.outcome import (
+    conclude,
+    cosim_verdict,
+    coverage_verdict,
+    replay_verdict,
+)
+from orchestrator.cli.paths import absolute
 from orchestrator.cli.tube import tube_app  # `tube refit` joins `tube fit`
 from orchestrator.modes import CosimMode
 from prosthesis_controller.interface import ControllerName
@@ -45,12 +52,17 @@ def serve(
                        ] = None,
     watchdog_ms: Annotated[float, typer.Option(min=0.1, help="Safe state after this long without "
                                                "measurements.")] = 50.0,
+    key: Annotated[Path | None, typer.Option(
+        "--key", dir_okay=False, help="zenoh: the key file (one line, a secret of 16+ "
+        "characters, mode 0600) the plant authenticates with (its bus config's key_file); "
+        "required over zenoh (docs/cosim.md, who may drive the controller).")] = None,
 ) -> None:
     """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
     from prosthesis_controller.node import bus_config_from_args, run_node
 
     cfg = bus_config_from_args(str(bus) if bus else None, interface=interface, run_id=run_id,
-                               channel=channel, listen=listen, connect=connect)
+                               channel=channel, listen=listen, connect=connect,
+                               key_file=str(key) if key else None)
     s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3)
     Console(stderr=True).print(f"controller node: {s}")
 
@@ -111,6 +123,8 @@ def run(
     end = ("FAULTED: " + res.fault_reason) if res.faulted else \
         (f"fell ({res.fall_reason}, code {res.fall_code})" if res.fell else "completed")
     t.add_row("result", end)
+    if res.fault_verdict:
+        t.add_row(f"who was late ({res.fault_cause})", res.fault_verdict)
     t.add_row("sim time / steps / ticks", f"{res.sim_time:.3f} s / {res.steps} / {res.ticks}")
     t.add_row("real-time factor", f"{res.real_time_factor:.2f}")
     t.add_row("frames tx / rx", f"{res.frames_tx} / {res.frames_rx}")
@@ -118,6 +132,11 @@ def run(
     if mode == CosimMode.REALTIME:
         t.add_row("plant overruns / slots skipped (max lag)",
                   f"{res.overruns} / {res.skipped_slots} ({res.max_lag_ms:.1f} ms)")
+        t.add_row("late replies: host stalled / controller late",
+                  f"{res.late_host} / {res.late_controller}")
+        t.add_row("host stalls (largest: ms, tick, ms on CPU)",
+                  f"{res.host_stalls} ({res.host_stall_ms:.1f}, {res.host_stall_tick}, "
+                  f"{res.host_stall_cpu_ms:.1f})")
     t.add_row("latency us (median/p99/max)", ", ".join(f"{k} {v:.0f}"
                                                          for k, v in res.latency_us.items()))
     t.add_row("per tick us", ", ".join(f"{k} {v:.0f}" for k, v in res.timing_us.items()))
@@ -131,8 +150,7 @@ def run(
     if record:
         t.add_row("recording", str(record))
     console.print(t)
-    if res.faulted:
-        raise typer.Exit(1)
+    conclude(cosim_verdict(res, steps))
 
 
 def replay_cmd(
@@ -143,9 +161,13 @@ def replay_cmd(
                                                 "onto this bus config instead.")] = None,
     speed: Annotated[float, typer.Option(min=0.0, help="Playback speed for --to-bus (0: fast).")
                      ] = 1.0,
+    tolerance: Annotated[float, typer.Option(
+        min=0.0, help="Largest torque difference (N m, motor side) that counts as the same "
+        "(default: one step of the CAN torque command); above it, exit 1.")] = 1e-6,
 ) -> None:
     """Replay recorded measurements through a controller and report the largest torque
-    difference, or play the recorded frames onto a CAN bus at recorded timing."""
+    difference (exit 1 above --tolerance), or play the recorded frames onto a CAN bus at
+    recorded timing."""
     console = Console()
     if to_bus is not None:
         from bus_schemas.transport.bus_config import load_bus_config, make_bus
@@ -163,6 +185,7 @@ def replay_cmd(
     r = replay(recording, controller)
     console.print(f"{r.controller}: {r.cycles} cycles, largest torque difference "
                   f"{r.max_torque_diff:.3g} N m (motor)")
+    conclude(replay_verdict(r.max_torque_diff, tolerance))
 
 
 @tube_app.command("refit")
@@ -183,12 +206,18 @@ def refit(
         "--exclude-ms", min=0.0, max=255.0,
         help="--model-error: time after touchdown left out of the bound (ms; default: the "
         "old bound's, else 30).")] = None,
+    min_coverage: Annotated[float | None, typer.Option(
+        "--min-coverage", min=0.0, max=1.0,
+        help="Exit 1 when the refitted tube's (or bound's) leave-one-out coverage is below "
+        "this (default: its a posteriori guarantee 1 - eps); the file is written all the "
+        "same.")] = None,
 ) -> None:
     """Refit the force tube from recorded ground-truth socket force (ps portions), or with
     --model-error the model-error bound from the controller's recorded estimates."""
+    from hp_model.force_tube import load_tube
     from orchestrator.cosim.recording import refit_model_error, refit_tube
 
-    paths = [p for r in recordings for p in (sorted(glob.glob(r)) or [r])]
+    paths = [str(absolute(p)) for r in recordings for p in (sorted(glob.glob(r)) or [r])]
     if model_error:
         rep = refit_model_error(paths, gait, out, old_tube=old, degree=degree,
                                 exclude_after_touchdown=None if exclude_ms is None
@@ -196,6 +225,13 @@ def refit(
     else:
         rep = refit_tube(paths, gait, out, old_tube=old, degree=degree)
     Console().print(rep)
+    t = load_tube(out)
+    if model_error:
+        me = t.model_error
+        conclude(coverage_verdict(f"model-error bound {out}",
+                                  me.credibility if me is not None else {}, min_coverage))
+    else:
+        conclude(coverage_verdict(f"force tube {out}", t.credibility, min_coverage))
 
 
 @recording_app.command("recover")
@@ -246,6 +282,8 @@ def animate_cmd(
 
     check_output_file(out)
     recording = source.endswith(".mcap") or Path(source).is_file()
+    if recording:
+        source = str(absolute(source))
     if not recording and (gait is None or tube is None):
         raise typer.BadParameter(f"scenario {source!r} needs --gait and --tube",
                                  param_hint="--gait/--tube")
@@ -268,7 +306,7 @@ def animate_cmd(
         r = run_scenario(model, g, load_tube(tube, g.hash()), sc)
         assert r.q is not None  # a scenario run keeps the configuration
         ended = f"{r.steps} steps" + (f", fell: {r.fall.reason.label}" if r.fall else "")
-        walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force)
+        walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force, r.fall)
         data = walker_gif(model, walk, fps=fps, max_seconds=seconds,
                           title=f"{sc.label} ({ended})")
     atomic_write_bytes(out, data)

@@ -10,6 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
+from orchestrator.cli.outcome import HOLDS, Verdict, conclude
 
 fmu_app = typer.Typer(help="The human side (plant + human controller) as an FMU.",
                       no_args_is_help=True)
@@ -54,5 +55,5 @@ def build(
     console.print(t)
     for p in problems:
         console.print(f"  [red]{p}[/]")
-    if problems:
-        raise typer.Exit(1)
+    conclude(Verdict(f"fmpy's validation of {info.path} found {len(problems)} problems: "
+                     f"{problems[0]}") if problems else HOLDS)

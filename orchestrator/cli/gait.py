@@ -12,6 +12,7 @@ from rich.table import Table
 
 from hp_model.domains import Domain
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
+from orchestrator.cli.outcome import conclude, gait_verdict
 
 gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimization.",
                        no_args_is_help=True)
@@ -80,6 +81,7 @@ def fit(
     if figure:
         save_gait_figure(out.with_suffix(".png"), gait, data)
     _summary(Console(), gait, out)
+    conclude(gait_verdict(gait.verification))
 
 
 def _summary(console: Console, gait, out: Path) -> None:

@@ -77,10 +77,10 @@ def inspect(
     s = summarize(t)
     console = Console()
     console.print(f"[bold]{take}[/]: {s.n_frames} frames at {s.frame_rate:g} Hz "
-                  f"({s.duration:.2f} s); the format's up axis {s.format_up}")
+                  f"({s.duration:.2f} s); the file's up axis {s.format_up}")
     if s.up_axis:
         console.print(f"axes guess: up {s.up_axis} (the markers span {s.up_span:.2f} m along "
-                      f"it per frame; sign from the format), walking "
+                      f"it per frame; {s.up_reason}), walking "
                       + (f"{s.walk_axis} ({s.walk_travel:.2f} m of travel)"
                          if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL
                          else f"unknown: the markers travel {s.walk_travel:.2f} m (a treadmill? "
@@ -92,6 +92,9 @@ def inspect(
     for col in s.columns:
         tab.add_row(col.kind, col.name, f"{100 * col.valid:.1f}", str(col.longest_gap))
     console.print(tab)
+    if s.model_outputs:
+        console.print("the lab's model outputs (not markers): "
+                      + ", ".join(f"{n} {k}" for k, n in s.model_outputs))
     if mapping_out is not None:
         atomic_write_bytes(mapping_out, mapping_skeleton(t).encode())
         console.print(f"wrote {mapping_out}: edit every entry, then hpcosim mocap process "

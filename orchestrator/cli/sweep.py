@@ -1,8 +1,12 @@
 """``hpcosim sweep``: robustness sweeps on Dask (registered in :mod:`orchestrator.cli`).
 
-    hpcosim sweep SPEC.toml --out DIR [--scheduler ADDRESS] [--workers N]   (= sweep run)
+    hpcosim sweep [run] SPEC.toml --out DIR [--workers N | --scheduler ADDRESS] [--gait G]
+        [--tube T] [--draws N] [--steps N] [--backend simulator|fmu] [--no-report]
     hpcosim sweep report DIR
     hpcosim sweep replay DIR CONTROLLER/FAMILY/DRAW [--backend simulator|fmu]
+
+(every option: docs/cli.md, generated from these verbs).  Exit 1 when runs have no result
+(interrupted, infrastructure errors), or a replayed run differs or is not stored.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from rich.console import Console
 from rich.table import Table
 from typer.core import TyperGroup
 
+from orchestrator.cli.outcome import HOLDS, Verdict, conclude, sweep_verdict
 from orchestrator.modes import SweepBackend
 
 
@@ -63,6 +68,23 @@ def _print_report(console: Console, s: dict[str, Any], out: Path) -> None:
                           + (f"\n  {w['cosim']}" if w["cosim"] else ""), highlight=False,
                           markup=False, soft_wrap=True)
     console.print(f"wrote {out}/report.md, report.json and figures")
+
+
+def _completeness(out: Path, keys: set[str]) -> Verdict:
+    """Whether every run of ``keys`` has a result to keep in ``out`` (an infrastructure
+    error is retried by a resume, so it is not one)."""
+    from orchestrator.sweep.store import done_keys
+
+    return sweep_verdict(len(keys), len(keys & done_keys(out)))
+
+
+def _manifest_keys(spec: dict[str, Any]) -> set[str]:
+    """The run keys of a sweep folder's stored spec (as ``draws.run_keys`` makes them)."""
+    from orchestrator.sweep.draws import ORACLE
+
+    ctrls = ([ORACLE] if spec.get("label_walkable") else []) + list(spec["controllers"])
+    return {f"{c}/{f}/{i}" for c in ctrls for f in spec["families"]
+            for i in range(int(spec["draws"]))}
 
 
 @sweep_app.command("run")
@@ -149,6 +171,9 @@ def run(
     if report:
         s = write_report(out)
         _print_report(console, s, out)
+    from orchestrator.sweep.draws import run_keys
+
+    conclude(_completeness(out, {k.text for k in run_keys(sp)}))
 
 
 @sweep_app.command("report")
@@ -158,7 +183,9 @@ def report_cmd(
     """Write OUT/report.md, report.json and figures from the stored results."""
     from orchestrator.sweep.report import write_report
 
-    _print_report(Console(), write_report(out), out)
+    s = write_report(out)
+    _print_report(Console(), s, out)
+    conclude(_completeness(out, _manifest_keys(s["spec"])))
 
 
 @sweep_app.command("replay")
@@ -192,4 +219,7 @@ def replay_cmd(
         console.print("identical to the stored result (every column)")
     else:
         console.print("DIFFERS from the stored result in: " + ", ".join(r.differences))
-        raise typer.Exit(1)
+    conclude(Verdict(f"{r.key} is not in the stored results: nothing to compare")
+             if r.stored is None else HOLDS if r.identical else
+             Verdict(f"{r.key} differs from the stored result in: "
+                     + ", ".join(r.differences)))

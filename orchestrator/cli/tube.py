@@ -13,6 +13,7 @@ from rich.table import Table
 
 from hp_model.force_tube import TubePhase
 from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_file
+from orchestrator.cli.outcome import HOLDS, combine, conclude, coverage_verdict
 
 tube_app = typer.Typer(help="The socket-force tube: playback of the recorded steps (paper "
                        "Sec. IV-B).", no_args_is_help=True)
@@ -59,6 +60,11 @@ def fit(
         "--exclude-ms", min=0.0, max=255.0,
         help="Time after the prosthesis's touchdown left out of the model-error bound (ms); "
         "the impact transient is left to the CLF relaxation.")] = 30.0,
+    min_coverage: Annotated[float | None, typer.Option(
+        "--min-coverage", min=0.0, max=1.0,
+        help="Exit 1 when the tube's (or the model-error bound's) leave-one-out coverage is "
+        "below this (default: its a posteriori guarantee 1 - eps; coverage 0 always); the "
+        "files are written all the same.")] = None,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
@@ -139,3 +145,6 @@ def fit(
     elif model_error:
         console.print(f"[yellow]model error[/]: {t.source.get('model_error', 'not fitted')}")
     console.print(f"wrote {paths['tube']}, {paths['figure'].name}, {paths['report'].name}")
+    conclude(combine(coverage_verdict("force tube", cred, min_coverage),
+                     coverage_verdict("model-error bound", me.credibility, min_coverage)
+                     if me is not None else HOLDS))

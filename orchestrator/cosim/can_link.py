@@ -16,6 +16,13 @@ Per tick k (t = k dt) the link
 4. judges the controller (:mod:`orchestrator.cosim.watchdog`): a missing reply holds the
    last torque; the watchdog, a lost liveliness token or a SAFE/FAULT heartbeat give the
    safe torque (zero) and a :attr:`Command.fault` that ends the run.
+
+In realtime the link also measures the plant's own time in each tick
+(:class:`~orchestrator.cosim.schedule.StallMeter`): a late reply while the plant's own loop
+was held up a period or more is the host's (``late_host``), else the controller's
+(``late_controller``), and a silence that ends the run says which (``fault_cause``).  What
+the link keeps of a run is constant in size (latency histogram, tallies, counts), however
+long the run.
 """
 
 from __future__ import annotations
@@ -36,8 +43,8 @@ from orchestrator.cosim.controller_process import ControllerProcess
 from orchestrator.cosim.drives import Drives, Plant
 from orchestrator.cosim.faults import FaultPlan
 from orchestrator.cosim.frame_records import diagnostics_record, rx_records, tx_records
-from orchestrator.cosim.result import CosimResult, ReplyTimes, reply_early_share, tick_breakdown
-from orchestrator.cosim.schedule import WallSchedule
+from orchestrator.cosim.result import CosimResult, ReplyTimes, tick_breakdown
+from orchestrator.cosim.schedule import StallMeter, WallSchedule
 from orchestrator.cosim.watchdog import ReplyWatchdog
 from orchestrator.loop import Command, LoopLog, Observation
 
@@ -88,6 +95,7 @@ class CanLink:
         self.injected: dict[str, int] = {}
         self.wall0 = time.perf_counter()
         self.schedule = WallSchedule(cfg.dt, cfg.max_lag, self.wall0)
+        self.stalls = StallMeter(cfg.dt)  # realtime: the plant's own time per tick
         self.watchdog = ReplyWatchdog(periods=cfg.watchdog_periods,
                                       reply_timeout=cfg.reply_timeout,
                                       node_watchdog=cfg.controller_watchdog,
@@ -136,6 +144,8 @@ class CanLink:
     def _before_send(self, k: int, t: float) -> None:
         """The plant's own faults (a stall), realtime catch-up, the process faults."""
         plan = self.plan
+        if self.realtime:
+            self.stalls.begin(k, time.perf_counter())
         if plan.case.is_plant and plan.hits(k):
             time.sleep(plan.stall_ms * 1e-3)
             self._count(plan.case.value)
@@ -188,30 +198,32 @@ class CanLink:
         self.rec.defer_many(self.log_ns(t), tx_records, frames, self.names, obs.sensed,
                             round(t * 1e6), obs.k % 16)
         self.rec.write_deferred(self._reply_here)
-        self.times.record.append(time.perf_counter_ns() - r0)
+        self.times.record.add(time.perf_counter_ns() - r0)
 
     def _await_reply(self, k: int, t: float, sent_ns: int, *, late: bool) -> tuple[bool, bool]:
         """Wait for this cycle's torque: lockstep up to ``reply_timeout``; realtime until
         0.8 dt into the tick's slot, or 0.8 dt after sending when the plant itself runs
         behind (a late plant must not count its own lateness as the controller's missed
-        reply).  (this cycle's reply came, some good TorqueCmd came); ``late``: held for
-        :meth:`settle` (:meth:`_take_torque`)."""
+        reply).  What is already in when the deadline has passed (the plant itself woke
+        late) is still taken.  (this cycle's reply came, some good TorqueCmd came);
+        ``late``: held for :meth:`settle` (:meth:`_take_torque`)."""
         w0 = time.perf_counter_ns()
         deadline = (max(self.schedule.slot(k + 0.8), sent_ns * 1e-9 + 0.8 * self.dt)
                     if self.realtime else sent_ns * 1e-9 + self.cfg.reply_timeout)
         got = answered = False
-        while not got:
+        while not got and not self.lost.is_set():
             left = deadline - time.perf_counter()
-            if left <= 0 or self.lost.is_set():
-                break
-            sample = self.frames.recv_all(min(left, 0.005))
+            sample = self.frames.recv_all(min(left, 0.005) if left > 0 else 0.0)
             if sample:
                 got, in_sample = self._take_sample(sample, t, late)
                 answered = answered or in_sample
+            elif left <= 0:
+                break
+        r1 = time.perf_counter_ns()
+        if self.realtime:
+            self.stalls.waited(w0 * 1e-9, r1 * 1e-9, deadline)
         if got:
-            r1 = time.perf_counter_ns()
-            self.times.round_trip.append(r1 - sent_ns)
-            self.times.wait.append(r1 - w0)
+            self.times.replied(r1 - sent_ns, r1 - w0)
         return got, answered
 
     def _take_sample(self, sample: list[Any], t: float, late: bool) -> tuple[bool, bool]:
@@ -243,20 +255,27 @@ class CanLink:
         """Count the reply (or its absence) and ask the watchdog; on a fault the safe
         torque (zero).  The fault's reason, "" while the controller is trusted."""
         res, wd = self.res, self.watchdog
+        stall = 0.0  # realtime: the plant's own loop held up [ms] (StallMeter.held_up)
         if got:
             wd.replied()
-        elif self.realtime and answered:
-            res.late += 1
-            wd.answered_late()
         else:
             if self.realtime:
+                stall = self.stalls.held_up(time.perf_counter())
                 res.late += 1
-            res.missed += 1
-            wd.missed(k)
+                if stall:
+                    res.late_host += 1
+                else:
+                    res.late_controller += 1
+            if self.realtime and answered:
+                wd.answered_late()
+            else:
+                res.missed += 1
+                wd.missed(k, stall)
         reason = wd.fault(k, got, self.plant.ctrl_state, self.lost)
         if reason:
             self.u = (0.0, 0.0)
             res.detection_periods = wd.detection_periods(k)
+            res.fault_cause, res.fault_verdict = wd.cause, wd.verdict
         return reason
 
     def _command(self, t: float, fault: str) -> Command:
@@ -379,6 +398,7 @@ class CanLink:
         end = self.schedule.slot(k)
         t = (k - 1) * self.dt
         self._settle_held()
+        p0 = time.perf_counter()
         while (left := end - time.perf_counter()) > 0:
             items: list[Checked] = []
             for msg in self.frames.recv_all(left):
@@ -386,12 +406,19 @@ class CanLink:
                 if v.frame_id == _TORQUE and v.status is _OK and v.value.enable:
                     self.u = (v.value.knee, v.value.ankle)
             self._defer_rx(items, t)
+        self.stalls.waited(p0, time.perf_counter(), end)
 
     def report(self, log: LoopLog) -> None:
         """After the loop: the link's figures into the run's result (wall time, faults
-        injected, rejects, torques clamped, reply latency, the tick breakdown)."""
+        injected, rejects, torques clamped, reply latency, the tick breakdown, the host
+        stalls)."""
         res, plant, times = self.res, self.plant, self.times
         res.wall_time = time.perf_counter() - self.wall0
+        if self.realtime:
+            st = self.stalls
+            st.end(time.perf_counter())
+            res.host_stalls = st.count
+            res.host_stall_ms, res.host_stall_tick, res.host_stall_cpu_ms = st.largest
         res.injected = self.injected
         res.plant_rejects = plant.rejects()
         res.torque_clamped = plant.torque_clamped
@@ -399,4 +426,4 @@ class CanLink:
         res.latency_us = times.latency_us()
         res.timing_us = tick_breakdown(log.tick_ns, log.plant_ns, times.round_trip,
                                        times.record, times.wait)
-        res.reply_early = reply_early_share(times.wait) if self.rec is not None else 0.0
+        res.reply_early = times.early_share() if self.rec is not None else 0.0

@@ -3,15 +3,26 @@ one-line error (:class:`CosimError`)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import KW_ONLY, asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from bus_schemas.transport.keys import validate_run_id
+from orchestrator.cosim.faults import FaultPlan
 from orchestrator.modes import CosimMode
+from prosthesis_controller.interface import ControllerName
 
 
 class CosimError(RuntimeError):
     """A co-simulation that could not start or run (one-line message)."""
+
+
+#: the command-line option of a configuration field (errors name it)
+_OPTION = {"max_time": "--max-time", "steps": "--steps", "perturb": "--perturb"}
+#: the numbers of a configuration that must be finite: > 0 (True) or >= 0 (False)
+_FINITE = {"max_time": True, "dt": True, "reply_timeout": True, "start_timeout": True,
+           "controller_watchdog": True, "poll_us": False, "max_lag": True}
 
 
 @dataclass
@@ -53,7 +64,33 @@ class CosimConfig:
     max_lag: float = 0.02  # s
 
     def __post_init__(self) -> None:
-        self.mode = CosimMode(self.mode)
+        """Every value checked before anything starts: :class:`CosimError` naming the
+        option (``hpcosim run``'s) or field."""
+        for name, kind in (("mode", CosimMode), ("controller", ControllerName)):
+            try:
+                setattr(self, name, kind(getattr(self, name)))
+            except ValueError as e:
+                raise CosimError(f"--{name}: {' '.join(str(e).split())}") from None
+        if isinstance(self.steps, bool) or not isinstance(self.steps, int) or self.steps < 1:
+            raise CosimError(f"--steps {self.steps!r}: expected a whole number >= 1")
+        for name, strict in _FINITE.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) \
+                    or v < 0 or (strict and v == 0):
+                raise CosimError(f"{_OPTION.get(name, name)} {v!r}: expected a finite number "
+                                 f"{'>' if strict else '>='} 0")
+        if not math.isfinite(self.max_time / self.dt):
+            raise CosimError(f"--max-time {self.max_time!r}: too many periods of {self.dt} s")
+        for name in ("watchdog_periods", "status_every"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise CosimError(f"{name} {v!r}: expected a whole number >= 1")
+        try:
+            FaultPlan.parse(self.perturb)
+            if self.run_id is not None:
+                validate_run_id(self.run_id)
+        except ValueError as e:
+            raise CosimError(str(e)) from None
 
     @property
     def realtime(self) -> bool:

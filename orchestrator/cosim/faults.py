@@ -8,6 +8,7 @@ perturbed human gait (:class:`PerturbCase` lists them).  Frame faults act on the
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,22 +66,32 @@ class FaultPlan:
 
     @classmethod
     def parse(cls, text: str | None) -> FaultPlan:
-        """The plan of a ``--perturb`` value (ValueError naming the cases if unknown)."""
+        """The plan of a ``--perturb`` value; ValueError naming ``--perturb``, the cases
+        and the part that is wrong (an unknown case, a number that is not one or out of
+        its range, too many parts)."""
         if not text or text == PerturbCase.NONE:
             return cls()
         parts = text.split(":")
-        case = PerturbCase(parts[0])
+        try:
+            case = PerturbCase(parts[0])
+        except ValueError:
+            raise _bad(text, f"unknown case {parts[0]!r}; choose one of "
+                       f"{', '.join(PerturbCase)}") from None
+        if case is PerturbCase.NONE:
+            raise _bad(text, "'none' takes no parameters")
         if case is PerturbCase.HUMAN:
-            amp = float(parts[1]) if len(parts) > 1 else 0.001
-            return cls(case, amplitude=amp, seed=int(parts[2]) if len(parts) > 2 else 0)
+            _arity(text, parts, "human[:AMPLITUDE[:SEED]]", 2)
+            amp = _number(text, parts, 1, "AMPLITUDE (rad)", 0.001, 0.0, math.inf)
+            seed = _whole(text, parts, 2, "SEED", 0, 0, SEED_LIMIT - 1)
+            return cls(case, amplitude=amp, seed=seed)
         if case is PerturbCase.STALL:
-            return cls(case, start=int(parts[1]) if len(parts) > 1 else 100, count=1,
-                       stall_ms=float(parts[2]) if len(parts) > 2 else 50.0)
-        nums = [int(p) for p in parts[1:]]
-        plan = cls(case)
-        for name, v in zip(("start", "every", "count"), nums, strict=False):
-            setattr(plan, name, v)
-        return plan
+            _arity(text, parts, "stall[:START[:MS]]", 2)
+            return cls(case, start=_whole(text, parts, 1, "START", 100, 0, None), count=1,
+                       stall_ms=_number(text, parts, 2, "MS", 50.0, 0.0, math.inf, open_=True))
+        _arity(text, parts, f"{case}[:START[:EVERY[:COUNT]]]", 3)
+        return cls(case, start=_whole(text, parts, 1, "START", 100, 0, None),
+                   every=_whole(text, parts, 2, "EVERY", 97, 1, None),
+                   count=_whole(text, parts, 3, "COUNT", 5, 1, None))
 
     def fmu_parameters(self) -> tuple[dict[str, float], dict[str, int]]:
         """The human FMU's start values for this plan (real, integer): the perturbation's
@@ -113,6 +124,51 @@ class FaultPlan:
         if case is PerturbCase.DUPLICATE:
             return [knee, knee, *rest], case.value
         return [_corrupted(case, knee), *rest], case.value
+
+
+#: the human perturbation's seed is the FMU's 32-bit signed Integer
+SEED_LIMIT = 2**31
+
+
+def _bad(text: str, why: str) -> ValueError:
+    return ValueError(f"--perturb {text!r}: {why}")
+
+
+def _arity(text: str, parts: list[str], form: str, most: int) -> None:
+    """At most ``most`` parameters after the case (``form``: what it takes)."""
+    if len(parts) - 1 > most:
+        raise _bad(text, f"too many parts; expected {form}")
+
+
+def _number(text: str, parts: list[str], i: int, name: str, default: float, low: float,
+            high: float, *, open_: bool = False) -> float:
+    """Part ``i`` as a finite number in [low, high] ((low, high] with ``open_``), or
+    ``default`` when absent."""
+    if len(parts) <= i:
+        return default
+    try:
+        v = float(parts[i])
+    except ValueError:
+        raise _bad(text, f"{name} {parts[i]!r} is not a number") from None
+    if not math.isfinite(v) or v < low or (open_ and v == low) or v > high:
+        raise _bad(text, f"{name} {parts[i]!r}: expected a finite number "
+                   f"{'>' if open_ else '>='} {low:g}")
+    return v
+
+
+def _whole(text: str, parts: list[str], i: int, name: str, default: int, low: int,
+           high: int | None) -> int:
+    """Part ``i`` as a whole number in [low, high], or ``default`` when absent."""
+    if len(parts) <= i:
+        return default
+    try:
+        v = int(parts[i])
+    except ValueError:
+        raise _bad(text, f"{name} {parts[i]!r} is not a whole number") from None
+    if v < low or (high is not None and v > high):
+        raise _bad(text, f"{name} {v}: expected a whole number >= {low}"
+                   + (f" and <= {high}" if high is not None else ""))
+    return v
 
 
 def _corrupted(case: PerturbCase, knee: can.Message) -> can.Message:

@@ -1,16 +1,63 @@
 """What a co-simulation is built from, loaded from its configuration and checked before any
-process starts (:class:`RunInputs`)."""
+process starts (:class:`RunInputs`), and the human FMU's build identity
+(:func:`fmu_identity`, :func:`check_fmu_identity`)."""
 
 from __future__ import annotations
 
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree as ET
 
-from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.config import CosimConfig, CosimError
 from orchestrator.cosim.drives import Drives
 from orchestrator.cosim.human import ensure_fmu
+
+#: where an hpcosim FMU's modelDescription.xml names its build: FMI 2.0 VendorAnnotations,
+#: FMI 3.0 Annotations (human_fmu.build, human_fmu.fmi3)
+_BUILD = ("./VendorAnnotations/Tool[@name='hpcosim']/Build",
+          "./Annotations/Annotation[@type='hpcosim']/Build")
+_MAX_XML = 16 << 20  # bytes of modelDescription.xml read at most
+
+
+def fmu_identity(path: Path) -> dict[str, str]:
+    """The build identity an hpcosim FMU carries in its modelDescription.xml: ``model_hash``
+    (the subject and device parameters), ``gait_hash``, ``gait_file``, ``subject``,
+    ``device``; CosimError naming the file when it has none (not an hpcosim build)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            info = z.getinfo("modelDescription.xml")
+            if info.file_size > _MAX_XML:
+                raise CosimError(f"{path}: modelDescription.xml of {info.file_size} bytes")
+            root = ET.fromstring(z.read(info))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as e:
+        raise CosimError(f"{path}: not an FMU ({type(e).__name__}: {e})") from None
+    for where in _BUILD:
+        build = root.find(where)
+        if build is not None and build.get("model_hash") and build.get("gait_hash"):
+            return dict(build.attrib)
+    raise CosimError(f"{path}: no hpcosim build identity (model and gait hashes) in its "
+                     "modelDescription.xml; build the FMU with hpcosim fmu build")
+
+
+def check_fmu_identity(path: Path, gait: Any, model: Any, gait_path: Path | str,
+                       option: str = "--fmu") -> None:
+    """Refuse the FMU at ``path`` (given as ``option``) unless it was built for ``gait``
+    (the one loaded from ``gait_path``) and ``model`` (the subject and device): one line
+    naming the FMU, what it was built for and the options that differ."""
+    ident = fmu_identity(path)
+    if ident["model_hash"] != model.parameter_hash():
+        raise CosimError(
+            f"{option} {path}: built for another subject or device (model {ident['model_hash']}: "
+            f"{ident.get('subject', '?')}, {ident.get('device', '?')}) than --subject/--device "
+            f"give (model {model.parameter_hash()}); build one with hpcosim fmu build")
+    if ident["gait_hash"] != gait.hash():
+        raise CosimError(
+            f"{option} {path}: built for another gait ({ident.get('gait_file', '?')}, gait "
+            f"{ident['gait_hash']}) than --gait {gait_path} (gait {gait.hash()}); build one "
+            f"with hpcosim fmu build --gait {gait_path}")
 
 
 @dataclass(frozen=True)
@@ -28,9 +75,9 @@ class RunInputs:
     def load(cls, cfg: CosimConfig, model: Any = None,
              say: Callable[[str], None] | None = None) -> RunInputs:
         """Load ``cfg``'s artifacts (``model``: the model of ``cfg.subject`` and
-        ``cfg.device`` if already built); a gait or tube made for another model or gait is
-        refused here, not in the controller process. The FMU is built if not cached
-        (progress through ``say``)."""
+        ``cfg.device`` if already built); a gait, tube or FMU made for another model or
+        gait is refused here, not in the controller process or at the walker's first
+        steps. The FMU is built if not cached (progress through ``say``)."""
         import hp_model
         from hp_model.force_tube import load_tube
         from hp_model.gait_artifact import load_gait
@@ -39,6 +86,8 @@ class RunInputs:
         gait = load_gait(cfg.gait, model.parameter_hash())
         tube = load_tube(cfg.tube, gait.hash())
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
+        check_fmu_identity(fmu_path, gait, model, cfg.gait,
+                           "--fmu" if cfg.fmu is not None else "the cached FMU")
         return cls(model, gait, tube, fmu_path, Drives.of(model))
 
 

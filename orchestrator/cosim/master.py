@@ -24,7 +24,7 @@ Fault handling: a missing reply holds the last torque; ``watchdog_periods`` (5) 
 replies in a row, the controller's liveliness token disappearing, or its heartbeat reporting
 SAFE/FAULT make the plant apply the safe torque (zero) and end the run as *faulted*
 (:mod:`orchestrator.cosim.watchdog`). The recording is always finished (also on
-SIGTERM/SIGINT).
+SIGTERM/SIGINT), except that a run failing before its first tick leaves none.
 """
 
 from __future__ import annotations
@@ -58,10 +58,12 @@ def run_cosim(cfg: CosimConfig, *, progress: Progress | None = None, model: Any 
               say: Callable[[str], None] | None = None,
               install_signal_handlers: bool = False) -> CosimResult:
     """Run one co-simulation (module docstring). Returns the summary; the recording (if any)
-    is complete and readable whatever happens. ``model``: the model of ``cfg.subject`` and
-    ``cfg.device``, if already built; ``progress(k, t, steps)`` every 100 ticks; ``say``:
-    what the run is doing, in words; ``install_signal_handlers``: SIGINT and SIGTERM end
-    the run early (:attr:`CosimResult.interrupted`) instead of the process."""
+    is complete and readable whatever happens once the first tick began; a run that fails
+    before it leaves no recording (:class:`RunRecord`). ``model``: the model of
+    ``cfg.subject`` and ``cfg.device``, if already built; ``progress(k, t, steps)`` every
+    100 ticks; ``say``: what the run is doing, in words; ``install_signal_handlers``:
+    SIGINT and SIGTERM end the run early (:attr:`CosimResult.interrupted`) instead of the
+    process."""
     say = say or (lambda _m: None)
     plan = FaultPlan.parse(cfg.perturb)
     inputs = RunInputs.load(cfg, model, say)

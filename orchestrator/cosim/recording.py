@@ -143,6 +143,7 @@ def replay(path: str | Path, controller: str | None = None, *, model: Any = None
 def recorded_frames(path: str | Path, directions: Iterable[str] = ("tx", "rx")
                     ) -> list[tuple[int, can.Message]]:
     """(log_time ns, frame) of the recorded CAN frames in log-time order."""
+    read_recording(path, messages=False)  # RecordingError for a file that is not one
     topics = [f"/can/{d}" for d in directions]
     out = []
     for _, ns, o in read_messages(path, topics):

@@ -44,6 +44,26 @@ def versions() -> dict[str, str]:
     return out
 
 
+def _make_folders(folder: Path) -> list[Path]:
+    """Make ``folder`` and its missing parents; the ones made, innermost first."""
+    missing = []
+    f = folder
+    while not f.exists() and f != f.parent:
+        missing.append(f)
+        f = f.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    return missing
+
+
+def _remove_folders(folders: list[Path]) -> None:
+    """Remove ``folders`` (innermost first) while they are empty."""
+    for f in folders:
+        try:
+            f.rmdir()
+        except OSError:
+            return
+
+
 class RunRecord:
     """The MCAP recording of one run at ``cfg.record`` (module docstring); ``rec`` is its
     :class:`bus_schemas.recording.recorder.Recorder` (the link queues the CAN records on it).
@@ -55,22 +75,30 @@ class RunRecord:
         from bus_schemas.recording.recorder import Recorder
 
         assert cfg.record is not None
-        Path(cfg.record).parent.mkdir(parents=True, exist_ok=True)
-        self.rec = Recorder(cfg.record, metadata={"run_id": run_id}, can_rates=0.1)
+        #: folders made for the recording, removed again if it is abandoned (innermost first)
+        self._made = _make_folders(Path(cfg.record).parent)
+        try:
+            self.rec = Recorder(cfg.record, metadata={"run_id": run_id}, can_rates=0.1)
+        except BaseException:
+            _remove_folders(self._made)
+            raise
         self.inputs, self.res = inputs, res
+        #: the tick loop was given the recorder (:meth:`ground_truth`): from then on the
+        #: recording holds the run, whatever ends it
+        self.started = False
         try:
             self.rec.register_all()
             self._describe(cfg, fmu)
             self._walker = WalkerFoxglove(inputs.model, inputs.gait, inputs.tube)
         except BaseException:
-            self.close()
+            self.close(failed=True)
             raise
 
     def __enter__(self) -> RunRecord:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: type[BaseException] | None, *exc: object) -> None:
+        self.close(failed=exc_type is not None)
 
     def _describe(self, cfg: CosimConfig, fmu: HumanFmu) -> None:
         """What the run is made of: metadata and attachments."""
@@ -98,14 +126,18 @@ class RunRecord:
         """The loop's recorder: ``/ground_truth``, ``/controller/clf`` and the walker for
         Foxglove, deferred (serialized while the plant waits for the controller), at log
         times ``log_ns(t)``."""
+        self.started = True
         return GroundTruthRecorder(self.rec, log_ns=log_ns, deferred=True, walker=self._walker)
 
-    def close(self) -> None:
+    def close(self, *, failed: bool = False) -> None:
         """Finish the file with the run's summary; a failed write (a full disk) leaves no
-        partial file (the write's error names the file)."""
+        partial file (the write's error names the file), and neither does a run that
+        ``failed`` before its first tick (nothing recorded: an error, not a recording)."""
         rec, res = self.rec, self.res
-        if rec.write_failed:
+        if rec.write_failed or (failed and not self.started):
             rec.abort()
+            if not self.started:
+                _remove_folders(self._made)
         elif not rec.finished:
             try:
                 if res.interrupted:

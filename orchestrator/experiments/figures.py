@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from orchestrator.experiments.scenarios import ScenarioResult
 from prosthesis_controller import ControllerName
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn
+    from matplotlib.figure import Figure
 
 #: each controller's colour in the figures
 COLOURS: dict[str, str] = {
@@ -37,23 +40,40 @@ def _plt() -> Any:
     return plt
 
 
-def fig6(runs: dict[str, ScenarioResult]) -> bytes:
-    """Prosthesis motor torques in ps of the exact and the relaxed robust CLF-QP."""
+def gear_ratios(model: HumanProsthesisModel) -> tuple[float, float]:
+    """(knee, ankle) gear ratios of the device config: joint torque = ratio x motor torque."""
+    p = model.device.prosthesis
+    return float(p.knee.gear_ratio.value), float(p.ankle.gear_ratio.value)
+
+
+def fig6(runs: dict[str, ScenarioResult], gear: tuple[float, float]) -> bytes:
+    """PNG of :func:`fig6_figure`."""
+    return figure_bytes(fig6_figure(runs, gear))
+
+
+def fig6_figure(runs: dict[str, ScenarioResult], gear: tuple[float, float]) -> Figure:
+    """Prosthesis motor torques in ps of the exact and the relaxed robust CLF-QP: motor N m
+    on the left axis, the joint's (``gear`` ratio times, knee and ankle) on the right."""
     plt = _plt()
     fig, ax = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
     for c, col in ((ControllerName.CLFQP_EXACT, "tab:blue"), (ControllerName.CLFQP, "tab:pink")):
         r = runs[c]
-        for j, name in enumerate(("knee", "ankle")):
+        for j in range(2):
             u = np.where(r.domain == _PS, r.torque[:, j], np.nan)
             ax[j].plot(r.t, u, color=col, lw=0.7,
                        label=("exact (eq. robust_CLF_QP)" if c == ControllerName.CLFQP_EXACT
                               else "relaxed (eq. robust_CLF_QP_relax)"))
-            ax[j].set_ylabel(f"{name} motor torque (N m)")
-    ax[1].set_xlabel(f"t (s), {Domain.PS} only")
+    for j, name in enumerate(("knee", "ankle")):
+        n = gear[j]
+        ax[j].set_ylabel(f"{name} motor torque\n(N m, motor side)", fontsize=9)
+        sec = ax[j].secondary_yaxis("right", functions=(lambda u, n=n: u * n,
+                                                        lambda v, n=n: v / n))
+        sec.set_ylabel(f"{name} joint torque (N m)\n= {n:g} x motor (gear ratio)", fontsize=9)
+    ax[1].set_xlabel(f"t (s), {Domain.PS} (prosthesis stance) only")
     ax[0].legend(fontsize=7)
     fig.suptitle("Fig. 6: prosthesis torques, exact vs relaxed robust CLF-QP")
     fig.tight_layout()
-    return figure_bytes(fig)
+    return fig
 
 
 def fig7(runs: dict[str, ScenarioResult], gait: Gait) -> bytes:
@@ -98,7 +118,7 @@ def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
         for c, r in rr.items():
             m = r.domain == _PS
             a.plot(r.t, np.where(m, r.q_p[:, 0], np.nan), color=COLOURS[c], lw=0.8,
-                   label=f"{c} ({'ok' if r.success else 'fell'})")
+                   label=f"{c} ({run_outcome(r)})")
             if r.failed and r.fail_t is not None:
                 a.axvline(r.fail_t, color=COLOURS[c], ls=":", lw=1)
         a.set_title(n, fontsize=9)
@@ -108,6 +128,14 @@ def fig8(runs: dict[str, dict[str, ScenarioResult]]) -> bytes:
     fig.suptitle("Fig. 8: prosthesis knee under perturbed human gaits")
     fig.tight_layout()
     return figure_bytes(fig)
+
+
+def run_outcome(r: ScenarioResult) -> str:
+    """A run's end for a legend: ``ok``, ``fell at 1.18 s, 2 steps``, ``fell at 0.004 s,
+    no step`` (a run that never completed a step)."""
+    if r.success or r.fail_t is None:
+        return "ok" if r.success else f"{r.steps} steps"
+    return f"fell at {r.fail_t:.3g} s, " + (f"{r.steps} steps" if r.steps else "no step")
 
 
 def write_animations(model: HumanProsthesisModel, out: str, nominal: ScenarioResult,
@@ -126,7 +154,7 @@ def write_animations(model: HumanProsthesisModel, out: str, nominal: ScenarioRes
     for name, fname, r, title, secs in runs:
         if r.q is None or r.t.size == 0:
             continue
-        walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force)
+        walk = WalkSeries(r.t, r.q, r.domain, r.tau, r.socket_force, r.fall)
         atomic_write_bytes(os.path.join(out, fname),
                            walker_gif(model, walk, title=title, max_seconds=secs))
         files[name] = fname

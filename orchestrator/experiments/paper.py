@@ -14,7 +14,8 @@ Next to the paper's controllers the phase-PD reference (``prosthesis_controller`
 paper) runs the nominal and robustness cases, and the diagnosis compares the torque's input
 authority in the reduced model and in the full loop (:mod:`orchestrator.experiments.diagnosis`).
 The figures and animations are :mod:`orchestrator.experiments.figures`', the stability
-evidence :mod:`orchestrator.experiments.stability`'.
+evidence :mod:`orchestrator.experiments.stability`', the claims judged on the metrics
+:mod:`orchestrator.experiments.claims`'.
 """
 
 from __future__ import annotations
@@ -33,8 +34,9 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import to_jsonable, write_json
 from hp_model.outputs import HipProgress
 from orchestrator.experiments.bench import Bench
+from orchestrator.experiments.claims import claims, device_summary
 from orchestrator.experiments.diagnosis import input_authority
-from orchestrator.experiments.figures import fig6, fig7, fig8, write_animations
+from orchestrator.experiments.figures import fig6, fig7, fig8, gear_ratios, write_animations
 from orchestrator.experiments.scenarios import (
     NOMINAL,
     PerturbationSearch,
@@ -90,7 +92,7 @@ def nominal_walking(bench: Bench, steps: int, eigen: bool = True,
     if eigen and len(post) >= 2 and r.success:
         stab, why = orbit_stability(bench, controller, post[-1], fd=fd), ""
     elif not eigen:
-        why = "skipped (--quick)"
+        why = "skipped (experiments --no-eigen, or demo --quick)"
     m["stability"] = {"computed": stab is not None, "why_not": why, **(stab or {})}
     m["stable_orbit"] = bool(r.success and stab is not None and stab["contracting"])
     return m, r
@@ -243,7 +245,7 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
                        fig7({ControllerName.CLFQP: r1, REFERENCE_CONTROLLER: r1r}, gait))
     say("exact vs relaxed robust CLF-QP")
     m2, r2 = exact_vs_relaxed(bench, min(steps, 5))
-    atomic_write_bytes(os.path.join(out, "fig6_torques.png"), fig6(r2))
+    atomic_write_bytes(os.path.join(out, "fig6_torques.png"), fig6(r2, gear_ratios(model)))
     say("robustness")
     m3, r3 = robustness(bench, steps, progress=say)
     atomic_write_bytes(os.path.join(out, "fig8_robustness.png"), fig8(r3))
@@ -270,111 +272,8 @@ def run_experiments(model: HumanProsthesisModel, gait: Gait, tube: ForceTube,
         "figures": {"fig6": "fig6_torques.png", "fig7": "fig7_phase_portraits.png",
                     "fig8": "fig8_robustness.png"},
         "animations": animations,
+        "device": device_summary(model),
     }
     metrics["claims"] = claims(metrics)
     write_json(os.path.join(out, "metrics.json"), metrics)
     return to_jsonable(metrics)
-
-
-def claims(m: dict[str, Any]) -> list[dict[str, Any]]:
-    """The paper's Sec. V claims, each with reproduced True/False and the numbers."""
-    n, e, r = m["nominal"], m["exact_vs_relaxed"], m["robustness"]
-    run = n["run"]
-    c1 = {"id": "nominal_stable", "claim": f"nominal closed loop stable for {m['steps']} steps "
-          "(robust CLF-QP relaxed in ps, swing controller in pns)",
-          "reproduced": bool(run["success"] and n["stable_orbit"]),
-          "numbers": f"{run['steps_completed']}/{run['steps_requested']} steps"
-          + (f"; fell: {run['reason']}" if run["failed"] else "")
-          + f"; knee RMS in ps {_f(run['knee_rms_ps_rad'])} rad; "
-          + stability_text(n["stability"])
-          + f"; fallback ticks {run['fallback_count']}"
-          + f"; F_s inside the tube {_pct(run['socket_force_in_tube'])} of the ps samples",
-          "headline": f"{run['steps_completed']}/{run['steps_requested']} steps, knee RMS "
-          f"{_f(run['knee_rms_ps_rad'])} rad, contraction "
-          f"{_f(n['stability'].get('contraction_worst'))}/cycle"}
-    ratio = e["chatter_ratio_exact_over_relaxed"]
-    c2 = {"id": "relaxed_smooth", "claim": "relaxed CLF-QP chatter >= 5x lower than exact, "
-          "with its tracking settling onto the periodic orbit",
-          "reproduced": bool(ratio is not None and ratio >= 5
-                             and e["relaxed_tracking_converging"]),
-          "numbers": (f"torque total variation per s of ps: exact "
-                      f"{_f(e['clfqp-exact']['chatter_rate_Nm_per_s'])}, relaxed "
-                      f"{_f(e['clfqp']['chatter_rate_Nm_per_s'])} N m/s (ratio {_f(ratio)}); "
-                      f"exact run: {_ended(e['clfqp-exact']['run'])}; relaxed run: "
-                      f"{_ended(e['clfqp']['run'])}; relaxed knee RMS per step (rad) "
-                      + ", ".join(f"{x:.4f}" for x in e["clfqp"]["knee_rms_per_step_rad"])),
-          "headline": f"chatter exact / relaxed {_f(ratio)}x"}
-    rows = []
-    for case, cc in r["cases"].items():
-        rows.append(f"{case}: " + ", ".join(
-            f"{c} {_f(cc[c]['knee_rms_ps_rad'])} rad ({_ended(cc[c])})"
-            for c in r["controllers"]))
-    both = [x for x in r["passive_lt_pd_where_both_complete"] if x is not None]
-    c3 = {"id": "robust_order", "claim": "under perturbations clfqp's knee RMS is below each "
-          "baseline's (passive, pd) in every case where that baseline completes",
-          "reproduced": bool(all(r["clfqp_below_each_completed_baseline"])),
-          "numbers": "; ".join(rows) + f"; the paper's passive < pd found in {sum(both)} of "
-          f"{len(both)} cases where both complete",
-          "headline": f"below in {sum(r['clfqp_below_each_completed_baseline'])} of "
-          f"{len(r['clfqp_below_each_completed_baseline'])} cases"}
-    c4 = {"id": "robust_success", "claim": "clfqp succeeds in every perturbed case",
-          "reproduced": bool(r["clfqp_succeeds_every_case"]),
-          "numbers": "; ".join(f"{case}: {_ended(cc['clfqp'])}"
-                               for case, cc in r["cases"].items()),
-          "headline": f"{sum(cc['clfqp']['success'] for cc in r['cases'].values())} of "
-          f"{len(r['cases'])} cases"}
-    out = [c1, c2, c3, c4]
-    p = m.get("paper_literal")
-    if p is not None:
-        pr = p["run"]
-        auth = m.get("diagnosis", {}).get("input_authority") or []
-        ratios = [a["norm_ratio_reduced_over_full"] for a in auth]
-        why = (f"; diagnosis: the reduced model's torque authority on (dy1, d2y2) is "
-               f"{_f(min(ratios))}-{_f(max(ratios))}x the loop's (socket force held fixed "
-               "while the human's answers the torque; input-authority table)" if ratios
-               else "")
-        paper_cases = "; ".join(f"{case}: {_ended(cc[PAPER_CONTROLLER])}"
-                                for case, cc in r["cases"].items() if PAPER_CONTROLLER in cc)
-        out.append({"id": "paper_literal", "claim": "the paper's literal formulation "
-                    "(clfqp-paper: subsystem model, socket force an input in the tube) walks "
-                    "the nominal loop and the perturbed cases",
-                    "reproduced": bool(pr["success"] and all(
-                        cc[PAPER_CONTROLLER]["success"] for cc in r["cases"].values()
-                        if PAPER_CONTROLLER in cc)),
-                    "numbers": f"nominal: {_ended(pr)}; {paper_cases}{why}",
-                    "headline": f"nominal: {_ended(pr)}" + (
-                        f"; authority {_f(min(ratios))}-{_f(max(ratios))}x the loop's"
-                        if ratios else "")})
-    return out
-
-
-def stability_text(st: dict[str, Any]) -> str:
-    """One line of :func:`orbit_stability`'s evidence."""
-    if not st.get("computed"):
-        return f"stability not computed: {st.get('why_not', '')}"
-    text = (f"contraction per cycle from {st['contraction_starts']} perturbed starts over "
-            f"{st['contraction_cycles']} cycles: worst {_f(st['contraction_worst'])} "
-            f"({'contracting' if st['contracting'] else 'NOT contracting'}; the unperturbed "
-            f"orbit's cycle-to-cycle band {_f(st['orbit_band'])} in the same units)")
-    if st["fd_spectral_radius"]:
-        fd = ", ".join(f"{_f(v)} (step {k})" for k, v in st["fd_spectral_radius"].items())
-        agree = "agree" if st["fd_steps_agree"] else "do NOT agree: not a derivative here"
-        text += f"; finite-difference return-map spectral radius {fd}: the steps {agree}"
-    return text
-
-
-def _f(x: float | None) -> str:
-    return "n/a" if x is None else f"{x:.3g}"
-
-
-def _pct(x: float | None) -> str:
-    return "n/a" if x is None else f"{100 * x:.0f} %"
-
-
-def _ended(s: dict[str, Any]) -> str:
-    if s["success"]:
-        return f"ok, {s['steps_completed']} steps"
-    if s["failed"]:
-        return (f"fell at t = {_f(s['fail_t'])} s in {s['fail_domain']}, tau = "
-                f"{_f(s['fail_tau'])} after {s['steps_completed']} steps")
-    return f"stopped after {s['steps_completed']} steps"

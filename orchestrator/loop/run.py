@@ -38,6 +38,7 @@ from hp_model.falls import Fall
 from orchestrator.loop.link import Command, LateLink, Link
 from orchestrator.loop.plant import Observation, Plant, Truth, Vector
 from prosthesis_controller.interface import ControllerMode
+from prosthesis_controller.timing import Tally
 
 
 class Recorder(Protocol):
@@ -62,14 +63,18 @@ class LoopLog:
     steps: int = 0
     fall: Fall | None = None
     fault: str = ""  # the link's failure that ended the run
-    #: per period (ns), when ``timed``: the plant's calls, the link's exchange, whole tick
-    plant_ns: list[int] = field(default_factory=list)
-    link_ns: list[int] = field(default_factory=list)
-    tick_ns: list[int] = field(default_factory=list)
+    #: periods run (counted by :func:`run_loop`, also when it keeps no samples)
+    count: int = 0
+    #: per period (ns), when ``timed``: the plant's calls, the link's exchange, whole tick;
+    #: count, total and largest only (constant memory: a run may last hours)
+    plant_ns: Tally = field(default_factory=Tally)
+    link_ns: Tally = field(default_factory=Tally)
+    tick_ns: Tally = field(default_factory=Tally)
 
     @property
     def periods(self) -> int:
-        return len(self.t)
+        """Periods run (a log filled by :meth:`add` alone: its samples)."""
+        return max(self.count, len(self.t))
 
     def add(self, obs: Observation, cmd: Command, truth: Truth) -> None:
         self.t.append(obs.t)
@@ -92,8 +97,9 @@ class LoopOptions(TypedDict, total=False):
     recorder: Recorder | None  # records each period's sample
     stop: threading.Event | None  # set (from another thread): end after the period
     progress: Callable[[int, float, int], None] | None  # (k, t, steps) every 100 periods
-    timed: bool  # default False; True: per-period timings in the log
-    samples: bool  # default True; False: only the counts and how the run ended
+    timed: bool  # default False; True: per-period timings (their tallies) in the log
+    samples: bool  # default True; False: only the counts and how the run ended (the log's
+    #  memory then does not grow with the periods: a co-simulation's recorder keeps them)
 
 
 def _sends_first(link: Link) -> TypeGuard[LateLink]:
@@ -174,8 +180,7 @@ def run_loop(plant: Plant, link: Link, *, steps: int,
             cmd = exchange(obs)
             t2 = clock()
             truth = plant.actuate(cmd.torque)
-            if not samples:
-                log.t.append(obs.t)
+            log.count += 1
             after(obs, cmd, truth)
             log.steps = obs.steps
             t3 = clock()
@@ -187,9 +192,9 @@ def run_loop(plant: Plant, link: Link, *, steps: int,
                 plant.advance()
             t4 = clock()
             if timed:
-                log.plant_ns.append((t1 - t0) + (t4 - t3) + (t3 - t2))
-                log.link_ns.append(t2 - t1)
-                log.tick_ns.append(t4 - t0)
+                log.plant_ns.add((t1 - t0) + (t4 - t3) + (t3 - t2))
+                log.link_ns.add(t2 - t1)
+                log.tick_ns.add(t4 - t0)
             if done:
                 break
             k += 1

@@ -70,16 +70,48 @@ class SweepError(RuntimeError):
     """A sweep that cannot start (one line), e.g. an unreachable scheduler."""
 
 
+#: the Dask protocols a scheduler on another process or machine is reached by
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss")
+_SECURE = ("tls", "wss")
+
+
+def check_scheduler(address: str) -> str:
+    """``address`` if it is one of a Dask scheduler (``[tcp|tls|ws|wss://]HOST:PORT``, port
+    1-65535; ``tls``/``wss`` with Dask's TLS configuration), else SweepError naming
+    ``--scheduler``: before any work, and without Dask's own tracebacks."""
+    def bad(why: str) -> SweepError:
+        return SweepError(f"--scheduler {address!r}: {why}")
+
+    scheme, sep, rest = address.strip().rpartition("://")
+    scheme = scheme if sep else "tcp"
+    if scheme not in SCHEDULER_SCHEMES:
+        raise bad(f"protocol {scheme!r}; expected one of {', '.join(SCHEDULER_SCHEMES)}")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not host.strip("[]") or not port.isdigit() or not 0 < int(port) < 65536:
+        raise bad("expected [PROTOCOL://]HOST:PORT with a port 1-65535, e.g. "
+                  "tcp://127.0.0.1:8786")
+    if scheme in _SECURE:
+        from distributed.security import Security
+
+        if Security().get_connection_args("client").get("ssl_context") is None:
+            raise bad(f"{scheme} needs Dask's TLS configuration (distributed.comm.tls: "
+                      "ca-file and the client's cert and key)")
+    return address.strip()
+
+
 @contextlib.contextmanager
 def dask_client(scheduler: str | None, workers: int | None) -> Iterator[Any]:
-    """A client of ``scheduler``, or of a new LocalCluster of ``workers`` processes."""
+    """A client of ``scheduler`` (checked: :func:`check_scheduler`), or of a new
+    LocalCluster of ``workers`` processes."""
     from distributed import Client, LocalCluster
 
-    if scheduler:
+    if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=10)
-        except (OSError, TimeoutError, ValueError) as e:
-            raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: "
+            client = Client(check_scheduler(scheduler), timeout=10)
+        except SweepError:
+            raise
+        except Exception as e:  # Dask's error for a user's address, of any kind
+            raise SweepError(f"--scheduler {scheduler}: cannot reach the Dask scheduler: "
                              f"{str(e).splitlines()[0] if str(e) else type(e).__name__}"
                              ) from None
         try:
@@ -105,14 +137,23 @@ def prepare_fmu(spec: SweepSpec) -> Path | None:
     """The FMU of an fmu-backend sweep: the spec's, or one built and cached for the gait."""
     if spec.backend != SweepBackend.FMU:
         return None
-    if spec.fmu is not None:
-        return spec.fmu
     import hp_model
     from orchestrator.cosim.human import ensure_fmu
 
     model = hp_model.load_model(str(spec.subject) if spec.subject else None,
                                 str(spec.device) if spec.device else None)
-    return ensure_fmu(spec.gait, model)
+    if spec.fmu is None:
+        return ensure_fmu(spec.gait, model)
+    from hp_model.gait_artifact import load_gait
+    from orchestrator.cosim.config import CosimError
+    from orchestrator.cosim.inputs import check_fmu_identity
+
+    try:  # an FMU built for another gait or model: refused before the cluster starts
+        check_fmu_identity(spec.fmu, load_gait(spec.gait, model.parameter_hash()), model,
+                           spec.gait, "the spec's fmu")
+    except CosimError as e:
+        raise SweepError(str(e)) from None
+    return spec.fmu
 
 
 @dataclass
@@ -245,6 +286,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
     an interrupt during start-up leave ``out`` as it was).  ``streaming``: runs in flight
     and how often rows are written (:class:`Streaming`)."""
     say = say or (lambda _m: None)
+    if scheduler is not None:
+        check_scheduler(scheduler)  # a bad address: before any work
     t_setup = time.perf_counter()
     art = Artifacts.from_spec(spec, prepare_fmu(spec))
     digest = art.digest()
