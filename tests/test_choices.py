@@ -113,12 +113,14 @@ def test_mode_counts_serialize_as_the_words():
 
 
 def test_cosim_config_parses_its_mode_and_records_the_word(tmp_path):
-    from orchestrator.cosim.config import CosimConfig
+    from orchestrator.cosim.config import CosimConfig, CosimError
 
     cfg = CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="realtime")
     assert cfg.mode is CosimMode.REALTIME
     assert json.dumps(cfg.to_dict()["mode"]) == '"realtime"'
-    with pytest.raises(ValueError, match="unknown cosim mode 'fast'; choose one of lockstep"):
+    # the run's own error type, naming the option (issue 39)
+    with pytest.raises(CosimError,
+                       match="--mode: unknown cosim mode 'fast'; choose one of lockstep"):
         CosimConfig("pd", tmp_path / "g.json", tmp_path / "t.json", mode="fast")
 
 
