@@ -31,7 +31,7 @@ from characterization.mocap.mapping import default_mapping
 from characterization.mocap.pipeline import process_take, to_artifact
 from characterization.mocap.synthetic_subject import SynthOptions, reference_gait, synthesize
 from hp_model import bezier
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 
 
 def main() -> None:
@@ -41,7 +41,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     model = hp_model.load_model()
-    coef = {d: model.hip_progress_coefficients(d) for d in Domain}
+    coef = {d: model.hip_progress_coefficients(d) for d in PAPER_DOMAINS}
     with tempfile.TemporaryDirectory():
         s = synthesize(model, SynthOptions(n_strides=37, seed=1, source=args.source))
         steps = to_artifact(process_take(s.take, default_mapping(), coef))

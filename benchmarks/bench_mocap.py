@@ -36,7 +36,7 @@ from characterization.mocap.pipeline import process_take, to_artifact
 from characterization.mocap.report import render_report
 from characterization.mocap.steps_artifact import save_steps
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 
 CLI = "CLI: hpcosim mocap process"
 WORK = "process_file()"  # the command's own work, after its imports
@@ -62,7 +62,7 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
     model = hp_model.load_model()
-    coef = {d: model.hip_progress_coefficients(d) for d in Domain}
+    coef = {d: model.hip_progress_coefficients(d) for d in PAPER_DOMAINS}
     mapping = default_mapping()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)

@@ -3,14 +3,37 @@ their coordinates and frames play.
 
 A domain is a member of :class:`Domain` (a :class:`~hp_model.choices.Choice`: the member is
 its word in artifacts, recordings and JSON).  Everything the rest of the code needs to know
-about a domain is its row of ``_SPECS`` below: its stance leg, the joints whose angles are
-its y2 outputs, the rows the human's torques control, the domain its guard leads to.  Adding
-a domain is one member of :class:`Domain` and one row of ``_SPECS``; the hybrid model's
-constraint stacks (:mod:`hp_model.human_prosthesis`), the FMU's tables, the gait artifact
-and the optimizer iterate over :class:`Domain`.
+about a domain is its row of ``_SPECS`` below: the feet on the ground and how (flat, on the
+heel, on the toe), its stance leg, the joints whose angles are its y2 outputs, the rows the
+human's torques control.  Adding a domain is one member of :class:`Domain` and one row of
+``_SPECS``; the hybrid model's constraint stacks (:mod:`hp_model.human_prosthesis`), the
+FMU's tables, the gait artifact and the optimizer iterate over the domains of a graph.
 
-    Domain.PS   prosthesis stance (the prosthesis foot flat on the ground)
-    Domain.PNS  prosthesis non-stance (the human's left foot flat)
+    Domain.PS    prosthesis stance (the prosthesis foot flat on the ground)
+    Domain.PNS   prosthesis non-stance (the human's left foot flat)
+    Domain.DS_H  double support after the human's heel strike: the human foot on its heel,
+                 the prosthesis foot on its toe (the prosthesis's heel off and push-off)
+    Domain.DS_P  double support after the prosthesis's heel strike: the prosthesis foot on
+                 its heel, the human foot on its toe
+
+A walk is a directed cycle of domains, a :class:`DomainGraph` (the guard of a domain is the
+touchdown of the next domain's new contact, its impact the next domain's constraints):
+
+    DomainGraph.PAPER         ps -> pns -> ps: the paper's two domains (flat feet, an
+                              instantaneous double support)
+    DomainGraph.MULTICONTACT  ps -> ds_h -> pns -> ds_p -> ps: the human's heel strike, the
+                              double support rolling the leading foot from heel to flat while
+                              the trailing foot pushes off on its toe, the single support on
+                              a flat foot; the trailing toe leaves the ground when the leading
+                              foot lands flat
+
+Why this contact sequence (REFERENCE.md Sec. 5; Perry, Winter): a stance starts with the heel
+strike, the foot is flat at 8-12 % of the stride and the other foot's toe-off is at 10-12 %
+(nearly together: one event here), the heel rises at 30-40 % while the other leg swings and
+the foot leaves on its toe at about 60 %.  The single support keeps the foot flat with its
+centre of pressure free to roll from heel to toe inside the sole (the gait optimization
+bounds it); its heel off is not a domain of its own: the heel leaves the ground when the
+other foot strikes, as the trailing foot of the next double support.
 
 Per domain (``Domain.X.<property>``):
 
@@ -36,8 +59,45 @@ if TYPE_CHECKING:
 
 #: the prosthesis joints (knee, ankle)
 PROSTHESIS = ("th_pk", "th_pa")
-#: the number of y2 outputs of every domain
+#: the number of y2 outputs of a single-support domain
 N_Y2 = 5
+
+
+class FootPart(Choice):
+    """How a foot touches the ground: flat (its sole's pose held: 3 constraints, the wrench
+    F_x, F_z, M_y at the sole) or on one point (its heel or toe held in x, z: 2 constraints,
+    F_x, F_z; the foot free to pitch about it)."""
+
+    FLAT = "sole"
+    HEEL = "heel"
+    TOE = "toe"
+
+
+@dataclass(frozen=True)
+class FootContact:
+    """One foot on the ground: ``side`` ("p" prosthesis, "l" human) and how."""
+
+    side: str
+    part: FootPart
+
+    @property
+    def frame(self) -> str:
+        """The frame held: ``<side>_sole`` (flat), ``<side>_heel`` or ``<side>_toe``."""
+        return f"{self.side}_{self.part.value}"
+
+    @property
+    def name(self) -> str:
+        """Its constraint's name: ``<side>_foot`` (flat), ``<side>_heel``, ``<side>_toe``."""
+        return f"{self.side}_foot" if self.part == FootPart.FLAT else self.frame
+
+    @property
+    def is_flat(self) -> bool:
+        return self.part == FootPart.FLAT
+
+    @property
+    def size(self) -> int:
+        """Constraint rows (and wrench entries: F_x, F_z[, M_y])."""
+        return 3 if self.is_flat else 2
 
 
 @dataclass(frozen=True)
@@ -62,12 +122,16 @@ class StanceLeg:
 
 @dataclass(frozen=True)
 class DomainSpec:
-    """One domain's row of ``_SPECS`` (module docstring)."""
+    """One domain's row of ``_SPECS`` (module docstring): ``contacts`` the feet on the
+    ground (the stance leg's first); ``stance_leg`` the leg the phase is measured on (the
+    flat foot's; in a double support the leading leg's); ``y2_coords`` and ``human_outputs``
+    its outputs (single support only so far: a double support has none, its gait is a
+    trajectory, :mod:`characterization.gait.multicontact`)."""
 
+    contacts: tuple[FootContact, ...]
     stance_leg: StanceLeg
     y2_coords: tuple[str, ...]
     human_outputs: tuple[int, ...]
-    next: str
 
 
 class Domain(Choice):
@@ -75,6 +139,8 @@ class Domain(Choice):
 
     PS = "ps"
     PNS = "pns"
+    DS_H = "ds_h"
+    DS_P = "ds_p"
 
     @property
     def code(self) -> int:
@@ -112,8 +178,17 @@ class Domain(Choice):
         return _SPECS[self].human_outputs
 
     @property
-    def next(self) -> Domain:
-        return Domain(_SPECS[self].next)
+    def contacts(self) -> tuple[FootContact, ...]:
+        return _SPECS[self].contacts
+
+    @property
+    def is_double_support(self) -> bool:
+        return len(_SPECS[self].contacts) == 2
+
+    @property
+    def has_outputs(self) -> bool:
+        """Whether the domain has virtual constraints (y1, y2) yet (single supports)."""
+        return bool(_SPECS[self].y2_coords)
 
     @property
     def is_prosthesis_stance(self) -> bool:
@@ -125,17 +200,67 @@ class Domain(Choice):
         return _SPECS[self].y2_coords.index(coord)
 
 
+_P_LEG = StanceLeg("th_rh", "th_pk", "th_pa", "p")
+_L_LEG = StanceLeg("th_lh", "th_lk", "th_la", "l")
 _SPECS: dict[Domain, DomainSpec] = {
     Domain.PS: DomainSpec(
-        stance_leg=StanceLeg("th_rh", "th_pk", "th_pa", "p"),
-        y2_coords=("th_lh", "th_lk", "th_la", "th_rh", "th_pk"),
-        human_outputs=(1, 2, 3, 4), next="pns"),
+        contacts=(FootContact("p", FootPart.FLAT),), stance_leg=_P_LEG,
+        y2_coords=("th_lh", "th_lk", "th_la", "th_rh", "th_pk"), human_outputs=(1, 2, 3, 4)),
     Domain.PNS: DomainSpec(
-        stance_leg=StanceLeg("th_lh", "th_lk", "th_la", "l"),
-        y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"),
-        human_outputs=(0, 1, 2, 3), next="ps"),
+        contacts=(FootContact("l", FootPart.FLAT),), stance_leg=_L_LEG,
+        y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"), human_outputs=(0, 1, 2, 3)),
+    Domain.DS_H: DomainSpec(
+        contacts=(FootContact("l", FootPart.HEEL), FootContact("p", FootPart.TOE)),
+        stance_leg=_L_LEG, y2_coords=(), human_outputs=()),
+    Domain.DS_P: DomainSpec(
+        contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
+        stance_leg=_P_LEG, y2_coords=(), human_outputs=()),
 }
 _CODES: dict[Domain, int] = {d: i for i, d in enumerate(Domain)}
+
+
+class DomainGraph(Choice):
+    """A walk's directed cycle of domains (module docstring): its word names it in gait
+    artifacts, recordings and on the command line (``--domains``)."""
+
+    PAPER = "paper"
+    MULTICONTACT = "multicontact"
+
+    @property
+    def domains(self) -> tuple[Domain, ...]:
+        """The cycle's domains in walking order, starting with the prosthesis stance."""
+        return _CYCLES[self]
+
+    def next(self, domain: Domain | str) -> Domain:
+        """The domain that ``domain``'s guard leads to (ValueError if it is not in the cycle)."""
+        cycle = _CYCLES[self]
+        d = Domain(domain)
+        if d not in cycle:
+            raise ValueError(f"domain {d} is not in the {self} graph ({', '.join(cycle)})")
+        return cycle[(cycle.index(d) + 1) % len(cycle)]
+
+    def touchdown_frame(self, domain: Domain | str) -> str:
+        """The frame whose touchdown is ``domain``'s guard: the next domain's new contact
+        (a foot landing flat from its heel touches down with its toe)."""
+        d = Domain(domain)
+        before = {c.side: c for c in d.contacts}
+        for c in self.next(d).contacts:
+            held = before.get(c.side)
+            if held == c:
+                continue
+            if c.is_flat and held is not None and held.part == FootPart.HEEL:
+                return f"{c.side}_{FootPart.TOE.value}"
+            return c.frame
+        raise ValueError(f"{d} -> {self.next(d)} adds no contact")
+
+
+_CYCLES: dict[DomainGraph, tuple[Domain, ...]] = {
+    DomainGraph.PAPER: (Domain.PS, Domain.PNS),
+    DomainGraph.MULTICONTACT: (Domain.PS, Domain.DS_H, Domain.PNS, Domain.DS_P),
+}
+#: the paper's domains, in walking order: what the consumers that run the paper's graph only
+#: (the controllers' HZD outputs, the FMU, playback) iterate over
+PAPER_DOMAINS = DomainGraph.PAPER.domains
 
 @dataclass(frozen=True)
 class DomainRoles:

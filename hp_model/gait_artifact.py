@@ -39,7 +39,7 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.artifacts import ArtifactError, FieldReader, canonical_hash, load_json, save_json
-from hp_model.domains import N_Y2, Domain
+from hp_model.domains import N_Y2, PAPER_DOMAINS, Domain
 from hp_model.outputs import GaitParams
 
 KIND = "hpcosim-gait"
@@ -92,7 +92,7 @@ class Gait:
         return canonical_hash({
             "model_hash": self.model_hash, "gains": list(self.gains),
             "socket_nominal": self.socket_nominal,
-            "params": {d: self.params[d].pack() for d in Domain}})
+            "params": {d: self.params[d].pack() for d in PAPER_DOMAINS}})
 
     def socket_force(self, tau: float | np.ndarray) -> np.ndarray:
         """Nominal socket force F*(tau) in ps: (3,) for a scalar tau, (n, 3) for an array;
@@ -122,7 +122,7 @@ def _params_doc(p: GaitParams) -> dict[str, Any]:
 
 def to_document(g: Gait) -> dict[str, Any]:
     domains: dict[str, Any] = {}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         doc = _params_doc(g.params[d])
         doc["offsets"] = np.asarray(g.offsets.get(d, np.zeros(N_Y2)))
         doc["duration"] = float(g.durations.get(d, 0.0))
@@ -177,7 +177,7 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
     degree = int(r.number("degree", 1, 20))
     eps, kp, kd = (r.number(f"gains.{k}", 0.0, 1e6) for k in ("eps", "kp", "kd"))
     params, data, offsets, durations, fit = {}, {}, {}, {}, {}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         base = f"domains.{d}"
         params[d] = _read_params(r, base, degree)
         offsets[d] = r.array(f"{base}.offsets", (N_Y2,))
@@ -192,7 +192,7 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
                               _read_curve(r, "controller_curves.stance_torque", 2))
     traj: dict[Domain, dict[str, np.ndarray]] = {}
     for d, t in (r.get("trajectory") or {}).items():
-        if d not in list(Domain):
+        if d not in list(PAPER_DOMAINS):
             raise r.fail(f"trajectory.{d}", f"is not a domain ({Domain.choices()})")
         traj[Domain(d)] = {name: r.array(f"trajectory.{d}.{name}") for name in t}
     g = Gait(params=params, model_hash=r.string("model_hash"), gains=(eps, kp, kd),

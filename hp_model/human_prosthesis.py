@@ -11,9 +11,12 @@ Coordinates, exactly as the paper:
 - Angles are pitches about +y (x forward, z up; see :mod:`hp_model.tree`): hip flexion is
   negative, knee flexion positive, ankle plantarflexion positive.  All zero = upright, feet
   flat.
-- Domains: ``ps`` (prosthesis stance: prosthesis foot flat + fixed joint) and ``pns``
-  (prosthesis non-stance: human left foot flat + fixed joint); 6 constraints each, wrenches
-  ordered (foot F_x, F_z, M_y in world axes; socket F_x, F_z, M_y).
+- Domains (:mod:`hp_model.domains`): the model is built for one :class:`DomainGraph`, the
+  paper's (``ps``: prosthesis foot flat + fixed joint, ``pns``: human left foot flat + fixed
+  joint; 6 constraints each, wrenches ordered foot F_x, F_z, M_y in world axes, then socket
+  F_x, F_z, M_y) or the multi-contact one (adds ``ds_h``/``ds_p``: the leading foot's heel
+  and the trailing foot's toe as points + fixed joint; 7 constraints, wrenches heel F_x, F_z,
+  toe F_x, F_z, socket F_x, F_z, M_y).
 - Socket force F_s: the wrench of the human (thigh/iWalk) on the prosthesis top link at the
   pin, in the top link's frame (which equals the thigh's frame since th_f = 0).
 - Actuators: th_lh, th_lk, th_la, th_rh (human, ratio 1, u in N m at the joint) and
@@ -31,7 +34,7 @@ import numpy as np
 from hp_model import anthropometry as anth
 from hp_model.compiled import CompileBackend
 from hp_model.config import DeviceConfig, SubjectConfig
-from hp_model.domains import Domain, DomainRoles, domain_roles
+from hp_model.domains import Domain, DomainGraph, DomainRoles, FootContact, domain_roles
 from hp_model.hybrid import Constraint, ConstraintKind, ContactDomain, HybridModel
 from hp_model.tree import Body, Frame, JointKind, PlanarTree, frame_pose
 
@@ -159,12 +162,25 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
 
 
 SOCKET = Constraint("socket", ConstraintKind.COORDS, SOCKET_COORDS)
-#: each domain's constraint stack: its stance foot flat, the socket's fixed joint
-DOMAIN_DEFS = tuple(
-    ContactDomain(d, (Constraint(f"{d.stance_leg.side}_foot", ConstraintKind.FRAME,
-                                 d.stance_leg.sole_frame), SOCKET),
-                  swing_frame=d.next.stance_leg.sole_frame, next=d.next)
-    for d in Domain)
+
+
+def contact_constraint(contact: FootContact) -> Constraint:
+    """A foot's contact as a constraint: its sole flat, or its heel or toe held in place."""
+    kind = ConstraintKind.FRAME if contact.is_flat else ConstraintKind.POINT
+    return Constraint(contact.name, kind, contact.frame)
+
+
+def domain_defs(graph: DomainGraph) -> tuple[ContactDomain, ...]:
+    """Each domain's constraint stack in ``graph``: its feet's contacts, then the socket's
+    fixed joint; its guard the touchdown of the next domain's new contact."""
+    return tuple(
+        ContactDomain(d, (*(contact_constraint(c) for c in d.contacts), SOCKET),
+                      swing_frame=graph.touchdown_frame(d), next=graph.next(d))
+        for d in graph.domains)
+
+
+#: the paper's domains' constraint stacks
+DOMAIN_DEFS = domain_defs(DomainGraph.PAPER)
 
 
 def hip_progress_coefficients(tree: PlanarTree, domain: str) -> tuple[float, float]:
@@ -198,26 +214,34 @@ class HumanProsthesisModel(HybridModel):
 
     def __init__(self, subject: SubjectConfig, device: DeviceConfig,
                  body: BodyVariation = NOMINAL_BODY,
-                 backend: CompileBackend | str = CompileBackend.AUTO) -> None:
+                 backend: CompileBackend | str = CompileBackend.AUTO,
+                 graph: DomainGraph | str = DomainGraph.PAPER) -> None:
         self.subject = subject
         self.device = device
         self.body = body
+        #: the walk's cycle of domains the model is built for
+        self.graph = DomainGraph(graph)
         tree = build_tree(subject, device, body)
         p = device.prosthesis
         ratios = (1.0, 1.0, 1.0, 1.0, p.knee.gear_ratio.value, p.ankle.gear_ratio.value)
         self.torque_limits = np.array(
             [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
         self.torque_limits.setflags(write=False)
-        super().__init__(tree, ACTUATED, ratios, DOMAIN_DEFS, name="hp12", backend=backend)
-        #: each domain's roles resolved to indices (:mod:`hp_model.domains`)
-        self.roles: dict[Domain, DomainRoles] = {d: domain_roles(self, d) for d in Domain}
+        name = "hp12" if self.graph == DomainGraph.PAPER else f"hp12-{self.graph}"
+        defs = domain_defs(self.graph)
+        super().__init__(tree, ACTUATED, ratios, defs, name=name, backend=backend)
+        #: each single-support domain's roles resolved to indices (:mod:`hp_model.domains`)
+        self.roles: dict[Domain, DomainRoles] = {
+            d: domain_roles(self, d) for d in self.graph.domains if not d.is_double_support}
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)
         h_s = self.constraint_expr((SOCKET,))
         Js = ca.jacobian(h_s, q)
         Jsdqd = ca.jtimes(Js @ qd, q, qd)
-        for d in DOMAIN_DEFS:
+        for d in defs:
+            if Domain(d.name).is_double_support:
+                continue
             Jf = ca.jacobian(self.constraint_expr(d.constraints[:1]), q)
             Hbar = self.H - Jf.T @ lam_f
             X = ca.solve(self.D, ca.horzcat(Js.T, Hbar - ca.DM(self.B) @ u))
@@ -229,8 +253,10 @@ class HumanProsthesisModel(HybridModel):
         """Hash of every subject and device parameter; artifacts record the model they were
         made for with it (``hp_model.artifacts.canonical_hash``)."""
         from hp_model.artifacts import canonical_hash
-        doc = {"subject": self.subject.model_dump(mode="json"),
-               "device": self.device.model_dump(mode="json")}
+        doc: dict[str, object] = {"subject": self.subject.model_dump(mode="json"),
+                                  "device": self.device.model_dump(mode="json")}
+        if self.graph != DomainGraph.PAPER:  # the paper's graph keeps the existing hashes
+            doc["domain_graph"] = self.graph.value
         if not self.body.is_nominal:  # the nominal body keeps the hashes of existing files
             doc["body_variation"] = asdict(self.body)
         return canonical_hash(doc)

@@ -3,7 +3,9 @@
 
 Domains hold their constraints as an ordered stack.  A ``frame`` constraint holds a frame's
 world pose (x, z, pitch) fixed (flat foot); its wrench is the ground reaction force
-(F_x, F_z) at the frame's point and the moment M_y, in world axes.  A ``coords`` constraint
+(F_x, F_z) at the frame's point and the moment M_y, in world axes.  A ``point`` constraint
+holds a frame's position (x, z) (a foot on its heel or toe, free to pitch); its wrench is
+(F_x, F_z) at the point.  A ``coords`` constraint
 holds joint coordinates at zero (the socket's fixed joint); its wrench is the generalized
 force on those coordinates, i.e. the wrench of the parent on the child in the joint frame.
 
@@ -44,6 +46,7 @@ class ConstraintKind(Choice):
     """What a :class:`Constraint` holds (module docstring)."""
 
     FRAME = "frame"  # target: a frame name; h = its world pose (x, z, pitch), 3 rows
+    POINT = "point"  # target: a frame name; h = its world position (x, z), 2 rows
     COORDS = "coords"  # target: a tuple of coordinate names; h = those coordinates
 
 
@@ -61,7 +64,9 @@ class Constraint:
 
     @property
     def size(self) -> int:
-        return 3 if self.kind == ConstraintKind.FRAME else len(self.target)
+        if self.kind == ConstraintKind.COORDS:
+            return len(self.target)
+        return 3 if self.kind == ConstraintKind.FRAME else 2
 
 
 @dataclass(frozen=True)
@@ -182,9 +187,10 @@ class HybridModel:
             poses = body_poses(self.tree, q)
         rows = []
         for c in constraints:
-            if c.kind == ConstraintKind.FRAME:
+            if c.kind in (ConstraintKind.FRAME, ConstraintKind.POINT):
                 assert isinstance(c.target, str)  # a frame constraint names one frame
-                rows.append(frame_pose(self.tree, q, c.target, poses))
+                pose = frame_pose(self.tree, q, c.target, poses)
+                rows.append(pose if c.kind == ConstraintKind.FRAME else pose[:2])
             else:
                 rows.append(ca.vertcat(*[q[self.tree.coord_index(n)] for n in c.target]))
         return ca.vertcat(*rows)

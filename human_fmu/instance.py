@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 
 #: sensor outputs in the order :meth:`HumanFmu.read` returns them (rad, rad/s, N, phase, rad)
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
@@ -274,7 +274,7 @@ class HumanFmu:
         (q0, qd0) in ps, with no FMU-side perturbation or offset: the state the in-process
         simulator starts from; ``real``: other Real parameters (e.g. fall limits)."""
         values: dict[str, float] = {}
-        for d in Domain:
+        for d in PAPER_DOMAINS:
             th = np.asarray(thetas[d], float)
             if th.size != self.n_theta:
                 raise ValueError(f"theta_{d} of size {th.size}; the FMU has {self.n_theta}")

@@ -23,7 +23,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.outputs import ThetaLayout
 
 MASK = (1 << 64) - 1
@@ -51,11 +51,11 @@ def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: i
     moved by the generator's delta (see the module docstring)."""
     if not (np.isfinite(amplitude) and amplitude >= 0):
         raise ValueError(f"amplitude must be finite and >= 0, got {amplitude}")
-    out = {d: np.array(thetas[d], dtype=float) for d in Domain}
+    out = {d: np.array(thetas[d], dtype=float) for d in PAPER_DOMAINS}
     if amplitude == 0:
         return out
     n_alpha = ThetaLayout.of_size(out[Domain.PS].size).n_alpha
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         k0 = d.code * n_alpha
         for i in range(n_alpha):
             out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)

@@ -14,7 +14,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.falls import FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
@@ -152,7 +152,7 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         desc, units = theta_descriptions(d, degree)
         t.array(f"theta_{d}", "Real", "parameter", desc, units,
                 [float(v) for v in thetas[d]])

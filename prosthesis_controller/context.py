@@ -15,7 +15,7 @@ import numpy as np
 
 from hp_model import bezier
 from hp_model.compiled import CompileBackend
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -57,7 +57,7 @@ class ControllerContext:
         lim = cfg.safety.torque_limits or tuple(float(v) for v in model.torque_limits[4:])
         self.limits = (float(lim[0]), float(lim[1]))
         self.gear = (float(sub.B[3, 0]), float(sub.B[4, 1]))
-        self.durations = {d: _duration(gait, d) for d in Domain}
+        self.durations = {d: _duration(gait, d) for d in PAPER_DOMAINS}
 
         ps, pns = gait.params[Domain.PS], gait.params[Domain.PNS]
         alpha_pk = ps.alpha[model.roles[Domain.PS].prosthesis_rows[0]]

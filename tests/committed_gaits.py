@@ -27,7 +27,7 @@ import numpy as np
 
 from characterization.gait.fit import fit_gait, verify_gait, walking_failures
 from characterization.gait.phzd import PHZDOptions, optimize_gait
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 
@@ -130,7 +130,7 @@ def regenerate(name: str, model: HumanProsthesisModel) -> Gait:
 
 def coefficient_difference(a: Gait, b: Gait) -> float:
     """Largest absolute difference of the gaits' packed parameters over both domains."""
-    return float(max(np.abs(a.theta(d) - b.theta(d)).max() for d in Domain))
+    return float(max(np.abs(a.theta(d) - b.theta(d)).max() for d in PAPER_DOMAINS))
 
 
 def assert_walks(model: HumanProsthesisModel, gait: Gait, name: str, steps: int = 20) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
 from hp_model.compiled import cache_root
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait, save_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
@@ -52,7 +52,7 @@ def built_fmu(tmp_path_factory, model: HumanProsthesisModel, gait: Gait,
 def simulator(model: HumanProsthesisModel, gait: Gait, thetas=None,
               options: SimOptions | None = None) -> HybridSimulator:
     cl = ClosedLoop(model, gait.degree)
-    th = thetas or {d: gait.theta(d) for d in Domain}
+    th = thetas or {d: gait.theta(d) for d in PAPER_DOMAINS}
     return HybridSimulator(model, cl, th, gait.gains_array, options)
 
 
@@ -61,9 +61,9 @@ def policy_table(model: HumanProsthesisModel, gait: Gait, sim: HybridSimulator) 
     gait's collocation trajectory over its phase."""
     k, a = model.roles[Domain.PS].prosthesis
     ratio = [float(model.B[k, 4]), float(model.B[a, 5])]
-    table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in Domain},
+    table: dict = {"ratio": ratio, "gains": {d: list(PD_GAINS[d]) for d in PAPER_DOMAINS},
                    "phase": {}, "nominal": {}}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         vc, th = sim.cl.vcs[d], sim.thetas[d]
         table["phase"][d] = {"c_row": vc.c_row.tolist(), "p_min": float(th[vc.layout.p_min]),
                              "p_max": float(th[vc.layout.p_max])}

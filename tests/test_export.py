@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import load_gait
 from hp_model.human_prosthesis import COORDS
 from hp_model.tables import Column, MotTable, TableError, csv_text, mot_text
@@ -84,7 +84,7 @@ def _stride(gait, name):
 def test_gait_csv_is_the_trajectory(gait_files, model):
     out, gait = gait_files
     header, rows = read_csv(out / "stride.csv")
-    n_ps, n_pns = (gait.trajectory[d]["t"].size for d in Domain)
+    n_ps, n_pns = (gait.trajectory[d]["t"].size for d in PAPER_DOMAINS)
     assert len(rows) == n_ps + n_pns - 1  # the impact's two states: one row
     assert header[:2] == ["time [s]", "domain"]
     assert header[2:14] == [f"{c} [{'m' if c in ('x_B', 'z_B', 'x_f', 'z_f') else 'rad'}]"
@@ -193,7 +193,7 @@ def test_gait_without_wrenches_or_trajectory(tmp_path, capsys):
     """A gait that stores no ``lam``: the angles and no ground reactions; one without a
     trajectory: a one-line error naming the field, exit 2, nothing written."""
     doc = json.loads(DEMO.read_text())
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         del doc["trajectory"][d]["lam"]
     g = tmp_path / "no_lam.json"
     g.write_text(json.dumps(doc))
@@ -260,7 +260,7 @@ def test_recording_csv_is_the_recorded_channels(recording, tmp_path):
                  "rho [1]"):
         assert name in header, name
     assert [r[header.index("domain")] for r in rows] == [o["domain"] for o in gt]
-    assert {r[header.index("domain")] for r in rows} == {d.value for d in Domain}
+    assert {r[header.index("domain")] for r in rows} == {d.value for d in PAPER_DOMAINS}
     np.testing.assert_array_equal(column(header, rows, "time [s]"), [o["t"] for o in gt])
     np.testing.assert_array_equal(column(header, rows, "step"), [o["step"] for o in gt])
     for i, c in enumerate(COORDS):

@@ -14,7 +14,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import fmi2Discard, fmi2LastSuccessfulTime, fmi2Terminated
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from tests.fmu_runner import HumanFMU, NominalPD
@@ -68,7 +68,7 @@ def case(reason: FallReason, peaks: tuple[float, float, float]) -> tuple[dict, f
 
 def scaled_pd(model, gait, sim, scale: float) -> NominalPD:
     table = policy_table(model, gait, sim)
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         table["nominal"][d]["u"] = (scale * np.array(table["nominal"][d]["u"])).tolist()
     return NominalPD(table)
 
@@ -200,7 +200,7 @@ def test_fmu_plant_ends_where_the_simulator_plant_does(human, model, template_ga
     FMU's fmi2Discard/fmi2Terminated with the simulator plant's samples and fall."""
     from orchestrator.loop import FmuPlant, SimulatorPlant, run_loop
 
-    thetas = {d: template_gait.theta(d) for d in Domain}
+    thetas = {d: template_gait.theta(d) for d in PAPER_DOMAINS}
     q0, qd0 = start_state(template_gait)
     sim = simulator(model, template_gait, options=SimOptions(**limits))
     ref = run_loop(SimulatorPlant(sim, q0, qd0), ConstantLink((0.0, 0.0)), steps=4)
@@ -221,7 +221,7 @@ def test_a_discard_without_a_fall_code_ends_the_run(human, model, template_gait,
     from orchestrator.loop import FmuEndError, FmuPlant, run_loop
     from orchestrator.sweep.fmu import period_bound, run_fmu_scenario
 
-    thetas = {d: template_gait.theta(d) for d in Domain}
+    thetas = {d: template_gait.theta(d) for d in PAPER_DOMAINS}
     q0, qd0 = start_state(template_gait)
     human.start_walk(thetas, q0, qd0)
     with pytest.raises(FmuEndError, match="without a fall code"):

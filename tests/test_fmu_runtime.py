@@ -27,7 +27,7 @@ from fmpy.fmi2 import (
     fmi2Terminated,
 )
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from tests.fmu_runner import HumanFMU, NominalPD, run, stepper
@@ -119,7 +119,7 @@ def test_runs_in_a_python_without_this_project(fmu_path, model, template_gait, t
 # -- instances ----------------------------------------------------------------------------------
 def _solo(path, table, periods, factor=1.0):
     t = json.loads(json.dumps(table))
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         t["nominal"][d]["u"] = (factor * np.array(t["nominal"][d]["u"])).tolist()
     h = HumanFMU(str(path))
     h.setup()

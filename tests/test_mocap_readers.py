@@ -16,7 +16,7 @@ from characterization.mocap.sagittal import SagittalFrame, axis_vector
 from characterization.mocap.steps_artifact import load_steps
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from characterization.mocap.take import MocapError
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 from orchestrator.cli import main
 
 
@@ -358,7 +358,7 @@ def test_motive_exports_with_markers_only_or_rigid_bodies_only(synth, tmp_path) 
     each with the limb and the frames in the reason."""
     from characterization.mocap.pipeline import process_take
 
-    coef = {d: hp_model.load_model().hip_progress_coefficients(d) for d in Domain}
+    coef = {d: hp_model.load_model().hip_progress_coefficients(d) for d in PAPER_DOMAINS}
     full = process_take(synth.take, default_mapping(), coef)
     p = tmp_path / "markers.csv"
     write_motive_csv(p, synth.take.replace(rigid_bodies={}, rigid_body_markers={}))

@@ -19,14 +19,14 @@ from characterization.mocap.steps_artifact import (
     steps_bytes,
 )
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 
 
 @pytest.fixture(scope="module")
 def artifact():
     model = hp_model.load_model()
     s = synthesize(model, SynthOptions(n_strides=4, seed=1))
-    coef = {d: model.hip_progress_coefficients(d) for d in Domain}
+    coef = {d: model.hip_progress_coefficients(d) for d in PAPER_DOMAINS}
     return to_artifact(process_take(s.take, default_mapping(), coef))
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.falls import FallReason
 from hp_model.force_tube import save_tube
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
@@ -104,7 +104,7 @@ def test_body_variation_scales_the_human_segments_only(model):
 @pytest.fixture(scope="module")
 def loop(model, playback_gait):
     cl = ClosedLoop(model, playback_gait.degree)
-    th = {d: playback_gait.theta(d) for d in Domain}
+    th = {d: playback_gait.theta(d) for d in PAPER_DOMAINS}
     return cl, th, initial_state(model, playback_gait)
 
 
@@ -225,11 +225,11 @@ def test_the_fmu_backend_refuses_what_it_does_not_model(tmp_path, spec_file):
 def test_oracle_tracks_the_humans_rows_and_the_nominal_prosthesis(playback_gait):
     from human_fmu.perturbation import perturbed_thetas
 
-    nominal = {d: playback_gait.theta(d) for d in Domain}
+    nominal = {d: playback_gait.theta(d) for d in PAPER_DOMAINS}
     pert = perturbed_thetas(nominal, 0.02, 5)
     th = oracle_thetas(playback_gait, pert)
     L = playback_gait.params[Domain.PS].layout
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         for r, name in enumerate(Domain(d).y2_coords):
             rows = L.row(r)
             src = pert if r + 1 in Domain(d).human_outputs else nominal

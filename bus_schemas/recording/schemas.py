@@ -37,7 +37,7 @@ from typing import Any
 import can
 
 from hp_model import COORDS
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
@@ -54,7 +54,7 @@ def _int(desc: str) -> dict[str, Any]:
 
 def _domain(desc: str, *extra: None) -> dict[str, Any]:
     """A domain: one of the words of :class:`Domain` (definition order), or ``extra``."""
-    return {"enum": [*(d.value for d in Domain), *extra], "description": desc}
+    return {"enum": [*(d.value for d in PAPER_DOMAINS), *extra], "description": desc}
 
 
 def _vec(n: int, desc: str) -> dict[str, Any]:

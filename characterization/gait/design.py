@@ -13,7 +13,7 @@ import numpy as np
 from characterization.gait.bezier_fit import fit_bezier
 from characterization.gait.controller_curves import fit_controller_curves
 from characterization.gait.phzd import DataTargets, PHZDOptions, PHZDResult
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams, VirtualConstraints
@@ -35,7 +35,7 @@ def build_gait(model: HumanProsthesisModel, result: PHZDResult, targets: DataTar
                ) -> Gait:
     """The gait artifact of a converged optimization."""
     data = {d: GaitParams(np.asarray(targets.alpha[d]), targets.v_hip[d], targets.p_min[d],
-                          targets.p_max[d]) for d in Domain}
+                          targets.p_max[d]) for d in PAPER_DOMAINS}
     options = {k: (list(v) if isinstance(v, tuple) else v)
                for k, v in dataclasses.asdict(opt).items()}
     solver = {"status": result.status, "success": result.success,

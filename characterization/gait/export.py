@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from hp_model.artifacts import ArtifactError
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import ACTUATED, SOCKET, HumanProsthesisModel
 from hp_model.hybrid import ConstraintKind
@@ -116,7 +116,7 @@ def stride(gait: Gait, model: HumanProsthesisModel, src: str = "gait") -> Stride
     lams: list[np.ndarray | None] = []
     doms: list[Domain] = []
     t0 = 0.0
-    for i, d in enumerate(Domain):
+    for i, d in enumerate(PAPER_DOMAINS):
         t, q, u, lam = _domain_samples(gait, model, d, src)
         keep = slice(1 if i else 0, None)  # the impact's second state: dropped
         ts.append(t[keep] + t0)
@@ -161,7 +161,7 @@ def foot_reactions(model: HumanProsthesisModel, s: Stride) -> list[FootReaction]
     zero = np.zeros(model.nq)
     n = s.t.size
     out = []
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         dom = model.domains[d]
         foot = next(c for c in dom.constraints if c.kind == ConstraintKind.FRAME)
         rows = dom.wrench_slice(foot.name)
@@ -226,7 +226,7 @@ def _force_columns(model: HumanProsthesisModel, s: Stride,
                  Column(f"{p}_cop_x", "m", f.cop_x)]
     if s.lam is not None:
         socket = np.zeros((s.t.size, 3))
-        for d in Domain:
+        for d in PAPER_DOMAINS:
             rows = model.domains[d].wrench_slice(SOCKET.name)
             on = np.array([dk == d for dk in s.domain])
             socket[on] = s.lam[on][:, rows]

@@ -9,7 +9,7 @@ import numpy as np
 from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 from hp_model.figures import figure_bytes
 from hp_model.gait_artifact import Gait
 
@@ -31,7 +31,7 @@ def gait_figure_bytes(gait: Gait, steps: StepsArtifact | None = None, fmt: str =
     fig.subplots_adjust(left=0.1, right=0.98, top=0.95, bottom=0.05, hspace=0.35, wspace=0.25)
     axes = fig.subplots(5, 2, sharex=True)
     s = np.linspace(0, 1, 201)
-    for col, d in enumerate(Domain):
+    for col, d in enumerate(PAPER_DOMAINS):
         names = d.y2_coords
         if steps is not None:
             cn = list(steps.coord_names)

@@ -35,7 +35,7 @@ from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.choices import Choice
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HipProgress, phase
@@ -70,7 +70,7 @@ class Regression:
         return {d: {"rms": self.fits[d].rms, "r2": np.nan_to_num(self.fits[d].r2, nan=1.0),
                     "n": self.fits[d].n, "steps": self.n_steps[d],
                     "hip_velocity_rms": self.hip_velocity_rms[d],
-                    "segments": self.segments} for d in Domain}
+                    "segments": self.segments} for d in PAPER_DOMAINS}
 
 
 @dataclass(frozen=True)
@@ -194,7 +194,7 @@ def regress_steps(model: HumanProsthesisModel, steps: StepsArtifact, degree: int
     segments = fit_segments(segments)
     found = domain_segments(steps) if segments == FitSegments.TOUCHDOWN else []
     alpha, v_hip, p_min, p_max, fits, vrms, counts = {}, {}, {}, {}, {}, {}, {}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         if segments == FitSegments.TOUCHDOWN:
             r = regress_segments(model, steps, [s for s in found if s.domain == d], d,
                                  degree, src)
@@ -212,7 +212,7 @@ def output_rms(gait: Gait, n: int = 201) -> dict[Domain, np.ndarray]:
     """Per domain, RMS over tau of y_d(alpha*) - (y_d(alpha_mc) + delta), per output (rad)."""
     s = np.linspace(0.0, 1.0, n)
     out = {}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         opt = bezier.evaluate(gait.params[d].alpha, s)
         data = bezier.evaluate(gait.data_params[d].alpha, s) + gait.offsets[d]
         out[d] = np.sqrt(np.mean((opt - data) ** 2, axis=0))

@@ -30,7 +30,7 @@ from numpy.typing import ArrayLike
 
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
-from hp_model.domains import N_Y2, Domain
+from hp_model.domains import N_Y2, PAPER_DOMAINS, Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import (
     GaitParams,
@@ -306,7 +306,7 @@ def _impacts(nlp: _NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str,
              ) -> None:
     """The impacts ps -> pns and pns -> ps (impulse variables; periodic up to a forward
     translation)."""
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         nxt = model.roles[d].next
         qe, qde = dec[d]["q"][:, -1], dec[d]["qd"][:, -1]
         qd_plus = nlp.var(f"qdplus_{d}", (model.nq, 1), 0.0)
@@ -346,14 +346,14 @@ def _result(nlp: _NLP, dec: dict[Domain, dict[str, ca.MX]], sol: dict, stats: di
     P = 2 * opt.nodes - 1
     xs = np.array(sol["x"]).ravel()
     unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
-                         [dec[d][k] for d in Domain for k in ("q", "qd", "qdd", "u", "lam", "T",
-                                                             "theta", "delta")])
+                         [dec[d][k] for d in PAPER_DOMAINS
+                          for k in ("q", "qd", "qdd", "u", "lam", "T", "theta", "delta")])
     vals = [np.array(v) for v in unpack(xs)]
     params: dict[Domain, GaitParams] = {}
     offsets: dict[Domain, np.ndarray] = {}
     durations: dict[Domain, float] = {}
     traj: dict[Domain, dict[str, np.ndarray]] = {}
-    for i, d in enumerate(Domain):
+    for i, d in enumerate(PAPER_DOMAINS):
         q, qd, qdd, u, lam, T, theta, delta = vals[8 * i: 8 * i + 8]
         params[d] = GaitParams.unpack(theta.ravel(), opt.degree)
         offsets[d] = delta.ravel()
@@ -374,7 +374,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
     nlp = _NLP()
     dec: dict[Domain, dict[str, ca.MX]] = {}
     cost = ca.MX(0)
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         vc = VirtualConstraints(model, d, opt.degree)
         p_mc = GaitParams(np.asarray(targets.alpha[d]), targets.v_hip[d], targets.p_min[d],
                           targets.p_max[d])

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimOptions, SimResult
@@ -28,7 +28,7 @@ JOINTS = ("th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 def make_simulator(model: HumanProsthesisModel, gait: Gait, gains: np.ndarray | None = None,
                    options: SimOptions | None = None) -> HybridSimulator:
     cl = ClosedLoop(model, gait.degree)
-    return HybridSimulator(model, cl, {d: gait.theta(d) for d in Domain},
+    return HybridSimulator(model, cl, {d: gait.theta(d) for d in PAPER_DOMAINS},
                            gait.gains_array if gains is None else gains, options)
 
 

@@ -20,7 +20,7 @@ from characterization.mocap.steps_artifact import StepsFileError, steps_bytes
 from characterization.mocap.take import MocapError, Take
 from characterization.mocap.trc_io import read_trc
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 
 #: the take formats, by file extension: a reader returns a :class:`Take` (a new format is a
 #: reader module and a row here)
@@ -69,7 +69,7 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
     subj = load_subject(subject or default_subject_path())
     # the coefficients need the model's tree only, not its dynamics (0.3 s to build)
     tree = build_tree(subj, load_device(device or default_device_path()))
-    coef = {d: hip_progress_coefficients(tree, d) for d in Domain}
+    coef = {d: hip_progress_coefficients(tree, d) for d in PAPER_DOMAINS}
     offsets = None
     if m.calibration is not None:
         offsets = static_offsets(read_take(m.calibration.static_trial), m, subj.lengths)

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import N_Y2, Domain
+from hp_model.domains import N_Y2, PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
@@ -84,7 +84,7 @@ def walk(model: HumanProsthesisModel, gait: Gait, n_steps: int, rng: np.random.G
     """``n_steps`` consecutive steps from the start of the gait's ps collocation trajectory
     (t = 0), each with its own perturbed theta (module docstring)."""
     cl = closed_loop or ClosedLoop(model, gait.degree)
-    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in Domain},
+    sim = HybridSimulator(model, cl, {d: gait.theta(d) for d in PAPER_DOMAINS},
                           gait.gains_array, SimOptions(dt=opt.dt))
     tr = gait.trajectory[Domain.PS]
     q, qd = np.array(tr["q"][:, 0], float), np.array(tr["qd"][:, 0], float)

@@ -18,7 +18,7 @@ from characterization.mocap.limb_angles import SOURCE_NAMES, LimbPitch
 from characterization.mocap.pipeline import ProcessedTake
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.json_io import dumps
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
@@ -72,7 +72,7 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
         "source": p.source, "frames": len(p.time), "frame_rate_hz": _r(rate, "hz"),
         "walking_direction_lab": _rv(p.frame.forward, "unit"),
         "up_lab": _rv(p.frame.up, "unit"),
-        "steps": {d: sum(s.domain == d for s in p.steps) for d in Domain},
+        "steps": {d: sum(s.domain == d for s in p.steps) for d in PAPER_DOMAINS},
         "steps_without_single_support": sum(s.single_support is None for s in p.steps),
         "dropped": [{"domain": d.domain, "start": d.start, "end": d.end, "reason": d.reason}
                     for d in p.dropped],
@@ -99,7 +99,7 @@ def _header(s: dict) -> list[str]:
     return [f"# Motion-capture QA: {Path(s['source']).name}", "",
             f"{s['frames']} frames at {s['frame_rate_hz']:g} Hz; walking direction (lab) "
             f"{_vec(s['walking_direction_lab'])}, up {_vec(s['up_lab'])}.", "",
-            "Steps kept: " + ", ".join(f"{s['steps'][d]} {d}" for d in Domain) + " "
+            "Steps kept: " + ", ".join(f"{s['steps'][d]} {d}" for d in PAPER_DOMAINS) + " "
             f"({s['steps_without_single_support']} without a detected single-support part);"
             f" dropped: {len(s['dropped'])}.", ""]
 
@@ -175,7 +175,7 @@ def figures(p: ProcessedTake) -> dict[str, bytes]:
 
     out = {}
     fig = plot.Figure(1260, 495, 2, len(ANGLES))
-    for r, dom in enumerate(Domain):
+    for r, dom in enumerate(PAPER_DOMAINS):
         steps = [s for s in p.steps if s.domain == dom]
         for c, name in enumerate(ANGLES):
             col = COORDS.index(name)

@@ -51,7 +51,7 @@ import numpy as np
 
 from characterization.mocap.take import MocapError
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.json_io import dumps
 
 SCHEMA_VERSION = 1
@@ -222,7 +222,7 @@ def validate_steps(a: StepsArtifact, src: str) -> None:
         need(name, getattr(a, name).shape == (k,), f"expected {k} values")
     need("pitch_source", bool(np.all((a.pitch_source >= 0) & (a.pitch_source <= 3))),
          "codes must be 0..3")
-    need("step_domain", bool(np.all(np.isin(a.step_domain, [d.value for d in Domain]))),
+    need("step_domain", bool(np.all(np.isin(a.step_domain, [d.value for d in PAPER_DOMAINS]))),
          f"values must be one of {Domain.choices()}")
     need("step_start", bool(np.all((a.step_start >= 0) & (a.step_start < a.step_end)
                                    & (a.step_end < n))), "steps must lie inside the take")

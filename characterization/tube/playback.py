@@ -83,7 +83,7 @@ from characterization.tube.model_error import (
 from characterization.tube.model_error import markdown as model_error_markdown
 from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.force_tube import COMPONENTS, EXCLUDE_AFTER_TOUCHDOWN, ForceTube, TubePhase, save_tube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -250,7 +250,7 @@ def check_inputs(model: HumanProsthesisModel, gait: Gait, steps: StepsArtifact,
     if names != list(model.coord_names):
         raise PlaybackError(f"{src}: field 'coord_names' {names} are not the model's "
                             f"coordinates {list(model.coord_names)}")
-    for r, d in enumerate(Domain):
+    for r, d in enumerate(PAPER_DOMAINS):
         mine = np.array(model.hip_progress_coefficients(d))
         if not np.allclose(steps.hip_coefficients[r], mine, rtol=1e-9, atol=1e-12):
             raise PlaybackError(

@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
 from orchestrator.cli.outcome import conclude, gait_verdict
 
@@ -93,7 +93,7 @@ def _summary(console: Console, gait, out: Path) -> None:
     t = Table("domain", "v_hip m/s", "step m", "duration s", "fit RMS deg (data)",
               "RMS deg (optimized vs data+offset)")
     v = gait.verification
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         p = gait.params[d]
         fitq = gait.fit_quality.get(d, {})
         rms = v.get("output_rms_deg", {}).get(d)

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
 from rich.table import Table
 
-from hp_model.domains import Domain
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
+
+if TYPE_CHECKING:
+    from characterization.mocap.session import TakeOutcome
 
 mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectories.",
                         no_args_is_help=True)
@@ -18,8 +20,9 @@ mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectori
 
 @mocap_app.command("process")
 def process(
-    take: Annotated[Path, typer.Argument(help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take.",
-                                         dir_okay=False)],
+    takes: Annotated[list[Path], typer.Argument(
+        help="Motive CSV (.csv), C3D (.c3d) or TRC (.trc) take; several takes of one session "
+        "(walkway trials) are processed one by one and their steps pooled.", dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Steps file to write (.npz or .json); "
                                       "the QA report and figures go next to it.",
                                       dir_okay=False)],
@@ -30,18 +33,36 @@ def process(
         dir_okay=False)] = None,
     figures: Annotated[bool, typer.Option(help="Write the figures.")] = True,
 ) -> None:
-    """Limb pitches, joint centres, joint angles and steps (ps/pns, tau) of one take."""
-    from characterization.mocap.files import process_file
+    """Limb pitches, joint centres, joint angles and steps (ps/pns, tau) of one take, or of
+    a session's takes pooled (a take that gives no step is a warning)."""
+    from characterization.mocap.session import process_session
 
     console = Console()
-    with console.status(f"processing {take}"):
-        r = process_file(take, out, subject=str(subject) if subject else None,
-                         device=str(device) if device else None, mapping=mapping,
-                         with_figures=figures)
-    p = r.processed
-    n_ps = sum(s.domain == Domain.PS for s in p.steps)
-    console.print(f"[bold]{take}[/]: {len(p.time)} frames at {p.frame_rate:g} Hz; steps "
-                  f"{n_ps} ps + {len(p.steps) - n_ps} pns kept, {len(p.dropped)} dropped")
+    with console.status(f"processing {len(takes)} take(s)"):
+        r = process_session(takes, out, subject=str(subject) if subject else None,
+                            device=str(device) if device else None, mapping=mapping,
+                            with_figures=figures)
+    for t in r.takes:
+        p = t.processed
+        if p is None:
+            console.print(f"[yellow]{t.line()}[/]", soft_wrap=True, highlight=False)
+            continue
+        console.print(f"[bold]{t.path}[/]: {len(p.time)} frames at {p.frame_rate:g} Hz; "
+                      + t.line().split(": ", 1)[1])
+        _print_take(console, t)
+    for w in r.warnings:  # one line each, never wrapped
+        console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
+    console.print(f"wrote {r.steps_path} ({r.artifact.n_steps} steps) and "
+                  + ", ".join(x.name for x in r.report_paths))
+
+
+def _print_take(console: Console, take: TakeOutcome) -> None:
+    """A processed take's joint centres, strides and double supports, dropped steps and
+    warnings."""
+    from characterization.mocap.foot_contact import double_supports
+
+    p = take.processed
+    assert p is not None
     t = Table(title="joint centres")
     for c in ("joint", "residual (mm)", "rotation SD (deg)", "well posed"):
         t.add_column(c)
@@ -49,11 +70,27 @@ def process(
         t.add_row(j, f"{f.residual_rms * 1000:.2f}", f"{f.rotation_sd * 57.29578:.1f}",
                   "yes" if f.well_posed else "[red]NO[/]")
     console.print(t)
+    ev = Table(title="strides (the prosthesis foot's) and double supports")
+    for c in ("stride", "frames", "time (s)", "speed (m/s)", "DS human lands (ms)",
+              "DS prosthesis lands (ms)"):
+        ev.add_column(c, justify="right")
+    for k, s in enumerate(take.strides):
+        ds = s.double_support
+        ev.add_row(str(k), f"{s.start}-{s.end}", f"{s.time:.3f}", f"{s.speed:.3f}",
+                   *(f"{1000 * ds.get(f, float('nan')):.0f}" for f in ("human", "prosthesis")))
+    console.print(ev)
+    for foot, c in p.contacts.items():
+        console.print(f"  {foot} foot touchdowns {list(c.touchdowns)}, lift-offs "
+                      f"{list(c.liftoffs)} (frames)")
+    ds = double_supports(p.contacts, p.frame_rate)
+    if ds:
+        console.print("  double supports: " + ", ".join(
+            f"{d.lands} lands {d.start}-{d.end} ({1000 * d.seconds:.0f} ms)" for d in ds),
+            soft_wrap=True)
     for d in p.dropped:
         console.print(f"  dropped {d.domain} step, frames {d.start}-{d.end}: {d.reason}")
-    for w in p.warnings:  # one line each, never wrapped
+    for w in p.warnings:
         console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
-    console.print(f"wrote {r.steps_path} and " + ", ".join(x.name for x in r.report_paths))
 
 
 @mocap_app.command("inspect")

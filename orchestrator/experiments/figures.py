@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hp_model.atomic_io import atomic_write_bytes
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.figures import figure_bytes
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -88,7 +88,7 @@ def fig7(runs: dict[str, ScenarioResult], gait: Gait) -> bytes:
                 y = np.where(r.domain == d.code, r.q_p[:, j], np.nan)
                 a.plot(y, np.where(r.domain == d.code, r.qd_p[:, j], np.nan), color=col,
                        lw=0.7, label=lab)
-            for d in Domain:
+            for d in PAPER_DOMAINS:
                 tr = gait.trajectory.get(d)
                 if tr is not None:
                     k = 10 + j

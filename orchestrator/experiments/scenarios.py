@@ -29,7 +29,7 @@ from characterization.gait.verification import make_simulator
 from characterization.tube.fit import deviation_profiles, fit_tube, nominal_coefficients
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
-from hp_model.domains import N_Y2, PROSTHESIS, Domain
+from hp_model.domains import N_Y2, PAPER_DOMAINS, PROSTHESIS, Domain
 from hp_model.falls import Fall, FallOutcome
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
@@ -65,7 +65,7 @@ class Perturbation:
     seed: int = 0
 
     def thetas(self, gait: Gait) -> dict[Domain, np.ndarray]:
-        return perturbed_thetas({d: gait.theta(d) for d in Domain}, self.amplitude,
+        return perturbed_thetas({d: gait.theta(d) for d in PAPER_DOMAINS}, self.amplitude,
                                 self.seed)
 
 
@@ -155,7 +155,7 @@ def knee_reference(gait: Gait, domain: np.ndarray, tau: np.ndarray) -> np.ndarra
     (0 ps, 1 pns) at phase ``tau`` (clipped to [0, 1]); shape of ``tau``."""
     domain, tau = np.asarray(domain), np.clip(np.asarray(tau, float), 0.0, 1.0)
     ref = np.zeros(tau.shape)
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         m = domain == d.code
         if m.any():
             r = d.y2_row(PROSTHESIS[0])
@@ -235,7 +235,7 @@ def oracle_thetas(gait: Gait, thetas: Mapping[Domain, np.ndarray]) -> dict[Domai
     controller is given)."""
     L = gait.params[Domain.PS].layout
     out: dict[Domain, np.ndarray] = {}
-    for d in Domain:
+    for d in PAPER_DOMAINS:
         th = np.array(thetas[d], float)
         nominal = gait.theta(d)
         for r in range(N_Y2):

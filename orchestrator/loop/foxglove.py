@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from orchestrator.loop.plant import Vector
 from orchestrator.loop.walker_figure import FORCE_SCALE, HUMAN, IWALK, PROSTHESIS
@@ -153,7 +153,7 @@ class WalkerFoxglove:
         self.gait, self.tube = gait, tube
         self._ref: dict[str, tuple[tuple[str, ...], np.ndarray, Callable]] = {}
         if gait is not None:
-            for d in Domain:
+            for d in PAPER_DOMAINS:
                 joints = tuple(j for j, c in (("knee", "th_pk"), ("ankle", "th_pa"))
                                if c in d.y2_coords)
                 rows = [d.y2_coords.index(c) for c in ("th_pk", "th_pa")

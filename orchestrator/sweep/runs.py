@@ -29,7 +29,7 @@ import numpy as np
 
 from hp_model.artifacts import canonical_hash
 from hp_model.compiled import CompileBackend
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.force_tube import ForceTube
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import BodyVariation, HumanProsthesisModel
@@ -106,7 +106,7 @@ def human_thetas(gait: Gait, draw: Draw) -> dict[Domain, np.ndarray]:
     for joint, off in zip(HUMAN_JOINTS, draw.output_offset, strict=True):
         if off == 0.0:
             continue
-        for d in Domain:
+        for d in PAPER_DOMAINS:
             if joint in d.y2_coords:
                 th[d][L.row(d.y2_row(joint))] += off
     return th

@@ -1,0 +1,402 @@
+"""A take's force plates: each foot's ground reaction over time in the take's sagittal frame.
+
+Frame and signs: the model's sagittal frame of :mod:`characterization.mocap.sagittal` (x
+forward along the walking direction, z up), the same frame as the markers.  ``fx`` / ``fz``
+are the ground's force ON the foot (N; ``fz`` > 0 while loaded, ``fx`` < 0 braking),
+``cop_x`` the centre of pressure along x (m, NaN while unloaded), ``free_moment`` the
+moment about the up axis at the centre of pressure (N m) where the source has it.
+
+Sources:
+
+* an OpenSim ``.mot`` of ground reactions (:func:`read_grf_mot`): per foot ``<p>v{x,y,z}``
+  (N), ``<p>p{x,y,z}`` (m) and ``<t>{x,y,z}`` (N m) with the prefixes of OpenSim's example
+  (``ground_force_`` the right foot; ``l_ground_force_`` or ``1_ground_force_`` the left),
+  in lab axes, projected with the take's frame; the columns are already one per foot;
+* the GaitAnalysisToolKit treadmill take (:func:`read_gatk_plate`): one plate under the right
+  foot, ``FP2.ForX``, ``FP2.ForY`` (N, X forward, Y up) and ``FP2.MomZ`` (N m about the plate
+  origin on its surface): centre of pressure ``MomZ / ForY``;
+* a C3D's FORCE_PLATFORM group (:func:`read_c3d_plates`): ezc3d computes each plate's force,
+  centre of pressure and free moment Tz in the lab frame from its channels, corners, origin
+  and calibration matrix (types 2, 3 and 4); the sign is set so the vertical force is >= 0
+  (the plate measures the foot's push).  A loaded sample goes to the foot whose heel-toe
+  midpoint is over the plate (inside its corners, horizontally); a plate with no foot over
+  it is left out.
+
+Stances (:func:`stances`): the foot's vertical force above ``threshold`` (default 20 N),
+the crossings interpolated linearly between samples; only stances whose touchdown and
+lift-off both lie inside the record are full stances.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+
+from characterization.mocap.sagittal import SagittalFrame
+from characterization.mocap.take import MocapError
+
+#: N: the vertical force above which a foot is on its plate (a common lab threshold)
+THRESHOLD_N = 20.0
+#: samples per normalized stance (0, 0.01, ..., 1)
+STANCE_SAMPLES = 101
+#: of body weight: the loaded part of a stance for the required friction
+LOADED_BW = 0.1
+#: OpenSim prefixes: foot -> (force prefix, torque prefix) candidates
+MOT_FEET: Mapping[str, tuple[tuple[str, str], ...]] = MappingProxyType({
+    "right": (("ground_force_", "ground_torque_"),),
+    "left": (("l_ground_force_", "l_ground_torque_"), ("1_ground_force_", "1_ground_torque_")),
+})
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class FootForce:
+    """One foot's ground reaction over the record (module docstring for frame and signs):
+    ``time`` (n,) s, ``fx``, ``fz`` (n,) N, ``cop_x`` (n,) m, ``free_moment`` (n,) N m or
+    None, ``plate`` the plate(s) it came from."""
+
+    foot: str
+    time: np.ndarray
+    fx: np.ndarray
+    fz: np.ndarray
+    cop_x: np.ndarray
+    free_moment: np.ndarray | None = None
+    plate: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("time", "fx", "fz", "cop_x"):
+            object.__setattr__(self, name, _ro(getattr(self, name)))
+        if self.free_moment is not None:
+            object.__setattr__(self, "free_moment", _ro(self.free_moment))
+        n = self.time.shape[0]
+        if any(getattr(self, k).shape != (n,) for k in ("fx", "fz", "cop_x")):
+            raise MocapError(f"foot '{self.foot}': force columns do not have {n} samples")
+
+    @property
+    def rate(self) -> float:
+        """Hz: the record's sample rate."""
+        return float(1.0 / np.median(np.diff(self.time)))
+
+
+@dataclass(frozen=True)
+class PlateRecord:
+    """A take's force plates: ``feet`` foot -> :class:`FootForce` (``"left"``/``"right"``)."""
+
+    source: str
+    feet: Mapping[str, FootForce]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "feet", MappingProxyType(dict(self.feet)))
+
+
+# --- readers ------------------------------------------------------------------------------
+
+
+def _mot_table(path: Path) -> tuple[list[str], np.ndarray]:
+    """Column names and rows of an OpenSim storage file (either header style: the lines
+    down to ``endheader``, then the column names)."""
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as e:
+        raise MocapError(f"{path}: cannot read ({e.strerror})") from None
+    try:
+        k = next(i for i, s in enumerate(lines) if s.strip().lower() == "endheader")
+    except StopIteration:
+        raise MocapError(f"{path}: no 'endheader' line (not an OpenSim .mot)") from None
+    names = lines[k + 1].split()
+    try:
+        rows = np.array([[float(v) for v in s.split()] for s in lines[k + 2:] if s.strip()])
+    except ValueError as e:
+        raise MocapError(f"{path}: a data row is not numbers ({e})") from None
+    if rows.ndim != 2 or rows.shape[1] != len(names):
+        raise MocapError(f"{path}: rows do not have the {len(names)} columns of the header")
+    return names, rows
+
+
+def _project(frame: SagittalFrame, v: np.ndarray) -> np.ndarray:
+    """(n, 3) lab vectors -> (n, 2) sagittal (x forward, z up)."""
+    return frame.project(v)
+
+
+def read_grf_mot(path: str | os.PathLike[str], frame: SagittalFrame) -> PlateRecord:
+    """Each foot's ground reaction from an OpenSim ``.mot`` (module docstring)."""
+    p = Path(path)
+    names, rows = _mot_table(p)
+    col = {n: i for i, n in enumerate(names)}
+    if "time" not in col:
+        raise MocapError(f"{p}: no 'time' column")
+    t = rows[:, col["time"]]
+    feet = {}
+    for foot, prefixes in MOT_FEET.items():
+        for fp, tp in prefixes:
+            need = [f"{fp}v{a}" for a in "xyz"] + [f"{fp}p{a}" for a in "xyz"]
+            if all(n in col for n in need):
+                f = _project(frame, rows[:, [col[n] for n in need[:3]]])
+                c = _project(frame, rows[:, [col[n] for n in need[3:]]])
+                tq = [f"{tp}{a}" for a in "xyz"]
+                fm = (rows[:, [col[n] for n in tq]] @ frame.up) if all(n in col for n in tq) \
+                    else None
+                on = f[:, 1] > 0
+                feet[foot] = FootForce(foot, t, f[:, 0], f[:, 1], np.where(on, c[:, 0], np.nan),
+                                       fm, fp)
+                break
+    if not feet:
+        raise MocapError(f"{p}: no ground-force columns (expected e.g. ground_force_vx ... "
+                         "ground_force_pz)")
+    return PlateRecord(str(p), feet)
+
+
+def read_gatk_plate(path: str | os.PathLike[str]) -> PlateRecord:
+    """The GaitAnalysisToolKit take's plate FP2 under the right foot (module docstring)."""
+    p = Path(path)
+    try:
+        header = p.read_text().splitlines()[0].lstrip("% ").split("\t")
+        raw = np.genfromtxt(p, skip_header=1)
+    except (OSError, IndexError, ValueError) as e:
+        raise MocapError(f"{p}: cannot read ({e})") from None
+    col = {n.strip(): i for i, n in enumerate(header)}
+    need = ("TimeStamp", "FP2.ForX", "FP2.ForY", "FP2.MomZ")
+    missing = [n for n in need if n not in col]
+    if missing:
+        raise MocapError(f"{p}: no column {missing[0]}")
+    fx, fz, mz = (raw[:, col[n]] for n in need[1:])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cop = np.where(fz > THRESHOLD_N, mz / fz, np.nan)
+    return PlateRecord(str(p), {"right": FootForce("right", raw[:, col["TimeStamp"]], fx, fz,
+                                                   cop, None, "FP2")})
+
+
+def _over_plate(xy: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(n,) bool: horizontal points (n, 2) inside the plate's horizontal bounding box."""
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    return np.all((xy >= lo) & (xy <= hi), axis=1)
+
+
+def read_c3d_plates(path: str | os.PathLike[str], frame: SagittalFrame,
+                    feet_markers: Mapping[str, tuple[str, str]]) -> PlateRecord:
+    """Each foot's ground reaction from a C3D's force plates (module docstring).
+    ``feet_markers``: foot -> (heel marker, toe marker) that decide which foot is on which
+    plate."""
+    import ezc3d  # lazily: the reader is only needed for C3D files
+
+    from characterization.mocap.c3d_io import read_c3d
+
+    p = Path(path)
+    try:
+        c = ezc3d.c3d(str(p), extract_forceplat_data=True)
+    except (RuntimeError, OSError) as e:
+        raise MocapError(f"{p}: cannot read ({e})") from None
+    plates = c["data"].get("platform", [])
+    if not plates:
+        raise MocapError(f"{p}: no force plates (FORCE_PLATFORM:USED is 0)")
+    take = read_c3d(p)
+    n_an = plates[0]["force"].shape[1]
+    t = take.time[0] + np.arange(n_an) / (take.frame_rate * n_an / take.n_frames)
+    lab_h = np.column_stack([frame.forward, frame.lateral])  # lab -> horizontal (2 axes)
+    mids = {foot: np.array([np.interp(t, take.time, (take.marker(h) + take.marker(k))[:, j] / 2)
+                            for j in range(3)]).T
+            for foot, (h, k) in feet_markers.items()}
+    acc = {foot: np.zeros((n_an, 4)) for foot in feet_markers}  # fx, fz, cop_x*fz, tz
+    used: dict[str, list[str]] = {foot: [] for foot in feet_markers}
+    for i, pf in enumerate(plates):
+        scale = {"N": 1.0}.get(pf["unit_force"], 1.0)
+        pos = {"mm": 1e-3, "m": 1.0}.get(pf["unit_position"], 1e-3)
+        f = pf["force"].T * scale
+        if np.nanmedian(f @ frame.up) < 0 or np.nanmin(f @ frame.up) < -np.nanmax(f @ frame.up):
+            f = -f
+        fs = _project(frame, f)
+        cop = _project(frame, pf["center_of_pressure"].T * pos)[:, 0]
+        tz = (pf["Tz"].T * pos) @ frame.up  # N mm -> N m
+        corners = (pf["corners"].T * pos) @ lab_h
+        loaded = fs[:, 1] > THRESHOLD_N
+        for foot, mid in mids.items():
+            on = loaded & _over_plate(mid @ lab_h, corners)
+            if not on.any():
+                continue
+            used[foot].append(str(i + 1))
+            a = acc[foot]
+            a[on, 0] += fs[on, 0]
+            a[on, 1] += fs[on, 1]
+            a[on, 2] += np.nan_to_num(cop[on]) * fs[on, 1]
+            a[on, 3] += np.nan_to_num(tz[on])
+    feet = {}
+    for foot, a in acc.items():
+        if used[foot]:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cx = np.where(a[:, 1] > 0, a[:, 2] / a[:, 1], np.nan)
+            feet[foot] = FootForce(foot, t, a[:, 0], a[:, 1], cx, a[:, 3],
+                                   "plate " + "+".join(used[foot]))
+    if not feet:
+        raise MocapError(f"{p}: no foot is over a loaded force plate")
+    return PlateRecord(str(p), feet)
+
+
+# --- stances and the take's summary --------------------------------------------------------
+
+
+def _crossing(t: np.ndarray, f: np.ndarray, i: int | np.integer, level: float) -> float:
+    """s: where f crosses ``level`` between samples i-1 and i (linear)."""
+    a, b = f[i - 1], f[i]
+    return float(t[i - 1] + (level - a) / (b - a) * (t[i] - t[i - 1]))
+
+
+def stances(ff: FootForce, threshold: float = THRESHOLD_N) -> list[tuple[float, float]]:
+    """Full stances (touchdown, lift-off) in s: fz above ``threshold``, crossings
+    interpolated; a stance cut by the record's start or end is left out."""
+    on = ff.fz > threshold
+    edges = np.flatnonzero(np.diff(on.astype(np.int8))) + 1
+    out = []
+    for a, b in itertools.pairwise(edges):
+        if on[a] and not on[b]:
+            out.append((_crossing(ff.time, ff.fz, a, threshold),
+                        _crossing(ff.time, ff.fz, b, threshold)))
+    return out
+
+
+@dataclass(frozen=True)
+class StanceSummary:
+    """One full stance (``tests``/``docs/person-check.md``): times s; force curves over the
+    normalized stance (``STANCE_SAMPLES`` points, 0..1) in body weights; peaks in body
+    weights (``fz_peaks`` first, valley, second), ``brake`` the most negative and ``push``
+    the most positive fx; ``cop_travel`` m (last loaded CoP minus first, relative to the
+    foot where ``foot_x`` was given); ``friction`` max |fx|/fz over fz > 10 % BW."""
+
+    foot: str
+    touchdown: float
+    liftoff: float
+    fx_bw: np.ndarray
+    fz_bw: np.ndarray
+    cop_x: np.ndarray
+    fz_peaks: tuple[float, float, float]
+    brake: float
+    push: float
+    cop_travel: float
+    friction: float
+
+    @property
+    def duration(self) -> float:
+        return self.liftoff - self.touchdown
+
+
+def double_hump(fz: np.ndarray) -> tuple[float, float, float]:
+    """(first peak, valley, second peak) of a vertical force over a normalized stance: the
+    largest value in the first and in the second half, the smallest between them."""
+    n = len(fz)
+    i1 = int(np.argmax(fz[: n // 2]))
+    i2 = n // 2 + int(np.argmax(fz[n // 2:]))
+    return float(fz[i1]), float(np.min(fz[i1:i2 + 1])), float(fz[i2])
+
+
+def required_friction(fx: np.ndarray, fz: np.ndarray, loaded: float) -> float:
+    """max |fx| / fz where fz > ``loaded`` (same units)."""
+    m = fz > loaded
+    return float(np.max(np.abs(fx[m]) / fz[m])) if m.any() else float("nan")
+
+
+def summarize_stance(ff: FootForce, touchdown: float, liftoff: float, body_weight: float,
+                     foot_x: np.ndarray | None = None) -> StanceSummary:
+    """One stance of ``ff`` over [touchdown, liftoff] s; ``foot_x`` (n,) m, the foot's heel
+    x on the record's time base, makes the centre of pressure relative to the foot (needed
+    on a treadmill, where the foot travels with the belt)."""
+    s = np.linspace(0.0, 1.0, STANCE_SAMPLES)
+    tt = touchdown + s * (liftoff - touchdown)
+    fx = np.interp(tt, ff.time, ff.fx) / body_weight
+    fz = np.interp(tt, ff.time, ff.fz) / body_weight
+    cop = ff.cop_x - foot_x if foot_x is not None else ff.cop_x
+    ok = np.isfinite(cop)
+    cx = np.interp(tt, ff.time[ok], cop[ok]) if ok.sum() > 1 else np.full_like(tt, np.nan)
+    cx[fz <= LOADED_BW] = np.nan
+    inside = np.flatnonzero(np.isfinite(cx))
+    travel = float(cx[inside[-1]] - cx[inside[0]]) if inside.size else float("nan")
+    return StanceSummary(ff.foot, touchdown, liftoff, _ro(fx), _ro(fz), _ro(cx),
+                         double_hump(fz), float(fx.min()), float(fx.max()), travel,
+                         required_friction(fx, fz, LOADED_BW))
+
+
+def double_supports(record: PlateRecord, threshold: float = THRESHOLD_N
+                    ) -> list[tuple[float, float, str]]:
+    """Both feet loaded: (start, end, the foot whose touchdown starts it) in s for each
+    double support inside the record, its ends at the interpolated crossings of
+    ``threshold``; empty with one foot."""
+    if len(record.feet) < 2:
+        return []
+    a, b = (record.feet[k] for k in sorted(record.feet))
+    t = a.time
+    if b.time.shape != t.shape or not np.allclose(b.time, t):
+        raise MocapError(f"{record.source}: the two feet's forces are on different time bases")
+    both = (a.fz > threshold) & (b.fz > threshold)
+    edges = np.flatnonzero(np.diff(both.astype(np.int8))) + 1
+    out = []
+    for s, e in itertools.pairwise(edges):
+        if both[s] and not both[e]:
+            new = a if a.fz[s - 1] <= threshold else b
+            off = a if a.fz[e] <= threshold else b
+            out.append((_crossing(t, new.fz, s, threshold), _crossing(t, off.fz, e, threshold),
+                        new.foot))
+    return out
+
+
+@dataclass(frozen=True)
+class PlateWalk:
+    """What the plates say of the walk: ``stances`` per foot, ``stride_time`` s (mean
+    touchdown-to-touchdown of one foot), ``double_supports`` s (mean over those after each
+    foot's touchdown, keyed by that foot), ``body_weight`` N used to normalize."""
+
+    stances: Mapping[str, tuple[StanceSummary, ...]]
+    stride_time: float
+    double_supports: Mapping[str, float]
+    body_weight: float
+
+
+def plate_walk(record: PlateRecord, body_weight: float,
+               foot_x: Mapping[str, np.ndarray] | None = None,
+               threshold: float = THRESHOLD_N) -> PlateWalk:
+    """The take's walk from its plates (:class:`PlateWalk`); ``foot_x`` foot -> heel x on
+    each foot's time base (see :func:`summarize_stance`)."""
+    st = {f: tuple(summarize_stance(ff, a, b, body_weight, (foot_x or {}).get(f))
+                   for a, b in stances(ff, threshold)) for f, ff in record.feet.items()}
+    strides = [b.touchdown - a.touchdown for s in st.values() for a, b in itertools.pairwise(s)]
+    if not strides:  # a foot whose stances are cut: touchdowns of any stance that starts inside
+        tds = {f: [_crossing(ff.time, ff.fz, i, threshold) for i in
+                   np.flatnonzero(np.diff((ff.fz > threshold).astype(np.int8)) == 1) + 1]
+               for f, ff in record.feet.items()}
+        strides = [b - a for v in tds.values() for a, b in itertools.pairwise(v)]
+    ds: dict[str, list[float]] = {}
+    for s, e, foot in double_supports(record, threshold):
+        ds.setdefault(foot, []).append(e - s)
+    return PlateWalk(st, float(np.mean(strides)) if strides else float("nan"),
+                     {k: float(np.mean(v)) for k, v in ds.items()}, body_weight)
+
+
+def mean_vertical_force(record: PlateRecord, start: float, end: float) -> float:
+    """N: the feet's summed vertical force averaged over [start, end] s (over a whole stride
+    of steady walking this is the body weight)."""
+    tot = None
+    for ff in record.feet.values():
+        m = (ff.time >= start) & (ff.time < end)
+        tot = ff.fz[m] if tot is None else tot + ff.fz[m]
+    return float(np.mean(tot)) if tot is not None else float("nan")
+
+
+def foot_x_on(record_time: np.ndarray, take_time: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A marker's sagittal x (take frames) on the plate record's time base (linear)."""
+    ok = np.isfinite(x)
+    return np.interp(record_time, take_time[ok], x[ok])
+
+
+__all__: Sequence[str] = (
+    "FootForce", "PlateRecord", "PlateWalk", "StanceSummary", "double_hump",
+    "double_supports", "foot_x_on", "mean_vertical_force", "plate_walk", "read_c3d_plates",
+    "read_gatk_plate", "read_grf_mot", "required_friction", "stances", "summarize_stance",
+)
