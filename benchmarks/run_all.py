@@ -7,9 +7,13 @@ its figures become one table (median, spread, ratio to the script's in-run refer
 met) on a page made from ``benchmarks/performance.md.in`` with the machine, the date and the
 commit, written atomically.  A benchmark that fails is listed with its error and the exit
 status is 1; the others are still written.  Explanations live in docs/performance-notes.md.
+``--merge``: put the tables of the benchmarks run (or, with ``--render-only``, loaded) into
+the existing page, keeping its other tables as they are; each merged table names its own
+date and commit, and the page's summary is counted again from all its tables (one benchmark
+re-measured without the others' 35 minutes).
 
     PYTHONPATH=. python benchmarks/run_all.py [--out docs/performance.md] [--only NAME ...]
-        [--quick] [--results DIR] [--render-only]
+        [--quick] [--results DIR] [--render-only] [--merge]
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import tempfile
@@ -73,6 +78,7 @@ class Outcome:
     rows: list[Row] = field(default_factory=list)
     error: str = ""
     quick: bool = False
+    stamp: str = ""  # "date at commit", when measured (kept in its meta)
 
 
 def mm(d: dict[str, float], scale: float = 1.0) -> tuple[float, str]:
@@ -391,7 +397,9 @@ def run(b: Bench, args: list[str], results: Path, quick: bool = False) -> Outcom
     with open(results / f"{b.name}.log", "w") as log:
         r = subprocess.run(cmd, cwd=ROOT, env=env, stdout=log, stderr=subprocess.STDOUT)
     o.seconds, o.load = time.perf_counter() - t0, (load0, os.getloadavg()[0])
-    meta = {"args": args, "seconds": o.seconds, "load": o.load, "quick": quick}
+    o.stamp = f"{datetime.now(UTC).strftime(DATE)} at commit `{commit()}`"
+    meta = {"args": args, "seconds": o.seconds, "load": o.load, "quick": quick,
+            "stamp": o.stamp}
     (results / f"{b.name}.meta.json").write_text(json.dumps(meta))
     if r.returncode != 0:
         tail = (results / f"{b.name}.log").read_text().strip().splitlines()
@@ -405,7 +413,7 @@ def load(b: Bench, results: Path) -> Outcome:
     try:
         meta = json.loads((results / f"{b.name}.meta.json").read_text())
         o = Outcome(b, list(meta["args"]), float(meta["seconds"]), tuple(meta["load"]),
-                    quick=bool(meta.get("quick", False)))
+                    quick=bool(meta.get("quick", False)), stamp=str(meta.get("stamp", "")))
     except (OSError, ValueError, KeyError, TypeError) as e:
         return Outcome(b, [], error=f"its {b.name}.meta.json: {type(e).__name__}: {e}")
     try:
@@ -415,10 +423,15 @@ def load(b: Bench, results: Path) -> Outcome:
     return o
 
 
-def table(o: Outcome) -> str:
+def table(o: Outcome, stamped: bool = False) -> str:
+    """The section of one benchmark; ``stamped``: saying when and at which commit it was
+    measured (a table merged into an older page)."""
     b = o.bench
     head = (f"### {b.name}: {b.title}\n\n`benchmarks/bench_{b.name}.py {' '.join(o.args)}`: "
             f"{o.seconds:.0f} s, load average {o.load[0]:.1f} -> {o.load[1]:.1f}.")
+    if stamped:
+        head += f" Measured {o.stamp or 'at an unrecorded date and commit'}" + \
+            (" (**--quick**)." if o.quick else ".")
     if o.error:
         return f"{head}\n\n**Failed** ({o.error}); its output: `{b.name}.log`.\n"
     if b.reference:
@@ -432,20 +445,65 @@ def table(o: Outcome) -> str:
     return "\n".join(lines) + "\n"
 
 
-def render(outcomes: list[Outcome], when: datetime) -> str:
-    m = machine()
+DATE = "%Y-%m-%d %H:%M UTC"
+_SECONDS = re.compile(r"^`benchmarks/bench_\w+\.py[^`]*`: (\d+) s,", re.M)
+_MET = re.compile(r"^\|.*\| (yes|\*\*no\*\*) \|$", re.M)
+_MACHINE = {"CPU": "cpu", "cores": "cores", "OS": "os", "Python": "python",
+            "packages": "packages"}
+_STAMP = re.compile(r"^Measured (.+?) at commit `(.+?)` by", re.M)
+
+
+def summary(tables: list[str], quick: bool) -> str:
+    """The page's summary line, counted from its sections (as :func:`table` writes them)."""
+    failed = [t[4:].split(":", 1)[0] for t in tables if "\n**Failed** (" in t]
+    met = [m for t in tables for m in _MET.findall(t)]
+    minutes = sum(int(s) for t in tables for s in _SECONDS.findall(t)) / 60
+    out = (f"{len(tables)} benchmarks, {minutes:.1f} min; targets met: "
+           f"{met.count('yes')} of {len(met)}"
+           + (f"; **failed: {', '.join(failed)}**" if failed else ""))
+    return out + (" (**--quick**: minimal repetitions, figures not comparable)" if quick else "")
+
+
+def render(tables: list[str], when: str, rev: str, quick: bool, note: str = "",
+           m: dict[str, str] | None = None) -> str:
+    """The page: the template filled with the machine ``m`` (default this one), ``when`` and
+    ``rev``, the summary (and ``note``) and the sections."""
+    m = m or machine()
     tmpl = Template((BENCH / "performance.md.in").read_text())
-    failed = [o.bench.name for o in outcomes if o.error]
-    targets = [r for o in outcomes for r in o.rows if r.met is not None]
-    summary = (f"{len(outcomes)} benchmarks, {sum(o.seconds for o in outcomes) / 60:.1f} min; "
-               f"targets met: {sum(bool(r.met) for r in targets)} of {len(targets)}"
-               + (f"; **failed: {', '.join(failed)}**" if failed else ""))
-    if any(o.quick for o in outcomes):
-        summary += " (**--quick**: minimal repetitions, figures not comparable)"
     return tmpl.substitute(
-        date=when.strftime("%Y-%m-%d %H:%M UTC"), commit=commit(), cpu=m["cpu"],
-        cores=m["cores"], os=m["os"], python=m["python"], packages=m["packages"],
-        summary=summary, tables="\n".join(table(o) for o in outcomes))
+        date=when, commit=rev, cpu=m["cpu"], cores=m["cores"], os=m["os"],
+        python=m["python"], packages=m["packages"], summary=summary(tables, quick) + note,
+        tables="\n".join(tables))
+
+
+def sections(page: str) -> tuple[str, dict[str, str]]:
+    """A page's header and its sections by benchmark name (each from its ``### name:``)."""
+    parts = re.split(r"^(?=### )", page, flags=re.M)
+    return parts[0], {p[4:].split(":", 1)[0]: p.rstrip("\n") + "\n" for p in parts[1:]}
+
+
+def merged(old: str, outcomes: list[Outcome]) -> str:
+    """``old`` (a page this script wrote) with the sections of ``outcomes`` in place of (or
+    beside) its own, in :data:`BENCHES` order; ValueError (one line) for a page not
+    written here or on another machine."""
+    head, kept = sections(old)
+    stamp = _STAMP.search(head)
+    rows = dict(re.findall(r"^\| (CPU|cores|OS|Python|packages) \| (.*) \|$", head, re.M))
+    if stamp is None or not kept or len(rows) != len(_MACHINE):
+        raise ValueError("not a page written by run_all.py (no 'Measured ... at commit', "
+                         "machine table or benchmark section)")
+    was = {key: rows[label] for label, key in _MACHINE.items()}
+    now = machine()
+    for key in ("cpu", "cores"):
+        if was[key] != now[key]:
+            raise ValueError(f"measured on another machine (its {key} is {was[key]!r}, "
+                             f"not {now[key]!r}): run all the benchmarks instead")
+    new = {o.bench.name: table(o, stamped=True) for o in outcomes}
+    tables = [new.get(b.name) or kept[b.name] for b in BENCHES
+              if b.name in new or b.name in kept]
+    note = ("; re-measured since, each dated in its table: " + ", ".join(new)) if new else ""
+    quick = "(**--quick**" in head or any(o.quick for o in outcomes)
+    return render(tables, stamp.group(1), stamp.group(2), quick, note, was)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -459,6 +517,9 @@ def main(argv: list[str] | None = None) -> int:
                     "folder)")
     ap.add_argument("--render-only", action="store_true",
                     help="write the page from --results of an earlier run, running nothing")
+    ap.add_argument("--merge", action="store_true",
+                    help="put these benchmarks' tables into the existing --out page, keeping "
+                    "its other tables")
     a = ap.parse_args(argv)
     names = {b.name: b for b in BENCHES}
     unknown = [n for n in a.only or [] if n not in names]
@@ -473,6 +534,15 @@ def main(argv: list[str] | None = None) -> int:
     if not a.out.parent.is_dir():
         print(f"run_all: error: {a.out.parent} is not a folder", file=sys.stderr)
         return 2
+    old = None
+    if a.merge:
+        try:
+            old = a.out.read_text()
+            merged(old, [])  # refuse a page it cannot merge into before running anything
+        except (OSError, ValueError) as e:
+            print(f"run_all: error: --merge into {a.out}: "
+                  f"{getattr(e, 'strerror', None) or e}", file=sys.stderr)
+            return 2
     chosen = [names[n] for n in a.only] if a.only else list(BENCHES)
     when = datetime.now(UTC)
     with tempfile.TemporaryDirectory() as tmp:
@@ -490,7 +560,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{o.seconds:.0f} s" + (f": FAILED ({o.error})" if o.error else ""),
                       flush=True)
             outcomes.append(o)
-        page = render(outcomes, when)
+        page = (merged(old, outcomes) if old is not None else
+                render([table(o) for o in outcomes], when.strftime(DATE), commit(),
+                       any(o.quick for o in outcomes)))
     from hp_model.atomic_io import atomic_write_bytes
 
     try:

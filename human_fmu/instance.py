@@ -98,7 +98,7 @@ EXTRACT_PREFIX = "hpcosim-fmu-"
 _EXTRACTED = re.compile(rf"{EXTRACT_PREFIX}(\d+)-")
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -108,7 +108,7 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _held(path: str) -> bool:
+def folder_held(path: str) -> bool:
     """The folder is locked by its (living) owner: a shared lock held while it is in use."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC | os.O_NOFOLLOW)
@@ -133,7 +133,7 @@ def sweep_dead_extractions(folder: str | Path | None = None) -> list[Path]:
             m = _EXTRACTED.match(e.name)
             if (m is None or not e.is_dir(follow_symlinks=False)
                     or e.stat(follow_symlinks=False).st_uid != os.geteuid()
-                    or _pid_alive(int(m.group(1))) or _held(e.path)):
+                    or pid_alive(int(m.group(1))) or folder_held(e.path)):
                 continue
             shutil.rmtree(e.path, ignore_errors=True)
             gone.append(Path(e.path))

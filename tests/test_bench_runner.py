@@ -57,7 +57,8 @@ def test_run_all_bad_input_is_a_one_line_error(tmp_path):
     page = tmp_path / "p.md"
     for args, msg in ((["--only", "nope"], "unknown benchmark 'nope'"),
                       (["--render-only"], "needs --results"),
-                      (["--out", str(tmp_path / "no" / "p.md")], "is not a folder")):
+                      (["--out", str(tmp_path / "no" / "p.md")], "is not a folder"),
+                      (["--merge", "--only", "model"], "--merge into")):
         r = run_all(*(args if "--out" in args else [*args, "--out", str(page)]))
         assert r.returncode == 2 and msg in r.stderr, r.stderr
         assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
@@ -116,3 +117,52 @@ def test_lockstep_floor_walks_and_its_table_is_its_json(tmp_path):
     rtf = f["real_time_factor"]["median"]
     assert abs(float(row.split("|")[2]) - rtf) <= 0.01 * rtf
     assert ">= 5 (the co-simulation's ceiling)" in row
+
+
+def _memory_results(res: Path, growth: float, stamp: str) -> None:
+    """A memory benchmark's kept JSON and meta (as ``run`` writes them)."""
+    res.mkdir(exist_ok=True)
+    j = {"duration_s": 3600.0, "warmup_s": 60.0, "restarts": 0,
+         "plant": {"warm_mb": 150.0, "end_mb": 150.0 * (1 + growth / 100), "max_mb": 160.0,
+                   "growth_pct": growth, "slope_mb_per_h": 0.5},
+         "node": {"warm_mb": 100.0, "end_mb": 101.0, "growth_pct": 1.0}}
+    (res / "memory.json").write_text(json.dumps(j))
+    meta = {"args": ["--duration", "3600"], "seconds": 1200.0, "load": [1.0, 2.0],
+            "quick": False, "stamp": stamp}
+    (res / "memory.meta.json").write_text(json.dumps(meta))
+
+
+def test_merge_replaces_one_table_and_keeps_the_others(tmp_path):
+    page, res = tmp_path / "performance.md", tmp_path / "results"
+    _memory_results(res, 25.0, "2026-01-01 00:00 UTC at commit `aaaaaaaaaa`")
+    r = run_all("--render-only", "--only", "memory", "--results", str(res), "--out", str(page))
+    assert r.returncode == 0, r.stderr
+    model = ("### model: 12-DOF model\n\n`benchmarks/bench_model.py --repeats 15`: 64 s, "
+             "load average 1.0 -> 1.0.\n\n| figure | median | spread | ratio | target | met |\n"
+             "|---|---:|---:|---:|---|:---:|\n| x (us) | 1.50 | 1-2 | 0.5 | ratio <= 1 | yes |\n")
+    page.write_text(page.read_text() + "\n" + model)
+    measured = next(x for x in page.read_text().splitlines() if x.startswith("Measured "))
+    _memory_results(res, 0.42, "2026-02-03 04:05 UTC at commit `bbbbbbbbbb`")
+    r = run_all("--render-only", "--only", "memory", "--results", str(res), "--merge",
+                "--out", str(page))
+    assert r.returncode == 0, r.stderr
+    text = page.read_text()
+    assert model in text and text.index("### model:") < text.index("### memory:")
+    assert text.count("### memory:") == 1 and text.count("### ") == 2
+    mem = text[text.index("### memory:"):]
+    assert "Measured 2026-02-03 04:05 UTC at commit `bbbbbbbbbb`." in mem
+    row = next(x for x in mem.splitlines()
+               if x.startswith("| orchestrator growth after the warm-up (%) |"))
+    assert float(row.split("|")[2]) == 0.42 and row.endswith("| yes |")
+    # the page's date and commit stay the first page's; the summary counts both tables
+    # (64 s + 1200 s, one target met in each)
+    assert measured in text.splitlines()
+    assert ("2 benchmarks, 21.1 min; targets met: 2 of 2; re-measured since, each dated in "
+            "its table: memory.") in text
+    # a page of another machine is refused, untouched
+    other = text.replace(f"| cores | {os.cpu_count()} |", "| cores | 999 |")
+    page.write_text(other)
+    r = run_all("--render-only", "--only", "memory", "--results", str(res), "--merge",
+                "--out", str(page))
+    assert r.returncode == 2 and "another machine" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and page.read_text() == other

@@ -16,9 +16,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import shutil
 import socket
-import tempfile
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
@@ -48,6 +46,7 @@ from orchestrator.loop import Encoder
 from orchestrator.modes import SweepBackend
 from orchestrator.sweep.draws import HUMAN_JOINTS, Draw, RunKey
 from orchestrator.sweep.spec import SweepSpec
+from orchestrator.sweep.tempdirs import WorkFolder
 from prosthesis_controller.interface import ControllerMode
 
 #: contexts (controller model x tube) kept per worker; a continuous tube_scale misses
@@ -191,9 +190,9 @@ class Resources:
         self.digest = artifacts.digest()
         #: identifies this set-up (host, process, time): one per worker, not per run
         self.setup_id = f"{socket.gethostname()}:{os.getpid()}:{time.time_ns()}"
-        base = Path(workdir or tempfile.gettempdir()) / f"hpcosim-sweep-{self.digest[:12]}"
-        base.mkdir(parents=True, exist_ok=True)
-        self.workdir = Path(tempfile.mkdtemp(prefix=f"{os.getpid()}-", dir=base))
+        #: this worker's private folder; a killed worker's is removed by the next one
+        self._folder = WorkFolder(self.digest[:12], workdir)
+        self.workdir = self._folder.path
         gait_path = self._put("gait.json", artifacts.gait)
         tube_path = self._put("tube.json", artifacts.tube)
         fmu_path, subject_path, device_path = (
@@ -271,7 +270,7 @@ class Resources:
             if self.fmu is not None:
                 self.fmu.free()
         finally:
-            shutil.rmtree(self.workdir, ignore_errors=True)
+            self._folder.close()
 
 
 # ------------------------------------------------------------------ the run
