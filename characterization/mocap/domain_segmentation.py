@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from characterization.mocap.limb_angles import runs
-from characterization.mocap.step_segmentation import StepBounds
+from characterization.mocap.step_segmentation import StepBounds, take_spans
 from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model.domains import Domain
 
@@ -83,15 +83,18 @@ def domain_segments(steps: StepsArtifact, opt: TouchdownOptions = TouchdownOptio
                     ) -> list[StepBounds]:
     """The model's domains in a take: [touchdown, next touchdown of the other foot - 1],
     labelled by the foot that landed (prosthesis -> ps, human -> pns).  Segments with a
-    missing joint angle are left out."""
+    missing joint angle are left out; in a session's pooled takes
+    (:func:`step_segmentation.take_spans`) each take is segmented on its own, so no
+    segment spans two takes."""
     names = list(steps.joint_names)
-    events = sorted((f, d) for d, j in LANDING_ANKLE.items()
-                    for f in touchdowns(steps.joint_position[:, names.index(j)],
-                                        steps.frame_rate, opt))
     segs = []
-    for (a, da), (b, db) in itertools.pairwise(events):
-        if da == db or b - a < 3:
-            continue  # two touchdowns of one foot in a row: no single support between
-        if np.all(np.isfinite(steps.q[a:b])):
-            segs.append(StepBounds(da, a, b - 1))
+    for s, e in take_spans(steps.time):
+        events = sorted((s + f, d) for d, j in LANDING_ANKLE.items()
+                        for f in touchdowns(steps.joint_position[s:e, names.index(j)],
+                                            steps.frame_rate, opt))
+        for (a, da), (b, db) in itertools.pairwise(events):
+            if da == db or b - a < 3:
+                continue  # two touchdowns of one foot in a row: no single support between
+            if np.all(np.isfinite(steps.q[a:b])):
+                segs.append(StepBounds(da, a, b - 1))
     return segs

@@ -22,12 +22,16 @@ walking speed: the marker's most posterior position relative to the body, Zeni e
 speed is the marker's mean forward speed over the ground across the take.  A foot that
 leaves the ground flat (the synthetic subject's) is not changed by this; a toe-tip marker,
 which leaves its band near the toe-off, little (the OpenSim take's: 3 frames at 60 Hz, from
-1.6-2.3 frames early to 0.7-1.4 late).  The stride time is the highest autocorrelation
-of the contact signal within ``STRIDE_RANGE``; stances and flights shorter than
-``min_phase`` of it (half a swing, about 40 % of a stride) are merged into their
-neighbours, shortest first.  Across the two feet (:func:`alternate`), a foot's two
-touchdowns with no touchdown of the other foot between them are one stance: the shorter of
-the contact or flight run between them is merged away.
+1.6-2.3 frames early to 0.7-1.4 late).  A first stride time is the highest local peak
+of the contact signal's (biased) autocorrelation within ``STRIDE_RANGE``; stances and
+flights shorter than ``min_phase`` of it (half the shortest swing: a slow walker's swing
+is 25-30 % of a 2.6 s stride, and the rule sees a slowly landing foot down early) are
+merged into their neighbours, shortest first; the stride reported is then the median
+interval of the foot's touchdowns (the autocorrelation's without two).  Per stride
+(:func:`strides`): its time, the hip's speed over the ground and its two double supports
+(:func:`double_supports`), the targets a fitted gait must match.  Across the two feet
+(:func:`alternate`), a foot's two touchdowns with no touchdown of the other foot between
+them are one stance: the shorter of the contact or flight run between them is merged away.
 
 Measured (``tests/test_mocap_contact.py``, ``tests/test_mocap_gatk.py``): on the synthetic
 subject (37 strides at 120 Hz, 0.5 mm noise, dropouts) every touchdown and lift-off found
@@ -67,7 +71,7 @@ class ContactOptions:
     height_tol: float = 0.002  # m: above its stance height, at least
     height_spread: float = 3.0  # and at least this many SDs of its stance height
     exit_factor: float = 2.0  # hysteresis: contact ends at this many tolerances
-    min_phase: float = 0.2  # of the stride: the shortest stance or flight kept
+    min_phase: float = 0.1  # of the stride: the shortest stance or flight kept
     cutoff_hz: float = 10.0  # low-pass of the marker positions
     roll_deg: float = 10.0  # a foot pitched this far toe-down and turning on: on its toes
 
@@ -124,19 +128,35 @@ def _schmitt(score: np.ndarray, enter: float, leave: float) -> np.ndarray:
 
 
 def stride_time(contact: np.ndarray, rate: float) -> float:
-    """s: the lag of the highest autocorrelation of the contact signal within
-    ``STRIDE_RANGE`` (NaN if the take is shorter than the range or shows no peak)."""
+    """s: the lag of the highest local peak, within ``STRIDE_RANGE``, of the contact
+    signal's autocorrelation (NaN if the take is shorter than the range or shows no peak).
+
+    The autocorrelation is the biased one (sums over the overlap divided by the take's
+    length): a periodic signal's peaks then fall off with the lag, so the stride's peak
+    wins over its multiples.  The unbiased one (divided by the overlap) rose at two strides
+    on short takes: on the GATK treadmill take's first 2.5 s (touchdowns 1.21 s apart) it
+    gave 2.30 s, and a stride read twice too long merged every swing away (module
+    docstring)."""
     x = contact.astype(float) - contact.mean()
     n = len(x)
     lo, hi = round(STRIDE_RANGE[0] * rate), min(round(STRIDE_RANGE[1] * rate), n - 2)
     if hi <= lo or not np.any(x):
         return float("nan")
     f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[:n] / (n - np.arange(n))
-    k = lo + int(np.argmax(ac[lo:hi + 1]))
-    if ac[k] <= 0 or k in (lo, hi):
+    ac = np.fft.irfft(f * np.conj(f))[:n] / n
+    k = np.arange(max(lo, 1), hi)
+    peaks = k[(ac[k] > ac[k - 1]) & (ac[k] >= ac[k + 1]) & (ac[k] > 0)]
+    if peaks.size == 0:
         return float("nan")
-    return k / rate
+    return float(peaks[np.argmax(ac[peaks])]) / rate
+
+
+def touchdown_stride(touchdowns: Sequence[int], rate: float) -> float:
+    """s: the median interval between a foot's consecutive touchdowns within
+    ``STRIDE_RANGE`` (NaN with fewer than two such touchdowns)."""
+    d = np.diff(np.asarray(touchdowns, float)) / rate
+    d = d[(d >= STRIDE_RANGE[0]) & (d <= STRIDE_RANGE[1])]
+    return float(np.median(d)) if d.size else float("nan")
 
 
 def _events(on: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -180,7 +200,8 @@ def foot_contact(heel: np.ndarray, toe: np.ndarray, time: np.ndarray,
     on, rolled = _lift_after_the_roll(on, P[0], P[-1], time, ground,
                                       np.radians(opt.roll_deg))
     td, lo = _events(on)
-    return FootContact(on, td, lo, ground, T, rolled=rolled)
+    T_td = touchdown_stride(td, rate)
+    return FootContact(on, td, lo, ground, T_td if np.isfinite(T_td) else T, rolled=rolled)
 
 
 def _lift_after_the_roll(on: np.ndarray, heel: np.ndarray, toe: np.ndarray, time: np.ndarray,
@@ -359,4 +380,84 @@ def compare_events(contacts: dict[str, FootContact], events: Sequence[LabEvent],
                 "lab_events": len(lab), "diff_frames": diffs,
                 "max_abs_frames": max(ok) if ok else None,
                 "median_abs_frames": round(float(np.median(ok)), 1) if ok else None}
+    return out
+
+
+@dataclass(frozen=True)
+class DoubleSupport:
+    """Both feet on the ground: from the touchdown of foot ``lands`` (frame ``start``) to
+    the other foot's lift-off (frame ``end``)."""
+
+    lands: str
+    start: int
+    end: int
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Stride:
+    """One stride of foot ``foot``: from its touchdown (frame ``start``) to its next
+    (``end``); ``time`` s; ``speed`` m/s, the hip's over the ground; ``double_support``:
+    foot -> the double support (s) that starts with that foot's touchdown inside the
+    stride (NaN if not found)."""
+
+    foot: str
+    start: int
+    end: int
+    time: float
+    speed: float
+    double_support: dict[str, float]
+
+
+def double_supports(contacts: dict[str, FootContact], rate: float) -> list[DoubleSupport]:
+    """Every double support of a take with both feet: a touchdown of one foot while the
+    other is on the ground, up to the other's next lift-off (before the landing foot's own
+    lift-off).  Empty with fewer than two feet."""
+    if len(contacts) != 2:
+        return []
+    out = []
+    for lands, other in itertools.permutations(contacts, 2):
+        me, ot = contacts[lands], contacts[other]
+        for td in me.touchdowns:
+            if not ot.contact[td]:
+                continue  # a flight phase: no double support
+            lo = [x for x in ot.liftoffs if x > td]
+            mine = [x for x in me.liftoffs if x > td]
+            if lo and (not mine or lo[0] < mine[0]):
+                out.append(DoubleSupport(lands, td, lo[0], (lo[0] - td) / rate))
+    return sorted(out, key=lambda d: d.start)
+
+
+def strides(contacts: dict[str, FootContact], hip_x: np.ndarray, rate: float,
+            foot: str = "prosthesis") -> list[Stride]:
+    """The strides of ``foot`` (from each touchdown to its next) with their time, the hip's
+    speed over the ground (m/s: its forward travel over the stride less the ground's,
+    from the stride's first and last frames with a hip position) and the double supports
+    inside each (:func:`double_supports`)."""
+    c = contacts.get(foot)
+    if c is None:
+        return []
+    ground = float(np.mean([k.ground_speed for k in contacts.values()]))
+    ds = double_supports(contacts, rate)
+    out = []
+    for a, b in itertools.pairwise(c.touchdowns):
+        x = np.asarray(hip_x[a:b + 1], float)
+        ok = np.flatnonzero(np.isfinite(x))
+        speed = ((x[ok[-1]] - x[ok[0]]) * rate / (ok[-1] - ok[0]) - ground
+                 if ok.size > 1 and ok[-1] > ok[0] else float("nan"))
+        inside = {d.lands: d.seconds for d in ds if a <= d.start < b}
+        out.append(Stride(foot, a, b, (b - a) / rate, float(speed),
+                          {f: inside.get(f, float("nan")) for f in contacts}))
+    return out
+
+
+def symmetric_double_support(contact: FootContact, rate: float) -> list[float]:
+    """s, per stride of a take with one foot (a lab recording one side): its stance less
+    half the stride, each of the two double supports when the other foot mirrors this one
+    half a stride later (an estimate: a person's two steps differ)."""
+    out = []
+    for a, b in itertools.pairwise(contact.touchdowns):
+        lo = [x for x in contact.liftoffs if a < x < b]
+        if lo:
+            out.append(((lo[0] - a) - (b - a) / 2) / rate)
     return out

@@ -71,6 +71,12 @@ ANGLE_DEFS = {"th_B": ("hat", None), "th_lh": ("l_thigh", "hat"),
               "th_pa": ("p_foot", "p_shin")}
 #: (c_k, c_a) of delta_p_hip per domain (``model.hip_progress_coefficients``)
 HipCoefficients = Mapping[Domain, tuple[float, float]]
+#: complete steps (a touchdown of one foot to the other's, every limb seen) `mocap process`
+#: needs of a take (docs/recording.md)
+MIN_STEPS = 1
+#: how a lab gets more steps: the end of every refusal that counts them
+MORE_TAKES = ("record a take with at least one full stride, or more walkway trials pooled "
+              "with `hpcosim mocap process A B C --out steps.npz`")
 #: frames: marker-found events further than this from the lab's are a warning (issue 19)
 LAB_EVENT_FRAMES = 3
 
@@ -395,7 +401,8 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
             dropped.append(DroppedStep(b.domain, b.start, b.end, _gap_reason(
                 pitches, b.start, b.end, rate, mapping.processing.max_gap)))
     if not steps:
-        raise MocapError(f"{take.source}: no complete step ({_no_step_reason(dropped, seg)})")
+        raise MocapError(f"{take.source}: no complete step ({_no_step_reason(dropped, seg)}); "
+                         f"`mocap process` needs at least {MIN_STEPS}: {MORE_TAKES}")
     if bounds:
         notes.append(f"partial portions before frame {bounds[0].start} and after frame "
                      f"{bounds[-1].end} are not complete steps")

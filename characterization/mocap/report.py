@@ -10,16 +10,22 @@ Pillow (``plot.py``: matplotlib took 1.2 s of the stage's 2 s budget).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from characterization.mocap.foot_contact import double_supports, strides
 from characterization.mocap.limb_angles import SOURCE_NAMES, LimbPitch
 from characterization.mocap.pipeline import ProcessedTake
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
 from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.json_io import dumps
+
+if TYPE_CHECKING:
+    from characterization.mocap.session import TakeOutcome
 
 ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
@@ -58,6 +64,21 @@ def _limb_summary(lp: LimbPitch, rate: float) -> dict[str, object]:
     }
 
 
+def gait_events(p: ProcessedTake) -> dict[str, list[dict[str, object]]]:
+    """The take's strides (the prosthesis foot's, :func:`foot_contact.strides`: time,
+    speed, its two double supports) and every double support (lands, frames, s): the
+    targets a fitted gait must match."""
+    st = strides(p.contacts, p.q[:, COORDS.index("x_B")], p.frame_rate)
+    return {
+        "strides": [{"foot": s.foot, "start": s.start, "end": s.end,
+                     "stride_time_s": _r(s.time, "s"), "speed_m_s": _r(s.speed, "m_s"),
+                     "double_support_s": {f: _r(v, "s") for f, v in s.double_support.items()}}
+                    for s in st],
+        "double_supports": [{"lands": d.lands, "start": d.start, "end": d.end,
+                             "seconds": _r(d.seconds, "s")}
+                            for d in double_supports(p.contacts, p.frame_rate)]}
+
+
 def qa_summary(p: ProcessedTake) -> dict[str, object]:
     """The QA numbers as plain data (JSON-ready), each rounded to its meaning
     (:data:`DIGITS`)."""
@@ -88,6 +109,7 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
                          "liftoffs_moved_by_roll_frames": list(c.rolled)}
                      for f, c in p.contacts.items()},
         "lab_events": p.lab_events,
+        **gait_events(p),
     }
 
 
@@ -148,6 +170,7 @@ def _events(s: dict) -> list[str]:
     if s["contacts"]:
         lines += ["", "## Foot contact from the markers (touchdown / lift-off frames)", ""]
         lines += [_contact_line(f, c) for f, c in s["contacts"].items()]
+    lines += _gait_lines(s)
     if s["lab_events"]:
         lines += ["", "## Found events against the lab's (frames, found - lab)", "",
                   "| foot | event | in the file | max abs | median abs |", "|---|---|---|---|---|"]
@@ -157,6 +180,31 @@ def _events(s: dict) -> list[str]:
                              f"{_f(v['max_abs_frames'], '.1f')} | "
                              f"{_f(v['median_abs_frames'], '.1f')} |")
     return lines
+
+
+def _gait_lines(s: dict) -> list[str]:
+    """The strides and double supports (ms) of the take, the gait's targets."""
+    lines = ["", "## Strides and double supports (the gait's targets)", ""]
+    if s["strides"]:
+        feet = list(s["strides"][0]["double_support_s"])
+        lines += ["| stride | frames | time (s) | speed (m/s) | "
+                  + " | ".join(f"double support, {f} lands (ms)" for f in feet) + " |",
+                  "|---" * (4 + len(feet)) + "|"]
+        lines += [f"| {k} ({v['foot']}) | {v['start']}-{v['end']} | "
+                  f"{_f(v['stride_time_s'], '.3f')} | {_f(v['speed_m_s'], '.2f')} | "
+                  + " | ".join(_ms(v["double_support_s"][f]) for f in feet) + " |"
+                  for k, v in enumerate(s["strides"])]
+    else:
+        lines.append("No full stride (two touchdowns of the prosthesis foot) in the take.")
+    if s["double_supports"]:
+        lines += ["", "Double supports: " + ", ".join(
+            f"{d['lands']} lands {d['start']}-{d['end']} ({_ms(d['seconds'])} ms)"
+            for d in s["double_supports"]) + "."]
+    return lines
+
+
+def _ms(x: float | None) -> str:
+    return "-" if x is None else f"{1000 * x:.0f}"
 
 
 def qa_markdown(summary: dict) -> str:
@@ -222,3 +270,50 @@ def write_report(steps_path: str | Path, p: ProcessedTake, with_figures: bool = 
     for path, data in files.items():
         atomic_write_bytes(path, data)
     return list(files)
+
+
+def render_session_report(steps_path: str | Path, takes: Sequence[TakeOutcome],
+                          warnings: Sequence[str], with_figures: bool = True
+                          ) -> dict[Path, bytes]:
+    """The QA report of a session (:mod:`characterization.mocap.session`), by output path.
+    One take: that take's report (:func:`render_report`) with the session's warnings; more:
+    ``<stem>.qa.md`` with a line per take and each take's report, ``<stem>.qa.json`` with
+    ``session`` (per take its line or why it gave no step; the warnings) and ``takes``
+    (each take's QA numbers), and each take's figures as ``<stem>_take<k>_<name>.png``."""
+    from characterization.mocap.session import session_summary
+
+    base = Path(steps_path).with_suffix("")
+    session = session_summary(takes, warnings)
+    done = [t for t in takes if t.processed is not None]
+    if len(takes) == 1 and done:
+        p = done[0].processed
+        assert p is not None
+        summary = {**qa_summary(p), "session": session}
+        md = qa_markdown(summary)
+        if warnings:
+            md += "\n## Session\n\n" + "".join(f"- {w}\n" for w in warnings)
+        out = {base.with_name(base.name + ".qa.md"): md.encode(),
+               base.with_name(base.name + ".qa.json"): dumps(summary, indent=2).encode()}
+        if with_figures:
+            for name, png in figures(p).items():
+                out[base.with_name(f"{base.name}_{name}.png")] = png
+        return out
+    summaries: list[dict] = []
+    lines = [f"# Motion-capture QA: a session of {len(takes)} takes", ""]
+    lines += [f"- {t.line()}" for t in takes]
+    if warnings:
+        lines += ["", "## Warnings", ""] + [f"- {w}" for w in warnings]
+    figs: dict[Path, bytes] = {}
+    for k, t in enumerate(takes):
+        if t.processed is None:
+            summaries.append({"source": str(t.path), "error": t.error})
+            continue
+        s = qa_summary(t.processed)
+        summaries.append(s)
+        lines += ["", "#" + qa_markdown(s)]
+        if with_figures:
+            for name, png in figures(t.processed).items():
+                figs[base.with_name(f"{base.name}_take{k}_{name}.png")] = png
+    return {base.with_name(base.name + ".qa.md"): ("\n".join(lines) + "\n").encode(),
+            base.with_name(base.name + ".qa.json"): dumps(
+                {"session": session, "takes": summaries}, indent=2).encode(), **figs}

@@ -102,3 +102,16 @@ def single_support(foot_x: np.ndarray, rate: float, start: int, end: int,
         return None
     a, b = max(moving, key=lambda r: r[1] - r[0])
     return start + a, start + b - 1
+
+
+#: s: the time between the takes pooled into one steps file (:mod:`session`); a frame-time
+#: step longer than half of it starts a new take
+TAKE_GAP = 1.0
+
+
+def take_spans(time: np.ndarray) -> list[tuple[int, int]]:
+    """[first, end) frames of each take pooled into a steps file's ``time`` (s): the takes
+    are separated by ``TAKE_GAP`` (one span for a single take)."""
+    cut = np.flatnonzero(np.diff(np.asarray(time, float)) > TAKE_GAP / 2) + 1
+    bounds = [0, *cut.tolist(), len(time)]
+    return list(itertools.pairwise(bounds))

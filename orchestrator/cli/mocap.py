@@ -48,12 +48,12 @@ def process(
             console.print(f"[yellow]{t.line()}[/]", soft_wrap=True, highlight=False)
             continue
         console.print(f"[bold]{t.path}[/]: {len(p.time)} frames at {p.frame_rate:g} Hz; "
-                      + t.line().split(": ", 1)[1])
+                      + t.line().split(": ", 1)[1], soft_wrap=True, highlight=False)
         _print_take(console, t)
     for w in r.warnings:  # one line each, never wrapped
         console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
     console.print(f"wrote {r.steps_path} ({r.artifact.n_steps} steps) and "
-                  + ", ".join(x.name for x in r.report_paths))
+                  + ", ".join(x.name for x in r.report_paths), soft_wrap=True)
 
 
 def _print_take(console: Console, take: TakeOutcome) -> None:
@@ -74,18 +74,18 @@ def _print_take(console: Console, take: TakeOutcome) -> None:
     for c in ("stride", "frames", "time (s)", "speed (m/s)", "DS human lands (ms)",
               "DS prosthesis lands (ms)"):
         ev.add_column(c, justify="right")
-    for k, s in enumerate(take.strides):
-        ds = s.double_support
-        ev.add_row(str(k), f"{s.start}-{s.end}", f"{s.time:.3f}", f"{s.speed:.3f}",
-                   *(f"{1000 * ds.get(f, float('nan')):.0f}" for f in ("human", "prosthesis")))
+    for k, st in enumerate(take.strides):
+        ev.add_row(str(k), f"{st.start}-{st.end}", f"{st.time:.3f}", f"{st.speed:.3f}",
+                   *(f"{1000 * st.double_support.get(f, float('nan')):.0f}"
+                     for f in ("human", "prosthesis")))
     console.print(ev)
-    for foot, c in p.contacts.items():
-        console.print(f"  {foot} foot touchdowns {list(c.touchdowns)}, lift-offs "
-                      f"{list(c.liftoffs)} (frames)")
-    ds = double_supports(p.contacts, p.frame_rate)
-    if ds:
+    for foot, fc in p.contacts.items():
+        console.print(f"  {foot} foot touchdowns {list(fc.touchdowns)}, lift-offs "
+                      f"{list(fc.liftoffs)} (frames)")
+    both = double_supports(p.contacts, p.frame_rate)
+    if both:
         console.print("  double supports: " + ", ".join(
-            f"{d.lands} lands {d.start}-{d.end} ({1000 * d.seconds:.0f} ms)" for d in ds),
+            f"{d.lands} lands {d.start}-{d.end} ({1000 * d.seconds:.0f} ms)" for d in both),
             soft_wrap=True)
     for d in p.dropped:
         console.print(f"  dropped {d.domain} step, frames {d.start}-{d.end}: {d.reason}")
