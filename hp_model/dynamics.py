@@ -4,6 +4,9 @@ Equations (paper eqs. robotDyn, holoConstr; REFERENCE.md Sec. 2):
 
     D(q) qdd + H(q, qd) = B u + J(q)^T lam,      J qdd + Jdot qd = 0.
 
+D includes the drives' reflected rotor inertias on its diagonal (``Body.armature``); they
+add nothing to H (a rotor spinning with its joint has no velocity-product term here).
+
 H = C qd + G is built by Kane's projection, H = sum_i m_i Jv_i^T (Jdot_vi qd + g e_z)
 (angular terms vanish in the plane since the angular Jacobian is constant), which is exact
 and about 4x cheaper than differentiating D.  The constrained (KKT) system is solved with a
@@ -36,6 +39,9 @@ def mass_matrix_and_bias(tree: PlanarTree, q: ca.SX, qd: ca.SX) -> tuple[ca.SX, 
         if b.inertia > 0:
             Jw = ca.jacobian(a, q)
             D += b.inertia * (Jw.T @ Jw)
+    for coord, j in tree.armature.items():  # reflected rotor inertias: diag(armature)
+        k = tree.coord_index(coord)
+        D[k, k] += j
     return D, H
 
 

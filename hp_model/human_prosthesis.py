@@ -14,9 +14,10 @@ Coordinates, exactly as the paper:
 - Domains (:mod:`hp_model.domains`): the model is built for one :class:`DomainGraph`, the
   paper's (``ps``: prosthesis foot flat + fixed joint, ``pns``: human left foot flat + fixed
   joint; 6 constraints each, wrenches ordered foot F_x, F_z, M_y in world axes, then socket
-  F_x, F_z, M_y) or the multi-contact one (adds ``ds_h``/``ds_p``: the leading foot's heel
-  and the trailing foot's toe as points + fixed joint; 7 constraints, wrenches heel F_x, F_z,
-  toe F_x, F_z, socket F_x, F_z, M_y).
+  F_x, F_z, M_y) or the multi-contact one (adds ``ps_toe``/``pns_toe``: the stance toe as a
+  point + fixed joint, 5 constraints; ``ds_h``/``ds_p``: the leading foot's heel and the
+  trailing foot's toe as points + fixed joint; 7 constraints, wrenches heel F_x, F_z, toe F_x,
+  F_z, socket F_x, F_z, M_y).
 - Socket force F_s: the wrench of the human (thigh/iWalk) on the prosthesis top link at the
   pin, in the top link's frame (which equals the thigh's frame since th_f = 0).
 - Actuators: th_lh, th_lk, th_la, th_rh (human, ratio 1, u in N m at the joint) and
@@ -136,9 +137,10 @@ def build_tree(subject: SubjectConfig, device: DeviceConfig,
         Body("p_top", "r_thigh", planar, SOCKET_COORDS, placement=(0.0, -(L.thigh + l_iw)),
              **link(p.top)),
         Body("p_shin", "p_top", rev, ("th_pk",), placement=(0.0, -p.top.length.value),
-             **link(p.shin)),
+             **link(p.shin), armature=p.knee.armature),
         Body("p_foot", "p_shin", rev, ("th_pa",), placement=(0.0, -p.shin.length.value),
-             mass=pf.mass.value, com=(pf.com_x.value, pf.com_z.value), inertia=pf.inertia.value),
+             mass=pf.mass.value, com=(pf.com_x.value, pf.com_z.value), inertia=pf.inertia.value,
+             armature=p.ankle.armature),
     )
     h_l, h_p = L.ankle_height, pf.ankle_height.value
     frames = (
@@ -227,12 +229,14 @@ class HumanProsthesisModel(HybridModel):
         self.torque_limits = np.array(
             [np.inf] * 4 + [p.knee.torque_limit.value, p.ankle.torque_limit.value])
         self.torque_limits.setflags(write=False)
-        name = "hp12" if self.graph == DomainGraph.PAPER else f"hp12-{self.graph}"
+        name = "hp12" if self.graph == DomainGraph.PAPER else f"hp12_{self.graph}"
         defs = domain_defs(self.graph)
         super().__init__(tree, ACTUATED, ratios, defs, name=name, backend=backend)
         #: each single-support domain's roles resolved to indices (:mod:`hp_model.domains`)
+        #: (the roles of the paper's outputs: flat stances ended by a touchdown)
         self.roles: dict[Domain, DomainRoles] = {
-            d: domain_roles(self, d) for d in self.graph.domains if not d.is_double_support}
+            d: domain_roles(self, d) for d in self.graph.domains
+            if d.is_flat_stance and self.domains[d].swing_frame is not None}
         # eq. (Fsocket): F_s = (J_s D^-1 J_s^T)^-1 (J_s D^-1 (H - B u - J_f^T lam_f) - Jdot_s qd)
         q, qd, u = self.q, self.qd, self.u
         lam_f = ca.SX.sym("lam_foot", 3)
@@ -240,7 +244,7 @@ class HumanProsthesisModel(HybridModel):
         Js = ca.jacobian(h_s, q)
         Jsdqd = ca.jtimes(Js @ qd, q, qd)
         for d in defs:
-            if Domain(d.name).is_double_support:
+            if not Domain(d.name).is_flat_stance:
                 continue
             Jf = ca.jacobian(self.constraint_expr(d.constraints[:1]), q)
             Hbar = self.H - Jf.T @ lam_f

@@ -55,6 +55,10 @@ class Body:
         mass: kg (>= 0; massless bodies are allowed).
         com: centre of mass in the body frame, metres (x, z).
         inertia: moment of inertia about the COM, about y, kg m^2.
+        armature: a drive's reflected rotor inertia at a revolute joint, kg m^2 (J_rotor
+            N^2): added to the mass matrix's diagonal at the joint's coordinate, as
+            Pinocchio's ``model.armature`` (the rotor's own gyroscopic and carrier terms
+            neglected).
     """
 
     name: str
@@ -66,12 +70,18 @@ class Body:
     mass: float = 0.0
     com: tuple[float, float] = (0.0, 0.0)
     inertia: float = 0.0
+    armature: float = 0.0
 
     def __post_init__(self) -> None:
         try:
             object.__setattr__(self, "joint", JointKind(self.joint))
         except ValueError as e:
             raise ModelError(f"body '{self.name}': {e}") from None
+        if not self.armature >= 0:
+            raise ModelError(f"body '{self.name}': armature {self.armature} must be >= 0")
+        if self.armature > 0 and self.joint != JointKind.REVOLUTE:
+            raise ModelError(f"body '{self.name}': an armature needs a revolute joint, not "
+                             f"{self.joint}")
 
 
 @dataclass(frozen=True)
@@ -138,6 +148,11 @@ class PlanarTree:
     @property
     def coord_names(self) -> tuple[str, ...]:
         return tuple(c for b in self.bodies for c in b.coords)
+
+    @property
+    def armature(self) -> dict[str, float]:
+        """Coordinate -> its drive's reflected inertia (kg m^2), the joints that have one."""
+        return {b.coords[0]: b.armature for b in self.bodies if b.armature > 0}
 
     @property
     def total_mass(self) -> float:

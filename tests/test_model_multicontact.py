@@ -26,7 +26,8 @@ def mc_model(model) -> HumanProsthesisModel:
 
 def test_graphs_are_cycles_with_the_paper_kept():
     assert DomainGraph.PAPER.domains == PAPER_DOMAINS == (Domain.PS, Domain.PNS)
-    assert MC.domains == (Domain.PS, Domain.DS_H, Domain.PNS, Domain.DS_P)
+    assert MC.domains == (Domain.PS, Domain.PS_TOE, Domain.DS_H, Domain.PNS, Domain.PNS_TOE,
+                          Domain.DS_P)
     for g in DomainGraph:
         walk = [g.domains[0]]
         for _ in g.domains:
@@ -38,8 +39,10 @@ def test_graphs_are_cycles_with_the_paper_kept():
 
 def test_guards_are_the_next_contacts_touchdown():
     assert [DomainGraph.PAPER.touchdown_frame(d) for d in PAPER_DOMAINS] == ["l_sole", "p_sole"]
-    # heel strike, then the leading foot lands flat: its toe touches down
-    assert [MC.touchdown_frame(d) for d in MC.domains] == ["l_heel", "l_toe", "p_heel", "p_toe"]
+    # heel off (a lift-off: no touchdown), heel strike, then the leading foot lands flat: its
+    # toe touches down
+    assert [MC.touchdown_frame(d) for d in MC.domains] == [
+        None, "l_heel", "l_toe", None, "p_heel", "p_toe"]
 
 
 def test_double_supports_hold_leading_heel_and_trailing_toe(mc_model):
@@ -51,7 +54,10 @@ def test_double_supports_hold_leading_heel_and_trailing_toe(mc_model):
         assert cd.wrench_slice(f"{lead}_heel") == slice(0, 2)
         assert cd.wrench_slice(f"{trail}_toe") == slice(2, 4)
         assert cd.wrench_slice("socket") == slice(4, 7)
-    assert set(mc_model.roles) == {Domain.PS, Domain.PNS}
+    assert set(mc_model.roles) == set()  # the paper's outputs: flat stances ended by touchdown
+    for d, side in ((Domain.PS_TOE, "p"), (Domain.PNS_TOE, "l")):
+        assert mc_model.domains[d].n_constraints == 2 + 3
+        assert mc_model.domains[d].wrench_slice(f"{side}_toe") == slice(0, 2)
 
 
 def test_paper_model_is_unchanged_by_the_graph(model):

@@ -1,5 +1,6 @@
 """D(q) and H(q, qd) against Pinocchio, an independent rigid-body library, loading a URDF
-generated from the same parameters (same coordinates and signs: pitch about +y)."""
+generated from the same parameters (same coordinates and signs: pitch about +y) with the
+drives' reflected rotor inertias as Pinocchio's ``model.armature``."""
 
 from __future__ import annotations
 
@@ -16,9 +17,15 @@ REL_TOL = 1e-8
 
 
 def _pin(tree):
+    """Pinocchio's model of the tree's URDF, with the drives' reflected rotor inertias set as
+    its ``armature`` (the URDF has no field for them)."""
     pm = pin.buildModelFromXML(to_urdf(tree))
     pm.gravity.linear = np.array([0.0, 0.0, -tree.gravity])
     idx = [pm.idx_vs[pm.getJointId(n)] for n in tree.coord_names]
+    armature = np.zeros(pm.nv)
+    for c, j in tree.armature.items():
+        armature[idx[tree.coord_index(c)]] = j
+    pm.armature = armature
     return pm, pm.createData(), idx
 
 

@@ -39,6 +39,7 @@ from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import HipProgress, phase
+from hp_model.tree import PlanarTree
 
 
 class FitSegments(Choice):
@@ -259,6 +260,45 @@ def walking_failures(verification: Mapping) -> list[str]:
     return failed
 
 
+#: m: the legs below the knee, the person's (shank + ankle height) and the prosthesis side
+#: (iWalk + pylon + shin + foot), differ by more than this: a warning (a prosthetist cuts
+#: the pylon to the user's leg; the default device is cut to the example subject's)
+LEG_LENGTH_TOLERANCE = 0.02
+
+
+def _below(tree: PlanarTree, frame: str, knee: str) -> float:
+    """Height (m) of the frame ``knee`` above the frame ``frame`` with every coordinate
+    zero (the legs straight down)."""
+    def depth(name: str) -> float:
+        f = tree.frame(name)
+        return f.point[1] + sum(b.placement[1] for b in tree.chain(f.body))
+    return depth(knee) - depth(frame)
+
+
+def leg_lengths(model: HumanProsthesisModel) -> tuple[float, float]:
+    """(the person's, the prosthesis side's) length from the knee to the sole (m), from the
+    model's tree: shank + ankle height; iWalk + pylon + shin + foot."""
+    return _below(model.tree, "l_sole", "l_knee"), _below(model.tree, "p_sole", "r_knee")
+
+
+def check_subject_fits_steps(model: HumanProsthesisModel, steps: StepsArtifact, src: str
+                             ) -> list[str]:
+    """Before any optimization (the subject itself is checked when read): the steps hold a
+    step (else a one-line :class:`FitError`); returns warnings, one line each: the
+    person's leg and the device's prosthesis side of different lengths
+    (:data:`LEG_LENGTH_TOLERANCE`)."""
+    if not steps.n_steps:
+        raise FitError(f"{src}: gait fit: the steps file holds no step")
+    human, device = leg_lengths(model)
+    if abs(human - device) <= LEG_LENGTH_TOLERANCE:
+        return []
+    top = model.device.prosthesis.top.length.value + human - device  # the pylon that fits
+    return [f"subject '{model.subject.name}': the leg below the knee (shank + ankle height, "
+            f"{human:.3f} m) and the device's prosthesis side (iWalk + pylon + shin + foot, "
+            f"{device:.3f} m) differ by {abs(human - device) * 1000:.0f} mm: a device whose "
+            f"pylon is cut to this leg has prosthesis.top.length = {top:.3f} m (--device)"]
+
+
 def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions,
              src: str = "steps", verify: bool = True,
              progress: Callable[[str], None] | None = None,
@@ -275,7 +315,12 @@ def fit_gait(model: HumanProsthesisModel, steps: StepsArtifact, opt: PHZDOptions
         say("Bezier regression of the steps")
         reg = regress_steps(model, steps, opt.degree, src, segments)
         say("PHZD optimization (IPOPT)")
-        res = optimize_gait(model, reg.targets, opt)
+        try:
+            res = optimize_gait(model, reg.targets, opt)
+        except ValueError as e:  # IPOPT ended on parameters that are no gait
+            raise GaitOptimizationError(
+                f"{src}: gait fit, PHZD optimization: IPOPT ended on parameters that are no "
+                f"gait ({e}); no gait written") from None
         if not res.success:
             raise GaitOptimizationError(
                 f"the gait optimization did not converge: IPOPT status '{res.status}' after "

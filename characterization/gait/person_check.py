@@ -60,12 +60,16 @@ class StanceForce:
     """One foot's ground reaction over its stance, uniformly sampled on 0..1 of the stance:
     ``fx`` forward, ``fz`` up (N, the ground on the foot, sagittal frame); ``cop_x`` m along
     x in the foot's sole coordinates (NaN where unloaded; optional on the take side);
-    ``sole`` (heel end, toe end) m in the same coordinates, for the gait's CoP check."""
+    ``sole`` (heel end, toe end) m in the same coordinates, for the gait's CoP check;
+    ``pivot`` True where the foot turns about its heel or toe point (a multi-contact gait's
+    heel strike and push-off: its centre of pressure is that point, on the sole's end by
+    design, so the margin applies where the foot is flat)."""
 
     fx: np.ndarray
     fz: np.ndarray
     cop_x: np.ndarray | None = None
     sole: tuple[float, float] | None = None
+    pivot: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "fx", _ro(self.fx))
@@ -218,8 +222,8 @@ def _grf_rows(foot: str, take: WalkSummary, gait: WalkSummary, lim: Limits) -> l
 def cop_heel_to_toe(s: StanceForce, body_weight: float, lim: Limits = LIMITS
                     ) -> tuple[bool, float, str]:
     """(passed, travel as a fraction of the sole, why): the loaded part's centre of
-    pressure inside the sole by ``cop_margin_m`` and moving heel to toe by at least
-    ``cop_travel`` of the sole."""
+    pressure inside the sole by ``cop_margin_m`` (where the foot is flat: not on a
+    ``pivot``) and moving heel to toe by at least ``cop_travel`` of the sole."""
     if s.cop_x is None or s.sole is None:
         return False, float("nan"), "no centre of pressure or sole"
     heel, toe = s.sole
@@ -228,9 +232,9 @@ def cop_heel_to_toe(s: StanceForce, body_weight: float, lim: Limits = LIMITS
     m = (s.fz > LOADED_BW * body_weight) & np.isfinite(c)
     if not m.any():
         return False, float("nan"), "never loaded"
-    c = c[m]
-    travel = float((c[-1] - c[0]) / length)
-    lo, hi = float(c.min()), float(c.max())
+    flat = m if s.pivot is None else m & ~np.asarray(s.pivot, bool)
+    travel = float((c[m][-1] - c[m][0]) / length)
+    lo, hi = (float(c[flat].min()), float(c[flat].max())) if flat.any() else (heel + 1, toe - 1)
     why = []
     if lo < heel + lim.cop_margin_m:
         why.append(f"behind the heel margin by {1000 * (heel + lim.cop_margin_m - lo):.0f} mm")

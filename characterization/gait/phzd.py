@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-from numpy.typing import ArrayLike
 
+from characterization.gait.nlp import NLP
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.domains import N_Y2, PAPER_DOMAINS, Domain
@@ -78,6 +78,8 @@ class PHZDOptions:
     #  angles); on the model-generated subject (true offsets 0) IPOPT then drifted to
     #  offsets of 8.6 deg and a gait 8.8 deg from the truth, at 0.2 deg from the data
     duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
+    min_step: float = 0.05  # m, least hip progress p_max - p_min per domain
+    min_hip_velocity: float = 0.05  # m/s, least v_hip (the regression's own floor)
     offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
     expand: bool = False  # expand the NLP to SX: 15x faster derivatives, but on the
     #  synthetic subject IPOPT then ended in a far worse local optimum (RMS 15-47 deg)
@@ -168,52 +170,7 @@ def initial_guess(model: HumanProsthesisModel, vc: VirtualConstraints, p: GaitPa
     return {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(p.nominal_duration)}
 
 
-class _NLP:
-    """The NLP under construction: the decision variables w (initial guess w0, bounds lbw,
-    ubw) and the constraints g (bounds lbg, ubg), in the order they are added."""
-
-    def __init__(self) -> None:
-        self.w: list[ca.MX] = []
-        self.w0: list[np.ndarray] = []
-        self.lbw: list[np.ndarray] = []
-        self.ubw: list[np.ndarray] = []
-        self.g: list[ca.MX] = []
-        self.lbg: list[np.ndarray] = []
-        self.ubg: list[np.ndarray] = []
-
-    def var(self, name: str, shape: tuple[int, int], init: ArrayLike, lb: ArrayLike = -np.inf,
-            ub: ArrayLike = np.inf) -> ca.MX:
-        """A new block of variables (column-major in w) with its initial guess and bounds."""
-        v = ca.MX.sym(name, *shape)
-        self.w.append(ca.vec(v))
-        init = np.asarray(init, dtype=float)
-        if init.ndim == 1 and shape[1] == 1:
-            init = init[:, None]
-        self.w0.append(np.broadcast_to(init, shape).ravel(order="F"))
-        self.lbw.append(np.broadcast_to(lb, shape).ravel(order="F"))
-        self.ubw.append(np.broadcast_to(ub, shape).ravel(order="F"))
-        return v
-
-    def eq(self, expr: ca.MX) -> None:
-        """expr = 0 (every element)."""
-        self.g.append(ca.vec(expr))
-        self.lbg.append(np.zeros(self.g[-1].shape[0]))
-        self.ubg.append(np.zeros(self.g[-1].shape[0]))
-
-    def geq(self, expr: ca.MX, lo: float = 0.0) -> None:
-        """expr >= lo (every element)."""
-        self.g.append(ca.vec(expr))
-        self.lbg.append(np.full(self.g[-1].shape[0], lo))
-        self.ubg.append(np.full(self.g[-1].shape[0], np.inf))
-
-    def within(self, expr: ca.MX, lo: float, hi: float) -> None:
-        """lo <= expr <= hi, expr a scalar."""
-        self.g.append(expr)
-        self.lbg.append(np.array([lo]))
-        self.ubg.append(np.array([hi]))
-
-
-def _domain_variables(nlp: _NLP, model: HumanProsthesisModel, vc: VirtualConstraints,
+def _domain_variables(nlp: NLP, model: HumanProsthesisModel, vc: VirtualConstraints,
                       p_mc: GaitParams, opt: PHZDOptions) -> dict[str, ca.MX]:
     """The decision variables of one domain (states, accelerations, torques u, wrenches
     lam at the 2 nodes - 1 points; duration T; gait parameters theta; offsets delta), with
@@ -233,7 +190,7 @@ def _domain_variables(nlp: _NLP, model: HumanProsthesisModel, vc: VirtualConstra
     }
 
 
-def _collocation(nlp: _NLP, X: dict[str, ca.MX], f_eq: ca.Function, f_in: ca.Function,
+def _collocation(nlp: NLP, X: dict[str, ca.MX], f_eq: ca.Function, f_in: ca.Function,
                  opt: PHZDOptions) -> None:
     """One domain's path constraints at every point (:func:`_point_functions`) and its
     Hermite-Simpson defects (separated form: nodes at even points, midpoints at odd)."""
@@ -253,7 +210,7 @@ def _collocation(nlp: _NLP, X: dict[str, ca.MX], f_eq: ca.Function, f_in: ca.Fun
     nlp.eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
 
 
-def _boundaries(nlp: _NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
+def _boundaries(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
                 f_out: ca.Function, opt: PHZDOptions) -> None:
     """One domain's ends: the start on the PHZD surface (y2 = dy2 = 0) at tau = 0 with the
     stance foot flat on the ground, the end at tau = 1; the guard (swing sole on the ground,
@@ -266,6 +223,11 @@ def _boundaries(nlp: _NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     nlp.eq(tau0)
     _, tau1 = f_out(q[:, -1], qd[:, -1], X["theta"])
     nlp.eq(tau1 - 1.0)
+    # the phase is defined only while the hip progresses: without these bounds IPOPT can
+    # collapse the step (p_max = p_min, tau = 0/0) where no walking gait is feasible
+    _, v_hip, p_min, p_max = unpack_symbolic(X["theta"], opt.degree)
+    nlp.geq(step_length(p_min, p_max), opt.min_step)
+    nlp.geq(v_hip, opt.min_hip_velocity)
     h_d = ca.Function("h", [model.q], [model.h[d]])
     nlp.eq(h_d(q[:, 0])[1:])  # stance sole z = 0, pitch = 0; socket q_f = 0
     fe = model.frame_expr(model.roles[d].swing_frame)
@@ -302,7 +264,7 @@ def _add_domain_cost(cost: ca.MX, X: dict[str, ca.MX], targets: DataTargets, d: 
     return cost
 
 
-def _impacts(nlp: _NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str, ca.MX]]
+def _impacts(nlp: NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str, ca.MX]]
              ) -> None:
     """The impacts ps -> pns and pns -> ps (impulse variables; periodic up to a forward
     translation)."""
@@ -324,7 +286,7 @@ def _impacts(nlp: _NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str,
             nlp.eq(q0n[1:] - qe[1:])  # x_B free: the ps start fixes the sole at x = 0
 
 
-def _solve(nlp: _NLP, cost: ca.MX, opt: PHZDOptions) -> tuple[dict, dict, float]:
+def _solve(nlp: NLP, cost: ca.MX, opt: PHZDOptions) -> tuple[dict, dict, float]:
     """IPOPT's solution, its statistics and the solve's wall time (s)."""
     problem = {"x": ca.vertcat(*nlp.w), "f": cost, "g": ca.vertcat(*nlp.g)}
     ipopt: dict[str, int | float | str] = {
@@ -340,7 +302,7 @@ def _solve(nlp: _NLP, cost: ca.MX, opt: PHZDOptions) -> tuple[dict, dict, float]
     return sol, solver.stats(), time.perf_counter() - t0
 
 
-def _result(nlp: _NLP, dec: dict[Domain, dict[str, ca.MX]], sol: dict, stats: dict,
+def _result(nlp: NLP, dec: dict[Domain, dict[str, ca.MX]], sol: dict, stats: dict,
             elapsed: float, opt: PHZDOptions) -> PHZDResult:
     """The solution's gait parameters, offsets, durations and trajectories per domain."""
     P = 2 * opt.nodes - 1
@@ -371,7 +333,7 @@ def optimize_gait(model: HumanProsthesisModel, targets: DataTargets,
                   opt: PHZDOptions | None = None) -> PHZDResult:
     """Solve the two-domain PHZD optimization with IPOPT (exact Hessian, MUMPS)."""
     opt = opt or PHZDOptions()
-    nlp = _NLP()
+    nlp = NLP()
     dec: dict[Domain, dict[str, ca.MX]] = {}
     cost = ca.MX(0)
     for d in PAPER_DOMAINS:

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from characterization.mocap.subject_from_take import c3d_subject_metadata
 from characterization.mocap.take import LabEvent, MocapError, ModelOutput, Take
 from hp_model.atomic_io import atomic_write_with
 
@@ -168,7 +169,8 @@ def take_from_c3d(c: Any, src: str) -> Take:
     up = file_up_axis(par)
     return Take(source=src, frame_rate=rate, time=time, markers=markers,
                 up_axis=up or "+z", up_axis_source="POINT:Y_SCREEN" if up else "",
-                metadata={"format": "c3d"}, events=lab_events(c["parameters"], src),
+                metadata={"format": "c3d", **c3d_subject_metadata(c["parameters"])},
+                events=lab_events(c["parameters"], src),
                 model_outputs=outputs)
 
 

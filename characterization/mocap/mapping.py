@@ -34,6 +34,10 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     lowpass_hz = 15.0      # zero-phase Butterworth on limb pitches; 0 = off
     [calibration]
     static_trial = "static.c3d"  # standing in the neutral posture: per-limb pitch offsets
+    [subject]              # the person, when the take's file does not say (docs/subject.md)
+    mass_kg = 72.5
+    height_m = 1.78
+    sex = "male"           # selects the segment-mass table's column
 
 A limb may also state an offset: ``offset_deg = 5.0`` (its measured pitch at zero pitch).
 """
@@ -54,7 +58,13 @@ from pydantic import (
 
 from characterization.mocap.take import MocapError
 from hp_model.choices import Choice
-from hp_model.config import NonNegative, Positive, StrictConfig, validation_message
+from hp_model.config import (
+    NonNegative,
+    Positive,
+    StrictConfig,
+    SubjectMeasures,
+    validation_message,
+)
 
 SCHEMA_VERSION = 1
 LIMBS = ("hat", "l_thigh", "l_shank", "l_foot", "r_thigh", "p_shin", "p_foot")
@@ -140,6 +150,8 @@ class MocapMapping(StrictConfig):
     segmentation: Segmentation | None = None
     processing: Processing = Processing()
     calibration: Calibration | None = None
+    #: the person: mass_kg, height_m, sex (used when the take's file carries none)
+    subject: SubjectMeasures | None = None
 
     @field_validator("limbs")
     @classmethod

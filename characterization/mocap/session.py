@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +38,7 @@ from characterization.mocap.steps_artifact import StepsArtifact, StepsFileError,
 from characterization.mocap.take import MocapError
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
+from hp_model.config import SubjectConfig
 from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.json_io import dumps
 
@@ -89,6 +90,9 @@ class SessionResult:
     report_paths: tuple[Path, ...]
     #: the session's warnings (takes without steps, too few steps for a stage), one line each
     warnings: tuple[str, ...]
+    #: the subject stored with the steps, and where each of its values came from
+    subject: SubjectConfig | None = None
+    provenance: dict[str, str] = field(default_factory=dict)
 
     @property
     def processed(self) -> list[ProcessedTake]:
@@ -217,12 +221,7 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     step."""
     from characterization.mocap.mapping import MocapMapping, default_mapping, load_mapping
     from characterization.mocap.report import render_session_report
-    from hp_model.config import (
-        default_device_path,
-        default_subject_path,
-        load_device,
-        load_subject,
-    )
+    from hp_model.config import default_device_path, load_device, load_subject, subject_record
     from hp_model.human_prosthesis import build_tree, hip_progress_coefficients
 
     outp = Path(out)
@@ -236,20 +235,27 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
             raise FileNotFoundError(f"{p}: no such file")
     m = (mapping if isinstance(mapping, MocapMapping) else
          load_mapping(mapping) if mapping is not None else default_mapping())  # type: ignore[arg-type]
-    subj = load_subject(subject or default_subject_path())
+    from characterization.mocap.files import read_take
+    from characterization.mocap.subject_from_take import session_subject
+
+    static = read_take(m.calibration.static_trial) if m.calibration is not None else None
+    if subject:  # --subject FILE (a TOML, or a steps/gait file holding one)
+        subj, prov = load_subject(subject), {"*": f"--subject {subject}"}
+    else:  # the person of the takes (docs/subject.md)
+        subj, prov = session_subject(paths, m, static)
     tree = build_tree(subj, load_device(device or default_device_path()))
     coef = {d: hip_progress_coefficients(tree, d) for d in PAPER_DOMAINS}
     offsets = None
-    if m.calibration is not None:
-        from characterization.mocap.files import read_take
-        offsets = static_offsets(read_take(m.calibration.static_trial), m, subj.lengths)
+    if static is not None:
+        offsets = static_offsets(static, m, subj.lengths)
     takes = process_takes(paths, lambda t: process_take(t, m, coef, subj.lengths, offsets))
     good = [t.processed for t in takes if t.processed is not None]
     if not good:
         raise MocapError("no take of the session gives a step: " + "; ".join(
             t.line() for t in takes))
     notes: list[str] = []
-    art = pool([to_artifact(p) for p in good], notes)
+    art = replace(pool([to_artifact(p) for p in good], notes),
+                  subject=subject_record(subj, prov))
     warns = [str(t.error) for t in takes if t.processed is None]
     warns += notes + stage_warnings(art)
     files = render_session_report(outp, takes, warns, with_figures)
@@ -257,7 +263,7 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     for path, data in files.items():  # the steps file last
         atomic_write_bytes(path, data)
     return SessionResult(tuple(takes), art, outp, tuple(p for p in files if p != outp),
-                         tuple(warns))
+                         tuple(warns), subj, prov)
 
 
 def session_summary(takes: Sequence[TakeOutcome], warnings: Sequence[str]) -> dict:

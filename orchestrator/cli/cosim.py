@@ -58,12 +58,14 @@ def serve(
         "required over zenoh (docs/cosim.md, who may drive the controller).")] = None,
 ) -> None:
     """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
+    from orchestrator.cli.subject import subject_source
     from prosthesis_controller.node import bus_config_from_args, run_node
 
     cfg = bus_config_from_args(str(bus) if bus else None, interface=interface, run_id=run_id,
                                channel=channel, listen=listen, connect=connect,
                                key_file=str(key) if key else None)
-    s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3)
+    s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3,
+                 subject=subject_source(None, gait))  # the gait's own subject
     Console(stderr=True).print(f"controller node: {s}")
 
 
@@ -97,7 +99,11 @@ def run(
     console = Console()
     if record is not None:  # before the FMU build and the controller start
         check_output_folder(record.parent, "--record")
-    cfg = CosimConfig(controller=controller, gait=gait, tube=tube, subject=subject,
+    from orchestrator.cli.subject import subject_source
+
+    who = subject_source(subject, gait)  # --subject, else the gait's own
+    cfg = CosimConfig(controller=controller, gait=gait, tube=tube,
+                      subject=Path(who) if who else None,
                       device=device, steps=steps, perturb=perturb, mode=mode, record=record,
                       fmu=fmu, max_time=max_time, pin_cpus=pin)
 
@@ -287,7 +293,9 @@ def animate_cmd(
     if not recording and (gait is None or tube is None):
         raise typer.BadParameter(f"scenario {source!r} needs --gait and --tube",
                                  param_hint="--gait/--tube")
-    model = hp_model.load_model(str(subject) if subject else None,
+    from orchestrator.cli.subject import subject_source
+
+    model = hp_model.load_model(subject_source(subject, None if recording else gait),
                                 str(device) if device else None)
     if recording:
         data = recording_gif(source, model, fps=fps, max_seconds=seconds)

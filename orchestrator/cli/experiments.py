@@ -57,11 +57,12 @@ def experiments(
     import hp_model
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import load_gait
+    from orchestrator.cli.subject import subject_source
     from orchestrator.experiments.paper import run_experiments
     from orchestrator.experiments.report import write_report
 
     console = Console()
-    model = hp_model.load_model(str(subject) if subject else None,
+    model = hp_model.load_model(subject_source(subject, gait),
                                 str(device) if device else None)
     g = load_gait(gait, model.parameter_hash())
     tb = load_tube(tube, g.hash())

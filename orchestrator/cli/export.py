@@ -31,7 +31,9 @@ def gait_export(
     from orchestrator.cli.options import check_output_folder
 
     check_output_folder(out)
-    model = hp_model.load_model(str(subject) if subject else None,
+    from orchestrator.cli.subject import subject_source
+
+    model = hp_model.load_model(subject_source(subject, gait),
                                 str(device) if device else None)
     g = load_gait(gait, model.parameter_hash())
     files = export_gait(g, model, out, src=str(gait))

@@ -32,11 +32,12 @@ def build(
     """Generate C from the model, compile it into an FMI 2.0 (or, --fmi 3, FMI 3.0)
     co-simulation FMU (Linux x86-64 binary plus sources), and validate it."""
     from human_fmu import build_fmu
+    from orchestrator.cli.subject import subject_source
 
     console = Console()
     with console.status("building the FMU") as status:
-        info = build_fmu(gait, out, subject, device, progress=lambda m: status.update(m),
-                         fmi_version=fmi)
+        info = build_fmu(gait, out, subject_source(subject, gait), device,
+                         progress=lambda m: status.update(m), fmi_version=fmi)
     t = Table(title=f"{info.path} ({info.size_bytes / 1024:.0f} KiB)")
     t.add_column("item")
     t.add_column("value")

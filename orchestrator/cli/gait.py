@@ -58,18 +58,25 @@ def fit(
     """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
     import hp_model
     from characterization.gait.figures import save_gait_figure
-    from characterization.gait.fit import fit_gait, fit_segments
+    from characterization.gait.fit import check_subject_fits_steps, fit_gait, fit_segments
     from characterization.gait.phzd import PHZDOptions
     from characterization.mocap.steps_artifact import load_steps
-    from hp_model.gait_artifact import save_gait
+    from hp_model.artifacts import save_json
+    from hp_model.config import SUBJECT_KEY, subject_record
+    from hp_model.gait_artifact import to_document
     from orchestrator.cli.options import check_output_file
+    from orchestrator.cli.subject import subject_note, subject_source
 
     console = Console(stderr=True)
     portions = fit_segments(segments)
     check_output_file(out)
     data = load_steps(steps)
-    model = hp_model.load_model(str(subject) if subject else None,
+    # the subject (--subject, else the steps') checked before any optimization starts
+    model = hp_model.load_model(subject_source(subject, steps),
                                 str(device) if device else None)
+    console.print(subject_note(subject, steps), soft_wrap=True, highlight=False)
+    for w in check_subject_fits_steps(model, data, str(steps)):
+        console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
     opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter, w_offset=offset_weight,
                       touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip,
                       track_kp=track_kp, track_kd=track_kd)
@@ -77,7 +84,10 @@ def fit(
         gait = fit_gait(model, data, opt, src=str(steps), verify=verify,
                         progress=lambda m: status.update(m), segments=portions,
                         allow_unstable=allow_unstable)
-    save_gait(out, gait)
+    provenance = ({"*": f"--subject {subject}"} if subject is not None else
+                  dict(data.subject.get("provenance", {})) if data.subject else
+                  {"*": "the shipped example subject"})
+    save_json(out, {**to_document(gait), SUBJECT_KEY: subject_record(model.subject, provenance)})
     if figure:
         save_gait_figure(out.with_suffix(".png"), gait, data)
     _summary(Console(), gait, out)

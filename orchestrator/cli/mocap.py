@@ -13,6 +13,7 @@ from orchestrator.cli.options import DeviceOpt, SubjectOpt
 
 if TYPE_CHECKING:
     from characterization.mocap.session import TakeOutcome
+    from hp_model.config import SubjectConfig
 
 mocap_app = typer.Typer(help="Motion capture: takes to per-step joint trajectories.",
                         no_args_is_help=True)
@@ -52,8 +53,22 @@ def process(
         _print_take(console, t)
     for w in r.warnings:  # one line each, never wrapped
         console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
+    if r.subject is not None:
+        _print_subject(console, r.subject, r.provenance)
     console.print(f"wrote {r.steps_path} ({r.artifact.n_steps} steps) and "
                   + ", ".join(x.name for x in r.report_paths), soft_wrap=True)
+
+
+def _print_subject(console: Console, s: SubjectConfig, provenance: dict[str, str]) -> None:
+    """The subject stored with the steps, and where each value came from (one line each)."""
+    L = s.lengths
+    console.print(f"subject '{s.name}': {s.body_mass:g} kg, {s.sex}, height "
+                  f"{provenance.get('height_m', '?')} m; thigh {L.thigh:.3f}, shank "
+                  f"{L.shank:.3f}, ankle height {L.ankle_height:.3f}, foot {L.foot:.3f}, heel "
+                  f"{L.heel:.3f}, trunk {L.trunk:.3f} m", soft_wrap=True, highlight=False)
+    for k, v in provenance.items():
+        if k != "height_m" and v:
+            console.print(f"  {k}: {v}", soft_wrap=True, highlight=False)
 
 
 def _print_take(console: Console, take: TakeOutcome) -> None:

@@ -8,7 +8,9 @@ from typing import Annotated
 import typer
 
 SubjectOpt = Annotated[Path | None, typer.Option(
-    "--subject", help="Subject TOML (default: the shipped example subject).", dir_okay=False)]
+    "--subject", help="Subject TOML, or a steps/gait file holding one (default: the subject "
+    "stored in the steps or gait file the verb reads, else the shipped example subject).",
+    dir_okay=False)]
 DeviceOpt = Annotated[Path | None, typer.Option(
     "--device", help="Device TOML (default: AMPRO3 + iWalk estimates).", dir_okay=False)]
 

@@ -81,13 +81,14 @@ def fit(
         write_outputs,
     )
     from hp_model.gait_artifact import load_gait
+    from orchestrator.cli.subject import subject_source
 
     console = Console()
     if out.suffix != ".json":
         raise PlaybackError(f"{out}: the tube file must end in .json")
     check_output_file(out)
     with console.status("loading the model (compiled once, then cached)"):
-        model = hp_model.load_model(str(subject) if subject else None,
+        model = hp_model.load_model(subject_source(subject, gait),
                                     str(device) if device else None)
         g = load_gait(gait, model.parameter_hash())
         s = load_steps(steps)

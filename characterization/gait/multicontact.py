@@ -1,0 +1,539 @@
+"""The person's gait on the multi-contact graph: a trajectory optimization by direct
+collocation over ps -> ds_h -> pns -> ds_p (:class:`hp_model.domains.DomainGraph`), fitted
+to a take's joint angles, domain durations and walking speed.
+
+Each domain d is discretised by Hermite-Simpson collocation (separated form, as
+:mod:`characterization.gait.phzd`); at every point the model's equations hold in
+inverse-dynamics form,
+
+    D qdd + H = B u + J_d^T lam,     J_d qdd + Jdot_d qd = 0,
+
+with the socket's fixed joint q_f = 0 as bounds.  Ground contact is unilateral and rough:
+per foot contact F_z >= ``min_normal_force`` (flat) or >= 0 (heel, toe), |F_x| <= mu F_z,
+and a flat foot's centre of pressure inside its sole with ``cop_margin``; the feet not on
+the ground stay above it.  A domain ends at its guard (the next domain's new contact touches
+down: the swing heel moving down at ``touchdown_velocity`` at least, or the leading toe as the
+foot lands flat) and the next starts with the rigid impact into its constraints (impulse
+variables, pushing on the ground); where a double support ends the trailing toe leaves the
+ground upward.  The cycle closes with a forward translation of one stride.
+
+Cost: the integral of squared differences of the trunk pitch and the six joint angles from
+the take's (per domain, over normalized time), the squared differences of each domain's
+duration and of the mean speed from the take's, and a small torque regularization (a double
+support has 5 degrees of freedom and 6 torques).
+
+This is the gait of the person, as a trajectory; the virtual constraints the controllers
+follow are single-support only so far (:mod:`characterization.gait.phzd`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from characterization.gait.nlp import NLP
+from hp_model.blas_threads import single_threaded_blas
+from hp_model.domains import Domain, DomainGraph, FootContact
+from hp_model.human_prosthesis import SOCKET_COORDS, HumanProsthesisModel
+
+GRAPH = DomainGraph.MULTICONTACT
+#: the coordinates fitted to the take: trunk pitch and the six joints
+TRACKED = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
+#: the ground points of the two feet
+FOOT_POINTS = ("l_heel", "l_toe", "p_heel", "p_toe")
+
+
+class MultiContactError(RuntimeError):
+    """The optimization could not start (bad targets) or IPOPT did not converge."""
+
+
+@dataclass(frozen=True)
+class MultiContactTargets:
+    """What the take gives the fit: per domain its duration (s) and its tracked angles
+    (rad, ``TRACKED`` rows) at ``samples`` evenly spaced instants of the domain (first and
+    last included), and the mean walking speed (m/s)."""
+
+    durations: dict[Domain, float]
+    angles: dict[Domain, np.ndarray]
+    speed: float
+
+    def __post_init__(self) -> None:
+        for d in GRAPH.domains:
+            if d not in self.durations or d not in self.angles:
+                raise MultiContactError(f"targets: no {d} (need each of "
+                                        f"{', '.join(GRAPH.domains)})")
+            T = self.durations[d]
+            if not (np.isfinite(T) and 0.01 < T < 3.0):
+                raise MultiContactError(f"targets: {d} lasts {T:.3f} s (need 0.01-3 s)")
+            a = np.asarray(self.angles[d])
+            if a.ndim != 2 or a.shape[0] != len(TRACKED) or a.shape[1] < 2:
+                raise MultiContactError(f"targets: {d} angles have shape {a.shape}, "
+                                        f"need ({len(TRACKED)}, n >= 2)")
+            if not np.all(np.isfinite(a)):
+                raise MultiContactError(f"targets: {d} angles are not all finite")
+        if not (np.isfinite(self.speed) and 0.05 < self.speed < 3.0):
+            raise MultiContactError(f"targets: walking speed {self.speed:.3f} m/s "
+                                    "(need 0.05-3 m/s)")
+
+    @property
+    def stride_time(self) -> float:
+        return float(sum(self.durations[d] for d in GRAPH.domains))
+
+
+@dataclass(frozen=True)
+class MultiContactOptions:
+    """Settings of the fit (SI units)."""
+
+    nodes: int = 9  # collocation nodes per domain (plus the midpoints)
+    mu: float = 0.35  # largest |F_x| / F_z of every contact (people need about 0.2)
+    min_normal_force: float = 20.0  # N, a flat foot's least normal force
+    cop_margin: float = 0.01  # m, centre of pressure this far inside the sole's ends
+    touchdown_velocity: float = 0.02  # m/s, least downward heel speed at a heel strike
+    clearance: float = 0.01  # m, swing toe height at mid-swing
+    w_angles: float = 1000.0  # 1 / (rad^2 s): the tracked angles' squared error integral
+    w_duration: float = 1000.0  # 1 / s^2
+    w_speed: float = 100.0  # s^2 / m^2
+    w_torque: float = 1e-5  # 1 / (N^2 m^2 s)
+    w_smooth: float = 1.0  # on the squared changes between points of the wrenches (in body
+    #  weights) and torques (in 100 N m): position-level contacts leave the wrench of
+    #  neighbouring points free to alternate (an index-3 DAE's ringing); people's are smooth
+    first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
+    duration_bounds: tuple[float, float] = (0.01, 3.0)  # s per domain
+    max_iter: int = 600
+    tol: float = 1e-6
+    print_level: int = 0
+
+
+@dataclass
+class MultiContactResult:
+    """The fitted cycle: per domain its duration (s) and trajectory (``t`` from the domain's
+    start, ``q``, ``qd``, ``qdd`` (12, P), ``u`` (6, P), ``lam`` (n_c, P): the domain's
+    wrenches, contacts first in ``Domain.contacts`` order, then the socket's), the stride
+    length (m, the hip's forward travel over the cycle) and IPOPT's verdict."""
+
+    durations: dict[Domain, float]
+    trajectory: dict[Domain, dict[str, np.ndarray]]
+    stride_length: float
+    status: str
+    success: bool
+    iterations: int
+    solve_seconds: float
+    cost: float
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def stride_time(self) -> float:
+        return float(sum(self.durations[d] for d in GRAPH.domains))
+
+    @property
+    def speed(self) -> float:
+        """Mean walking speed over the cycle, m/s."""
+        return self.stride_length / self.stride_time
+
+    def double_supports(self) -> dict[Domain, float]:
+        """Each double support's duration, s."""
+        return {d: self.durations[d] for d in GRAPH.domains if d.is_double_support}
+
+
+def _sole_ends(model: HumanProsthesisModel, side: str) -> tuple[float, float]:
+    """(heel, toe) distances (m) of a foot's heel and toe points behind / ahead of its sole
+    frame (along the sole)."""
+    pts = {f.name: f.point for f in model.tree.frames}
+    sole = pts[f"{side}_sole"][0]
+    return sole - pts[f"{side}_heel"][0], pts[f"{side}_toe"][0] - sole
+
+
+def _contact_rows(c: FootContact, lam: ca.SX, model: HumanProsthesisModel,
+                  opt: MultiContactOptions) -> list[ca.SX]:
+    """One contact's wrench inequalities (>= 0): friction cone, normal force, and for a flat
+    foot the centre of pressure d = -M_y / F_z inside [-heel + margin, toe - margin]."""
+    fx, fz = lam[0], lam[1]
+    rows = [opt.mu * fz - fx, opt.mu * fz + fx]
+    if c.is_flat:
+        heel, toe = _sole_ends(model, c.side)
+        my = lam[2]
+        rows += [fz - opt.min_normal_force,
+                 (toe - opt.cop_margin) * fz + my, (heel - opt.cop_margin) * fz - my]
+    else:
+        rows.append(fz)
+    return rows
+
+
+def _free_points(d: Domain) -> tuple[str, ...]:
+    """The foot points not held by ``d``'s contacts (they stay above the ground)."""
+    held = set()
+    for c in d.contacts:
+        held |= {f"{c.side}_heel", f"{c.side}_toe"} if c.is_flat else {c.frame}
+    return tuple(p for p in FOOT_POINTS if p not in held)
+
+
+def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOptions
+                     ) -> tuple[ca.Function, ca.Function, ca.Function]:
+    """SX functions of one collocation point of ``d``: the equations of motion, the wrench
+    inequalities and the free foot points' heights."""
+    q, qd = model.q, model.qd
+    qdd = ca.SX.sym("qdd", model.nq)
+    u = ca.SX.sym("u", model.nu)
+    n_c = model.domains[d].n_constraints
+    lam = ca.SX.sym("lam", n_c)
+    J = ca.jacobian(model.h[d], q)
+    dyn = model.D @ qdd + model.H - ca.DM(model.B) @ u - J.T @ lam
+    rows: list[ca.SX] = []
+    o = 0
+    for c in d.contacts:
+        rows += _contact_rows(c, lam[o:o + c.size], model, opt)
+        o += c.size
+    heights = [model.frame_expr(p)[1] for p in _free_points(d)]
+    args, names = [q, qd, qdd, u, lam], ["q", "qd", "qdd", "u", "lam"]
+    return (ca.Function(f"mc_eq_{d}", args, [dyn], names, ["eq"]),
+            ca.Function(f"mc_wrench_{d}", args, [ca.vertcat(*rows)], names, ["ineq"]),
+            ca.Function(f"mc_free_{d}", [q], [ca.vertcat(*heights)], ["q"], ["z"]))
+
+
+# -- the initial guess -------------------------------------------------------------------------
+def _resample(a: np.ndarray, n: int) -> np.ndarray:
+    """Rows of ``a`` (given at evenly spaced instants) at ``n`` evenly spaced instants."""
+    a = np.asarray(a, dtype=float)
+    s = np.linspace(0.0, 1.0, a.shape[1])
+    return np.array([np.interp(np.linspace(0.0, 1.0, n), s, r) for r in a])
+
+
+def initial_guess(model: HumanProsthesisModel, targets: MultiContactTargets, n_points: int
+                  ) -> dict[Domain, dict[str, np.ndarray]]:
+    """The take's angles placed on each domain's stance-leg foot held flat at one place per
+    domain (the places chosen so that the hip moves on continuously); rates by finite
+    differences; (u, lam) by least squares on D qdd + H = B u + J^T lam."""
+    fs = model.numeric()
+    idx = [model.coord_names.index(c) for c in TRACKED]
+    out: dict[Domain, dict[str, np.ndarray]] = {}
+    x_end = None
+    for d in GRAPH.domains:
+        T = targets.durations[d]
+        A = _resample(targets.angles[d], n_points)
+        Q = np.zeros((model.nq, n_points))
+        Q[idx] = A
+        flat = Domain.PS if d.stance_leg.side == "p" else Domain.PNS
+        for k in range(n_points):
+            Q[:, k] = model.place_stance_foot(Q[:, k], flat)
+        if x_end is not None:
+            Q[0] += x_end - Q[0, 0]
+        x_end = Q[0, -1]
+        t = np.linspace(0.0, T, n_points)
+        dQ: np.ndarray = np.gradient(Q, t, axis=1)
+        ddQ: np.ndarray = np.gradient(dQ, t, axis=1)
+        terms = fs[f"terms_{d}"]
+        n_c = model.domains[d].n_constraints
+        U, L = np.zeros((model.nu, n_points)), np.zeros((n_c, n_points))
+        for k in range(n_points):
+            D, H, J, _ = terms(Q[:, k], dQ[:, k])
+            sol, *_ = np.linalg.lstsq(np.hstack([model.B, J.T]), D @ ddQ[:, k] + H, rcond=None)
+            U[:, k], L[:, k] = sol[: model.nu], sol[model.nu:]
+        out[d] = {"q": Q, "qd": dQ, "qdd": ddQ, "u": U, "lam": L, "T": np.array(T)}
+    return out
+
+
+# -- the NLP -----------------------------------------------------------------------------------
+def _domain_variables(nlp: NLP, model: HumanProsthesisModel, d: Domain,
+                      guess: dict[str, np.ndarray], opt: MultiContactOptions
+                      ) -> dict[str, ca.MX]:
+    P = 2 * opt.nodes - 1
+    ulim = np.where(np.isfinite(model.torque_limits), model.torque_limits, 1e4)
+    lb, ub = np.full((model.nq, 1), -np.inf), np.full((model.nq, 1), np.inf)
+    sock = [model.coord_names.index(c) for c in SOCKET_COORDS]
+    lb[sock], ub[sock] = 0.0, 0.0
+    n_c = model.domains[d].n_constraints
+    return {
+        "q": nlp.var(f"q_{d}", (model.nq, P), guess["q"], lb, ub),
+        "qd": nlp.var(f"qd_{d}", (model.nq, P), guess["qd"], lb, ub),
+        "qdd": nlp.var(f"qdd_{d}", (model.nq, P), guess["qdd"], lb, ub),
+        "u": nlp.var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
+        "lam": nlp.var(f"lam_{d}", (n_c, P), guess["lam"] / _weight(model)),
+        "T": nlp.var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
+    }
+
+
+def _weight(model: HumanProsthesisModel) -> float:
+    """The walker's weight, N: the unit of the wrench variables (their scale near 1)."""
+    return float(sum(b.mass for b in model.tree.bodies) * model.tree.gravity)
+
+
+def _free(model: HumanProsthesisModel) -> list[int]:
+    """The coordinates other than the socket's (whose q_f = 0 are bounds, not constraints:
+    a constraint on them would repeat the bound)."""
+    return [i for i, c in enumerate(model.coord_names) if c not in SOCKET_COORDS]
+
+
+def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
+                 opt: MultiContactOptions, soft: list[int]) -> None:
+    """``d``'s path constraints at every point and its Hermite-Simpson defects; the index
+    of the contact wrenches' inequalities appended to ``soft`` (:func:`fit_multicontact`)."""
+    N, P = opt.nodes, 2 * opt.nodes - 1
+    f_eq, f_wrench, f_free = _point_functions(model, d, opt)
+    args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"] * _weight(model)]
+    nlp.eq(f_eq.map(P)(*args))
+    # the contacts held where the domain's first point has them (position level: the first
+    # point's are the previous domain's guard and contacts, so none is stated twice)
+    n_c = model.domains[d].n_constraints - len(SOCKET_COORDS)
+    hc = ca.Function(f"mc_contacts_{d}", [model.q], [model.h[d][:n_c]])
+    nlp.eq(hc.map(P - 1)(X["q"][:, 1:]) - ca.repmat(hc(X["q"][:, 0]), 1, P - 1))
+    soft.append(len(nlp.g))
+    nlp.geq(f_wrench.map(P)(*args))
+    nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]))
+    h = X["T"] / (N - 1)
+    free = _free(model)
+    q, qd, qdd = X["q"][free, :], X["qd"][free, :], X["qdd"][free, :]
+    k0, kc, k1 = slice(0, P - 2, 2), slice(1, P - 1, 2), slice(2, P, 2)
+    nlp.eq(q[:, kc] - (q[:, k0] + q[:, k1]) / 2 - h / 8 * (qd[:, k0] - qd[:, k1]))
+    nlp.eq(qd[:, kc] - (qd[:, k0] + qd[:, k1]) / 2 - h / 8 * (qdd[:, k0] - qdd[:, k1]))
+    nlp.eq(q[:, k1] - q[:, k0] - h / 6 * (qd[:, k0] + 4 * qd[:, kc] + qd[:, k1]))
+    nlp.eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
+
+
+def _frame_fn(model: HumanProsthesisModel, frame: str) -> ca.Function:
+    """(pose (x, z, pitch), velocity) of ``frame`` as a function of (q, qd)."""
+    fe = model.frame_expr(frame)
+    return ca.Function(f"frame_{frame}", [model.q, model.qd],
+                       [fe, ca.jtimes(fe, model.q, model.qd)])
+
+
+def _boundaries(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
+                opt: MultiContactOptions) -> None:
+    """``d``'s guard at its end (the touchdown frame on the ground, moving down); the swing
+    toe's clearance at mid-swing of a single support.  (A domain's contacts are on the ground
+    at its start by the guards before it: a heel strike puts the heel there, a toe landing
+    after it the sole flat.)"""
+    q, qd = X["q"], X["qd"]
+    td = GRAPH.touchdown_frame(d)
+    if td is not None:  # else a heel's lift-off: no guard but the next domain's contacts
+        pose_e, vel_e = _frame_fn(model, td)(q[:, -1], qd[:, -1])
+        nlp.eq(pose_e[1])
+        if td.endswith("_heel"):
+            nlp.within(vel_e[1], -np.inf, -opt.touchdown_velocity)
+        else:
+            nlp.within(vel_e[1], -np.inf, 0.0)
+    if d.is_flat_stance:
+        swing = "l" if d.stance_leg.side == "p" else "p"
+        P = 2 * opt.nodes - 1
+        pose_m, _ = _frame_fn(model, f"{swing}_toe")(q[:, P // 2], qd[:, P // 2])
+        nlp.geq(pose_m[1], opt.clearance)
+    if d == GRAPH.domains[0]:
+        pose0, _ = _frame_fn(model, d.contacts[0].frame)(q[:, 0], qd[:, 0])
+        nlp.eq(pose0[0])  # the cycle starts with the prosthesis sole at x = 0
+
+
+def _impacts(nlp: NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str, ca.MX]],
+             guess: dict[Domain, dict[str, np.ndarray]], soft: list[int]) -> ca.MX:
+    """Each domain's end into the next's start through the rigid impact into the next
+    domain's constraints (normal impulses >= 0; a released toe moves up); periodic up to a
+    forward translation.  Returns the stride length (the translation), m."""
+    stride = nlp.var("stride", (1, 1), 1.0, 0.05, 3.0)
+    free = _free(model)
+    lb, ub = np.full((model.nq, 1), -np.inf), np.full((model.nq, 1), np.inf)
+    lb[[i for i in range(model.nq) if i not in free]] = 0.0
+    ub[[i for i in range(model.nq) if i not in free]] = 0.0
+    for d in GRAPH.domains:
+        nxt = GRAPH.next(d)
+        qe, qde = dec[d]["q"][:, -1], dec[d]["qd"][:, -1]
+        if GRAPH.touchdown_frame(d) is None:  # a lift-off: q and qd go on
+            nlp.eq(dec[nxt]["q"][free, 0] - qe[free])
+            nlp.eq(dec[nxt]["qd"][free, 0] - qde[free])
+            continue
+        n_c = model.domains[nxt].n_constraints
+        qd_plus = nlp.var(f"qdplus_{d}", (model.nq, 1), guess[nxt]["qd"][:, 0], lb, ub)
+        F_I = nlp.var(f"impulse_{d}", (n_c, 1), 0.0)
+        D, _, E, _ = model.function(f"terms_{nxt}")(qe, qde)
+        nlp.eq(D @ (qd_plus - qde) - E.T @ F_I)
+        nlp.eq((E @ qd_plus)[: n_c - len(SOCKET_COORDS)])
+        o = 0
+        for c in nxt.contacts:
+            soft.append(len(nlp.g))
+            nlp.geq(F_I[o + 1])  # the ground pushes, never pulls
+            o += c.size
+        kept = {(c.side, c.part) for c in nxt.contacts}
+        for c in d.contacts:
+            if c.side not in {k[0] for k in kept}:  # released: leaves the ground upward
+                _, vel = _frame_fn(model, c.frame)(qe, qd_plus)
+                soft.append(len(nlp.g))
+                nlp.geq(vel[1])
+        q0n = dec[nxt]["q"][:, 0]
+        nlp.eq(dec[nxt]["qd"][free, 0] - qd_plus[free])
+        if nxt == GRAPH.domains[0]:
+            nlp.eq(q0n[free[1:]] - qe[free[1:]])
+            nlp.eq(qe[0] - q0n[0] - stride)
+        else:
+            nlp.eq(q0n[free] - qe[free])
+    return stride
+
+
+def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
+          opt: MultiContactOptions) -> ca.MX:
+    """``d``'s share of the cost: the tracked angles' squared error integral (Simpson
+    weights), its duration's squared error, the torques' squared integral."""
+    P = 2 * opt.nodes - 1
+    A = _resample(targets.angles[d], P)
+    w = np.ones(P)
+    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+    w = w / w.sum()  # Simpson weights of the mean over the domain
+    T = X["T"]
+    e = X["q"][idx, :] - A
+    cost = opt.w_angles * T * ca.sum2(ca.sum1(e**2) * w[None, :])
+    cost += opt.w_torque * T * ca.sum2(ca.sum1(X["u"] ** 2) * w[None, :])
+    cost += opt.w_duration * (T - targets.durations[d]) ** 2
+    cost += opt.w_smooth * (ca.sumsqr(ca.diff(X["lam"], 1, 1))
+                            + ca.sumsqr(ca.diff(X["u"], 1, 1) / 100.0))
+    return cost
+
+
+def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
+                     opt: MultiContactOptions | None = None) -> MultiContactResult:
+    """Solve the multi-contact fit with IPOPT (exact Hessian, MUMPS); ``model`` must be built
+    on the multi-contact graph."""
+    opt = opt or MultiContactOptions()
+    if model.graph != GRAPH:
+        raise MultiContactError(f"the model is built on the {model.graph} graph; the "
+                                f"multi-contact fit needs graph={GRAPH}")
+    P = 2 * opt.nodes - 1
+    guess = initial_guess(model, targets, P)
+    idx = [model.coord_names.index(c) for c in TRACKED]
+    nlp = NLP()
+    dec: dict[Domain, dict[str, ca.MX]] = {}
+    soft: list[int] = []
+    cost = ca.MX(0)
+    for d in GRAPH.domains:
+        X = dec[d] = _domain_variables(nlp, model, d, guess[d], opt)
+        _collocation(nlp, model, d, X, opt, soft)
+        _boundaries(nlp, model, d, X, opt)
+        cost += _cost(X, targets, d, idx, opt)
+    stride = _impacts(nlp, model, dec, guess, soft)
+    total = sum(dec[d]["T"] for d in GRAPH.domains)
+    cost += opt.w_speed * (stride / total - targets.speed) ** 2
+    return _solve(nlp, cost, dec, stride, opt, soft, _weight(model))
+
+
+def _solve(nlp: NLP, cost: ca.MX, dec: dict[Domain, dict[str, ca.MX]], stride: ca.MX,
+           opt: MultiContactOptions, soft: list[int], weight: float) -> MultiContactResult:
+    """Two solves of one NLP: first without the contact inequalities (``soft``: a motion the
+    model can make near the take's, from a guess its body cannot follow), then with them
+    from there."""
+    problem = {"x": ca.vertcat(*nlp.w), "f": cost, "g": ca.vertcat(*nlp.g)}
+    ipopt: dict[str, int | float | str] = {
+        "max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
+        "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
+    warm_start: dict[str, int | float | str] = {
+        **ipopt, "warm_start_init_point": "yes", "mu_init": 1e-4,
+        "warm_start_bound_push": 1e-6, "warm_start_mult_bound_push": 1e-6}
+    relaxed = [np.full_like(lo, -np.inf) if j in soft else lo for j, lo in enumerate(nlp.lbg)]
+    bounds = {"lbx": np.concatenate(nlp.lbw), "ubx": np.concatenate(nlp.ubw),
+              "ubg": np.concatenate(nlp.ubg)}
+    t0 = time.perf_counter()
+    warm = ca.nlpsol("multicontact_warm", "ipopt", problem,
+                     {"ipopt": warm_start, "print_time": False, "expand": True})
+    first_ipopt: dict[str, int | float | str] = {**ipopt, "max_iter": opt.first_iter}
+    first_solver = ca.nlpsol("multicontact_first", "ipopt", problem,
+                             {"ipopt": first_ipopt, "print_time": False, "expand": True})
+    with single_threaded_blas():
+        first = first_solver(x0=np.concatenate(nlp.w0), lbg=np.concatenate(relaxed), **bounds)
+        sol = warm(x0=first["x"], lam_x0=first["lam_x"], lam_g0=first["lam_g"],
+                   lbg=np.concatenate(nlp.lbg), **bounds)
+    elapsed = time.perf_counter() - t0
+    stats = warm.stats()
+    keys = ("q", "qd", "qdd", "u", "lam", "T")
+    unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
+                         [dec[d][k] for d in GRAPH.domains for k in keys] + [stride])
+    vals = [np.array(v) for v in unpack(np.array(sol["x"]).ravel())]
+    P = 2 * opt.nodes - 1
+    traj: dict[Domain, dict[str, np.ndarray]] = {}
+    durations: dict[Domain, float] = {}
+    for i, d in enumerate(GRAPH.domains):
+        q, qd, qdd, u, lam, T = vals[6 * i: 6 * i + 6]
+        durations[d] = float(T.item())
+        traj[d] = {"t": np.linspace(0.0, durations[d], P), "q": q, "qd": qd, "qdd": qdd,
+                   "u": u, "lam": lam * weight}
+    return MultiContactResult(
+        durations=durations, trajectory=traj, stride_length=float(vals[-1].item()),
+        status=str(stats["return_status"]), success=bool(stats["success"]),
+        iterations=int(stats["iter_count"]), solve_seconds=elapsed, cost=float(sol["f"]),
+        stats={k: v for k, v in stats.items() if isinstance(v, int | float | str)})
+
+
+# -- the targets from a take ---------------------------------------------------------------------
+#: samples per domain of the targets' angles
+TARGET_SAMPLES = 21
+
+
+def heel_off(pitch: np.ndarray, start: int, end: int, rise: float = np.radians(3.0)) -> int:
+    """The frame the stance foot's heel leaves the ground in its single support (frames
+    ``start``..``end``): after the last frame whose foot pitch (rad, toe down positive) is
+    within ``rise`` of its flat pitch (the median over the support's first half); at least
+    one frame from either end."""
+    seg = np.asarray(pitch[start:end + 1], float)
+    flat = np.nanmedian(seg[: max(2, seg.size // 2)])
+    low = np.flatnonzero(~(seg > flat + rise))
+    k = start + (int(low[-1]) + 1 if low.size else 1)
+    return int(min(max(k, start + 1), end - 1))
+
+
+def stride_windows(touchdowns: dict[str, tuple[int, ...]], liftoffs: dict[str, tuple[int, ...]],
+                   pitch: dict[str, np.ndarray]) -> list[dict[Domain, tuple[int, int]]]:
+    """Per complete stride of the prosthesis foot (touchdown a to its next b, with the human
+    foot's lift-off, touchdown and the prosthesis's lift-off in that order between them, and
+    each single support's heel off from the stance foot's ``pitch`` (rad, :func:`heel_off`)):
+    each domain's (first, last) frame: ds_p = (a, human lift-off), ps = (human lift-off,
+    prosthesis heel off), ps_toe = (heel off, human touchdown), ds_h = (human touchdown,
+    prosthesis lift-off), pns and pns_toe alike, up to b.  Feet are ``"prosthesis"`` and
+    ``"human"``."""
+    tp, lp = touchdowns["prosthesis"], liftoffs["prosthesis"]
+    th, lh = touchdowns["human"], liftoffs["human"]
+    out = []
+    for a, b in itertools.pairwise(tp):
+        lo_h = next((x for x in lh if a < x < b), None)
+        td_h = next((x for x in th if lo_h is not None and lo_h < x < b), None)
+        lo_p = next((x for x in lp if td_h is not None and td_h < x < b), None)
+        if lo_h is None or td_h is None or lo_p is None or td_h - lo_h < 3 or b - lo_p < 3:
+            continue
+        ho_p = heel_off(pitch["prosthesis"], lo_h, td_h)
+        ho_h = heel_off(pitch["human"], lo_p, b)
+        out.append({Domain.DS_P: (a, lo_h), Domain.PS: (lo_h, ho_p),
+                    Domain.PS_TOE: (ho_p, td_h), Domain.DS_H: (td_h, lo_p),
+                    Domain.PNS: (lo_p, ho_h), Domain.PNS_TOE: (ho_h, b)})
+    return out
+
+
+def targets_from_take(time: np.ndarray, q: np.ndarray, coord_names: tuple[str, ...],
+                      touchdowns: dict[str, tuple[int, ...]],
+                      liftoffs: dict[str, tuple[int, ...]], pitch: dict[str, np.ndarray],
+                      ground_speed: float = 0.0) -> MultiContactTargets:
+    """The fit's targets from a take's joint angles ``q`` (n, 12; NaN where unknown), its
+    feet's events (frames) and pitches (rad): each domain's mean duration and mean angles
+    over the take's complete strides (:func:`stride_windows`; a window with an unknown angle
+    is left out), the hip's mean speed over the ground (m/s: its forward speed less
+    ``ground_speed``, a treadmill's belt)."""
+    windows = stride_windows(touchdowns, liftoffs, pitch)
+    if not windows:
+        raise MultiContactError(
+            "no complete stride with both feet's events (prosthesis touchdown, human "
+            "lift-off, human touchdown, prosthesis lift-off, prosthesis touchdown): the "
+            "multi-contact fit needs at least one; record a longer walk or pool takes")
+    idx = [list(coord_names).index(c) for c in TRACKED]
+    durations, angles = {}, {}
+    for d in GRAPH.domains:
+        seg = [(time[e] - time[s], _resample(q[s:e + 1, idx].T, TARGET_SAMPLES))
+               for w in windows for s, e in [w[d]]]
+        ok = [(T, a) for T, a in seg if np.all(np.isfinite(a))]
+        if not ok:
+            raise MultiContactError(f"no {d} window with all of {', '.join(TRACKED)} known")
+        durations[d] = float(np.mean([T for T, _ in ok]))
+        angles[d] = np.mean([a for _, a in ok], axis=0)
+    x = q[:, list(coord_names).index("x_B")]
+    speeds = []
+    for w in windows:
+        a, b = w[Domain.DS_P][0], w[Domain.PNS][1]
+        if np.isfinite(x[a]) and np.isfinite(x[b]):
+            speeds.append((x[b] - x[a]) / (time[b] - time[a]) - ground_speed)
+    if not speeds:
+        raise MultiContactError("no stride with the hip's position at both ends")
+    return MultiContactTargets(durations, angles, float(np.mean(speeds)))
