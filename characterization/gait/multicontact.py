@@ -36,6 +36,8 @@ import casadi as ca
 import numpy as np
 
 from characterization.gait.nlp import NLP
+from characterization.mocap.step_segmentation import take_spans
+from characterization.mocap.steps_artifact import FEET, StepsArtifact
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.domains import Domain, DomainGraph, FootContact
 from hp_model.human_prosthesis import SOCKET_COORDS, HumanProsthesisModel
@@ -223,8 +225,8 @@ def initial_guess(model: HumanProsthesisModel, targets: MultiContactTargets, n_p
             Q[0] += x_end - Q[0, 0]
         x_end = Q[0, -1]
         t = np.linspace(0.0, T, n_points)
-        dQ: np.ndarray = np.gradient(Q, t, axis=1)
-        ddQ: np.ndarray = np.gradient(dQ, t, axis=1)
+        dQ = np.asarray(np.gradient(Q, t, axis=1))
+        ddQ = np.asarray(np.gradient(dQ, t, axis=1))
         terms = fs[f"terms_{d}"]
         n_c = model.domains[d].n_constraints
         U, L = np.zeros((model.nu, n_points)), np.zeros((n_c, n_points))
@@ -503,22 +505,31 @@ def stride_windows(touchdowns: dict[str, tuple[int, ...]], liftoffs: dict[str, t
     return out
 
 
-def targets_from_take(time: np.ndarray, q: np.ndarray, coord_names: tuple[str, ...],
-                      touchdowns: dict[str, tuple[int, ...]],
-                      liftoffs: dict[str, tuple[int, ...]], pitch: dict[str, np.ndarray],
-                      ground_speed: float = 0.0) -> MultiContactTargets:
-    """The fit's targets from a take's joint angles ``q`` (n, 12; NaN where unknown), its
-    feet's events (frames) and pitches (rad): each domain's mean duration and mean angles
-    over the take's complete strides (:func:`stride_windows`; a window with an unknown angle
-    is left out), the hip's mean speed over the ground (m/s: its forward speed less
-    ``ground_speed``, a treadmill's belt)."""
-    windows = stride_windows(touchdowns, liftoffs, pitch)
+def contact_events(contact: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """(touchdowns, lift-offs) of a foot's contact (bool per frame): the first frame on the
+    ground, the first frame off it."""
+    c = np.asarray(contact, bool).astype(np.int8)
+    d = np.diff(c)
+    return (tuple(int(k) + 1 for k in np.flatnonzero(d == 1)),
+            tuple(int(k) + 1 for k in np.flatnonzero(d == -1)))
+
+
+def targets_from_windows(time: np.ndarray, q: np.ndarray, coord_names: tuple[str, ...],
+                         windows: list[dict[Domain, tuple[int, int]]], ground_speed: float = 0.0
+                         ) -> MultiContactTargets:
+    """The fit's targets from a take's joint angles ``q`` (n, 12; NaN where unknown) and the
+    domains' windows of its complete strides (:func:`stride_windows`): each domain's mean
+    duration and mean angles (a window with an unknown angle is left out), the hip's mean
+    speed over the ground (m/s: its forward speed less ``ground_speed``, a treadmill's
+    belt)."""
     if not windows:
         raise MultiContactError(
             "no complete stride with both feet's events (prosthesis touchdown, human "
             "lift-off, human touchdown, prosthesis lift-off, prosthesis touchdown): the "
-            "multi-contact fit needs at least one; record a longer walk or pool takes")
-    idx = [list(coord_names).index(c) for c in TRACKED]
+            "multi-contact fit needs at least one; record a longer walk or pool takes with "
+            "`hpcosim mocap process A B C --out steps.npz`")
+    names = list(coord_names)
+    idx = [names.index(c) for c in TRACKED]
     durations, angles = {}, {}
     for d in GRAPH.domains:
         seg = [(time[e] - time[s], _resample(q[s:e + 1, idx].T, TARGET_SAMPLES))
@@ -528,12 +539,36 @@ def targets_from_take(time: np.ndarray, q: np.ndarray, coord_names: tuple[str, .
             raise MultiContactError(f"no {d} window with all of {', '.join(TRACKED)} known")
         durations[d] = float(np.mean([T for T, _ in ok]))
         angles[d] = np.mean([a for _, a in ok], axis=0)
-    x = q[:, list(coord_names).index("x_B")]
+    x = q[:, names.index("x_B")]
     speeds = []
     for w in windows:
-        a, b = w[Domain.DS_P][0], w[Domain.PNS][1]
+        a, b = w[Domain.DS_P][0], w[Domain.PNS_TOE][1]
         if np.isfinite(x[a]) and np.isfinite(x[b]):
             speeds.append((x[b] - x[a]) / (time[b] - time[a]) - ground_speed)
     if not speeds:
         raise MultiContactError("no stride with the hip's position at both ends")
     return MultiContactTargets(durations, angles, float(np.mean(speeds)))
+
+
+def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: str = "steps"
+                       ) -> MultiContactTargets:
+    """The fit's targets from a steps file: each take's strides (a stride never spans two
+    pooled takes) from its feet's contact and the stance feet's pitch (``model``'s sole
+    frames), pooled."""
+    if steps.foot_contact is None:
+        raise MultiContactError(
+            f"{src}: the steps file has no foot contact (made by an older version): run "
+            "`hpcosim mocap process` on the take(s) again")
+    q = np.asarray(steps.q, float)
+    q0 = np.nan_to_num(q)
+    pitch = {"human": q0 @ model.pitch_row("l_sole"), "prosthesis": q0 @ model.pitch_row("p_sole")}
+    windows: list[dict[Domain, tuple[int, int]]] = []
+    for a, b in take_spans(steps.time):
+        td, lo = {}, {}
+        for k, foot in enumerate(FEET):
+            t, l_ = contact_events(steps.foot_contact[a:b, k])
+            td[foot] = tuple(a + i for i in t)
+            lo[foot] = tuple(a + i for i in l_)
+        windows += stride_windows(td, lo, pitch)
+    coords = tuple(str(c) for c in steps.coord_names)
+    return targets_from_windows(steps.time, q, coords, windows, steps.ground_speed or 0.0)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +58,7 @@ from characterization.mocap.step_segmentation import (
     segment_steps,
     single_support,
 )
-from characterization.mocap.steps_artifact import StepsArtifact
+from characterization.mocap.steps_artifact import FEET, StepsArtifact
 from characterization.mocap.take import MocapError, Take
 from hp_model import COORDS
 from hp_model.config import SubjectLengths, default_subject_path, load_subject
@@ -539,4 +540,14 @@ def to_artifact(p: ProcessedTake) -> StepsArtifact:
         dropped_start=np.array([d.start for d in p.dropped], dtype=np.int64),
         dropped_end=np.array([d.end for d in p.dropped], dtype=np.int64),
         dropped_reason=np.array([d.reason for d in p.dropped], dtype=str),
+        **_contact_fields(p),
     )
+
+
+def _contact_fields(p: ProcessedTake) -> dict[str, Any]:
+    """The feet's contact for the steps file, when both feet's are known."""
+    if not all(f in p.contacts for f in FEET):
+        return {}
+    return {"foot_contact": np.column_stack([np.asarray(p.contacts[f].contact, bool)
+                                             for f in FEET]),
+            "ground_speed": float(np.mean([p.contacts[f].ground_speed for f in FEET]))}

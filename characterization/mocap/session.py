@@ -48,7 +48,8 @@ TUBE_MIN_STEPS = 4
 MORE = ("record more walkway trials (or a longer take) and pool them with "
         "`hpcosim mocap process A B C --out steps.npz`")
 
-_FRAMES = {"time", "q", "limb_pitch", "pitch_source", "joint_position", "delta_ps"}
+_FRAMES = {"time", "q", "limb_pitch", "pitch_source", "joint_position", "delta_ps",
+           "foot_contact"}
 _STEP_FRAMES = {"step_start", "step_end", "dropped_start", "dropped_end"}
 _SS_FRAMES = {"step_ss_start", "step_ss_end"}  # -1: none
 _STEPS = {"step_domain", "step_delta_lower", "step_delta_upper", "dropped_domain",
@@ -140,6 +141,8 @@ def _joint_fit(name: str, vals: Sequence[np.ndarray], best: int) -> np.ndarray:
 def _pooled_field(name: str, arts: Sequence[StepsArtifact], offsets: Sequence[int],
                   best: int, notes: list[str]) -> object:
     vals = [getattr(a, name) for a in arts]
+    if any(v is None for v in vals):  # an optional field one of the takes lacks
+        return None
     if name == "source":
         return " + ".join(vals)
     if name == "time":

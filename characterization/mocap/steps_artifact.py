@@ -29,6 +29,11 @@ units, radians, sagittal world frame x forward / z up):
 | tau | (sum T,) | tau of every step, concatenated |
 | tau_offsets | (k + 1,) int | step i's tau is tau[tau_offsets[i]:tau_offsets[i + 1]] |
 | dropped_domain, dropped_start, dropped_end, dropped_reason | (m,) | steps not kept, and why |
+| subject | object | the take's subject and where each value came from (optional) |
+| foot_contact | (n, 2) bool | each foot on the ground, columns (human, prosthesis) (optional: |
+|   |        | the multi-contact fit's foot events; older files lack it) |
+| ground_speed | () float | m/s, the ground's forward speed under the feet (a treadmill's belt; |
+|   |        | 0 overground; optional) |
 | subject | optional | the subject of the take (:func:`hp_model.config.subject_record`: its |
 |   |       | config and where each value came from); absent in files made before it |
 
@@ -101,6 +106,10 @@ class StepsArtifact:
     schema_version: int = SCHEMA_VERSION
     #: the take's subject (``hp_model.config.subject_record``); None in older files
     subject: Mapping[str, Any] | None = None
+    #: (n, 2) each foot on the ground, columns ``FEET``; None in older files
+    foot_contact: np.ndarray | None = None
+    #: m/s, the ground's speed under the feet (a treadmill's belt); None in older files
+    ground_speed: float | None = None
 
     @property
     def n_steps(self) -> int:
@@ -117,9 +126,11 @@ _STR = {"source", "coord_names", "limb_names", "joint_names", "step_domain", "dr
         "dropped_reason"}
 _INT = {"pitch_source", "step_start", "step_end", "step_ss_start", "step_ss_end",
         "tau_offsets", "dropped_start", "dropped_end", "schema_version"}
-_BOOL = {"joint_well_posed"}
+_BOOL = {"joint_well_posed", "foot_contact"}
 #: fields an older file may lack
-_OPTIONAL = {"subject"}
+_OPTIONAL = {"subject", "foot_contact", "ground_speed"}
+#: the columns of ``foot_contact``
+FEET = ("human", "prosthesis")
 
 
 def _coerce(name: str, value: object) -> object:
@@ -130,7 +141,7 @@ def _coerce(name: str, value: object) -> object:
         return record
     if name == "source":
         return str(np.asarray(value))
-    if name == "frame_rate":
+    if name in ("frame_rate", "ground_speed"):
         return float(np.asarray(value))
     if name == "schema_version":
         return int(np.asarray(value))
@@ -270,6 +281,11 @@ def validate_steps(a: StepsArtifact, src: str) -> None:
         ss, se = a.step_ss_start[i], a.step_ss_end[i]
         need("step_ss_start", (ss == -1 and se == -1) or (s <= ss <= se <= e),
              f"step {i}: single support must lie inside the step")
+    if a.foot_contact is not None:
+        need("foot_contact", a.foot_contact.shape == (n, len(FEET)),
+             f"shape {a.foot_contact.shape}, expected {(n, len(FEET))}")
+    if a.ground_speed is not None:
+        need("ground_speed", bool(np.isfinite(a.ground_speed)), "must be finite")
     m = len(a.dropped_domain)
     for name in ("dropped_start", "dropped_end", "dropped_reason"):
         need(name, getattr(a, name).shape == (m,), f"expected {m} values")

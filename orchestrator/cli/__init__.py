@@ -153,6 +153,7 @@ LAZY_USER_ERRORS = (("orchestrator.cosim.recording", "RecordingError"),
                     ("orchestrator.cosim.config", "CosimError"),
                     ("bus_schemas.transport.bus_config", "BusConfigError"),
                     ("characterization.gait.phzd", "GaitOptimizationError"),
+                    ("characterization.gait.multicontact", "MultiContactError"),
                     ("human_fmu.build", "FmuBuildError"))
 #: a check that ran and failed (exit 1): (module, class), as :data:`LAZY_USER_ERRORS`
 LAZY_CHECK_FAILURES = (("characterization.gait.phzd", "GaitVerificationError"),)

@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from hp_model.domains import PAPER_DOMAINS
+from hp_model.domains import PAPER_DOMAINS, DomainGraph
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
 from orchestrator.cli.outcome import conclude, gait_verdict
 
@@ -28,8 +28,9 @@ def fit(
     device: DeviceOpt = None,
     degree: Annotated[int, typer.Option(help="Bezier degree of the joint outputs.",
                                         min=1, max=9)] = 5,
-    nodes: Annotated[int, typer.Option(help="Collocation nodes per domain.",
-                                       min=5, max=101)] = 21,
+    nodes: Annotated[int | None, typer.Option(
+        help="Collocation nodes per domain (default: 21 paper, 9 multicontact).",
+        min=3, max=101)] = None,
     max_iter: Annotated[int, typer.Option(help="IPOPT iteration limit.", min=1)] = 1000,
     segments: Annotated[str, typer.Option(
         help="Portions of the take regressed per domain: 'touchdown' (the model's domains, "
@@ -54,8 +55,18 @@ def fit(
         help="Write the gait even when it falls or its return map is not contracting "
         "(marked walks: false in its verification).")] = False,
     figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
+    domains: Annotated[DomainGraph, typer.Option(
+        help="The walk's cycle of domains: 'paper' (ps -> pns, flat feet: the paper's PHZD "
+        "gait, what the tube, controllers and co-simulation run) or 'multicontact' (heel "
+        "strike, foot flat, heel off, toe off, double supports: the person's gait as a "
+        "trajectory, compared with the take; docs/gait-design.md).")] = DomainGraph.PAPER,
+    allow_mismatch: Annotated[bool, typer.Option(
+        help="multicontact: write the gait even when it is not the person's (marked "
+        "mismatch_allowed).")] = False,
 ) -> None:
-    """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it."""
+    """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it (or,
+    with --domains multicontact, fit the person's multi-contact gait and compare it with
+    the take)."""
     import hp_model
     from characterization.gait.figures import save_gait_figure
     from characterization.gait.fit import check_subject_fits_steps, fit_gait, fit_segments
@@ -67,6 +78,12 @@ def fit(
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
 
+    if domains == DomainGraph.MULTICONTACT:
+        from orchestrator.cli.gait_multicontact import fit_multicontact_gait
+
+        fit_multicontact_gait(steps, out, subject, device, nodes or 9, max_iter,
+                              allow_mismatch)
+        return
     console = Console(stderr=True)
     portions = fit_segments(segments)
     check_output_file(out)
@@ -77,7 +94,8 @@ def fit(
     console.print(subject_note(subject, steps), soft_wrap=True, highlight=False)
     for w in check_subject_fits_steps(model, data, str(steps)):
         console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
-    opt = PHZDOptions(degree=degree, nodes=nodes, max_iter=max_iter, w_offset=offset_weight,
+    opt = PHZDOptions(degree=degree, nodes=nodes or 21, max_iter=max_iter,
+                      w_offset=offset_weight,
                       touchdown_slip=np.inf if touchdown_slip is None else touchdown_slip,
                       track_kp=track_kp, track_kd=track_kd)
     with console.status("gait fit") as status:

@@ -1,0 +1,79 @@
+"""The multi-contact gait artifact: the person's fitted cycle (:mod:`.multicontact`) as a
+versioned JSON file.
+
+Layout (``kind = "hpcosim-gait-multicontact"``, ``schema_version = 1``; SI units, rad):
+
+    model_hash       hash of the model parameters (subject, device, graph) it was made for
+    domain_graph     "multicontact"; ``domains`` in walking order
+    stride           {length m, time s, speed m/s}
+    trajectory.<d>   per domain: {duration, t (P,), q, qd, qdd (12, P), u (6, P),
+                     lam (n_c, P): the contacts' wrenches in Domain.contacts order, then the
+                     socket's (N, N m)}
+    ground_reaction  per foot (human, prosthesis): its stance on 0..1 {fx, fz (N), cop_x (m,
+                     sole frame), pivot (on its heel or toe point), sole (heel end, toe end)}
+    targets          what the take gave the fit: {durations per domain, speed}
+    check            the comparison with the take (:mod:`.person_check`), its verdict
+    mismatch_allowed true when written by ``--allow-mismatch`` although not the person's
+    options, solver  the fit's settings; IPOPT's status, iterations, seconds, cost
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from characterization.gait.multicontact import (
+    GRAPH,
+    MultiContactOptions,
+    MultiContactResult,
+    MultiContactTargets,
+)
+from characterization.gait.person_check import PersonCheck, StanceForce
+from hp_model.artifacts import load_json, save_json
+
+KIND = "hpcosim-gait-multicontact"
+SCHEMA_VERSION = 1
+
+
+def _force_doc(s: StanceForce) -> dict[str, Any]:
+    return {"fx": s.fx, "fz": s.fz, "cop_x": s.cop_x, "sole": s.sole,
+            "pivot": None if s.pivot is None else np.asarray(s.pivot, bool).tolist()}
+
+
+def to_document(result: MultiContactResult, targets: MultiContactTargets,
+                grf: dict[str, StanceForce], check: PersonCheck, model_hash: str,
+                options: MultiContactOptions, mismatch_allowed: bool = False
+                ) -> dict[str, Any]:
+    """The artifact's JSON document (module docstring)."""
+    traj = {d.value: {"duration": result.durations[d], **result.trajectory[d]}
+            for d in GRAPH.domains}
+    return {
+        "kind": KIND, "schema_version": SCHEMA_VERSION, "model_hash": model_hash,
+        "domain_graph": GRAPH.value, "domains": [d.value for d in GRAPH.domains],
+        "stride": {"length": result.stride_length, "time": result.stride_time,
+                   "speed": result.speed},
+        "trajectory": traj,
+        "ground_reaction": {foot: _force_doc(s) for foot, s in grf.items()},
+        "targets": {"durations": {d.value: targets.durations[d] for d in GRAPH.domains},
+                    "speed": targets.speed},
+        "check": check.to_json(),
+        "mismatch_allowed": bool(mismatch_allowed),
+        "options": asdict(options),
+        "solver": {"status": result.status, "success": result.success,
+                   "iterations": result.iterations, "seconds": result.solve_seconds,
+                   "cost": result.cost},
+    }
+
+
+def save_multicontact_gait(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
+    """Write the document atomically (strict JSON: non-finite numbers as null)."""
+    save_json(path, doc)
+
+
+def load_multicontact_gait(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The document of a multi-contact gait file (:class:`~hp_model.artifacts.ArtifactError`
+    naming the file and field when it is not one)."""
+    return dict(load_json(path, KIND, SCHEMA_VERSION))

@@ -1,0 +1,74 @@
+"""``hpcosim gait fit --domains multicontact``: the person's gait on the multi-contact graph
+(:mod:`characterization.gait.multicontact`), compared with the take and written with that
+comparison; a gait that is not the person's is refused unless ``--allow-mismatch``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.console import Console
+
+from orchestrator.cli.outcome import HOLDS, Verdict, conclude
+
+
+def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: Path | None,
+                          nodes: int, max_iter: int, allow_mismatch: bool) -> None:
+    """Targets from the steps, the fit, the comparison printed, the artifact written (a
+    mismatch only with ``allow_mismatch``), the verdict as the exit code."""
+    from characterization.gait.multicontact import (
+        GRAPH,
+        MultiContactError,
+        MultiContactOptions,
+        fit_multicontact,
+        targets_from_steps,
+    )
+    from characterization.gait.multicontact_artifact import save_multicontact_gait, to_document
+    from characterization.gait.multicontact_summary import gait_summary, take_summary
+    from characterization.gait.person_check import check_person, print_check
+    from characterization.mocap.steps_artifact import load_steps
+    from hp_model.config import (
+        default_device_path,
+        default_subject_path,
+        load_device,
+        load_subject,
+    )
+    from hp_model.human_prosthesis import HumanProsthesisModel
+    from orchestrator.cli.options import check_output_file
+    from orchestrator.cli.subject import subject_note, subject_source
+
+    console = Console(stderr=True)
+    check_output_file(out)
+    data = load_steps(steps)
+    model = HumanProsthesisModel(
+        load_subject(subject_source(subject, steps) or default_subject_path()),
+        load_device(device or default_device_path()), graph=GRAPH)
+    console.print(subject_note(subject, steps), soft_wrap=True, highlight=False)
+    targets = targets_from_steps(data, model, str(steps))
+    opt = MultiContactOptions(nodes=nodes, max_iter=max_iter)
+    with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
+        result = fit_multicontact(model, targets, opt)
+    if not result.success:
+        raise MultiContactError(f"gait fit, multi-contact optimization: IPOPT ended with "
+                                f"{result.status} after {result.iterations} iterations")
+    gait = gait_summary(model, result, str(out))
+    check = check_person(take_summary(targets, str(steps)), gait)
+    print_check(Console(), check)
+    if check.passed or allow_mismatch:
+        doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
+                          mismatch_allowed=not check.passed)
+        save_multicontact_gait(out, doc)
+        Console().print(f"[bold]gait[/bold] {out}: speed {result.speed:.2f} m/s, stride "
+                        f"{result.stride_time:.2f} s, double supports "
+                        + ", ".join(f"{d} {T * 1000:.0f} ms"
+                                    for d, T in result.double_supports().items())
+                        + f"; IPOPT {result.iterations} iterations, "
+                        f"{result.solve_seconds:.1f} s", highlight=False)
+    conclude(_verdict(check.passed, check.verdict(), allow_mismatch))
+
+
+def _verdict(passed: bool, why: str, allow_mismatch: bool) -> Verdict:
+    if passed:
+        return HOLDS
+    if allow_mismatch:
+        return Verdict(f"{why}; written by --allow-mismatch, marked mismatch_allowed")
+    return Verdict(f"{why}; not written (--allow-mismatch writes it anyway)")

@@ -1,0 +1,145 @@
+"""The person's gait on the multi-contact graph (characterization.gait.multicontact), on the
+real openOFM walk: its foot events become the domains' windows, the fit walks at the take's
+speed and stride with its double supports, and its ground forces are a physical walk's."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from characterization.gait.multicontact import (
+    GRAPH,
+    MultiContactError,
+    contact_events,
+    fit_multicontact,
+    heel_off,
+    stride_windows,
+    targets_from_steps,
+)
+from characterization.gait.multicontact_summary import gait_summary, take_summary
+from characterization.gait.person_check import check_person, cop_heel_to_toe
+from characterization.mocap.files import process_file
+from characterization.mocap.steps_artifact import load_steps
+from hp_model.compiled import CompileBackend
+from hp_model.domains import Domain
+from hp_model.human_prosthesis import HumanProsthesisModel
+
+DATA = Path(__file__).parent / "data" / "openofm-walk"
+
+
+def test_contact_events_are_the_first_frames_on_and_off():
+    c = np.array([0, 0, 1, 1, 1, 0, 0, 1, 1], bool)
+    assert contact_events(c) == ((2, 7), (5,))
+
+
+def test_heel_off_is_where_the_foot_pitch_leaves_flat():
+    pitch = np.radians(np.r_[np.zeros(20), np.linspace(0.0, 30.0, 11)[1:]])
+    # flat to frame 19, then 3 deg per frame: 3 deg is not above 3 deg, 6 is
+    assert heel_off(pitch, 0, 29) == 21
+    assert heel_off(np.zeros(30), 0, 29) == 28  # never rises: the last frame but one
+
+
+def test_stride_windows_follow_the_events():
+    td = {"prosthesis": (10, 110), "human": (60,)}
+    lo = {"prosthesis": (75,), "human": (25,)}
+    pitch = {"prosthesis": np.r_[np.zeros(50), np.full(70, 0.3)],
+             "human": np.r_[np.zeros(95), np.full(25, 0.3)]}
+    (w,) = stride_windows(td, lo, pitch)
+    assert w == {Domain.DS_P: (10, 25), Domain.PS: (25, 50), Domain.PS_TOE: (50, 60),
+                 Domain.DS_H: (60, 75), Domain.PNS: (75, 95), Domain.PNS_TOE: (95, 110)}
+    assert stride_windows({"prosthesis": (10,), "human": ()}, lo, pitch) == []
+
+
+@pytest.fixture(scope="module")
+def steps(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ofm") / "steps.npz"
+    process_file(DATA / "dynamic.c3d", out, mapping=DATA / "mapping.toml", with_figures=False)
+    return load_steps(out)
+
+
+@pytest.fixture(scope="module")
+def mc_model(model):
+    return HumanProsthesisModel(model.subject, model.device, graph=GRAPH,
+                                backend=CompileBackend.AUTO)
+
+
+def test_targets_from_the_real_walk(steps, mc_model):
+    """openOFM's stride 28-140 at 100 Hz: double supports of 140 and 150 ms (docs/
+    recording.md's table), the hip at 1.21 m/s (2.46 m in 2.04 s: about 1.2)."""
+    t = targets_from_steps(steps, mc_model)
+    assert t.durations[Domain.DS_H] == pytest.approx(0.14, abs=0.011)
+    assert t.durations[Domain.DS_P] == pytest.approx(0.15, abs=0.011)
+    assert t.stride_time == pytest.approx(1.12, abs=0.011)
+    assert t.speed == pytest.approx(1.2, abs=0.05)
+    for d in (Domain.PS_TOE, Domain.PNS_TOE):  # heel off 0.05-0.15 s before the heel strike
+        assert 0.04 < t.durations[d] < 0.16
+
+
+def test_an_old_steps_file_without_contact_is_one_line(steps, mc_model):
+    from dataclasses import replace
+
+    with pytest.raises(MultiContactError, match="mocap process` on the take"):
+        targets_from_steps(replace(steps, foot_contact=None), mc_model, "old.npz")
+
+
+@pytest.mark.slow
+def test_the_fit_walks_like_the_take(steps, mc_model):
+    """The fit converges; speed and stride within 10 % and each double support within 30 ms
+    of the take's (issue 37); the mean vertical ground force over the cycle is the walker's
+    weight (periodic motion: the momentum returns); every contact inside its friction cone
+    (mu 0.35) and each flat foot's centre of pressure inside its sole."""
+    targets = targets_from_steps(steps, mc_model)
+    r = fit_multicontact(mc_model, targets)
+    assert r.success, r.status
+    take, gait = take_summary(targets), gait_summary(mc_model, r)
+    check = {row.criterion: row for row in check_person(take, gait).rows}
+    for name in ("mean speed", "stride time", "double support 1", "double support 2"):
+        assert check[name].passed, (name, check[name])
+    weight = gait.body_weight
+    impulse = sum(np.trapezoid(gait.grf[f].fz, dx=1.0 / (len(gait.grf[f].fz) - 1))
+                  * _stance_time(r, f) for f in ("human", "prosthesis"))
+    # the impacts' impulses are the rest of the momentum balance: small at these speeds
+    assert impulse / r.stride_time == pytest.approx(weight, rel=0.05)
+    for f in ("human", "prosthesis"):
+        s = gait.grf[f]
+        loaded = s.fz > 0.1 * weight
+        assert np.all(np.abs(s.fx[loaded]) <= 0.35 * s.fz[loaded] + 1e-6)
+        ok, travel, why = cop_heel_to_toe(s, weight)
+        assert ok, why
+        assert travel > 0.5
+
+
+def _stance_time(r, foot: str) -> float:
+    from characterization.gait.multicontact_summary import STANCE
+
+    return sum(r.durations[d] for d in STANCE[foot])
+
+
+@pytest.mark.slow
+def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
+    """`gait fit --domains multicontact`: the comparison printed, the verdict one line; with
+    --allow-mismatch the artifact is written, carrying the comparison and the mark."""
+    from typer.testing import CliRunner
+
+    from characterization.gait.multicontact_artifact import load_multicontact_gait
+    from characterization.mocap.steps_artifact import save_steps
+    from hp_model.config import default_subject_path
+    from orchestrator.cli import app
+
+    src = tmp_path / "steps.npz"
+    save_steps(src, steps)
+    out = tmp_path / "mc.json"
+    res = CliRunner().invoke(app, ["gait", "fit", str(src), "--out", str(out), "--domains",
+                                   "multicontact", "--subject", str(default_subject_path()),
+                                   "--allow-mismatch"])
+    assert "double support 1" in res.output
+    doc = load_multicontact_gait(out)
+    passed = doc["check"]["passed"]
+    assert res.exit_code == (0 if passed else 1), res.output
+    assert doc["mismatch_allowed"] is (not passed)
+    assert doc["domains"] == [d.value for d in GRAPH.domains]
+    assert set(doc["ground_reaction"]) == {"human", "prosthesis"}
+    json.loads(out.read_text())  # strict JSON
