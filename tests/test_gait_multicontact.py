@@ -143,3 +143,4 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
     assert doc["domains"] == [d.value for d in GRAPH.domains]
     assert set(doc["ground_reaction"]) == {"human", "prosthesis"}
     json.loads(out.read_text())  # strict JSON
+    assert out.with_suffix(".png").stat().st_size > 10_000  # the figure against the take

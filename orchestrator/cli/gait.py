@@ -82,7 +82,7 @@ def fit(
         from orchestrator.cli.gait_multicontact import fit_multicontact_gait
 
         fit_multicontact_gait(steps, out, subject, device, nodes or 9, max_iter,
-                              allow_mismatch)
+                              allow_mismatch, figure)
         return
     console = Console(stderr=True)
     portions = fit_segments(segments)

@@ -12,9 +12,12 @@ from orchestrator.cli.outcome import HOLDS, Verdict, conclude
 
 
 def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: Path | None,
-                          nodes: int, max_iter: int, allow_mismatch: bool) -> None:
-    """Targets from the steps, the fit, the comparison printed, the artifact written (a
-    mismatch only with ``allow_mismatch``), the verdict as the exit code."""
+                          nodes: int, max_iter: int, allow_mismatch: bool, figure: bool = True
+                          ) -> None:
+    """Targets from the steps, the fit, the comparison printed, the artifact (and, with
+    ``figure``, its figure against the take next to it) written (a mismatch only with
+    ``allow_mismatch``), the verdict as the exit code."""
+    from characterization.gait.figures import save_person_figure
     from characterization.gait.multicontact import (
         GRAPH,
         MultiContactError,
@@ -51,12 +54,15 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         raise MultiContactError(f"gait fit, multi-contact optimization: IPOPT ended with "
                                 f"{result.status} after {result.iterations} iterations")
     gait = gait_summary(model, result, str(out))
-    check = check_person(take_summary(targets, str(steps)), gait)
+    take = take_summary(targets, str(steps))
+    check = check_person(take, gait)
     print_check(Console(), check)
     if check.passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
                           mismatch_allowed=not check.passed)
         save_multicontact_gait(out, doc)
+        if figure:
+            save_person_figure(out.with_suffix(".png"), take, gait)
         Console().print(f"[bold]gait[/bold] {out}: speed {result.speed:.2f} m/s, stride "
                         f"{result.stride_time:.2f} s, double supports "
                         + ", ".join(f"{d} {T * 1000:.0f} ms"
