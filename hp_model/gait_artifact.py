@@ -33,6 +33,7 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,20 @@ from hp_model.outputs import GaitParams
 
 KIND = "hpcosim-gait"
 SCHEMA_VERSION = 2
+#: the kind of a multi-contact gait (characterization.gait.multicontact_artifact), which the
+#: consumers of this artifact refuse with the command that makes theirs
+MULTICONTACT_KIND = "hpcosim-gait-multicontact"
+
+
+def _kind(path: str | os.PathLike[str]) -> object:
+    """A JSON file's ``kind`` field (None if it has none or is not JSON)."""
+    import json
+
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return doc.get("kind") if isinstance(doc, dict) else None
 
 
 @dataclass(frozen=True)
@@ -167,7 +182,15 @@ def _read_curve(r: FieldReader, field: str, rows: int) -> np.ndarray:
 def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Gait:
     """Read and validate a gait file; with ``model_hash``, refuse a gait for another model."""
     src = str(path)
-    doc = load_json(path, KIND, (1, SCHEMA_VERSION))
+    try:
+        doc = load_json(path, KIND, (1, SCHEMA_VERSION))
+    except ArtifactError:
+        if _kind(path) == MULTICONTACT_KIND:
+            raise ArtifactError(
+                f"{src}: a multi-contact gait (`gait fit --domains multicontact`, a "
+                "trajectory): the tube, controllers, FMU and co-simulation run the paper's "
+                f"domains for now; fit one with `hpcosim gait fit STEPS --out {src}`") from None
+        raise
     if doc["schema_version"] == 1:
         raise ArtifactError(
             f"{src}: field 'schema_version': a version-1 gait has no controller curves "

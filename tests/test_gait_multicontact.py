@@ -144,3 +144,14 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
     assert set(doc["ground_reaction"]) == {"human", "prosthesis"}
     json.loads(out.read_text())  # strict JSON
     assert out.with_suffix(".png").stat().st_size > 10_000  # the figure against the take
+
+
+def test_a_multicontact_gait_given_to_the_paper_stages_is_one_line(tmp_path):
+    from hp_model.artifacts import ArtifactError, save_json
+    from hp_model.gait_artifact import MULTICONTACT_KIND, load_gait
+
+    path = tmp_path / "mc.json"
+    save_json(path, {"kind": MULTICONTACT_KIND, "schema_version": 1})
+    with pytest.raises(ArtifactError, match="multi-contact gait.*gait fit STEPS") as e:
+        load_gait(path)
+    assert "\n" not in str(e.value)

@@ -33,8 +33,9 @@ from characterization.gait.multicontact import (
 )
 from characterization.gait.person_check import PersonCheck, StanceForce
 from hp_model.artifacts import load_json, save_json
+from hp_model.gait_artifact import MULTICONTACT_KIND
 
-KIND = "hpcosim-gait-multicontact"
+KIND = MULTICONTACT_KIND
 SCHEMA_VERSION = 1
 
 
