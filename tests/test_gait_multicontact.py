@@ -152,6 +152,6 @@ def test_a_multicontact_gait_given_to_the_paper_stages_is_one_line(tmp_path):
 
     path = tmp_path / "mc.json"
     save_json(path, {"kind": MULTICONTACT_KIND, "schema_version": 1})
-    with pytest.raises(ArtifactError, match="multi-contact gait.*gait fit STEPS") as e:
+    with pytest.raises(ArtifactError, match=r"multi-contact gait.*gait fit STEPS") as e:
         load_gait(path)
     assert "\n" not in str(e.value)
