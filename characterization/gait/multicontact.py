@@ -141,12 +141,11 @@ class MultiContactResult:
         return {d: self.durations[d] for d in GRAPH.domains if d.is_double_support}
 
 
-def _sole_ends(model: HumanProsthesisModel, side: str) -> tuple[float, float]:
-    """(heel, toe) distances (m) of a foot's heel and toe points behind / ahead of its sole
-    frame (along the sole)."""
+def sole_ends(model: HumanProsthesisModel, side: str) -> tuple[float, float]:
+    """(heel end, toe end) of a foot's sole in its sole frame's x, m (heel end < 0)."""
     pts = {f.name: f.point for f in model.tree.frames}
     sole = pts[f"{side}_sole"][0]
-    return sole - pts[f"{side}_heel"][0], pts[f"{side}_toe"][0] - sole
+    return pts[f"{side}_heel"][0] - sole, pts[f"{side}_toe"][0] - sole
 
 
 def _contact_rows(c: FootContact, lam: ca.SX, model: HumanProsthesisModel,
@@ -156,10 +155,10 @@ def _contact_rows(c: FootContact, lam: ca.SX, model: HumanProsthesisModel,
     fx, fz = lam[0], lam[1]
     rows = [opt.mu * fz - fx, opt.mu * fz + fx]
     if c.is_flat:
-        heel, toe = _sole_ends(model, c.side)
+        heel_end, toe = sole_ends(model, c.side)
         my = lam[2]
         rows += [fz - opt.min_normal_force,
-                 (toe - opt.cop_margin) * fz + my, (heel - opt.cop_margin) * fz - my]
+                 (toe - opt.cop_margin) * fz + my, (-heel_end - opt.cop_margin) * fz - my]
     else:
         rows.append(fz)
     return rows
@@ -197,7 +196,7 @@ def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOp
 
 
 # -- the initial guess -------------------------------------------------------------------------
-def _resample(a: np.ndarray, n: int) -> np.ndarray:
+def resample_rows(a: np.ndarray, n: int) -> np.ndarray:
     """Rows of ``a`` (given at evenly spaced instants) at ``n`` evenly spaced instants."""
     a = np.asarray(a, dtype=float)
     s = np.linspace(0.0, 1.0, a.shape[1])
@@ -215,7 +214,7 @@ def initial_guess(model: HumanProsthesisModel, targets: MultiContactTargets, n_p
     x_end = None
     for d in GRAPH.domains:
         T = targets.durations[d]
-        A = _resample(targets.angles[d], n_points)
+        A = resample_rows(targets.angles[d], n_points)
         Q = np.zeros((model.nq, n_points))
         Q[idx] = A
         flat = Domain.PS if d.stance_leg.side == "p" else Domain.PNS
@@ -253,14 +252,14 @@ def _domain_variables(nlp: NLP, model: HumanProsthesisModel, d: Domain,
         "qd": nlp.var(f"qd_{d}", (model.nq, P), guess["qd"], lb, ub),
         "qdd": nlp.var(f"qdd_{d}", (model.nq, P), guess["qdd"], lb, ub),
         "u": nlp.var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
-        "lam": nlp.var(f"lam_{d}", (n_c, P), guess["lam"] / _weight(model)),
+        "lam": nlp.var(f"lam_{d}", (n_c, P), guess["lam"] / body_weight(model)),
         "T": nlp.var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
     }
 
 
-def _weight(model: HumanProsthesisModel) -> float:
-    """The walker's weight, N: the unit of the wrench variables (their scale near 1)."""
-    return float(sum(b.mass for b in model.tree.bodies) * model.tree.gravity)
+def body_weight(model: HumanProsthesisModel) -> float:
+    """The walker's weight (person and device), N: the unit of the wrench variables."""
+    return float(model.tree.total_mass * model.tree.gravity)
 
 
 def _free(model: HumanProsthesisModel) -> list[int]:
@@ -275,7 +274,7 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     of the contact wrenches' inequalities appended to ``soft`` (:func:`fit_multicontact`)."""
     N, P = opt.nodes, 2 * opt.nodes - 1
     f_eq, f_wrench, f_free = _point_functions(model, d, opt)
-    args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"] * _weight(model)]
+    args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"] * body_weight(model)]
     nlp.eq(f_eq.map(P)(*args))
     # the contacts held where the domain's first point has them (position level: the first
     # point's are the previous domain's guard and contacts, so none is stated twice)
@@ -376,7 +375,7 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     """``d``'s share of the cost: the tracked angles' squared error integral (Simpson
     weights), its duration's squared error, the torques' squared integral."""
     P = 2 * opt.nodes - 1
-    A = _resample(targets.angles[d], P)
+    A = resample_rows(targets.angles[d], P)
     w = np.ones(P)
     w[1:-1:2], w[2:-1:2] = 4.0, 2.0
     w = w / w.sum()  # Simpson weights of the mean over the domain
@@ -413,7 +412,7 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
     stride = _impacts(nlp, model, dec, guess, soft)
     total = sum(dec[d]["T"] for d in GRAPH.domains)
     cost += opt.w_speed * (stride / total - targets.speed) ** 2
-    return _solve(nlp, cost, dec, stride, opt, soft, _weight(model))
+    return _solve(nlp, cost, dec, stride, opt, soft, body_weight(model))
 
 
 def _solve(nlp: NLP, cost: ca.MX, dec: dict[Domain, dict[str, ca.MX]], stride: ca.MX,
@@ -532,7 +531,7 @@ def targets_from_windows(time: np.ndarray, q: np.ndarray, coord_names: tuple[str
     idx = [names.index(c) for c in TRACKED]
     durations, angles = {}, {}
     for d in GRAPH.domains:
-        seg = [(time[e] - time[s], _resample(q[s:e + 1, idx].T, TARGET_SAMPLES))
+        seg = [(time[e] - time[s], resample_rows(q[s:e + 1, idx].T, TARGET_SAMPLES))
                for w in windows for s, e in [w[d]]]
         ok = [(T, a) for T, a in seg if np.all(np.isfinite(a))]
         if not ok:

@@ -18,7 +18,9 @@ from characterization.gait.multicontact import (
     TRACKED,
     MultiContactResult,
     MultiContactTargets,
-    _resample,
+    body_weight,
+    resample_rows,
+    sole_ends,
 )
 from characterization.gait.person_check import StanceForce, WalkSummary
 from hp_model.domains import Domain
@@ -67,13 +69,6 @@ def take_summary(targets: MultiContactTargets, source: str = "take",
         joint_angles=_angles(pieces), grf=grf or {}, body_weight=body_weight, source=source)
 
 
-def sole_ends(model: HumanProsthesisModel, side: str) -> tuple[float, float]:
-    """(heel end, toe end) of a foot's sole in its sole frame's x, m."""
-    pts = {f.name: f.point for f in model.tree.frames}
-    sole = pts[f"{side}_sole"][0]
-    return pts[f"{side}_heel"][0] - sole, pts[f"{side}_toe"][0] - sole
-
-
 def stance_force(model: HumanProsthesisModel, result: MultiContactResult, foot: str,
                  n: int = CYCLE_SAMPLES) -> StanceForce:
     """``foot``'s ground reaction over its stance in the fitted cycle (module docstring)."""
@@ -103,15 +98,15 @@ def gait_summary(model: HumanProsthesisModel, result: MultiContactResult,
     foot's ground reaction over its stance."""
     idx = [model.coord_names.index(c) for c in TRACKED]
     pieces = [(result.durations[d], result.trajectory[d]["q"][idx]) for d in GRAPH.domains]
-    weight = float(sum(b.mass for b in model.tree.bodies) * model.tree.gravity)
     return WalkSummary(
         speed=result.speed, stride_time=result.stride_time,
         double_supports=(result.durations[Domain.DS_H], result.durations[Domain.DS_P]),
         joint_angles=_angles(pieces),
-        grf={f: stance_force(model, result, f) for f in STANCE}, body_weight=weight,
+        grf={f: stance_force(model, result, f) for f in STANCE},
+        body_weight=body_weight(model),
         source=source)
 
 
 def target_angles(targets: MultiContactTargets, d: Domain, n: int) -> np.ndarray:
     """The take's tracked angles of domain ``d`` at ``n`` evenly spaced instants (rad)."""
-    return _resample(targets.angles[d], n)
+    return resample_rows(targets.angles[d], n)
