@@ -165,13 +165,19 @@ UNIT_SETS = (  # (mass, com, inertia about com) -> standard parameters (m, m cx,
 
 
 def standard_parameters(tree: PlanarTree, bodies: Sequence[str]) -> np.ndarray:
-    """theta0: (m, m c_x, m c_z, I_com + m |c|^2) of each named body, stacked."""
+    """theta0: (m, m c_x, m c_z, I_com + m |c|^2) of each named body, stacked, then the
+    armature (kg m^2) of each driven joint (:func:`drives`)."""
     out = []
     for name in bodies:
         b = tree.body(name)
         cx, cz = b.com
         out += [b.mass, b.mass * cx, b.mass * cz, b.inertia + b.mass * (cx * cx + cz * cz)]
-    return np.array(out)
+    return np.array(out + [tree.body(n).armature for n in drives(tree)])
+
+
+def drives(tree: PlanarTree) -> list[str]:
+    """The bodies whose joint carries an armature (a drive's reflected rotor inertia)."""
+    return [b.name for b in tree.bodies if b.armature > 0]
 
 
 def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
@@ -179,19 +185,23 @@ def regressor(sub: ProsthesisSubsystem, xa: ca.SX, a: ca.SX, v: ca.SX
     """Y (2 x 4 n_links) with Y theta = M a + C(q, qd) v + g for the moving links (the foot is
     fixed in stance and drops out).  ``xa`` = (q_j, qd_j) symbol to express Y in."""
     links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
+
+    def column(name: str, **unit: object) -> ca.SX:
+        """M a + C v + g of the tree with only ``name``'s parameters set to ``unit``."""
+        bodies = tuple(
+            dataclasses.replace(b, **unit) if b.name == name  # type: ignore[arg-type]
+            else dataclasses.replace(b, mass=0.0, inertia=0.0, armature=0.0)
+            for b in sub.tree.bodies)
+        tree = PlanarTree(bodies=bodies, frames=sub.tree.frames, gravity=sub.tree.gravity)
+        xs, M, g, C = reduced_lagrangian(sub, tree)
+        return ca.substitute(M @ a + C @ v + g, xs, xa)
+
     cols: list[ca.SX] = []
     for name in links:
-        per_set = []
-        for mass, com, inertia in UNIT_SETS:
-            bodies = tuple(
-                dataclasses.replace(b, mass=mass, com=com, inertia=inertia) if b.name == name
-                else dataclasses.replace(b, mass=0.0, inertia=0.0) for b in sub.tree.bodies)
-            tree = PlanarTree(bodies=bodies, frames=sub.tree.frames, gravity=sub.tree.gravity)
-            xs, M, g, C = reduced_lagrangian(sub, tree)
-            y = ca.substitute(M @ a + C @ v + g, xs, xa)
-            per_set.append(y)
-        y1, y2, y3, y4 = per_set
+        y1, y2, y3, y4 = (column(name, mass=mass, com=com, inertia=inertia, armature=0.0)
+                          for mass, com, inertia in UNIT_SETS)
         cols += [y1, y2 - y1 - y4, y3 - y1 - y4, y4]
+    cols += [column(name, mass=0.0, inertia=0.0, armature=1.0) for name in drives(sub.tree)]
     return ca.horzcat(*cols), links
 
 
@@ -447,7 +457,7 @@ def passive_function(sub: ProsthesisSubsystem, x: ca.SX, stance_ref: ca.Function
     lam, kgain = Pl.add("lam", (2,)), Pl.add("k", (2,))
     rho_th, bl = Pl.add("rho_theta"), Pl.add("boundary")
     links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
-    theta0 = Pl.add("theta0", (4 * len(links),))
+    theta0 = Pl.add("theta0", (4 * len(links) + len(drives(sub.tree)),))
     tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
     q_d, qd_d, qdd_d = stance_ref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
     e, ed = th - q_d, dth - qd_d

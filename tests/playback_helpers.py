@@ -84,6 +84,8 @@ class PinocchioSocket:
         tree = model.tree
         pm = pin.buildModelFromXML(to_urdf(tree))
         pm.gravity.linear = np.array([0.0, 0.0, -tree.gravity])
+        for c, j in tree.armature.items():  # the drives' reflected rotor inertias
+            pm.armature[pm.idx_vs[pm.getJointId(c)]] = j
         sole = model.stance_frame(domain)
         fr = next(f for f in tree.frames if f.name == sole)
         body = tree.body(fr.body)

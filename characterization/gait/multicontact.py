@@ -104,7 +104,8 @@ class MultiContactOptions:
     #  weights) and torques (in 100 N m): position-level contacts leave the wrench of
     #  neighbouring points free to alternate (an index-3 DAE's ringing); people's are smooth
     first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
-    duration_bounds: tuple[float, float] = (0.01, 3.0)  # s per domain
+    duration_range: tuple[float, float] = (0.5, 2.0)  # each domain's duration, as a
+    #  fraction of the take's (and at least 10 ms): keeps IPOPT near the person's timing
     max_iter: int = 600
     tol: float = 1e-6
     print_level: int = 0
@@ -238,6 +239,12 @@ def initial_guess(model: HumanProsthesisModel, targets: MultiContactTargets, n_p
 
 
 # -- the NLP -----------------------------------------------------------------------------------
+def _duration_bounds(take: float, opt: MultiContactOptions) -> tuple[float, float]:
+    """A domain's duration bounds (s) about the take's ``take``."""
+    lo, hi = opt.duration_range
+    return max(0.01, lo * take), max(0.02, hi * take)
+
+
 def _domain_variables(nlp: NLP, model: HumanProsthesisModel, d: Domain,
                       guess: dict[str, np.ndarray], opt: MultiContactOptions
                       ) -> dict[str, ca.MX]:
@@ -253,7 +260,7 @@ def _domain_variables(nlp: NLP, model: HumanProsthesisModel, d: Domain,
         "qdd": nlp.var(f"qdd_{d}", (model.nq, P), guess["qdd"], lb, ub),
         "u": nlp.var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
         "lam": nlp.var(f"lam_{d}", (n_c, P), guess["lam"] / body_weight(model)),
-        "T": nlp.var(f"T_{d}", (1, 1), guess["T"], *opt.duration_bounds),
+        "T": nlp.var(f"T_{d}", (1, 1), guess["T"], *_duration_bounds(float(guess["T"]), opt)),
     }
 
 
