@@ -25,6 +25,7 @@ import pytest
 
 from characterization.mocap.synthetic_subject import reference_gait
 from hp_model import bezier
+from hp_model.config import default_subject_path
 from hp_model.domains import PAPER_DOMAINS
 from hp_model.gait_artifact import load_gait
 from tests.committed_gaits import COEFFICIENT_TOLERANCE, RECIPES, ROOT, coefficient_difference
@@ -36,11 +37,12 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def steps_file(tmp_path_factory):
     d = tmp_path_factory.mktemp("gaitcli")
-    # the demo's subject (tests/committed_gaits.py, recipe "demo")
+    # the demo's subject (tests/committed_gaits.py, recipe "demo"): the model walking the
+    # example subject, so that subject (not one measured from the take) is the truth
     r = run("mocap", "synth", "--out", str(d), "--seed", "1", "--steps", "20")
     assert r.returncode == 0, r.stderr
     r = run("mocap", "process", str(d / "take.csv"), "--out", str(d / "steps.npz"),
-            "--no-figures")
+            "--no-figures", "--subject", str(default_subject_path()))
     assert r.returncode == 0, r.stderr
     return d / "steps.npz"
 

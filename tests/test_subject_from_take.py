@@ -230,7 +230,7 @@ def test_subject_whose_leg_the_device_does_not_fit_is_warned_before_optimization
     r = run("gait", "fit", str(steps), "--subject", str(subj), "--out", str(tmp_path / "g.json"),
             "--max-iter", "2", "--no-verify")
     lines = r.stderr.splitlines()
-    assert "'lab-m80' from --subject" in lines[0]  # which subject, and not the steps'
+    assert "'lab-m80' from --subject" in r.stdout  # which subject, and not the steps'
     warn = [ln for ln in lines if ln.startswith("warning:")]
     assert len(warn) == 1 and "differ by 43 mm" in warn[0]
     assert "prosthesis.top.length = 0.103 m" in warn[0]

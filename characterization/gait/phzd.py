@@ -78,8 +78,10 @@ class PHZDOptions:
     #  angles); on the model-generated subject (true offsets 0) IPOPT then drifted to
     #  offsets of 8.6 deg and a gait 8.8 deg from the truth, at 0.2 deg from the data
     duration_bounds: tuple[float, float] = (0.2, 1.5)  # s per domain
-    min_step: float = 0.05  # m, least hip progress p_max - p_min per domain
-    min_hip_velocity: float = 0.05  # m/s, least v_hip (the regression's own floor)
+    min_step: float = 0.0  # m, least hip progress p_max - p_min per domain (0: unbounded)
+    min_hip_velocity: float = 0.0  # m/s, least v_hip (0: unbounded).  Off by default: the
+    #  bounds change IPOPT's path on every gait; ``fit_gait`` solves again with them
+    #  (STEP_FLOOR) when IPOPT collapses a step (p_max = p_min: tau = 0/0, no gait)
     offset_bound: float = 0.15  # rad, |delta_alpha| (marker-placement offsets, not a free fit)
     expand: bool = False  # expand the NLP to SX: 15x faster derivatives, but on the
     #  synthetic subject IPOPT then ended in a far worse local optimum (RMS 15-47 deg)
@@ -226,8 +228,10 @@ def _boundaries(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, c
     # the phase is defined only while the hip progresses: without these bounds IPOPT can
     # collapse the step (p_max = p_min, tau = 0/0) where no walking gait is feasible
     _, v_hip, p_min, p_max = unpack_symbolic(X["theta"], opt.degree)
-    nlp.geq(step_length(p_min, p_max), opt.min_step)
-    nlp.geq(v_hip, opt.min_hip_velocity)
+    if opt.min_step > 0:
+        nlp.geq(step_length(p_min, p_max), opt.min_step)
+    if opt.min_hip_velocity > 0:
+        nlp.geq(v_hip, opt.min_hip_velocity)
     h_d = ca.Function("h", [model.q], [model.h[d]])
     nlp.eq(h_d(q[:, 0])[1:])  # stance sole z = 0, pitch = 0; socket q_f = 0
     fe = model.frame_expr(model.roles[d].swing_frame)

@@ -54,9 +54,10 @@ MAX_TABLE_DEVIATION = 0.10
 #: Take.metadata keys of the file's own measures
 MASS_KEY, HEIGHT_KEY, NAME_KEY = "body_mass_kg", "height_m", "subject_name"
 
-#: (length, joint pairs whose centre distance measures it): the human leg (left) and, for
-#: the thigh, the right thigh (the person's own, in the iWalk)
-MEASURED = {"thigh": (("hip_l", "knee_l"), ("hip_r", "knee_p")),
+#: (length, joint pairs whose centre distance measures it): the human leg (left) only: on
+#: the prosthesis side the hip-to-knee distance runs through the iWalk and the device's
+#: adapter to AMPRO3's knee (on the synthetic subject 0.56 m against a thigh of 0.40 m)
+MEASURED = {"thigh": (("hip_l", "knee_l"),),
             "shank": (("knee_l", "ankle_l"),)}
 
 

@@ -91,7 +91,7 @@ def fit(
     # the subject (--subject, else the steps') checked before any optimization starts
     model = hp_model.load_model(subject_source(subject, steps),
                                 str(device) if device else None)
-    console.print(subject_note(subject, steps), soft_wrap=True, highlight=False)
+    Console().print(subject_note(subject, steps), soft_wrap=True, highlight=False)
     for w in check_subject_fits_steps(model, data, str(steps)):
         console.print(f"[yellow]warning:[/] {w}", soft_wrap=True, highlight=False)
     opt = PHZDOptions(degree=degree, nodes=nodes or 21, max_iter=max_iter,

@@ -45,7 +45,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     model = HumanProsthesisModel(
         load_subject(subject_source(subject, steps) or default_subject_path()),
         load_device(device or default_device_path()), graph=GRAPH)
-    console.print(subject_note(subject, steps), soft_wrap=True, highlight=False)
+    Console().print(subject_note(subject, steps), soft_wrap=True, highlight=False)
     targets = targets_from_steps(data, model, str(steps))
     opt = MultiContactOptions(nodes=nodes, max_iter=max_iter)
     with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
