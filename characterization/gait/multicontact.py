@@ -10,12 +10,13 @@ inverse-dynamics form,
 
 with the socket's fixed joint q_f = 0 as bounds.  Ground contact is unilateral and rough:
 per foot contact F_z >= ``min_normal_force`` (flat) or >= 0 (heel, toe), |F_x| <= mu F_z,
-and a flat foot's centre of pressure inside its sole with ``cop_margin``; the feet not on
-the ground stay above it.  A domain ends at its guard (the next domain's new contact touches
-down: the swing heel moving down at ``touchdown_velocity`` at least, or the leading toe as the
-foot lands flat) and the next starts with the rigid impact into its constraints (impulse
-variables, pushing on the ground); where a double support ends the trailing toe leaves the
-ground upward.  The cycle closes with a forward translation of one stride.
+and a flat foot's centre of pressure inside its sole with ``cop_margin``, rolling from heel to
+toe (never backward between points); the feet not on the ground stay above it. A domain ends at
+its guard (the next domain's new contact touches down: the swing heel moving down at
+``touchdown_velocity`` at least, or the leading toe as the foot lands flat) and the next starts
+with the rigid impact into its constraints (impulse variables, pushing on the ground); where a
+double support ends the trailing toe leaves the ground upward.  The cycle closes with a
+forward translation of one stride.
 
 Cost: the integral of squared differences of the trunk pitch and the six joint angles from
 the take's (per domain, over normalized time), the squared differences of each domain's
@@ -291,6 +292,11 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     soft.append(len(nlp.g))
     nlp.geq(f_wrench.map(P)(*args))
     nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]))
+    if d.is_flat_stance:  # the centre of pressure -M_y / F_z rolls from heel to toe:
+        lam = X["lam"]  # d_{k+1} >= d_k, times F_z,k F_z,k+1 > 0
+        fz, my = lam[1, :], lam[2, :]
+        soft.append(len(nlp.g))
+        nlp.geq(my[:-1] * fz[1:] - my[1:] * fz[:-1])
     h = X["T"] / (N - 1)
     free = _free(model)
     q, qd, qdd = X["q"][free, :], X["qd"][free, :], X["qdd"][free, :]
