@@ -1,0 +1,67 @@
+"""Benchmark: the multi-contact fit (``gait fit --domains multicontact``; issue 37 target: a
+3-stride take in <= 60 s on these 2-core machines) on openOFM's Vicon walk (tests/data: one
+complete stride; the NLP's size does not depend on the number of strides, which only average
+the targets).
+
+Per repeat: targets from the steps, NLP construction and the two IPOPT solves (wall), the
+iterations; printed: median and spread, and the comparison with the take (speed, stride,
+double supports, angle RMS).
+
+    PYTHONPATH=. python benchmarks/bench_gait_multicontact.py [--repeats 3] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import hp_model
+from characterization.gait.multicontact import GRAPH, fit_multicontact, targets_from_steps
+from characterization.gait.multicontact_summary import gait_summary, take_summary
+from characterization.gait.person_check import check_person
+from characterization.mocap.files import process_file
+from characterization.mocap.steps_artifact import load_steps
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.json_io import write_json
+
+TAKE = Path(__file__).resolve().parent.parent / "tests" / "data" / "openofm-walk"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
+    args = ap.parse_args()
+    base = hp_model.load_model()
+    model = HumanProsthesisModel(base.subject, base.device, graph=GRAPH)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "steps.npz"
+        process_file(TAKE / "dynamic.c3d", out, mapping=TAKE / "mapping.toml",
+                     with_figures=False)
+        steps = load_steps(out)
+    model.numeric()  # compiled once, outside the timing
+    walls, iters = [], []
+    for k in range(args.repeats):
+        t0 = time.perf_counter()
+        targets = targets_from_steps(steps, model)
+        r = fit_multicontact(model, targets)
+        walls.append(time.perf_counter() - t0)
+        iters.append(r.iterations)
+        print(f"repeat {k + 1}: {walls[-1]:.1f} s, {r.status}, {r.iterations} iterations")
+    check = check_person(take_summary(targets), gait_summary(model, r))
+    rows = {row.criterion: row.error for row in check.rows}
+    med = statistics.median(walls)
+    print(f"multi-contact fit: median {med:.1f} s (min {min(walls):.1f}, max {max(walls):.1f}) "
+          f"over {args.repeats}; target <= 60 s")
+    for name, err in rows.items():
+        print(f"  {name}: {err:.3g}")
+    if args.json:
+        write_json(args.json, {"median_s": med, "walls_s": walls, "iterations": iters,
+                               "check": check.to_json()})
+
+
+if __name__ == "__main__":
+    main()
