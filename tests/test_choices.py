@@ -23,7 +23,7 @@ from prosthesis_controller.interface import ControllerMode, ControllerName, QpOu
 #: every enum and the strings files and command lines spell (unchanged formats)
 CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (CompileBackend, ("auto", "c", "sx")),
-    (ConstraintKind, ("frame", "coords")),
+    (ConstraintKind, ("frame", "point", "coords")),
     (JointKind, ("revolute", "planar")),
     (ClosedLoopMode, ("full", "human")),
     (QpOutcome, ("not_run", "solved", "infeasible", "failed", "nonfinite")),

@@ -52,7 +52,7 @@ _SMALL_SOLVE = """
 import hashlib, numpy as np, hp_model
 from characterization.gait.phzd import PHZDOptions, optimize_gait
 from hp_model.blas_threads import blas_thread_counts
-from hp_model.domains import Domain
+from hp_model.domains import PAPER_DOMAINS
 from tests.gait_template import template_targets
 r = optimize_gait(hp_model.load_model(), template_targets(), PHZDOptions(nodes=7, max_iter=15))
 x = np.concatenate([np.ravel(r.trajectory[d][k]) for d in PAPER_DOMAINS

@@ -224,7 +224,13 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     step."""
     from characterization.mocap.mapping import MocapMapping, default_mapping, load_mapping
     from characterization.mocap.report import render_session_report
-    from hp_model.config import default_device_path, load_device, load_subject, subject_record
+    from hp_model.config import (
+        default_device_path,
+        default_subject_path,
+        load_device,
+        load_subject,
+        subject_record,
+    )
     from hp_model.human_prosthesis import build_tree, hip_progress_coefficients
 
     outp = Path(out)
@@ -242,10 +248,15 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     from characterization.mocap.subject_from_take import session_subject
 
     static = read_take(m.calibration.static_trial) if m.calibration is not None else None
+    subject_error: Exception | None = None
     if subject:  # --subject FILE (a TOML, or a steps/gait file holding one)
         subj, prov = load_subject(subject), {"*": f"--subject {subject}"}
     else:  # the person of the takes (docs/subject.md)
-        subj, prov = session_subject(paths, m, static)
+        try:
+            subj, prov = session_subject(paths, m, static)
+        except (MocapError, ValueError) as e:  # the takes' own errors (units, mapping) first
+            subject_error = e
+            subj, prov = load_subject(default_subject_path()), {}
     tree = build_tree(subj, load_device(device or default_device_path()))
     coef = {d: hip_progress_coefficients(tree, d) for d in PAPER_DOMAINS}
     offsets = None
@@ -256,6 +267,8 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     if not good:
         raise MocapError("no take of the session gives a step: " + "; ".join(
             t.line() for t in takes))
+    if subject_error is not None:
+        raise subject_error
     notes: list[str] = []
     art = replace(pool([to_artifact(p) for p in good], notes),
                   subject=subject_record(subj, prov))
