@@ -72,12 +72,13 @@ class TakeOutcome:
             return []
         return strides(p.contacts, p.q[:, COORDS.index("x_B")], p.frame_rate)
 
-    def line(self) -> str:
-        """One line: the take's strides and steps kept, or why it gave none."""
+    def line(self, full_path: bool = False) -> str:
+        """One line: the take's strides and steps kept, or why it gave none (the take by
+        its file name, or its whole path)."""
         p = self.processed
         if p is None:
             why = (self.error or "").removeprefix(f"{self.path}: ")
-            return f"{self.path.name}: no step ({why})"
+            return f"{self.path if full_path else self.path.name}: no step ({why})"
         n = {d: sum(s.domain == d for s in p.steps) for d in PAPER_DOMAINS}
         return (f"{self.path.name}: {len(self.strides)} full stride(s), steps kept "
                 f"{n[Domain.PS]} ps + {n[Domain.PNS]} pns, {len(p.dropped)} dropped")
@@ -264,9 +265,9 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
         offsets = static_offsets(static, m, subj.lengths)
     takes = process_takes(paths, lambda t: process_take(t, m, coef, subj.lengths, offsets))
     good = [t.processed for t in takes if t.processed is not None]
-    if not good:
+    if not good:  # each take by its path, as the file it names
         raise MocapError("no take of the session gives a step: " + "; ".join(
-            t.line() for t in takes))
+            t.line(full_path=True) for t in takes))
     if subject_error is not None:
         raise subject_error
     notes: list[str] = []
