@@ -19,7 +19,6 @@ from characterization.gait.multicontact import (
     MultiContactResult,
     MultiContactTargets,
     body_weight,
-    resample_rows,
     sole_ends,
 )
 from characterization.gait.person_check import StanceForce, WalkSummary
@@ -105,8 +104,3 @@ def gait_summary(model: HumanProsthesisModel, result: MultiContactResult,
         grf={f: stance_force(model, result, f) for f in STANCE},
         body_weight=body_weight(model),
         source=source)
-
-
-def target_angles(targets: MultiContactTargets, d: Domain, n: int) -> np.ndarray:
-    """The take's tracked angles of domain ``d`` at ``n`` evenly spaced instants (rad)."""
-    return resample_rows(targets.angles[d], n)
