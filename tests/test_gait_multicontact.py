@@ -155,3 +155,23 @@ def test_a_multicontact_gait_given_to_the_paper_stages_is_one_line(tmp_path):
     with pytest.raises(ArtifactError, match=r"multi-contact gait.*gait fit STEPS") as e:
         load_gait(path)
     assert "\n" not in str(e.value)
+
+
+def test_the_pylon_is_cut_to_the_persons_leg(model):
+    """openOFM's subject (1.83 m: shank 0.450 m) on the default device: the prosthesis side
+    is 52 mm short; the fitted device's sides match, the cut is said in one line; a leg
+    the device cannot reach without a pylon is one line too."""
+    from characterization.gait.fit import FitError, leg_lengths, pylon_fitted
+
+    tall = model.subject.model_copy(update={"lengths": model.subject.lengths.model_copy(
+        update={"shank": 0.450})})
+    dev, note = pylon_fitted(tall, model.device)
+    fitted = HumanProsthesisModel(tall, dev, backend=CompileBackend.SX)
+    human, side = leg_lengths(fitted)
+    assert side == pytest.approx(human, abs=1e-9)
+    assert "prosthesis.top.length" in note and "\n" not in note
+    assert pylon_fitted(model.subject, model.device) == (model.device, "")
+    short = model.subject.model_copy(update={"lengths": model.subject.lengths.model_copy(
+        update={"shank": 0.20})})
+    with pytest.raises(FitError, match="shorter than the device's prosthesis side"):
+        pylon_fitted(short, model.device)

@@ -35,9 +35,10 @@ from characterization.mocap.steps_artifact import StepsArtifact
 from hp_model import bezier
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.choices import Choice
+from hp_model.config import DeviceConfig, SubjectConfig
 from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.gait_artifact import Gait
-from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.human_prosthesis import HumanProsthesisModel, build_tree
 from hp_model.outputs import HipProgress, phase
 from hp_model.tree import PlanarTree
 
@@ -279,6 +280,31 @@ def leg_lengths(model: HumanProsthesisModel) -> tuple[float, float]:
     """(the person's, the prosthesis side's) length from the knee to the sole (m), from the
     model's tree: shank + ankle height; iWalk + pylon + shin + foot."""
     return _below(model.tree, "l_sole", "l_knee"), _below(model.tree, "p_sole", "r_knee")
+
+
+def pylon_fitted(subject: SubjectConfig, device: DeviceConfig) -> tuple[DeviceConfig, str]:
+    """The device with its pylon (``prosthesis.top.length``) cut so that its prosthesis side
+    is as long as the person's leg below the knee, and one line saying so; ``device`` itself
+    (and "") when they already differ by no more than :data:`LEG_LENGTH_TOLERANCE`.  A leg
+    shorter than the device's knee, shin and foot alone is a one-line :class:`FitError`."""
+    tree = build_tree(subject, device)
+    human, side = _below(tree, "l_sole", "l_knee"), _below(tree, "p_sole", "r_knee")
+    if abs(human - side) <= LEG_LENGTH_TOLERANCE:
+        return device, ""
+    top = device.prosthesis.top
+    length = top.length.value + human - side
+    if length <= 0.0:
+        raise FitError(f"subject '{subject.name}': the leg below the knee ({human:.3f} m) is "
+                       f"shorter than the device's prosthesis side without its pylon "
+                       f"({side - top.length.value:.3f} m): give a device that fits (--device)")
+    cut = top.length.model_copy(update={
+        "value": length, "source": f"cut to subject '{subject.name}''s leg below the knee "
+        f"({human:.3f} m) by gait fit"})
+    fitted = device.model_copy(update={"prosthesis": device.prosthesis.model_copy(
+        update={"top": top.model_copy(update={"length": cut})})})
+    return fitted, (f"device: the pylon cut to subject '{subject.name}''s leg below the knee "
+                    f"({human:.3f} m): prosthesis.top.length = {length:.3f} m (the device "
+                    f"file's {top.length.value:.3f} m; --device FILE to give one)")
 
 
 def check_subject_fits_steps(model: HumanProsthesisModel, steps: StepsArtifact, src: str

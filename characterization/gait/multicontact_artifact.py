@@ -15,6 +15,8 @@ Layout (``kind = "hpcosim-gait-multicontact"``, ``schema_version = 1``; SI units
     check            the comparison with the take (:mod:`.person_check`), its verdict
     mismatch_allowed true when written by ``--allow-mismatch`` although not the person's
     options, solver  the fit's settings; IPOPT's status, iterations, seconds, cost
+    subject, device  the model's configs (``gait fit`` cuts the device's pylon to the person's
+                     leg unless given ``--device``), so the file remakes its model
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     ``figure``, its figure against the take next to it) written (a mismatch only with
     ``allow_mismatch``), the verdict as the exit code."""
     from characterization.gait.figures import save_person_figure
+    from characterization.gait.fit import pylon_fitted
     from characterization.gait.multicontact import (
         GRAPH,
         MultiContactError,
@@ -42,10 +43,14 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     console = Console(stderr=True)
     check_output_file(out)
     data = load_steps(steps)
-    model = HumanProsthesisModel(
-        load_subject(subject_source(subject, steps) or default_subject_path()),
-        load_device(device or default_device_path()), graph=GRAPH)
+    person = load_subject(subject_source(subject, steps) or default_subject_path())
+    dev = load_device(device or default_device_path())
     Console().print(subject_note(subject, steps), soft_wrap=True, highlight=False)
+    if device is None:  # the device the person would wear: its pylon cut to their leg
+        dev, note = pylon_fitted(person, dev)
+        if note:
+            Console().print(note, soft_wrap=True, highlight=False)
+    model = HumanProsthesisModel(person, dev, graph=GRAPH)
     targets = targets_from_steps(data, model, str(steps))
     opt = MultiContactOptions(nodes=nodes, max_iter=max_iter)
     with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
@@ -60,6 +65,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     if check.passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
                           mismatch_allowed=not check.passed)
+        doc["subject"] = person.model_dump(mode="json")
+        doc["device"] = dev.model_dump(mode="json")  # the gait's model, remade from the file
         save_multicontact_gait(out, doc)
         if figure:
             save_person_figure(out.with_suffix(".png"), take, gait)
