@@ -16,7 +16,7 @@ from characterization.mocap.pipeline import (
     to_artifact,
 )
 from characterization.mocap.report import render_report
-from characterization.mocap.steps_artifact import StepsFileError, steps_bytes
+from characterization.mocap.steps_artifact import steps_bytes, steps_output
 from characterization.mocap.take import MocapError, Take
 from characterization.mocap.trc_io import read_trc
 from hp_model.atomic_io import atomic_write_bytes
@@ -57,12 +57,7 @@ def process_file(take_path: str | os.PathLike[str], out: str | os.PathLike[str],
     from hp_model.config import default_device_path, default_subject_path, load_device, load_subject
     from hp_model.human_prosthesis import build_tree, hip_progress_coefficients
 
-    outp = Path(out)
-    if outp.suffix not in (".npz", ".json"):
-        raise StepsFileError(f"{outp}: unknown steps file extension '{outp.suffix}' "
-                             "(use .npz or .json)")
-    if not outp.parent.is_dir():
-        raise FileNotFoundError(f"{outp.parent}: output folder does not exist")
+    outp = steps_output(out)
     m = (mapping if isinstance(mapping, MocapMapping) else
          load_mapping(mapping) if mapping is not None else default_mapping())
     take = read_take(take_path)

@@ -34,7 +34,7 @@ import numpy as np
 from characterization.mocap.foot_contact import Stride, strides
 from characterization.mocap.pipeline import ProcessedTake, process_take, static_offsets, to_artifact
 from characterization.mocap.step_segmentation import TAKE_GAP
-from characterization.mocap.steps_artifact import StepsArtifact, StepsFileError, steps_bytes
+from characterization.mocap.steps_artifact import StepsArtifact, steps_bytes, steps_output
 from characterization.mocap.take import MocapError
 from hp_model import COORDS
 from hp_model.atomic_io import atomic_write_bytes
@@ -234,12 +234,7 @@ def process_session(paths: Sequence[str | os.PathLike[str]], out: str | os.PathL
     )
     from hp_model.human_prosthesis import build_tree, hip_progress_coefficients
 
-    outp = Path(out)
-    if outp.suffix not in (".npz", ".json"):
-        raise StepsFileError(f"{outp}: unknown steps file extension '{outp.suffix}' "
-                             "(use .npz or .json)")
-    if not outp.parent.is_dir():
-        raise FileNotFoundError(f"{outp.parent}: output folder does not exist")
+    outp = steps_output(out)
     for p in paths:
         if not Path(p).is_file():
             raise FileNotFoundError(f"{p}: no such file")

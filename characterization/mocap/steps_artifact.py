@@ -181,6 +181,18 @@ def steps_bytes(path: str | os.PathLike[str], a: StepsArtifact) -> bytes:
     raise StepsFileError(f"{p}: unknown steps file extension '{p.suffix}' (use .npz or .json)")
 
 
+def steps_output(path: str | os.PathLike[str]) -> Path:
+    """A steps file to write, checked before any work: a ``.npz`` or ``.json`` in an existing
+    folder (one-line :class:`StepsFileError` / :class:`FileNotFoundError` otherwise)."""
+    outp = Path(path)
+    if outp.suffix not in (".npz", ".json"):
+        raise StepsFileError(f"{outp}: unknown steps file extension '{outp.suffix}' "
+                             "(use .npz or .json)")
+    if not outp.parent.is_dir():
+        raise FileNotFoundError(f"{outp.parent}: output folder does not exist")
+    return outp
+
+
 def save_steps(path: str | os.PathLike[str], a: StepsArtifact) -> None:
     """Write ``.npz`` or ``.json`` by the file's extension, atomically."""
     atomic_write_bytes(path, steps_bytes(path, a))
