@@ -48,9 +48,14 @@ import numpy as np
 
 from hp_model.choices import Choice
 from hp_model.compiled import FunctionSet
+from hp_model.contact_outputs import ContactConstraints, virtual_constraints
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints
 from hp_model.placement import walker_functions
+
+#: a domain's virtual constraints: the paper's or the multi-contact graph's
+DomainConstraints = VirtualConstraints | ContactConstraints
 
 
 class ClosedLoopMode(Choice):
@@ -146,7 +151,16 @@ def delayed_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     return out
 
 
-def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
+def guard_height(model: HumanProsthesisModel, domain: str, x: ca.SX) -> ca.Function:
+    """x -> the height (m) of the frame whose touchdown ends ``domain`` (its guard); a
+    domain ended by a lift-off (no touchdown: :meth:`DomainGraph.touchdown_frame`) has none,
+    its height is 1 (the simulator ends it at tau = 1)."""
+    frame = model.domains[domain].swing_frame
+    z = ca.SX(1.0) if frame is None else model.frame_expr(frame, x[:model.nq])[1]
+    return ca.Function("h", [x], [z])
+
+
+def closed_loop_functions(model: HumanProsthesisModel, vc: DomainConstraints
                           ) -> list[ca.Function]:
     """The xdot and rk4 functions of one domain, both modes."""
     d, nq = vc.domain, model.nq
@@ -157,8 +171,7 @@ def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
     u_p = ca.SX.sym("u_p", 2)
     dyn = model.function(f"dyn_{d}")
     fl, hfl = vc.functions[f"fl_{d}"], vc.functions[f"hfl_{d}"]
-    swing = model.roles[d].swing_frame
-    height = ca.Function("h", [x], [model.frame_expr(swing, q)[1]])
+    height = guard_height(model, d, x)
 
     out: list[ca.Function] = []
     u_full = fl(q, qd, theta, gains)[0]
@@ -183,19 +196,32 @@ def closed_loop_functions(model: HumanProsthesisModel, vc: VirtualConstraints
 
 
 class ClosedLoop:
-    """The compiled closed-loop functions of both domains for one Bezier degree."""
+    """The compiled closed-loop functions of every domain of the model's graph for one
+    Bezier degree (the paper's graph: with the walker's placed states, ``start_<d>`` and
+    ``zero_dynamics_<d>``)."""
 
     def __init__(self, model: HumanProsthesisModel, degree: int) -> None:
         self.model, self.degree = model, degree
-        self.vcs = {d: VirtualConstraints(model, d, degree) for d in model.domains}
+        self.vcs: dict[Domain, DomainConstraints] = {
+            d: virtual_constraints(model, d, degree) for d in model.graph.domains}
         fns: list[ca.Function] = []
         for d, vc in self.vcs.items():
             fns += closed_loop_functions(model, vc)
             fns += [vc.functions[f"outputs_{d}"], vc.functions[f"phase_{d}"]]
-            fns += walker_functions(vc)
+            if isinstance(vc, VirtualConstraints):
+                fns += walker_functions(vc)
         self.functions = {f.name(): f for f in fns}
         self._numeric: FunctionSet | None = None
         self._delayed: FunctionSet | None = None
+
+    def paper_constraints(self, domain: Domain) -> VirtualConstraints:
+        """The paper's virtual constraints of ``domain`` (ValueError on another graph: what
+        reads the paper's hip progress and roles runs on the paper's graph only)."""
+        vc = self.vcs[domain]
+        if not isinstance(vc, VirtualConstraints):
+            raise ValueError(f"the paper's outputs of {domain} are not on the "
+                             f"{self.model.graph} graph")
+        return vc
 
     def numeric(self) -> FunctionSet:
         if self._numeric is None:
@@ -223,6 +249,9 @@ class ClosedLoop:
         if self._delayed is None:
             fns: list[ca.Function] = []
             for vc in self.vcs.values():
+                if not isinstance(vc, VirtualConstraints):
+                    raise ValueError(f"the delayed human runs the paper's graph only, not "
+                                     f"{self.model.graph}")
                 fns += delayed_functions(self.model, vc)
             self._delayed = FunctionSet(fns, f"{self.model.name}_cld_m{self.degree}")
         return self._delayed

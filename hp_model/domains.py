@@ -43,7 +43,11 @@ Per domain (``Domain.X.<property>``):
 
     stance_leg      (hip, knee, ankle) coordinates of the stance leg and its frames' side
     stance          (knee, ankle) of the stance leg: delta_p_hip = c_k th_k + c_a th_a
-    y2_coords       the 5 joints whose angles are the y2 outputs, in output order
+    y2_coords       the joints whose angles are the y2 outputs, in output order (the paper's
+                    domains: 5, all but the stance ankle; a double support: both hips and
+                    the leading knee and ankle, with y1; on a toe: all 6, without y1:
+                    :mod:`hp_model.contact_outputs`)
+    velocity_output whether the stacked outputs start with the hip velocity y1
     human_outputs   rows of the stacked outputs (y1, y2) the human's 4 torques control
     next            the domain the swing foot's touchdown leads to
     code            its number (definition order: 0 = ps, 1 = pns), as logs and the FMU store it
@@ -128,14 +132,16 @@ class StanceLeg:
 class DomainSpec:
     """One domain's row of ``_SPECS`` (module docstring): ``contacts`` the feet on the
     ground (the stance leg's first); ``stance_leg`` the leg the phase is measured on (the
-    flat foot's; in a double support the leading leg's); ``y2_coords`` and ``human_outputs``
-    its outputs (single support only so far: a double support has none, its gait is a
-    trajectory, :mod:`characterization.gait.multicontact`)."""
+    flat foot's; in a double support the leading leg's); ``y2_coords`` the joints of its y2
+    outputs, ``velocity_output`` whether it has the hip-velocity output y1 (stacked first:
+    (y1, y2), else y2 alone), ``human_outputs`` the rows of that stack the human's four
+    torques control."""
 
     contacts: tuple[FootContact, ...]
     stance_leg: StanceLeg
     y2_coords: tuple[str, ...]
     human_outputs: tuple[int, ...]
+    velocity_output: bool = True
 
 
 class Domain(Choice):
@@ -198,9 +204,11 @@ class Domain(Choice):
         return len(c) == 1 and c[0].is_flat
 
     @property
-    def has_outputs(self) -> bool:
-        """Whether the domain has virtual constraints (y1, y2) yet (single supports)."""
-        return bool(_SPECS[self].y2_coords)
+    def velocity_output(self) -> bool:
+        """Whether its outputs start with the hip velocity y1 (a domain with as many
+        actuators as degrees of freedom, or more: a flat foot, a double support); on a toe
+        the walker pivots freely, its phase the zero dynamics."""
+        return _SPECS[self].velocity_output
 
     @property
     def is_prosthesis_stance(self) -> bool:
@@ -212,6 +220,8 @@ class Domain(Choice):
         return _SPECS[self].y2_coords.index(coord)
 
 
+#: the human's joints: on a toe (and leading in a double support) its torques hold them
+_HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
 _P_LEG = StanceLeg("th_rh", "th_pk", "th_pa", "p")
 _L_LEG = StanceLeg("th_lh", "th_lk", "th_la", "l")
 _SPECS: dict[Domain, DomainSpec] = {
@@ -223,16 +233,18 @@ _SPECS: dict[Domain, DomainSpec] = {
         y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"), human_outputs=(0, 1, 2, 3)),
     Domain.DS_H: DomainSpec(
         contacts=(FootContact("l", FootPart.HEEL), FootContact("p", FootPart.TOE)),
-        stance_leg=_L_LEG, y2_coords=(), human_outputs=()),
+        stance_leg=_L_LEG, y2_coords=_HUMAN_JOINTS, human_outputs=(1, 2, 3, 4)),
     Domain.DS_P: DomainSpec(
         contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
-        stance_leg=_P_LEG, y2_coords=(), human_outputs=()),
+        stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", *PROSTHESIS), human_outputs=(0, 1, 2)),
     Domain.PS_TOE: DomainSpec(
-        contacts=(FootContact("p", FootPart.TOE),), stance_leg=_P_LEG, y2_coords=(),
-        human_outputs=()),
+        contacts=(FootContact("p", FootPart.TOE),), stance_leg=_P_LEG,
+        y2_coords=_HUMAN_JOINTS + PROSTHESIS, human_outputs=(0, 1, 2, 3),
+        velocity_output=False),
     Domain.PNS_TOE: DomainSpec(
-        contacts=(FootContact("l", FootPart.TOE),), stance_leg=_L_LEG, y2_coords=(),
-        human_outputs=()),
+        contacts=(FootContact("l", FootPart.TOE),), stance_leg=_L_LEG,
+        y2_coords=_HUMAN_JOINTS + PROSTHESIS, human_outputs=(0, 1, 2, 3),
+        velocity_output=False),
 }
 _CODES: dict[Domain, int] = {d: i for i, d in enumerate(Domain)}
 
@@ -256,6 +268,14 @@ class DomainGraph(Choice):
         if d not in cycle:
             raise ValueError(f"domain {d} is not in the {self} graph ({', '.join(cycle)})")
         return cycle[(cycle.index(d) + 1) % len(cycle)]
+
+    @property
+    def step_starts(self) -> tuple[Domain, ...]:
+        """The domains a step begins in: entered by a foot's touchdown that starts its
+        stance (the paper's: both; the multi-contact graph's: the double supports, entered
+        by a heel strike)."""
+        return tuple(d for d in _CYCLES[self] if self == DomainGraph.PAPER
+                     or d.is_double_support)
 
     def touchdown_frame(self, domain: Domain | str) -> str | None:
         """The frame whose touchdown is ``domain``'s guard: the next domain's new contact

@@ -53,13 +53,18 @@ Num = Any
 @dataclass(frozen=True)
 class ThetaLayout:
     """Where the gait parameters of one domain sit in the packed vector theta =
-    (alpha row by row (5 (m+1), rad), v_hip (m/s), p_min, p_max (m)), m the Bezier degree."""
+    (alpha row by row (rows (m+1), rad), v_hip (m/s), p_min, p_max (m)), m the Bezier degree,
+    ``rows`` the domain's y2 outputs (5 in the paper's domains; the multi-contact graph's
+    domains have 4 to 6, :mod:`hp_model.contact_outputs`)."""
 
     degree: int
+    rows: int = N_Y2
 
     def __post_init__(self) -> None:
         if self.degree < 0:
             raise ValueError(f"the Bezier degree must be >= 0, got {self.degree}")
+        if self.rows < 1:
+            raise ValueError(f"a gait has at least one output row, got {self.rows}")
 
     @classmethod
     def of_size(cls, size: int) -> ThetaLayout:
@@ -71,7 +76,7 @@ class ThetaLayout:
 
     @property
     def n_alpha(self) -> int:
-        return N_Y2 * (self.degree + 1)
+        return self.rows * (self.degree + 1)
 
     @property
     def size(self) -> int:
@@ -104,12 +109,12 @@ class ThetaLayout:
         return slice(self.n_alpha, self.size)
 
     def unpack(self, theta: Num) -> tuple[Num, Num, Num, Num]:
-        """(alpha (5, m+1), v_hip, p_min, p_max) of a numeric or symbolic vector."""
+        """(alpha (rows, m+1), v_hip, p_min, p_max) of a numeric or symbolic vector."""
         alpha: Num
         if isinstance(theta, ca.SX | ca.MX):
-            alpha = ca.reshape(theta[self.alpha], self.degree + 1, N_Y2).T
+            alpha = ca.reshape(theta[self.alpha], self.degree + 1, self.rows).T
         else:
-            alpha = np.asarray(theta)[self.alpha].reshape(N_Y2, self.degree + 1)
+            alpha = np.asarray(theta)[self.alpha].reshape(self.rows, self.degree + 1)
         return alpha, theta[self.v_hip], theta[self.p_min], theta[self.p_max]
 
 
@@ -282,7 +287,8 @@ def stance_outputs(hip: HipProgress, x: Num, alpha: Num, v_hip: Num, p_min: Num,
 # -- gait parameters ----------------------------------------------------------------------------
 @dataclass(frozen=True)
 class GaitParams:
-    """Gait parameters of one domain: alpha (5, m+1) in rad, v_hip (m/s), p_min, p_max (m)."""
+    """Gait parameters of one domain: alpha (rows, m+1) in rad (5 rows in the paper's
+    domains), v_hip (m/s), p_min, p_max (m)."""
 
     alpha: np.ndarray
     v_hip: float
@@ -291,8 +297,8 @@ class GaitParams:
 
     def __post_init__(self) -> None:
         a = np.array(self.alpha, dtype=float)
-        if a.ndim != 2 or a.shape[0] != N_Y2:
-            raise ValueError(f"alpha must have shape (5, m+1), got {a.shape}")
+        if a.ndim != 2 or a.shape[0] < 1 or a.shape[1] < 1:
+            raise ValueError(f"alpha must have shape (rows, m+1), got {a.shape}")
         if not self.p_max > self.p_min:
             raise ValueError(f"p_max ({self.p_max}) must exceed p_min ({self.p_min})")
         a.setflags(write=False)
@@ -304,7 +310,7 @@ class GaitParams:
 
     @property
     def layout(self) -> ThetaLayout:
-        return ThetaLayout(self.degree)
+        return ThetaLayout(self.degree, self.alpha.shape[0])
 
     def pack(self) -> np.ndarray:
         return np.r_[self.alpha.ravel(), self.v_hip, self.p_min, self.p_max]

@@ -121,7 +121,7 @@ class SimState:
     qd: np.ndarray
     tau: float
     lam: np.ndarray  # constraint wrenches of the current domain (foot, socket)
-    steps: int  # impacts so far
+    steps: int  # steps so far (impacts that start one)
 
 
 @dataclass
@@ -133,6 +133,7 @@ class Impact:
     qd_plus: np.ndarray
     impulse: np.ndarray
     foot_pitch: float = 0.0  # rad, the landing foot's pitch removed at touchdown
+    starts_step: bool = True  # a heel strike (not a foot landing flat from its heel)
 
 
 @dataclass
@@ -143,15 +144,18 @@ class SimResult(FallOutcome):
     q: np.ndarray  # (n, 12)
     qd: np.ndarray
     u: np.ndarray  # (n, 6) torques applied (prosthesis: motor torque)
-    lam: np.ndarray  # (n, 6) foot wrench (world), socket wrench F_s
+    #: (n, k) the domain's constraint wrenches: the paper's graph: foot (world), socket F_s;
+    #: a graph with domains of fewer constraints than k: NaN after them
+    lam: np.ndarray
     tau: np.ndarray
-    domain: np.ndarray  # (n,) 0 = ps, 1 = pns
+    domain: np.ndarray  # (n,) Domain.code
     impacts: list[Impact] = field(default_factory=list)
     fall: Fall | None = None  # how the run ended (None: steps or duration reached)
 
     @property
     def steps(self) -> int:
-        return len(self.impacts)
+        """Steps taken: the impacts that start one (every impact in the paper's graph)."""
+        return sum(i.starts_step for i in self.impacts)
 
     def post_impact_states(self, into: Domain | str) -> list[tuple[np.ndarray, np.ndarray]]:
         return [(i.q, i.qd_plus) for i in self.impacts if i.into == into]
@@ -252,8 +256,10 @@ class HybridSimulator:
         self.mfs = model.numeric()
         self.nq = model.nq
         # the frame that lands when entering a domain is its stance sole, rotated about its
-        # stance ankle
+        # stance ankle (the paper's domains: a foot landing flat)
         self._landing = {d: (r.stance_frame_index, r.ankle) for d, r in model.roles.items()}
+        #: the width of the logged wrenches: the most constraints of a domain
+        self.lam_width = max(dom.n_constraints for dom in model.domains.values())
 
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: Domain, x: np.ndarray, u_p: np.ndarray, h: float,
@@ -325,16 +331,26 @@ class HybridSimulator:
     def phase(self, d: Domain | str, q: np.ndarray) -> float:
         """tau of q in domain d for the tracked gait (``VirtualConstraints.phase``: the same
         arithmetic as the FMU's generated ``phase_<d>``)."""
-        return float(self.cl.vcs[d].phase(q, self.thetas[d]))
+        return float(self.cl.vcs[Domain(d)].phase(q, self.thetas[d]))
 
     def _flatten_landing_foot(self, into: Domain, q: np.ndarray) -> float:
         """Rotate the foot that becomes the stance foot of ``into`` flat about its ankle
-        (in place); returns the pitch removed."""
+        (in place); returns the pitch removed (0 where the foot lands on a point, or flat
+        from its heel: the multi-contact graph)."""
+        if into not in self._landing:
+            return 0.0
         frame, ankle = self._landing[into]
         pose = self.mfs["frames"](q, np.zeros(self.nq))[0]
         pitch = float(pose[2, frame])
         q[ankle] -= pitch
         return pitch
+
+    def guard_height(self, d: Domain, x: np.ndarray) -> float:
+        """The height (m) of the frame whose touchdown ends ``d`` at state x; 1 in a domain
+        ended by a lift-off (:func:`hp_model.closed_loop.guard_height`)."""
+        if self.model.domains[d].swing_frame is None:
+            return 1.0
+        return float(self.mfs[f"guard_{d}"](x[:self.nq], x[self.nq:])[0][0])
 
     def _locate(self, step: StepFrom, h: float, z0: float, z1: float, s1: float = 1.0
                 ) -> tuple[float, np.ndarray]:
@@ -440,8 +456,7 @@ class SimulationRun:
         self._t_step = 0.0  # start of the current step: the start, then the last impact
         self._bad_cone = 0
         self._heel: float | None = None  # pitch (rad) of a touchdown on heel or toe
-        nq = sim.nq
-        self._z_prev = float(sim.mfs[f"guard_{domain}"](self._x[:nq], self._x[nq:])[0][0])
+        self._z_prev = sim.guard_height(self.domain, self._x)
         self._n_delay = (round(sim.human_delay / sim.opt.dt) if sim.human_delay is not None
                          else None)
         self._pipeline: deque[np.ndarray] = deque()
@@ -453,12 +468,12 @@ class SimulationRun:
         self._applied = False
         #: tau of a state x (q first) per domain, for the gait tracked at the start
         self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
-                       for dd in sim.model.domains}
+                       for dd in sim.model.graph.domains}
 
     @property
     def steps(self) -> int:
-        """Impacts so far."""
-        return len(self.impacts)
+        """Steps so far: the impacts that start one (:attr:`SimResult.steps`)."""
+        return sum(i.starts_step for i in self.impacts)
 
     def observe(self) -> SimState:
         """The state at the start of the current period, with the constraint wrenches under
@@ -509,7 +524,9 @@ class SimulationRun:
                              "apply(None)")
         self._applied = True
         nq = sim.nq
-        for log, v in zip(self._log, (self.t, x[:nq].copy(), x[nq:].copy(), u, lam, tau,
+        logged = lam if lam.size == sim.lam_width else np.r_[
+            lam, np.full(sim.lam_width - lam.size, np.nan)]
+        for log, v in zip(self._log, (self.t, x[:nq].copy(), x[nq:].copy(), u, logged, tau,
                                       d.code), strict=True):
             log.append(v)
         opt = sim.opt
@@ -538,19 +555,21 @@ class SimulationRun:
             while rest > 0:
                 step = partial(sim._rk4, mode, d, x, u_p, vhold=self._vhold, k1=k1)
                 xn, z = step(rest)
-                armed = self._phase[d](x) >= opt.guard_tau_min
+                armed = (sim.model.domains[d].swing_frame is not None
+                         and self._phase[d](x) >= opt.guard_tau_min)
                 s1, z1 = 1.0, z
                 if armed and self._z_prev > 0:
                     s1, z1 = sim._touchdown(d, x, xn, rest, self._z_prev, z, step)
                 if armed and self._z_prev > 0 and z1 <= 0:
                     s, xe = sim._locate(step, rest, self._z_prev, z1, s1)
                     k1 = None
-                    nxt = sim.model.roles[d].next
+                    nxt = sim.model.graph.next(d)
                     qe, qdm = xe[:nq].copy(), xe[nq:]
                     pitch = sim._flatten_landing_foot(nxt, qe)
                     qdp, imp = sim.mfs[f"impact_{nxt}"](qe, qdm)
                     self.impacts.append(Impact(t + j * h + (h - rest) + s * rest, nxt, qe,
-                                               qdm.copy(), qdp.copy(), imp.copy(), pitch))
+                                               qdm.copy(), qdp.copy(), imp.copy(), pitch,
+                                               nxt in sim.model.graph.step_starts))
                     if abs(pitch) > opt.max_touchdown_pitch:
                         self._heel = pitch
                     x = np.r_[qe, qdp]
@@ -560,7 +579,7 @@ class SimulationRun:
                         v_now = sim._feedback(d, x)
                         self._pipeline.append(v_now)
                         self._vhold = sim._hold(mode, d, self._pipeline, v_now)
-                    self._z_prev = float(sim.mfs[f"guard_{d}"](qe, qdp)[0][0])
+                    self._z_prev = sim.guard_height(d, x)
                     self._tau_peak = -np.inf
                     self._t_step = self.impacts[-1].t
                     rest -= s * rest
@@ -570,6 +589,11 @@ class SimulationRun:
                 x, self._z_prev = xn, z
                 k1 = None
                 rest = 0.0
+                if sim.model.domains[d].swing_frame is None and self._phase[d](x) >= 1.0:
+                    # a lift-off (a heel leaves the ground): no impact, at the step's end
+                    d = sim.model.graph.next(d)
+                    self._z_prev = sim.guard_height(d, x)
+                    self._tau_peak = -np.inf
         self._x, self.domain = x, d
         self.periods += 1
         self.t = self.periods * opt.dt

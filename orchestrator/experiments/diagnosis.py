@@ -34,7 +34,7 @@ def _full_output_accel(cl: ClosedLoop, gait: Gait, x: np.ndarray, u_p: np.ndarra
                        ) -> tuple[np.ndarray, np.ndarray]:
     """(dy1, d2y2) of the controller's outputs (:func:`hp_model.outputs.stance_outputs`)
     and F_s of the full loop at x under u_p."""
-    vc, p = cl.vcs[Domain.PS], gait.params[Domain.PS]
+    vc, p = cl.paper_constraints(Domain.PS), gait.params[Domain.PS]
     r, nq = vc.roles, cl.model.nq
     xd, _, lam = cl.numeric()["xdot_human_ps"](x, gait.theta(Domain.PS), gait.gains_array, u_p)
     q, qd, qdd = x[:nq], x[nq:], xd[nq:]
@@ -53,7 +53,7 @@ def input_authority(model: HumanProsthesisModel, gait: Gait, ctx: ControllerCont
     cl = ClosedLoop(model, gait.degree)
     tr = gait.trajectory[Domain.PS]
     q, qd = np.asarray(tr["q"], float), np.asarray(tr["qd"], float)
-    tau_all = cl.vcs[Domain.PS].phase(q, gait.params[Domain.PS])
+    tau_all = cl.paper_constraints(Domain.PS).phase(q, gait.params[Domain.PS])
     pk, pa = model.roles[Domain.PS].prosthesis
     f = ctx.terms.numeric["clf_qp"]
     out_names = f.function.name_out()

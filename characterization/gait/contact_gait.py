@@ -1,0 +1,108 @@
+"""The multi-contact gait as virtual constraints: what the simulated human and the walker
+track (:mod:`hp_model.contact_outputs`), regressed from the fitted trajectory
+(:mod:`characterization.gait.multicontact`).
+
+Per domain d: the hip progress over its reference contact p(q_k) at the fitted nodes sets
+p_min, p_max (its first and last node) and each node's phase tau_k; the y2 joints' angles
+and, where the domain has a velocity output, the hip progress rate, at the nodes are fitted
+by Bezier polynomials of tau (least squares,
+:func:`~characterization.gait.bezier_fit.fit_bezier`); v_hip is the mean hip progress rate
+(p_max - p_min) / T_d.  The phase must rise through the domain (the hip moving forward over
+the contact): a fitted trajectory whose hip stalls or runs back is refused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from characterization.gait.multicontact import GRAPH, MultiContactError, MultiContactResult
+from hp_model import bezier
+from hp_model.contact_outputs import ContactConstraints
+from hp_model.domains import Domain
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import GaitParams
+
+#: the Bezier degree of the multi-contact gait's curves
+DEGREE = 5
+#: the weight of a node's slope dB/dtau against its value in the regression (per unit tau)
+RATE_WEIGHT = 0.1
+
+
+@dataclass(frozen=True)
+class ContactGait:
+    """The virtual constraints of each domain (:class:`GaitParams`: alpha (rows, m+1): the
+    y2 joints' curves (rad), then the hip rate's (m/s) where there is one; v_hip m/s, p_min
+    and p_max m) and the regression's RMS residual per row (rad, m/s)."""
+
+    params: dict[Domain, GaitParams]
+    rms: dict[Domain, np.ndarray]
+
+    def thetas(self) -> dict[Domain, np.ndarray]:
+        """The packed vectors the closed loop takes."""
+        return {d: p.pack() for d, p in self.params.items()}
+
+
+def contact_gait(model: HumanProsthesisModel, result: MultiContactResult,
+                 degree: int = DEGREE) -> ContactGait:
+    """The virtual constraints of the fitted cycle ``result`` (module docstring)."""
+    return contact_gait_of(model, result.trajectory, result.durations, degree)
+
+
+def contact_gait_of(model: HumanProsthesisModel,
+                    trajectory: Mapping[Domain, Mapping[str, Any]],
+                    durations: Mapping[Domain, float], degree: int = DEGREE) -> ContactGait:
+    """The virtual constraints of a fitted cycle given as its per-domain trajectories (``q``,
+    ``qd``, ``qdd`` (12, P) at the nodes) and durations (s): a fit's or a gait file's."""
+    params: dict[Domain, GaitParams] = {}
+    rms: dict[Domain, np.ndarray] = {}
+    for d in GRAPH.domains:
+        vc = ContactConstraints(model, d, degree)
+        tr = trajectory[d]
+        q, qd = np.asarray(tr["q"], float), np.asarray(tr["qd"], float)
+        pp = [vc.progress(q[:, k], qd[:, k]) for k in range(q.shape[1])]
+        p = np.array([float(a) for a, _ in pp])
+        p_dot = np.array([float(b) for _, b in pp])
+        if not np.all(np.diff(p) > 0):
+            k = int(np.argmin(np.diff(p)))
+            raise MultiContactError(
+                f"domain {d}: the hip does not move forward over its {vc.reference_frame} "
+                f"throughout (node {k}: {p[k]:.4f} -> {p[k + 1]:.4f} m); no phase variable")
+        tau = (p - p[0]) / (p[-1] - p[0])
+        idx = [model.coord_names.index(c) for c in d.y2_coords]
+        tau_dot = p_dot / (p[-1] - p[0])
+        rows, rates = q[idx, :].T, qd[idx, :].T
+        if d.velocity_output:
+            qdd = np.asarray(tr["qdd"], float)
+            p_ddot = np.array([float(vc.progress_rate(q[:, k], qd[:, k], qdd[:, k]))
+                               for k in range(q.shape[1])])
+            rows, rates = np.c_[rows, p_dot], np.c_[rates, p_ddot]
+        alpha = fit_with_rates(tau, rows, rates / tau_dot[:, None], degree)
+        params[d] = GaitParams(alpha, (p[-1] - p[0]) / durations[d],
+                               float(p[0]), float(p[-1]))
+        rms[d] = np.sqrt(np.mean((bezier.basis(degree, tau) @ alpha.T - rows) ** 2, axis=0))
+    return ContactGait(params, rms)
+
+
+def fit_with_rates(tau: np.ndarray, y: np.ndarray, dy: np.ndarray, degree: int,
+                   rate_weight: float = RATE_WEIGHT) -> np.ndarray:
+    """alpha (rows, m+1) of the Bezier curves B with B(tau_k) ~ y_k and dB/dtau(tau_k) ~
+    dy_k (y, dy: (n, rows)), least squares, the slopes weighted by ``rate_weight``: the
+    slopes hold the curves' ends (where the nodes alone leave a polynomial free to bend, and
+    the closed loop would follow the bend with forces the gait never had)."""
+    H = bezier.basis(degree, tau)
+    diff = degree * (np.eye(degree + 1, k=1) - np.eye(degree + 1))[:-1]  # (m, m+1)
+    Hd = bezier.basis(degree - 1, tau) @ diff
+    coef, *_ = np.linalg.lstsq(np.r_[H, rate_weight * Hd], np.r_[y, rate_weight * dy],
+                               rcond=None)
+    return coef.T
+
+
+def start_state(trajectory: Mapping[Domain, Mapping[str, Any]],
+                domain: Domain = GRAPH.domains[0]) -> tuple[np.ndarray, np.ndarray]:
+    """(q, qd) of a fitted cycle's trajectories at the start of ``domain``."""
+    tr = trajectory[domain]
+    return np.asarray(tr["q"], float)[:, 0].copy(), np.asarray(tr["qd"], float)[:, 0].copy()

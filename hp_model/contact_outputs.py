@@ -1,0 +1,175 @@
+"""Virtual constraints of the multi-contact graph's domains (``DomainGraph.MULTICONTACT``).
+
+The paper's outputs (:mod:`hp_model.outputs`: its formulas, its packed gait vector theta and
+its curves) with the two changes a foot on its heel or toe needs:
+
+- the phase's hip progress is exact: the hip's forward position over the domain's stance
+  contact (its first contact: a flat sole, a heel or a toe), delta_p_hip(q) = x_hip(q) -
+  x_c(q) (m), rates from its Jacobian J_p (the paper's linearisation about a flat foot under
+  the ankle does not hold on a toe);
+- the hip's rate follows a curve of the phase, y1 = d/dt delta_p_hip - V(tau) (m/s; V a
+  Bezier polynomial, the last row of alpha; v_hip its mean), not a constant: a person's hip
+  slows and speeds up within a stance, and holding it at a constant rate takes forces the
+  ground cannot give;
+- the outputs per domain (``Domain.y2_coords``, ``Domain.velocity_output``): on a flat foot
+  the paper's (y1 and every joint but the stance ankle: 6 outputs, 6 degrees of freedom); on
+  a toe the six joints (7 degrees of freedom and 6 torques: the walker pivots on its toe,
+  the phase is the zero dynamics); in a double support (a closed chain with 5 degrees of
+  freedom and 6 torques) y1, both hips and the leading leg's knee and ankle (its foot
+  rolling from the heel to flat): the trailing leg's knee and ankle close the chain (a bent
+  leg; the leading leg is nearly straight, and closing the chain through it would turn a
+  millimetre of hip into degrees of knee); of the torques that give the outputs' dynamics,
+  the one of least norm.  The human's torques control ``Domain.human_outputs`` (on a toe
+  its four joints; leading a double support its joints and hip; trailing, y1 and the hips:
+  its push-off; fewer rows than torques: the least-norm torque again).
+
+With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_max - p_min:
+
+    dy1  = J_p qdd + Jdot_p qd - dV/dtau tau_dot
+    ddy2 = (S - dB/dtau J_p / step) qdd - d2B/dtau2 tau_dot^2 - dB/dtau Jdot_p qd / step
+
+so A = [J_p b; M b], L_f = [J_p a + Jdot_p qd - dV/dtau tau_dot; M a - ...] and the
+feedback linearization is the paper's, u = -A^+ (L_f + v), v = (eps y1, kp y2 + kd dy2)
+(A^+ the inverse, or with fewer outputs than torques the least-norm right inverse).
+
+Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
+(:func:`hp_model.outputs.resting`: the swing leg holds its landing posture); a double
+support's continue linearly (:func:`hp_model.outputs.continued`: the leading foot goes on
+rolling down onto its toe).
+
+:class:`ContactConstraints` has the paper's function names and signatures
+(:class:`hp_model.outputs.VirtualConstraints`: ``phase_<d>``, ``outputs_<d>`` (y1 = 0 where
+there is no velocity output), ``fl_<d>``, ``hfl_<d>``), so :mod:`hp_model.closed_loop` and
+the simulator run either; :func:`virtual_constraints` picks the one of a model's graph.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import casadi as ca
+import numpy as np
+
+from hp_model.compiled import FunctionSet
+from hp_model.domains import Domain, DomainGraph
+from hp_model.dynamics import constrained_accel, constraint_terms
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import (
+    GaitTerms,
+    ThetaLayout,
+    VirtualConstraints,
+    continued,
+    outputs,
+    resting,
+)
+
+
+def _least_norm(A: ca.SX, r: ca.SX) -> ca.SX:
+    """The u of least norm with A u = r (A square: the solution; A with fewer rows than
+    columns and full row rank: A^T (A A^T)^-1 r)."""
+    if A.size1() == A.size2():
+        return ca.solve(A, r)
+    return A.T @ ca.solve(A @ A.T, r)
+
+
+class ContactConstraints:
+    """Phase, outputs and feedback linearization of one domain of the multi-contact graph
+    (module docstring); ``degree`` the Bezier degree of its curves."""
+
+    def __init__(self, model: HumanProsthesisModel, domain: str, degree: int = 5) -> None:
+        d = Domain(domain)
+        if d not in model.domains:
+            raise ValueError(f"domain {d} is not in the {model.graph} graph")
+        if degree < 1:
+            raise ValueError("y2 needs a Bezier degree >= 1")
+        self.model, self.domain, self.degree = model, d, degree
+        n_y2 = len(d.y2_coords)
+        self.layout = ThetaLayout(degree, n_y2 + int(d.velocity_output))
+        self.n_params = self.layout.size
+        q, qd, nq = model.q, model.qd, model.nq
+        #: the frame the phase is measured from: the domain's first contact
+        self.reference_frame = d.contacts[0].frame
+        progress = model.frame_expr("hip")[0] - model.frame_expr(self.reference_frame)[0]
+        Jp = ca.jacobian(progress, q)
+        progress_dot = Jp @ qd
+        Jpdot_qd = ca.jtimes(progress_dot, q, qd)
+        S = np.zeros((len(d.y2_coords), nq))
+        for r, name in enumerate(d.y2_coords):
+            S[r, model.coord_names.index(name)] = 1.0
+        SD = ca.DM(S)
+
+        theta = ca.SX.sym("theta", self.n_params)
+        gains = ca.SX.sym("gains", 3)
+        alpha, v_hip, p_min, p_max = self.layout.unpack(theta)
+        curve = continued if d.is_double_support else resting
+        o = outputs(SD @ q, SD @ qd, progress, progress_dot,
+                    GaitTerms(alpha[:n_y2, :], v_hip, p_min, p_max), curve)
+        step = p_max - p_min
+
+        J, Jdqd = constraint_terms(model.h[d], q, qd)
+        qdd, _ = constrained_accel(model.D, model.H, ca.DM(model.B) @ model.u, J, Jdqd)
+        b = ca.jacobian(qdd, model.u)
+        a = ca.substitute(qdd, model.u, ca.DM.zeros(model.nu))
+        M = SD - o.db @ Jp / step
+        A = M @ b
+        Lf = M @ a - o.ddb * o.tau_dot**2 - o.db * Jpdot_qd / step
+        v = gains[1] * o.y2 + gains[2] * o.dy2
+        y1 = ca.SX(0)
+        if d.velocity_output:  # the hip's rate on its own curve V(tau): alpha's last row
+            V, dV, _ = curve(alpha[n_y2:, :], o.tau)
+            y1 = progress_dot - V
+            A = ca.vertcat(Jp @ b, A)
+            Lf = ca.vertcat(Jp @ a + Jpdot_qd - dV * o.tau_dot, Lf)
+            v = ca.vertcat(gains[0] * y1, v)
+        rhs = Lf + v
+        u = -_least_norm(A, rhs)
+        u_p = ca.SX.sym("u_p", 2)
+        rows = list(d.human_outputs)
+        A_h, A_p = A[rows, 0:4], A[rows, 4:6]
+        u_hfl = ca.vertcat(-_least_norm(A_h, rhs[rows] + A_p @ u_p), u_p)
+
+        tau = o.tau
+        self.functions = {
+            f"phase_{d}": ca.Function(f"phase_{d}", [q, theta], [tau], ["q", "theta"], ["tau"]),
+            f"outputs_{d}": ca.Function(f"outputs_{d}", [q, qd, theta], [y1, o.y2, o.dy2, tau],
+                                        ["q", "qd", "theta"], ["y1", "y2", "dy2", "tau"]),
+            f"fl_{d}": ca.Function(f"fl_{d}", [q, qd, theta, gains], [u, y1, o.y2, o.dy2, tau],
+                                   ["q", "qd", "theta", "gains"],
+                                   ["u", "y1", "y2", "dy2", "tau"]),
+            f"hfl_{d}": ca.Function(f"hfl_{d}", [q, qd, theta, gains, u_p], [u_hfl],
+                                    ["q", "qd", "theta", "gains", "u_p"], ["u"]),
+        }
+        #: hip progress (m) over the reference frame of a configuration: the phase's numerator
+        self.progress = ca.Function(f"progress_{d}", [q, qd], [progress, progress_dot],
+                                    ["q", "qd"], ["p", "p_dot"])
+        qdd_s = ca.SX.sym("qdd", nq)
+        #: its second derivative (m/s^2) given the accelerations
+        self.progress_rate = ca.Function(f"progress_rate_{d}", [q, qd, qdd_s],
+                                         [Jp @ qdd_s + Jpdot_qd], ["q", "qd", "qdd"],
+                                         ["p_ddot"])
+        self._numeric: FunctionSet | None = None
+
+    def numeric(self) -> FunctionSet:
+        """The functions compiled to C (cached on disk) and bound to reusable buffers."""
+        if self._numeric is None:
+            name = f"{self.model.name}_vc_{self.domain}_m{self.degree}"
+            self._numeric = FunctionSet([*self.functions.values(), self.progress], name)
+        return self._numeric
+
+    def phase(self, q: np.ndarray, theta: np.ndarray) -> float:
+        """tau of the configuration q (nq,) for the packed gait ``theta``."""
+        return float(self.numeric()[f"phase_{self.domain}"](q, theta)[0].item())
+
+    def phase_function(self, theta: np.ndarray) -> Callable[[np.ndarray], float]:
+        """q (or a state x, q first) -> tau for the gait ``theta`` (the simulator's)."""
+        f, nq, th = self.numeric()[f"phase_{self.domain}"], self.model.nq, np.array(theta)
+        return lambda q: float(f(q[:nq], th)[0].item())
+
+
+def virtual_constraints(model: HumanProsthesisModel, domain: str, degree: int
+                        ) -> VirtualConstraints | ContactConstraints:
+    """The virtual constraints of ``domain`` on ``model``'s graph: the paper's
+    (:class:`~hp_model.outputs.VirtualConstraints`) or the multi-contact ones."""
+    if model.graph == DomainGraph.PAPER:
+        return VirtualConstraints(model, domain, degree)
+    return ContactConstraints(model, domain, degree)

@@ -1,0 +1,139 @@
+"""The multi-contact graph's virtual constraints (hp_model.contact_outputs): the feedback
+linearization gives each domain's outputs the dynamics it promises, on states off the gait;
+the regression of a trajectory onto them (characterization.gait.contact_gait)."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from characterization.gait.contact_gait import fit_with_rates
+from hp_model import bezier
+from hp_model.config import default_device_path, default_subject_path, load_device, load_subject
+from hp_model.contact_outputs import ContactConstraints, virtual_constraints
+from hp_model.domains import Domain, DomainGraph
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import VirtualConstraints
+
+GAINS = np.array([10.0, 1600.0, 80.0])
+
+
+@pytest.fixture(scope="module")
+def model() -> HumanProsthesisModel:
+    return HumanProsthesisModel(load_subject(default_subject_path()),
+                                load_device(default_device_path()),
+                                graph=DomainGraph.MULTICONTACT)
+
+
+def _state(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A walking-like posture (hip over the feet, knees bent) with random velocities."""
+    q = np.zeros(12)
+    q[1] = 0.9
+    q[[3, 4, 5, 6, 10, 11]] = [-0.3, 0.3, -0.05, 0.2, 0.2, -0.1]
+    q[[3, 4, 5, 6, 10, 11]] += 0.05 * rng.standard_normal(6)
+    qd = 0.5 * rng.standard_normal(12)
+    qd[7:10] = 0.0  # the socket's fixed joint
+    return q, qd
+
+
+def _theta(vc: ContactConstraints, rng: np.random.Generator) -> np.ndarray:
+    """Curves near the posture, a hip progress of 0.2 m at about 1.2 m/s."""
+    L = vc.layout
+    alpha = 0.2 * rng.standard_normal((L.rows, L.degree + 1))
+    if vc.domain.velocity_output:
+        alpha[-1] = 1.2 + 0.1 * rng.standard_normal(L.degree + 1)
+    return np.r_[alpha.ravel(), 1.2, -0.1, 0.1]
+
+
+def _output_rates(vc: ContactConstraints, q, qd, qdd, theta) -> tuple[np.ndarray, ...]:
+    """(y1, y2, dy2) and their time derivatives, the latter by central differences along
+    (qd, qdd) (step 1e-6 s: error ~1e-9 of the second derivatives here)."""
+    f = vc.functions[f"outputs_{vc.domain}"]
+    h = 1e-6
+
+    def at(s: float) -> tuple[np.ndarray, ...]:
+        y1, y2, dy2, _ = f(q + s * qd + 0.5 * s * s * qdd, qd + s * qdd, theta)
+        return float(y1), np.array(y2).ravel(), np.array(dy2).ravel()
+
+    (y1p, y2p, dy2p), (y1m, y2m, dy2m), (y1, y2, dy2) = at(h), at(-h), at(0.0)
+    return y1, y2, dy2, (y1p - y1m) / (2 * h), (y2p - y2m) / (2 * h), (dy2p - dy2m) / (2 * h)
+
+
+@pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
+def test_feedback_linearization_gives_the_outputs_their_dynamics(
+        model: HumanProsthesisModel, domain: Domain) -> None:
+    """fl: dy1 = -eps y1 (where there is y1) and ddy2 = -kp y2 - kd dy2, with qdd from the
+    domain's constrained dynamics; hfl: the same on the human's rows whatever u_p."""
+    rng = np.random.default_rng(7)
+    vc = ContactConstraints(model, domain, degree=4)
+    dyn = model.function(f"dyn_{domain}")
+    q, qd = _state(rng)
+    theta = _theta(vc, rng)
+    u = np.array(vc.functions[f"fl_{domain}"](q, qd, theta, GAINS)[0]).ravel()
+    qdd = np.array(dyn(q, qd, u)[0]).ravel()
+    y1, y2, dy2, dy1_num, dy2_num, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
+    np.testing.assert_allclose(dy2_num, dy2, atol=1e-7)  # dy2 is y2's rate
+    scale = np.abs(GAINS[1] * y2).max()
+    np.testing.assert_allclose(ddy2_num, -GAINS[1] * y2 - GAINS[2] * dy2, atol=1e-6 * scale)
+    stacked = np.r_[dy1_num + GAINS[0] * y1, ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2] \
+        if domain.velocity_output else ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
+    if domain.velocity_output:
+        assert abs(stacked[0]) < 1e-6 * scale
+    # the human's feedback linearization, the prosthesis torque given
+    u_p = np.array([3.0, -2.0])
+    u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
+    np.testing.assert_array_equal(u_h[4:], u_p)
+    qdd = np.array(dyn(q, qd, u_h)[0]).ravel()
+    y1, y2, dy2, dy1_num, _, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
+    closed = np.r_[dy1_num + GAINS[0] * y1, ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2] \
+        if domain.velocity_output else ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
+    rows = list(domain.human_outputs)
+    np.testing.assert_allclose(closed[rows], 0.0, atol=1e-6 * scale)
+    assert np.abs(closed[[r for r in range(closed.size) if r not in rows]]).max() > 1e-3, \
+        "the prosthesis's rows are not the human's to hold"
+
+
+def test_phase_is_the_hip_over_the_stance_contact(model: HumanProsthesisModel) -> None:
+    """tau = (x_hip - x_contact - p_min) / (p_max - p_min), the contact the domain's first."""
+    rng = np.random.default_rng(3)
+    q, _ = _state(rng)
+    frames = model.function("frames")
+    pose = np.array(frames(q, np.zeros(12))[0])
+    for d in DomainGraph.MULTICONTACT.domains:
+        vc = ContactConstraints(model, d, degree=3)
+        theta = _theta(vc, rng)
+        x_c = pose[0, model.frame_index(d.contacts[0].frame)]
+        expect = (pose[0, model.frame_index("hip")] - x_c + 0.1) / 0.2
+        assert vc.phase(q, theta) == pytest.approx(expect, abs=1e-12)
+
+
+def test_the_graph_picks_its_constraints(model: HumanProsthesisModel) -> None:
+    paper = HumanProsthesisModel(model.subject, model.device)
+    assert isinstance(virtual_constraints(paper, Domain.PS, 5), VirtualConstraints)
+    assert isinstance(virtual_constraints(model, Domain.DS_H, 5), ContactConstraints)
+    with pytest.raises(ValueError, match="not in the paper graph"):
+        ContactConstraints(paper, Domain.DS_H)
+
+
+def test_regression_with_slopes_recovers_a_curve() -> None:
+    """Nodes and slopes of a degree-5 curve give back its coefficients; noise on the
+    values alone moves the curve's ends less than a plain fit's."""
+    rng = np.random.default_rng(11)
+    alpha = rng.standard_normal((2, 6))
+    tau = np.linspace(0.0, 1.0, 17)
+    y = bezier.evaluate(alpha, tau)  # (17, 2)
+    dy = bezier.evaluate(bezier.derivative(alpha), tau)
+    np.testing.assert_allclose(fit_with_rates(tau, y, dy, 5), alpha, atol=1e-10)
+    noisy = y + 0.01 * rng.standard_normal(y.shape)
+    ends = np.abs(bezier.evaluate(fit_with_rates(tau, noisy, dy, 5), np.array([0.0, 1.0]))
+                  - bezier.evaluate(alpha, np.array([0.0, 1.0])))
+    assert ends.max() < 0.02
+
+
+def test_symbolic_functions_are_sx(model: HumanProsthesisModel) -> None:
+    """Generated as C like the paper's (SX, no free symbols)."""
+    vc = ContactConstraints(model, Domain.PS_TOE, degree=3)
+    for f in vc.functions.values():
+        assert f.is_a("SXFunction") and not f.has_free()
+    assert isinstance(vc.functions["fl_ps_toe"].sx_in(0), ca.SX)
