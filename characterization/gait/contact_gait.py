@@ -45,6 +45,16 @@ class ContactGait:
         """The packed vectors the closed loop takes."""
         return {d: p.pack() for d, p in self.params.items()}
 
+    def to_json(self) -> dict[str, Any]:
+        """Per domain: its outputs' joints, whether it has the hip-rate row, the curves
+        (alpha rows: the joints' (rad), then the hip rate's (m/s)), v_hip, p_min, p_max, the
+        phase's reference frame and the regression's RMS per row."""
+        return {d.value: {"y2_coords": list(d.y2_coords), "velocity_output": d.velocity_output,
+                          "reference_frame": d.contacts[0].frame, "alpha": p.alpha,
+                          "v_hip": p.v_hip, "p_min": p.p_min, "p_max": p.p_max,
+                          "rms": self.rms[d]}
+                for d, p in self.params.items()}
+
 
 def contact_gait(model: HumanProsthesisModel, result: MultiContactResult,
                  degree: int = DEGREE) -> ContactGait:
@@ -73,14 +83,15 @@ def contact_gait_of(model: HumanProsthesisModel,
                 f"throughout (node {k}: {p[k]:.4f} -> {p[k + 1]:.4f} m); no phase variable")
         tau = (p - p[0]) / (p[-1] - p[0])
         idx = [model.coord_names.index(c) for c in d.y2_coords]
-        tau_dot = p_dot / (p[-1] - p[0])
-        rows, rates = q[idx, :].T, qd[idx, :].T
-        if d.velocity_output:
-            qdd = np.asarray(tr["qdd"], float)
-            p_ddot = np.array([float(vc.progress_rate(q[:, k], qd[:, k], qdd[:, k]))
-                               for k in range(q.shape[1])])
-            rows, rates = np.c_[rows, p_dot], np.c_[rates, p_ddot]
-        alpha = fit_with_rates(tau, rows, rates / tau_dot[:, None], degree)
+        step = p[-1] - p[0]
+        tau_dot = p_dot / step
+        qdd = np.asarray(tr["qdd"], float)
+        p_ddot = np.array([float(vc.progress_rate(q[:, k], qd[:, k], qdd[:, k]))
+                           for k in range(q.shape[1])])
+        rows, slopes = q[idx, :].T, qd[idx, :].T / tau_dot[:, None]  # qd = B' tau_dot
+        if d.velocity_output:  # the hip rate's curve
+            rows, slopes = np.c_[rows, p_dot], np.c_[slopes, p_ddot / tau_dot]
+        alpha = fit_with_rates(tau, rows, slopes, degree)
         params[d] = GaitParams(alpha, (p[-1] - p[0]) / durations[d],
                                float(p[0]), float(p[-1]))
         rms[d] = np.sqrt(np.mean((bezier.basis(degree, tau) @ alpha.T - rows) ** 2, axis=0))
@@ -92,7 +103,9 @@ def fit_with_rates(tau: np.ndarray, y: np.ndarray, dy: np.ndarray, degree: int,
     """alpha (rows, m+1) of the Bezier curves B with B(tau_k) ~ y_k and dB/dtau(tau_k) ~
     dy_k (y, dy: (n, rows)), least squares, the slopes weighted by ``rate_weight``: the
     slopes hold the curves' ends (where the nodes alone leave a polynomial free to bend, and
-    the closed loop would follow the bend with forces the gait never had)."""
+    the closed loop would follow the bend with forces the gait never had).  (The nodes'
+    accelerations as a third set of rows made it worse: the collocation's accelerations
+    zigzag between nodes and midpoints.)"""
     H = bezier.basis(degree, tau)
     diff = degree * (np.eye(degree + 1, k=1) - np.eye(degree + 1))[:-1]  # (m, m+1)
     Hd = bezier.basis(degree - 1, tau) @ diff
@@ -106,3 +119,58 @@ def start_state(trajectory: Mapping[Domain, Mapping[str, Any]],
     """(q, qd) of a fitted cycle's trajectories at the start of ``domain``."""
     tr = trajectory[domain]
     return np.asarray(tr["q"], float)[:, 0].copy(), np.asarray(tr["qd"], float)[:, 0].copy()
+
+
+#: the simulated human's gains (eps 1/s, kp 1/s^2, kd 1/s): the paper's gaits' (gait files)
+GAINS = (10.0, 1600.0, 80.0)
+
+
+@dataclass(frozen=True)
+class ContactWalk:
+    """The fitted cycle walked in closed loop: the steps taken (heel strikes), how the run
+    ended (``fall``: its one-line message, None if it took every step), each stride's time
+    (s, heel strike to heel strike of the human foot) and speed (m/s) after the first."""
+
+    steps: int
+    wanted: int
+    fall: str | None
+    strides: np.ndarray
+    speeds: np.ndarray
+
+    @property
+    def walks(self) -> bool:
+        return self.fall is None and self.steps >= self.wanted
+
+    def to_json(self) -> dict[str, Any]:
+        return {"walks": self.walks, "steps": self.steps, "wanted": self.wanted,
+                "fall": self.fall, "strides": self.strides, "speeds": self.speeds,
+                "controller": "feedback linearization of the fitted gait (human and "
+                              "prosthesis)"}
+
+    def line(self) -> str:
+        """One line: the verdict and how it was run."""
+        how = ("the human and the prosthesis both on feedback linearization of the fitted "
+               "gait; the prosthesis controllers do not run the multi-contact graph yet")
+        if not self.walks:
+            return f"does not walk: after {self.steps} steps, {self.fall} ({how})"
+        return (f"walks {self.steps} steps in closed loop: stride "
+                f"{np.median(self.strides):.3f} s, {np.median(self.speeds):.3f} m/s ({how})")
+
+
+def walk_contact_gait(model: HumanProsthesisModel, gait: ContactGait,
+                      trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
+                      gains: tuple[float, float, float] = GAINS) -> ContactWalk:
+    """Simulate ``steps`` steps of ``gait`` from the fitted cycle's start (the in-process
+    simulator, mode full) and measure them (:class:`ContactWalk`)."""
+    from hp_model.closed_loop import ClosedLoop
+    from hp_model.simulator import HybridSimulator
+
+    cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
+    sim = HybridSimulator(model, cl, gait.thetas(), np.array(gains))
+    q0, qd0 = start_state(trajectory)
+    res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps)
+    strikes = [i for i in res.impacts if i.into == Domain.DS_H]
+    t = np.array([i.t for i in strikes])
+    x = np.array([float(i.q[0]) for i in strikes])
+    return ContactWalk(res.steps, steps, None if res.fall is None else res.fall.message(),
+                       np.diff(t), np.diff(x) / np.diff(t) if t.size > 1 else np.array([]))
