@@ -4,9 +4,9 @@ track (:mod:`hp_model.contact_outputs`), regressed from the fitted trajectory
 
 Per domain d: the hip progress over its reference contact p(q_k) at the fitted nodes sets
 p_min, p_max (its first and last node) and each node's phase tau_k; the y2 joints' angles
-and, where the domain has a velocity output, the hip progress rate, at the nodes are fitted
-by Bezier polynomials of tau (least squares,
-:func:`~characterization.gait.bezier_fit.fit_bezier`); v_hip is the mean hip progress rate
+and, where the domain has a velocity output, the hip progress rate at the nodes are fitted
+by Bezier polynomials of tau (least squares on the values and the slopes,
+:func:`fit_with_rates`); v_hip is the mean hip progress rate
 (p_max - p_min) / T_d.  The phase must rise through the domain (the hip moving forward over
 the contact): a fitted trajectory whose hip stalls or runs back is refused.
 """

@@ -1,6 +1,8 @@
 """``hpcosim gait fit --domains multicontact``: the person's gait on the multi-contact graph
-(:mod:`characterization.gait.multicontact`), compared with the take and written with that
-comparison; a gait that is not the person's is refused unless ``--allow-mismatch``."""
+(:mod:`characterization.gait.multicontact`), compared with the take, its virtual constraints
+regressed and walked in closed loop (:mod:`characterization.gait.contact_gait`), and written
+with both; a gait that is not the person's or does not walk is refused unless
+``--allow-mismatch``."""
 
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     """Targets from the steps, the fit, the comparison printed, the artifact (and, with
     ``figure``, its figure against the take next to it) written (a mismatch only with
     ``allow_mismatch``), the verdict as the exit code."""
+    from characterization.gait.contact_gait import contact_gait, walk_contact_gait
     from characterization.gait.figures import save_person_figure
     from characterization.gait.fit import pylon_fitted
     from characterization.gait.multicontact import (
@@ -62,11 +65,19 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     take = take_summary(targets, str(steps))
     check = check_person(take, gait)
     print_check(Console(), check)
-    if check.passed or allow_mismatch:
+    outputs = contact_gait(model, result)
+    with console.status("gait fit: the fitted cycle in closed loop"):
+        walk = walk_contact_gait(model, outputs, result.trajectory)
+    Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
+                    highlight=False)
+    passed = check.passed and walk.walks
+    if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
-                          mismatch_allowed=not check.passed)
+                          mismatch_allowed=not passed)
         doc["subject"] = person.model_dump(mode="json")
         doc["device"] = dev.model_dump(mode="json")  # the gait's model, remade from the file
+        doc["virtual_constraints"] = outputs.to_json()
+        doc["closed_loop"] = walk.to_json()
         save_multicontact_gait(out, doc)
         if figure:
             save_person_figure(out.with_suffix(".png"), take, gait)
@@ -76,7 +87,9 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
                                     for d, T in result.double_supports().items())
                         + f"; IPOPT {result.iterations} iterations, "
                         f"{result.solve_seconds:.1f} s", highlight=False)
-    conclude(_verdict(check.passed, check.verdict(), allow_mismatch))
+    why = "; ".join(w for w, bad in ((check.verdict(), not check.passed),
+                                     (f"the gait {walk.line()}", not walk.walks)) if bad)
+    conclude(_verdict(passed, why, allow_mismatch))
 
 
 def _verdict(passed: bool, why: str, allow_mismatch: bool) -> Verdict:
