@@ -25,6 +25,11 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   ground there the crossing is located in (0, s_min] the same way. The impact map of the
   next domain gives qd+, the domain switches and the rest of the step, (1 - s) h, is
   integrated in the new domain.
+- A lift-off (the multi-contact graph's heel off: a domain with no touchdown frame,
+  :meth:`hp_model.domains.DomainGraph.touchdown_frame`) ends its domain at the end of the
+  RK4 step at which the phase reaches 1: the next domain's constraints hold the state as it
+  is (a heel leaving the ground: no impact).  On that graph a step is a heel strike (an
+  impact into a double support); a foot landing flat from its heel is an impact too.
 - Flat-foot touchdown: the model's impact makes the landing foot a flat stance foot, but
   off the nominal orbit it lands with a small residual pitch, which the holonomic
   constraint would then freeze forever (a neutral mode that tilts the whole walker step
