@@ -35,7 +35,8 @@ feedback linearization is the paper's, u = -A^+ (L_f + v), v = (eps y1, kp y2 + 
 Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
 (:func:`hp_model.outputs.resting`: the swing leg holds its landing posture); a double
 support's continue linearly (:func:`hp_model.outputs.continued`: the leading foot goes on
-rolling down onto its toe).
+rolling down onto its toe).  Below tau = 0 (a domain entered early) every curve continues
+linearly.
 
 :class:`ContactConstraints` has the paper's function names and signatures
 (:class:`hp_model.outputs.VirtualConstraints`: ``phase_<d>``, ``outputs_<d>`` (y1 = 0 where
@@ -55,13 +56,30 @@ from hp_model.domains import Domain, DomainGraph
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import (
+    Curve,
     GaitTerms,
+    Num,
     ThetaLayout,
     VirtualConstraints,
     continued,
     outputs,
     resting,
 )
+
+
+def _entering_linearly(curve: Curve) -> Curve:
+    """``curve`` on tau >= 0, continued linearly below (:func:`hp_model.outputs.continued`):
+    a domain entered early (its phase still negative: a step shorter than the gait's) keeps
+    the curves' first slope instead of the polynomials' extrapolation, which bends away
+    within a few percent of the phase (on openOFM's gait the prosthesis ankle's swing curve
+    gave 125 deg at tau = -0.16)."""
+
+    def f(alpha: Num, tau: Num) -> tuple[Num, Num, Num]:
+        early = tau < 0
+        lin, cur = continued(alpha, tau), curve(alpha, tau)
+        return tuple(ca.if_else(early, a, b) for a, b in zip(lin, cur, strict=True))
+
+    return f
 
 
 def _least_norm(A: ca.SX, r: ca.SX) -> ca.SX:
@@ -101,7 +119,7 @@ class ContactConstraints:
         theta = ca.SX.sym("theta", self.n_params)
         gains = ca.SX.sym("gains", 3)
         alpha, v_hip, p_min, p_max = self.layout.unpack(theta)
-        curve = continued if d.is_double_support else resting
+        curve = continued if d.is_double_support else _entering_linearly(resting)
         o = outputs(SD @ q, SD @ qd, progress, progress_dot,
                     GaitTerms(alpha[:n_y2, :], v_hip, p_min, p_max), curve)
         step = p_max - p_min
