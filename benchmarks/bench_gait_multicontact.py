@@ -3,7 +3,9 @@
 complete stride; the NLP's size does not depend on the number of strides, which only average
 the targets).
 
-Per repeat: targets from the steps, NLP construction and the two IPOPT solves (wall), the
+The walker is the take's person (75 kg, 1.83 m, stored with the steps) on the device they
+would wear (its pylon cut to their leg), as ``gait fit`` uses by default.  Per repeat:
+targets from the steps, NLP construction and the two IPOPT solves (wall), the
 iterations; printed: median and spread, and the comparison with the take (speed, stride,
 double supports, angle RMS).
 
@@ -19,11 +21,12 @@ import time
 from pathlib import Path
 
 import hp_model
+from characterization.gait.fit import pylon_fitted
 from characterization.gait.multicontact import GRAPH, fit_multicontact, targets_from_steps
 from characterization.gait.multicontact_summary import gait_summary, take_summary
 from characterization.gait.person_check import check_person
-from characterization.mocap.files import process_file
-from characterization.mocap.steps_artifact import load_steps
+from characterization.mocap.session import process_session
+from characterization.mocap.steps_artifact import load_steps, steps_subject
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import write_json
 
@@ -35,13 +38,17 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", type=Path, help="also write the figures to this JSON file")
     args = ap.parse_args()
-    base = hp_model.load_model()
-    model = HumanProsthesisModel(base.subject, base.device, graph=GRAPH)
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "steps.npz"
-        process_file(TAKE / "dynamic.c3d", out, mapping=TAKE / "mapping.toml",
-                     with_figures=False)
+        process_session([TAKE / "dynamic.c3d"], out, mapping=TAKE / "mapping.toml",
+                        with_figures=False)
         steps = load_steps(out)
+    stored = steps_subject(steps, str(TAKE / "dynamic.c3d"))
+    if stored is None:
+        raise SystemExit("the steps carry no subject")
+    person = stored[0]
+    device, _ = pylon_fitted(person, hp_model.load_model().device)
+    model = HumanProsthesisModel(person, device, graph=GRAPH)
     model.numeric()  # compiled once, outside the timing
     walls, iters = [], []
     for k in range(args.repeats):

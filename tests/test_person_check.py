@@ -20,6 +20,7 @@ from characterization.gait.person_check import (
     WalkSummary,
     check_person,
     cop_heel_to_toe,
+    hump,
     print_check,
 )
 from characterization.mocap.force_plates import plate_walk, read_gatk_plate, stances
@@ -115,3 +116,20 @@ def test_the_table_and_verdict_print(person) -> None:
     print_check(Console(file=buf, width=140), check_person(person, replace(person, speed=0.5)))
     out = buf.getvalue()
     assert "mean speed" in out and "FAIL" in out and "not the person's gait" in out
+
+
+def test_a_double_hump_is_told_from_an_impact_spike(person) -> None:
+    """The GATK plate's stance is a double hump (1.05 / 0.87 / 1.06 BW); a force that starts
+    on its largest value (a rigid heel strike's, 1.8 BW) is not, nor a flat one; with no
+    plates on the take side the gait's peaks are shown, not judged."""
+    fz = person.grf["right"].fz / BW
+    p1, valley, p2, two = hump(fz)
+    assert two and p1 == pytest.approx(1.05, abs=0.02) and p2 == pytest.approx(1.06, abs=0.02)
+    assert valley == pytest.approx(0.87, abs=0.02)
+    spike = np.r_[1.8, np.linspace(1.2, 0.8, 50), np.linspace(0.8, 1.1, 40), np.zeros(10)]
+    assert not hump(spike)[3]
+    assert not hump(np.full(101, 1.0))[3]
+    no_plates = replace(person, grf={})
+    rows = {r.criterion: r for r in check_person(no_plates, person).rows}
+    assert rows["right F_z peaks"].passed is None
+    assert "a double hump" in rows["right F_z peaks"].note

@@ -1,6 +1,7 @@
 """The person's gait on the multi-contact graph: a trajectory optimization by direct
-collocation over ps -> ds_h -> pns -> ds_p (:class:`hp_model.domains.DomainGraph`), fitted
-to a take's joint angles, domain durations and walking speed.
+collocation over ps -> ps_toe -> ds_h -> pns -> pns_toe -> ds_p
+(:class:`hp_model.domains.DomainGraph`), fitted to a take's joint angles, domain durations
+and walking speed.
 
 Each domain d is discretised by Hermite-Simpson collocation (separated form, as
 :mod:`characterization.gait.phzd`); at every point the model's equations hold in
@@ -17,6 +18,16 @@ its guard (the next domain's new contact touches down: the swing heel moving dow
 with the rigid impact into its constraints (impulse variables, pushing on the ground); where a
 double support ends the trailing toe leaves the ground upward.  The cycle closes with a
 forward translation of one stride.
+
+The ground force is a person's through the transitions, as force plates show it (Perry,
+Winter; OpenSim's subject01 plates): a contact that leaves (the trailing toe at the end of a
+double support) carries nothing at its last point, a heel strike's new contact nothing at its
+first; at the heel off the flat foot's centre of pressure is on the toe end (the heel carries
+nothing) and its force goes on on the toe; a foot landing flat from its heel starts with its
+centre of pressure on the heel end; each contact force changes at a bounded rate
+(``force_rate``, ``shear_rate``, ``moment_rate``; through a rigid impact by no more than one
+interval's worth) and a flat foot's centre of pressure rolls toward the toe no faster than
+``cop_speed``.  The impacts stay rigid (their impulses are not force samples).
 
 Cost: the integral of squared differences of the trunk pitch and the six joint angles from
 the take's (per domain, over normalized time), the squared differences of each domain's
@@ -97,6 +108,13 @@ class MultiContactOptions:
     cop_margin: float = 0.01  # m, centre of pressure this far inside the sole's ends
     touchdown_velocity: float = 0.02  # m/s, least downward heel speed at a heel strike
     clearance: float = 0.01  # m, swing toe height at mid-swing
+    force_rate: float = 15.0  # BW/s, largest |dF_z/dt| of a contact (plates: OpenSim's
+    #  subject01 walk 9.4 BW/s over its 60 Hz samples; 1.5 times that)
+    shear_rate: float = 5.0  # BW/s, largest |dF_x/dt| (the same plates: 2.1 BW/s)
+    moment_rate: float = 4.0  # BW m/s, largest |dM_y/dt| of a flat foot about its sole
+    #  frame (the same plates, centre of pressure times F_z about the heel: 2.3 BW m/s)
+    cop_speed: float = 1.5  # m/s, largest speed of a flat foot's centre of pressure along
+    #  its sole (the same plates: 0.96 m/s relative to the heel marker; 1.5 times that)
     w_angles: float = 1000.0  # 1 / (rad^2 s): the tracked angles' squared error integral
     w_duration: float = 1000.0  # 1 / s^2
     w_speed: float = 100.0  # s^2 / m^2
@@ -151,19 +169,54 @@ def sole_ends(model: HumanProsthesisModel, side: str) -> tuple[float, float]:
 
 
 def _contact_rows(c: FootContact, lam: ca.SX, model: HumanProsthesisModel,
-                  opt: MultiContactOptions) -> list[ca.SX]:
+                  opt: MultiContactOptions, margins: tuple[float, float]) -> list[ca.SX]:
     """One contact's wrench inequalities (>= 0): friction cone, normal force, and for a flat
-    foot the centre of pressure d = -M_y / F_z inside [-heel + margin, toe - margin]."""
+    foot the centre of pressure d = -M_y / F_z inside [heel end + margin, toe end - margin]
+    (``margins`` (heel, toe), m)."""
     fx, fz = lam[0], lam[1]
     rows = [opt.mu * fz - fx, opt.mu * fz + fx]
     if c.is_flat:
         heel_end, toe = sole_ends(model, c.side)
         my = lam[2]
         rows += [fz - opt.min_normal_force,
-                 (toe - opt.cop_margin) * fz + my, (-heel_end - opt.cop_margin) * fz - my]
+                 (toe - margins[1]) * fz + my, (-heel_end - margins[0]) * fz - my]
     else:
         rows.append(fz)
     return rows
+
+
+def previous(d: Domain) -> Domain:
+    """The domain before ``d`` in the graph's cycle."""
+    return next(p for p in GRAPH.domains if GRAPH.next(p) == d)
+
+
+def _side_contacts(d: Domain) -> dict[str, tuple[FootContact, int]]:
+    """side -> (its contact in ``d``, the contact's first row in ``d``'s wrench)."""
+    out, o = {}, 0
+    for c in d.contacts:
+        out[c.side] = (c, o)
+        o += c.size
+    return out
+
+
+def handover_margins(d: Domain, opt: MultiContactOptions
+                     ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The centre-of-pressure margins (heel, toe), m, of ``d``'s first and last point: a
+    flat foot that took over from its heel starts with its centre of pressure on the heel
+    end, one that hands over to its toe ends on the toe end (:func:`_transitions`), so the
+    margin there is 0; ``cop_margin`` elsewhere."""
+    m = opt.cop_margin
+    first, last = [m, m], [m, m]
+    for side, (c, _) in _side_contacts(d).items():
+        if not c.is_flat:
+            continue
+        before = _side_contacts(previous(d)).get(side)
+        after = _side_contacts(GRAPH.next(d)).get(side)
+        if before is not None and not before[0].is_flat:
+            first[0] = 0.0
+        if after is not None and not after[0].is_flat:
+            last[1] = 0.0
+    return (first[0], first[1]), (last[0], last[1])
 
 
 def _free_points(d: Domain) -> tuple[str, ...]:
@@ -175,9 +228,10 @@ def _free_points(d: Domain) -> tuple[str, ...]:
 
 
 def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOptions
-                     ) -> tuple[ca.Function, ca.Function, ca.Function]:
+                     ) -> tuple[ca.Function, list[ca.Function], ca.Function]:
     """SX functions of one collocation point of ``d``: the equations of motion, the wrench
-    inequalities and the free foot points' heights."""
+    inequalities (at the first point, the inner points, the last point:
+    :func:`handover_margins`) and the free foot points' heights."""
     q, qd = model.q, model.qd
     qdd = ca.SX.sym("qdd", model.nq)
     u = ca.SX.sym("u", model.nu)
@@ -185,16 +239,29 @@ def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOp
     lam = ca.SX.sym("lam", n_c)
     J = ca.jacobian(model.h[d], q)
     dyn = model.D @ qdd + model.H - ca.DM(model.B) @ u - J.T @ lam
-    rows: list[ca.SX] = []
-    o = 0
-    for c in d.contacts:
-        rows += _contact_rows(c, lam[o:o + c.size], model, opt)
-        o += c.size
-    heights = [model.frame_expr(p)[1] for p in _free_points(d)]
     args, names = [q, qd, qdd, u, lam], ["q", "qd", "qdd", "u", "lam"]
-    return (ca.Function(f"mc_eq_{d}", args, [dyn], names, ["eq"]),
-            ca.Function(f"mc_wrench_{d}", args, [ca.vertcat(*rows)], names, ["ineq"]),
+    first, last = handover_margins(d, opt)
+    wrench = []
+    for k, margins in enumerate((first, (opt.cop_margin, opt.cop_margin), last)):
+        rows: list[ca.SX] = []
+        o = 0
+        for c in d.contacts:
+            rows += _contact_rows(c, lam[o:o + c.size], model, opt, margins)
+            o += c.size
+        wrench.append(ca.Function(f"mc_wrench_{d}_{k}", args, [ca.vertcat(*rows)], names,
+                                  ["ineq"]))
+    heights = [model.frame_expr(p)[1] for p in _free_points(d)]
+    return (ca.Function(f"mc_eq_{d}", args, [dyn], names, ["eq"]), wrench,
             ca.Function(f"mc_free_{d}", [q], [ca.vertcat(*heights)], ["q"], ["z"]))
+
+
+def _rates(d: Domain, opt: MultiContactOptions) -> np.ndarray:
+    """Per wrench row of ``d``'s contacts the largest rate of change (BW/s; BW m/s for a
+    flat foot's moment)."""
+    out: list[float] = []
+    for c in d.contacts:
+        out += [opt.shear_rate, opt.force_rate] + ([opt.moment_rate] if c.is_flat else [])
+    return np.array(out)[:, None]
 
 
 # -- the initial guess -------------------------------------------------------------------------
@@ -289,14 +356,26 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     n_c = model.domains[d].n_constraints - len(SOCKET_COORDS)
     hc = ca.Function(f"mc_contacts_{d}", [model.q], [model.h[d][:n_c]])
     nlp.eq(hc.map(P - 1)(X["q"][:, 1:]) - ca.repmat(hc(X["q"][:, 0]), 1, P - 1))
-    soft.append(len(nlp.g))
-    nlp.geq(f_wrench.map(P)(*args))
-    nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]))
-    if d.is_flat_stance:  # the centre of pressure -M_y / F_z rolls from heel to toe:
-        lam = X["lam"]  # d_{k+1} >= d_k, times F_z,k F_z,k+1 > 0
-        fz, my = lam[1, :], lam[2, :]
+    for f, cols in zip(f_wrench, (slice(0, 1), slice(1, P - 1), slice(P - 1, P)),
+                       strict=True):
         soft.append(len(nlp.g))
-        nlp.geq(my[:-1] * fz[1:] - my[1:] * fz[:-1])
+        nlp.geq(f.map(cols.stop - cols.start)(*[a[:, cols] for a in args]))
+    # a person's ground force changes at a bounded rate (force plates): per interval
+    n_w = sum(c.size for c in d.contacts)
+    step = ca.repmat(ca.DM(_rates(d, opt)) * X["T"] / (P - 1), 1, P - 1)
+    change = ca.diff(X["lam"][:n_w, :], 1, 1)
+    soft += [len(nlp.g), len(nlp.g) + 1]
+    nlp.geq(step - change)
+    nlp.geq(step + change)
+    nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]))
+    if d.is_flat_stance:  # the centre of pressure d (M_y + d F_z = 0) rolls from heel to
+        # toe, no faster than cop_speed: 0 <= d_{k+1} - d_k <= v h
+        heel, toe = sole_ends(model, d.contacts[0].side)
+        cop = nlp.var(f"cop_{d}", (1, P), np.linspace(heel, toe, P))
+        nlp.eq(X["lam"][2, :] + cop * X["lam"][1, :])
+        soft += [len(nlp.g), len(nlp.g) + 1]
+        nlp.geq(ca.diff(cop, 1, 1))
+        nlp.geq(opt.cop_speed * X["T"] / (P - 1) - ca.diff(cop, 1, 1))
     h = X["T"] / (N - 1)
     free = _free(model)
     q, qd, qdd = X["q"][free, :], X["qd"][free, :], X["qdd"][free, :]
@@ -383,6 +462,46 @@ def _impacts(nlp: NLP, model: HumanProsthesisModel, dec: dict[Domain, dict[str, 
     return stride
 
 
+def _transitions(nlp: NLP, model: HumanProsthesisModel,
+                 dec: dict[Domain, dict[str, ca.MX]], opt: MultiContactOptions,
+                 soft: list[int]) -> None:
+    """The ground force of each foot through the domains' transitions, as a person's: a
+    contact that leaves (the trailing toe at the end of a double support) carries nothing
+    at its last point; a new one (a heel strike) carries nothing at its first; a heel off
+    has the flat foot's centre of pressure on the toe end (the heel carries nothing) and
+    the same force on the toe after it; a foot landing flat from its heel starts with its
+    centre of pressure on the heel end (the toe carries nothing yet).  Through a rigid
+    impact a kept contact's force changes by no more than its rate allows over the next
+    domain's first interval; without an impact it is continuous."""
+    P = 2 * opt.nodes - 1
+    for d in GRAPH.domains:
+        nxt = GRAPH.next(d)
+        A, B = dec[d]["lam"], dec[nxt]["lam"]
+        before, after = _side_contacts(d), _side_contacts(nxt)
+        impact = GRAPH.touchdown_frame(d) is not None
+        rate = ca.DM([opt.shear_rate, opt.force_rate]) * dec[nxt]["T"] / (P - 1)
+        for side, (c, o) in before.items():
+            if side not in after:  # lift-off
+                nlp.eq(A[o:o + 2, -1])
+                continue
+            c2, o2 = after[side]
+            jump = B[o2:o2 + 2, 0] - A[o:o + 2, -1]
+            if impact:
+                soft += [len(nlp.g), len(nlp.g) + 1]
+                nlp.geq(rate - jump)
+                nlp.geq(rate + jump)
+            else:
+                nlp.eq(jump)
+            heel, toe = sole_ends(model, side)
+            if c.is_flat and not c2.is_flat:  # heel off: -M_y / F_z = toe end
+                nlp.eq(toe * A[o + 1, -1] + A[o + 2, -1])
+            if c2.is_flat and not c.is_flat:  # lands flat: -M_y / F_z = heel end
+                nlp.eq(heel * B[o2 + 1, 0] + B[o2 + 2, 0])
+        for side, (_, o2) in after.items():
+            if side not in before:  # touchdown
+                nlp.eq(B[o2:o2 + 2, 0])
+
+
 def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
           opt: MultiContactOptions) -> ca.MX:
     """``d``'s share of the cost: the tracked angles' squared error integral (Simpson
@@ -423,6 +542,7 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
         _boundaries(nlp, model, d, X, opt)
         cost += _cost(X, targets, d, idx, opt)
     stride = _impacts(nlp, model, dec, guess, soft)
+    _transitions(nlp, model, dec, opt, soft)
     total = sum(dec[d]["T"] for d in GRAPH.domains)
     cost += opt.w_speed * (stride / total - targets.speed) ** 2
     return _solve(nlp, cost, dec, stride, opt, soft, body_weight(model))

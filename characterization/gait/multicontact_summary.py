@@ -16,9 +16,11 @@ import numpy as np
 from characterization.gait.multicontact import (
     GRAPH,
     TRACKED,
+    MultiContactOptions,
     MultiContactResult,
     MultiContactTargets,
     body_weight,
+    handover_margins,
     sole_ends,
 )
 from characterization.gait.person_check import StanceForce, WalkSummary
@@ -85,10 +87,13 @@ def stance_force(model: HumanProsthesisModel, result: MultiContactResult, foot: 
                 else:
                     cop = np.full_like(fz, heel if c.frame.endswith("heel") else toe)
                 pivot = np.full_like(fz, 0.0 if c.is_flat else 1.0)
+                if c.is_flat:  # its handovers: on the sole's ends by design
+                    first, last = handover_margins(d, MultiContactOptions())
+                    pivot[0], pivot[-1] = first[0] == 0.0, last[1] == 0.0
                 pieces.append((result.durations[d], np.vstack([fx, fz, cop, pivot])))
             o += c.size
     fx, fz, cop, pivot = _cycle(pieces, n)
-    return StanceForce(fx=fx, fz=fz, cop_x=cop, sole=(heel, toe), pivot=pivot > 0.5)
+    return StanceForce(fx=fx, fz=fz, cop_x=cop, sole=(heel, toe), pivot=pivot > 0.0)
 
 
 def gait_summary(model: HumanProsthesisModel, result: MultiContactResult,

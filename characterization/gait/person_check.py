@@ -12,7 +12,10 @@ compares them criterion by criterion (:data:`LIMITS`, docs/person-check.md):
 * per foot with plates on the take side: the vertical force's correlation over the
   normalized stance >= 0.9 and its two peaks within 15 % of body weight;
 * the gait's own ground forces: the centre of pressure moving heel to toe inside the sole
-  with a margin, and the required friction max |F_x| / F_z (F_z > 10 % BW) <= 0.35.
+  with a margin (where the foot is flat, away from its handovers to the heel or toe point),
+  and the required friction max |F_x| / F_z (F_z > 10 % BW) <= 0.35; where the take has no
+  plates for a foot, the gait's vertical force peaks and whether they make a double hump
+  (:func:`hump`) are shown, not judged.
 
 A criterion that cannot be evaluated (a quantity missing on one side) is a row with
 ``passed = None``: shown, not failed, except the gait's own ground-force rows, which fail
@@ -63,7 +66,7 @@ class StanceForce:
     ``sole`` (heel end, toe end) m in the same coordinates, for the gait's CoP check;
     ``pivot`` True where the foot turns about its heel or toe point (a multi-contact gait's
     heel strike and push-off: its centre of pressure is that point, on the sole's end by
-    design, so the margin applies where the foot is flat)."""
+    design, so the margin applies where the foot is flat) and where it hands over to one."""
 
     fx: np.ndarray
     fz: np.ndarray
@@ -245,14 +248,39 @@ def cop_heel_to_toe(s: StanceForce, body_weight: float, lim: Limits = LIMITS
     return not why, travel, "; ".join(why)
 
 
-def _own_force_rows(foot: str, gait: WalkSummary, lim: Limits) -> list[CheckRow]:
+#: of body weight: how far both peaks of a double hump rise above the valley between them
+HUMP_BW = 0.1
+
+
+def hump(fz_bw: np.ndarray) -> tuple[float, float, float, bool]:
+    """(first peak, valley, second peak, a double hump?) of a vertical force over a
+    normalized stance in body weights (:func:`double_hump`): a double hump when each peak
+    is inside the stance (not at its ends: a force that starts or ends on its largest value
+    is an impact's or a cut's) and rises :data:`HUMP_BW` above the valley."""
+    p1, v, p2 = double_hump(fz_bw)
+    n = len(fz_bw)
+    i1, i2 = int(np.argmax(fz_bw[: n // 2])), n // 2 + int(np.argmax(fz_bw[n // 2:]))
+    inside = i1 > 0 and i2 < n - 1
+    return p1, v, p2, bool(inside and min(p1, p2) >= v + HUMP_BW)
+
+
+def _own_force_rows(foot: str, gait: WalkSummary, lim: Limits, plates: bool
+                    ) -> list[CheckRow]:
     g = gait.grf[foot]
     ok, travel, why = cop_heel_to_toe(g, gait.body_weight, lim)
     mu = required_friction(g.fx, g.fz, LOADED_BW * gait.body_weight)
-    return [CheckRow(f"{foot} CoP heel to toe", float("nan"), 100 * travel, 100 * travel,
-                     100 * lim.cop_travel, "% sole", ok, why),
-            CheckRow(f"{foot} required friction", float("nan"), mu, mu, lim.friction, "",
-                     bool(mu <= lim.friction) if np.isfinite(mu) else False)]
+    rows = []
+    if not plates:  # shown, not judged: the issue's limits are against the take's plates
+        p1, v, p2, two = hump(g.fz / gait.body_weight)
+        rows.append(CheckRow(
+            f"{foot} F_z peaks", float("nan"), max(p1, p2), float("nan"), float("nan"),
+            "BW", None, f"first {p1:.2f}, valley {v:.2f}, second {p2:.2f} BW: "
+            f"{'a' if two else 'no'} double hump; the take has no force plates"))
+    rows.append(CheckRow(f"{foot} CoP heel to toe", float("nan"), 100 * travel,
+                         100 * travel, 100 * lim.cop_travel, "% sole", ok, why))
+    rows.append(CheckRow(f"{foot} required friction", float("nan"), mu, mu, lim.friction, "",
+                         bool(mu <= lim.friction) if np.isfinite(mu) else False))
+    return rows
 
 
 def check_person(take: WalkSummary, gait: WalkSummary, limits: Limits = LIMITS
@@ -267,7 +295,7 @@ def check_person(take: WalkSummary, gait: WalkSummary, limits: Limits = LIMITS
         rows.append(CheckRow("ground forces", float("nan"), float("nan"), float("nan"), 0.0,
                              "", False, "the gait carries no ground forces"))
     for foot in sorted(gait.grf):
-        rows += _own_force_rows(foot, gait, limits)
+        rows += _own_force_rows(foot, gait, limits, foot in take.grf)
     return PersonCheck(take.source, gait.source, tuple(rows))
 
 
