@@ -23,6 +23,7 @@ import json
 import os
 import platform
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -134,6 +135,16 @@ def gait_rows(j: dict[str, Any]) -> list[Row]:
         ok = name == "build + solve (s)"
         out.append(Row(name, med, spread, None, "< 60 s" if ok else "", med < 60 if ok else None))
     return out
+
+
+def gait_multicontact_rows(j: dict[str, Any]) -> list[Row]:
+    walls = j["walls_s"]
+    med = float(j["median_s"])
+    iters = j["iterations"]
+    return [Row("targets, NLP and both IPOPT solves (s)", med,
+                f"{fmt(min(walls))}-{fmt(max(walls))}", None, "<= 60 s", med <= 60.0),
+            Row("IPOPT iterations", float(statistics.median(iters)),
+                f"{min(iters)}-{max(iters)}")]
 
 
 def playback_rows(j: dict[str, Any]) -> list[Row]:
@@ -309,6 +320,9 @@ BENCHES = (
           stage_rows("stages_s", "s", {"process_file()": ("", 1.0)})),
     Bench("gait", "PHZD gait optimization (two domains, 12 DOF) from the regression's guess",
           ["--repeats", "2"], ["--repeats", "1"], gait_rows),
+    Bench("gait_multicontact", "the person's gait on the multi-contact graph (`gait fit "
+          "--domains multicontact`) on openOFM's walk, the take's subject",
+          ["--repeats", "3"], ["--repeats", "1"], gait_multicontact_rows),
     Bench("tube_fit", "force-tube fit: 20 profiles x 150 samples, degree 3",
           ["--repeats", "15"], ["--repeats", "1"],
           stage_rows("stages_ms", "ms", {"fit_tube (all)": ("", 1000.0)})),
