@@ -81,10 +81,9 @@ def contact_gait_of(model: HumanProsthesisModel,
             raise MultiContactError(
                 f"domain {d}: the hip does not move forward over its {vc.reference_frame} "
                 f"throughout (node {k}: {p[k]:.4f} -> {p[k + 1]:.4f} m); no phase variable")
-        tau = (p - p[0]) / (p[-1] - p[0])
-        idx = [model.coord_names.index(c) for c in d.y2_coords]
         step = p[-1] - p[0]
-        tau_dot = p_dot / step
+        tau, tau_dot = (p - p[0]) / step, p_dot / step
+        idx = [model.coord_names.index(c) for c in d.y2_coords]
         qdd = np.asarray(tr["qdd"], float)
         p_ddot = np.array([float(vc.progress_rate(q[:, k], qd[:, k], qdd[:, k]))
                            for k in range(q.shape[1])])
@@ -92,8 +91,7 @@ def contact_gait_of(model: HumanProsthesisModel,
         if d.velocity_output:  # the hip rate's curve
             rows, slopes = np.c_[rows, p_dot], np.c_[slopes, p_ddot / tau_dot]
         alpha = fit_with_rates(tau, rows, slopes, degree)
-        params[d] = GaitParams(alpha, (p[-1] - p[0]) / durations[d],
-                               float(p[0]), float(p[-1]))
+        params[d] = GaitParams(alpha, step / durations[d], float(p[0]), float(p[-1]))
         rms[d] = np.sqrt(np.mean((bezier.basis(degree, tau) @ alpha.T - rows) ** 2, axis=0))
     return ContactGait(params, rms)
 
