@@ -19,15 +19,15 @@ import pytest
 from scipy.io import loadmat
 
 from characterization.mocap.foot_contact import ContactOptions
-from characterization.mocap.mapping import JOINTS, default_mapping
+from characterization.mocap.mapping import default_mapping
 from characterization.mocap.pipeline import process_take
 from characterization.mocap.step_segmentation import segment_steps
 from characterization.mocap.synthetic_subject import SynthOptions, static_trial, synthesize
 from characterization.mocap.take import LabEvent, MocapError
 from hp_model.outputs import HipProgress
+from tests.contact_helpers import FEET, lag_frames
 
 GATK = Path(__file__).parent / "data" / "gatk-walking"
-FEET = {"prosthesis": ("ankle_p", "p_land", "p_lift"), "human": ("ankle_l", "h_land", "h_lift")}
 
 
 @pytest.fixture(scope="module", params=["model", "template"])
@@ -39,26 +39,6 @@ def synth(model, request):
 @pytest.fixture(scope="module")
 def contact(synth, coef):
     return process_take(synth.take, default_mapping(), coef)
-
-
-def _lag_frames(truth: dict, foot: str, rate: float, speed_tol: float) -> float:
-    """Frames the noise-free ankle centre spends between rest at an event and speed_tol
-    (the most over the take's touchdowns and lift-offs)."""
-    joint, land, lift = FEET[foot]
-    t = truth["time"]
-    a = truth["joint_position"][:, list(JOINTS).index(joint)]
-    fast = np.hypot(*np.gradient(a, t, axis=0).T) > speed_tol
-    lags = []
-    for kind in (land, lift):
-        for te in truth[kind] * rate:
-            k = int(np.ceil(te)) if kind == land else int(np.floor(te))
-            if not 40 <= k < len(t) - 40:
-                continue
-            if kind == land:
-                lags.append(te - (k - 40 + np.flatnonzero(fast[k - 40:k])[-1]))
-            else:
-                lags.append(k + np.flatnonzero(fast[k:k + 40])[0] - te)
-    return float(max(lags))
 
 
 def _matched(found: tuple[int, ...], truth_frames: np.ndarray) -> np.ndarray:
@@ -75,7 +55,7 @@ def test_every_touchdown_and_liftoff_of_the_truth(contact, synth) -> None:
     n = len(contact.time)
     filt = rate / (4 * ContactOptions().cutoff_hz)
     for foot, (_, land, lift) in FEET.items():
-        tol = _lag_frames(tr, foot, rate, ContactOptions().speed_tol) + filt
+        tol = lag_frames(tr, foot, rate, ContactOptions().speed_tol, 40) + filt
         c = contact.contacts[foot]
         assert c.source == "markers"
         assert c.rolled == ()  # its feet leave the ground flat: no roll over the toes
@@ -114,7 +94,7 @@ def test_paper_rule_puts_swing_into_ps_where_contact_does_not(contact, synth, co
         nxt = tr["p_land"][tr["p_land"] * rate > lo]
         swing |= (t >= lo) & (t < (nxt[0] * rate if nxt.size else n))
     paper = process_take(synth.take, default_mapping("paper"), coef)
-    tol = _lag_frames(tr, "prosthesis", rate, ContactOptions().speed_tol) + 3
+    tol = lag_frames(tr, "prosthesis", rate, ContactOptions().speed_tol, 40) + 3
     paper_swing = [int(swing[s.start:s.end + 1].sum()) for s in paper.steps if s.domain == "ps"]
     contact_swing = [int(swing[s.start:s.end + 1].sum()) for s in contact.steps
                      if s.domain == "ps"]

@@ -30,38 +30,18 @@ from characterization.mocap.foot_contact import (
     stride_time,
     strides,
 )
-from characterization.mocap.mapping import JOINTS, default_mapping
+from characterization.mocap.mapping import default_mapping
 from characterization.mocap.pipeline import process_take
 from characterization.mocap.synthetic_gait import GaitParams
 from characterization.mocap.synthetic_subject import SynthOptions, synthesize
 from hp_model import COORDS
+from tests.contact_helpers import FEET, lag_frames
 
 GATK = Path(__file__).parent / "data" / "gatk-walking"
-FEET = {"prosthesis": ("ankle_p", "p_land", "p_lift"), "human": ("ankle_l", "h_land", "h_lift")}
 #: the slow walker: 2.6 s strides (SD 0.1 s), 0.33 m steps (0.25 m/s), 20 % double
 #: support each, 3 cm of clearance (slow walkers shuffle)
 SLOW = GaitParams(stride_time=2.6, step_length=0.33, double_support=0.20, sd_stride_time=0.1,
                   clearance=0.03)
-
-
-def _lag_frames(truth: dict, foot: str, rate: float, speed_tol: float) -> float:
-    """Frames the noise-free ankle of ``foot`` spends between rest at its events and
-    ``speed_tol`` (the most over the take's touchdowns and lift-offs)."""
-    joint, land, lift = FEET[foot]
-    t = truth["time"]
-    a = truth["joint_position"][:, list(JOINTS).index(joint)]
-    fast = np.hypot(*np.gradient(a, t, axis=0).T) > speed_tol
-    lags = []
-    for kind in (land, lift):
-        for te in truth[kind] * rate:
-            k = int(np.ceil(te)) if "land" in kind else int(np.floor(te))
-            if not 80 <= k < len(t) - 80:
-                continue
-            if "land" in kind:
-                lags.append(te - (k - 80 + np.flatnonzero(fast[k - 80:k])[-1]))
-            else:
-                lags.append(k + np.flatnonzero(fast[k:k + 80])[0] - te)
-    return float(max(lags))
 
 
 @pytest.fixture(scope="module")
@@ -80,7 +60,7 @@ def test_slow_walker_every_touchdown_found(slow) -> None:
     filt = rate / (4 * ContactOptions().cutoff_hz)
     n = len(p.time)
     for foot, (_, land, lift) in FEET.items():
-        tol = _lag_frames(tr, foot, rate, ContactOptions().speed_tol) + filt
+        tol = lag_frames(tr, foot, rate, ContactOptions().speed_tol, 80) + filt
         c = p.contacts[foot]
         for kind, found in ((land, c.touchdowns), (lift, c.liftoffs)):
             true = tr[kind] * rate
@@ -102,7 +82,7 @@ def test_slow_walker_strides_speed_and_double_supports(slow) -> None:
     assert len(st) == 4
     land = np.sort(tr["p_land"])
     filt = rate / (4 * ContactOptions().cutoff_hz)
-    tol = {f: _lag_frames(tr, f, rate, ContactOptions().speed_tol) + filt for f in FEET}
+    tol = {f: lag_frames(tr, f, rate, ContactOptions().speed_tol, 80) + filt for f in FEET}
     for x in st:
         k = int(np.argmin(np.abs(land * rate - x.start)))
         # both touchdowns early by 0 to tol frames: their difference within tol
