@@ -90,6 +90,30 @@ def _least_norm(A: ca.SX, r: ca.SX) -> ca.SX:
     return A.T @ ca.solve(A @ A.T, r)
 
 
+def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
+    """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its output rows,
+    given the prosthesis motor torque u_p).
+
+    Where the domain has fewer outputs than torques (a double support: a closed chain, whose
+    torques can also squeeze the legs against each other without moving anything) and the
+    human has one more torque than rows (``ds_p``: y1 and both hips), the least-norm u_h
+    would pick its own squeeze and push the prosthesis's joints through the chain.  The human
+    keeps instead the rule of the full feedback linearization (``fl``, least norm over all
+    six torques): no torque along the null space of A, P u = 0 with
+    P = I - A^T (A A^T)^-1 A (rank one: the squeeze).  Its rows and that one are four
+    independent equations in u_h, so given the u_p ``fl`` computes, the human's torques are
+    ``fl``'s exactly, and given another u_p the squeeze is still none.  Where the human holds
+    as many rows as it has torques (``ds_h``), u_p sets the squeeze."""
+    A_h, A_p = A[rows, 0:4], A[rows, 4:6]
+    r = -(rhs[rows] + A_p @ u_p)
+    if A.size1() == A.size2() or len(rows) == A_h.size2():  # no freedom left to the human
+        return _least_norm(A_h, r)
+    P = ca.SX.eye(A.size2()) - A.T @ ca.solve(A @ A.T, A)
+    M = ca.vertcat(A_h, P[:, 0:4])
+    b = ca.vertcat(r, -P[:, 4:6] @ u_p)
+    return ca.solve(M.T @ M, M.T @ b)  # exact: the rows are consistent
+
+
 class ContactConstraints:
     """Phase, outputs and feedback linearization of one domain of the multi-contact graph
     (module docstring); ``degree`` the Bezier degree of its curves."""
@@ -142,9 +166,7 @@ class ContactConstraints:
         rhs = Lf + v
         u = -_least_norm(A, rhs)
         u_p = ca.SX.sym("u_p", 2)
-        rows = list(d.human_outputs)
-        A_h, A_p = A[rows, 0:4], A[rows, 4:6]
-        u_hfl = ca.vertcat(-_least_norm(A_h, rhs[rows] + A_p @ u_p), u_p)
+        u_hfl = ca.vertcat(_human_torques(A, rhs, list(d.human_outputs), u_p), u_p)
 
         tau = o.tau
         self.functions = {

@@ -94,6 +94,37 @@ def test_feedback_linearization_gives_the_outputs_their_dynamics(
         "the prosthesis's rows are not the human's to hold"
 
 
+@pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
+def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
+        model: HumanProsthesisModel, domain: Domain) -> None:
+    """hfl given the u_p that fl computes returns fl's six torques (so a prosthesis that
+    applies the oracle's torque walks the oracle's walk); in a double support (a closed chain:
+    six torques, five outputs) the human adds no squeeze whatever u_p: the total torque has
+    no component along the null space of the outputs' map, the direction that only presses
+    the legs against each other (it moves nothing, so the outputs cannot tell); where the
+    human holds as many rows as it has torques (``ds_h``) the squeeze is u_p's to set."""
+    rng = np.random.default_rng(11)
+    vc = ContactConstraints(model, domain, degree=4)
+    dyn = model.function(f"dyn_{domain}")
+    q, qd = _state(rng)
+    theta = _theta(vc, rng)
+    u = np.array(vc.functions[f"fl_{domain}"](q, qd, theta, GAINS)[0]).ravel()
+    u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u[4:])).ravel()
+    np.testing.assert_allclose(u_h, u, rtol=1e-7, atol=1e-7 * np.abs(u).max())
+    if len(domain.human_outputs) == 4:
+        return
+    assert domain.is_double_support
+    # the null direction, numerically: torques that leave every acceleration unchanged
+    B = np.column_stack([np.array(dyn(q, qd, e)[0]).ravel() - np.array(dyn(q, qd, 0 * e)[0]).ravel()
+                         for e in np.eye(6)])  # d qdd / d u (12, 6)
+    _, sv, vt = np.linalg.svd(B)
+    assert sv[-1] < 1e-9 * sv[0]  # one squeeze direction
+    n = vt[-1]
+    for u_p in ([3.0, -2.0], [-1.0, 0.5]):
+        u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
+        assert abs(n @ u_h) < 1e-7 * np.abs(u_h).max(), (u_p, n @ u_h)
+
+
 def test_phase_is_the_hip_over_the_stance_contact(model: HumanProsthesisModel) -> None:
     """tau = (x_hip - x_contact - p_min) / (p_max - p_min), the contact the domain's first."""
     rng = np.random.default_rng(3)
