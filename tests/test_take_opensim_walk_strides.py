@@ -141,3 +141,28 @@ def test_strides_and_steps_against_the_plates(processed) -> None:
     assert all(0.9 <= s.speed <= 1.4 for s in st)  # m/s over the belt: a person's walk
     domains = [s.domain for s in processed.steps]
     assert domains.count(Domain.PS) == 2 and domains.count(Domain.PNS) == 2
+
+
+def test_the_paper_domains_are_found_on_the_treadmill(tmp_path) -> None:
+    """On a treadmill the stance ankle moves with the belt, so the landing foot's ankle comes
+    to rest against the belt (``ground_speed``), not in the lab: each of the paper's domains
+    (prosthesis (right) -> ps, human (left) -> pns) starts in the double support the plates
+    show after its foot's touchdown, between that touchdown and the other foot's lift-off
+    (3 frames of the markers' lag allowed)."""
+    from characterization.mocap.domain_segmentation import domain_segments
+    from characterization.mocap.steps_artifact import load_steps
+
+    process_file(TAKE / "subject01_walk1.trc", tmp_path / "steps.npz",
+                 mapping=TAKE / "mapping.toml", with_figures=False)
+    steps = load_steps(tmp_path / "steps.npz")
+    assert steps.ground_speed is not None and abs(steps.ground_speed) > 0.5  # a belt
+    segs = domain_segments(steps)
+    rec = _plates()
+    feet = {Domain.PS: ("right", "left"), Domain.PNS: ("left", "right")}
+    assert {s.domain for s in segs} == {Domain.PS, Domain.PNS} and len(segs) >= 3
+    for s in segs:
+        t = float(steps.time[s.start])
+        own, other = feet[s.domain]
+        landed = max(c for c in _crossings(rec, own, up=True) if c <= t)
+        left = min(c for c in _crossings(rec, other, up=False) if c >= landed)
+        assert landed <= t <= left + 3.0 / RATE, (s, t, landed, left)

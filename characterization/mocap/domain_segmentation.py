@@ -87,10 +87,13 @@ def domain_segments(steps: StepsArtifact, opt: TouchdownOptions = TouchdownOptio
     (:func:`step_segmentation.take_spans`) each take is segmented on its own, so no
     segment spans two takes."""
     names = list(steps.joint_names)
+    belt = float(steps.ground_speed or 0.0)  # m/s: a treadmill's belt carries the stance foot
     segs = []
     for s, e in take_spans(steps.time):
+        drift = np.zeros((e - s, 2))  # the belt's travel: the ankles measured against it
+        drift[:, 0] = belt * (steps.time[s:e] - steps.time[s])
         events = sorted((s + f, d) for d, j in LANDING_ANKLE.items()
-                        for f in touchdowns(steps.joint_position[s:e, names.index(j)],
+                        for f in touchdowns(steps.joint_position[s:e, names.index(j)] - drift,
                                             steps.frame_rate, opt))
         for (a, da), (b, db) in itertools.pairwise(events):
             if da == db or b - a < 3:
