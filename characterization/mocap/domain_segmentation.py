@@ -37,6 +37,9 @@ from hp_model.domains import Domain
 #: ankle joint centre of the foot that lands at the start of each domain
 LANDING_ANKLE = {Domain.PS: "ankle_p", Domain.PNS: "ankle_l"}
 
+#: m/s: a ground this fast under the stance feet is a treadmill's belt
+BELT_SPEED = 0.1
+
 
 @dataclass(frozen=True)
 class TouchdownOptions:
@@ -87,7 +90,10 @@ def domain_segments(steps: StepsArtifact, opt: TouchdownOptions = TouchdownOptio
     (:func:`step_segmentation.take_spans`) each take is segmented on its own, so no
     segment spans two takes."""
     names = list(steps.joint_names)
-    belt = float(steps.ground_speed or 0.0)  # m/s: a treadmill's belt carries the stance foot
+    ground = float(steps.ground_speed or 0.0)
+    # m/s: a treadmill's belt carries the stance foot (overground, the measured speed of a
+    # foot at rest is marker noise, and the lab frame is the ground's)
+    belt = ground if abs(ground) > BELT_SPEED else 0.0
     segs = []
     for s, e in take_spans(steps.time):
         drift = np.zeros((e - s, 2))  # the belt's travel: the ankles measured against it
