@@ -211,6 +211,12 @@ class Domain(Choice):
         return _SPECS[self].velocity_output
 
     @property
+    def prosthesis_contact(self) -> FootContact | None:
+        """The prosthesis foot's contact with the ground here (flat, heel or toe), None when
+        it swings: what AMPRO3's foot switch and load cell sense."""
+        return next((c for c in _SPECS[self].contacts if c.side == "p"), None)
+
+    @property
     def is_prosthesis_stance(self) -> bool:
         """Whether the prosthesis foot is the stance foot."""
         return _SPECS[self].stance_leg.side == "p"

@@ -12,9 +12,11 @@ A plant is stepped one control period at a time by :func:`orchestrator.loop.run_
 What AMPRO3 senses (:func:`sensed`, the one sensor map): knee and ankle angle (rad) and
 velocity (rad/s); the foot load cell, the ground normal force on the prosthesis foot in ps,
 clipped at 0 (a load cell does not pull), 0 in pns; contact = the domain is ps; the socket
-IMU's pitch (rad; NaN without one).  The FMU computes the same outputs in its generated C
-(q, qd of th_pk, th_pa; lam[1]); :class:`FmuPlant` applies the same clipping and contact
-rule to them through :func:`sensed`.
+IMU's pitch (rad; NaN without one).  On the multi-contact graph the foot is on the ground
+on its heel, flat or on its toe (:attr:`Domain.prosthesis_contact`), and the load is that
+contact's normal force (:func:`wrench_rows`).  The FMU (the paper's graph) computes the
+same outputs in its generated C (q, qd of th_pk, th_pa; lam[1]); :class:`FmuPlant` applies
+the same clipping and contact rule to them through :func:`sensed`.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import NamedTuple, Protocol, TypeAlias
 import numpy as np
 
 from hp_model.closed_loop import ClosedLoopMode
-from hp_model.domains import Domain
+from hp_model.domains import PROSTHESIS, Domain
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimState
@@ -53,11 +55,32 @@ class Sensed(NamedTuple):
 def sensed(domain: str, angles: tuple[float, float], velocities: tuple[float, float],
            normal_force: float, socket_pitch: float) -> Sensed:
     """The one map from the plant's state to what AMPRO3 senses (module docstring);
-    ``normal_force``: the ground's normal force on the prosthesis foot (N) when in ps."""
-    ps = domain == Domain.PS
+    ``normal_force``: the ground's normal force on the prosthesis foot (N) when it is on the
+    ground (flat, on its heel or its toe: :attr:`Domain.prosthesis_contact`; the paper's ps)."""
+    contact = Domain(domain).prosthesis_contact is not None
     return Sensed(float(angles[0]), float(angles[1]), float(velocities[0]),
-                  float(velocities[1]), max(float(normal_force), 0.0) if ps else 0.0, ps,
-                  float(socket_pitch))
+                  float(velocities[1]), max(float(normal_force), 0.0) if contact else 0.0,
+                  contact, float(socket_pitch))
+
+
+class WrenchRows(NamedTuple):
+    """Where a domain's constraint wrenches lam hold what the loop reads: the row of the
+    ground's normal force on the prosthesis foot (None when it swings) and the socket's
+    wrench (F_x, F_z, M_y)."""
+
+    load: int | None
+    socket: slice
+
+
+def wrench_rows(model: HumanProsthesisModel) -> dict[Domain, WrenchRows]:
+    """:class:`WrenchRows` of every domain of ``model``'s graph, from its constraint stacks
+    (the paper's: ps load row 1, the socket rows 3:6 in both)."""
+    rows = {}
+    for d in model.graph.domains:
+        stack, c = model.domains[d], d.prosthesis_contact
+        load = None if c is None else stack.wrench_slice(c.name).start + 1  # (F_x, F_z, ..)
+        rows[d] = WrenchRows(load, stack.wrench_slice("socket"))
+    return rows
 
 
 class Observation(NamedTuple):
@@ -99,14 +122,17 @@ class Plant(Protocol):
 
 
 def observe_state(k: int, st: SimState, knee_ankle: tuple[int, int],
-                  pitch_row: np.ndarray | None = None) -> Observation:
+                  pitch_row: np.ndarray | None = None, load_row: int | None = 1
+                  ) -> Observation:
     """The observation of the simulator's state ``st`` at period ``k``: the model
     coordinates ``knee_ankle`` of th_pk, th_pa; ``pitch_row``: the model's
-    ``pitch_row("socket")`` for the IMU's socket pitch (NaN without it)."""
+    ``pitch_row("socket")`` for the IMU's socket pitch (NaN without it); ``load_row``: the
+    row of ``st.lam`` with the prosthesis foot's normal force (:class:`WrenchRows`; the
+    paper's ps: 1)."""
     pk, pa = knee_ankle
     pitch = math.nan if pitch_row is None else float(pitch_row @ st.q)
-    s = sensed(st.domain, (st.q[pk], st.q[pa]), (st.qd[pk], st.qd[pa]), float(st.lam[1]),
-               pitch)
+    load = 0.0 if load_row is None else float(st.lam[load_row])
+    s = sensed(st.domain, (st.q[pk], st.q[pa]), (st.qd[pk], st.qd[pa]), load, pitch)
     return Observation(k, st.t, st.domain, st.steps, st.tau, s)
 
 
@@ -122,8 +148,9 @@ class SimulatorPlant:
         self.model: HumanProsthesisModel = sim.model
         self.dt = sim.opt.dt
         self.run = sim.start(q0, qd0, domain, mode=mode)
-        self._pk, self._pa = self.model.roles[Domain.PS].prosthesis
+        self._pk, self._pa = (self.model.coord_names.index(c) for c in PROSTHESIS)
         self._pitch = self.model.pitch_row("socket")
+        self._rows = wrench_rows(self.model)
         self._k = 0
 
     @property
@@ -131,12 +158,14 @@ class SimulatorPlant:
         return self.run.fall
 
     def observe(self) -> Observation:
-        return observe_state(self._k, self.run.observe(), (self._pk, self._pa), self._pitch)
+        st = self.run.observe()
+        return observe_state(self._k, st, (self._pk, self._pa), self._pitch,
+                             self._rows[st.domain].load)
 
     def actuate(self, torque: Vector | None) -> Truth:
         self.run.apply(None if torque is None else np.asarray(torque, dtype=float))
         q, qd, u, lam = self.run.last_sample()
-        return Truth(q, qd, lam[3:6], u[4:6])
+        return Truth(q, qd, lam[self._rows[self.run.domain].socket], u[4:6])
 
     def advance(self) -> None:
         self.run.advance()
