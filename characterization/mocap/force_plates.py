@@ -24,7 +24,9 @@ Sources:
 
 Stances (:func:`stances`): the foot's vertical force above ``threshold`` (default 20 N),
 the crossings interpolated linearly between samples; only stances whose touchdown and
-lift-off both lie inside the record are full stances.
+lift-off both lie inside the record are full stances.  What ``mocap process`` keeps in the
+steps file (:func:`take_plates`): each foot's full stances inside the take averaged on the
+normalized stance (N), and the feet's mean vertical force over whole strides (the weight).
 """
 
 from __future__ import annotations
@@ -32,14 +34,18 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from characterization.mocap.sagittal import SagittalFrame
-from characterization.mocap.take import MocapError
+from characterization.mocap.take import MocapError, Take
+
+if TYPE_CHECKING:
+    from characterization.mocap.mapping import MocapMapping
 
 #: N: the vertical force above which a foot is on its plate (a common lab threshold)
 THRESHOLD_N = 20.0
@@ -129,18 +135,32 @@ def _project(frame: SagittalFrame, v: np.ndarray) -> np.ndarray:
     return frame.project(v)
 
 
-def read_grf_mot(path: str | os.PathLike[str], frame: SagittalFrame) -> PlateRecord:
-    """Each foot's ground reaction from an OpenSim ``.mot`` (module docstring)."""
+def _torque_prefix(force_prefix: str) -> str:
+    """OpenSim's torque columns of a force prefix (``l_ground_force_`` -> ``l_ground_torque_``)."""
+    return force_prefix.replace("force", "torque")
+
+
+def read_grf_mot(path: str | os.PathLike[str], frame: SagittalFrame,
+                 feet: Mapping[str, str] | None = None, field: str = "") -> PlateRecord:
+    """Each foot's ground reaction from an OpenSim ``.mot`` (module docstring).  ``feet``:
+    foot name -> its force columns' prefix (e.g. ``{"human": "l_ground_force_"}``), every
+    one required (a missing column is a one-line error naming it and ``field``, e.g. the
+    mapping's); default: OpenSim's prefixes, ``left`` and ``right``, those present."""
     p = Path(path)
     names, rows = _mot_table(p)
     col = {n: i for i, n in enumerate(names)}
     if "time" not in col:
         raise MocapError(f"{p}: no 'time' column")
     t = rows[:, col["time"]]
-    feet = {}
-    for foot, prefixes in MOT_FEET.items():
+    wanted = MOT_FEET if feet is None else {f: ((fp, _torque_prefix(fp)),)
+                                             for f, fp in feet.items()}
+    out = {}
+    for foot, prefixes in wanted.items():
         for fp, tp in prefixes:
             need = [f"{fp}v{a}" for a in "xyz"] + [f"{fp}p{a}" for a in "xyz"]
+            if feet is not None and (miss := [n for n in need if n not in col]):
+                raise MocapError(f"{p}: no column '{miss[0]}' ({field}{foot} = '{fp}'; "
+                                 f"the file's force columns: {_force_columns(names)})")
             if all(n in col for n in need):
                 f = _project(frame, rows[:, [col[n] for n in need[:3]]])
                 c = _project(frame, rows[:, [col[n] for n in need[3:]]])
@@ -148,13 +168,32 @@ def read_grf_mot(path: str | os.PathLike[str], frame: SagittalFrame) -> PlateRec
                 fm = (rows[:, [col[n] for n in tq]] @ frame.up) if all(n in col for n in tq) \
                     else None
                 on = f[:, 1] > 0
-                feet[foot] = FootForce(foot, t, f[:, 0], f[:, 1], np.where(on, c[:, 0], np.nan),
-                                       fm, fp)
+                out[foot] = FootForce(foot, t, f[:, 0], f[:, 1], np.where(on, c[:, 0], np.nan),
+                                      fm, fp)
                 break
-    if not feet:
+    if not out:
         raise MocapError(f"{p}: no ground-force columns (expected e.g. ground_force_vx ... "
                          "ground_force_pz)")
-    return PlateRecord(str(p), feet)
+    return PlateRecord(str(p), out)
+
+
+def _force_columns(names: Sequence[str]) -> str:
+    """The prefixes of a .mot's force columns (``<prefix>vx``), for an error."""
+    found = sorted({n[:-2] for n in names if n.endswith("vx")})
+    return ", ".join(f"'{n}'" for n in found) or "none"
+
+
+def check_mot_prefixes(path: str | os.PathLike[str], prefixes: Mapping[str, str],
+                       where: str) -> None:
+    """A one-line :class:`MocapError` (``where``, the field, the file) unless the ``.mot``
+    at ``path`` has every ``<prefix>v{x,y,z}`` and ``<prefix>p{x,y,z}`` column of
+    ``prefixes`` (field name -> prefix)."""
+    names, _ = _mot_table(Path(path))
+    for field, fp in prefixes.items():
+        miss = [c for c in (f"{fp}{k}{a}" for k in "vp" for a in "xyz") if c not in names]
+        if miss:
+            raise MocapError(f"{where}: field '{field}' = '{fp}': {path} has no column "
+                             f"'{miss[0]}' (its force columns: {_force_columns(names)})")
 
 
 def read_gatk_plate(path: str | os.PathLike[str]) -> PlateRecord:
@@ -240,6 +279,18 @@ def read_c3d_plates(path: str | os.PathLike[str], frame: SagittalFrame,
     if not feet:
         raise MocapError(f"{p}: no foot is over a loaded force plate")
     return PlateRecord(str(p), feet)
+
+
+def c3d_plate_count(path: str | os.PathLike[str]) -> int:
+    """FORCE_PLATFORM:USED of a C3D (0 when the file has no such parameter)."""
+    import ezc3d  # lazily: the reader is only needed for C3D files
+
+    try:
+        c = ezc3d.c3d(str(path))
+    except (RuntimeError, OSError) as e:
+        raise MocapError(f"{path}: cannot read ({e})") from None
+    used = np.ravel(c["parameters"].get("FORCE_PLATFORM", {}).get("USED", {}).get("value", []))
+    return int(used[0]) if used.size else 0
 
 
 # --- stances and the take's summary --------------------------------------------------------
@@ -389,6 +440,141 @@ def mean_vertical_force(record: PlateRecord, start: float, end: float) -> float:
     return float(np.mean(tot)) if tot is not None else float("nan")
 
 
+@dataclass(frozen=True)
+class MeanStance:
+    """One foot's ground reaction averaged over its full stances, on the normalized stance
+    (``STANCE_SAMPLES`` points, 0..1 of each stance): ``fx`` forward, ``fz`` up (N, the
+    ground on the foot, sagittal frame); ``count`` the stances averaged (0: the curves NaN)."""
+
+    fx: np.ndarray
+    fz: np.ndarray
+    count: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "fx", _ro(self.fx))
+        object.__setattr__(self, "fz", _ro(self.fz))
+
+
+def mean_stance(ff: FootForce, span: tuple[float, float] | None = None,
+                threshold: float = THRESHOLD_N) -> MeanStance:
+    """The mean of ``ff``'s full stances (:func:`stances`) lying inside ``span`` (s; default
+    the whole record), each resampled on 0..1 of its own stance (:func:`summarize_stance`)."""
+    st = [(a, b) for a, b in stances(ff, threshold)
+          if span is None or (span[0] <= a and b <= span[1])]
+    if not st:
+        nan = np.full(STANCE_SAMPLES, np.nan)
+        return MeanStance(nan, nan, 0)
+    curves = [summarize_stance(ff, a, b, 1.0) for a, b in st]  # body weight 1: N
+    return MeanStance(np.mean([c.fx_bw for c in curves], axis=0),
+                      np.mean([c.fz_bw for c in curves], axis=0), len(st))
+
+
+def stride_weight(record: PlateRecord, span: tuple[float, float] | None = None,
+                  threshold: float = THRESHOLD_N) -> tuple[float, int]:
+    """(N, strides): the feet's summed vertical force averaged over each whole stride
+    (touchdown to touchdown of one foot's full stances inside ``span``) and over the strides
+    (steady walking: the body weight); (NaN, 0) without two feet or a whole stride."""
+    if len(record.feet) < 2:
+        return float("nan"), 0
+    tds = [[a for a, b in stances(ff, threshold)
+            if span is None or (span[0] <= a and b <= span[1])] for ff in record.feet.values()]
+    per = [mean_vertical_force(record, a, b) for t in tds for a, b in itertools.pairwise(t)]
+    return (float(np.mean(per)), len(per)) if per else (float("nan"), 0)
+
+
+@dataclass(frozen=True)
+class TakePlates:
+    """What the steps file keeps of a take's plates: ``source`` the file, ``feet`` foot ->
+    :class:`MeanStance` (the model's feet), ``weight`` N (:func:`stride_weight`, NaN
+    without a whole stride) over ``strides`` strides."""
+
+    source: str
+    feet: Mapping[str, MeanStance]
+    weight: float
+    strides: int
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "feet", MappingProxyType(dict(self.feet)))
+
+    def line(self) -> str:
+        """One line for the QA report and the terminal."""
+        feet = ", ".join(f"{f} foot {s.count} full stance(s)" for f, s in self.feet.items())
+        w = (f"; the feet carry {self.weight:.0f} N over {self.strides} whole stride(s)"
+             if self.strides else "")
+        return f"force plates {Path(self.source).name} read: {feet} averaged{w}"
+
+
+def take_plates(record: PlateRecord, span: tuple[float, float] | None = None,
+                threshold: float = THRESHOLD_N) -> TakePlates:
+    """Each foot's mean stance (:func:`mean_stance`) and the plates' weight
+    (:func:`stride_weight`) over the full stances inside ``span`` (s, the take's)."""
+    w, n = stride_weight(record, span, threshold)
+    return TakePlates(record.source, {f: mean_stance(ff, span, threshold)
+                                      for f, ff in record.feet.items()}, w, n)
+
+
+def _mot_side(mapping: MocapMapping, foot: str) -> str:
+    """The plates' side (``left``/``right``) of a model foot, by the segmentation's sides."""
+    seg = mapping.segmentation
+    side = (seg.human_side if foot == "human" else seg.prosthesis_side) if seg else \
+        ("Left" if foot == "human" else "Right")
+    if side.lower() not in MOT_FEET:
+        raise MocapError(f"mapping field 'segmentation.{foot}_side' = '{side}' is not Left or "
+                         f"Right: name the {foot} foot's columns with 'force_plates.{foot}'")
+    return side.lower()
+
+
+def _mot_plates(mapping: MocapMapping, frame: SagittalFrame) -> PlateRecord:
+    """The mapping's ``[force_plates]`` file, its feet the model's (``human``,
+    ``prosthesis``): the columns it names, else OpenSim's of the segmentation's sides."""
+    fp = mapping.force_plates
+    assert fp is not None
+    given = {f: pre for f, pre in (("human", fp.human), ("prosthesis", fp.prosthesis)) if pre}
+    feet = dict(read_grf_mot(fp.file, frame, given, "mapping field force_plates.").feet
+                ) if given else {}
+    rest = [f for f in ("human", "prosthesis") if f not in given]
+    if rest:
+        rec = read_grf_mot(fp.file, frame)
+        for f in rest:
+            side = _mot_side(mapping, f)
+            if side in rec.feet:
+                feet[f] = replace(rec.feet[side], foot=f)
+    return PlateRecord(fp.file, feet)
+
+
+def _c3d_plates(take: Take, mapping: MocapMapping, frame: SagittalFrame) -> PlateRecord | None:
+    """A C3D take's own plates, each loaded sample to the foot over it (heel -> toe pairs of
+    ``l_foot`` / ``p_foot``); None when the file has none or the mapping no foot pair."""
+    feet = {f: cfg.markers for f, limb in (("human", "l_foot"), ("prosthesis", "p_foot"))
+            if (cfg := mapping.limbs.get(limb)) is not None and cfg.markers is not None
+            and cfg.pair_axis == "forward"}
+    if not feet or c3d_plate_count(take.source) == 0:
+        return None
+    return read_c3d_plates(take.source, frame, feet)
+
+
+def mapped_plates(take: Take, mapping: MocapMapping, frame: SagittalFrame
+                  ) -> TakePlates | None:
+    """The take's plates as :func:`take_plates` keeps them, feet ``human`` and
+    ``prosthesis``: the mapping's ``[force_plates]`` file, else a C3D's own plates, else
+    None; a file whose times miss the take's is a one-line error naming it."""
+    if mapping.force_plates is not None:
+        rec = _mot_plates(mapping, frame)
+    elif take.metadata.get("format") == "c3d":
+        c3d = _c3d_plates(take, mapping, frame)
+        if c3d is None:
+            return None
+        rec = c3d
+    else:
+        return None
+    t0, t1 = float(take.time[0]), float(take.time[-1])
+    times = [ff.time for ff in rec.feet.values()]
+    if times and not any(t[0] < t1 and t[-1] > t0 for t in times):
+        raise MocapError(f"{rec.source}: the plates' times ({times[0][0]:g}-{times[0][-1]:g} s) "
+                         f"miss the take's ({t0:g}-{t1:g} s; mapping field 'force_plates.file')")
+    return take_plates(rec, (t0, t1))
+
+
 def foot_x_on(record_time: np.ndarray, take_time: np.ndarray, x: np.ndarray) -> np.ndarray:
     """A marker's sagittal x (take frames) on the plate record's time base (linear)."""
     ok = np.isfinite(x)
@@ -396,7 +582,9 @@ def foot_x_on(record_time: np.ndarray, take_time: np.ndarray, x: np.ndarray) -> 
 
 
 __all__: Sequence[str] = (
-    "FootForce", "PlateRecord", "PlateWalk", "StanceSummary", "double_hump",
-    "double_supports", "foot_x_on", "mean_vertical_force", "plate_walk", "read_c3d_plates",
-    "read_gatk_plate", "read_grf_mot", "required_friction", "stances", "summarize_stance",
+    "FootForce", "MeanStance", "PlateRecord", "PlateWalk", "StanceSummary", "TakePlates",
+    "c3d_plate_count", "check_mot_prefixes", "double_hump", "double_supports", "foot_x_on",
+    "mapped_plates", "mean_stance", "mean_vertical_force", "plate_walk", "read_c3d_plates",
+    "read_gatk_plate", "read_grf_mot", "required_friction", "stances", "stride_weight",
+    "summarize_stance", "take_plates",
 )

@@ -38,6 +38,11 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     mass_kg = 72.5
     height_m = 1.78
     sex = "male"           # selects the segment-mass table's column
+    [force_plates]         # the take's plates in a separate file (a C3D's own plates need
+                           # nothing here)
+    file = "walk_grf.mot"  # OpenSim ground reactions, lab axes as the take's, relative path
+    human = "l_ground_force_"     # the human foot's force columns (<prefix>vx ... pz);
+    prosthesis = "ground_force_"  # default: OpenSim's left / right by [segmentation] sides
 
 A limb may also state an offset: ``offset_deg = 5.0`` (its measured pitch at zero pitch).
 """
@@ -78,6 +83,8 @@ JOINTS = {
     "ankle_p": ("p_shin", "p_foot"),
 }
 Axis = Literal["up", "forward"]
+#: the extensions of a separate ground-reaction file (``[force_plates] file``)
+PLATE_FILES = (".mot", ".sto")
 AxisSpec = str | Annotated[list[float], Field(min_length=3, max_length=3)]
 
 
@@ -139,6 +146,27 @@ class Calibration(StrictConfig):
     static_trial: str
 
 
+class ForcePlates(StrictConfig):
+    """The take's force plates in a separate file: an OpenSim ``.mot`` of ground reactions
+    (:func:`force_plates.read_grf_mot`; lab axes and clock as the take's), the path relative
+    to the mapping file; ``human`` / ``prosthesis`` the prefix of each foot's columns
+    (``<prefix>vx`` ... ``<prefix>pz``), by default OpenSim's left (``l_ground_force_`` or
+    ``1_ground_force_``) and right (``ground_force_``) prefixes chosen by the segmentation's
+    ``human_side`` / ``prosthesis_side``."""
+
+    file: str
+    human: str | None = None
+    prosthesis: str | None = None
+
+    @field_validator("file")
+    @classmethod
+    def _mot(cls, v: str) -> str:
+        if Path(v).suffix.lower() not in PLATE_FILES:
+            raise ValueError(f"'{v}' is not an OpenSim ground-reaction file (expected "
+                             f"{' or '.join(PLATE_FILES)})")
+        return v
+
+
 class MocapMapping(StrictConfig):
     """The whole mapping config."""
 
@@ -152,6 +180,8 @@ class MocapMapping(StrictConfig):
     calibration: Calibration | None = None
     #: the person: mass_kg, height_m, sex (used when the take's file carries none)
     subject: SubjectMeasures | None = None
+    #: the take's force plates in a separate file (:class:`ForcePlates`)
+    force_plates: ForcePlates | None = None
 
     @field_validator("limbs")
     @classmethod
@@ -188,6 +218,16 @@ def load_mapping(path: str | os.PathLike[str]) -> MocapMapping:
     if m.calibration is not None:  # relative to the mapping file
         trial = p.parent / m.calibration.static_trial
         m = m.model_copy(update={"calibration": Calibration(static_trial=str(trial))})
+    if m.force_plates is not None:  # relative to the mapping file; its columns checked now
+        from characterization.mocap.force_plates import check_mot_prefixes
+
+        plates = p.parent / m.force_plates.file
+        if not plates.is_file():
+            raise MocapError(f"{p}: field 'force_plates.file': {plates}: no such file")
+        check_mot_prefixes(plates, {f"force_plates.{k}": v for k in ("human", "prosthesis")
+                                    if (v := getattr(m.force_plates, k)) is not None}, str(p))
+        m = m.model_copy(update={"force_plates": m.force_plates.model_copy(
+            update={"file": str(plates)})})
     return m
 
 

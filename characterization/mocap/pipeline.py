@@ -41,6 +41,7 @@ from characterization.mocap.foot_contact import (
     contact_from_events,
     foot_contact,
 )
+from characterization.mocap.force_plates import STANCE_SAMPLES, TakePlates, mapped_plates
 from characterization.mocap.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.mocap.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap.mapping import (
@@ -126,6 +127,8 @@ class ProcessedTake:
     lab_events: dict[str, dict[str, EventComparison]] = field(default_factory=dict)
     #: failed checks that processing went on after (QA report and terminal), one line each
     warnings: tuple[str, ...] = ()
+    #: the take's force plates (:func:`force_plates.mapped_plates`), None without
+    plates: TakePlates | None = None
 
 
 def foot_contacts(take: Take, mapping: MocapMapping, frame: SagittalFrame
@@ -410,9 +413,27 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     lab = compare_events(marker_contacts, take.events, take.time,
                          {"human": seg.human_side, "prosthesis": seg.prosthesis_side})
     _report_lab_events(lab, take.source, notes, warnings)
+    plates = _plates(take, mapping, frame, notes, warnings)
     return ProcessedTake(take.source, rate, take.time, frame, pitches, q, joints, delta,
                          dict(coefficients), tuple(steps), tuple(dropped), tuple(notes),
-                         contacts, SegmentationMethod(seg.method), lab, tuple(warnings))
+                         contacts, SegmentationMethod(seg.method), lab, tuple(warnings),
+                         plates)
+
+
+def _plates(take: Take, mapping: MocapMapping, frame: SagittalFrame, notes: list[str],
+            warnings: list[str]) -> TakePlates | None:
+    """The take's force plates (:func:`force_plates.mapped_plates`), a note saying what was
+    read and a warning for a foot without a full stance on them."""
+    plates = mapped_plates(take, mapping, frame)
+    if plates is None:
+        return None
+    notes.append(plates.line())
+    for foot in FEET:
+        s = plates.feet.get(foot)
+        if s is None or s.count == 0:
+            warnings.append(f"{plates.source}: the {foot} foot has no full stance on the force "
+                            "plates inside the take (its ground force is not compared)")
+    return plates
 
 
 def _segmentation(mapping: MocapMapping) -> Segmentation:
@@ -540,8 +561,21 @@ def to_artifact(p: ProcessedTake) -> StepsArtifact:
         dropped_start=np.array([d.start for d in p.dropped], dtype=np.int64),
         dropped_end=np.array([d.end for d in p.dropped], dtype=np.int64),
         dropped_reason=np.array([d.reason for d in p.dropped], dtype=str),
-        **_contact_fields(p),
+        **_contact_fields(p), **_plate_fields(p.plates),
     )
+
+
+def _plate_fields(plates: TakePlates | None) -> dict[str, Any]:
+    """The force plates' fields of the steps file (:mod:`steps_artifact`), none without."""
+    if plates is None:
+        return {}
+    feet = [plates.feet.get(f) for f in FEET]
+    nan = np.full(STANCE_SAMPLES, np.nan)
+    return {"plate_source": plates.source,
+            "plate_stances": np.array([s.count if s else 0 for s in feet], dtype=np.int64),
+            "plate_fx": np.stack([s.fx if s else nan for s in feet]),
+            "plate_fz": np.stack([s.fz if s else nan for s in feet]),
+            "plate_weight": float(plates.weight)}
 
 
 def _contact_fields(p: ProcessedTake) -> dict[str, Any]:

@@ -31,9 +31,9 @@ ANGLES = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 
 #: decimals each kind of number is reported to, Markdown and JSON alike ("rounded to its
 #: meaning"): angles 0.1 deg, lengths 0.1 mm (residuals in mm; the joint-centre offsets in
-#: m, 4 decimals), times 1 ms, speeds 1 mm/s, lab directions 0.001, rates 0.001 Hz; frames
-#: are integers, or 0.1 frame where they are differences from the lab's events
-DIGITS = {"deg": 1, "mm": 1, "m": 4, "s": 3, "m_s": 3, "unit": 3, "hz": 3}
+#: m, 4 decimals), times 1 ms, speeds 1 mm/s, lab directions 0.001, rates 0.001 Hz, forces
+#: 0.1 N; frames are integers, or 0.1 frame where they are differences from the lab's events
+DIGITS = {"deg": 1, "mm": 1, "m": 4, "s": 3, "m_s": 3, "unit": 3, "hz": 3, "n": 1}
 
 
 def _r(x: float | None, kind: str) -> float | None:
@@ -99,6 +99,10 @@ def qa_summary(p: ProcessedTake) -> dict[str, object]:
                     for d in p.dropped],
         "limbs": limbs, "joints": joints, "warnings": list(p.warnings),
         "notes": list(p.notes),
+        "force_plates": None if p.plates is None else {
+            "source": p.plates.source,
+            "full_stances": {f: s.count for f, s in p.plates.feet.items()},
+            "weight_n": _r(p.plates.weight, "n"), "whole_strides": p.plates.strides},
         "segmentation": p.segmentation,
         "step_intervals": [{"domain": st.domain, "start": st.start, "end": st.end,
                             "t_start_s": _r(p.time[st.start], "s"),

@@ -36,6 +36,16 @@ units, radians, sagittal world frame x forward / z up):
 |   |        | 0 overground; optional) |
 | subject | optional | the subject of the take (:func:`hp_model.config.subject_record`: its |
 |   |       | config and where each value came from); absent in files made before it |
+| plate_source | () str | the force plates' file (optional, with the four below: a take with |
+|   |        | plates, :func:`force_plates.mapped_plates`) |
+| plate_stances | (2,) int | full stances averaged per foot, columns ``FEET`` (0: none) |
+| plate_fx, plate_fz | (2, 101) | each foot's mean ground reaction over its stance (forward, |
+|   |        | up), N, on 0..1 of the stance (101 points); NaN rows for a foot without one |
+| plate_weight | () float | N, the feet's mean vertical force over whole strides (the weight the |
+|   |        | plates carry; NaN without a whole stride) |
+
+:func:`plate_forces` gives the stance curves and the body weight to compare a gait's ground
+forces with (``gait fit``).
 
 An ``.npz`` is numpy's zip of ``.npy`` arrays: the float arrays stored (deflating them
 made the file about 15 % smaller for 70 ms on a take of 5 000 frames), the others
@@ -51,13 +61,14 @@ import io
 import json
 import os
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from characterization.mocap.force_plates import MeanStance
 from characterization.mocap.take import MocapError
 from hp_model.atomic_io import atomic_write_bytes
 from hp_model.config import SubjectConfig, subject_from_record
@@ -110,6 +121,12 @@ class StepsArtifact:
     foot_contact: np.ndarray | None = None
     #: m/s, the ground's speed under the feet (a treadmill's belt); None in older files
     ground_speed: float | None = None
+    #: the force plates' file and what was kept of them (module docstring); None without
+    plate_source: str | None = None
+    plate_stances: np.ndarray | None = None
+    plate_fx: np.ndarray | None = None
+    plate_fz: np.ndarray | None = None
+    plate_weight: float | None = None
 
     @property
     def n_steps(self) -> int:
@@ -122,13 +139,15 @@ class StepsArtifact:
         return self.q[self.step_start[i]:self.step_end[i] + 1]
 
 
-_STR = {"source", "coord_names", "limb_names", "joint_names", "step_domain", "dropped_domain",
-        "dropped_reason"}
+_STR = {"source", "plate_source", "coord_names", "limb_names", "joint_names", "step_domain",
+        "dropped_domain", "dropped_reason"}
 _INT = {"pitch_source", "step_start", "step_end", "step_ss_start", "step_ss_end",
-        "tau_offsets", "dropped_start", "dropped_end", "schema_version"}
+        "tau_offsets", "dropped_start", "dropped_end", "schema_version", "plate_stances"}
 _BOOL = {"joint_well_posed", "foot_contact"}
 #: fields an older file may lack
-_OPTIONAL = {"subject", "foot_contact", "ground_speed"}
+#: the force plates' fields: all or none
+PLATES = ("plate_source", "plate_stances", "plate_fx", "plate_fz", "plate_weight")
+_OPTIONAL = {"subject", "foot_contact", "ground_speed", *PLATES}
 #: the columns of ``foot_contact``
 FEET = ("human", "prosthesis")
 
@@ -139,9 +158,11 @@ def _coerce(name: str, value: object) -> object:
         if not isinstance(record, dict):
             raise TypeError("not an object")
         return record
-    if name == "source":
+    if name in ("source", "plate_source"):
         return str(np.asarray(value))
-    if name in ("frame_rate", "ground_speed"):
+    if name == "plate_weight" and value is None:  # NaN, as JSON holds it
+        return float("nan")
+    if name in ("frame_rate", "ground_speed", "plate_weight"):
         return float(np.asarray(value))
     if name == "schema_version":
         return int(np.asarray(value))
@@ -253,6 +274,26 @@ def steps_subject(a: StepsArtifact, src: str) -> tuple[SubjectConfig, dict[str, 
     return None if a.subject is None else subject_from_record(a.subject, src)
 
 
+#: m/s^2: the model's gravity (``hp_model.tree.PlanarTree``), for a weight from a mass
+G = 9.81
+
+
+def plate_forces(a: StepsArtifact, src: str = "steps"
+                 ) -> tuple[dict[str, MeanStance], float] | None:
+    """Each model foot's (``FEET``) mean stance ground reaction from the take's force plates
+    (N; only feet with a stance) and the body weight to compare them in (N: the plates' own
+    weight over whole strides, else the stored subject's mass times ``G``); None when the
+    steps have no plates, no foot with a stance or no weight."""
+    if a.plate_stances is None or a.plate_fx is None or a.plate_fz is None:
+        return None
+    grf = {f: MeanStance(a.plate_fx[i], a.plate_fz[i], int(a.plate_stances[i]))
+           for i, f in enumerate(FEET) if a.plate_stances[i] > 0}
+    bw = a.plate_weight if a.plate_weight is not None else float("nan")
+    if not np.isfinite(bw) and (subj := steps_subject(a, src)) is not None:
+        bw = subj[0].body_mass * G
+    return (grf, float(bw)) if grf and np.isfinite(bw) and bw > 0 else None
+
+
 def validate_steps(a: StepsArtifact, src: str) -> None:
     """Shapes and value checks; raises :class:`StepsFileError` naming the field."""
     n, k = len(a.time), len(a.step_domain)
@@ -301,3 +342,21 @@ def validate_steps(a: StepsArtifact, src: str) -> None:
     m = len(a.dropped_domain)
     for name in ("dropped_start", "dropped_end", "dropped_reason"):
         need(name, getattr(a, name).shape == (m,), f"expected {m} values")
+    _validate_plates(a, need)
+
+
+def _validate_plates(a: StepsArtifact, need: Callable[[str, bool, str], None]) -> None:
+    """The force plates' fields: all or none, shapes, a finite curve for each stance."""
+    have = [k for k in PLATES if getattr(a, k) is not None]
+    if not have:
+        return
+    for k in PLATES:
+        need(k, k in have, f"missing (the file has {', '.join(have)})")
+    st, fx, fz = a.plate_stances, a.plate_fx, a.plate_fz
+    assert st is not None and fx is not None and fz is not None
+    need("plate_stances", st.shape == (len(FEET),) and bool(np.all(st >= 0)),
+         f"expected {len(FEET)} counts >= 0")
+    for k, v in (("plate_fx", fx), ("plate_fz", fz)):
+        need(k, v.ndim == 2 and v.shape[0] == len(FEET) and v.shape[1] > 1,
+             f"shape {v.shape}, expected ({len(FEET)}, samples)")
+        need(k, bool(np.all(np.isfinite(v[st > 0]))), "NaN in a foot's stance")

@@ -102,6 +102,8 @@ def _print_take(console: Console, take: TakeOutcome) -> None:
         console.print("  double supports: " + ", ".join(
             f"{d.lands} lands {d.start}-{d.end} ({1000 * d.seconds:.0f} ms)" for d in both),
             soft_wrap=True)
+    if p.plates is not None:
+        console.print(f"  {p.plates.line()}", soft_wrap=True, highlight=False)
     for d in p.dropped:
         console.print(f"  dropped {d.domain} step, frames {d.start}-{d.end}: {d.reason}")
     for w in p.warnings:
