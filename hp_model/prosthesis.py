@@ -17,6 +17,9 @@ dynamics reduce to the 4-state form (``reduced``)
 Functions (besides :class:`~hp_model.hybrid.HybridModel`'s, with the single domain ``ps``):
 
     sub_dyn(q, qd, u, F_s)      -> qdd, lam_foot      (subsystem KKT solve with socket input)
+    sub_dyn_<part>(q, qd, u, F_s) -> qdd, lam_point   the same with the foot on its heel or toe
+                                  (``p_heel``, ``p_toe``; built from a multi-contact model: the
+                                  foot pivots on the point, 3 DOF; :meth:`contact_domain`)
     jac_socket(q)               -> Jbar_s (3 x 5)
     embed(x_p)                  -> q, qd              (foot flat at the origin)
     reduced(x_p)                -> f_p (4), g_m (4 x 2), g_s (4 x 3)
@@ -27,7 +30,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import Domain, FootPart
 from hp_model.dynamics import constrained_accel, constraint_terms
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.hybrid import Constraint, ConstraintKind, ContactDomain, HybridModel
@@ -36,16 +39,29 @@ from hp_model.tree import frame_pose, rot
 SUB_COORDS = ("x_Bp", "z_Bp", "th_Bp", "th_pk", "th_pa")
 
 
+#: the subsystem's domain of each way its foot touches the ground: flat (the paper's ps), on
+#: its heel or its toe (the multi-contact graph's)
+_CONTACT_DOMAINS = {FootPart.FLAT: Domain.PS.value, FootPart.HEEL: "p_heel",
+                    FootPart.TOE: "p_toe"}
+
+
 class ProsthesisSubsystem(HybridModel):
-    """The prosthesis alone, built from a :class:`HumanProsthesisModel`'s tree."""
+    """The prosthesis alone, built from a :class:`HumanProsthesisModel`'s tree: its foot flat
+    (the paper's ps) and, when the full model walks the multi-contact graph, on its heel or
+    toe (the parts its graph's domains touch the ground with)."""
 
     def __init__(self, full: HumanProsthesisModel) -> None:
         tree = full.tree.subtree("p_top", base_coords=SUB_COORDS[:3])
         p = full.device.prosthesis
         foot = Constraint("p_foot", ConstraintKind.FRAME, "p_sole")
+        parts = {c.part for d in full.graph.domains
+                 if (c := d.prosthesis_contact) is not None} - {FootPart.FLAT}
+        points = tuple(ContactDomain(_CONTACT_DOMAINS[part], (Constraint(
+            _CONTACT_DOMAINS[part], ConstraintKind.POINT, f"p_{part.value}"),))
+            for part in (FootPart.HEEL, FootPart.TOE) if part in parts)
         super().__init__(
             tree, ("th_pk", "th_pa"), (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-            (ContactDomain(Domain.PS, (foot,)),), name="prosthesis5",
+            (ContactDomain(Domain.PS, (foot,)), *points), name="prosthesis5",
         )
         self.full = full
         self.torque_limits = full.torque_limits[4:]
@@ -56,11 +72,17 @@ class ProsthesisSubsystem(HybridModel):
         base = frame_pose(tree, q, "socket", self.poses)
         Jw = ca.jacobian(base, q)
         Js = ca.vertcat(rot(base[2]).T @ Jw[0:2, :], Jw[2, :])
-        h = self.h[Domain.PS]
-        J, Jdqd = constraint_terms(h, q, qd)
-        qdd, lam = constrained_accel(self.D, self.H, ca.DM(self.B) @ u + Js.T @ Fs, J, Jdqd)
+        forcing = ca.DM(self.B) @ u + Js.T @ Fs
+        J, Jdqd = constraint_terms(self.h[Domain.PS], q, qd)
+        qdd, lam = constrained_accel(self.D, self.H, forcing, J, Jdqd)
         self.functions["sub_dyn"] = ca.Function(
             "sub_dyn", [q, qd, u, Fs], [qdd, lam], ["q", "qd", "u", "F_s"], ["qdd", "lam"])
+        for point in points:
+            J, Jdqd = constraint_terms(self.h[point.name], q, qd)
+            qdd_pt, lam_pt = constrained_accel(self.D, self.H, forcing, J, Jdqd)
+            name = f"sub_dyn_{point.name}"
+            self.functions[name] = ca.Function(name, [q, qd, u, Fs], [qdd_pt, lam_pt],
+                                               ["q", "qd", "u", "F_s"], ["qdd", "lam"])
         self.functions["jac_socket"] = ca.Function("jac_socket", [q], [Js], ["q"], ["J_s"])
 
         # embedding of x_p with the sole flat at the origin
@@ -85,6 +107,12 @@ class ProsthesisSubsystem(HybridModel):
             "reduced", [xp], [f_p, ca.vertcat(z2, g_m), ca.vertcat(z3, g_s)],
             ["x_p"], ["f_p", "g_m", "g_s"])
         self.x_p = xp
+
+    @staticmethod
+    def contact_domain(part: FootPart) -> str:
+        """The subsystem's domain with its foot on the ground so (``ps`` flat, ``p_heel``,
+        ``p_toe``); its dynamics ``sub_dyn`` (flat) or ``sub_dyn_<domain>``."""
+        return _CONTACT_DOMAINS[FootPart(part)]
 
     def from_full(
         self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
