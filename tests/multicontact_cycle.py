@@ -28,7 +28,7 @@ KEYS = ("q", "qd", "qdd")
 
 def save_cycle(path: Path, model: HumanProsthesisModel, trajectory: dict, durations: dict,
                stride_length: float) -> None:
-    arrays = {f"{d.value}.{k}": np.asarray(trajectory[d][k], float)
+    arrays: dict[str, Any] = {f"{d.value}.{k}": np.asarray(trajectory[d][k], float)
               for d in model.graph.domains for k in KEYS}
     meta = {"subject": model.subject.model_dump(mode="json"),
             "device": model.device.model_dump(mode="json"),

@@ -170,6 +170,22 @@ def test_the_ground_forces_are_a_persons(fitted, mc_model):
         assert max(p1, p2) < 1.5, (foot, p1, p2)
 
 
+@pytest.mark.slow
+def test_the_fitted_cycle_walks_in_closed_loop(fitted, mc_model):
+    """The fit with defaults, regressed onto the multi-contact virtual constraints, walks 10
+    steps in closed loop (what `gait fit` requires before writing it), at the fit's stride
+    and speed within 3 % (the loop tracks curves regressed from the fit, not the fit), the
+    strides within 5 ms of each other (a limit cycle)."""
+    from characterization.gait.contact_gait import contact_gait, walk_contact_gait
+
+    _, r = fitted
+    walk = walk_contact_gait(mc_model, contact_gait(mc_model, r), r.trajectory, steps=10)
+    assert walk.walks, walk.line()
+    assert np.all(np.abs(walk.strides / r.stride_time - 1) < 0.03), walk.strides
+    assert np.all(np.abs(walk.speeds / r.speed - 1) < 0.03), walk.speeds
+    assert np.ptp(walk.strides) < 0.005, walk.strides
+
+
 def _stance_time(r, foot: str) -> float:
     from characterization.gait.multicontact_summary import STANCE
 

@@ -31,8 +31,10 @@ interval's worth) and a flat foot's centre of pressure rolls toward the toe no f
 
 Cost: the integral of squared differences of the trunk pitch and the six joint angles from
 the take's (per domain, over normalized time), the squared differences of each domain's
-duration and of the mean speed from the take's, and a small torque regularization (a double
-support has 5 degrees of freedom and 6 torques).
+duration and of the mean speed from the take's, a small torque regularization (a double
+support has 5 degrees of freedom and 6 torques), the wrenches' and torques' changes between
+points and the hip's and trunk's jerk (a trajectory the closed loop's curves of the phase
+can follow).
 
 This is the gait of the person, as a trajectory; the virtual constraints the controllers
 follow are single-support only so far (:mod:`characterization.gait.phzd`).
@@ -57,6 +59,8 @@ from hp_model.human_prosthesis import SOCKET_COORDS, HumanProsthesisModel
 GRAPH = DomainGraph.MULTICONTACT
 #: the coordinates fitted to the take: trunk pitch and the six joints
 TRACKED = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
+#: the floating base's coordinates: the hip's position and the trunk's pitch
+BASE = ("x_B", "z_B", "th_B")
 #: the ground points of the two feet
 FOOT_POINTS = ("l_heel", "l_toe", "p_heel", "p_toe")
 
@@ -122,6 +126,12 @@ class MultiContactOptions:
     w_smooth: float = 1.0  # on the squared changes between points of the wrenches (in body
     #  weights) and torques (in 100 N m): position-level contacts leave the wrench of
     #  neighbouring points free to alternate (an index-3 DAE's ringing); people's are smooth
+    w_jerk: float = 1e-4  # s^5 / m^2: the hip's and the trunk's jerk (x_B, z_B; th_B in
+    #  rad), squared, integrated: without it the hip slowed from 1.30 to 0.82 m/s over the
+    #  last 40 ms of ps and sped up again after the heel off, a kink degree-5 curves of the
+    #  phase follow badly, and the closed loop's heel strikes were outside the friction cone
+    #  for 4 of the 5 ms the simulator allows (with it: at most 1).  IPOPT is sensitive to
+    #  it: on openOFM 1e-5 and 5e-5 did not converge in 600 iterations
     first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
     duration_range: tuple[float, float] = (0.5, 2.0)  # each domain's duration, as a
     #  fraction of the take's (and at least 10 ms): keeps IPOPT near the person's timing
@@ -503,9 +513,10 @@ def _transitions(nlp: NLP, model: HumanProsthesisModel,
 
 
 def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
-          opt: MultiContactOptions) -> ca.MX:
+          opt: MultiContactOptions, base: list[int]) -> ca.MX:
     """``d``'s share of the cost: the tracked angles' squared error integral (Simpson
-    weights), its duration's squared error, the torques' squared integral."""
+    weights), its duration's squared error, the torques' squared integral, the wrenches'
+    and torques' changes between points, the hip's and trunk's squared jerk integral."""
     P = 2 * opt.nodes - 1
     A = resample_rows(targets.angles[d], P)
     w = np.ones(P)
@@ -518,6 +529,9 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     cost += opt.w_duration * (T - targets.durations[d]) ** 2
     cost += opt.w_smooth * (ca.sumsqr(ca.diff(X["lam"], 1, 1))
                             + ca.sumsqr(ca.diff(X["u"], 1, 1) / 100.0))
+    # the jerk over an interval h = T / (P - 1) is the accelerations' change over h: its
+    # squared integral sum (dqdd / h)^2 h
+    cost += opt.w_jerk * ca.sumsqr(ca.diff(X["qdd"][base, :], 1, 1)) / T * (P - 1)
     return cost
 
 
@@ -532,6 +546,7 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
     P = 2 * opt.nodes - 1
     guess = initial_guess(model, targets, P)
     idx = [model.coord_names.index(c) for c in TRACKED]
+    base = [model.coord_names.index(c) for c in BASE]
     nlp = NLP()
     dec: dict[Domain, dict[str, ca.MX]] = {}
     soft: list[int] = []
@@ -540,7 +555,7 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
         X = dec[d] = _domain_variables(nlp, model, d, guess[d], opt)
         _collocation(nlp, model, d, X, opt, soft)
         _boundaries(nlp, model, d, X, opt)
-        cost += _cost(X, targets, d, idx, opt)
+        cost += _cost(X, targets, d, idx, opt, base)
     stride = _impacts(nlp, model, dec, guess, soft)
     _transitions(nlp, model, dec, opt, soft)
     total = sum(dec[d]["T"] for d in GRAPH.domains)
