@@ -513,10 +513,10 @@ def _transitions(nlp: NLP, model: HumanProsthesisModel,
 
 
 def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
-          opt: MultiContactOptions, base: list[int]) -> ca.MX:
+          opt: MultiContactOptions) -> ca.MX:
     """``d``'s share of the cost: the tracked angles' squared error integral (Simpson
     weights), its duration's squared error, the torques' squared integral, the wrenches'
-    and torques' changes between points, the hip's and trunk's squared jerk integral."""
+    and torques' changes between points (the jerk is :func:`_jerk`, weighted apart)."""
     P = 2 * opt.nodes - 1
     A = resample_rows(targets.angles[d], P)
     w = np.ones(P)
@@ -529,10 +529,14 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     cost += opt.w_duration * (T - targets.durations[d]) ** 2
     cost += opt.w_smooth * (ca.sumsqr(ca.diff(X["lam"], 1, 1))
                             + ca.sumsqr(ca.diff(X["u"], 1, 1) / 100.0))
-    # the jerk over an interval h = T / (P - 1) is the accelerations' change over h: its
-    # squared integral sum (dqdd / h)^2 h
-    cost += opt.w_jerk * ca.sumsqr(ca.diff(X["qdd"][base, :], 1, 1)) / T * (P - 1)
     return cost
+
+
+def _jerk(X: dict[str, ca.MX], opt: MultiContactOptions, base: list[int]) -> ca.MX:
+    """A domain's hip and trunk jerk, squared and integrated: the accelerations' change over an
+    interval h = T / (P - 1), sum (dqdd / h)^2 h."""
+    P = 2 * opt.nodes - 1
+    return ca.sumsqr(ca.diff(X["qdd"][base, :], 1, 1)) / X["T"] * (P - 1)
 
 
 def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
@@ -550,25 +554,33 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
     nlp = NLP()
     dec: dict[Domain, dict[str, ca.MX]] = {}
     soft: list[int] = []
-    cost = ca.MX(0)
+    cost, jerk = ca.MX(0), ca.MX(0)
     for d in GRAPH.domains:
         X = dec[d] = _domain_variables(nlp, model, d, guess[d], opt)
         _collocation(nlp, model, d, X, opt, soft)
         _boundaries(nlp, model, d, X, opt)
-        cost += _cost(X, targets, d, idx, opt, base)
+        cost += _cost(X, targets, d, idx, opt)
+        jerk += _jerk(X, opt, base)
     stride = _impacts(nlp, model, dec, guess, soft)
     _transitions(nlp, model, dec, opt, soft)
     total = sum(dec[d]["T"] for d in GRAPH.domains)
     cost += opt.w_speed * (stride / total - targets.speed) ** 2
-    return _solve(nlp, cost, dec, stride, opt, soft, body_weight(model))
+    return _solve(nlp, (cost, jerk), dec, stride, opt, soft, body_weight(model))
 
 
-def _solve(nlp: NLP, cost: ca.MX, dec: dict[Domain, dict[str, ca.MX]], stride: ca.MX,
-           opt: MultiContactOptions, soft: list[int], weight: float) -> MultiContactResult:
-    """Two solves of one NLP: first without the contact inequalities (``soft``: a motion the
-    model can make near the take's, from a guess its body cannot follow), then with them
-    from there."""
-    problem = {"x": ca.vertcat(*nlp.w), "f": cost, "g": ca.vertcat(*nlp.g)}
+def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.MX]],
+           stride: ca.MX, opt: MultiContactOptions, soft: list[int], weight: float
+           ) -> MultiContactResult:
+    """Three solves of one NLP (cost: ``costs[0]`` plus ``w_jerk`` times the jerk
+    ``costs[1]``, the weight a parameter of the NLP): first without the contact inequalities
+    (``soft``: a motion the model can make near the take's, from a guess its body cannot
+    follow) and without the jerk, then with the inequalities, then with the jerk, each from
+    the last.  The jerk's solve converges from a gait that already has the person's contacts
+    (from the take's guess it did not on every take); if it does not, the result is the
+    second solve's, with ``stats["jerk_stage"]`` saying so."""
+    w_jerk = ca.MX.sym("w_jerk")
+    problem = {"x": ca.vertcat(*nlp.w), "f": costs[0] + w_jerk * costs[1],
+               "g": ca.vertcat(*nlp.g), "p": w_jerk}
     ipopt: dict[str, int | float | str] = {
         "max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
         "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
@@ -584,12 +596,28 @@ def _solve(nlp: NLP, cost: ca.MX, dec: dict[Domain, dict[str, ca.MX]], stride: c
     first_ipopt: dict[str, int | float | str] = {**ipopt, "max_iter": opt.first_iter}
     first_solver = ca.nlpsol("multicontact_first", "ipopt", problem,
                              {"ipopt": first_ipopt, "print_time": False, "expand": True})
+    lbg = np.concatenate(nlp.lbg)
     with single_threaded_blas():
-        first = first_solver(x0=np.concatenate(nlp.w0), lbg=np.concatenate(relaxed), **bounds)
-        sol = warm(x0=first["x"], lam_x0=first["lam_x"], lam_g0=first["lam_g"],
-                   lbg=np.concatenate(nlp.lbg), **bounds)
+        first = first_solver(x0=np.concatenate(nlp.w0), lbg=np.concatenate(relaxed), p=0.0,
+                             **bounds)
+        second = warm(x0=first["x"], lam_x0=first["lam_x"], lam_g0=first["lam_g"], lbg=lbg,
+                      p=0.0, **bounds)
+        stats = dict(warm.stats())
+        sol, jerk_stage = second, ("off (w_jerk = 0)" if opt.w_jerk <= 0 else
+                                   "not run (the contacts' solve did not converge)")
+        if stats["success"] and opt.w_jerk > 0:
+            third = warm(x0=second["x"], lam_x0=second["lam_x"], lam_g0=second["lam_g"],
+                         lbg=lbg, p=opt.w_jerk, **bounds)
+            third_stats = dict(warm.stats())
+            jerk_stage = (f"{third_stats['return_status']} after "
+                          f"{third_stats['iter_count']} iterations")
+            if third_stats["success"]:
+                sol, stats = third, {**third_stats, "iter_count": stats["iter_count"]
+                                     + third_stats["iter_count"]}
+            else:
+                jerk_stage += ": the contacts' solve kept"
+        stats["jerk_stage"] = jerk_stage
     elapsed = time.perf_counter() - t0
-    stats = warm.stats()
     keys = ("q", "qd", "qdd", "u", "lam", "T")
     unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
                          [dec[d][k] for d in GRAPH.domains for k in keys] + [stride])

@@ -14,7 +14,8 @@ Layout (``kind = "hpcosim-gait-multicontact"``, ``schema_version = 1``; SI units
     targets          what the take gave the fit: {durations per domain, speed}
     check            the comparison with the take (:mod:`.person_check`), its verdict
     mismatch_allowed true when written by ``--allow-mismatch`` although not the person's
-    options, solver  the fit's settings; IPOPT's status, iterations, seconds, cost
+    options, solver  the fit's settings; IPOPT's status, iterations, seconds, cost, and how its
+                     last (jerk) stage ended
     subject, device  the model's configs (``gait fit`` cuts the device's pylon to the person's
                      leg unless given ``--device``), so the file remakes its model
 """
@@ -67,7 +68,7 @@ def to_document(result: MultiContactResult, targets: MultiContactTargets,
         "options": asdict(options),
         "solver": {"status": result.status, "success": result.success,
                    "iterations": result.iterations, "seconds": result.solve_seconds,
-                   "cost": result.cost},
+                   "cost": result.cost, "jerk_stage": result.stats.get("jerk_stage")},
     }
 
 

@@ -31,8 +31,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     )
     from characterization.gait.multicontact_artifact import save_multicontact_gait, to_document
     from characterization.gait.multicontact_summary import gait_summary, take_summary
-    from characterization.gait.person_check import check_person, print_check
-    from characterization.mocap.steps_artifact import load_steps
+    from characterization.gait.person_check import StanceForce, check_person, print_check
+    from characterization.mocap.steps_artifact import load_steps, plate_forces
     from hp_model.config import (
         default_device_path,
         default_subject_path,
@@ -62,7 +62,10 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         raise MultiContactError(f"gait fit, multi-contact optimization: IPOPT ended with "
                                 f"{result.status} after {result.iterations} iterations")
     gait = gait_summary(model, result, str(out))
-    take = take_summary(targets, str(steps))
+    plates = plate_forces(data, str(steps))  # the take's force plates, where it has them
+    grf, bw = ({f: StanceForce(fx=s.fx, fz=s.fz) for f, s in plates[0].items()}, plates[1]) \
+        if plates is not None else (None, float("nan"))
+    take = take_summary(targets, str(steps), grf, bw)
     check = check_person(take, gait)
     print_check(Console(), check)
     outputs = contact_gait(model, result)
