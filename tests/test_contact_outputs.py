@@ -60,17 +60,23 @@ def _output_rates(vc: ContactConstraints, q, qd, qdd, theta) -> tuple[np.ndarray
     return y1, y2, dy2, (y1p - y1m) / (2 * h), (y2p - y2m) / (2 * h), (dy2p - dy2m) / (2 * h)
 
 
-@pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
-def test_feedback_linearization_gives_the_outputs_their_dynamics(
-        model: HumanProsthesisModel, domain: Domain) -> None:
-    """fl: dy1 = -eps y1 (where there is y1) and ddy2 = -kp y2 - kd dy2, with qdd from the
-    domain's constrained dynamics; hfl: the same on the human's rows whatever u_p."""
-    rng = np.random.default_rng(7)
+def _fl_at_random_state(model: HumanProsthesisModel, domain: Domain, seed: int):
+    """(constraints, dynamics, q, qd, theta, fl's torques) at a random state and curves."""
+    rng = np.random.default_rng(seed)
     vc = ContactConstraints(model, domain, degree=4)
     dyn = model.function(f"dyn_{domain}")
     q, qd = _state(rng)
     theta = _theta(vc, rng)
     u = np.array(vc.functions[f"fl_{domain}"](q, qd, theta, GAINS)[0]).ravel()
+    return vc, dyn, q, qd, theta, u
+
+
+@pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
+def test_feedback_linearization_gives_the_outputs_their_dynamics(
+        model: HumanProsthesisModel, domain: Domain) -> None:
+    """fl: dy1 = -eps y1 (where there is y1) and ddy2 = -kp y2 - kd dy2, with qdd from the
+    domain's constrained dynamics; hfl: the same on the human's rows whatever u_p."""
+    vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=7)
     qdd = np.array(dyn(q, qd, u)[0]).ravel()
     y1, y2, dy2, dy1_num, dy2_num, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
     np.testing.assert_allclose(dy2_num, dy2, atol=1e-7)  # dy2 is y2's rate
@@ -103,12 +109,7 @@ def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
     no component along the null space of the outputs' map, the direction that only presses
     the legs against each other (it moves nothing, so the outputs cannot tell); where the
     human holds as many rows as it has torques (``ds_h``) the squeeze is u_p's to set."""
-    rng = np.random.default_rng(11)
-    vc = ContactConstraints(model, domain, degree=4)
-    dyn = model.function(f"dyn_{domain}")
-    q, qd = _state(rng)
-    theta = _theta(vc, rng)
-    u = np.array(vc.functions[f"fl_{domain}"](q, qd, theta, GAINS)[0]).ravel()
+    vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=11)
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u[4:])).ravel()
     np.testing.assert_allclose(u_h, u, rtol=1e-7, atol=1e-7 * np.abs(u).max())
     if len(domain.human_outputs) == 4:
