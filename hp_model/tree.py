@@ -93,6 +93,10 @@ class Frame:
     point: tuple[float, float] = (0.0, 0.0)
 
 
+#: m/s^2, the model's gravity (a tree's default)
+GRAVITY = 9.81
+
+
 @dataclass(frozen=True)
 class PlanarTree:
     """An immutable planar kinematic tree with named frames.
@@ -102,7 +106,7 @@ class PlanarTree:
 
     bodies: tuple[Body, ...]
     frames: tuple[Frame, ...] = ()
-    gravity: float = 9.81
+    gravity: float = GRAVITY
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
     _coord_offset: tuple[int, ...] = field(init=False, repr=False, compare=False)
 

@@ -74,6 +74,7 @@ from hp_model.atomic_io import atomic_write_bytes
 from hp_model.config import SubjectConfig, subject_from_record
 from hp_model.domains import PAPER_DOMAINS, Domain
 from hp_model.json_io import dumps
+from hp_model.tree import GRAVITY
 
 SCHEMA_VERSION = 1
 
@@ -274,15 +275,11 @@ def steps_subject(a: StepsArtifact, src: str) -> tuple[SubjectConfig, dict[str, 
     return None if a.subject is None else subject_from_record(a.subject, src)
 
 
-#: m/s^2: the model's gravity (``hp_model.tree.PlanarTree``), for a weight from a mass
-G = 9.81
-
-
 def plate_forces(a: StepsArtifact, src: str = "steps"
                  ) -> tuple[dict[str, MeanStance], float] | None:
     """Each model foot's (``FEET``) mean stance ground reaction from the take's force plates
     (N; only feet with a stance) and the body weight to compare them in (N: the plates' own
-    weight over whole strides, else the stored subject's mass times ``G``); None when the
+    weight over whole strides, else the stored subject's mass times ``GRAVITY``); None when the
     steps have no plates, no foot with a stance or no weight."""
     if a.plate_stances is None or a.plate_fx is None or a.plate_fz is None:
         return None
@@ -290,7 +287,7 @@ def plate_forces(a: StepsArtifact, src: str = "steps"
            for i, f in enumerate(FEET) if a.plate_stances[i] > 0}
     bw = a.plate_weight if a.plate_weight is not None else float("nan")
     if not np.isfinite(bw) and (subj := steps_subject(a, src)) is not None:
-        bw = subj[0].body_mass * G
+        bw = subj[0].body_mass * GRAVITY
     return (grf, float(bw)) if grf and np.isfinite(bw) and bw > 0 else None
 
 
