@@ -135,7 +135,8 @@ class MultiContactOptions:
     first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
     duration_range: tuple[float, float] = (0.5, 2.0)  # each domain's duration, as a
     #  fraction of the take's (and at least 10 ms): keeps IPOPT near the person's timing
-    max_iter: int = 600
+    max_iter: int = 1000  # per solve, as `gait fit --max-iter` (OpenSim's strides need 600-1000
+    #  in the contacts' solve)
     tol: float = 1e-6
     print_level: int = 0
 
