@@ -214,3 +214,26 @@ def test_json_round_trip_and_the_subjects_weight_without_a_whole_stride(steps_fi
     np.testing.assert_allclose(b.plate_fz, a.plate_fz, rtol=1e-12)
     got = plate_forces(b, str(js))
     assert got is not None and got[1] == pytest.approx(WEIGHT, rel=1e-9)
+
+
+def test_a_c3d_whose_own_plates_cannot_be_read_is_processed_without_them(
+        tmp_path, monkeypatch) -> None:
+    """A C3D's own plates are optional: a plate layout the reader does not know (here: the
+    reader made to fail on openOFM's Vicon take, as if it had plates) is a warning naming the
+    file, and the take's steps are written without plates."""
+    from characterization.mocap import force_plates
+    from characterization.mocap.files import process_file
+
+    def unknown_layout(*_args, **_kwargs):
+        raise KeyError("CAL_MATRIX")
+
+    monkeypatch.setattr(force_plates, "c3d_plate_count", lambda _path: 2)
+    monkeypatch.setattr(force_plates, "read_c3d_plates", unknown_layout)
+    ofm = Path(__file__).parent / "data" / "openofm-walk"
+    res = process_file(ofm / "dynamic.c3d", tmp_path / "steps.npz",
+                       mapping=ofm / "mapping.toml", with_figures=False)
+    said = [w for w in res.processed.warnings if "force plates could not be read" in w]
+    assert len(said) == 1 and "dynamic.c3d" in said[0] and "CAL_MATRIX" in said[0], \
+        res.processed.warnings
+    a = load_steps(tmp_path / "steps.npz")
+    assert a.plate_source is None and len(a.step_domain) > 0

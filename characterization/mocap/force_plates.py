@@ -550,7 +550,11 @@ def _c3d_plates(take: Take, mapping: MocapMapping, frame: SagittalFrame) -> Plat
             and cfg.pair_axis == "forward"}
     if not feet or c3d_plate_count(take.source) == 0:
         return None
-    return read_c3d_plates(take.source, frame, feet)
+    try:
+        return read_c3d_plates(take.source, frame, feet)
+    except (KeyError, IndexError, ValueError) as e:  # a plate layout the reader does not know
+        raise MocapError(f"{take.source}: its force plates could not be read "
+                         f"({type(e).__name__}: {e})") from None
 
 
 def mapped_plates(take: Take, mapping: MocapMapping, frame: SagittalFrame

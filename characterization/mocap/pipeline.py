@@ -424,7 +424,13 @@ def _plates(take: Take, mapping: MocapMapping, frame: SagittalFrame, notes: list
             warnings: list[str]) -> TakePlates | None:
     """The take's force plates (:func:`force_plates.mapped_plates`), a note saying what was
     read and a warning for a foot without a full stance on them."""
-    plates = mapped_plates(take, mapping, frame)
+    try:
+        plates = mapped_plates(take, mapping, frame)
+    except MocapError as e:
+        if mapping.force_plates is not None:  # asked for by the mapping: an error
+            raise
+        warnings.append(f"{e}; the take is processed without them")  # a C3D's own: optional
+        return None
     if plates is None:
         return None
     notes.append(plates.line())
