@@ -18,19 +18,25 @@ its curves) with the two changes a foot on its heel or toe needs:
   freedom and 6 torques) y1, both hips and the leading leg's knee and ankle (its foot
   rolling from the heel to flat): the trailing leg's knee and ankle close the chain (a bent
   leg; the leading leg is nearly straight, and closing the chain through it would turn a
-  millimetre of hip into degrees of knee); of the torques that give the outputs' dynamics,
-  the one of least norm.  The human's torques control ``Domain.human_outputs`` (on a toe
-  its four joints; leading a double support its joints and hip; trailing, y1 and the hips:
-  its push-off; fewer rows than torques: the least-norm torque again).
+  millimetre of hip into degrees of knee), and the legs' squeeze (the sixth torque
+  direction, which moves nothing and presses the feet against each other along the ground):
+  the leading contact's force along the ground follows a curve of the phase, F_x = W L(tau)
+  (W the body weight, L the last row of alpha, from the fitted gait).  Without that row the
+  torques of least norm picked a squeeze of their own: on openOFM's fit, at the fitted state
+  itself, 90-140 N m more at each hip and the trailing toe's F_x 0.16 W from the fit's.  The
+  human's torques control ``Domain.human_outputs`` (on a toe its four joints; leading a
+  double support its joints and hip; trailing, y1, the hips and the squeeze: its push-off);
+  every domain has as many rows as torques.
 
 With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_max - p_min:
 
     dy1  = J_p qdd + Jdot_p qd - dV/dtau tau_dot
     ddy2 = (S - dB/dtau J_p / step) qdd - d2B/dtau2 tau_dot^2 - dB/dtau Jdot_p qd / step
 
-so A = [J_p b; M b], L_f = [J_p a + Jdot_p qd - dV/dtau tau_dot; M a - ...] and the
-feedback linearization is the paper's, u = -A^+ (L_f + v), v = (eps y1, kp y2 + kd dy2)
-(A^+ the inverse, or with fewer outputs than torques the least-norm right inverse).
+so A = [J_p b; M b], L_f = [J_p a + Jdot_p qd - dV/dtau tau_dot; M a - ...] (in a double
+support also the squeeze's row: lam = lam_a(q, qd) + lam_b(q) u, the leading contact's F_x
+row of lam_b, and of lam_a - W L(tau)) and the feedback linearization is the paper's,
+u = -A^-1 (L_f + v), v = (eps y1, kp y2 + kd dy2, 0).
 
 Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
 (:func:`hp_model.outputs.resting`: the swing leg holds its landing posture); a double
@@ -82,36 +88,12 @@ def _entering_linearly(curve: Curve) -> Curve:
     return f
 
 
-def _least_norm(A: ca.SX, r: ca.SX) -> ca.SX:
-    """The u of least norm with A u = r (A square: the solution; A with fewer rows than
-    columns and full row rank: A^T (A A^T)^-1 r)."""
-    if A.size1() == A.size2():
-        return ca.solve(A, r)
-    return A.T @ ca.solve(A @ A.T, r)
-
-
 def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
-    """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its output rows,
-    given the prosthesis motor torque u_p).
-
-    Where the domain has fewer outputs than torques (a double support: a closed chain, whose
-    torques can also squeeze the legs against each other without moving anything) and the
-    human has one more torque than rows (``ds_p``: y1 and both hips), the least-norm u_h
-    would pick its own squeeze and push the prosthesis's joints through the chain.  The human
-    keeps instead the rule of the full feedback linearization (``fl``, least norm over all
-    six torques): no torque along the null space of A, P u = 0 with
-    P = I - A^T (A A^T)^-1 A (rank one: the squeeze).  Its rows and that one are four
-    independent equations in u_h, so given the u_p ``fl`` computes, the human's torques are
-    ``fl``'s exactly, and given another u_p the squeeze is still none.  Where the human holds
-    as many rows as it has torques (``ds_h``), u_p sets the squeeze."""
-    A_h, A_p = A[rows, 0:4], A[rows, 4:6]
-    r = -(rhs[rows] + A_p @ u_p)
-    if A.size1() == A.size2() or len(rows) == A_h.size2():  # no freedom left to the human
-        return _least_norm(A_h, r)
-    P = ca.SX.eye(A.size2()) - A.T @ ca.solve(A @ A.T, A)
-    M = ca.vertcat(A_h, P[:, 0:4])
-    b = ca.vertcat(r, -P[:, 4:6] @ u_p)
-    return ca.solve(M.T @ M, M.T @ b)  # exact: the rows are consistent
+    """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its four output
+    rows, given the prosthesis motor torque u_p): given the u_p that ``fl`` computes, ``fl``'s
+    own.  In ``ds_p`` the human's rows include the squeeze (it holds the gait's load on the
+    prosthesis's heel whatever u_p); in ``ds_h`` u_p sets it."""
+    return ca.solve(A[rows, 0:4], -(rhs[rows] + A[rows, 4:6] @ u_p))
 
 
 class ContactConstraints:
@@ -126,7 +108,8 @@ class ContactConstraints:
             raise ValueError("y2 needs a Bezier degree >= 1")
         self.model, self.domain, self.degree = model, d, degree
         n_y2 = len(d.y2_coords)
-        self.layout = ThetaLayout(degree, n_y2 + int(d.velocity_output))
+        self.layout = ThetaLayout(degree, n_y2 + int(d.velocity_output)
+                                  + int(d.is_double_support))
         self.n_params = self.layout.size
         q, qd, nq = model.q, model.qd, model.nq
         #: the frame the phase is measured from: the domain's first contact
@@ -149,7 +132,7 @@ class ContactConstraints:
         step = p_max - p_min
 
         J, Jdqd = constraint_terms(model.h[d], q, qd)
-        qdd, _ = constrained_accel(model.D, model.H, ca.DM(model.B) @ model.u, J, Jdqd)
+        qdd, lam = constrained_accel(model.D, model.H, ca.DM(model.B) @ model.u, J, Jdqd)
         b = ca.jacobian(qdd, model.u)
         a = ca.substitute(qdd, model.u, ca.DM.zeros(model.nu))
         M = SD - o.db @ Jp / step
@@ -157,14 +140,26 @@ class ContactConstraints:
         Lf = M @ a - o.ddb * o.tau_dot**2 - o.db * Jpdot_qd / step
         v = gains[1] * o.y2 + gains[2] * o.dy2
         y1 = ca.SX(0)
-        if d.velocity_output:  # the hip's rate on its own curve V(tau): alpha's last row
-            V, dV, _ = curve(alpha[n_y2:, :], o.tau)
+        if d.velocity_output:  # the hip's rate on its own curve V(tau): alpha's next row
+            V, dV, _ = curve(alpha[n_y2:n_y2 + 1, :], o.tau)
             y1 = progress_dot - V
             A = ca.vertcat(Jp @ b, A)
             Lf = ca.vertcat(Jp @ a + Jpdot_qd - dV * o.tau_dot, Lf)
             v = ca.vertcat(gains[0] * y1, v)
+        #: in a double support (else None): (q, qd, theta, u) -> the leading contact's force
+        #: along the ground and its target W L(tau), N
+        self.load: ca.Function | None = None
+        if d.is_double_support:  # the squeeze: the leading contact's F_x on its curve (BW)
+            load, _, _ = curve(alpha[-1:, :], o.tau)
+            target = model.tree.total_mass * model.tree.gravity * load
+            fx = lam[0]  # the leading contact's (F_x, F_z[, M_y]): along the ground, N
+            A = ca.vertcat(A, ca.jacobian(fx, model.u))
+            Lf = ca.vertcat(Lf, ca.substitute(fx, model.u, ca.DM.zeros(model.nu)) - target)
+            v = ca.vertcat(v, 0)
+            self.load = ca.Function(f"load_{d}", [q, qd, theta, model.u], [fx, target],
+                                    ["q", "qd", "theta", "u"], ["fx", "target"])
         rhs = Lf + v
-        u = -_least_norm(A, rhs)
+        u = -ca.solve(A, rhs)
         u_p = ca.SX.sym("u_p", 2)
         u_hfl = ca.vertcat(_human_torques(A, rhs, list(d.human_outputs), u_p), u_p)
 

@@ -48,7 +48,8 @@ Per domain (``Domain.X.<property>``):
                     the leading knee and ankle, with y1; on a toe: all 6, without y1:
                     :mod:`hp_model.contact_outputs`)
     velocity_output whether the stacked outputs start with the hip velocity y1
-    human_outputs   rows of the stacked outputs (y1, y2) the human's 4 torques control
+    human_outputs   rows of the stacked outputs (y1, y2; in a double support then the legs'
+                    squeeze) the human's 4 torques control
     next            the domain the swing foot's touchdown leads to
     code            its number (definition order: 0 = ps, 1 = pns), as logs and the FMU store it
 
@@ -134,8 +135,9 @@ class DomainSpec:
     ground (the stance leg's first); ``stance_leg`` the leg the phase is measured on (the
     flat foot's; in a double support the leading leg's); ``y2_coords`` the joints of its y2
     outputs, ``velocity_output`` whether it has the hip-velocity output y1 (stacked first:
-    (y1, y2), else y2 alone), ``human_outputs`` the rows of that stack the human's four
-    torques control."""
+    (y1, y2), else y2 alone; a double support's stack ends with the legs' squeeze: the
+    leading contact's force along the ground on its curve), ``human_outputs`` the rows of that stack
+    the human's four torques control."""
 
     contacts: tuple[FootContact, ...]
     stance_leg: StanceLeg
@@ -242,7 +244,8 @@ _SPECS: dict[Domain, DomainSpec] = {
         stance_leg=_L_LEG, y2_coords=_HUMAN_JOINTS, human_outputs=(1, 2, 3, 4)),
     Domain.DS_P: DomainSpec(
         contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
-        stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", *PROSTHESIS), human_outputs=(0, 1, 2)),
+        stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", *PROSTHESIS),
+        human_outputs=(0, 1, 2, 5)),
     Domain.PS_TOE: DomainSpec(
         contacts=(FootContact("p", FootPart.TOE),), stance_leg=_P_LEG,
         y2_coords=_HUMAN_JOINTS + PROSTHESIS, human_outputs=(0, 1, 2, 3),

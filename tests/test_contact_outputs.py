@@ -39,11 +39,27 @@ def _state(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 
 def _theta(vc: ContactConstraints, rng: np.random.Generator) -> np.ndarray:
     """Curves near the posture, a hip progress of 0.2 m at about 1.2 m/s."""
-    L = vc.layout
+    L, d = vc.layout, vc.domain
     alpha = 0.2 * rng.standard_normal((L.rows, L.degree + 1))
-    if vc.domain.velocity_output:
-        alpha[-1] = 1.2 + 0.1 * rng.standard_normal(L.degree + 1)
+    if d.velocity_output:
+        alpha[len(d.y2_coords)] = 1.2 + 0.1 * rng.standard_normal(L.degree + 1)
+    if d.is_double_support:  # the leading foot's load, body weights
+        alpha[-1] = 0.5 + 0.1 * rng.standard_normal(L.degree + 1)
     return np.r_[alpha.ravel(), 1.2, -0.1, 0.1]
+
+
+def _stacked(vc: ContactConstraints, q, qd, qdd, u, theta) -> np.ndarray:
+    """The closed loop's error per row of the stack: dy1 + eps y1 (where there is y1),
+    ddy2 + kp y2 + kd dy2, and in a double support the leading contact's F_x minus its
+    target (N, divided by 100 to be of the rows' size)."""
+    y1, y2, dy2, dy1_num, _, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
+    rows = ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
+    if vc.domain.velocity_output:
+        rows = np.r_[dy1_num + GAINS[0] * y1, rows]
+    if vc.load is not None:
+        fx, target = (float(v) for v in vc.load(q, qd, theta, u))
+        rows = np.r_[rows, (fx - target) / 100.0]
+    return rows
 
 
 def _output_rates(vc: ContactConstraints, q, qd, qdd, theta) -> tuple[np.ndarray, ...]:
@@ -78,22 +94,18 @@ def test_feedback_linearization_gives_the_outputs_their_dynamics(
     domain's constrained dynamics; hfl: the same on the human's rows whatever u_p."""
     vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=7)
     qdd = np.array(dyn(q, qd, u)[0]).ravel()
-    y1, y2, dy2, dy1_num, dy2_num, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
+    _, y2, dy2, _, dy2_num, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
     np.testing.assert_allclose(dy2_num, dy2, atol=1e-7)  # dy2 is y2's rate
     scale = np.abs(GAINS[1] * y2).max()
     np.testing.assert_allclose(ddy2_num, -GAINS[1] * y2 - GAINS[2] * dy2, atol=1e-6 * scale)
-    stacked = np.r_[dy1_num + GAINS[0] * y1, ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2] \
-        if domain.velocity_output else ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
-    if domain.velocity_output:
-        assert abs(stacked[0]) < 1e-6 * scale
+    stacked = _stacked(vc, q, qd, qdd, u, theta)
+    np.testing.assert_allclose(stacked, 0.0, atol=1e-6 * scale)  # y1 and the squeeze too
     # the human's feedback linearization, the prosthesis torque given
     u_p = np.array([3.0, -2.0])
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
     np.testing.assert_array_equal(u_h[4:], u_p)
     qdd = np.array(dyn(q, qd, u_h)[0]).ravel()
-    y1, y2, dy2, dy1_num, _, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
-    closed = np.r_[dy1_num + GAINS[0] * y1, ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2] \
-        if domain.velocity_output else ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
+    closed = _stacked(vc, q, qd, qdd, u_h, theta)
     rows = list(domain.human_outputs)
     np.testing.assert_allclose(closed[rows], 0.0, atol=1e-6 * scale)
     assert np.abs(closed[[r for r in range(closed.size) if r not in rows]]).max() > 1e-3, \
@@ -104,26 +116,32 @@ def test_feedback_linearization_gives_the_outputs_their_dynamics(
 def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
         model: HumanProsthesisModel, domain: Domain) -> None:
     """hfl given the u_p that fl computes returns fl's six torques (so a prosthesis that
-    applies the oracle's torque walks the oracle's walk); in a double support (a closed chain:
-    six torques, five outputs) the human adds no squeeze whatever u_p: the total torque has
-    no component along the null space of the outputs' map, the direction that only presses
-    the legs against each other (it moves nothing, so the outputs cannot tell); where the
-    human holds as many rows as it has torques (``ds_h``) the squeeze is u_p's to set."""
+    applies the oracle's torque walks the oracle's walk).  In a double support (a closed
+    chain: one torque direction only presses the legs against each other and moves nothing)
+    that squeeze is a row of its own: the leading contact's F_x on its curve; in
+    ``ds_p`` the human holds it whatever u_p, in ``ds_h`` u_p sets it."""
     vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=11)
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u[4:])).ravel()
     np.testing.assert_allclose(u_h, u, rtol=1e-7, atol=1e-7 * np.abs(u).max())
-    if len(domain.human_outputs) == 4:
+    if not domain.is_double_support:
         return
-    assert domain.is_double_support
     # the null direction, numerically: torques that leave every acceleration unchanged
     B = np.column_stack([np.array(dyn(q, qd, e)[0]).ravel() - np.array(dyn(q, qd, 0 * e)[0]).ravel()
                          for e in np.eye(6)])  # d qdd / d u (12, 6)
     _, sv, vt = np.linalg.svd(B)
     assert sv[-1] < 1e-9 * sv[0]  # one squeeze direction
-    n = vt[-1]
+    assert vc.load is not None
+    fx, target = (float(v) for v in vc.load(q, qd, theta, u))
+    assert fx == pytest.approx(target, abs=1e-6 * abs(target))
+    squeezed = u + 50.0 * vt[-1]  # the same motion, another squeeze: another load
+    assert abs(float(vc.load(q, qd, theta, squeezed)[0]) - fx) > 1.0
     for u_p in ([3.0, -2.0], [-1.0, 0.5]):
         u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
-        assert abs(n @ u_h) < 1e-7 * np.abs(u_h).max(), (u_p, n @ u_h)
+        fx_h = float(vc.load(q, qd, theta, u_h)[0])
+        if 5 in domain.human_outputs:  # the human holds the load
+            assert fx_h == pytest.approx(target, abs=1e-6 * abs(target)), u_p
+        else:  # the prosthesis's torque sets it
+            assert abs(fx_h - target) > 1.0, u_p
 
 
 def test_phase_is_the_hip_over_the_stance_contact(model: HumanProsthesisModel) -> None:

@@ -7,13 +7,14 @@ p_min, p_max (its first and last node) and each node's phase tau_k; the y2 joint
 and, where the domain has a velocity output, the hip progress rate at the nodes are fitted
 by Bezier polynomials of tau (least squares on the values and the slopes,
 :func:`fit_with_rates`: a joint's slope from its rate, qd / tau_dot; the hip rate's by
-finite differences of the rates over tau, never from the fitted accelerations: the fit holds
-its contacts at position level, so its accelerations need not satisfy them and zigzag from
-node to midpoint, e.g. the stance ankle's, which the hip progress over the stance foot sums:
--35 and +15 m/s^2 alternating on openOFM's fit while the hip's own acceleration stayed
+finite differences of the rates over tau, never from the fitted accelerations: when the fit
+held its contacts at the position level its accelerations need not satisfy them and zigzagged
+from node to midpoint, e.g. the stance ankle's, which the hip progress over the stance foot
+sums: -35 and +15 m/s^2 alternating on openOFM's fit while the hip's own acceleration stayed
 within 2.5 m/s^2, and the hip-rate curve missed the rates by 0.1 m/s RMS); v_hip is the mean
-hip progress rate
-(p_max - p_min) / T_d.  The phase must rise through the domain (the hip moving forward over
+hip progress rate (p_max - p_min) / T_d; in a double support the leading contact's force
+along the ground (the legs' squeeze, :mod:`hp_model.contact_outputs`) from the fit's
+wrenches.  The phase must rise through the domain (the hip moving forward over
 the contact): a fitted trajectory whose hip stalls or runs back is refused.
 """
 
@@ -25,7 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from characterization.gait.multicontact import GRAPH, MultiContactError, MultiContactResult
+from characterization.gait.multicontact import (
+    GRAPH,
+    MultiContactError,
+    MultiContactResult,
+    body_weight,
+)
 from hp_model import bezier
 from hp_model.contact_outputs import ContactConstraints
 from hp_model.domains import Domain
@@ -41,8 +47,9 @@ RATE_WEIGHT = 0.1
 @dataclass(frozen=True)
 class ContactGait:
     """The virtual constraints of each domain (:class:`GaitParams`: alpha (rows, m+1): the
-    y2 joints' curves (rad), then the hip rate's (m/s) where there is one; v_hip m/s, p_min
-    and p_max m) and the regression's RMS residual per row (rad, m/s)."""
+    y2 joints' curves (rad), then the hip rate's (m/s) where there is one, then in a double
+    support the leading contact's force along the ground (body weights); v_hip m/s, p_min and p_max
+    m) and the regression's RMS residual per row (rad, m/s, BW)."""
 
     params: dict[Domain, GaitParams]
     rms: dict[Domain, np.ndarray]
@@ -56,6 +63,7 @@ class ContactGait:
         (alpha rows: the joints' (rad), then the hip rate's (m/s)), v_hip, p_min, p_max, the
         phase's reference frame and the regression's RMS per row."""
         return {d.value: {"y2_coords": list(d.y2_coords), "velocity_output": d.velocity_output,
+                          "load_output": d.is_double_support,
                           "reference_frame": d.contacts[0].frame, "alpha": p.alpha,
                           "v_hip": p.v_hip, "p_min": p.p_min, "p_max": p.p_max,
                           "rms": self.rms[d]}
@@ -72,10 +80,11 @@ def contact_gait_of(model: HumanProsthesisModel,
                     trajectory: Mapping[Domain, Mapping[str, Any]],
                     durations: Mapping[Domain, float], degree: int = DEGREE) -> ContactGait:
     """The virtual constraints of a fitted cycle given as its per-domain trajectories (``q``,
-    ``qd`` (12, P) at the nodes; the accelerations are not read) and durations (s): a fit's
-    or a gait file's."""
+    ``qd`` (12, P) at the nodes, and in a double support ``lam`` (N, Domain.contacts order);
+    the accelerations are not read) and durations (s): a fit's or a gait file's."""
     params: dict[Domain, GaitParams] = {}
     rms: dict[Domain, np.ndarray] = {}
+    weight = body_weight(model)
     for d in GRAPH.domains:
         vc = ContactConstraints(model, d, degree)
         tr = trajectory[d]
@@ -95,6 +104,10 @@ def contact_gait_of(model: HumanProsthesisModel,
         if d.velocity_output:  # the hip rate's curve; its slope from the rates themselves
             rows = np.c_[rows, p_dot]
             slopes = np.c_[slopes, np.gradient(p_dot, tau, edge_order=2)]
+        if d.is_double_support:  # the squeeze: the leading contact's F_x (BW)
+            load = np.asarray(tr["lam"], float)[0] / weight
+            rows = np.c_[rows, load]
+            slopes = np.c_[slopes, np.gradient(load, tau, edge_order=2)]
         alpha = fit_with_rates(tau, rows, slopes, degree)
         params[d] = GaitParams(alpha, step / durations[d], float(p[0]), float(p[-1]))
         rms[d] = np.sqrt(np.mean((bezier.basis(degree, tau) @ alpha.T - rows) ** 2, axis=0))
