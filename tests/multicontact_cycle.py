@@ -23,7 +23,7 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 
 PATH = Path(__file__).parent / "data" / "gaits" / "openofm_multicontact_cycle.npz"
 TAKE = Path(__file__).parent / "data" / "openofm-walk"
-KEYS = ("q", "qd", "qdd")
+KEYS = ("q", "qd", "qdd", "lam")
 
 
 def save_cycle(path: Path, model: HumanProsthesisModel, trajectory: dict, durations: dict,
@@ -51,7 +51,7 @@ def load_cycle(path: Path = PATH) -> tuple[HumanProsthesisModel, dict[Domain, di
 
 
 def main() -> int:
-    from characterization.gait.fit import pylon_fitted
+    from characterization.gait.fit import worn_device
     from characterization.gait.multicontact import (
         GRAPH,
         MultiContactOptions,
@@ -71,7 +71,7 @@ def main() -> int:
         found = steps_subject(steps, str(steps_path))
         assert found is not None, "mocap process stores the subject"
         subject = found[0]
-        device, _ = pylon_fitted(subject, load_device(default_device_path()))
+        device, _ = worn_device(subject, load_device(default_device_path()))
         model = HumanProsthesisModel(subject, device, graph=GRAPH)
         result = fit_multicontact(model, targets_from_steps(steps, model), MultiContactOptions())
     if not result.success:

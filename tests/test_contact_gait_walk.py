@@ -53,8 +53,8 @@ def test_every_domain_is_visited_in_the_graphs_order() -> None:
 
 
 def test_the_curves_do_not_read_the_fitted_accelerations() -> None:
-    """The fit holds its contacts at position level, so its accelerations zigzag from node
-    to midpoint; the curves come from the positions and rates alone (the hip rate's slopes
+    """A fit that holds its contacts at the position level has accelerations that zigzag from
+    node to midpoint; the curves come from the positions and rates alone (the hip rate's slopes
     by finite differences), and the hip-rate curve passes within 0.04 m/s RMS (3 % of the
     walking speed) of the fitted rates in every domain (on the accelerations it missed them
     by 0.1 m/s in pns on openOFM's fit)."""

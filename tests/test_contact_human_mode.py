@@ -35,6 +35,11 @@ def _lifted(model: HumanProsthesisModel) -> HumanProsthesisModel:
 pytestmark = pytest.mark.slow  # about 50 s: a model of its own (compiled once)
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 37 item 5, open: on the cycle fitted with contacts held at the acceleration level, "
+    "the torque held 1 ms leaves the friction cone at the first ds_h heel strike (t 0.418 s, "
+    "F_x 12.9 N on F_z 8-14 N); the oracle evaluated at every stage walks it (test_contact_"
+    "gait_walk)"))
 def test_a_prosthesis_holding_the_oracles_torque_walks_the_oracles_walk() -> None:
     model, traj, durations, _ = load_cycle()
     model = _lifted(model)

@@ -64,12 +64,13 @@ def steps(tmp_path_factory):
 @pytest.fixture(scope="module")
 def mc_model(model, steps):
     """The person of the take (75 kg, 1.83 m, from the C3D and the static trial) on the
-    device they would wear (its pylon cut to their leg): what `gait fit` uses."""
-    from characterization.gait.fit import pylon_fitted
+    device they would wear (its pylon cut to their leg, its foot their foot's size): what
+    `gait fit` uses."""
+    from characterization.gait.fit import worn_device
     from characterization.mocap.steps_artifact import steps_subject
 
     person, _ = steps_subject(steps, "openofm steps")
-    device, _ = pylon_fitted(person, model.device)
+    device, _ = worn_device(person, model.device)
     return HumanProsthesisModel(person, device, graph=GRAPH, backend=CompileBackend.AUTO)
 
 
@@ -220,8 +221,9 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
         assert "does not walk" in res.output
     vcs = doc["virtual_constraints"]
     assert list(vcs) == [d.value for d in GRAPH.domains]
-    for d in GRAPH.domains:  # the curves of every domain: its joints, then the hip's rate
-        rows = len(d.y2_coords) + int(d.velocity_output)
+    for d in GRAPH.domains:  # the curves of every domain: its joints, then the hip's rate,
+        # then in a double support the legs' squeeze
+        rows = len(d.y2_coords) + int(d.velocity_output) + int(d.is_double_support)
         assert np.asarray(vcs[d.value]["alpha"]).shape == (rows, 6)
     assert doc["domains"] == [d.value for d in GRAPH.domains]
     assert set(doc["ground_reaction"]) == {"human", "prosthesis"}

@@ -4,6 +4,8 @@ that contact's normal force, and the ground truth's socket wrench from the domai
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
@@ -26,6 +28,7 @@ def test_the_prosthesis_senses_its_own_contacts_over_a_stride() -> None:
     rows = wrench_rows(model)
     weight = model.tree.total_mass * G
     loads: dict[Domain, list[float]] = {d: [] for d in model.graph.domains}
+    ticks: list[tuple[Domain, float]] = []
     while plant.observe().t < 1.3:  # more than a stride
         obs = plant.observe()
         truth = plant.actuate(None)
@@ -42,11 +45,17 @@ def test_the_prosthesis_senses_its_own_contacts_over_a_stride() -> None:
                                       lam[model.domains[d].wrench_slice("socket")])
         assert rows[d].socket.stop - rows[d].socket.start == 3
         loads[d].append(obs.sensed.foot_load)
+        ticks.append((d, obs.sensed.foot_load))
         plant.advance()
     assert all(loads[d] for d in model.graph.domains)  # every domain visited
-    # single supports on the prosthesis carry the walker: mean load within 20 % of its weight
-    for d in (Domain.PS, Domain.PS_TOE):
-        assert abs(np.mean(loads[d]) / weight - 1.0) < 0.2, (d, np.mean(loads[d]) / weight)
+    # the prosthesis's single support carries the walker: over it the mean load is within
+    # 20 % of its weight (the body's centre falls and rises again), every sample within a
+    # person's double hump (0.5-1.5 weights: valley about 0.7, peaks 1.1-1.3)
+    # (the tick of a heel strike, whose load is the impact's, left out)
+    single = np.array([f for (d, f), (nxt, _) in itertools.pairwise(ticks)
+                       if d in (Domain.PS, Domain.PS_TOE) and nxt == d]) / weight
+    assert abs(single.mean() - 1.0) < 0.2, single.mean()
+    assert single.min() > 0.5 and single.max() < 1.5, (single.min(), single.max())
     # the double supports share it: the prosthesis foot bears part of the weight
     for d in (Domain.DS_H, Domain.DS_P):
         assert 0.0 < np.mean(loads[d]) < 1.5 * weight, (d, np.mean(loads[d]) / weight)

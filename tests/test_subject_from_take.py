@@ -23,6 +23,7 @@ from characterization.mocap.steps_artifact import load_steps, save_steps, steps_
 from characterization.mocap.subject_from_take import (
     HEIGHT_KEY,
     MASS_KEY,
+    ROLL_OFF_OF_FOOT,
     STATURE_FRACTION,
     c3d_subject_metadata,
     subject_of_file,
@@ -84,9 +85,15 @@ def test_openofm_subject_from_the_c3d(with_static):
     # table's is used, and the note says so
     assert L.shank == pytest.approx(0.246 * 1.83, abs=1e-3)
     assert prov["lengths.shank"].startswith("table") and "shank" in prov["notes"]
-    for k in ("ankle_height", "foot", "trunk"):
+    for k in ("ankle_height", "trunk"):
         assert getattr(L, k) == pytest.approx(STATURE_FRACTION[k] * 1.83, abs=1e-3)
-    assert L.heel == pytest.approx(0.2 * L.foot, abs=1e-3)
+    # the foot to the metatarsal heads (where it rolls off): 0.70 of the table's 0.278 m, its
+    # toe end 0.139 m ahead of the ankle (the static trial's metatarsal heads: 0.120-0.155 m)
+    whole = STATURE_FRACTION["foot"] * 1.83
+    assert L.heel == pytest.approx(0.2 * whole, abs=1e-3)
+    assert L.foot == pytest.approx(ROLL_OFF_OF_FOOT * whole, abs=1e-3)
+    assert 0.120 < L.foot - L.heel < 0.155
+    assert "metatarsal" in prov["lengths.foot"]
 
 
 def test_opensim_subject_without_mass_or_height_says_so():

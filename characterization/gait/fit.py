@@ -307,6 +307,41 @@ def pylon_fitted(subject: SubjectConfig, device: DeviceConfig) -> tuple[DeviceCo
                     f"file's {top.length.value:.3f} m; --device FILE to give one)")
 
 
+#: m: a prosthesis foot whose heel and toe ends are this close to the person's is left as it is
+FOOT_TOLERANCE = 0.01
+
+
+def foot_fitted(subject: SubjectConfig, device: DeviceConfig) -> tuple[DeviceConfig, str]:
+    """The device with its foot sized to the person's (a prosthetic foot is chosen by the
+    sound foot's size): the same heel and toe ends about the ankle (the heel end and, for a
+    subject from a take, the metatarsal heads, where the model's rigid foot rolls off), mass
+    and inertia kept; and one line saying so; ``device`` itself (and "") when both ends are
+    within :data:`FOOT_TOLERANCE`."""
+    L, foot = subject.lengths, device.prosthesis.foot
+    toe, heel = L.foot - L.heel, L.heel
+    if (abs(foot.length.value - foot.heel.value - toe) <= FOOT_TOLERANCE
+            and abs(foot.heel.value - heel) <= FOOT_TOLERANCE):
+        return device, ""
+    src = f"sized to subject '{subject.name}''s foot by gait fit"
+    sized = foot.model_copy(update={
+        "length": foot.length.model_copy(update={"value": L.foot, "source": src}),
+        "heel": foot.heel.model_copy(update={"value": heel, "source": src})})
+    fitted = device.model_copy(update={"prosthesis": device.prosthesis.model_copy(
+        update={"foot": sized})})
+    return fitted, (f"device: the foot sized to subject '{subject.name}''s: "
+                    f"prosthesis.foot.length = {L.foot:.3f} m, heel = {heel:.3f} m (the "
+                    f"device file's {foot.length.value:.3f} m, {foot.heel.value:.3f} m; "
+                    "--device FILE to give one)")
+
+
+def worn_device(subject: SubjectConfig, device: DeviceConfig) -> tuple[DeviceConfig, list[str]]:
+    """The device the person would wear: its pylon cut to their leg (:func:`pylon_fitted`),
+    its foot their foot's size (:func:`foot_fitted`); and the lines saying what changed."""
+    device, pylon = pylon_fitted(subject, device)
+    device, foot = foot_fitted(subject, device)
+    return device, [line for line in (pylon, foot) if line]
+
+
 def check_subject_fits_steps(model: HumanProsthesisModel, steps: StepsArtifact, src: str
                              ) -> list[str]:
     """Before any optimization (the subject itself is checked when read): the steps hold a

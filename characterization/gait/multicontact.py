@@ -120,12 +120,13 @@ class MultiContactOptions:
     cop_speed: float = 1.5  # m/s, largest speed of a flat foot's centre of pressure along
     #  its sole (the same plates: 0.96 m/s relative to the heel marker; 1.5 times that)
     w_angles: float = 1000.0  # 1 / (rad^2 s): the tracked angles' squared error integral
-    w_duration: float = 1000.0  # 1 / s^2
-    w_speed: float = 100.0  # s^2 / m^2
+    w_duration: float = 3000.0  # 1 / s^2 (at 1000 the double supports came out 20-50 ms
+    #  short of the take's; at 10000 the loop's heel strike left the friction cone)
+    w_speed: float = 300.0  # s^2 / m^2
     w_torque: float = 1e-5  # 1 / (N^2 m^2 s)
     w_smooth: float = 1.0  # on the squared changes between points of the wrenches (in body
-    #  weights) and torques (in 100 N m): position-level contacts leave the wrench of
-    #  neighbouring points free to alternate (an index-3 DAE's ringing); people's are smooth
+    #  weights) and torques (in 100 N m): people's are smooth (with the contacts held at the
+    #  position level the wrenches of neighbouring points alternated: an index-3 DAE)
     w_jerk: float = 1e-4  # s^5 / m^2: the hip's and the trunk's jerk (x_B, z_B; th_B in
     #  rad), squared, integrated: without it the hip slowed from 1.30 to 0.82 m/s over the
     #  last 40 ms of ps and sped up again after the heel off, a kink degree-5 curves of the
@@ -239,8 +240,9 @@ def _free_points(d: Domain) -> tuple[str, ...]:
 
 
 def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOptions
-                     ) -> tuple[ca.Function, list[ca.Function], ca.Function]:
-    """SX functions of one collocation point of ``d``: the equations of motion, the wrench
+                     ) -> tuple[ca.Function, ca.Function, list[ca.Function], ca.Function]:
+    """SX functions of one collocation point of ``d``: the equations of motion, the ground
+    contacts' acceleration (J qdd + dJ/dt qd of the contacts' rows of h), the wrench
     inequalities (at the first point, the inner points, the last point:
     :func:`handover_margins`) and the free foot points' heights."""
     q, qd = model.q, model.qd
@@ -250,6 +252,9 @@ def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOp
     lam = ca.SX.sym("lam", n_c)
     J = ca.jacobian(model.h[d], q)
     dyn = model.D @ qdd + model.H - ca.DM(model.B) @ u - J.T @ lam
+    J_g = J[: n_c - len(SOCKET_COORDS), :]  # the ground contacts' rows (the socket's last)
+    acc = ca.Function(f"mc_contact_acc_{d}", [q, qd, qdd],
+                      [J_g @ qdd + ca.jtimes(J_g @ qd, q, qd)], ["q", "qd", "qdd"], ["a"])
     args, names = [q, qd, qdd, u, lam], ["q", "qd", "qdd", "u", "lam"]
     first, last = handover_margins(d, opt)
     wrench = []
@@ -262,7 +267,7 @@ def _point_functions(model: HumanProsthesisModel, d: Domain, opt: MultiContactOp
         wrench.append(ca.Function(f"mc_wrench_{d}_{k}", args, [ca.vertcat(*rows)], names,
                                   ["ineq"]))
     heights = [model.frame_expr(p)[1] for p in _free_points(d)]
-    return (ca.Function(f"mc_eq_{d}", args, [dyn], names, ["eq"]), wrench,
+    return (ca.Function(f"mc_eq_{d}", args, [dyn], names, ["eq"]), acc, wrench,
             ca.Function(f"mc_free_{d}", [q], [ca.vertcat(*heights)], ["q"], ["z"]))
 
 
@@ -359,14 +364,17 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     """``d``'s path constraints at every point and its Hermite-Simpson defects; the index
     of the contact wrenches' inequalities appended to ``soft`` (:func:`fit_multicontact`)."""
     N, P = opt.nodes, 2 * opt.nodes - 1
-    f_eq, f_wrench, f_free = _point_functions(model, d, opt)
+    f_eq, f_acc, f_wrench, f_free = _point_functions(model, d, opt)
     args = [X["q"], X["qd"], X["qdd"], X["u"], X["lam"] * body_weight(model)]
     nlp.eq(f_eq.map(P)(*args))
-    # the contacts held where the domain's first point has them (position level: the first
-    # point's are the previous domain's guard and contacts, so none is stated twice)
-    n_c = model.domains[d].n_constraints - len(SOCKET_COORDS)
-    hc = ca.Function(f"mc_contacts_{d}", [model.q], [model.h[d][:n_c]])
-    nlp.eq(hc.map(P - 1)(X["q"][:, 1:]) - ca.repmat(hc(X["q"][:, 0]), 1, P - 1))
+    # the contacts held at the acceleration level at every point: the domain's first point has
+    # them on the ground and at rest (the guard and impact before it, or at a heel off the
+    # previous domain's contacts), so none is stated twice, and the collocation keeps them
+    # there within 0.7 mm over a domain (measured on both takes).  Held at the position level
+    # instead (an index-3 DAE), the wrenches of neighbouring points were free to alternate and
+    # IPOPT crawled: 386 iterations on openOFM, 1031 (8 min) on OpenSim's strides, against
+    # 55 and 74 (about 20 s) this way
+    nlp.eq(f_acc.map(P)(X["q"], X["qd"], X["qdd"]))
     for f, cols in zip(f_wrench, (slice(0, 1), slice(1, P - 1), slice(P - 1, P)),
                        strict=True):
         soft.append(len(nlp.g))

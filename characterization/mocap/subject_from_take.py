@@ -11,7 +11,8 @@ value came from.
 - **Segment lengths**: thigh and shank from the take's joint centres (the median distance
   of adjacent centres over the frames; the static trial's when the mapping names one: the
   walking fit's marker-to-joint vectors applied to the standing markers); the rest (ankle
-  height, foot, heel, trunk) from Winter 2009's fractions of stature (:data:`STATURE_FRACTION`).
+  height, foot, heel, trunk) from Winter 2009's fractions of stature (:data:`STATURE_FRACTION`);
+  the foot from the heel to the metatarsal heads (:data:`ROLL_OFF_OF_FOOT`), where it rolls off.
   A measured length further than :data:`MAX_TABLE_DEVIATION` from the table's is not
   believed (a marker set whose joint fit is off): the table's is used, with a note.
 
@@ -47,6 +48,14 @@ from hp_model.config import (
 STATURE_FRACTION = {"thigh": 0.245, "shank": 0.246, "ankle_height": 0.039, "foot": 0.152,
                     "trunk": 0.288}
 HEEL_OF_FOOT = 0.2
+#: the model's foot is rigid and rolls off about its toe end; a person's rolls off about the
+#: metatarsal heads (the toes stay down): the model's foot ends there, this fraction of the
+#: foot's length from the heel (openOFM's static trial: heel marker 0.055 m behind the lateral
+#: malleolus, first and fifth metatarsal heads 0.155 and 0.120 m ahead of it, of a 0.278 m
+#: foot; the first metatarsophalangeal joint at about 0.72 of the length, the fifth 0.63).
+#: With the whole foot, the fitted ankles were 5.4 and 3.9 deg plantarflexed from the take's
+#: on average (the long foot's toe end 5-8 cm below the person's forefoot at push-off)
+ROLL_OFF_OF_FOOT = 0.70
 #: a measured length this far (relative) from the table's fraction of the height is not used
 #: (people's thigh and shank fractions vary by about 5 %; Vicon's own lower-leg length of the
 #: openOFM subject is 0.24 H)
@@ -222,6 +231,9 @@ def subject_from_take(take: Take, centres: Mapping[str, JointCentreFit],
         prov[f"lengths.{name}"] = f"table: Winter 2009, {frac} x height"
     values["heel"] = HEEL_OF_FOOT * values["foot"]
     prov["lengths.heel"] = f"table: {HEEL_OF_FOOT} x foot length"
+    values["foot"] *= ROLL_OFF_OF_FOOT
+    prov["lengths.foot"] += (f", to the metatarsal heads ({ROLL_OFF_OF_FOOT} of it: where "
+                             "the foot rolls off, the model's toe)")
     sex = given.sex or example.sex
     prov["sex"] = "mapping: [subject] sex" if given.sex else \
         f"default: the example subject's ('{example.sex}')"

@@ -21,7 +21,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     ``allow_mismatch``), the verdict as the exit code."""
     from characterization.gait.contact_gait import contact_gait, walk_contact_gait
     from characterization.gait.figures import save_person_figure
-    from characterization.gait.fit import pylon_fitted
+    from characterization.gait.fit import worn_device
     from characterization.gait.multicontact import (
         GRAPH,
         MultiContactError,
@@ -49,10 +49,10 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     person = load_subject(subject_source(subject, steps) or default_subject_path())
     dev = load_device(device or default_device_path())
     Console().print(subject_note(subject, steps), soft_wrap=True, highlight=False)
-    if device is None:  # the device the person would wear: its pylon cut to their leg
-        dev, note = pylon_fitted(person, dev)
-        if note:
-            Console().print(note, soft_wrap=True, highlight=False)
+    if device is None:  # the device the person would wear: its pylon and foot fitted
+        dev, notes = worn_device(person, dev)
+        for line in notes:
+            Console().print(line, soft_wrap=True, highlight=False)
     model = HumanProsthesisModel(person, dev, graph=GRAPH)
     targets = targets_from_steps(data, model, str(steps))
     opt = MultiContactOptions(nodes=nodes, max_iter=max_iter)
