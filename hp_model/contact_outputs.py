@@ -20,13 +20,16 @@ its curves) with the two changes a foot on its heel or toe needs:
   leg; the leading leg is nearly straight, and closing the chain through it would turn a
   millimetre of hip into degrees of knee), and the legs' squeeze (the sixth torque
   direction, which moves nothing and presses the feet against each other along the ground):
-  the leading contact's force along the ground follows a curve of the phase, F_x = W L(tau)
-  (W the body weight, L the last row of alpha, from the fitted gait).  Without that row the
-  torques of least norm picked a squeeze of their own: on openOFM's fit, at the fitted state
-  itself, 90-140 N m more at each hip and the trailing toe's F_x 0.16 W from the fit's.  The
-  human's torques control ``Domain.human_outputs`` (on a toe its four joints; leading a
-  double support its joints and hip; trailing, y1, the hips and the squeeze: its push-off);
-  every domain has as many rows as torques.
+  the leading contact's friction ratio follows a curve of the phase, F_x = R(tau) F_z (R the
+  last row of alpha, from the fitted gait; a ratio, not a force, so that the contact stays in
+  its friction cone while its normal force lags the fit's after the heel strike).  Without
+  that row the torques of least norm picked a squeeze of their own: on openOFM's fit, at the
+  fitted state itself, 90-140 N m more at each hip and the trailing toe's F_x 0.16 W from the
+  fit's.  The human's torques control ``Domain.human_outputs`` (on a toe its four joints;
+  leading a double support its hip, knee and ankle and the squeeze (the prosthesis's, pushing
+  off: y1 and the other hip); trailing, y1, the hips and the squeeze): in a double support
+  the person sets how the load is shared between the feet.  Every domain has as many rows as
+  torques.
 
 With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_max - p_min:
 
@@ -34,8 +37,8 @@ With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_ma
     ddy2 = (S - dB/dtau J_p / step) qdd - d2B/dtau2 tau_dot^2 - dB/dtau Jdot_p qd / step
 
 so A = [J_p b; M b], L_f = [J_p a + Jdot_p qd - dV/dtau tau_dot; M a - ...] (in a double
-support also the squeeze's row: lam = lam_a(q, qd) + lam_b(q) u, the leading contact's F_x
-row of lam_b, and of lam_a - W L(tau)) and the feedback linearization is the paper's,
+support also the squeeze's row: lam = lam_a(q, qd) + lam_b(q) u, the rows of the leading
+contact's F_x - R(tau) F_z) and the feedback linearization is the paper's,
 u = -A^-1 (L_f + v), v = (eps y1, kp y2 + kd dy2, 0).
 
 Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
@@ -91,8 +94,8 @@ def _entering_linearly(curve: Curve) -> Curve:
 def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
     """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its four output
     rows, given the prosthesis motor torque u_p): given the u_p that ``fl`` computes, ``fl``'s
-    own.  In ``ds_p`` the human's rows include the squeeze (it holds the gait's load on the
-    prosthesis's heel whatever u_p); in ``ds_h`` u_p sets it."""
+    own.  In a double support the human's rows include the squeeze: it holds the gait's
+    friction ratio of the leading contact whatever u_p."""
     return ca.solve(A[rows, 0:4], -(rhs[rows] + A[rows, 4:6] @ u_p))
 
 
@@ -146,18 +149,17 @@ class ContactConstraints:
             A = ca.vertcat(Jp @ b, A)
             Lf = ca.vertcat(Jp @ a + Jpdot_qd - dV * o.tau_dot, Lf)
             v = ca.vertcat(gains[0] * y1, v)
-        #: in a double support (else None): (q, qd, theta, u) -> the leading contact's force
-        #: along the ground and its target W L(tau), N
-        self.load: ca.Function | None = None
-        if d.is_double_support:  # the squeeze: the leading contact's F_x on its curve (BW)
-            load, _, _ = curve(alpha[-1:, :], o.tau)
-            target = model.tree.total_mass * model.tree.gravity * load
-            fx = lam[0]  # the leading contact's (F_x, F_z[, M_y]): along the ground, N
-            A = ca.vertcat(A, ca.jacobian(fx, model.u))
-            Lf = ca.vertcat(Lf, ca.substitute(fx, model.u, ca.DM.zeros(model.nu)) - target)
+        #: in a double support (else None): (q, qd, theta, u) -> the squeeze row's error
+        #: F_x - R(tau) F_z of the leading contact (N) and R(tau)
+        self.squeeze: ca.Function | None = None
+        if d.is_double_support:  # the squeeze: the leading contact's F_x / F_z on its curve
+            ratio, _, _ = curve(alpha[-1:, :], o.tau)
+            err = lam[0] - ratio * lam[1]  # the leading contact's (F_x, F_z[, M_y]), N
+            A = ca.vertcat(A, ca.jacobian(err, model.u))
+            Lf = ca.vertcat(Lf, ca.substitute(err, model.u, ca.DM.zeros(model.nu)))
             v = ca.vertcat(v, 0)
-            self.load = ca.Function(f"load_{d}", [q, qd, theta, model.u], [fx, target],
-                                    ["q", "qd", "theta", "u"], ["fx", "target"])
+            self.squeeze = ca.Function(f"squeeze_{d}", [q, qd, theta, model.u], [err, ratio],
+                                       ["q", "qd", "theta", "u"], ["error", "ratio"])
         rhs = Lf + v
         u = -ca.solve(A, rhs)
         u_p = ca.SX.sym("u_p", 2)

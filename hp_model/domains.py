@@ -228,7 +228,8 @@ class Domain(Choice):
         return _SPECS[self].y2_coords.index(coord)
 
 
-#: the human's joints: on a toe (and leading in a double support) its torques hold them
+#: the human's joints: on a toe its torques hold them (leading a double support, all but the
+#: prosthesis-side hip, with the squeeze)
 _HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
 _P_LEG = StanceLeg("th_rh", "th_pk", "th_pa", "p")
 _L_LEG = StanceLeg("th_lh", "th_lk", "th_la", "l")
@@ -241,7 +242,7 @@ _SPECS: dict[Domain, DomainSpec] = {
         y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"), human_outputs=(0, 1, 2, 3)),
     Domain.DS_H: DomainSpec(
         contacts=(FootContact("l", FootPart.HEEL), FootContact("p", FootPart.TOE)),
-        stance_leg=_L_LEG, y2_coords=_HUMAN_JOINTS, human_outputs=(1, 2, 3, 4)),
+        stance_leg=_L_LEG, y2_coords=_HUMAN_JOINTS, human_outputs=(1, 2, 3, 5)),
     Domain.DS_P: DomainSpec(
         contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
         stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", *PROSTHESIS),

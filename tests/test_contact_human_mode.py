@@ -1,8 +1,8 @@
 """The multi-contact loop with the prosthesis's torque given from outside (mode human, what a
 prosthesis controller drives): a prosthesis that applies the oracle's torque, held over each
-1 ms period like a controller's, walks the oracle's walk.  (In ``ds_p`` the human has a torque
-more than its outputs; choosing its own squeeze of the closed chain, it pushed the
-prosthesis's joints and the walker fell in the second step: hp_model.contact_outputs.)"""
+1 ms period like a controller's, walks the oracle's walk.  (In a double support the closed
+chain's squeeze is the human's to hold, the leading contact's friction ratio on its curve:
+hp_model.contact_outputs.)"""
 
 from __future__ import annotations
 
@@ -36,10 +36,10 @@ pytestmark = pytest.mark.slow  # about 50 s: a model of its own (compiled once)
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "issue 37 item 5, open: on the cycle fitted with contacts held at the acceleration level, "
-    "the torque held 1 ms leaves the friction cone at the first ds_h heel strike (t 0.418 s, "
-    "F_x 12.9 N on F_z 8-14 N); the oracle evaluated at every stage walks it (test_contact_"
-    "gait_walk)"))
+    "issue 37 item 5, open: on the cycle fitted with contacts held at the acceleration level "
+    "the torque held 1 ms walks 2 steps: at the end of ds_p (tau 0.91-1.0) the trailing toe's "
+    "normal force goes negative (to -230 N) before the prosthesis foot lands flat; the oracle "
+    "evaluated at every stage walks it (test_contact_gait_walk)"))
 def test_a_prosthesis_holding_the_oracles_torque_walks_the_oracles_walk() -> None:
     model, traj, durations, _ = load_cycle()
     model = _lifted(model)

@@ -43,22 +43,21 @@ def _theta(vc: ContactConstraints, rng: np.random.Generator) -> np.ndarray:
     alpha = 0.2 * rng.standard_normal((L.rows, L.degree + 1))
     if d.velocity_output:
         alpha[len(d.y2_coords)] = 1.2 + 0.1 * rng.standard_normal(L.degree + 1)
-    if d.is_double_support:  # the leading foot's load, body weights
-        alpha[-1] = 0.5 + 0.1 * rng.standard_normal(L.degree + 1)
+    if d.is_double_support:  # the leading contact's friction ratio
+        alpha[-1] = 0.1 * rng.standard_normal(L.degree + 1)
     return np.r_[alpha.ravel(), 1.2, -0.1, 0.1]
 
 
 def _stacked(vc: ContactConstraints, q, qd, qdd, u, theta) -> np.ndarray:
     """The closed loop's error per row of the stack: dy1 + eps y1 (where there is y1),
-    ddy2 + kp y2 + kd dy2, and in a double support the leading contact's F_x minus its
-    target (N, divided by 100 to be of the rows' size)."""
+    ddy2 + kp y2 + kd dy2, and in a double support the squeeze row's F_x - R(tau) F_z (N,
+    divided by 100 to be of the rows' size)."""
     y1, y2, dy2, dy1_num, _, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
     rows = ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
     if vc.domain.velocity_output:
         rows = np.r_[dy1_num + GAINS[0] * y1, rows]
-    if vc.load is not None:
-        fx, target = (float(v) for v in vc.load(q, qd, theta, u))
-        rows = np.r_[rows, (fx - target) / 100.0]
+    if vc.squeeze is not None:
+        rows = np.r_[rows, float(vc.squeeze(q, qd, theta, u)[0]) / 100.0]
     return rows
 
 
@@ -118,7 +117,7 @@ def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
     """hfl given the u_p that fl computes returns fl's six torques (so a prosthesis that
     applies the oracle's torque walks the oracle's walk).  In a double support (a closed
     chain: one torque direction only presses the legs against each other and moves nothing)
-    that squeeze is a row of its own: the leading contact's F_x on its curve; in
+    that squeeze is a row of its own: the leading contact's F_x / F_z on its curve; in
     ``ds_p`` the human holds it whatever u_p, in ``ds_h`` u_p sets it."""
     vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=11)
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u[4:])).ravel()
@@ -130,18 +129,17 @@ def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
                          for e in np.eye(6)])  # d qdd / d u (12, 6)
     _, sv, vt = np.linalg.svd(B)
     assert sv[-1] < 1e-9 * sv[0]  # one squeeze direction
-    assert vc.load is not None
-    fx, target = (float(v) for v in vc.load(q, qd, theta, u))
-    assert fx == pytest.approx(target, abs=1e-6 * abs(target))
-    squeezed = u + 50.0 * vt[-1]  # the same motion, another squeeze: another load
-    assert abs(float(vc.load(q, qd, theta, squeezed)[0]) - fx) > 1.0
+    assert vc.squeeze is not None
+    assert abs(float(vc.squeeze(q, qd, theta, u)[0])) < 1e-6 * np.abs(u).max()
+    squeezed = u + 50.0 * vt[-1]  # the same motion, another squeeze: another friction ratio
+    assert abs(float(vc.squeeze(q, qd, theta, squeezed)[0])) > 1.0
     for u_p in ([3.0, -2.0], [-1.0, 0.5]):
         u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
-        fx_h = float(vc.load(q, qd, theta, u_h)[0])
-        if 5 in domain.human_outputs:  # the human holds the load
-            assert fx_h == pytest.approx(target, abs=1e-6 * abs(target)), u_p
+        err = float(vc.squeeze(q, qd, theta, u_h)[0])
+        if 5 in domain.human_outputs:  # the human holds the ratio
+            assert abs(err) < 1e-6 * np.abs(u_h).max(), u_p
         else:  # the prosthesis's torque sets it
-            assert abs(fx_h - target) > 1.0, u_p
+            assert abs(err) > 1.0, u_p
 
 
 def test_phase_is_the_hip_over_the_stance_contact(model: HumanProsthesisModel) -> None:

@@ -12,9 +12,9 @@ held its contacts at the position level its accelerations need not satisfy them 
 from node to midpoint, e.g. the stance ankle's, which the hip progress over the stance foot
 sums: -35 and +15 m/s^2 alternating on openOFM's fit while the hip's own acceleration stayed
 within 2.5 m/s^2, and the hip-rate curve missed the rates by 0.1 m/s RMS); v_hip is the mean
-hip progress rate (p_max - p_min) / T_d; in a double support the leading contact's force
-along the ground (the legs' squeeze, :mod:`hp_model.contact_outputs`) from the fit's
-wrenches.  The phase must rise through the domain (the hip moving forward over
+hip progress rate (p_max - p_min) / T_d; in a double support the leading contact's friction
+ratio F_x / F_z (the legs' squeeze, :mod:`hp_model.contact_outputs`) from the fit's wrenches
+where it is loaded.  The phase must rise through the domain (the hip moving forward over
 the contact): a fitted trajectory whose hip stalls or runs back is refused.
 """
 
@@ -48,8 +48,8 @@ RATE_WEIGHT = 0.1
 class ContactGait:
     """The virtual constraints of each domain (:class:`GaitParams`: alpha (rows, m+1): the
     y2 joints' curves (rad), then the hip rate's (m/s) where there is one, then in a double
-    support the leading contact's force along the ground (body weights); v_hip m/s, p_min and p_max
-    m) and the regression's RMS residual per row (rad, m/s, BW)."""
+    support the leading contact's friction ratio F_x / F_z; v_hip m/s, p_min and p_max m) and
+    the regression's RMS residual per row (rad, m/s, 1)."""
 
     params: dict[Domain, GaitParams]
     rms: dict[Domain, np.ndarray]
@@ -63,7 +63,7 @@ class ContactGait:
         (alpha rows: the joints' (rad), then the hip rate's (m/s)), v_hip, p_min, p_max, the
         phase's reference frame and the regression's RMS per row."""
         return {d.value: {"y2_coords": list(d.y2_coords), "velocity_output": d.velocity_output,
-                          "load_output": d.is_double_support,
+                          "squeeze_output": d.is_double_support,
                           "reference_frame": d.contacts[0].frame, "alpha": p.alpha,
                           "v_hip": p.v_hip, "p_min": p.p_min, "p_max": p.p_max,
                           "rms": self.rms[d]}
@@ -84,7 +84,6 @@ def contact_gait_of(model: HumanProsthesisModel,
     the accelerations are not read) and durations (s): a fit's or a gait file's."""
     params: dict[Domain, GaitParams] = {}
     rms: dict[Domain, np.ndarray] = {}
-    weight = body_weight(model)
     for d in GRAPH.domains:
         vc = ContactConstraints(model, d, degree)
         tr = trajectory[d]
@@ -104,14 +103,35 @@ def contact_gait_of(model: HumanProsthesisModel,
         if d.velocity_output:  # the hip rate's curve; its slope from the rates themselves
             rows = np.c_[rows, p_dot]
             slopes = np.c_[slopes, np.gradient(p_dot, tau, edge_order=2)]
-        if d.is_double_support:  # the squeeze: the leading contact's F_x (BW)
-            load = np.asarray(tr["lam"], float)[0] / weight
-            rows = np.c_[rows, load]
-            slopes = np.c_[slopes, np.gradient(load, tau, edge_order=2)]
         alpha = fit_with_rates(tau, rows, slopes, degree)
-        params[d] = GaitParams(alpha, step / durations[d], float(p[0]), float(p[-1]))
         rms[d] = np.sqrt(np.mean((bezier.basis(degree, tau) @ alpha.T - rows) ** 2, axis=0))
+        if d.is_double_support:  # the squeeze: the leading contact's friction ratio
+            ratio, ratio_rms = _friction_ratio(np.asarray(tr["lam"], float), tau, degree,
+                                               LOADED * body_weight(model))
+            alpha, rms[d] = np.r_[alpha, ratio[None, :]], np.r_[rms[d], ratio_rms]
+        params[d] = GaitParams(alpha, step / durations[d], float(p[0]), float(p[-1]))
     return ContactGait(params, rms)
+
+
+#: body weights: a contact's normal force above which its friction ratio F_x / F_z is read
+#: (at the heel strike both start from zero)
+LOADED = 0.02
+
+
+def _friction_ratio(lam: np.ndarray, tau: np.ndarray, degree: int, loaded: float
+                    ) -> tuple[np.ndarray, float]:
+    """The Bezier coefficients (m+1,) of the leading contact's F_x / F_z over a double
+    support (``lam`` (n_c, n) in N, its first rows the leading contact's F_x, F_z), least
+    squares on the nodes where F_z > ``loaded`` (N), and the fit's RMS residual there."""
+    fx, fz = lam[0], lam[1]
+    on = fz > loaded
+    if on.sum() <= degree:
+        raise MultiContactError(f"the double support's leading contact carries more than "
+                                f"{loaded:.0f} N at {on.sum()} nodes only (need {degree + 1})")
+    H = bezier.basis(degree, tau[on])
+    r = fx[on] / fz[on]
+    coef, *_ = np.linalg.lstsq(H, r, rcond=None)
+    return coef, float(np.sqrt(np.mean((H @ coef - r) ** 2)))
 
 
 def fit_with_rates(tau: np.ndarray, y: np.ndarray, dy: np.ndarray, degree: int,
