@@ -44,14 +44,14 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import casadi as ca
 import numpy as np
 
 from characterization.gait.nlp import NLP
 from characterization.mocap.step_segmentation import take_spans
-from characterization.mocap.steps_artifact import FEET, StepsArtifact
+from characterization.mocap.steps_artifact import FEET, StepsArtifact, plate_forces
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.domains import Domain, DomainGraph, FootContact
 from hp_model.human_prosthesis import SOCKET_COORDS, HumanProsthesisModel
@@ -63,6 +63,12 @@ TRACKED = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 BASE = ("x_B", "z_B", "th_B")
 #: the ground points of the two feet
 FOOT_POINTS = ("l_heel", "l_toe", "p_heel", "p_toe")
+#: each foot's stance, in walking order, and the side of its frames
+STANCE: dict[str, tuple[Domain, ...]] = {
+    "prosthesis": (Domain.DS_P, Domain.PS, Domain.PS_TOE, Domain.DS_H),
+    "human": (Domain.DS_H, Domain.PNS, Domain.PNS_TOE, Domain.DS_P),
+}
+SIDE = {"prosthesis": "p", "human": "l"}
 
 
 class MultiContactError(RuntimeError):
@@ -78,6 +84,9 @@ class MultiContactTargets:
     durations: dict[Domain, float]
     angles: dict[Domain, np.ndarray]
     speed: float
+    #: foot -> its mean vertical ground reaction over its stance on the take's force plates
+    #: (body weights, evenly spaced samples of the stance), where the take has them
+    stance_fz: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for d in GRAPH.domains:
@@ -93,6 +102,11 @@ class MultiContactTargets:
                                         f"need ({len(TRACKED)}, n >= 2)")
             if not np.all(np.isfinite(a)):
                 raise MultiContactError(f"targets: {d} angles are not all finite")
+        for foot, fz in self.stance_fz.items():
+            if foot not in STANCE or np.ndim(fz) != 1 or len(fz) < 2 \
+                    or not np.all(np.isfinite(fz)):
+                raise MultiContactError(f"targets: {foot}'s stance force must be finite "
+                                        "samples of a foot's stance")
         if not (np.isfinite(self.speed) and 0.05 < self.speed < 3.0):
             raise MultiContactError(f"targets: walking speed {self.speed:.3f} m/s "
                                     "(need 0.05-3 m/s)")
@@ -120,6 +134,8 @@ class MultiContactOptions:
     cop_speed: float = 1.5  # m/s, largest speed of a flat foot's centre of pressure along
     #  its sole (the same plates: 0.96 m/s relative to the heel marker; 1.5 times that)
     w_angles: float = 1000.0  # 1 / (rad^2 s): the tracked angles' squared error integral
+    w_force: float = 300.0  # 1 / (BW^2 s): each foot's vertical force against the take's
+    #  force plates (where it has them), squared error integral over the foot's stance
     w_duration: float = 3000.0  # 1 / s^2 (at 1000 the double supports came out 20-50 ms
     #  short of the take's; at 10000 the loop's heel strike left the friction cone)
     w_speed: float = 300.0  # s^2 / m^2
@@ -536,9 +552,32 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     cost = opt.w_angles * T * ca.sum2(ca.sum1(e**2) * w[None, :])
     cost += opt.w_torque * T * ca.sum2(ca.sum1(X["u"] ** 2) * w[None, :])
     cost += opt.w_duration * (T - targets.durations[d]) ** 2
+    for row, fz in plate_rows(targets, d, P):
+        cost += opt.w_force * T * ca.sum2((X["lam"][row, :] - fz[None, :]) ** 2 * w[None, :])
     cost += opt.w_smooth * (ca.sumsqr(ca.diff(X["lam"], 1, 1))
                             + ca.sumsqr(ca.diff(X["u"], 1, 1) / 100.0))
     return cost
+
+
+def plate_rows(targets: MultiContactTargets, d: Domain, n: int
+                ) -> list[tuple[int, np.ndarray]]:
+    """Per foot on the ground in ``d`` whose stance the take's plates give: (its F_z row of
+    ``d``'s wrenches, the plates' F_z (BW) at ``n`` evenly spaced instants of ``d``),
+    ``d`` placed in the foot's stance by the take's domain durations."""
+    out = []
+    for foot, fz in targets.stance_fz.items():
+        if d not in STANCE[foot]:
+            continue
+        T = [targets.durations[e] for e in STANCE[foot]]
+        k = STANCE[foot].index(d)
+        a, b = sum(T[:k]) / sum(T), sum(T[:k + 1]) / sum(T)
+        samples = np.interp(np.linspace(a, b, n), np.linspace(0.0, 1.0, len(fz)), fz)
+        o = 0
+        for c in d.contacts:
+            if c.side == SIDE[foot]:
+                out.append((o + 1, samples))
+            o += c.size
+    return out
 
 
 def _jerk(X: dict[str, ca.MX], opt: MultiContactOptions, base: list[int]) -> ca.MX:
@@ -755,4 +794,10 @@ def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: s
             lo[foot] = tuple(a + i for i in l_)
         windows += stride_windows(td, lo, pitch)
     coords = tuple(str(c) for c in steps.coord_names)
-    return targets_from_windows(steps.time, q, coords, windows, steps.ground_speed or 0.0)
+    targets = targets_from_windows(steps.time, q, coords, windows, steps.ground_speed or 0.0)
+    plates = plate_forces(steps, src)
+    if plates is None:
+        return targets
+    grf, weight = plates
+    return replace(targets, stance_fz={f: np.asarray(m.fz, float) / weight
+                                       for f, m in grf.items()})

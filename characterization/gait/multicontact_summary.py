@@ -15,6 +15,8 @@ import numpy as np
 
 from characterization.gait.multicontact import (
     GRAPH,
+    SIDE,
+    STANCE,
     TRACKED,
     MultiContactOptions,
     MultiContactResult,
@@ -29,12 +31,6 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 
 #: joint-angle samples over the cycle
 CYCLE_SAMPLES = 101
-#: each foot's stance, in walking order
-STANCE: dict[str, tuple[Domain, ...]] = {
-    "prosthesis": (Domain.DS_P, Domain.PS, Domain.PS_TOE, Domain.DS_H),
-    "human": (Domain.DS_H, Domain.PNS, Domain.PNS_TOE, Domain.DS_P),
-}
-SIDE = {"prosthesis": "p", "human": "l"}
 
 
 def _cycle(pieces: list[tuple[float, np.ndarray]], n: int = CYCLE_SAMPLES) -> np.ndarray:
