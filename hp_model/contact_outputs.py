@@ -15,8 +15,11 @@ its curves) with the two changes a foot on its heel or toe needs:
   the paper's (y1 and every joint but the stance ankle: 6 outputs, 6 degrees of freedom); on
   a toe the six joints (7 degrees of freedom and 6 torques: the walker pivots on its toe,
   the phase is the zero dynamics); in a double support (a closed chain with 5 degrees of
-  freedom and 6 torques) y1, both hips and the leading leg's knee and ankle (its foot
-  rolling from the heel to flat): the trailing leg's knee and ankle close the chain (a bent
+  freedom and 6 torques) y1, both hips, the leading leg's knee and its sole's world pitch
+  (the foot rolling from the heel to flat lands when the pitch is zero, whatever the leg
+  above it does: with the ankle's angle as the output instead, a prosthesis torque held
+  over 1 ms let the shank's errors delay the landing until the trailing toe pulled on the
+  ground): the trailing leg's knee and ankle close the chain (a bent
   leg; the leading leg is nearly straight, and closing the chain through it would turn a
   millimetre of hip into degrees of knee), and the legs' squeeze (the sixth torque
   direction, which moves nothing and presses the feet against each other along the ground):
@@ -91,6 +94,23 @@ def _entering_linearly(curve: Curve) -> Curve:
     return f
 
 
+#: an output named ``<frame>`` + this is the frame's world pitch (rad), not a coordinate
+PITCH = "_pitch"
+
+
+def selection(model: HumanProsthesisModel, names: tuple[str, ...]) -> np.ndarray:
+    """(len(names), nq) rows S with the outputs' angles S q (rad): a coordinate's unit row,
+    or for ``<frame>_pitch`` the frame's world pitch (exact: linear in q in a planar tree,
+    :meth:`HumanProsthesisModel.pitch_row`)."""
+    S = np.zeros((len(names), model.nq))
+    for r, name in enumerate(names):
+        if name.endswith(PITCH):
+            S[r] = model.pitch_row(name[: -len(PITCH)])
+        else:
+            S[r, model.coord_names.index(name)] = 1.0
+    return S
+
+
 def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
     """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its four output
     rows, given the prosthesis motor torque u_p): given the u_p that ``fl`` computes, ``fl``'s
@@ -121,10 +141,7 @@ class ContactConstraints:
         Jp = ca.jacobian(progress, q)
         progress_dot = Jp @ qd
         Jpdot_qd = ca.jtimes(progress_dot, q, qd)
-        S = np.zeros((len(d.y2_coords), nq))
-        for r, name in enumerate(d.y2_coords):
-            S[r, model.coord_names.index(name)] = 1.0
-        SD = ca.DM(S)
+        SD = ca.DM(selection(model, d.y2_coords))
 
         theta = ca.SX.sym("theta", self.n_params)
         gains = ca.SX.sym("gains", 3)

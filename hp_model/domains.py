@@ -44,9 +44,9 @@ Per domain (``Domain.X.<property>``):
     stance_leg      (hip, knee, ankle) coordinates of the stance leg and its frames' side
     stance          (knee, ankle) of the stance leg: delta_p_hip = c_k th_k + c_a th_a
     y2_coords       the joints whose angles are the y2 outputs, in output order (the paper's
-                    domains: 5, all but the stance ankle; a double support: both hips and
-                    the leading knee and ankle, with y1; on a toe: all 6, without y1:
-                    :mod:`hp_model.contact_outputs`)
+                    domains: 5, all but the stance ankle; a double support: both hips, the
+                    leading knee and the leading sole's world pitch (``<frame>_pitch``), with
+                    y1; on a toe: all 6, without y1: :mod:`hp_model.contact_outputs`)
     velocity_output whether the stacked outputs start with the hip velocity y1
     human_outputs   rows of the stacked outputs (y1, y2; in a double support then the legs'
                     squeeze) the human's 4 torques control
@@ -242,10 +242,11 @@ _SPECS: dict[Domain, DomainSpec] = {
         y2_coords=("th_lh", "th_lk", "th_rh", "th_pk", "th_pa"), human_outputs=(0, 1, 2, 3)),
     Domain.DS_H: DomainSpec(
         contacts=(FootContact("l", FootPart.HEEL), FootContact("p", FootPart.TOE)),
-        stance_leg=_L_LEG, y2_coords=_HUMAN_JOINTS, human_outputs=(1, 2, 3, 5)),
+        stance_leg=_L_LEG, y2_coords=("th_lh", "th_lk", "l_sole_pitch", "th_rh"),
+        human_outputs=(1, 2, 3, 5)),
     Domain.DS_P: DomainSpec(
         contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
-        stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", *PROSTHESIS),
+        stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", "th_pk", "p_sole_pitch"),
         human_outputs=(0, 1, 2, 5)),
     Domain.PS_TOE: DomainSpec(
         contacts=(FootContact("p", FootPart.TOE),), stance_leg=_P_LEG,

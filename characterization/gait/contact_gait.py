@@ -33,7 +33,7 @@ from characterization.gait.multicontact import (
     body_weight,
 )
 from hp_model import bezier
-from hp_model.contact_outputs import ContactConstraints
+from hp_model.contact_outputs import ContactConstraints, selection
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
@@ -98,8 +98,8 @@ def contact_gait_of(model: HumanProsthesisModel,
                 f"throughout (node {k}: {p[k]:.4f} -> {p[k + 1]:.4f} m); no phase variable")
         step = p[-1] - p[0]
         tau, tau_dot = (p - p[0]) / step, p_dot / step
-        idx = [model.coord_names.index(c) for c in d.y2_coords]
-        rows, slopes = q[idx, :].T, qd[idx, :].T / tau_dot[:, None]  # qd = B' tau_dot
+        S = selection(model, d.y2_coords)
+        rows, slopes = (S @ q).T, (S @ qd).T / tau_dot[:, None]  # qd = B' tau_dot
         if d.velocity_output:  # the hip rate's curve; its slope from the rates themselves
             rows = np.c_[rows, p_dot]
             slopes = np.c_[slopes, np.gradient(p_dot, tau, edge_order=2)]

@@ -125,6 +125,14 @@ class MultiContactOptions:
     min_normal_force: float = 20.0  # N, a flat foot's least normal force
     cop_margin: float = 0.01  # m, centre of pressure this far inside the sole's ends
     touchdown_velocity: float = 0.02  # m/s, least downward heel speed at a heel strike
+    landing_clearance: float = 0.003  # m: the point a domain ends by landing stays this far
+    #  above the ground times (1 - s) (s the domain's fraction): a leading foot skimmed the
+    #  ground flat for the last quarter of its double support, and any tracking error in
+    #  closed loop then kept it up (it landed at tau 1.1, the trailing toe pulling)
+    flat_landing_velocity: float = 0.02  # m/s, least downward toe speed as a foot lands flat
+    #  (at 0 the fitted foot settled onto the ground with no speed left, and in closed loop
+    #  a tracking error of 0.006 rad, 1 mm at the toe, delayed the landing by 10 % of the
+    #  double support)
     clearance: float = 0.01  # m, swing toe height at mid-swing
     force_rate: float = 15.0  # BW/s, largest |dF_z/dt| of a contact (plates: OpenSim's
     #  subject01 walk 9.4 BW/s over its 60 Hz samples; 1.5 times that)
@@ -402,7 +410,14 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     soft += [len(nlp.g), len(nlp.g) + 1]
     nlp.geq(step - change)
     nlp.geq(step + change)
-    nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]))
+    # the free points above the ground; the one this domain ends by landing (its guard's)
+    # by landing_clearance (1 - s) at least: it lands at the end, not before
+    free = _free_points(d)
+    td = GRAPH.touchdown_frame(d)
+    s_in = np.linspace(0.0, 1.0, P)[1:-1]
+    low = np.array([opt.landing_clearance * (1.0 - s_in) if p == td else 0.0 * s_in
+                    for p in free])
+    nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]) - low)
     if d.is_flat_stance:  # the centre of pressure d (M_y + d F_z = 0) rolls from heel to
         # toe, no faster than cop_speed: 0 <= d_{k+1} - d_k <= v h
         heel, toe = sole_ends(model, d.contacts[0].side)
@@ -439,10 +454,8 @@ def _boundaries(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, c
     if td is not None:  # else a heel's lift-off: no guard but the next domain's contacts
         pose_e, vel_e = _frame_fn(model, td)(q[:, -1], qd[:, -1])
         nlp.eq(pose_e[1])
-        if td.endswith("_heel"):
-            nlp.within(vel_e[1], -np.inf, -opt.touchdown_velocity)
-        else:
-            nlp.within(vel_e[1], -np.inf, 0.0)
+        nlp.within(vel_e[1], -np.inf, -(opt.touchdown_velocity if td.endswith("_heel")
+                                        else opt.flat_landing_velocity))
     if d.is_flat_stance:
         swing = "l" if d.stance_leg.side == "p" else "p"
         P = 2 * opt.nodes - 1
