@@ -412,11 +412,10 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     nlp.geq(step + change)
     # the free points above the ground; the one this domain ends by landing (its guard's)
     # by landing_clearance (1 - s) at least: it lands at the end, not before
-    free = _free_points(d)
     td = GRAPH.touchdown_frame(d)
     s_in = np.linspace(0.0, 1.0, P)[1:-1]
     low = np.array([opt.landing_clearance * (1.0 - s_in) if p == td else 0.0 * s_in
-                    for p in free])
+                    for p in _free_points(d)])
     nlp.geq(f_free.map(P - 2)(X["q"][:, 1:-1]) - low)
     if d.is_flat_stance:  # the centre of pressure d (M_y + d F_z = 0) rolls from heel to
         # toe, no faster than cop_speed: 0 <= d_{k+1} - d_k <= v h
