@@ -14,7 +14,9 @@ per foot contact F_z >= ``min_normal_force`` (flat) or >= 0 (heel, toe), |F_x| <
 and a flat foot's centre of pressure inside its sole with ``cop_margin``, rolling from heel to
 toe (never backward between points); the feet not on the ground stay above it. A domain ends at
 its guard (the next domain's new contact touches down: the swing heel moving down at
-``touchdown_velocity`` at least, or the leading toe as the foot lands flat) and the next starts
+``touchdown_velocity`` at least, or the leading toe at ``flat_landing_velocity`` as the foot
+lands flat; before it that point stays ``landing_clearance`` (1 - s) above the ground) and the
+next starts
 with the rigid impact into its constraints (impulse variables, pushing on the ground); where a
 double support ends the trailing toe leaves the ground upward.  The cycle closes with a
 forward translation of one stride.
