@@ -260,3 +260,23 @@ def test_the_pylon_is_cut_to_the_persons_leg(model):
         update={"shank": 0.20})})
     with pytest.raises(FitError, match="shorter than the device's prosthesis side"):
         pylon_fitted(short, model.device)
+
+
+def test_the_device_foot_is_sized_to_the_persons(model):
+    """A subject from a take has its foot end at the metatarsal heads; the device's foot is
+    given the same heel and toe ends about the ankle (said in one line), its mass kept; a
+    foot already within 1 cm at both ends is left as it is."""
+    from characterization.gait.fit import foot_fitted, worn_device
+
+    L = model.subject.lengths
+    person = model.subject.model_copy(update={"lengths": L.model_copy(
+        update={"foot": 0.195, "heel": 0.056})})
+    dev, note = foot_fitted(person, model.device)
+    foot = dev.prosthesis.foot
+    assert foot.length.value - foot.heel.value == pytest.approx(0.195 - 0.056)
+    assert foot.heel.value == pytest.approx(0.056)
+    assert foot.mass == model.device.prosthesis.foot.mass
+    assert "prosthesis.foot.length" in note and "\n" not in note
+    assert foot_fitted(person, dev) == (dev, "")
+    worn, notes = worn_device(person, model.device)
+    assert worn.prosthesis.foot == foot and len(notes) in (1, 2)
