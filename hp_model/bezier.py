@@ -54,19 +54,29 @@ def derivative(alpha):
     return m * (alpha[:, 1:] - alpha[:, :-1])
 
 
-def evaluate_continued(alpha, s):
+def evaluate_continued(alpha, s, order: int = 1):
     """(B, dB/ds, d2B/ds2) of the rows of ``alpha`` at a CasADi scalar ``s``, continued
-    linearly (C^1) outside [0, 1]: B(s_c) + B'(s_c)(s - s_c) with s_c = clip(s, 0, 1), so
-    d2B/ds2 = 0 outside (a jump at the ends: not for anything that must be C^2 there).  A
-    degree-m polynomial extrapolated beyond its interval bends away within a few percent of
-    the phase (and ill-conditions anything that inverts it); the linear continuation keeps
-    the last velocity.  (n_outputs, 1) columns."""
+    outside [0, 1] by the Taylor polynomial of ``order`` at the nearer end, s_c = clip(s, 0, 1):
+
+    - ``order`` 1 (C^1): B(s_c) + B'(s_c)(s - s_c), so d2B/ds2 = 0 outside (a jump at the
+      ends: not for anything that must be C^2 there);
+    - ``order`` 2 (C^2): + B''(s_c)(s - s_c)^2 / 2, so d2B/ds2 = B''(s_c) outside: the
+      accelerations a curve asks for, and the forces they take, stay continuous at the ends.
+
+    A degree-m polynomial extrapolated beyond its interval bends away within a few percent
+    of the phase (and ill-conditions anything that inverts it); the continuation keeps the
+    last velocity (and curvature).  (n_outputs, 1) columns."""
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 or 2, got {order}")
     d1 = derivative(alpha)
     d2 = derivative(d1)
     sc = ca.fmin(ca.fmax(s, 0), 1)
-    inside = (s >= 0) * (s <= 1)
-    dB = evaluate(d1, sc)
-    return evaluate(alpha, sc) + dB * (s - sc), dB, evaluate(d2, sc) * inside
+    out = s - sc
+    dB, ddB = evaluate(d1, sc), evaluate(d2, sc)
+    if order == 1:
+        inside = (s >= 0) * (s <= 1)
+        return evaluate(alpha, sc) + dB * out, dB, ddB * inside
+    return evaluate(alpha, sc) + dB * out + ddB * out**2 / 2, dB + ddB * out, ddB
 
 
 def gram(m: int) -> np.ndarray:

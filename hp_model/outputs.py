@@ -198,6 +198,15 @@ def continued(alpha: Num, tau: Num) -> tuple[Num, Num, Num]:
     return bezier.evaluate_continued(alpha, tau)
 
 
+def continued_smoothly(alpha: Num, tau: Num) -> tuple[Num, Num, Num]:
+    """Continued outside [0, 1] by the curves' second-order Taylor polynomial at the nearer
+    end (C^2: :func:`hp_model.bezier.evaluate_continued` of order 2): past the end of a
+    double support the accelerations the curves ask for, and so the contact forces, go on
+    without a jump (continued linearly, a landing 1 ms late made the trailing toe pull
+    0.4 kN on the ground)."""
+    return bezier.evaluate_continued(alpha, tau, order=2)
+
+
 #: phase span over which the outputs come to rest past tau = 1 (:func:`resting`)
 TAIL = 0.15
 

@@ -30,6 +30,18 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   RK4 step at which the phase reaches 1: the next domain's constraints hold the state as it
   is (a heel leaving the ground: no impact).  On that graph a step is a heel strike (an
   impact into a double support); a foot landing flat from its heel is an impact too.
+- A double support's trailing foot leaves when it would pull (the multi-contact graph): its
+  toe's normal force, under the torque applied at a period's start, below
+  ``min_normal_force``.  The designed double support ends with that force reaching zero as
+  the leading foot lands flat; off the orbit the two drift apart by a few ms, and the
+  constraint would hold the toe on the ground by pulling on it (0.4-0.7 kN for up to 38 ms
+  before every contact was watched).  The leading foot is then landed flat at once: rotated
+  flat about its ankle (its pitch logged, above ``max_touchdown_pitch`` a fall "landed on heel
+  or toe") and the next domain's impact applied, a foot landing flat (not a step;
+  :attr:`Impact.release`).  The leading contact pulling (a heel strike that starts below zero
+  load) is a fall by the friction-cone check below; lifting the heel instead, back into the
+  toe's single support past its tau = 1, was tried: its resting curves then pulled 0.9 kN on
+  the toe.
 - Flat-foot touchdown: the model's impact makes the landing foot a flat stance foot, but
   off the nominal orbit it lands with a small residual pitch, which the holonomic
   constraint would then freeze forever (a neutral mode that tilts the whole walker step
@@ -41,8 +53,9 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   its :class:`~hp_model.falls.FallReason`, time, domain, phase and the numbers of the
   event; a touchdown on heel or toe is reported at the start of the next period): hip
   height below ``min_hip_height``; phase tau running backward more than ``tau_backward``;
-  the stance foot pulling on the ground or slipping (normal force below ``min_normal_force``
-  or |F_x| > mu F_z, sustained over ``cone_periods`` periods); no touchdown by
+  the stance foot (a double support's leading foot) pulling on the ground or slipping
+  (normal force below ``min_normal_force`` or |F_x| > mu F_z, sustained over
+  ``cone_periods`` periods); no touchdown by
   ``tau_max``; the phase stalled (no touchdown within ``max_step_time`` s of the start or
   of the last impact: a walker standing still, with tau neither progressing nor running
   back, would otherwise be simulated forever); a non-finite state or a generalized speed
@@ -139,6 +152,8 @@ class Impact:
     impulse: np.ndarray
     foot_pitch: float = 0.0  # rad, the landing foot's pitch removed at touchdown
     starts_step: bool = True  # a heel strike (not a foot landing flat from its heel)
+    #: a foot landed flat because the trailing foot left a double support (module docstring)
+    release: bool = False
 
 
 @dataclass
@@ -344,11 +359,32 @@ class HybridSimulator:
         from its heel: the multi-contact graph)."""
         if into not in self._landing:
             return 0.0
-        frame, ankle = self._landing[into]
+        return self._flatten(*self._landing[into], q)
+
+    def _flatten(self, frame: int, ankle: int, q: np.ndarray) -> float:
+        """Rotate the foot of sole frame index ``frame`` flat about its ankle (coordinate
+        index ``ankle``), in place; returns the pitch removed (rad)."""
         pose = self.mfs["frames"](q, np.zeros(self.nq))[0]
         pitch = float(pose[2, frame])
         q[ankle] -= pitch
         return pitch
+
+    def release_trailing(self, d: Domain, x: np.ndarray, t: float
+                         ) -> tuple[np.ndarray, Impact] | None:
+        """If ``d`` is a double support: the state after its trailing foot leaves and its
+        leading foot lands flat (module docstring) and that landing's impact record, at
+        time t (s); None in any other domain."""
+        if not d.is_double_support:
+            return None
+        nq, into = self.nq, self.model.graph.next(d)
+        leg = d.stance_leg  # the leading leg
+        q = x[:nq].copy()
+        pitch = self._flatten(self.model.frame_index(leg.sole_frame),
+                              self.model.coord_names.index(leg.ankle), q)
+        qdp, imp = self.mfs[f"impact_{into}"](q, x[nq:])
+        impact = Impact(t, into, q, x[nq:].copy(), qdp.copy(), imp.copy(), pitch,
+                        starts_step=False, release=True)
+        return np.r_[q, qdp], impact
 
     def guard_height(self, d: Domain, x: np.ndarray) -> float:
         """The height (m) of the frame whose touchdown ends ``d`` at state x; 1 in a domain
@@ -471,6 +507,7 @@ class SimulationRun:
         #: stage of the period; None with the delayed human)
         self._k1: np.ndarray | None = None
         self._applied = False
+        self._lam = np.zeros(0)  # the constraint wrenches under the torque applied
         #: tau of a state x (q first) per domain, for the gait tracked at the start
         self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
                        for dd in sim.model.graph.domains}
@@ -528,6 +565,7 @@ class SimulationRun:
             raise ValueError("mode full: the torques come from feedback linearization; "
                              "apply(None)")
         self._applied = True
+        self._lam = lam  # the wrenches under the torque applied
         nq = sim.nq
         logged = lam if lam.size == sim.lam_width else np.r_[
             lam, np.full(sim.lam_width - lam.size, np.nan)]
@@ -555,6 +593,13 @@ class SimulationRun:
         x, d, u_p, t = self._x, self.domain, self._u_p, self.t
         h = opt.dt / opt.substeps
         k1 = self._k1  # the field at x, the first stage of the period's first step
+        trailing = d.contacts[0].size + 1  # the trailing contact's F_z in a double support
+        if d.is_double_support and self._lam[trailing] < opt.min_normal_force:
+            released = sim.release_trailing(d, x, t)
+            assert released is not None  # a double support
+            x, impact = released
+            d, k1 = impact.into, None
+            self._enter(d, x, impact)
         for j in range(opt.substeps):
             rest = h
             while rest > 0:
@@ -572,21 +617,10 @@ class SimulationRun:
                     qe, qdm = xe[:nq].copy(), xe[nq:]
                     pitch = sim._flatten_landing_foot(nxt, qe)
                     qdp, imp = sim.mfs[f"impact_{nxt}"](qe, qdm)
-                    self.impacts.append(Impact(t + j * h + (h - rest) + s * rest, nxt, qe,
-                                               qdm.copy(), qdp.copy(), imp.copy(), pitch,
-                                               nxt in sim.model.graph.step_starts))
-                    if abs(pitch) > opt.max_touchdown_pitch:
-                        self._heel = pitch
-                    x = np.r_[qe, qdp]
-                    d = nxt
-                    if self._n_delay is not None:  # the pipeline restarts at touchdown
-                        self._pipeline.clear()
-                        v_now = sim._feedback(d, x)
-                        self._pipeline.append(v_now)
-                        self._vhold = sim._hold(mode, d, self._pipeline, v_now)
-                    self._z_prev = sim.guard_height(d, x)
-                    self._tau_peak = -np.inf
-                    self._t_step = self.impacts[-1].t
+                    x, d = np.r_[qe, qdp], nxt
+                    self._enter(d, x, Impact(t + j * h + (h - rest) + s * rest, nxt, qe,
+                                             qdm.copy(), qdp.copy(), imp.copy(), pitch,
+                                             nxt in sim.model.graph.step_starts))
                     rest -= s * rest
                     if rest <= 1e-15 * h:
                         break
@@ -603,6 +637,23 @@ class SimulationRun:
         self.periods += 1
         self.t = self.periods * opt.dt
         self._obs, self._applied, self._k1 = None, False, None
+
+    def _enter(self, d: Domain, x: np.ndarray, impact: Impact) -> None:
+        """The bookkeeping of entering ``d`` at state x through ``impact``: logged, a
+        touchdown on heel or toe flagged, the delayed human's pipeline restarted, the guard,
+        the phase's running peak and the stall clock reset."""
+        sim = self.sim
+        self.impacts.append(impact)
+        if abs(impact.foot_pitch) > sim.opt.max_touchdown_pitch:
+            self._heel = impact.foot_pitch
+        if self._n_delay is not None:  # the pipeline restarts at touchdown
+            self._pipeline.clear()
+            v_now = sim._feedback(d, x)
+            self._pipeline.append(v_now)
+            self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
+        self._z_prev = sim.guard_height(d, x)
+        self._tau_peak = -np.inf
+        self._t_step = impact.t
 
     def last_sample(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, u, lam) of the last logged period (after :meth:`apply`): the state at its
