@@ -29,10 +29,15 @@ its curves) with the two changes a foot on its heel or toe needs:
   that row the torques of least norm picked a squeeze of their own: on openOFM's fit, at the
   fitted state itself, 90-140 N m more at each hip and the trailing toe's F_x 0.16 W from the
   fit's.  The human's torques control ``Domain.human_outputs`` (on a toe its four joints;
-  leading a double support its hip, knee and ankle and the squeeze (the prosthesis's, pushing
-  off: y1 and the other hip); trailing, y1, the hips and the squeeze): in a double support
-  the person sets how the load is shared between the feet.  Every domain has as many rows as
-  torques.
+  leading a double support (``ds_h``) its hip, knee and sole and the squeeze, the
+  prosthesis pushing off holding y1 and the other hip; trailing (``ds_p``) y1, the hips and
+  the prosthesis sole's pitch, the prosthesis's knee and ankle holding its knee and the
+  squeeze).  In ``ds_p`` the human cannot hold the squeeze: both legs are nearly straight as
+  it starts (the trailing knee at 5 deg), and the human's four rows with the squeeze among
+  them go singular there (condition number, rows scaled to 1, up to 3900 on the committed
+  cycle, against at most 100 for the rows it holds now and 150 in ``ds_h``); given a
+  prosthesis torque held over 1 ms, the human's torques then blew up and the heel left the
+  ground with 0.48 kN of pull.  Every domain has as many rows as torques.
 
 With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_max - p_min:
 
@@ -181,6 +186,11 @@ class ContactConstraints:
             v = ca.vertcat(v, 0)
             self.squeeze = ca.Function(f"squeeze_{d}", [q, qd, theta, model.u], [err, ratio],
                                        ["q", "qd", "theta", "u"], ["error", "ratio"])
+        #: (q, qd, theta) -> A: the stacked outputs' second derivatives (y1's first) per
+        #: torque (rows in ``human_outputs`` order of the stack, columns the six torques,
+        #: the prosthesis's motor torques last)
+        self.decoupling = ca.Function(f"decoupling_{d}", [q, qd, theta], [A],
+                                      ["q", "qd", "theta"], ["A"])
         rhs = Lf + v
         u = -ca.solve(A, rhs)
         u_p = ca.SX.sym("u_p", 2)

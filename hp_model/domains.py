@@ -228,8 +228,8 @@ class Domain(Choice):
         return _SPECS[self].y2_coords.index(coord)
 
 
-#: the human's joints: on a toe its torques hold them (leading a double support, all but the
-#: prosthesis-side hip, with the squeeze)
+#: the human's joints: on a toe its torques hold them (the double supports' rows:
+#: :mod:`hp_model.contact_outputs`)
 _HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
 _P_LEG = StanceLeg("th_rh", "th_pk", "th_pa", "p")
 _L_LEG = StanceLeg("th_lh", "th_lk", "th_la", "l")
@@ -247,7 +247,7 @@ _SPECS: dict[Domain, DomainSpec] = {
     Domain.DS_P: DomainSpec(
         contacts=(FootContact("p", FootPart.HEEL), FootContact("l", FootPart.TOE)),
         stance_leg=_P_LEG, y2_coords=("th_lh", "th_rh", "th_pk", "p_sole_pitch"),
-        human_outputs=(0, 1, 2, 5)),
+        human_outputs=(0, 1, 2, 4)),
     Domain.PS_TOE: DomainSpec(
         contacts=(FootContact("p", FootPart.TOE),), stance_leg=_P_LEG,
         y2_coords=_HUMAN_JOINTS + PROSTHESIS, human_outputs=(0, 1, 2, 3),
