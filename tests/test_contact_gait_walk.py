@@ -22,7 +22,8 @@ def test_the_fitted_cycle_walks_in_closed_loop() -> None:
     assert np.all(np.abs(walk.strides / stride - 1) < 0.03), walk.strides
     assert np.all(np.abs(walk.speeds / (stride_length / stride) - 1) < 0.03), walk.speeds
     assert np.ptp(walk.strides) < 0.005
-    assert "feedback linearization" in walk.line()
+    assert "holding that law's torque over each 1 ms period within its motor limits" \
+        in walk.line()
     rec = walk.to_json()
     assert rec["walks"] and rec["steps"] == 6
 

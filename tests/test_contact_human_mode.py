@@ -1,7 +1,10 @@
 """The multi-contact loop with the prosthesis's torque given from outside (mode human, what a
 prosthesis controller drives): a prosthesis that applies the oracle's torque, held over each
-1 ms period like a controller's, walks the oracle's walk, every contact watched (a double
-support's trailing foot leaves when it would pull: hp_model.simulator).
+1 ms period like a controller's and within the motors' limits, walks the oracle's walk,
+every contact watched (a double support's trailing foot leaves when it would pull:
+hp_model.simulator).  The committed cycle is fitted with a margin under the motors (the fit's
+``motor_margin``): fitted at the limits, the ankle saturated through the push-off and the
+walker fell at the first heel strike.
 
 The human's rows in each double support (hp_model.contact_outputs) are the ones its four
 torques can hold on the walk: with the squeeze among its rows in ``ds_p`` they went singular
@@ -13,64 +16,42 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
+from characterization.gait.contact_gait import GAINS, contact_gait_of, held_oracle, start_state
 from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain, DomainGraph
-from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator, SimResult
 from tests.multicontact_cycle import load_cycle
 
-#: motor side, N m: the committed cycle was fitted without a margin under the device's
-#: limits and its regressed curves ask the ankle for more at push-off (the loop's question
-#: here is the human's law, not the motor)
-LIFTED_LIMIT = 100.0
 G = 9.81
 pytestmark = pytest.mark.slow  # about a minute: a model of its own (compiled once)
-
-
-def _lifted(model: HumanProsthesisModel) -> HumanProsthesisModel:
-    dev = model.device
-    pros = dev.prosthesis
-    joints = {j: getattr(pros, j).model_copy(update={"torque_limit": getattr(
-        pros, j).torque_limit.model_copy(update={"value": LIFTED_LIMIT})})
-        for j in ("knee", "ankle")}
-    dev = dev.model_copy(update={"prosthesis": pros.model_copy(update=joints)})
-    return HumanProsthesisModel(model.subject, dev, graph=model.graph)
 
 
 @pytest.fixture(scope="module")
 def loop():
     model, traj, durations, _ = load_cycle()
-    model = _lifted(model)
     gait = contact_gait_of(model, traj, durations)
     cl = ClosedLoop(model, 5)
     sim = HybridSimulator(model, cl, gait.thetas(), np.array(GAINS))
     return model, traj, cl, sim
 
 
-def _held(model, traj, cl, sim, steps: int) -> SimResult:
-    oracle = {d: cl.vcs[d].numeric()[f"fl_{d}"] for d in model.graph.domains}
+def _held(traj, cl, sim, steps: int) -> SimResult:
     q0, qd0 = start_state(traj)
-    run = sim.start(q0, qd0, DomainGraph.MULTICONTACT.domains[0], mode="human")
-    while run.steps < steps and run.t < 2.0 * steps:
-        st = run.observe()
-        u = oracle[st.domain](st.q, st.qd, sim.thetas[st.domain], sim.gains)[0]
-        assert run.apply(np.asarray(u).ravel()[4:6]) is None, run.fall
-        run.advance()
-    return run.result()
+    return sim.run(q0, qd0, DomainGraph.MULTICONTACT.domains[0], steps=steps,
+                   duration=2.0 * steps, policy=held_oracle(cl, sim.thetas, sim.gains))
 
 
 def test_a_prosthesis_holding_the_oracles_torque_walks_the_oracles_walk(loop) -> None:
     model, traj, cl, sim = loop
     steps = 6
-    held = _held(model, traj, cl, sim, steps)
+    held = _held(traj, cl, sim, steps)
     q0, qd0 = start_state(traj)
     full = sim.run(q0, qd0, DomainGraph.MULTICONTACT.domains[0], steps=steps,
                    duration=2.0 * steps)
-    assert held.steps == steps and full.fall is None
+    assert held.fall is None and held.steps == steps and full.fall is None
     # the same gait: each step's duration within 3 % and length within 1 % of the oracle's
-    # (the torque held 1 ms instead of evaluated at every Runge-Kutta stage moves the limit
-    # cycle a little)
+    # (the torque held 1 ms instead of evaluated at every Runge-Kutta stage, and clamped to
+    # the motors' limits, moves the limit cycle a little)
     def steps_of(res):  # (durations s, lengths m) of the steps after the first heel strike
         strikes = [i for i in res.impacts if i.starts_step]
         t, x = np.array([i.t for i in strikes]), np.array([i.q[0] for i in strikes])

@@ -13,6 +13,7 @@ import pytest
 from characterization.gait.multicontact import (
     GRAPH,
     MultiContactError,
+    MultiContactOptions,
     contact_events,
     fit_multicontact,
     heel_off,
@@ -172,9 +173,29 @@ def test_the_ground_forces_are_a_persons(fitted, mc_model):
 
 
 @pytest.mark.slow
+def test_the_fit_leaves_the_motors_a_margin(fitted, mc_model):
+    """The prosthesis's motor torques stay within (1 - motor_margin) of the device's limits
+    over the whole cycle, and the margin is used (the push-off presses against it)."""
+    _, r = fitted
+    margin = MultiContactOptions().motor_margin
+    limit = (1 - margin) * mc_model.torque_limits[4:6]
+    peak = np.max([np.abs(r.trajectory[d]["u"][4:6]).max(axis=1) for d in GRAPH.domains],
+                  axis=0)
+    assert np.all(peak <= limit * (1 + 1e-6)), (peak, limit)
+    assert peak[1] > 0.95 * limit[1], (peak, limit)  # the ankle at push-off
+
+
+@pytest.mark.parametrize("margin", [-0.1, 1.0, 1.5])
+def test_a_motor_margin_outside_zero_to_one_is_refused(margin):
+    with pytest.raises(MultiContactError, match="motor_margin"):
+        MultiContactOptions(motor_margin=margin)
+
+
+@pytest.mark.slow
 def test_the_fitted_cycle_walks_in_closed_loop(fitted, mc_model):
     """The fit with defaults, regressed onto the multi-contact virtual constraints, walks 10
-    steps in closed loop (what `gait fit` requires before writing it), at the fit's stride
+    steps in closed loop (what `gait fit` requires before writing it: the prosthesis holding
+    the oracle's torque each 1 ms within its motors' limits), at the fit's stride
     and speed within 3 % (the loop tracks curves regressed from the fit, not the fit), the
     strides within 5 ms of each other (a limit cycle)."""
     from characterization.gait.contact_gait import contact_gait, walk_contact_gait
@@ -212,7 +233,7 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
     doc = load_multicontact_gait(out)
     # the person's gait and walking in closed loop: both, or the verdict says which failed
     loop = doc["closed_loop"]
-    assert "closed loop" in res.output and loop["controller"].startswith("feedback")
+    assert "closed loop" in res.output and "within its motor limits" in loop["controller"]
     assert loop["walks"] is (loop["fall"] is None and loop["steps"] == loop["wanted"])
     passed = doc["check"]["passed"] and loop["walks"]
     assert res.exit_code == (0 if passed else 1), res.output

@@ -33,10 +33,12 @@ from characterization.gait.multicontact import (
     body_weight,
 )
 from hp_model import bezier
+from hp_model.closed_loop import ClosedLoop
 from hp_model.contact_outputs import ContactConstraints, selection
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
+from hp_model.simulator import HybridSimulator, Policy, SimState
 
 #: the Bezier degree of the multi-contact gait's curves
 DEGREE = 5
@@ -185,31 +187,51 @@ class ContactWalk:
     def to_json(self) -> dict[str, Any]:
         return {"walks": self.walks, "steps": self.steps, "wanted": self.wanted,
                 "fall": self.fall, "strides": self.strides, "speeds": self.speeds,
-                "controller": "feedback linearization of the fitted gait (human and "
-                              "prosthesis)"}
+                "controller": HELD_ORACLE}
 
     def line(self) -> str:
         """One line: the verdict and how it was run."""
-        how = ("the human and the prosthesis both on feedback linearization of the fitted "
-               "gait; the prosthesis controllers do not run the multi-contact graph yet")
+        how = (f"{HELD_ORACLE}; the product's prosthesis controllers do not run the "
+               "multi-contact graph yet")
         if not self.walks:
             return f"does not walk: after {self.steps} steps, {self.fall} ({how})"
         return (f"walks {self.steps} steps in closed loop: stride "
                 f"{np.median(self.strides):.3f} s, {np.median(self.speeds):.3f} m/s ({how})")
 
 
+#: how :func:`walk_contact_gait` runs the prosthesis
+HELD_ORACLE = ("the human on feedback linearization of the fitted gait, the prosthesis "
+               "holding that law's torque over each 1 ms period within its motor limits")
+
+
+def held_oracle(closed_loop: ClosedLoop, thetas: Mapping[Domain, np.ndarray],
+                gains: np.ndarray) -> Policy:
+    """The prosthesis policy that applies, each period, the motor torque (2, N m) the full
+    feedback linearization of the gait gives at the period's start (the simulator holds it
+    over the period and clamps it to the motors' limits): full-state feedback, what a
+    prosthesis controller's torque is measured against."""
+    fl = {d: closed_loop.vcs[d].numeric()[f"fl_{d}"] for d in closed_loop.model.graph.domains}
+
+    def policy(_t: float, st: SimState) -> np.ndarray:
+        u = fl[st.domain](st.q, st.qd, thetas[st.domain], gains)[0]
+        return np.asarray(u).ravel()[4:6]
+
+    return policy
+
+
 def walk_contact_gait(model: HumanProsthesisModel, gait: ContactGait,
                       trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
                       gains: tuple[float, float, float] = GAINS) -> ContactWalk:
     """Simulate ``steps`` steps of ``gait`` from the fitted cycle's start (the in-process
-    simulator, mode full) and measure them (:class:`ContactWalk`)."""
-    from hp_model.closed_loop import ClosedLoop
-    from hp_model.simulator import HybridSimulator
-
+    simulator, mode human: the prosthesis on :func:`held_oracle`) and measure them
+    (:class:`ContactWalk`)."""
     cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
-    sim = HybridSimulator(model, cl, gait.thetas(), np.array(gains))
+    g = np.array(gains)
+    thetas = gait.thetas()
+    sim = HybridSimulator(model, cl, thetas, g)
     q0, qd0 = start_state(trajectory)
-    res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps)
+    res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
+                  policy=held_oracle(cl, thetas, g))
     strikes = [i for i in res.impacts if i.into == Domain.DS_H]
     t = np.array([i.t for i in strikes])
     x = np.array([float(i.q[0]) for i in strikes])
