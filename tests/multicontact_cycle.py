@@ -23,7 +23,7 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 
 PATH = Path(__file__).parent / "data" / "gaits" / "openofm_multicontact_cycle.npz"
 TAKE = Path(__file__).parent / "data" / "openofm-walk"
-KEYS = ("q", "qd", "qdd", "lam")
+KEYS = ("t", "q", "qd", "qdd", "u", "lam")
 
 
 def save_cycle(path: Path, model: HumanProsthesisModel, trajectory: dict, durations: dict,

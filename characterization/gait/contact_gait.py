@@ -179,6 +179,8 @@ class ContactWalk:
     fall: str | None
     strides: np.ndarray
     speeds: np.ndarray
+    #: how the human and the prosthesis were run
+    controller: str = ""
 
     @property
     def walks(self) -> bool:
@@ -187,12 +189,12 @@ class ContactWalk:
     def to_json(self) -> dict[str, Any]:
         return {"walks": self.walks, "steps": self.steps, "wanted": self.wanted,
                 "fall": self.fall, "strides": self.strides, "speeds": self.speeds,
-                "controller": HELD_ORACLE}
+                "controller": self.controller or HELD_ORACLE}
 
     def line(self) -> str:
         """One line: the verdict and how it was run."""
-        how = (f"{HELD_ORACLE}; the product's prosthesis controllers do not run the "
-               "multi-contact graph yet")
+        how = (self.controller or HELD_ORACLE) + ("; the paper's CLF-QP does not run the "
+                                                  "multi-contact graph yet")
         if not self.walks:
             return f"does not walk: after {self.steps} steps, {self.fall} ({how})"
         return (f"walks {self.steps} steps in closed loop: stride "

@@ -42,6 +42,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     from hp_model.human_prosthesis import HumanProsthesisModel
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
+    from orchestrator.loop.contact_walk import walk_with_contact_pd
 
     console = Console(stderr=True)
     check_output_file(out)
@@ -73,6 +74,10 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         walk = walk_contact_gait(model, outputs, result.trajectory)
     Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
                     highlight=False)
+    with console.status("gait fit: the fitted cycle with the prosthesis on contact-pd"):
+        pd_walk = walk_with_contact_pd(model, outputs, result.trajectory)
+    Console().print(f"[bold]prosthesis controller[/bold] {pd_walk.line()} (reported, not "
+                    "required)", soft_wrap=True, highlight=False)
     passed = check.passed and walk.walks
     if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
@@ -81,6 +86,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         doc["device"] = dev.model_dump(mode="json")  # the gait's model, remade from the file
         doc["virtual_constraints"] = outputs.to_json()
         doc["closed_loop"] = walk.to_json()
+        doc["closed_loop_controller"] = pd_walk.to_json()
         save_multicontact_gait(out, doc)
         if figure:
             save_person_figure(out.with_suffix(".png"), take, gait)

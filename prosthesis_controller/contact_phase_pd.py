@@ -1,0 +1,192 @@
+"""A prosthesis controller for the multi-contact graph from AMPRO3's own sensors
+(:class:`ContactPhasePD`): joint PD on the fitted gait's knee and ankle, with the gait's motor
+torque as feedforward, both read at a phase the prosthesis measures itself.
+
+- **Stance** (foot switch on: heel strike to toe-off, across ``ds_p``, ``ps``, ``ps_toe`` and
+  ``ds_h``): the phase is the hip's forward progress over the heel's ground point, from the
+  socket IMU's pitch and the knee and ankle encoders (the leg's kinematics, one function of
+  the model): over the heel while the foot is on its heel or flat, over the toe plus the
+  heel-to-toe length once the heel is up (whichever of the two is lower is on the ground).
+  It rises monotonically over the whole stance, so one law runs the stance without deciding
+  which domain it is in (a prototype that switched laws on a detected contact part fell when
+  2 ms of the wrong law ran at the heel off).
+- **Swing** (foot switch off): the time since toe-off over the gait's swing time.
+- **Reference**: one stride of the gait as the model walks it (:func:`tables_from_walk`: the
+  knee's and the ankle's angles, rates and motor torques against the phase), interpolated
+  linearly in the phase (the torque has kinks at the contact transitions).
+
+Not the paper's CLF-QP: the product's ``clfqp`` runs the paper's two domains only.  Measured
+on the committed openOFM cycle and OpenSim's strides (fitted with the default motor margin),
+the simulated human on its feedback linearization: 20 steps each with the default gains; on
+OpenSim's strides stance gains above 100 N m/rad (or damping above 3 N m s/rad) fall at the
+prosthesis's heel strike, where the swing lands the ankle 7-8 deg off the stance's start
+(docs/gait-design.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from hp_model.compiled import NumericFunction
+from hp_model.domains import PROSTHESIS
+from hp_model.human_prosthesis import HumanProsthesisModel
+from prosthesis_controller.measurement import ProsthesisMeasurement
+
+
+@dataclass(frozen=True)
+class PhaseTable:
+    """A stretch of the gait against its phase: ``phase`` (n,) non-decreasing from 0 to 1;
+    ``values`` (n, 6): th_pk, th_pa (rad), their rates (rad/s), the motor torques (N m)."""
+
+    phase: np.ndarray
+    values: np.ndarray
+
+    def at(self, s: float) -> np.ndarray:
+        """The values (6,) at phase ``s``, linear between samples, clamped to the table's
+        ends (as ``numpy.interp``, one search for the six columns)."""
+        ph = self.phase
+        s = min(max(s, float(ph[0])), float(ph[-1]))
+        i = min(max(int(np.searchsorted(ph, s, side="right")) - 1, 0), ph.size - 2)
+        span = ph[i + 1] - ph[i]
+        w = (s - ph[i]) / span if span > 0 else 0.0
+        return self.values[i] + w * (self.values[i + 1] - self.values[i])
+
+
+class LegKinematics:
+    """The prosthesis leg's geometry from what it senses: ``f`` (socket pitch, knee, ankle)
+    -> (x_hip - x_heel, x_hip - x_toe, z_heel - z_toe) (m, world frame); ``heel_to_toe``:
+    the sole's length between its heel and toe points (m)."""
+
+    def __init__(self, f: ca.Function, heel_to_toe: float) -> None:
+        self.f, self.heel_to_toe = f, heel_to_toe
+        self._num = NumericFunction(f)  # bound to buffers: called every tick
+
+    @classmethod
+    def of(cls, model: HumanProsthesisModel) -> LegKinematics:
+        ix = model.coord_names.index
+        x = ca.SX.sym("x", 3)  # socket pitch, knee, ankle
+        socket = model.pitch_row("socket")
+        # a posture with the socket at the sensed pitch: the leg below it depends on nothing
+        # else (its translation joints are held at zero)
+        base = int(np.flatnonzero(socket)[0])
+        sub = ca.SX.zeros(model.nq)
+        sub[base], sub[ix(PROSTHESIS[0])], sub[ix(PROSTHESIS[1])] = x[0], x[1], x[2]
+        hip, heel, toe = (model.frame_expr(n, sub) for n in ("hip", "p_heel", "p_toe"))
+        f = ca.Function("prosthesis_leg", [x],
+                        [ca.vertcat(hip[0] - heel[0], hip[0] - toe[0], heel[1] - toe[1])])
+        d = np.asarray(f(np.zeros(3))).ravel()
+        return cls(f, float(d[0] - d[1]))
+
+    def progress(self, pitch: float, knee: float, ankle: float) -> float:
+        """The hip's forward progress (m) over the heel's ground point (module docstring)."""
+        n = self._num
+        n.inputs[0][:] = (pitch, knee, ankle)
+        n.call_inplace()
+        over_heel, over_toe, heel_above_toe = n.outputs[0]
+        return float(over_heel if heel_above_toe <= 0.0 else over_toe + self.heel_to_toe)
+
+
+@dataclass(frozen=True)
+class ContactGaitTables:
+    """What :class:`ContactPhasePD` follows: the stance against its phase, the swing against
+    time over ``swing_time`` (s), and the hip's progress (m) at heel strike and toe-off."""
+
+    stance: PhaseTable
+    swing: PhaseTable
+    progress: tuple[float, float]
+    swing_time: float
+
+
+def tables_from_walk(leg: LegKinematics, t: np.ndarray, sensed: np.ndarray,
+                     contact: np.ndarray, torque: np.ndarray) -> ContactGaitTables:
+    """The tables of a walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5): socket
+    pitch, knee, ankle (rad), knee and ankle rates (rad/s); ``contact`` (n,) the foot switch;
+    ``torque`` (n, 2) the motor torques (N m).  From its first stance that starts with a heel
+    strike (the switch turning on) and the swing after it.  The gait as the model walks it:
+    the feedforward is the torque of that walk, not the fit's node torques, which belong to
+    the fit's own accelerations (the regressed curves the walker follows differ from them by
+    up to 0.7 N m at the motor).  ValueError without such a stance and swing, or if the
+    stance's phase does not rise."""
+    c = np.asarray(contact, bool)
+    on = np.flatnonzero(~c[:-1] & c[1:]) + 1
+    off = np.flatnonzero(c[:-1] & ~c[1:]) + 1
+    i0 = on[0] if on.size else None
+    i1 = next((i for i in off if i0 is not None and i > i0), None)
+    i2 = next((i for i in on if i1 is not None and i > i1), None)
+    if i0 is None or i1 is None or i2 is None:
+        raise ValueError("the walk holds no stance from a heel strike and the swing after it")
+    x = np.asarray(sensed, float)
+    p = np.array([leg.progress(*x[i, :3]) for i in range(i0, i1)])
+    if not np.all(np.diff(p) > -1e-6):
+        k = int(np.argmin(np.diff(p)))
+        raise ValueError(f"the stance's phase does not rise (sample {k}: {p[k]:.4f} -> "
+                         f"{p[k + 1]:.4f} m)")
+    vals = np.c_[x[:, 1:5], np.asarray(torque, float)]
+    swing_time = float(t[i2] - t[i1])
+    return ContactGaitTables(PhaseTable((p - p[0]) / (p[-1] - p[0]), vals[i0:i1]),
+                             PhaseTable((t[i1:i2] - t[i1]) / swing_time, vals[i1:i2]),
+                             (float(p[0]), float(p[-1])), swing_time)
+
+
+@dataclass(frozen=True)
+class PDGains:
+    """Joint-side gains: stiffness (N m/rad) and damping (N m s/rad), (knee, ankle)."""
+
+    kp: tuple[float, float]
+    kd: tuple[float, float]
+
+
+#: the defaults (module docstring): soft, the ankle rolling the foot down after the heel
+#: strike under the body's weight
+STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
+SWING_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
+
+
+class ContactPhasePD:
+    """The controller of the module docstring, one tick per measurement: motor torques
+    (knee, ankle; N m), clamped to ``limits`` (N m, motor side), zero for a measurement it
+    cannot use (a non-finite field or no IMU pitch)."""
+
+    name = "contact-pd"
+
+    def __init__(self, tables: ContactGaitTables, leg: LegKinematics,
+                 gear: tuple[float, float], limits: tuple[float, float],
+                 stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> None:
+        self.tables, self.leg = tables, leg
+        self._gear = (float(gear[0]), float(gear[1]))
+        self._limits = (float(limits[0]), float(limits[1]))
+        self._gains = {True: (stance.kp, stance.kd), False: (swing.kp, swing.kd)}
+        self.reset()
+
+    def reset(self) -> None:
+        self._in_stance: bool | None = None
+        self._t_off: float | None = None
+        #: the last tick's phase (stance: the progress phase; swing: the time phase)
+        self.phase = math.nan
+
+    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
+        fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)
+        if not all(math.isfinite(v) for v in fields):
+            return 0.0, 0.0
+        tab = self.tables
+        stance = bool(m.contact)
+        if stance:
+            p0, p1 = tab.progress
+            s = (self.leg.progress(m.socket_pitch, m.knee_angle, m.ankle_angle) - p0) / (p1 - p0)
+            ref = tab.stance.at(s)
+        else:
+            if self._in_stance is not False or self._t_off is None:
+                self._t_off = m.t  # toe-off (or a start in swing)
+            s = (m.t - self._t_off) / tab.swing_time
+            ref = tab.swing.at(s)
+        self._in_stance, self.phase = stance, s
+        (kpk, kpa), (kdk, kda) = self._gains[stance]
+        (gk, ga), (lk, la) = self._gear, self._limits
+        rk, ra, rvk, rva, fk, fa = ref.tolist()
+        uk = fk + (kpk * (rk - m.knee_angle) + kdk * (rvk - m.knee_vel)) / gk
+        ua = fa + (kpa * (ra - m.ankle_angle) + kda * (rva - m.ankle_vel)) / ga
+        return min(max(uk, -lk), lk), min(max(ua, -la), la)

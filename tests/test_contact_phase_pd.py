@@ -1,0 +1,113 @@
+"""contact-pd, the multi-contact graph's prosthesis controller from its own sensors
+(prosthesis_controller.contact_phase_pd; orchestrator.loop.contact_walk): its stance phase
+from the socket IMU and the encoders against the model's own frames, its tables, its
+behaviour on bad input, and the committed cycle walked with it in the in-process plant."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from characterization.gait.contact_gait import GAINS, contact_gait_of
+from hp_model.domains import PROSTHESIS, Domain
+from orchestrator.loop.contact_walk import (
+    _simulator,
+    controller_tables,
+    walk_with_contact_pd,
+)
+from prosthesis_controller.contact_phase_pd import (
+    ContactPhasePD,
+    LegKinematics,
+    PhaseTable,
+)
+from prosthesis_controller.measurement import ProsthesisMeasurement
+from tests.multicontact_cycle import load_cycle
+
+pytestmark = pytest.mark.slow  # about a minute: the committed cycle's model, compiled once
+
+
+@pytest.fixture(scope="module")
+def cycle():
+    model, traj, durations, _ = load_cycle()
+    return model, traj, durations, contact_gait_of(model, traj, durations)
+
+
+@pytest.fixture(scope="module")
+def tables(cycle):
+    model, traj, _, gait = cycle
+    leg = LegKinematics.of(model)
+    return leg, controller_tables(_simulator(model, gait, GAINS), leg, traj)
+
+
+def test_the_stance_phase_is_the_hip_over_the_heels_ground_point(cycle) -> None:
+    """From (socket pitch, knee, ankle) alone: the hip over the heel while the heel is down,
+    over the toe plus the heel-to-toe length once the heel is up, against the full model's
+    frames at every node of the fitted stance (hip, heel and toe from all 12 coordinates)."""
+    model, traj, _, _ = cycle
+    leg = LegKinematics.of(model)
+    frames = model.numeric()["frames"]
+    ix = model.coord_names.index
+    pk, pa = ix(PROSTHESIS[0]), ix(PROSTHESIS[1])
+    pitch = model.pitch_row("socket")
+    def frame_x(q: np.ndarray, name: str) -> float:
+        return float(np.asarray(frames(q, np.zeros(model.nq))[0])[0, model.frame_index(name)])
+
+    # the heel's ground point: where ds_p's heel strike put it (the cycle's last domain:
+    # ps of the next stride starts from it; ps of this cycle from its own heel)
+    ground = {d: frame_x(np.asarray(traj[Domain.PS if d != Domain.DS_P else d]["q"])[:, 0],
+                         "p_heel") for d in (Domain.DS_P, Domain.PS, Domain.PS_TOE, Domain.DS_H)}
+    for d, heel_x in ground.items():
+        q = np.asarray(traj[d]["q"])
+        for k in range(q.shape[1]):
+            want = frame_x(q[:, k], "hip") - heel_x
+            got = leg.progress(float(pitch @ q[:, k]), q[pk, k], q[pa, k])
+            assert got == pytest.approx(want, abs=2e-3), (d, k)  # the fit holds contacts to 1 mm
+
+
+def test_the_tables_span_one_stance_and_one_swing(cycle, tables) -> None:
+    _, _, durations, _ = cycle
+    _, tab = tables
+    for t in (tab.stance, tab.swing):
+        assert t.phase[0] == 0.0 and 0.99 < t.phase[-1] <= 1.0  # the last 1 ms sample
+        assert np.all(np.diff(t.phase) >= -1e-9)
+    stance = sum(durations[d] for d in (Domain.DS_P, Domain.PS, Domain.PS_TOE, Domain.DS_H))
+    swing = durations[Domain.PNS] + durations[Domain.PNS_TOE]
+    assert tab.swing_time == pytest.approx(swing, rel=0.03)
+    assert tab.stance.phase.size * 1e-3 == pytest.approx(stance, rel=0.03)  # 1 ms samples
+    assert tab.progress[1] - tab.progress[0] > 0.5  # m: a stance's hip travel
+
+
+def test_bad_input_gives_no_torque_and_the_output_is_bounded(tables) -> None:
+    leg, tab = tables
+    limits = (0.5, 0.6)
+    ctl = ContactPhasePD(tab, leg, (50.0, 50.0), limits)
+    ok = ProsthesisMeasurement(0.1, 0.3, 0.1, 0.0, 0.0, 300.0, True, 0.2)
+    u = ctl.tick(ok)
+    assert all(math.isfinite(v) for v in u)
+    assert abs(u[0]) <= limits[0] and abs(u[1]) <= limits[1]
+    for bad in (ProsthesisMeasurement(0.2, math.nan, 0.1, 0.0, 0.0, 300.0, True, 0.2),
+                ProsthesisMeasurement(0.3, 0.3, 0.1, 0.0, 0.0, 300.0, True, math.nan),
+                ProsthesisMeasurement(0.4, 0.3, 0.1, math.inf, 0.0, 300.0, False, 0.2)):
+        assert ctl.tick(bad) == (0.0, 0.0)
+
+
+def test_a_phase_table_clamps_and_interpolates() -> None:
+    t = PhaseTable(np.array([0.0, 0.5, 1.0]), np.arange(18.0).reshape(3, 6))
+    np.testing.assert_allclose(t.at(0.25), np.arange(6) + 3.0)
+    np.testing.assert_allclose(t.at(-1.0), np.arange(6))
+    np.testing.assert_allclose(t.at(2.0), np.arange(6) + 12.0)
+
+
+def test_the_committed_cycle_walks_with_contact_pd(cycle) -> None:
+    """10 steps in the in-process plant (AMPRO3's sensors, the torque held each 1 ms within
+    the motors' limits), stride and speed within 3 % of the fitted cycle's."""
+    model, traj, durations, gait = cycle
+    walk = walk_with_contact_pd(model, gait, traj, steps=10)
+    assert walk.walks, walk.line()
+    stride = sum(durations.values())
+    _, _, _, stride_length = load_cycle()
+    assert np.all(np.abs(walk.strides / stride - 1) < 0.03), walk.strides
+    assert np.all(np.abs(walk.speeds / (stride_length / stride) - 1) < 0.03), walk.speeds
+    assert "contact-pd" in walk.line() and walk.to_json()["controller"].endswith("sensors)")
