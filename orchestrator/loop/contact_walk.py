@@ -29,9 +29,12 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
 from orchestrator.loop.plant import Observation, SimulatorPlant
 from prosthesis_controller.contact_phase_pd import (
+    STANCE_GAINS,
+    SWING_GAINS,
     ContactGaitTables,
     ContactPhasePD,
     LegKinematics,
+    PDGains,
     tables_from_walk,
 )
 from prosthesis_controller.measurement import ProsthesisMeasurement
@@ -77,14 +80,17 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
 
 def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                          trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
-                         gains: tuple[float, float, float] = GAINS) -> ContactWalk:
-    """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactPhasePD`."""
+                         gains: tuple[float, float, float] = GAINS,
+                         stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS
+                         ) -> ContactWalk:
+    """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactPhasePD`
+    (``stance``, ``swing``: its gains); ``gains``: the simulated human's."""
     sim = _simulator(model, gait, gains)
     leg = LegKinematics.of(model)
     p = model.device.prosthesis
     ctl = ContactPhasePD(controller_tables(sim, leg, trajectory), leg,
                          (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-                         (p.knee.torque_limit.value, p.ankle.torque_limit.value))
+                         (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance, swing)
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     while True:
