@@ -16,11 +16,10 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
   linearly in the phase (the torque has kinks at the contact transitions).
 
 Not the paper's CLF-QP: the product's ``clfqp`` runs the paper's two domains only.  Measured
-on the committed openOFM cycle and OpenSim's strides (fitted with the default motor margin),
-the simulated human on its feedback linearization: 20 steps each with the default gains; on
-OpenSim's strides stance gains above 100 N m/rad (or damping above 3 N m s/rad) fall at the
-prosthesis's heel strike, where the swing lands the ankle 7-8 deg off the stance's start
-(docs/gait-design.md).
+with the simulated human on its feedback linearization (docs/gait-design.md): 20 steps on
+openOFM's fits; on OpenSim's strides' fit 16, then the prosthesis's heel strike pulls (in a
+double support the prosthesis's torque sets how the load is shared between the feet, and a
+joint PD's errors there unload a contact).
 """
 
 from __future__ import annotations
@@ -140,8 +139,7 @@ class PDGains:
     kd: tuple[float, float]
 
 
-#: the defaults (module docstring): soft, the ankle rolling the foot down after the heel
-#: strike under the body's weight
+#: the defaults (docs/gait-design.md: the window of gains that walk is narrow)
 STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
 SWING_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
 

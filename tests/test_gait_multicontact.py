@@ -191,6 +191,12 @@ def test_a_motor_margin_outside_zero_to_one_is_refused(margin):
         MultiContactOptions(motor_margin=margin)
 
 
+@pytest.mark.parametrize("speed", [0.0, -3.0])
+def test_a_joint_speed_bound_must_be_positive(speed):
+    with pytest.raises(MultiContactError, match="max_joint_speed"):
+        MultiContactOptions(max_joint_speed=speed)
+
+
 @pytest.mark.slow
 def test_the_fitted_cycle_walks_in_closed_loop(fitted, mc_model):
     """The fit with defaults, regressed onto the multi-contact virtual constraints, walks 10

@@ -56,7 +56,7 @@ from characterization.mocap.step_segmentation import take_spans
 from characterization.mocap.steps_artifact import FEET, StepsArtifact, plate_forces
 from hp_model.blas_threads import single_threaded_blas
 from hp_model.domains import Domain, DomainGraph, FootContact
-from hp_model.human_prosthesis import SOCKET_COORDS, HumanProsthesisModel
+from hp_model.human_prosthesis import ACTUATED, SOCKET_COORDS, HumanProsthesisModel
 
 GRAPH = DomainGraph.MULTICONTACT
 #: the coordinates fitted to the take: trunk pitch and the six joints
@@ -173,9 +173,20 @@ class MultiContactOptions:
     #  push-off); at 0.15 and 0.2 it walks 20 steps (saturated in 1.3-1.4 % of the
     #  periods); at 0.3 the fit's own loop fell at a late heel strike
 
+    max_joint_speed: float | None = None  # rad/s, every joint at every point (None: none).
+    #  The takes' fastest joint is 5.4-7.0 rad/s (openOFM's and OpenSim's walks, the knee in
+    #  swing); without a bound the fit of OpenSim's strides flicks the prosthesis knee at
+    #  15 rad/s and the ankle at -19 rad/s over the 15 ms before the prosthesis's heel strike
+    #  (the impact takes the speed away).  10 rad/s removes the flick but costs the fit the
+    #  person's gait (OpenSim's: speed 9 % slow, seven angles over 3 deg RMS; openOFM's: the
+    #  prosthesis knee and hip over 3 deg): not on by default
+
     def __post_init__(self) -> None:
         if not 0.0 <= self.motor_margin < 1.0:
             raise MultiContactError(f"motor_margin {self.motor_margin} must be in [0, 1)")
+        if self.max_joint_speed is not None and not self.max_joint_speed > 0:
+            raise MultiContactError(f"max_joint_speed {self.max_joint_speed} must be "
+                                    "positive (rad/s) or None")
 
 
 @dataclass
@@ -374,10 +385,14 @@ def _domain_variables(nlp: NLP, model: HumanProsthesisModel, d: Domain,
     lb, ub = np.full((model.nq, 1), -np.inf), np.full((model.nq, 1), np.inf)
     sock = [model.coord_names.index(c) for c in SOCKET_COORDS]
     lb[sock], ub[sock] = 0.0, 0.0
+    vlb, vub = lb.copy(), ub.copy()
+    if opt.max_joint_speed is not None:
+        joints = [model.coord_names.index(c) for c in ACTUATED]
+        vlb[joints], vub[joints] = -opt.max_joint_speed, opt.max_joint_speed
     n_c = model.domains[d].n_constraints
     return {
         "q": nlp.var(f"q_{d}", (model.nq, P), guess["q"], lb, ub),
-        "qd": nlp.var(f"qd_{d}", (model.nq, P), guess["qd"], lb, ub),
+        "qd": nlp.var(f"qd_{d}", (model.nq, P), np.clip(guess["qd"], vlb, vub), vlb, vub),
         "qdd": nlp.var(f"qdd_{d}", (model.nq, P), guess["qdd"], lb, ub),
         "u": nlp.var(f"u_{d}", (model.nu, P), guess["u"], -ulim[:, None], ulim[:, None]),
         "lam": nlp.var(f"lam_{d}", (n_c, P), guess["lam"] / body_weight(model)),
