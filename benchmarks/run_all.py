@@ -147,6 +147,16 @@ def gait_multicontact_rows(j: dict[str, Any]) -> list[Row]:
                 f"{min(iters)}-{max(iters)}")]
 
 
+def contact_pd_rows(j: dict[str, Any]) -> list[Row]:
+    lo, hi = j["median_range_us"]
+    med = float(j["median_us"])
+    return [Row(f"contact-pd tick, {j['ticks']} ticks of its walk (us)", med,
+                f"{fmt(lo)}-{fmt(hi)}", None, "<= 40 us median", med <= 40.0),
+            Row("  p99 (us)", float(j["p99_us"])),
+            Row("  stance / swing median (us)", float(j["stance_median_us"]),
+                f"swing {fmt(float(j['swing_median_us']))}")]
+
+
 def playback_rows(j: dict[str, Any]) -> list[Row]:
     f, p = j["fit_s"], j["per_frame_us"]
     total = mm(f["total"])
@@ -323,6 +333,9 @@ BENCHES = (
     Bench("gait_multicontact", "the person's gait on the multi-contact graph (`gait fit "
           "--domains multicontact`) on openOFM's walk, the take's subject",
           ["--repeats", "3"], ["--repeats", "1"], gait_multicontact_rows),
+    Bench("contact_pd", "contact-pd, the multi-contact graph's prosthesis controller: its "
+          "tick on the measurements of its own walk of the committed openOFM cycle",
+          ["--repeats", "5"], ["--repeats", "1", "--steps", "2"], contact_pd_rows),
     Bench("tube_fit", "force-tube fit: 20 profiles x 150 samples, degree 3",
           ["--repeats", "15"], ["--repeats", "1"],
           stage_rows("stages_ms", "ms", {"fit_tube (all)": ("", 1000.0)})),

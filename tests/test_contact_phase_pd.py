@@ -1,5 +1,5 @@
 """contact-pd, the multi-contact graph's prosthesis controller from its own sensors
-(prosthesis_controller.contact_phase_pd; orchestrator.loop.contact_walk): its stance phase
+(prosthesis_controller.contact_phase_pd; orchestrator.experiments.contact_walk): its stance phase
 from the socket IMU and the encoders against the model's own frames, its tables, its
 behaviour on bad input, and the committed cycle walked with it in the in-process plant."""
 
@@ -12,7 +12,7 @@ import pytest
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of
 from hp_model.domains import PROSTHESIS, Domain
-from orchestrator.loop.contact_walk import (
+from orchestrator.experiments.contact_walk import (
     _simulator,
     controller_tables,
     walk_with_contact_pd,

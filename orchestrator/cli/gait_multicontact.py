@@ -42,7 +42,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     from hp_model.human_prosthesis import HumanProsthesisModel
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
-    from orchestrator.loop.contact_walk import walk_with_contact_pd
+    from orchestrator.experiments.contact_walk import walk_with_contact_pd
 
     console = Console(stderr=True)
     check_output_file(out)
