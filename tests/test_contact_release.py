@@ -73,3 +73,28 @@ def test_no_contact_of_a_double_support_pulls_on_the_ground(loop) -> None:
     assert releases, "the committed cycle's trailing toes leave a little early"
     assert all(abs(i.foot_pitch) < np.radians(0.5) for i in releases)
     assert all(i.into in (Domain.PS, Domain.PNS) and not i.starts_step for i in releases)
+
+
+def test_a_trailing_toe_sliding_under_load_is_watched_when_asked(loop) -> None:
+    """The trailing contact's slip counts where it carries more than ``trailing_slip_load``
+    (off by default, hp_model.simulator): at 0, the toe unloading at the end of the committed
+    cycle's first ``ds_h`` slides (|F_x| > mu F_z at 20-30 N) for 5 periods and the run ends
+    there, naming that contact's forces; at 0.05 BW this cycle walks."""
+    from hp_model.falls import FallReason
+    from hp_model.simulator import SimOptions
+
+    model, traj, sim = loop
+    strict = HybridSimulator(model, sim.cl, sim.thetas, sim.gains,
+                             SimOptions(trailing_slip_load=0.0))
+    q0, qd0 = start_state(traj)
+    res = strict.run(q0, qd0, DomainGraph.MULTICONTACT.domains[0], steps=6, duration=12.0)
+    fall = res.fall
+    assert fall is not None and fall.reason == FallReason.FRICTION_CONE
+    assert fall.domain == Domain.DS_H and fall.tau > 0.8
+    weight = model.tree.total_mass * G
+    assert 0 < fall.values["F_z"] < 0.05 * weight
+    assert abs(fall.values["F_x"]) > strict.opt.mu * fall.values["F_z"]
+    loaded = HybridSimulator(model, sim.cl, sim.thetas, sim.gains,
+                             SimOptions(trailing_slip_load=0.05))
+    res = loaded.run(q0, qd0, DomainGraph.MULTICONTACT.domains[0], steps=6, duration=12.0)
+    assert res.fall is None and res.steps == 6

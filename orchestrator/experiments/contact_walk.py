@@ -60,12 +60,13 @@ def _simulator(model: HumanProsthesisModel, gait: ContactGait,
 def controller_tables(sim: HybridSimulator, leg: LegKinematics,
                       trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
     """The tables of :func:`tables_from_walk` from two strides of the held oracle in the
-    plant ``sim`` from the fitted cycle's start."""
+    plant ``sim`` from the fitted cycle's start.  ValueError if it falls, or if the walk
+    gives no tables."""
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
     t, x, c, u = [], [], [], []
-    while plant.observe().t < 2.5 and plant.fall is None:
+    while plant.observe().t < 2.5:
         obs = plant.observe()
         torque = policy(obs.t, plant.run.observe())
         s = obs.sensed
@@ -74,6 +75,9 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
                   s.ankle_velocity))
         c.append(s.contact)
         u.append(plant.actuate(torque).torque)
+        if plant.fall is not None:
+            raise ValueError(f"the held oracle fell in the stride the tables are read from: "
+                             f"{plant.fall.message()}")
         plant.advance()
     return tables_from_walk(leg, np.array(t), np.array(x), np.array(c), np.array(u))
 
@@ -88,7 +92,12 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
     sim = _simulator(model, gait, gains)
     leg = LegKinematics.of(model)
     p = model.device.prosthesis
-    ctl = ContactPhasePD(controller_tables(sim, leg, trajectory), leg,
+    try:
+        tables = controller_tables(sim, leg, trajectory)
+    except ValueError as e:  # the verdict line says why, no walk
+        return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]),
+                           CONTACT_PD)
+    ctl = ContactPhasePD(tables, leg,
                          (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
                          (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance, swing)
     q0, qd0 = start_state(trajectory)
