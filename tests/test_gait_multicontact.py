@@ -191,6 +191,21 @@ def test_a_motor_margin_outside_zero_to_one_is_refused(margin):
         MultiContactOptions(motor_margin=margin)
 
 
+@pytest.mark.parametrize(("option", "value"), [("--motor-margin", "1.5"),
+                                               ("--motor-margin", "-0.1"),
+                                               ("--max-joint-speed", "0")])
+def test_gait_fit_refuses_a_bad_margin_or_speed_bound(tmp_path, option, value):
+    from typer.testing import CliRunner
+
+    from orchestrator.cli import app
+
+    res = CliRunner().invoke(app, ["gait", "fit", str(tmp_path / "steps.npz"), "--out",
+                                   str(tmp_path / "mc.json"), "--domains", "multicontact",
+                                   option, value])
+    assert res.exit_code == 2 and option in res.output, res.output
+    assert not (tmp_path / "mc.json").exists()
+
+
 @pytest.mark.parametrize("speed", [0.0, -3.0])
 def test_a_joint_speed_bound_must_be_positive(speed):
     with pytest.raises(MultiContactError, match="max_joint_speed"):
@@ -253,6 +268,7 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
         rows = len(d.y2_coords) + int(d.velocity_output) + int(d.is_double_support)
         assert np.asarray(vcs[d.value]["alpha"]).shape == (rows, 6)
     assert doc["domains"] == [d.value for d in GRAPH.domains]
+    assert doc["options"]["motor_margin"] == 0.15 and doc["options"]["max_joint_speed"] is None
     assert set(doc["ground_reaction"]) == {"human", "prosthesis"}
     json.loads(out.read_text())  # strict JSON
     assert out.with_suffix(".png").stat().st_size > 10_000  # the figure against the take

@@ -63,6 +63,13 @@ def fit(
     allow_mismatch: Annotated[bool, typer.Option(
         help="multicontact: write the gait even when it is not the person's (marked "
         "mismatch_allowed).")] = False,
+    motor_margin: Annotated[float, typer.Option(
+        help="multicontact: the prosthesis's motor torques stay within (1 - margin) of the "
+        "device's limits (feedback needs the rest; docs/gait-design.md).",
+        min=0.0, max=0.9)] = 0.15,
+    max_joint_speed: Annotated[float | None, typer.Option(
+        help="multicontact: a bound on every joint's rate, rad/s (default: none; the takes' "
+        "fastest joint moves at 5.4-7 rad/s).", min=0.1)] = None,
 ) -> None:
     """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it (or,
     with --domains multicontact, fit the person's multi-contact gait and compare it with
@@ -82,7 +89,8 @@ def fit(
         from orchestrator.cli.gait_multicontact import fit_multicontact_gait
 
         fit_multicontact_gait(steps, out, subject, device, nodes or 9, max_iter,
-                              allow_mismatch, figure)
+                              allow_mismatch, figure, motor_margin=motor_margin,
+                              max_joint_speed=max_joint_speed)
         return
     console = Console(stderr=True)
     portions = fit_segments(segments)

@@ -14,7 +14,8 @@ from orchestrator.cli.outcome import HOLDS, Verdict, conclude
 
 
 def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: Path | None,
-                          nodes: int, max_iter: int, allow_mismatch: bool, figure: bool = True
+                          nodes: int, max_iter: int, allow_mismatch: bool, figure: bool = True,
+                          *, motor_margin: float = 0.15, max_joint_speed: float | None = None
                           ) -> None:
     """Targets from the steps, the fit, the comparison printed, the artifact (and, with
     ``figure``, its figure against the take next to it) written (a mismatch only with
@@ -56,7 +57,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
             Console().print(line, soft_wrap=True, highlight=False)
     model = HumanProsthesisModel(person, dev, graph=GRAPH)
     targets = targets_from_steps(data, model, str(steps))
-    opt = MultiContactOptions(nodes=nodes, max_iter=max_iter)
+    opt = MultiContactOptions(nodes=nodes, max_iter=max_iter, motor_margin=motor_margin,
+                              max_joint_speed=max_joint_speed)
     with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
         result = fit_multicontact(model, targets, opt)
     if not result.success:
