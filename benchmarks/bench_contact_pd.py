@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
 from characterization.gait.multicontact import GRAPH
-from orchestrator.experiments.contact_walk import _simulator, controller_tables, measurement
+from orchestrator.experiments.contact_walk import controller_tables, loop_simulator
+from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_phase_pd import ContactPhasePD, LegKinematics
 from prosthesis_controller.measurement import ProsthesisMeasurement
@@ -37,7 +38,7 @@ def walk_measurements(steps: int) -> tuple[list[ProsthesisMeasurement], ContactP
     """What contact-pd read over ``steps`` steps of the committed cycle, and a controller."""
     model, traj, durations, _ = load_cycle()
     gait = contact_gait_of(model, traj, durations)
-    sim = _simulator(model, gait, GAINS)
+    sim = loop_simulator(model, gait, GAINS)
     leg = LegKinematics.of(model)
     p = model.device.prosthesis
 

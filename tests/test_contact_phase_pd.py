@@ -13,8 +13,8 @@ import pytest
 from characterization.gait.contact_gait import GAINS, contact_gait_of
 from hp_model.domains import PROSTHESIS, Domain
 from orchestrator.experiments.contact_walk import (
-    _simulator,
     controller_tables,
+    loop_simulator,
     walk_with_contact_pd,
 )
 from prosthesis_controller.contact_phase_pd import (
@@ -38,7 +38,7 @@ def cycle():
 def tables(cycle):
     model, traj, _, gait = cycle
     leg = LegKinematics.of(model)
-    return leg, controller_tables(_simulator(model, gait, GAINS), leg, traj)
+    return leg, controller_tables(loop_simulator(model, gait, GAINS), leg, traj)
 
 
 def test_the_stance_phase_is_the_hip_over_the_heels_ground_point(cycle) -> None:

@@ -27,7 +27,8 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
-from orchestrator.loop.plant import Observation, SimulatorPlant
+from orchestrator.loop.link import measurement
+from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_phase_pd import (
     STANCE_GAINS,
     SWING_GAINS,
@@ -37,22 +38,15 @@ from prosthesis_controller.contact_phase_pd import (
     PDGains,
     tables_from_walk,
 )
-from prosthesis_controller.measurement import ProsthesisMeasurement
 
 #: how :func:`walk_with_contact_pd` runs the prosthesis
 CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prosthesis on "
               "contact-pd (joint PD and the gait's torque at a phase from its own sensors)")
 
 
-def measurement(obs: Observation) -> ProsthesisMeasurement:
-    """What the controller reads of an observation."""
-    s = obs.sensed
-    return ProsthesisMeasurement(obs.t, s.knee_angle, s.ankle_angle, s.knee_velocity,
-                                 s.ankle_velocity, s.foot_load, s.contact, s.socket_pitch)
-
-
-def _simulator(model: HumanProsthesisModel, gait: ContactGait,
+def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
                gains: tuple[float, float, float]) -> HybridSimulator:
+    """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd)."""
     cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
     return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
 
@@ -60,13 +54,14 @@ def _simulator(model: HumanProsthesisModel, gait: ContactGait,
 def controller_tables(sim: HybridSimulator, leg: LegKinematics,
                       trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
     """The tables of :func:`tables_from_walk` from two strides of the held oracle in the
-    plant ``sim`` from the fitted cycle's start.  ValueError if it falls, or if the walk
-    gives no tables."""
+    plant ``sim`` from the fitted cycle's start (a stride: the trajectory's domains' ends
+    ``t``, s).  ValueError if it falls, or if the walk gives no tables."""
+    stride = sum(float(np.asarray(trajectory[d]["t"])[-1]) for d in GRAPH.domains)
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
     t, x, c, u = [], [], [], []
-    while plant.observe().t < 2.5:
+    while plant.observe().t < 2.0 * stride + 0.1:
         obs = plant.observe()
         torque = policy(obs.t, plant.run.observe())
         s = obs.sensed
@@ -89,7 +84,7 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                          ) -> ContactWalk:
     """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactPhasePD`
     (``stance``, ``swing``: its gains); ``gains``: the simulated human's."""
-    sim = _simulator(model, gait, gains)
+    sim = loop_simulator(model, gait, gains)
     leg = LegKinematics.of(model)
     p = model.device.prosthesis
     try:
