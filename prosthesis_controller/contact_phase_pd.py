@@ -100,6 +100,20 @@ class ContactGaitTables:
     swing_time: float
 
 
+def first_stride(contact: np.ndarray) -> tuple[int, int, int]:
+    """Sample indices of a walk's first heel strike (the foot switch turning on), the
+    toe-off after it and the next heel strike.  ValueError without them."""
+    c = np.asarray(contact, bool)
+    on = np.flatnonzero(~c[:-1] & c[1:]) + 1
+    off = np.flatnonzero(c[:-1] & ~c[1:]) + 1
+    i0 = int(on[0]) if on.size else None
+    i1 = next((int(i) for i in off if i0 is not None and i > i0), None)
+    i2 = next((int(i) for i in on if i1 is not None and i > i1), None)
+    if i0 is None or i1 is None or i2 is None:
+        raise ValueError("the walk holds no stance from a heel strike and the swing after it")
+    return i0, i1, i2
+
+
 def tables_from_walk(leg: LegKinematics, t: np.ndarray, sensed: np.ndarray,
                      contact: np.ndarray, torque: np.ndarray) -> ContactGaitTables:
     """The tables of a walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5): socket
@@ -110,14 +124,7 @@ def tables_from_walk(leg: LegKinematics, t: np.ndarray, sensed: np.ndarray,
     the fit's own accelerations (the regressed curves the walker follows differ from them by
     up to 0.7 N m at the motor).  ValueError without such a stance and swing, or if the
     stance's phase does not rise."""
-    c = np.asarray(contact, bool)
-    on = np.flatnonzero(~c[:-1] & c[1:]) + 1
-    off = np.flatnonzero(c[:-1] & ~c[1:]) + 1
-    i0 = on[0] if on.size else None
-    i1 = next((i for i in off if i0 is not None and i > i0), None)
-    i2 = next((i for i in on if i1 is not None and i > i1), None)
-    if i0 is None or i1 is None or i2 is None:
-        raise ValueError("the walk holds no stance from a heel strike and the swing after it")
+    i0, i1, i2 = first_stride(contact)
     x = np.asarray(sensed, float)
     p = np.array([leg.progress(*x[i, :3]) for i in range(i0, i1)])
     if not np.all(np.diff(p) > -1e-6):
@@ -166,6 +173,12 @@ class ContactPhasePD:
         #: the last tick's phase (stance: the progress phase; swing: the time phase)
         self.phase = math.nan
 
+    def stance_phase(self, m: ProsthesisMeasurement) -> float:
+        """The stance phase of a measurement: the hip's progress over the heel's ground point
+        from the heel strike's (0) to the toe-off's (1) (module docstring)."""
+        p0, p1 = self.tables.progress
+        return (self.leg.progress(m.socket_pitch, m.knee_angle, m.ankle_angle) - p0) / (p1 - p0)
+
     def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
         fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)
         if not all(math.isfinite(v) for v in fields):
@@ -173,8 +186,7 @@ class ContactPhasePD:
         tab = self.tables
         stance = bool(m.contact)
         if stance:
-            p0, p1 = tab.progress
-            s = (self.leg.progress(m.socket_pitch, m.knee_angle, m.ankle_angle) - p0) / (p1 - p0)
+            s = self.stance_phase(m)
             ref = tab.stance.at(s)
         else:
             if self._in_stance is not False or self._t_off is None:

@@ -11,7 +11,8 @@ sensed the same way: the gait as the model walks it.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -24,11 +25,19 @@ from characterization.gait.contact_gait import (
 )
 from characterization.gait.multicontact import GRAPH
 from hp_model.closed_loop import ClosedLoop
+from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller.contact_clfqp import (
+    DEFAULT_CONFIG,
+    MAX_WRENCH,
+    ContactClfConfig,
+    ContactClfQp,
+    StanceModel,
+)
 from prosthesis_controller.contact_phase_pd import (
     STANCE_GAINS,
     SWING_GAINS,
@@ -36,12 +45,18 @@ from prosthesis_controller.contact_phase_pd import (
     ContactPhasePD,
     LegKinematics,
     PDGains,
+    first_stride,
     tables_from_walk,
 )
+from prosthesis_controller.measurement import ProsthesisMeasurement
 
 #: how :func:`walk_with_contact_pd` runs the prosthesis
 CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prosthesis on "
               "contact-pd (joint PD and the gait's torque at a phase from its own sensors)")
+
+#: how :func:`walk_with_contact_clfqp` runs the prosthesis
+CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis on clfqp "
+         "(the interaction-aware CLF-QP at a phase from its own sensors)")
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
@@ -51,30 +66,104 @@ def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
     return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
 
 
-def controller_tables(sim: HybridSimulator, leg: LegKinematics,
-                      trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
-    """The tables of :func:`tables_from_walk` from two strides of the held oracle in the
-    plant ``sim`` from the fitted cycle's start (a stride: the trajectory's domains' ends
-    ``t``, s).  ValueError if it falls, or if the walk gives no tables."""
+@dataclass(frozen=True)
+class HeldWalk:
+    """The held oracle's walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5) socket
+    pitch, knee, ankle (rad), their rates (rad/s); ``contact`` (n,) the foot switch;
+    ``torque`` (n, 2) the motor torques applied (N m); the plant's truth: ``domain`` (n,)
+    codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches (zero-padded)."""
+
+    t: np.ndarray
+    sensed: np.ndarray
+    contact: np.ndarray
+    torque: np.ndarray
+    domain: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    wrench: np.ndarray
+
+
+def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]]
+              ) -> HeldWalk:
+    """Two strides of the held oracle in the plant ``sim`` from the fitted cycle's start (a
+    stride: the trajectory's domains' ends ``t``, s).  ValueError if it falls."""
     stride = sum(float(np.asarray(trajectory[d]["t"])[-1]) for d in GRAPH.domains)
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
-    t, x, c, u = [], [], [], []
+    rows: list[tuple[Any, ...]] = []
     while plant.observe().t < 2.0 * stride + 0.1:
         obs = plant.observe()
-        torque = policy(obs.t, plant.run.observe())
+        st = plant.run.observe()
+        torque = policy(obs.t, st)
         s = obs.sensed
-        t.append(obs.t)
-        x.append((s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
-                  s.ankle_velocity))
-        c.append(s.contact)
-        u.append(plant.actuate(torque).torque)
+        wrench = np.zeros(MAX_WRENCH)
+        n = wrench_size(st.domain)
+        wrench[:n] = st.lam[:n]
+        applied = plant.actuate(torque).torque
+        rows.append((obs.t, (s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
+                             s.ankle_velocity), s.contact, applied, st.domain.code,
+                     st.q.copy(), st.qd.copy(), wrench))
         if plant.fall is not None:
             raise ValueError(f"the held oracle fell in the stride the tables are read from: "
                              f"{plant.fall.message()}")
         plant.advance()
-    return tables_from_walk(leg, np.array(t), np.array(x), np.array(c), np.array(u))
+    cols = list(zip(*rows, strict=True))
+    return HeldWalk(*(np.array(c) for c in cols))
+
+
+def controller_tables(sim: HybridSimulator, leg: LegKinematics,
+                      trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
+    """The tables of :func:`tables_from_walk` from :func:`held_walk`.  ValueError if it
+    falls, or if the walk gives no tables."""
+    w = held_walk(sim, trajectory)
+    return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+
+
+def controller_model(sim: HybridSimulator, leg: LegKinematics,
+                     trajectory: Mapping[Domain, Mapping[str, Any]]
+                     ) -> tuple[ContactGaitTables, StanceModel]:
+    """contact-pd's tables and the CLF-QP's walker against the stance phase, both from the
+    same stance of :func:`held_walk`.  ValueError as :func:`controller_tables`."""
+    w = held_walk(sim, trajectory)
+    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+    i0, i1, _ = first_stride(w.contact)
+    st = slice(i0, i1)
+    return tables, StanceModel(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
+                               w.wrench[st])
+
+
+class _Controller(Protocol):
+    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]: ...
+
+
+def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
+                    controller: _Controller, steps: int, description: str) -> ContactWalk:
+    """Walk ``steps`` steps of the plant ``sim`` from the fitted cycle's start with the
+    prosthesis on ``controller`` (``description``: the verdict's words for it)."""
+    q0, qd0 = start_state(trajectory)
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    while True:
+        obs = plant.observe()
+        plant.actuate(np.array(controller.tick(measurement(obs))))
+        if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
+            break
+        plant.advance()
+    res = plant.run.result()
+    strikes = [i for i in res.impacts if i.into == Domain.DS_H]
+    ts = np.array([i.t for i in strikes])
+    xs = np.array([float(i.q[0]) for i in strikes])
+    return ContactWalk(res.steps, steps, None if res.fall is None else res.fall.message(),
+                       np.diff(ts), np.diff(xs) / np.diff(ts) if ts.size > 1 else np.array([]),
+                       description)
+
+
+def _phase_pd(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
+              stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> ContactPhasePD:
+    p = model.device.prosthesis
+    return ContactPhasePD(tables, leg, (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
+                          (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance,
+                          swing)
 
 
 def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
@@ -86,27 +175,36 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
     (``stance``, ``swing``: its gains); ``gains``: the simulated human's."""
     sim = loop_simulator(model, gait, gains)
     leg = LegKinematics.of(model)
-    p = model.device.prosthesis
     try:
         tables = controller_tables(sim, leg, trajectory)
     except ValueError as e:  # the verdict line says why, no walk
         return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]),
                            CONTACT_PD)
-    ctl = ContactPhasePD(tables, leg,
-                         (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-                         (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance, swing)
-    q0, qd0 = start_state(trajectory)
-    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
-    while True:
-        obs = plant.observe()
-        plant.actuate(np.array(ctl.tick(measurement(obs))))
-        if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
-            break
-        plant.advance()
-    res = plant.run.result()
-    strikes = [i for i in res.impacts if i.into == Domain.DS_H]
-    ts = np.array([i.t for i in strikes])
-    xs = np.array([float(i.q[0]) for i in strikes])
-    return ContactWalk(res.steps, steps, None if res.fall is None else res.fall.message(),
-                       np.diff(ts), np.diff(xs) / np.diff(ts) if ts.size > 1 else np.array([]),
-                       CONTACT_PD)
+    return walk_controller(sim, trajectory, _phase_pd(model, tables, leg, stance, swing),
+                           steps, CONTACT_PD)
+
+
+def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
+                  trajectory: Mapping[Domain, Mapping[str, Any]],
+                  gains: tuple[float, float, float] = GAINS,
+                  config: ContactClfConfig = DEFAULT_CONFIG) -> ContactClfQp:
+    """The CLF-QP of ``gait`` (its tables from :func:`controller_model`; ValueError as
+    there)."""
+    sim = loop_simulator(model, gait, gains)
+    leg = LegKinematics.of(model)
+    tables, walker = controller_model(sim, leg, trajectory)
+    inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
+    return ContactClfQp(_phase_pd(model, tables, leg), walker, inter, gait.thetas(), gains,
+                        model, config)
+
+
+def walk_with_contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
+                            trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
+                            gains: tuple[float, float, float] = GAINS,
+                            config: ContactClfConfig = DEFAULT_CONFIG) -> ContactWalk:
+    """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactClfQp`."""
+    try:
+        ctl = contact_clfqp(model, gait, trajectory, gains, config)
+    except ValueError as e:
+        return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]), CLFQP)
+    return walk_controller(loop_simulator(model, gait, gains), trajectory, ctl, steps, CLFQP)

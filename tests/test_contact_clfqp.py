@@ -1,0 +1,185 @@
+"""The CLF-QP on the multi-contact graph (prosthesis_controller.contact_clfqp, with
+hp_model.contact_interaction): its model against the simulator, its QP against a second
+solver, its behaviour on bad input, and the committed cycle walked with it in the in-process
+plant (the simulated human on its feedback linearization)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import quadprog
+
+from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
+from characterization.gait.multicontact import GRAPH
+from hp_model.contact_interaction import STANCE_DOMAINS, ContactInteraction
+from hp_model.domains import PROSTHESIS, Domain
+from orchestrator.experiments.contact_walk import (
+    CLFQP,
+    contact_clfqp,
+    loop_simulator,
+    walk_controller,
+)
+from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller.measurement import ProsthesisMeasurement
+from tests.multicontact_cycle import load_cycle
+
+pytestmark = pytest.mark.slow  # about a minute: the committed cycle's model, compiled once
+
+DT = 1e-3  # s, the plant's period
+
+
+@pytest.fixture(scope="module")
+def cycle():
+    model, traj, durations, _ = load_cycle()
+    return model, traj, durations, contact_gait_of(model, traj, durations)
+
+
+class Recorded:
+    """A controller that keeps what each stance tick of :class:`ContactClfQp` decided."""
+
+    def __init__(self, ctl) -> None:
+        self.ctl, self.ticks = ctl, []
+
+    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
+        u = self.ctl.tick(m)
+        c = self.ctl
+        self.ticks.append((m.contact, u, c.domain, c.solved, c.sigma, c.qp))
+        c.qp = None
+        return u
+
+
+@pytest.fixture(scope="module")
+def walk(cycle):
+    model, traj, _, gait = cycle
+    rec = Recorded(contact_clfqp(model, gait, traj))
+    return rec, walk_controller(loop_simulator(model, gait, GAINS), traj, rec, 20, CLFQP)
+
+
+def test_the_interaction_model_predicts_the_simulators_joint_accelerations(cycle) -> None:
+    """At the walker's true state, under the torque the held oracle applies, f + g u equals
+    the prosthesis joint accelerations the simulator produces over the next period (their
+    mean over it from the rates, against the trapezoid of the model at the period's ends),
+    in every prosthesis-stance domain away from the impacts."""
+    model, traj, _, gait = cycle
+    sim = loop_simulator(model, gait, GAINS)
+    fns = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
+    thetas = gait.thetas()
+    pk, pa = (model.coord_names.index(c) for c in PROSTHESIS)
+    fl = {d: sim.cl.vcs[d].numeric()[f"fl_{d}"] for d in GRAPH.domains}
+    q0, qd0 = start_state(traj)
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    rows = []
+    while plant.observe().t < 1.2:
+        st = plant.run.observe()
+        u = np.asarray(fl[st.domain](st.q, st.qd, thetas[st.domain], np.array(GAINS))[0])
+        u = np.asarray(plant.actuate(u.ravel()[4:6]).torque)  # within the motors' limits
+        plant.advance()
+        after = plant.run.observe()
+        if st.domain not in STANCE_DOMAINS or after.domain != st.domain:
+            continue
+        fn = fns[f"interaction_{st.domain}"]
+
+        def predicted(x, fn=fn, d=st.domain, u=u):
+            f, g, _, _ = (np.asarray(a) for a in fn(x.q, x.qd, thetas[d], np.array(GAINS)))
+            return f.ravel() + g @ u
+
+        want = (after.qd[[pk, pa]] - st.qd[[pk, pa]]) / DT
+        got = 0.5 * (predicted(st) + predicted(after))  # the period's mean (trapezoid)
+        rows.append((st.t, st.domain, want, got))
+    impacts = np.array([i.t for i in plant.run.result().impacts])
+    seen = set()
+    for t, d, want, got in rows:
+        if np.min(np.abs(impacts - t)) < 3 * DT:  # an impact within the period or next to it
+            continue
+        assert got == pytest.approx(want, rel=0.01, abs=0.5), (d, t)
+        seen.add(d)
+    assert seen == set(STANCE_DOMAINS), seen
+
+
+def test_in_ds_p_the_prosthesis_moves_one_joint_direction(cycle) -> None:
+    """After the prosthesis's heel strike the human holds y1, both hips and the prosthesis
+    sole's pitch: the prosthesis's two torques move one combination of its joint
+    accelerations (g of rank 1); the other presses the feet along the ground (W of rank 2).
+    In the other stance domains g has full rank."""
+    model, traj, _, gait = cycle
+    fns = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
+    thetas = gait.thetas()
+    for d in STANCE_DOMAINS:
+        tr = traj[d]
+        k = np.asarray(tr["q"]).shape[1] // 2
+        _, g, _, W = (np.asarray(a) for a in fns[f"interaction_{d}"](
+            np.asarray(tr["q"])[:, k], np.asarray(tr["qd"])[:, k], thetas[d], np.array(GAINS)))
+        sv = np.linalg.svd(g, compute_uv=False)
+        if d == Domain.DS_P:
+            assert sv[1] < 1e-6 * sv[0], sv
+            assert np.linalg.matrix_rank(W, tol=1e-6 * np.abs(W).max()) == 2
+        else:
+            assert sv[1] > 1e-3 * sv[0], (d, sv)
+
+
+def test_it_walks_the_committed_cycle(cycle, walk) -> None:
+    """20 steps; each stride within 1 % of the fitted cycle's time and speed (the CLF tracks
+    the gait); every torque within the motors; every stance QP solved, its contact rows
+    held (slack below 1e-3 body weights) on at least 99 % of the stance ticks."""
+    model, _, durations, _ = cycle
+    rec, w = walk
+    assert w.walks, w.fall
+    stride = sum(durations.values())
+    assert np.all(np.abs(w.strides / stride - 1) < 0.01), w.strides
+    p = model.device.prosthesis
+    lim = np.array([p.knee.torque_limit.value, p.ankle.torque_limit.value])
+    u = np.array([t[1] for t in rec.ticks])
+    assert np.all(np.abs(u) <= lim + 1e-12)
+    stance = [t for t in rec.ticks if t[0]]
+    assert stance and all(t[3] for t in stance)
+    assert {t[2] for t in stance} == set(STANCE_DOMAINS)
+    held = sum(t[4] < 1e-3 for t in stance) / len(stance)
+    assert held >= 0.99, held
+
+
+def _quadprog(P, c, G, h, xl, xu):
+    """min 1/2 z^T P z + c^T z, G z <= h, xl <= z <= xu (finite bounds) with quadprog."""
+    n = len(c)
+    lo, hi = np.isfinite(xl), np.isfinite(xu)
+    C = np.vstack([-G, np.eye(n)[lo], -np.eye(n)[hi]]).T
+    b = np.concatenate([-h, xl[lo], -xu[hi]])
+    Pq = P + 1e-9 * np.eye(n)
+    return quadprog.solve_qp(Pq, -c, C, b, 0)[0]
+
+
+def test_piqp_and_quadprog_agree_on_its_qps(walk) -> None:
+    """A second solver on 200 of the walk's stance QPs: the cost within 1e-6 of its scale,
+    the torques within 1e-3 motor N m (0.04 % of the limits): piqp stops at a duality gap of
+    1e-8 of costs up to ~1e4, and the torque block's curvature (g^T g, the force and torque
+    terms: ~1e3 per N m^2) turns that gap into ~2e-4 N m."""
+    rec, _ = walk
+    qps = [t[5] for t in rec.ticks if t[0] and t[5] is not None]
+    for P, c, G, h, xl, xu in qps[:: max(len(qps) // 200, 1)]:
+        z = _quadprog(P, c, G, h, xl, xu)
+        ctl = rec.ctl
+        ctl._solver.update(P=P, c=c, G=G, h_u=h, x_l=xl, x_u=xu)
+        ctl._solver.solve()
+        zp = np.array(ctl._solver.result.x)
+        assert zp[:2] == pytest.approx(z[:2], abs=1e-3)
+        cost_p, cost_q = (0.5 * v @ P @ v + c @ v for v in (zp, z))
+        assert cost_p == pytest.approx(cost_q, abs=1e-6 * (1 + abs(cost_q)))
+
+
+def test_bad_measurements_give_zero_torque_and_torques_stay_bounded(cycle) -> None:
+    model, traj, _, gait = cycle
+    ctl = contact_clfqp(model, gait, traj)
+    ok = ProsthesisMeasurement(t=0.0, knee_angle=0.05, ankle_angle=0.0, knee_vel=0.0,
+                               ankle_vel=0.0, foot_load=500.0, contact=True,
+                               socket_pitch=0.0)
+    for bad in (replace(ok, knee_vel=math.nan), replace(ok, socket_pitch=math.nan),
+                replace(ok, t=math.inf)):
+        assert ctl.tick(bad) == (0.0, 0.0)
+    p = model.device.prosthesis
+    lim = (p.knee.torque_limit.value, p.ankle.torque_limit.value)
+    for k in range(50):  # far from the gait: bounded, finite
+        u = ctl.tick(replace(ok, t=0.001 * (k + 1), knee_angle=1.2, knee_vel=-8.0,
+                                 ankle_vel=6.0))
+        assert all(math.isfinite(v) and abs(v) <= lim_ for v, lim_ in zip(u, lim, strict=True))
