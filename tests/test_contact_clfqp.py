@@ -1,4 +1,4 @@
-"""The CLF-QP on the multi-contact graph (prosthesis_controller.contact_clfqp, with
+"""The CLF-QP on the multi-contact graph (prosthesis_controller.contact_clf_qp, with
 hp_model.contact_interaction): its model against the simulator, its QP against a second
 solver, its behaviour on bad input, and the committed cycle walked with it in the in-process
 plant (the simulated human on its feedback linearization)."""

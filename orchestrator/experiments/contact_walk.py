@@ -31,7 +31,7 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
-from prosthesis_controller.contact_clfqp import (
+from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
     MAX_WRENCH,
     ContactClfConfig,
