@@ -147,14 +147,17 @@ def gait_multicontact_rows(j: dict[str, Any]) -> list[Row]:
                 f"{min(iters)}-{max(iters)}")]
 
 
-def contact_pd_rows(j: dict[str, Any]) -> list[Row]:
-    lo, hi = j["median_range_us"]
-    med = float(j["median_us"])
-    return [Row(f"contact-pd tick, {j['ticks']} ticks of its walk (us)", med,
-                f"{fmt(lo)}-{fmt(hi)}", None, "<= 40 us median", med <= 40.0),
-            Row("  p99 (us)", float(j["p99_us"])),
-            Row("  stance / swing median (us)", float(j["stance_median_us"]),
-                f"swing {fmt(float(j['swing_median_us']))}")]
+def contact_controller_rows(j: dict[str, Any]) -> list[Row]:
+    rows = []
+    for name, r in j["controllers"].items():
+        lo, hi = r["median_range_us"]
+        med = float(r["median_us"])
+        rows += [Row(f"{name} tick, {r['ticks']} ticks of its walk (us)", med,
+                     f"{fmt(lo)}-{fmt(hi)}", None, "<= 40 us median", med <= 40.0),
+                 Row("  p99 (us)", float(r["p99_us"])),
+                 Row("  stance / swing median (us)", float(r["stance_median_us"]),
+                     f"swing {fmt(float(r['swing_median_us']))}")]
+    return rows
 
 
 def playback_rows(j: dict[str, Any]) -> list[Row]:
@@ -333,9 +336,10 @@ BENCHES = (
     Bench("gait_multicontact", "the person's gait on the multi-contact graph (`gait fit "
           "--domains multicontact`) on openOFM's walk, the take's subject",
           ["--repeats", "3"], ["--repeats", "1"], gait_multicontact_rows),
-    Bench("contact_pd", "contact-pd, the multi-contact graph's prosthesis controller: its "
-          "tick on the measurements of its own walk of the committed openOFM cycle",
-          ["--repeats", "5"], ["--repeats", "1", "--steps", "2"], contact_pd_rows),
+    Bench("contact_controllers", "the multi-contact graph's prosthesis controllers (clfqp, "
+          "contact-pd): each one's tick on the measurements of its own walk of the committed "
+          "openOFM cycle", ["--repeats", "5"], ["--repeats", "1", "--steps", "2"],
+          contact_controller_rows),
     Bench("tube_fit", "force-tube fit: 20 profiles x 150 samples, degree 3",
           ["--repeats", "15"], ["--repeats", "1"],
           stage_rows("stages_ms", "ms", {"fit_tube (all)": ("", 1000.0)})),

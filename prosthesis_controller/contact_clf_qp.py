@@ -49,9 +49,10 @@ tolerance) gives contact-pd's torque.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import piqp
@@ -59,7 +60,7 @@ from scipy.linalg import solve_continuous_are
 
 from hp_model.compiled import FunctionSet
 from hp_model.contact_interaction import STANCE_DOMAINS, wrench_size
-from hp_model.domains import PROSTHESIS, Domain
+from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from prosthesis_controller.contact_phase_pd import ContactPhasePD
 from prosthesis_controller.measurement import ProsthesisMeasurement
@@ -67,6 +68,9 @@ from prosthesis_controller.qp import dense_solver, set_tolerance
 
 #: the largest number of contact wrench rows of a stance domain (a double support: 2 + 2)
 MAX_WRENCH = 4
+#: the largest number of contact rows of a stance domain's QP (a double support: 3 per
+#: heel or toe; a flat sole: 5)
+MAX_CONTACT_ROWS = 6
 
 
 @dataclass(frozen=True)
@@ -93,43 +97,6 @@ DEFAULT_CONFIG = ContactClfConfig()
 
 
 @dataclass(frozen=True)
-class StanceModel:
-    """The gait's walker against the stance phase (one stance as the model walks it, the
-    samples of contact-pd's stance table): ``domain`` (n,) codes; ``q``, ``qd`` (n, nq);
-    ``wrench`` (n, 4) the contact wrenches of each sample's domain, zero-padded (N, N m)."""
-
-    phase: np.ndarray
-    domain: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    wrench: np.ndarray
-
-    def at(self, s: float) -> tuple[Domain, np.ndarray, np.ndarray, np.ndarray]:
-        """(domain, q, qd, wrench) at phase ``s``: the domain of the sample at or
-        before it, linear to the next sample within that domain (copies)."""
-        ph = self.phase
-        i = min(max(int(np.searchsorted(ph, s, side="right")) - 1, 0), ph.size - 1)
-        j = min(i + 1, ph.size - 1)
-        code = int(self.domain[i])
-        w = 0.0
-        if j != i and int(self.domain[j]) == code and ph[j] > ph[i]:
-            w = min(max((s - ph[i]) / (ph[j] - ph[i]), 0.0), 1.0)
-        q, qd, wrench = ((1.0 - w) * a[i] + w * a[j] for a in (self.q, self.qd, self.wrench))
-        return Domain.from_code(code), q, qd, wrench
-
-
-def joint_clf(eps: float) -> np.ndarray:
-    """P_eps of the two joints' RES-CLF: eta = (e_k, e_a, de_k, de_a), eta_dot = F eta + G nu,
-    CARE with Q = I, R = I, positions scaled by 1/eps."""
-    F = np.block([[np.zeros((2, 2)), np.eye(2)], [np.zeros((2, 2)), np.zeros((2, 2))]])
-    G = np.vstack([np.zeros((2, 2)), np.eye(2)])
-    P = solve_continuous_are(F, G, np.eye(4), np.eye(2))
-    P = 0.5 * (P + P.T)
-    scale = np.diag([1.0 / eps, 1.0 / eps, 1.0, 1.0])
-    return scale @ P @ scale
-
-
-@dataclass(frozen=True)
 class Sole:
     """A flat sole's heel and toe distances from its sole frame (m, along the sole)."""
 
@@ -145,43 +112,190 @@ def soles(model: HumanProsthesisModel) -> dict[str, Sole]:
             for s in ("p", "l")}
 
 
+def contact_rows(domain: Domain, W: np.ndarray, w0: np.ndarray, w_ref: np.ndarray, mu: float,
+                 f_min: float, soles: Mapping[str, Sole]) -> list[tuple[np.ndarray, float]]:
+    """The contact rows (a u <= b, before the slack) of ``domain``'s contacts for the wrench
+    w = w0 + W u (per contact (F_x, F_z[, M_y]) in contact order; body weights and body
+    weights x m): each contact in its friction cone ``mu`` with a normal force of at least
+    ``f_min`` or half the gait's (``w_ref``) where that is lower; a flat sole's centre of
+    pressure -M_y / F_z between its heel and toe."""
+    rows, k = [], 0
+    for contact in domain.contacts:
+        x, z = k, k + 1
+        least = min(f_min, 0.5 * max(float(w_ref[z]), 0.0))
+        rows += [(W[x] - mu * W[z], mu * w0[z] - w0[x]),
+                 (-W[x] - mu * W[z], mu * w0[z] + w0[x]),
+                 (-W[z], w0[z] - least)]
+        if contact.is_flat:
+            sole, m = soles[contact.side], k + 2
+            rows += [(-(sole.toe * W[z] + W[m]), sole.toe * w0[z] + w0[m]),
+                     (-(sole.heel * W[z] - W[m]), sole.heel * w0[z] - w0[m])]
+        k += contact.size
+    return rows
+
+
+def qp_rows(domain: Domain) -> int:
+    """Rows of ``domain``'s QP: the CLF's and its contacts'."""
+    return 1 + sum(5 if c.is_flat else 3 for c in domain.contacts)
+
+
+@dataclass(frozen=True)
+class StanceQp:
+    """Everything of the QP that depends on the phase alone (module docstring), per sample of
+    one stance as the model walks it (``phase`` (n,), non-decreasing): ``domain`` (n,) the
+    gait's domain; ``g`` (n, 2, 2) the torque authority on the joint accelerations
+    (rad/s^2 per motor N m); ``u_ref`` (n, 2) the gait's motor torques (N m); ``P`` (n, 4, 4)
+    and ``c`` (n, 4) the cost in z = (u, rho, sigma); ``G`` (n, 6, 4) and ``h`` (n, 6) the
+    contact rows (a domain's first ``qp_rows(d) - 1``; their slack sigma in body weights)."""
+
+    phase: np.ndarray
+    domain: tuple[Domain, ...]
+    g: np.ndarray
+    u_ref: np.ndarray
+    P: np.ndarray
+    c: np.ndarray
+    G: np.ndarray
+    h: np.ndarray
+
+    _phases: list[float] = field(init=False, repr=False, compare=False)
+    g_rows: list[list[list[float]]] = field(init=False, repr=False, compare=False)
+    u_rows: list[list[float]] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        # the phases, g and u_ref as floats: a search ~0.3 us, not numpy's ~1.5 us, and the
+        # CLF row in float arithmetic (the tick is held to 40 us,
+        # benchmarks/bench_contact_controllers.py)
+        object.__setattr__(self, "_phases", self.phase.tolist())
+        object.__setattr__(self, "g_rows", self.g.tolist())
+        object.__setattr__(self, "u_rows", self.u_ref.tolist())
+
+    def index(self, s: float) -> int:
+        """The sample at or before phase ``s`` (the first or the last outside the stance)."""
+        return min(max(bisect.bisect_right(self._phases, s) - 1, 0), len(self._phases) - 1)
+
+
+@dataclass(frozen=True)
+class WalkedStance:
+    """One stance as the model walks it, sampled each period: ``phase`` (n,) its stance
+    phase; ``domain`` (n,) domain codes; ``q``, ``qd`` (n, nq) the walker's state;
+    ``wrench`` (n, 4) its contact wrenches (zero-padded; N, N m); ``torque`` (n, 2) the
+    prosthesis's motor torques (N m)."""
+
+    phase: np.ndarray
+    domain: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    wrench: np.ndarray
+    torque: np.ndarray
+
+
+def stance_qp(walked: WalkedStance, interaction: FunctionSet,
+              thetas: Mapping[Domain, np.ndarray], gains: tuple[float, float, float],
+              model: HumanProsthesisModel, config: ContactClfConfig = DEFAULT_CONFIG
+              ) -> StanceQp:
+    """The :class:`StanceQp` along ``walked``: ``interaction`` the compiled
+    :class:`~hp_model.contact_interaction.ContactInteraction`; ``thetas``, ``gains`` the
+    gait's and the human's.  In du = u - u_ref: nu = g du, w = w_ref + W du."""
+    phase, q, qd, wrench, u_ref = (walked.phase, walked.q, walked.qd, walked.wrench,
+                                   np.asarray(walked.torque, float))
+    domain = walked.domain
+    weight = float(model.tree.total_mass) * 9.81
+    feet = soles(model)
+    n = len(phase)
+    doms = tuple(Domain.from_code(int(c)) for c in domain)
+    g_all, P_all = np.zeros((n, 2, 2)), np.zeros((n, 4, 4))
+    c_all, G_all = np.zeros((n, 4)), np.zeros((n, MAX_CONTACT_ROWS, 4))
+    h_all = np.ones((n, MAX_CONTACT_ROWS))
+    for i, d in enumerate(doms):
+        _, g, _, W = (np.asarray(a) for a in interaction[f"interaction_{d}"](
+            q[i], qd[i], np.asarray(thetas[d], float), np.asarray(gains, float)))
+        nw = wrench_size(d)
+        Wn, wn = W / weight, wrench[i, :nw] / weight  # body weights
+        H = g.T @ g + config.w_force * Wn.T @ Wn + config.w_torque * np.eye(2)
+        g_all[i] = g
+        # the cost over trace(H) (the same minimizer): piqp in 9 iterations, not 12
+        k = float(np.trace(H))
+        P_all[i, :2, :2] = 2.0 * H / k
+        P_all[i, 2, 2] = P_all[i, 3, 3] = 1e-9
+        c_all[i] = (*(-2.0 * H @ u_ref[i] / k), config.c_rho / k, config.c_sigma / k)
+        rows = contact_rows(d, Wn, wn - Wn @ u_ref[i], wn, config.mu, config.f_min / weight,
+                            feet)
+        for r, (row_u, row_h) in enumerate(rows):
+            G_all[i, r, :2], G_all[i, r, 3], h_all[i, r] = row_u, -1.0, row_h
+    return StanceQp(np.asarray(phase, float), doms, g_all, np.asarray(u_ref, float), P_all,
+                    c_all, G_all, h_all)
+
+
+@dataclass(frozen=True)
+class JointClf:
+    """The RES-CLF of one joint's deviation, a double integrator (e, de) with de_dot = nu:
+    V = p11 e^2 + 2 p12 e de + p22 de^2 (CARE with Q = I, R = 1, the position scaled by
+    1/eps).  The two joints' CLF is the sum of theirs (the CARE of the pair decouples)."""
+
+    p11: float
+    p12: float
+    p22: float
+
+    def terms(self, e: float, de: float) -> tuple[float, float, float]:
+        """(V, dV/dt at nu = 0, dV/dnu) of the deviation e (rad) and its rate de (rad/s)."""
+        p11, p12, p22 = self.p11, self.p12, self.p22
+        return (p11 * e * e + 2.0 * p12 * e * de + p22 * de * de,
+                2.0 * (p11 * e + p12 * de) * de, 2.0 * (p12 * e + p22 * de))
+
+    @classmethod
+    def of(cls, eps: float) -> JointClf:
+        if not 0 < eps < 1:
+            raise ValueError(f"eps must lie in (0, 1), got {eps}")
+        F, G = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([[0.0], [1.0]])
+        P = solve_continuous_are(F, G, np.eye(2), np.eye(1))
+        return cls(float(P[0, 0]) / eps**2, float(P[0, 1]) / eps, float(P[1, 1]))
+
+
 class ContactClfQp:
     """The controller of the module docstring, one tick per measurement: motor torques
     (knee, ankle; N m) clamped to the motors' limits."""
 
     name = "clfqp"
 
-    def __init__(self, phase_law: ContactPhasePD, walker: StanceModel,
-                 interaction: FunctionSet, thetas: Mapping[Domain, np.ndarray],
-                 gains: tuple[float, float, float], model: HumanProsthesisModel,
-                 config: ContactClfConfig = DEFAULT_CONFIG) -> None:
-        self.law, self.walker, self.config = phase_law, walker, config
-        self._fns = {d: interaction[f"interaction_{d}"] for d in STANCE_DOMAINS}
-        self._thetas = {d: np.asarray(thetas[d], float) for d in STANCE_DOMAINS}
-        self._gains = np.asarray(gains, float)
-        self._joints = [model.coord_names.index(c) for c in PROSTHESIS]
-        self._weight = float(model.tree.total_mass) * 9.81
-        self._soles = soles(model)
-        self._P = joint_clf(config.eps)
-        p = model.device.prosthesis
-        self._limits = np.array([p.knee.torque_limit.value, p.ankle.torque_limit.value])
-        self._rows = 1 + 5 * 2  # the CLF, then at most two contacts of five rows
-        self._solver = dense_solver(
-            config.solver_eps, P=np.eye(4), c=np.zeros(4),
-            G=np.ones((self._rows, 4)), h_l=np.full(self._rows, -math.inf),
-            h_u=np.ones(self._rows), x_l=-np.ones(4), x_u=np.ones(4))
+    def __init__(self, phase_law: ContactPhasePD, stance: StanceQp,
+                 limits: tuple[float, float], config: ContactClfConfig = DEFAULT_CONFIG
+                 ) -> None:
+        self.law, self.stance, self.config = phase_law, stance, config
+        self._clf = JointClf.of(config.eps)
+        self._limits = (float(limits[0]), float(limits[1]))
+        #: one piqp solver per domain, set up once with its rows; its G, h, bounds buffers
+        self._solvers: dict[Domain, piqp.DenseSolver] = {}
+        self._G: dict[Domain, np.ndarray] = {}
+        self._h: dict[Domain, np.ndarray] = {}
+        for d in STANCE_DOMAINS:
+            rows = qp_rows(d)
+            self._G[d], self._h[d] = np.zeros((rows, 4)), np.zeros(rows)
+            self._solvers[d] = dense_solver(
+                config.solver_eps, P=np.eye(4), c=np.zeros(4), G=np.ones((rows, 4)),
+                h_l=np.full(rows, -math.inf), h_u=np.ones(rows), x_l=-np.ones(4),
+                x_u=np.ones(4))
+            # one equilibration pass, not piqp's 10: its update + solve 19 us, not 24, on
+            # the committed cycle's stance QPs; the torques within 1e-4 N m of the default's
+            # (the QP is strictly convex in them) (the tick is held to 40 us)
+            self._solvers[d].settings.preconditioner_iter = 1
+        #: each solver's solution, read through a view made once (piqp keeps its result in
+        #: place; ``result`` makes a new object, ~1 us)
+        self._z = {d: sol.result.x for d, sol in self._solvers.items()}
+        self._xl = np.array([0.0, 0.0, 0.0, 0.0])
+        self._xu = np.array([0.0, 0.0, math.inf, 1.0])
+        self.keep_qp = False  # set to keep each stance tick's QP in ``qp``
         self.reset()
 
     def reset(self) -> None:
         self.law.reset()
-        self._u = np.zeros(2)
+        self._u = (0.0, 0.0)
         #: the last stance tick's domain (as the gait has it at the phase; None in swing), the
         #: CLF's value, the relaxations and whether piqp solved it
         self.domain: Domain | None = None
         self.V = self.rho = self.sigma = 0.0
         self.solved = True
-        #: the last stance QP as piqp got it: (P, c, G, h, x_l, x_u), min 1/2 z^T P z + c^T z,
-        #: G z <= h, x_l <= z <= x_u
+        #: the last stance QP as piqp got it (copies): (P, c, G, h, x_l, x_u),
+        #: min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
         self.qp: tuple[np.ndarray, ...] | None = None
 
     @property
@@ -191,83 +305,59 @@ class ContactClfQp:
     def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
         fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)
         if not all(math.isfinite(v) for v in fields):
-            self._u[:] = 0.0
-            return 0.0, 0.0
-        fallback = self.law.tick(m)  # the phase, the swing law and the fallback
-        if not m.contact:
-            self.domain = None
-            self._u[:] = fallback
-            return fallback
-        u = self._stance(m, self.law.phase)
-        if u is None:
-            u = np.asarray(fallback, float)
-        u = np.clip(u, -self._limits, self._limits)
-        self._u[:] = u
-        return float(u[0]), float(u[1])
+            self._u = (0.0, 0.0)
+            return self._u
+        law = self.law
+        ref = law.reference(m)  # the phase and the gait there
+        u = None
+        self.domain = None
+        if m.contact:
+            u = self._stance(m, law.phase, ref)
+        if u is None:  # swing, or no solution: contact-pd's law
+            u = law.torque(m, ref)
+        (lk, la) = self._limits
+        self._u = (min(max(u[0], -lk), lk), min(max(u[1], -la), la))
+        return self._u
 
-    def _stance(self, m: ProsthesisMeasurement, s: float) -> np.ndarray | None:
-        cfg = self.config
-        d, q, qd, w_ref = self.walker.at(s)
-        ref = self.law.tables.stance.at(s)
-        _, g, _, W = (np.array(a) for a in self._fns[d](q, qd, self._thetas[d], self._gains))
-        u_ref = ref[4:6]
-        n_w = wrench_size(d)
-        # in du = u - u_ref: nu = g du, w = w_ref + W du (module docstring)
-        eta = np.array([m.knee_angle - ref[0], m.ankle_angle - ref[1],
-                        m.knee_vel - ref[2], m.ankle_vel - ref[3]])
-        Pe = self._P @ eta
-        V = float(eta @ Pe)
-        LfV = 2.0 * float(Pe[:2] @ eta[2:])  # the CLF's rate at du = 0
-        LgV = 2.0 * Pe[2:] @ g
-        Wn, wn = W / self._weight, w_ref[:n_w] / self._weight  # body weights
-        H = g.T @ g + cfg.w_force * Wn.T @ Wn + cfg.w_torque * np.eye(2)
-        P = np.zeros((4, 4))
-        P[:2, :2] = 2.0 * H
-        P[2, 2] = P[3, 3] = 1e-9
-        c = np.r_[-2.0 * H @ u_ref, cfg.c_rho, cfg.c_sigma]
-        G = np.zeros((self._rows, 4))
-        h = np.ones(self._rows)  # unused rows: 0 <= 1
-        scale = max(float(np.linalg.norm(LgV)), 1e-9)
-        G[0, :2], G[0, 2] = LgV / scale, -1.0 / scale
-        h[0] = (-cfg.gamma / cfg.eps * V - LfV + LgV @ u_ref) / scale
-        r = 1
-        for row_u, row_h in self._contact_rows(d, Wn, wn - Wn @ u_ref, wn):
-            G[r, :2], G[r, 3], h[r] = row_u, -1.0, row_h
-            r += 1
-        du, lim = cfg.delta_u, self._limits
-        x_l = np.r_[np.maximum(self._u - du, -lim), 0.0, 0.0]
-        x_u = np.r_[np.minimum(self._u + du, lim), math.inf, 1.0]
-        self.qp = (P, c, G, h, x_l, x_u)
-        sol = self._solver
-        sol.update(P=P, c=c, G=G, h_u=h, x_l=x_l, x_u=x_u)
+    def _stance(self, m: ProsthesisMeasurement, s: float, ref: tuple[float, ...]
+                ) -> tuple[float, float] | None:
+        """The QP's torques at stance phase ``s``, the gait there ``ref`` (None if piqp
+        cannot solve it)."""
+        cfg, st = self.config, self.stance
+        i = st.index(s)
+        d = st.domain[i]
+        k, a, vk, va, _, _ = ref
+        # the CLF in floats, joint by joint (numpy's per-call cost on 4-vectors was ~5 us of
+        # a tick held to 40 us, benchmarks/bench_contact_controllers.py)
+        Vk, Lk, wk = self._clf.terms(m.knee_angle - k, m.knee_vel - vk)
+        Va, La, wa = self._clf.terms(m.ankle_angle - a, m.ankle_vel - va)
+        V, LfV = Vk + Va, Lk + La  # the CLF and its rate at du = 0
+        (g00, g01), (g10, g11) = st.g_rows[i]
+        lg0, lg1 = wk * g00 + wa * g10, wk * g01 + wa * g11  # LgV: its rate per du
+        scale = max(math.hypot(lg0, lg1), 1e-9)
+        ur0, ur1 = st.u_rows[i]
+        G, h = self._G[d], self._h[d]
+        G[0, 0], G[0, 1], G[0, 2], G[0, 3] = lg0 / scale, lg1 / scale, -1.0 / scale, 0.0
+        h[0] = (-cfg.gamma / cfg.eps * V - LfV + lg0 * ur0 + lg1 * ur1) / scale
+        G[1:] = st.G[i, :G.shape[0] - 1]
+        h[1:] = st.h[i, :G.shape[0] - 1]
+        du, (lk, la), (u0, u1) = cfg.delta_u, self._limits, self._u
+        xl, xu = self._xl, self._xu
+        xl[0], xu[0] = max(u0 - du, -lk), min(u0 + du, lk)
+        xl[1], xu[1] = max(u1 - du, -la), min(u1 + du, la)
+        sol = self._solvers[d]
+        sol.update(P=st.P[i], c=st.c[i], G=G, h_u=h, x_l=xl, x_u=xu)
         status = sol.solve()
         if status != piqp.PIQP_SOLVED:
             set_tolerance(sol, 100.0 * cfg.solver_eps)
             status = sol.solve()
             set_tolerance(sol, cfg.solver_eps)
+        if self.keep_qp:
+            self.qp = tuple(np.array(v) for v in (st.P[i], st.c[i], G, h, xl, xu))
         self.domain, self.V = d, V
         self.solved = status == piqp.PIQP_SOLVED
         if not self.solved:
             return None
-        z = sol.result.x
+        z = self._z[d]
         self.rho, self.sigma = float(z[2]), float(z[3])
-        return np.array(z[:2])
-
-    def _contact_rows(self, d: Domain, W: np.ndarray, w0: np.ndarray, w_ref: np.ndarray
-                      ) -> list[tuple[np.ndarray, float]]:
-        """The contact rows (a u <= b, before the slack) of ``d``'s contacts, the wrench
-        w = w0 + W u in body weights (per contact (F_x, F_z[, M_y]) in contact order) and
-        the gait's ``w_ref`` for the contacts' f_min."""
-        cfg, rows, k = self.config, [], 0
-        for contact in d.contacts:
-            x, z = k, k + 1
-            f_min = min(cfg.f_min / self._weight, 0.5 * max(float(w_ref[z]), 0.0))
-            rows += [(W[x] - cfg.mu * W[z], cfg.mu * w0[z] - w0[x]),
-                     (-W[x] - cfg.mu * W[z], cfg.mu * w0[z] + w0[x]),
-                     (-W[z], w0[z] - f_min)]
-            if contact.is_flat:  # the centre of pressure -M_y / F_z on the sole
-                sole, m = self._soles[contact.side], k + 2
-                rows += [(-(sole.toe * W[z] + W[m]), sole.toe * w0[z] + w0[m]),
-                         (-(sole.heel * W[z] - W[m]), sole.heel * w0[z] - w0[m])]
-            k += contact.size
-        return rows
+        return float(z[0]), float(z[1])

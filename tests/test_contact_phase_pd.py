@@ -110,4 +110,4 @@ def test_the_committed_cycle_walks_with_contact_pd(cycle) -> None:
     _, _, _, stride_length = load_cycle()
     assert np.all(np.abs(walk.strides / stride - 1) < 0.03), walk.strides
     assert np.all(np.abs(walk.speeds / (stride_length / stride) - 1) < 0.03), walk.speeds
-    assert "contact-pd" in walk.line() and walk.to_json()["controller"].endswith("sensors)")
+    assert "contact-pd" in walk.line() and walk.to_json()["controller"].endswith("sensors")

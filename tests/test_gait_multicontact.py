@@ -215,15 +215,17 @@ def test_a_joint_speed_bound_must_be_positive(speed):
 @pytest.mark.slow
 def test_the_fitted_cycle_walks_in_closed_loop(fitted, mc_model):
     """The fit with defaults, regressed onto the multi-contact virtual constraints, walks 10
-    steps in closed loop (what `gait fit` requires before writing it: the prosthesis holding
-    the oracle's torque each 1 ms within its motors' limits), at the fit's stride
-    and speed within 3 % (the loop tracks curves regressed from the fit, not the fit), the
-    strides within 5 ms of each other (a limit cycle)."""
-    from characterization.gait.contact_gait import contact_gait, walk_contact_gait
+    steps in closed loop with the prosthesis on clfqp (what `gait fit` requires before
+    writing it), at the fit's stride and speed within 3 % (the loop tracks curves regressed
+    from the fit, not the fit), the strides within 5 ms of each other (a limit cycle)."""
+    from characterization.gait.contact_gait import contact_gait
+    from orchestrator.experiments.contact_walk import walk_with_contact_clfqp
 
     _, r = fitted
-    walk = walk_contact_gait(mc_model, contact_gait(mc_model, r), r.trajectory, steps=10)
+    walk = walk_with_contact_clfqp(mc_model, contact_gait(mc_model, r), r.trajectory,
+                                   steps=10)
     assert walk.walks, walk.line()
+    assert "prosthesis on clfqp" in walk.line()
     assert np.all(np.abs(walk.strides / r.stride_time - 1) < 0.03), walk.strides
     assert np.all(np.abs(walk.speeds / r.speed - 1) < 0.03), walk.speeds
     assert np.ptp(walk.strides) < 0.005, walk.strides
@@ -254,7 +256,9 @@ def test_gait_fit_cli_compares_with_the_take(tmp_path, steps):
     doc = load_multicontact_gait(out)
     # the person's gait and walking in closed loop: both, or the verdict says which failed
     loop = doc["closed_loop"]
-    assert "closed loop" in res.output and "within its motor limits" in loop["controller"]
+    assert "closed loop" in res.output and "prosthesis on clfqp" in loop["controller"]
+    assert "within its motor limits" in doc["closed_loop_reference"]["controller"]
+    assert "contact-pd" in doc["closed_loop_contact_pd"]["controller"]
     assert loop["walks"] is (loop["fall"] is None and loop["steps"] == loop["wanted"])
     passed = doc["check"]["passed"] and loop["walks"]
     assert res.exit_code == (0 if passed else 1), res.output

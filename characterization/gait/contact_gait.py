@@ -193,12 +193,11 @@ class ContactWalk:
 
     def line(self) -> str:
         """One line: the verdict and how it was run."""
-        how = (self.controller or HELD_ORACLE) + ("; the paper's CLF-QP does not run the "
-                                                  "multi-contact graph yet")
+        how = self.controller or HELD_ORACLE
         if not self.walks:
             return f"does not walk: after {self.steps} steps, {self.fall} ({how})"
-        return (f"walks {self.steps} steps in closed loop: stride "
-                f"{np.median(self.strides):.3f} s, {np.median(self.speeds):.3f} m/s ({how})")
+        return (f"walks {self.steps} steps: stride {np.median(self.strides):.3f} s, "
+                f"{np.median(self.speeds):.3f} m/s ({how})")
 
 
 #: how :func:`walk_contact_gait` runs the prosthesis

@@ -1,8 +1,8 @@
 """``hpcosim gait fit --domains multicontact``: the person's gait on the multi-contact graph
 (:mod:`characterization.gait.multicontact`), compared with the take, its virtual constraints
-regressed and walked in closed loop (:mod:`characterization.gait.contact_gait`), and written
-with both; a gait that is not the person's or does not walk is refused unless
-``--allow-mismatch``."""
+regressed and walked in closed loop with the prosthesis on ``clfqp``
+(:mod:`orchestrator.experiments.contact_walk`), and written with both; a gait that is not
+the person's or does not walk is refused unless ``--allow-mismatch``."""
 
 from __future__ import annotations
 
@@ -43,7 +43,10 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     from hp_model.human_prosthesis import HumanProsthesisModel
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
-    from orchestrator.experiments.contact_walk import walk_with_contact_pd
+    from orchestrator.experiments.contact_walk import (
+        walk_with_contact_clfqp,
+        walk_with_contact_pd,
+    )
 
     console = Console(stderr=True)
     check_output_file(out)
@@ -72,14 +75,16 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     check = check_person(take, gait)
     print_check(Console(), check)
     outputs = contact_gait(model, result)
-    with console.status("gait fit: the fitted cycle in closed loop"):
-        walk = walk_contact_gait(model, outputs, result.trajectory)
+    with console.status("gait fit: the fitted cycle with the prosthesis on clfqp"):
+        walk = walk_with_contact_clfqp(model, outputs, result.trajectory)
     Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
                     highlight=False)
-    with console.status("gait fit: the fitted cycle with the prosthesis on contact-pd"):
+    with console.status("gait fit: the fitted cycle with the reference and the baseline"):
+        reference = walk_contact_gait(model, outputs, result.trajectory)
         pd_walk = walk_with_contact_pd(model, outputs, result.trajectory)
-    Console().print(f"[bold]prosthesis controller[/bold] {pd_walk.line()} (reported, not "
-                    "required)", soft_wrap=True, highlight=False)
+    for what, w in (("reference", reference), ("baseline", pd_walk)):
+        Console().print(f"[bold]{what}[/bold] {w.line()} (reported, not required)",
+                        soft_wrap=True, highlight=False)
     passed = check.passed and walk.walks
     if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
@@ -88,7 +93,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         doc["device"] = dev.model_dump(mode="json")  # the gait's model, remade from the file
         doc["virtual_constraints"] = outputs.to_json()
         doc["closed_loop"] = walk.to_json()
-        doc["closed_loop_controller"] = pd_walk.to_json()
+        doc["closed_loop_reference"] = reference.to_json()
+        doc["closed_loop_contact_pd"] = pd_walk.to_json()
         save_multicontact_gait(out, doc)
         if figure:
             save_person_figure(out.with_suffix(".png"), take, gait)

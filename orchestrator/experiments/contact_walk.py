@@ -36,7 +36,8 @@ from prosthesis_controller.contact_clf_qp import (
     MAX_WRENCH,
     ContactClfConfig,
     ContactClfQp,
-    StanceModel,
+    WalkedStance,
+    stance_qp,
 )
 from prosthesis_controller.contact_phase_pd import (
     STANCE_GAINS,
@@ -52,11 +53,11 @@ from prosthesis_controller.measurement import ProsthesisMeasurement
 
 #: how :func:`walk_with_contact_pd` runs the prosthesis
 CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prosthesis on "
-              "contact-pd (joint PD and the gait's torque at a phase from its own sensors)")
+              "contact-pd: joint PD and the gait's torque at a phase from its own sensors")
 
 #: how :func:`walk_with_contact_clfqp` runs the prosthesis
-CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis on clfqp "
-         "(the interaction-aware CLF-QP at a phase from its own sensors)")
+CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis on clfqp: "
+         "the interaction-aware robust CLF-QP at a phase from its own sensors")
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
@@ -120,19 +121,6 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
     return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
 
 
-def controller_model(sim: HybridSimulator, leg: LegKinematics,
-                     trajectory: Mapping[Domain, Mapping[str, Any]]
-                     ) -> tuple[ContactGaitTables, StanceModel]:
-    """contact-pd's tables and the CLF-QP's walker against the stance phase, both from the
-    same stance of :func:`held_walk`.  ValueError as :func:`controller_tables`."""
-    w = held_walk(sim, trajectory)
-    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
-    i0, i1, _ = first_stride(w.contact)
-    st = slice(i0, i1)
-    return tables, StanceModel(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
-                               w.wrench[st])
-
-
 class _Controller(Protocol):
     def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]: ...
 
@@ -188,14 +176,21 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   trajectory: Mapping[Domain, Mapping[str, Any]],
                   gains: tuple[float, float, float] = GAINS,
                   config: ContactClfConfig = DEFAULT_CONFIG) -> ContactClfQp:
-    """The CLF-QP of ``gait`` (its tables from :func:`controller_model`; ValueError as
-    there)."""
+    """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
+    the same stance of :func:`held_walk` (ValueError as :func:`controller_tables`)."""
     sim = loop_simulator(model, gait, gains)
     leg = LegKinematics.of(model)
-    tables, walker = controller_model(sim, leg, trajectory)
+    w = held_walk(sim, trajectory)
+    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+    i0, i1, _ = first_stride(w.contact)
+    st = slice(i0, i1)
     inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
-    return ContactClfQp(_phase_pd(model, tables, leg), walker, inter, gait.thetas(), gains,
-                        model, config)
+    walked = WalkedStance(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
+                          w.wrench[st], w.torque[st])
+    stance = stance_qp(walked, inter, gait.thetas(), gains, model, config)
+    p = model.device.prosthesis
+    return ContactClfQp(_phase_pd(model, tables, leg), stance,
+                        (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
 
 
 def walk_with_contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,

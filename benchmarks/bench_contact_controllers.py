@@ -1,0 +1,132 @@
+"""Benchmark: per-tick cost of the multi-contact graph's prosthesis controllers, ``clfqp``
+(prosthesis_controller/contact_clf_qp.py) and ``contact-pd``
+(prosthesis_controller/contact_phase_pd.py), each on the measurements of its own walk.
+
+The committed openOFM multi-contact cycle (tests/data/gaits) is walked in the in-process
+plant with the prosthesis on the controller (stance and swing); every measurement the
+controller read is kept, then replayed through the reset controller ``--repeats`` times,
+each tick timed.  Issue 37's target: the controller tick <= 40 us median.  The machine is
+shared and noisy: the spread over the repeats is printed with the median.
+
+Usage: python benchmarks/bench_contact_controllers.py [--steps 6] [--repeats 5]
+       [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
+
+from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
+from characterization.gait.multicontact import GRAPH
+from orchestrator.experiments.contact_walk import contact_clfqp, controller_tables, loop_simulator
+from orchestrator.loop.link import measurement
+from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller.contact_phase_pd import ContactPhasePD, LegKinematics
+from prosthesis_controller.measurement import ProsthesisMeasurement
+from tests.multicontact_cycle import load_cycle
+
+
+class Controller(Protocol):
+    def reset(self) -> None: ...
+
+    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]: ...
+
+
+def controllers() -> tuple[dict[str, Controller], Any]:
+    """The two controllers of the committed cycle, and its in-process simulator."""
+    model, traj, durations, _ = load_cycle()
+    gait = contact_gait_of(model, traj, durations)
+    sim = loop_simulator(model, gait, GAINS)
+    leg = LegKinematics.of(model)
+    p = model.device.prosthesis
+    pd = ContactPhasePD(controller_tables(sim, leg, traj), leg,
+                        (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
+                        (p.knee.torque_limit.value, p.ankle.torque_limit.value))
+    return {"clfqp": contact_clfqp(model, gait, traj), "contact-pd": pd}, (sim, traj)
+
+
+def walk_measurements(ctl: Controller, sim: Any, traj: Any, steps: int
+                      ) -> list[ProsthesisMeasurement]:
+    """What ``ctl`` read over ``steps`` steps of the committed cycle."""
+    ctl.reset()
+    q0, qd0 = start_state(traj)
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    read: list[ProsthesisMeasurement] = []
+    while plant.fall is None and plant.run.steps < steps:
+        m = measurement(plant.observe())
+        read.append(m)
+        plant.actuate(np.array(ctl.tick(m)))
+        plant.advance()
+    if plant.fall is not None:
+        raise SystemExit(f"the controller fell on the committed cycle: {plant.fall.message()}")
+    return read
+
+
+def time_ticks(ctl: Controller, read: list[ProsthesisMeasurement]) -> np.ndarray:
+    """Each tick's duration (us) over the measurements, from a reset controller."""
+    ctl.reset()
+    out = np.empty(len(read))
+    clock = time.perf_counter_ns
+    gc.disable()
+    try:
+        for k, m in enumerate(read):
+            t0 = clock()
+            ctl.tick(m)
+            out[k] = clock() - t0
+    finally:
+        gc.enable()
+    return out * 1e-3
+
+
+def measure(ctl: Controller, read: list[ProsthesisMeasurement], repeats: int
+            ) -> dict[str, Any]:
+    stance = np.array([m.contact for m in read])
+    medians, p99s, st_med, sw_med = [], [], [], []
+    for _ in range(repeats):
+        us = time_ticks(ctl, read)
+        medians.append(float(np.median(us)))
+        p99s.append(float(np.percentile(us, 99)))
+        st_med.append(float(np.median(us[stance])))
+        sw_med.append(float(np.median(us[~stance])))
+    return {"ticks": len(read), "repeats": repeats, "median_us": float(np.median(medians)),
+            "median_range_us": [min(medians), max(medians)], "p99_us": float(np.median(p99s)),
+            "stance_median_us": float(np.median(st_med)),
+            "swing_median_us": float(np.median(sw_med)), "target_us": 40.0}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=6)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--json", type=Path)
+    a = ap.parse_args()
+    ctls, (sim, traj) = controllers()
+    rows = {name: measure(c, walk_measurements(c, sim, traj, a.steps), a.repeats)
+            for name, c in ctls.items()}
+    print("| tick | ticks x repeats | median (us) | range over repeats | p99 | stance | swing |")
+    print("|---|---|---|---|---|---|---|")
+    for name, r in rows.items():
+        lo, hi = r["median_range_us"]
+        print(f"| {name} | {r['ticks']} x {a.repeats} | {r['median_us']:.1f} | "
+              f"{lo:.1f}-{hi:.1f} | {r['p99_us']:.1f} | {r['stance_median_us']:.1f} | "
+              f"{r['swing_median_us']:.1f} |")
+        print(f"{name}: median <= 40 us: {'holds' if r['median_us'] <= 40 else 'FAILS'}")
+    if a.json is not None:
+        a.json.write_text(json.dumps({"controllers": rows, "machine": platform.machine(),
+                                      "python": platform.python_version()}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
