@@ -152,6 +152,16 @@ def _quadprog(P, c, G, h, xl, xu):
     return quadprog.solve_qp(Pq, -c, C, b, 0)[0]
 
 
+def _slsqp(P, c, G, h, xl, xu, z0):
+    """The same QP with scipy's SLSQP from z0."""
+    res = minimize(lambda v: 0.5 * v @ P @ v + c @ v, z0, jac=lambda v: P @ v + c,
+                   method="SLSQP", bounds=list(zip(xl, xu, strict=True)),
+                   constraints={"type": "ineq", "fun": lambda v: h - G @ v,
+                                "jac": lambda v: -G},
+                   options={"ftol": 1e-14, "maxiter": 200})
+    return res.x
+
+
 def test_a_second_solver_agrees_on_its_qps(walk) -> None:
     """quadprog and scipy's SLSQP on 200 of the walk's stance QPs: the controller's cost as
     low as theirs (1e-6 of its scale), its torques within 1e-3 motor N m (0.04 % of the
@@ -166,12 +176,7 @@ def test_a_second_solver_agrees_on_its_qps(walk) -> None:
         # scipy's SLSQP polishes its point on the controller's own QP
         reg = np.diag([0.0, 0.0, 1e-4, 1e-4])
         z0 = np.clip(_quadprog(P + reg, c, G, h, xl, xu), xl, xu)
-        res = minimize(lambda v: 0.5 * v @ P @ v + c @ v, z0, jac=lambda v: P @ v + c,
-                       method="SLSQP", bounds=list(zip(xl, xu, strict=True)),
-                       constraints={"type": "ineq", "fun": lambda v: h - G @ v,
-                                    "jac": lambda v: -G},
-                       options={"ftol": 1e-14, "maxiter": 200})
-        z = res.x
+        z = _slsqp(P, c, G, h, xl, xu, z0)
         assert np.all(G @ z - h <= 1e-6)
         zp = np.array([*t[1], t[6], t[4]])  # the controller's torques, rho and sigma
         assert zp[:2] == pytest.approx(z[:2], abs=1e-3)
