@@ -532,7 +532,10 @@ def merged(old: str, outcomes: list[Outcome]) -> str:
     new = {o.bench.name: table(o, stamped=True) for o in outcomes}
     tables = [new.get(b.name) or kept[b.name] for b in BENCHES
               if b.name in new or b.name in kept]
-    note = ("; re-measured since, each dated in its table: " + ", ".join(new)) if new else ""
+    # the tables re-measured since the page's run: these, and those an earlier merge dated
+    dated = [b.name for b in BENCHES if b.name in new
+             or (b.name in kept and re.search(r"\. Measured .+ at commit", kept[b.name]))]
+    note = ("; re-measured since, each dated in its table: " + ", ".join(dated)) if dated else ""
     quick = "(**--quick**" in head or any(o.quick for o in outcomes)
     return render(tables, stamp.group(1), stamp.group(2), quick, note, was)
 
