@@ -8,7 +8,7 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   since toe-off.  The swing runs contact-pd's law (joint PD and the gait's torque).
 - **Model** (stance): the human-prosthesis loop restricted to the nominal human
   (:mod:`hp_model.contact_interaction`), in the domain the gait is in at the phase and at
-  the gait's walker state there (:class:`StanceModel`: one stance as the model walks it),
+  the gait's walker state there (one stance as the model walks it, :class:`WalkedStance`),
   linearized about the gait:
 
       qdd_p = qdd_ref + g (u - u_ref),     w = w_ref + W (u - u_ref)
@@ -21,15 +21,17 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   feedback linearization saw output-velocity errors the real one did not and answered
   them, and the drift was off by 10-100 rad/s^2 within 50 ms of a stance; the controller
   fell 68 ms into the committed cycle's first stance.  The authority g was within 0.3 % of
-  the true state's.
+  the true state's.  Everything of the QP below that depends on the phase alone (g, W, the
+  cost, the contact rows) is evaluated once along that stance (:class:`StanceQp`, 1 ms
+  samples); a tick adds the CLF row and the torque box.
 - **Outputs**: the knee's and the ankle's deviations from the gait at the phase,
-  eta = (e_k, e_a, de_k, de_a); nu = qdd_p - qdd_ref = g (u - u_ref).  A RES-CLF
-  V = eta^T P_eps eta of the two double integrators (CARE with Q = I, R = I; positions
-  scaled by 1/eps, the paper's eps).
+  eta = (e_k, e_a, de_k, de_a); nu = qdd_p - qdd_ref = g (u - u_ref).  A RES-CLF of the
+  two double integrators, the sum of each joint's (:class:`JointClf`: CARE with Q = I,
+  R = 1, the position scaled by 1/eps, the paper's eps).
 - **QP**, z = (u_k, u_a, rho, sigma):
 
       min  |nu|^2 + w_force |(w - w_ref) / W_body|^2 + w_torque |u - u_ref|^2
-           + c_rho rho + c_sigma sigma
+           + c_rho rho + c_sigma sigma                  (over its trace, for piqp)
       s.t. LgV u - rho <= -(gamma/eps) V - LfV                            (the CLF)
            per contact: |F_x| <= mu F_z + sigma, F_z >= f_min - sigma; a flat sole's centre
            of pressure on the sole (rows in body weights)
