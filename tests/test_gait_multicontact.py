@@ -329,3 +329,33 @@ def test_the_device_foot_is_sized_to_the_persons(model):
     assert foot_fitted(person, dev) == (dev, "")
     worn, notes = worn_device(person, model.device)
     assert worn.prosthesis.foot == foot and len(notes) in (1, 2)
+
+
+def test_a_takes_feet_are_flat_where_they_stand_flat(steps, mc_model):
+    """openOFM's feet read +1.6 deg while flat on the ground (the markers' foot segment);
+    the targets take that out of the ankles: the targets' flat stances then put each sole
+    within 0.5 deg of flat (the median over the middle half; the soles at their targets'
+    angles through the model's frames)."""
+    from characterization.gait.multicontact import (
+        FLAT_STANCE,
+        SIDE,
+        TRACKED,
+        targets_from_steps,
+    )
+
+    t = targets_from_steps(steps, mc_model, "openofm")
+    assert set(t.flat_foot_pitch) == {"prosthesis", "human"}
+    for foot, off in t.flat_foot_pitch.items():
+        assert 0.5 < np.degrees(off) < 3.0, (foot, np.degrees(off))
+    frames = mc_model.numeric()["frames"]
+    ix = [mc_model.coord_names.index(c) for c in TRACKED]
+    for foot, (domain, _) in FLAT_STANCE.items():
+        A = np.asarray(t.angles[domain])
+        n = A.shape[1]
+        pitches = []
+        for k in range(n // 4, n - n // 4):
+            q = np.zeros(mc_model.nq)
+            q[ix] = A[:, k]
+            pose = np.asarray(frames(q, np.zeros(mc_model.nq))[0])
+            pitches.append(pose[2, mc_model.frame_index(f"{SIDE[foot]}_sole")])
+        assert abs(np.degrees(np.median(pitches))) < 0.5, (foot, np.degrees(pitches))

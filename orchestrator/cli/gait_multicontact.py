@@ -7,6 +7,7 @@ the person's or does not walk is refused unless ``--allow-mismatch``."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 
@@ -20,7 +21,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     """Targets from the steps, the fit, the comparison printed, the artifact (and, with
     ``figure``, its figure against the take next to it) written (a mismatch only with
     ``allow_mismatch``), the verdict as the exit code."""
-    from characterization.gait.contact_gait import contact_gait, walk_contact_gait
+    from characterization.gait.contact_gait import contact_gait
     from characterization.gait.figures import save_person_figure
     from characterization.gait.fit import worn_device
     from characterization.gait.multicontact import (
@@ -43,10 +44,6 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     from hp_model.human_prosthesis import HumanProsthesisModel
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
-    from orchestrator.experiments.contact_walk import (
-        walk_with_contact_clfqp,
-        walk_with_contact_pd,
-    )
 
     console = Console(stderr=True)
     check_output_file(out)
@@ -60,6 +57,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
             Console().print(line, soft_wrap=True, highlight=False)
     model = HumanProsthesisModel(person, dev, graph=GRAPH)
     targets = targets_from_steps(data, model, str(steps))
+    _say_flat_feet(targets.flat_foot_pitch)
     opt = MultiContactOptions(nodes=nodes, max_iter=max_iter, motor_margin=motor_margin,
                               max_joint_speed=max_joint_speed)
     with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
@@ -75,16 +73,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     check = check_person(take, gait)
     print_check(Console(), check)
     outputs = contact_gait(model, result)
-    with console.status("gait fit: the fitted cycle with the prosthesis on clfqp"):
-        walk = walk_with_contact_clfqp(model, outputs, result.trajectory)
-    Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
-                    highlight=False)
-    with console.status("gait fit: the fitted cycle with the reference and the baseline"):
-        reference = walk_contact_gait(model, outputs, result.trajectory)
-        pd_walk = walk_with_contact_pd(model, outputs, result.trajectory)
-    for what, w in (("reference", reference), ("baseline", pd_walk)):
-        Console().print(f"[bold]{what}[/bold] {w.line()} (reported, not required)",
-                        soft_wrap=True, highlight=False)
+    walk, reference, pd_walk = _walks(model, outputs, result.trajectory, console)
     passed = check.passed and walk.walks
     if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
@@ -107,6 +96,39 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     why = "; ".join(w for w, bad in ((check.verdict(), not check.passed),
                                      (f"the gait {walk.line()}", not walk.walks)) if bad)
     conclude(_verdict(passed, why, allow_mismatch))
+
+
+def _say_flat_feet(pitch: dict[str, float]) -> None:
+    """One line: how far off flat the take's feet read while flat on the ground (rad)."""
+    import math
+
+    if pitch:
+        Console().print("take: its feet read " + ", ".join(
+            f"{math.degrees(v):+.1f} deg ({foot})" for foot, v in pitch.items())
+            + " while flat on the ground; taken out of the ankles' angles (the model's "
+            "flat sole is at 0)", soft_wrap=True, highlight=False)
+
+
+def _walks(model: Any, outputs: Any, trajectory: Any, console: Console) -> tuple[Any, ...]:
+    """The fitted cycle walked 10 steps with the prosthesis on clfqp (the verdict), the held
+    oracle (the reference) and contact-pd (the baseline), each printed on its line."""
+    from characterization.gait.contact_gait import walk_contact_gait
+    from orchestrator.experiments.contact_walk import (
+        walk_with_contact_clfqp,
+        walk_with_contact_pd,
+    )
+
+    with console.status("gait fit: the fitted cycle with the prosthesis on clfqp"):
+        walk = walk_with_contact_clfqp(model, outputs, trajectory)
+    Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
+                    highlight=False)
+    with console.status("gait fit: the fitted cycle with the reference and the baseline"):
+        reference = walk_contact_gait(model, outputs, trajectory)
+        pd_walk = walk_with_contact_pd(model, outputs, trajectory)
+    for what, w in (("reference", reference), ("baseline", pd_walk)):
+        Console().print(f"[bold]{what}[/bold] {w.line()} (reported, not required)",
+                        soft_wrap=True, highlight=False)
+    return walk, reference, pd_walk
 
 
 def _verdict(passed: bool, why: str, allow_mismatch: bool) -> Verdict:
