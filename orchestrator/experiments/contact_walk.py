@@ -1,11 +1,14 @@
 """A fitted multi-contact gait walked by a prosthesis controller from its own sensors
-(:class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) in the in-process plant
-(:class:`orchestrator.loop.plant.SimulatorPlant`: what AMPRO3 senses, the torque held each
-period and bounded at the motors), the simulated human on its feedback linearization.
+(``clfqp``: :class:`prosthesis_controller.contact_clf_qp.ContactClfQp`, the verdict's; the
+baseline ``contact-pd``: :class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) in
+the in-process plant (:class:`orchestrator.loop.plant.SimulatorPlant`: what AMPRO3 senses,
+the torque held each period and bounded at the motors), the simulated human on its feedback
+linearization.
 
-The controller's tables come from one stride of the same plant with the prosthesis holding
+The controllers' tables come from one stride of the same plant with the prosthesis holding
 the full feedback linearization's torque (:func:`characterization.gait.contact_gait.held_oracle`),
-sensed the same way: the gait as the model walks it.
+sensed the same way: the gait as the model walks it (:func:`held_walk`); the CLF-QP's model
+is evaluated along the same stance (the walker's states, wrenches and torques there).
 """
 
 from __future__ import annotations
@@ -61,7 +64,7 @@ CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
-               gains: tuple[float, float, float]) -> HybridSimulator:
+                   gains: tuple[float, float, float]) -> HybridSimulator:
     """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd)."""
     cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
     return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
