@@ -113,18 +113,15 @@ def _walks(model: Any, outputs: Any, trajectory: Any, console: Console) -> tuple
     """The fitted cycle walked 10 steps with the prosthesis on clfqp (the verdict), the held
     oracle (the reference) and contact-pd (the baseline), each printed on its line."""
     from characterization.gait.contact_gait import walk_contact_gait
-    from orchestrator.experiments.contact_walk import (
-        walk_with_contact_clfqp,
-        walk_with_contact_pd,
-    )
+    from orchestrator.experiments.contact_walk import walk_prosthesis_controllers
 
-    with console.status("gait fit: the fitted cycle with the prosthesis on clfqp"):
-        walk = walk_with_contact_clfqp(model, outputs, trajectory)
+    with console.status("gait fit: the fitted cycle with the prosthesis on clfqp and "
+                        "contact-pd"):
+        walk, pd_walk = walk_prosthesis_controllers(model, outputs, trajectory)
     Console().print(f"[bold]closed loop[/bold] {walk.line()}", soft_wrap=True,
                     highlight=False)
-    with console.status("gait fit: the fitted cycle with the reference and the baseline"):
+    with console.status("gait fit: the fitted cycle with the reference"):
         reference = walk_contact_gait(model, outputs, trajectory)
-        pd_walk = walk_with_contact_pd(model, outputs, trajectory)
     for what, w in (("reference", reference), ("baseline", pd_walk)):
         Console().print(f"[bold]{what}[/bold] {w.line()} (reported, not required)",
                         soft_wrap=True, highlight=False)

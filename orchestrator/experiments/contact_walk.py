@@ -116,6 +116,16 @@ def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any
     return HeldWalk(*(np.array(c) for c in cols))
 
 
+@dataclass(frozen=True)
+class LoopSetup:
+    """What several walks of one gait can share: its in-process simulator
+    (:func:`loop_simulator`) and the held oracle's walk (:func:`held_walk`; None: not made,
+    or it fell)."""
+
+    sim: HybridSimulator
+    held: HeldWalk | None
+
+
 def controller_tables(sim: HybridSimulator, leg: LegKinematics,
                       trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
     """The tables of :func:`tables_from_walk` from :func:`held_walk`.  ValueError if it
@@ -160,14 +170,16 @@ def _phase_pd(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKi
 def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                          trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
                          gains: tuple[float, float, float] = GAINS,
-                         stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS
-                         ) -> ContactWalk:
+                         stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS, *,
+                         setup: LoopSetup | None = None) -> ContactWalk:
     """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactPhasePD`
-    (``stance``, ``swing``: its gains); ``gains``: the simulated human's."""
-    sim = loop_simulator(model, gait, gains)
+    (``stance``, ``swing``: its gains); ``gains``: the simulated human's; ``setup``: the
+    simulator and the held walk when made already."""
+    sim = setup.sim if setup else loop_simulator(model, gait, gains)
     leg = LegKinematics.of(model)
     try:
-        tables = controller_tables(sim, leg, trajectory)
+        w = (setup and setup.held) or held_walk(sim, trajectory)
+        tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
     except ValueError as e:  # the verdict line says why, no walk
         return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]),
                            CONTACT_PD)
@@ -178,12 +190,14 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
 def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   trajectory: Mapping[Domain, Mapping[str, Any]],
                   gains: tuple[float, float, float] = GAINS,
-                  config: ContactClfConfig = DEFAULT_CONFIG) -> ContactClfQp:
+                  config: ContactClfConfig = DEFAULT_CONFIG, *,
+                  setup: LoopSetup | None = None) -> ContactClfQp:
     """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
-    the same stance of :func:`held_walk` (ValueError as :func:`controller_tables`)."""
-    sim = loop_simulator(model, gait, gains)
+    the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
+    :func:`controller_tables`)."""
     leg = LegKinematics.of(model)
-    w = held_walk(sim, trajectory)
+    w = (setup and setup.held) or held_walk(
+        setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
     tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
     i0, i1, _ = first_stride(w.contact)
     st = slice(i0, i1)
@@ -199,10 +213,27 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
 def walk_with_contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                             trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
                             gains: tuple[float, float, float] = GAINS,
-                            config: ContactClfConfig = DEFAULT_CONFIG) -> ContactWalk:
-    """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactClfQp`."""
+                            config: ContactClfConfig = DEFAULT_CONFIG, *,
+                            setup: LoopSetup | None = None) -> ContactWalk:
+    """Walk ``gait`` ``steps`` steps with the prosthesis on :class:`ContactClfQp`
+    (``setup``: as :func:`walk_with_contact_pd`)."""
+    setup = setup or LoopSetup(loop_simulator(model, gait, gains), None)
+    sim = setup.sim
     try:
-        ctl = contact_clfqp(model, gait, trajectory, gains, config)
+        ctl = contact_clfqp(model, gait, trajectory, gains, config, setup=setup)
     except ValueError as e:
         return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]), CLFQP)
-    return walk_controller(loop_simulator(model, gait, gains), trajectory, ctl, steps, CLFQP)
+    return walk_controller(sim, trajectory, ctl, steps, CLFQP)
+
+
+def walk_prosthesis_controllers(model: HumanProsthesisModel, gait: ContactGait,
+                                trajectory: Mapping[Domain, Mapping[str, Any]],
+                                steps: int = 10) -> tuple[ContactWalk, ContactWalk]:
+    """``clfqp``'s walk and contact-pd's, on one simulator and one held walk."""
+    sim = loop_simulator(model, gait, GAINS)
+    try:
+        setup = LoopSetup(sim, held_walk(sim, trajectory))
+    except ValueError:  # each walk then says why in its line
+        setup = LoopSetup(sim, None)
+    return (walk_with_contact_clfqp(model, gait, trajectory, steps, setup=setup),
+            walk_with_contact_pd(model, gait, trajectory, steps, setup=setup))
