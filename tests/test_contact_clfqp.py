@@ -227,3 +227,30 @@ def test_an_imu_bias_is_estimated_while_the_foot_is_flat(cycle) -> None:
     assert np.all(np.abs(late - bias) < math.radians(0.02)), np.degrees(late).min()
     strikes = [i.t for i in plant.run.result().impacts if i.into == Domain.DS_H]
     assert np.all(np.abs(np.diff(strikes) / sum(durations.values()) - 1) < 0.01)
+
+
+def test_a_perturbation_family_is_walked_by_all_three_on_the_same_draws(cycle) -> None:
+    """orchestrator.experiments.contact_perturbations (what docs/gait-design.md's table
+    runs): two draws of the IMU bias (0.5 deg sd) and of the human's gains, 6 steps: clfqp
+    walks all four (the table: 20 of 20 and 18 of 20); the oracle's sensor row is the draws;
+    the human's posture offsets of 0 deg change nothing."""
+    from orchestrator.experiments.contact_perturbations import draw, family_walks
+
+    model, traj, durations, gait = cycle
+    w = family_walks(model, traj, durations, "bias", 1.0, draws=2, steps=6)
+    assert w["clfqp"] == 2 and w["oracle"] == 2, w
+    w = family_walks(model, traj, durations, "gains", 1.0, draws=2, steps=6)
+    assert w["clfqp"] == 2, w
+    same = draw(gait, "posture", 0.0, 0).gait
+    for d in gait.params:
+        np.testing.assert_array_equal(same.params[d].alpha, gait.params[d].alpha)
+    with pytest.raises(ValueError, match="unknown family"):
+        draw(gait, "wind", 1.0, 0)
+
+
+def test_the_perturbation_script_refuses_a_missing_gait_in_one_line(capsys) -> None:
+    from orchestrator.experiments.contact_perturbations import main
+
+    assert main(["/nonexistent/gait.json", "--family", "bias"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "/nonexistent/gait.json" in err and "\n" not in err

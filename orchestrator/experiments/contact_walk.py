@@ -187,6 +187,17 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                            steps, CONTACT_PD)
 
 
+def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
+                    trajectory: Mapping[Domain, Mapping[str, Any]],
+                    setup: LoopSetup | None = None) -> ContactPhasePD:
+    """contact-pd of ``gait`` with its default gains, its tables from :func:`held_walk`
+    (``setup``'s when made already; ValueError as :func:`controller_tables`)."""
+    leg = LegKinematics.of(model)
+    w = (setup and setup.held) or held_walk(
+        setup.sim if setup else loop_simulator(model, gait, GAINS), trajectory)
+    return _phase_pd(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg)
+
+
 def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   trajectory: Mapping[Domain, Mapping[str, Any]],
                   gains: tuple[float, float, float] = GAINS,

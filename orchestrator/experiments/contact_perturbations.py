@@ -1,0 +1,184 @@
+"""The multi-contact graph's prosthesis controllers under perturbation: the same draws for the
+held oracle (full-state reference), ``clfqp`` and contact-pd, each walked in the in-process
+plant (:mod:`orchestrator.experiments.contact_walk`); what docs/gait-design.md's perturbation
+table measures.
+
+Families (``amplitude`` scales each; per draw, from its seed):
+
+    bias     the socket IMU's pitch off by a constant, N(0, 0.5 deg x amplitude)
+    imu      the IMU's pitch with white noise, 0.2 deg x amplitude
+    encoder  the encoders with white noise, 1 mrad and 0.02 rad/s x amplitude
+    sensors  all three together
+    gains    the simulated human's gains (eps, kp, kd) each x exp(N(0, 0.3 x amplitude))
+    posture  the human's four joints' curves offset by N(0, 1 deg x amplitude), every domain
+
+The oracle reads the plant's state, not the sensors: in the sensor families it is not walked
+(its row is the draws).
+
+Usage: python -m orchestrator.experiments.contact_perturbations GAIT.json --family bias
+       [--amplitude 1] [--draws 20] [--steps 10]
+(GAIT.json: a multi-contact gait written by ``hpcosim gait fit --domains multicontact``.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from characterization.gait.contact_gait import (
+    GAINS,
+    ContactGait,
+    contact_gait_of,
+    held_oracle,
+    start_state,
+)
+from characterization.gait.multicontact import GRAPH
+from hp_model.domains import Domain
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.outputs import GaitParams
+from orchestrator.experiments.contact_walk import (
+    LoopSetup,
+    contact_clfqp,
+    held_walk,
+    loop_simulator,
+    make_contact_pd,
+)
+from orchestrator.loop.link import Encoder, measurement
+from orchestrator.loop.plant import SimulatorPlant
+
+FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture")
+#: the human's joints whose curves the posture family offsets
+HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
+CONTROLLERS = ("oracle", "clfqp", "contact-pd")
+
+
+@dataclass(frozen=True)
+class Draw:
+    """One draw: the gait the simulated human walks, its gains, the prosthesis's sensors."""
+
+    gait: ContactGait
+    gains: tuple[float, float, float]
+    encoder: Encoder | None
+
+
+def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
+    """The perturbation ``family`` (module docstring) of draw ``seed``."""
+    rng = np.random.default_rng(seed)
+    a = float(amplitude)
+    if family == "bias":
+        return Draw(gait, GAINS, Encoder(imu_bias=rng.normal(0, math.radians(0.5) * a),
+                                         seed=seed))
+    if family == "imu":
+        return Draw(gait, GAINS, Encoder(imu_noise=math.radians(0.2) * a, seed=seed))
+    if family == "encoder":
+        return Draw(gait, GAINS, Encoder(angle_noise=1e-3 * a, velocity_noise=2e-2 * a,
+                                         seed=seed))
+    if family == "sensors":
+        return Draw(gait, GAINS, Encoder(angle_noise=1e-3 * a, velocity_noise=2e-2 * a,
+                                         imu_bias=rng.normal(0, math.radians(0.5) * a),
+                                         imu_noise=math.radians(0.2) * a, seed=seed))
+    if family == "gains":
+        g = np.asarray(GAINS) * np.exp(rng.normal(0, 0.3 * a, 3))
+        return Draw(gait, (float(g[0]), float(g[1]), float(g[2])), None)
+    if family == "posture":
+        offset = dict(zip(HUMAN_JOINTS, rng.normal(0, math.radians(1.0) * a, 4),
+                          strict=True))
+        params = {}
+        for d, p in gait.params.items():
+            alpha = np.array(p.alpha, float)
+            for row, coord in enumerate(d.y2_coords):
+                alpha[row] += offset.get(coord, 0.0)
+            params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
+        return Draw(ContactGait(params, gait.rms), GAINS, None)
+    raise ValueError(f"unknown family {family!r}; choose from {', '.join(FAMILIES)}")
+
+
+def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
+              d: Draw, controller: Any, steps: int, seed: int) -> bool:
+    """Whether the plant of draw ``d`` takes ``steps`` steps with the prosthesis on
+    ``controller`` ("oracle", or a controller with ``reset`` and ``tick``)."""
+    sim = loop_simulator(model, d.gait, d.gains)
+    q0, qd0 = start_state(trajectory)
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    rng = np.random.default_rng(seed + 1000)
+    oracle = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()}, sim.gains) \
+        if controller == "oracle" else None
+    if oracle is None:
+        controller.reset()
+    while True:
+        obs = plant.observe()
+        if oracle is not None:
+            u = oracle(obs.t, plant.run.observe())
+        else:
+            m = measurement(obs, d.encoder, rng) if d.encoder else measurement(obs)
+            u = np.array(controller.tick(m))
+        plant.actuate(u)
+        if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
+            break
+        plant.advance()
+    return plant.fall is None and plant.run.steps >= steps
+
+
+def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
+                 durations: Mapping[Domain, float], family: str, amplitude: float = 1.0,
+                 draws: int = 20, steps: int = 10) -> dict[str, int]:
+    """Walks of ``steps`` steps out of ``draws`` draws of ``family`` per controller (the
+    same draws for each; the controllers made once from the unperturbed gait)."""
+    gait = contact_gait_of(model, trajectory, durations)
+    sim = loop_simulator(model, gait, GAINS)
+    setup = LoopSetup(sim, held_walk(sim, trajectory))
+    ctls: dict[str, Any] = {"oracle": "oracle",
+                            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup),
+                            "contact-pd": make_contact_pd(model, gait, trajectory, setup)}
+    walks = dict.fromkeys(CONTROLLERS, 0)
+    for seed in range(draws):
+        d = draw(gait, family, amplitude, seed)
+        for name, ctl in ctls.items():
+            if name == "oracle" and d.encoder is not None:
+                walks[name] += 1  # it reads the plant's state, not the sensors
+                continue
+            walks[name] += walk_draw(model, trajectory, d, ctl, steps, seed)
+    return walks
+
+
+def _load(path: str) -> tuple[HumanProsthesisModel, dict[Domain, dict[str, Any]],
+                              dict[Domain, float]]:
+    from characterization.gait.multicontact_artifact import load_multicontact_gait
+    from hp_model.config import DeviceConfig, SubjectConfig
+
+    doc = load_multicontact_gait(path)
+    model = HumanProsthesisModel(SubjectConfig.model_validate(doc["subject"]),
+                                 DeviceConfig.model_validate(doc["device"]), graph=GRAPH)
+    traj = {d: {k: np.asarray(v, float) for k, v in doc["trajectory"][d.value].items()
+                if k != "duration"} for d in GRAPH.domains}
+    durations = {d: float(doc["trajectory"][d.value]["duration"]) for d in GRAPH.domains}
+    return model, traj, durations
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("gait")
+    ap.add_argument("--family", choices=FAMILIES, required=True)
+    ap.add_argument("--amplitude", type=float, default=1.0)
+    ap.add_argument("--draws", type=int, default=20)
+    ap.add_argument("--steps", type=int, default=10)
+    a = ap.parse_args(argv)
+    try:
+        model, traj, durations = _load(a.gait)
+    except (OSError, ValueError, KeyError) as e:
+        print(f"contact_perturbations: error: {a.gait}: {e}", file=sys.stderr)
+        return 2
+    w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps)
+    print(f"{a.family} x{a.amplitude:g}, {a.draws} draws, {a.steps} steps: "
+          + ", ".join(f"{k} {v}/{a.draws}" for k, v in w.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
