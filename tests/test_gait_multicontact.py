@@ -349,7 +349,7 @@ def test_a_takes_feet_are_flat_where_they_stand_flat(steps, mc_model):
         assert 0.5 < np.degrees(off) < 3.0, (foot, np.degrees(off))
     frames = mc_model.numeric()["frames"]
     ix = [mc_model.coord_names.index(c) for c in TRACKED]
-    for foot, (domain, _) in FLAT_STANCE.items():
+    for foot, domain in FLAT_STANCE.items():
         A = np.asarray(t.angles[domain])
         n = A.shape[1]
         pitches = []

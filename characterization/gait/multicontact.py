@@ -816,8 +816,8 @@ def targets_from_windows(time: np.ndarray, q: np.ndarray, coord_names: tuple[str
     return MultiContactTargets(durations, angles, float(np.mean(speeds)))
 
 
-#: each foot's flat single support (its domain) and its ankle's coordinate
-FLAT_STANCE = {"prosthesis": (Domain.PS, "th_pa"), "human": (Domain.PNS, "th_la")}
+#: each foot's flat single support (its stance leg's ankle: ``Domain.stance_leg.ankle``)
+FLAT_STANCE = {"prosthesis": Domain.PS, "human": Domain.PNS}
 
 
 def flat_foot_pitch(pitch: dict[str, np.ndarray],
@@ -828,7 +828,7 @@ def flat_foot_pitch(pitch: dict[str, np.ndarray],
     little off (no static trial says where the markers sit on the foot): openOFM's feet at
     +1.6 deg, OpenSim's at +0.3 to +0.6 deg."""
     out = {}
-    for foot, (domain, _) in FLAT_STANCE.items():
+    for foot, domain in FLAT_STANCE.items():
         samples = [pitch[foot][a + (b - a) // 4: b - (b - a) // 4 + 1]
                    for a, b in (w[domain] for w in windows)]
         out[foot] = float(np.nanmedian(np.concatenate(samples)))
@@ -863,7 +863,7 @@ def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: s
     offsets = flat_foot_pitch(pitch, windows) if windows else {}
     q = q.copy()
     for foot, off in offsets.items():
-        ankle = FLAT_STANCE[foot][1]
+        ankle = FLAT_STANCE[foot].stance_leg.ankle
         # the sole's pitch moves one for one with its ankle's angle
         q[:, coords.index(ankle)] -= off / float(rows[foot][model.coord_names.index(ankle)])
     targets = replace(targets_from_windows(steps.time, q, coords, windows,

@@ -48,9 +48,9 @@ from orchestrator.experiments.contact_walk import (
     held_walk,
     loop_simulator,
     make_contact_pd,
+    walk_controller,
 )
-from orchestrator.loop.link import Encoder, measurement
-from orchestrator.loop.plant import SimulatorPlant
+from orchestrator.loop.link import IDEAL_ENCODER, Encoder
 
 FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture")
 #: the human's joints whose curves the posture family offsets
@@ -100,29 +100,21 @@ def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
 
 
 def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
-              d: Draw, controller: Any, steps: int, seed: int) -> bool:
+              d: Draw, controller: Any, steps: int) -> bool:
     """Whether the plant of draw ``d`` takes ``steps`` steps with the prosthesis on
-    ``controller`` ("oracle", or a controller with ``reset`` and ``tick``)."""
+    ``controller`` ("oracle": :func:`held_oracle` on the plant's state; else a controller
+    with ``reset`` and ``tick``, reading the sensors through the draw's encoder)."""
     sim = loop_simulator(model, d.gait, d.gains)
-    q0, qd0 = start_state(trajectory)
-    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
-    rng = np.random.default_rng(seed + 1000)
-    oracle = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()}, sim.gains) \
-        if controller == "oracle" else None
-    if oracle is None:
-        controller.reset()
-    while True:
-        obs = plant.observe()
-        if oracle is not None:
-            u = oracle(obs.t, plant.run.observe())
-        else:
-            m = measurement(obs, d.encoder, rng) if d.encoder else measurement(obs)
-            u = np.array(controller.tick(m))
-        plant.actuate(u)
-        if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
-            break
-        plant.advance()
-    return plant.fall is None and plant.run.steps >= steps
+    if controller == "oracle":
+        q0, qd0 = start_state(trajectory)
+        policy = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()},
+                             sim.gains)
+        res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
+                      policy=policy)
+        return res.fall is None and res.steps >= steps
+    controller.reset()
+    return walk_controller(sim, trajectory, controller, steps, "",
+                           d.encoder or IDEAL_ENCODER).walks
 
 
 def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
@@ -143,7 +135,7 @@ def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mappin
             if name == "oracle" and d.encoder is not None:
                 walks[name] += 1  # it reads the plant's state, not the sensors
                 continue
-            walks[name] += walk_draw(model, trajectory, d, ctl, steps, seed)
+            walks[name] += walk_draw(model, trajectory, d, ctl, steps)
     return walks
 
 
@@ -171,10 +163,10 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
     try:
         model, traj, durations = _load(a.gait)
-    except (OSError, ValueError, KeyError) as e:
+        w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps)
+    except (OSError, ValueError, KeyError) as e:  # a bad file, or the held oracle fell
         print(f"contact_perturbations: error: {a.gait}: {e}", file=sys.stderr)
         return 2
-    w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps)
     print(f"{a.family} x{a.amplitude:g}, {a.draws} draws, {a.steps} steps: "
           + ", ".join(f"{k} {v}/{a.draws}" for k, v in w.items()))
     return 0

@@ -32,7 +32,7 @@ from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
-from orchestrator.loop.link import measurement
+from orchestrator.loop.link import IDEAL_ENCODER, Encoder, measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
@@ -139,14 +139,17 @@ class _Controller(Protocol):
 
 
 def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
-                    controller: _Controller, steps: int, description: str) -> ContactWalk:
+                    controller: _Controller, steps: int, description: str,
+                    encoder: Encoder = IDEAL_ENCODER) -> ContactWalk:
     """Walk ``steps`` steps of the plant ``sim`` from the fitted cycle's start with the
-    prosthesis on ``controller`` (``description``: the verdict's words for it)."""
+    prosthesis on ``controller`` (``description``: the verdict's words for it), its sensors
+    read through ``encoder`` (its noise from its seed)."""
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    rng = np.random.default_rng(encoder.seed)
     while True:
         obs = plant.observe()
-        plant.actuate(np.array(controller.tick(measurement(obs))))
+        plant.actuate(np.array(controller.tick(measurement(obs, encoder, rng))))
         if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
             break
         plant.advance()
