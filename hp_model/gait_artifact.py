@@ -50,7 +50,7 @@ SCHEMA_VERSION = 2
 MULTICONTACT_KIND = "hpcosim-gait-multicontact"
 
 
-def _kind(path: str | os.PathLike[str]) -> object:
+def artifact_kind(path: str | os.PathLike[str]) -> object:
     """A JSON file's ``kind`` field (None if it has none or is not JSON)."""
     import json
 
@@ -185,7 +185,7 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
     try:
         doc = load_json(path, KIND, (1, SCHEMA_VERSION))
     except ArtifactError:
-        if _kind(path) == MULTICONTACT_KIND:
+        if artifact_kind(path) == MULTICONTACT_KIND:
             raise ArtifactError(
                 f"{src}: a multi-contact gait (`gait fit --domains multicontact`, a "
                 "trajectory): the tube, controllers, FMU and co-simulation run the paper's "

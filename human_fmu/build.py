@@ -29,24 +29,24 @@ import subprocess
 import tempfile
 import time
 import zipfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import casadi as ca
+import numpy as np
 
 import hp_model
 from hp_model.artifacts import ArtifactError
 from hp_model.closed_loop import ClosedLoop
 from hp_model.compiled import densified, find_c_compiler, generate_c
-from hp_model.domains import PAPER_DOMAINS, Domain
+from hp_model.domains import Domain, DomainGraph
 from hp_model.falls import c_definitions
 from hp_model.gait_artifact import Gait, load_gait
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import dumps
-from hp_model.outputs import ThetaLayout
 from hp_model.simulator import SimOptions
 from human_fmu.fmi3 import PLATFORM_TUPLE, config_macros, model_description_3
 from human_fmu.variables import (
@@ -69,9 +69,11 @@ FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 FMI3_HEADERS = ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 #: per FMI version: the API source file, its headers and the binaries folder
 API = {2: ("hpfmu.c", FMI_HEADERS, PLATFORM), 3: ("hpfmu3.c", FMI3_HEADERS, PLATFORM_TUPLE)}
-CASADI_FUNCTIONS = ("rk4k_human_ps", "rk4k_human_pns", "xdot_human_ps", "xdot_human_pns",
-                    "phase_ps", "phase_pns", "start_ps", "start_pns")
-MODEL_FUNCTIONS = ("impact_ps", "impact_pns", "guard_ps", "guard_pns", "frames")
+#: the generated functions of each domain, by their role in the C (``F_<ROLE>[d]`` of
+#: hpfmu_config.h): from the closed loop, then from the model.  ``guard`` only where a
+#: touchdown ends the domain, ``start`` (the walker's placement) on the paper's graph only
+CLOSED_LOOP_ROLES = ("rk4k_human", "xdot_human", "phase", "start")
+MODEL_ROLES = ("impact", "guard")
 
 
 class FmuBuildError(RuntimeError):
@@ -149,10 +151,27 @@ def private_helpers(src: str) -> str:
     return _HELPER.sub(r"static \1 \2(", src)
 
 
+def function_names(model: HumanProsthesisModel) -> list[tuple[str, Domain | None, str]]:
+    """(role, domain, name) of each function compiled into the FMU, in its C table's order:
+    per domain of the model's graph its roles (``CLOSED_LOOP_ROLES``, ``MODEL_ROLES``), then
+    the model's ``frames``."""
+    out: list[tuple[str, Domain | None, str]] = []
+    for d in model.graph.domains:
+        for role in (*CLOSED_LOOP_ROLES, *MODEL_ROLES):
+            if role == "start" and model.graph != DomainGraph.PAPER:
+                continue
+            if role == "guard" and model.domains[d].swing_frame is None:
+                continue
+            out.append((role, d, f"{role}_{d}"))
+    return [*out, ("frames", None, "frames")]
+
+
 def fmu_functions(model: HumanProsthesisModel, cl: ClosedLoop) -> list[ca.Function]:
-    """The CasADi functions compiled into the FMU (the ones HybridSimulator calls)."""
-    return ([densified(cl.functions[n]) for n in CASADI_FUNCTIONS]
-            + [densified(model.functions[n]) for n in MODEL_FUNCTIONS])
+    """The CasADi functions compiled into the FMU (the ones HybridSimulator calls), in the
+    order of :func:`function_names`."""
+    return [densified(cl.functions[name] if role in CLOSED_LOOP_ROLES else
+                      model.functions[name])
+            for role, _d, name in function_names(model)]
 
 
 # -- modelDescription.xml -----------------------------------------------------------------------
@@ -236,40 +255,112 @@ def _c_double(v: float) -> str:
     return r if any(ch in r for ch in ".eEn") else r + ".0"
 
 
-def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree: int
-                  ) -> str:
+def _c_ints(name: str, values: Sequence[int]) -> str:
+    return f"static const int {name}[{len(values)}] = {{" + ", ".join(map(str, values)) + "};"
+
+
+def domain_tables(cl: ClosedLoop) -> list[str]:
+    """The C tables of the model's graph, indexed by a domain's place in the cycle (the
+    ``domain`` output and the ``initial_domain`` parameter use ``Domain.code``): what
+    :class:`hp_model.simulator.SimulationRun` reads from the model's domains."""
+    model = cl.model
+    graph, domains = model.graph, model.graph.domains
+    place = {d: k for k, d in enumerate(domains)}
+    layouts = [cl.vcs[d].layout for d in domains]
+    theta_at = np.cumsum([0] + [L.size for L in layouts]).tolist()
+    alpha_at = np.cumsum([0] + [L.n_alpha for L in layouts]).tolist()
+    roles = model.roles
+    coord = model.coord_names.index
+
+    def trailing(d: Domain) -> int:  # the trailing contact's F_x row (F_z the next)
+        return d.contacts[0].size if d.is_double_support else -1
+
+    def lead(d: Domain) -> tuple[int, int]:  # a double support's leading sole and ankle
+        if not d.is_double_support:
+            return -1, -1
+        leg = d.stance_leg
+        return model.frame_index(leg.sole_frame), coord(leg.ankle)
+
+    def load_row(d: Domain) -> int:  # the prosthesis contact's F_z row
+        c = d.prosthesis_contact
+        return -1 if c is None else model.domains[d].wrench_slice(c.name).start + 1
+
+    fn = function_names(model)
+    index = {(role, d): k for k, (role, d, _n) in enumerate(fn)}
+    lines = [
+        f"/* the {graph} graph: domains in walking order (their place indexes every table; "
+        "the domain output reports Domain.code) */",
+        f"#define HPFMU_ND {len(domains)}",
+        "static const char *const HPFMU_DOMAIN_NAME[HPFMU_ND] = {"
+        + ", ".join(_c_str(d) for d in domains) + "};",
+        _c_ints("HPFMU_DOMAIN_CODE", [d.code for d in domains]),
+        _c_ints("HPFMU_NEXT", [place[graph.next(d)] for d in domains]),
+        "/* entering the domain starts a step (the paper's: every impact; else a heel strike) */",
+        _c_ints("HPFMU_STARTS_STEP", [int(d in graph.step_starts) for d in domains]),
+        "/* the packed gait of each domain in theta[] (hp_model.outputs.ThetaLayout): its "
+        "first entry, its Bezier coefficients' count, the first of them in the perturbation's "
+        "draws */",
+        f"#define HPFMU_NTHETA {theta_at[-1]}",
+        _c_ints("HPFMU_THETA_AT", theta_at[:-1]),
+        _c_ints("HPFMU_NALPHA", [L.n_alpha for L in layouts]),
+        _c_ints("HPFMU_ALPHA_AT", alpha_at[:-1]),
+        "/* the sole landed flat at a touchdown into the domain, and its ankle (-1: none; the "
+        "paper's flat stances) */",
+        _c_ints("HPFMU_LANDING_FRAME", [roles[d].stance_frame_index if d in roles else -1
+                                        for d in domains]),
+        _c_ints("HPFMU_LANDING_ANKLE", [roles[d].ankle if d in roles else -1
+                                        for d in domains]),
+        "/* a double support: its trailing contact's F_x row in lam (F_z the next; -1: not "
+        "one), the leading foot's sole frame and ankle, landed flat when the trailing leaves */",
+        _c_ints("HPFMU_TRAILING", [trailing(d) for d in domains]),
+        _c_ints("HPFMU_LEAD_SOLE", [lead(d)[0] for d in domains]),
+        _c_ints("HPFMU_LEAD_ANKLE", [lead(d)[1] for d in domains]),
+        "/* rows of lam: the prosthesis foot's normal force (-1: it swings), the socket "
+        "wrench's first; whether the first contact (the stance) has a moment (a flat sole) */",
+        _c_ints("HPFMU_LOAD_ROW", [load_row(d) for d in domains]),
+        _c_ints("HPFMU_SOCKET_AT", [model.domains[d].wrench_slice("socket").start
+                                    for d in domains]),
+        _c_ints("HPFMU_STANCE_FLAT", [int(d.contacts[0].is_flat) for d in domains]),
+        "/* the first contact's frame: on the ground at the start (and level if flat) */",
+        _c_ints("HPFMU_CONTACT_FRAME", [model.frame_index(d.contacts[0].frame)
+                                        for d in domains]),
+        "/* the generated functions (hpfmu_casadi.inc) and each domain's by role (-1: none) */",
+        "typedef int (*cs_eval)(const casadi_real **, casadi_real **, casadi_int *, "
+        "casadi_real *, int);",
+        "typedef int (*cs_work)(casadi_int *, casadi_int *, casadi_int *, casadi_int *);",
+        f"#define N_FN {len(fn)}",
+        "static const cs_eval FN[N_FN] = {" + ", ".join(n for *_r, n in fn) + "};",
+        "static const cs_work FN_WORK[N_FN] = {" + ", ".join(f"{n}_work" for *_r, n in fn)
+        + "};",
+        *(_c_ints(f"F_{role.split('_')[0].upper()}", [index.get((role, d), -1)
+                                                      for d in domains])
+          for role in (*CLOSED_LOOP_ROLES, *MODEL_ROLES)),
+        f"#define F_FRAMES {index[('frames', None)]}",
+    ]
+    return lines
+
+
+def config_header(table: _Table, cl: ClosedLoop, guid: str) -> str:
+    model, degree = cl.model, cl.degree
     names = model.coord_names
-    roles = [model.roles[d] for d in PAPER_DOMAINS]
-    L = ThetaLayout(degree)
+    pk, pa = (names.index(c) for c in ("th_pk", "th_pa"))
+    lam_width = max(dom.n_constraints for dom in model.domains.values())
     lines = [
         "/* hpfmu_config.h: generated by human_fmu.build from the variable table; do not edit */",
         "#ifndef HPFMU_CONFIG_H", "#define HPFMU_CONFIG_H", "",
         f"#define HPFMU_GUID {_c_str(guid)}",
         f"#define HPFMU_NQ {model.nq}", f"#define HPFMU_NU {model.nu}",
-        f"#define HPFMU_NLAM {model.domains[Domain.PS].n_constraints}",
-        "/* the packed gait vector theta (hp_model.outputs.ThetaLayout) */",
-        f"#define HPFMU_NTHETA {L.size}", f"#define HPFMU_NALPHA {L.n_alpha}",
-        f"#define HPFMU_THETA_V_HIP {L.v_hip}", f"#define HPFMU_THETA_P_MIN {L.p_min}",
-        f"#define HPFMU_THETA_P_MAX {L.p_max}",
+        f"#define HPFMU_NLAM {lam_width}",
         f"#define HPFMU_DEGREE {degree}",
         f"#define HPFMU_NFRAMES {len(model.frame_names)}",
         f"#define HPFMU_IDX_ZB {names.index('z_B')}",
-        f"#define HPFMU_IDX_PK {model.roles[Domain.PS].prosthesis[0]}",
-        f"#define HPFMU_IDX_PA {model.roles[Domain.PS].prosthesis[1]}",
+        f"#define HPFMU_IDX_PK {pk}",
+        f"#define HPFMU_IDX_PA {pa}",
         f"#define HPFMU_SOCKET_FIRST {names.index('x_f')}", "",
         "/* the device's motor torque limits (knee, ankle; N m): inputs are clamped to them */",
         "static const double HPFMU_TORQUE_LIMIT[2] = {"
         + ", ".join(_c_double(float(v)) for v in model.torque_limits[4:6]) + "};", "",
-        "/* domains: 0 = ps, 1 = pns (hp_model.domains) */",
-        "static const char *const HPFMU_DOMAIN_NAME[2] = {"
-        + ", ".join(_c_str(d) for d in PAPER_DOMAINS) + "};",
-        "static const int HPFMU_NEXT[2] = {"
-        + ", ".join(str(r.next.code) for r in roles) + "};",
-        "/* frame held flat in the domain (= the frame that lands when entering it) */",
-        "static const int HPFMU_STANCE_FRAME[2] = {"
-        + ", ".join(str(r.stance_frame_index) for r in roles) + "};",
-        "static const int HPFMU_LANDING_ANKLE[2] = {"
-        + ", ".join(str(r.ankle) for r in roles) + "};",
+        *domain_tables(cl), "",
         "/* fall codes (the fall_code output) and messages: hp_model.falls.FallReason */",
         *c_definitions().splitlines(),
         *config_macros(),
@@ -300,7 +391,13 @@ def config_header(table: _Table, model: HumanProsthesisModel, guid: str, degree:
             lines.append(f"static const int HPFMU_{up}_START[{len(vs)}] = {{")
         lines += [f"  {x}," for x in vals]
         lines += ["};", ""]
-    lines += ["#endif", ""]
+    at = [table.arrays[f"THETA_{d.upper()}"][1] for d in model.graph.domains]
+    sizes = [table.arrays[f"THETA_{d.upper()}"][2] for d in model.graph.domains]
+    if at != [at[0] + sum(sizes[:k]) for k in range(len(at))]:
+        raise AssertionError("the theta arrays are not consecutive in the variable table")
+    lines += ["/* the domains' packed gaits: one array after the other (HPFMU_THETA_AT) */",
+              f"#define VR_THETA_1 VR_THETA_{model.graph.domains[0].upper()}_1",
+              "#endif", ""]
     return "\n".join(lines)
 
 
@@ -366,39 +463,71 @@ def _check_target(out: Path, fmi_version: int) -> str:
 
 
 @dataclass(frozen=True)
+class TrackedGait:
+    """What the FMU's human tracks and starts from, on its model's graph: the packed gait
+    of each domain (:class:`hp_model.outputs.ThetaLayout`), the feedback gains (eps 1/s, kp
+    1/s^2, kd 1/s), the initial state (q0, qd0) in the graph's first domain, the curves'
+    Bezier degree, and the gait's identity (its hash, its file's name)."""
+
+    thetas: Mapping[Domain, np.ndarray]
+    gains: tuple[float, float, float]
+    q0: np.ndarray
+    qd0: np.ndarray
+    degree: int
+    hash: str
+    name: str
+
+
+def paper_tracked_gait(gait: str | os.PathLike[str], model: HumanProsthesisModel
+                       ) -> TrackedGait:
+    """The paper's gait file as the FMU tracks it: its optimized ps start (FmuBuildError
+    if it is not a gait of ``model``)."""
+    g = load_checked_gait(gait, model)
+    tr = g.trajectory[Domain.PS]
+    return TrackedGait({d: g.theta(d) for d in model.graph.domains},
+                       (float(g.gains[0]), float(g.gains[1]), float(g.gains[2])),
+                       tr["q"][:, 0], tr["qd"][:, 0], g.degree, g.hash(), Path(gait).name)
+
+
+@dataclass(frozen=True)
 class _Inputs:
-    """What an FMU is built from: the model, the checked gait, the closed loop along it and
-    the variable table (start values from the gait)."""
+    """What an FMU is built from: the model, the gait it tracks, the closed loop along it
+    and the variable table (start values from the gait)."""
 
     model: HumanProsthesisModel
-    gait: Gait
-    gait_name: str  # the gait file's name, recorded in the FMU
+    gait: TrackedGait
     closed_loop: ClosedLoop
     table: _Table
     model_hash: str
-    gait_hash: str
 
 
-def _load_inputs(gait: str | os.PathLike[str], subject: str | os.PathLike[str] | None,
+def _load_inputs(gait: str | os.PathLike[str] | TrackedGait,
+                 subject: str | os.PathLike[str] | None,
                  device: str | os.PathLike[str] | None,
                  model: HumanProsthesisModel | None) -> _Inputs:
     """The model (built from subject/device unless given), the gait checked against it and
     the variable table."""
     if model is None:
+        if isinstance(gait, TrackedGait):
+            raise ValueError("a TrackedGait is built with the model it was made for")
         model = hp_model.load_model(str(subject) if subject else None,
                                     str(device) if device else None)
     elif subject is not None or device is not None:
         raise ValueError("give either model or subject/device")
-    g = load_checked_gait(gait, model)
-    model_hash, gait_hash = model.parameter_hash(), g.hash()
+    g = gait if isinstance(gait, TrackedGait) else paper_tracked_gait(gait, model)
+    if set(g.thetas) != set(model.graph.domains):
+        raise FmuBuildError(f"gait {g.name}: its domains ({', '.join(map(str, g.thetas))}) "
+                            f"are not the {model.graph} graph's")
     cl = ClosedLoop(model, g.degree)
-    thetas = {d: g.theta(d) for d in PAPER_DOMAINS}
-    tr = g.trajectory[Domain.PS]
-    table = build_table(model, thetas, g.gains, tr["q"][:, 0], tr["qd"][:, 0], g.degree,
-                        SimOptions())
-    add_constants(table, model_hash, gait_hash)
-    return _Inputs(model=model, gait=g, gait_name=Path(gait).name, closed_loop=cl,
-                   table=table, model_hash=model_hash, gait_hash=gait_hash)
+    for d, th in g.thetas.items():
+        if np.size(th) != cl.vcs[d].n_params:
+            raise FmuBuildError(f"gait {g.name}: the {d} gait has {np.size(th)} parameters; "
+                                f"degree {g.degree} on the {model.graph} graph has "
+                                f"{cl.vcs[d].n_params}")
+    table = build_table(model, g.thetas, g.gains, g.q0, g.qd0, g.degree, SimOptions())
+    model_hash = model.parameter_hash()
+    add_constants(table, model_hash, g.hash)
+    return _Inputs(model=model, gait=g, closed_loop=cl, table=table, model_hash=model_hash)
 
 
 @dataclass(frozen=True)
@@ -426,11 +555,12 @@ def _generate_sources(inp: _Inputs, fmi_version: int) -> _Sources:
     table_key = dumps([(v.name, v.type, v.causality, v.vr, fmt_value(v.start)
                         if v.start is not None else None) for v in table.vars])
     guid = _guid(casadi_src, wrapper_src + core_src + c_definitions(), table_key,
-                 inp.model_hash, inp.gait_hash, f"fmi{fmi_version}")
-    header = config_header(table, model, guid, g.degree)
+                 inp.model_hash, g.hash, f"fmi{fmi_version}")
+    header = config_header(table, inp.closed_loop, guid)
     generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-    annotations = {"model_hash": inp.model_hash, "gait_hash": inp.gait_hash,
-                   "gait_file": inp.gait_name, "degree": str(g.degree),
+    annotations = {"model_hash": inp.model_hash, "gait_hash": g.hash,
+                   "gait_file": g.name, "degree": str(g.degree),
+                   "domain_graph": str(model.graph),
                    "subject": model.subject.name, "device": model.device.name}
     about = ("hpcosim human side: 12-DOF human-prosthesis hybrid dynamics with the human's "
              "feedback linearization along the gait; inputs: prosthesis motor torques; "
@@ -474,10 +604,11 @@ def _build_info(inp: _Inputs, srcs: _Sources, fmi_version: int, cc: str,
     """``resources/build_info.json``: hashes, compiler and flags, versions, timings."""
     info = {"model_identifier": MODEL_IDENTIFIER, "fmi_version": f"{fmi_version}.0",
             "guid": srcs.guid, "model_hash": inp.model_hash,
-            "gait_hash": inp.gait_hash, "gait_file": inp.gait_name, "degree": inp.gait.degree,
+            "gait_hash": inp.gait.hash, "gait_file": inp.gait.name, "degree": inp.gait.degree,
+            "domain_graph": str(inp.model.graph),
             "generated": srcs.generated, "compiler": cc, "cflags": list(FMU_CFLAGS),
             "casadi": ca.CasadiMeta.version(), "hpcosim": hp_model.__version__,
-            "functions": [*CASADI_FUNCTIONS, *MODEL_FUNCTIONS], "seconds": seconds}
+            "functions": [n for *_r, n in function_names(inp.model)], "seconds": seconds}
     return dumps(info, indent=1) + "\n"
 
 
@@ -495,14 +626,16 @@ def _zip_atomically(root: Path, out: Path) -> None:
     atomic_write_with(out, write)
 
 
-def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
+def build_fmu(gait: str | os.PathLike[str] | TrackedGait, out: str | os.PathLike[str],
               subject: str | os.PathLike[str] | None = None,
               device: str | os.PathLike[str] | None = None, *,
               model: HumanProsthesisModel | None = None,
               progress: Callable[[str], None] | None = None,
               fmi_version: int = 2) -> BuildInfo:
     """Build ``out`` (.fmu) for the gait file and the subject/device configs (defaults: the
-    shipped example files); ``model`` reuses an already built model of those configs.
+    shipped example files); ``model`` reuses an already built model of those configs.  A
+    :class:`TrackedGait` (another graph's gait, e.g. the multi-contact one) comes with the
+    ``model`` it was made for.
     ``fmi_version``: 2 (FMI 2.0) or 3 (FMI 3.0), the same generated C and core."""
     t0 = time.perf_counter()
     say = progress or (lambda _msg: None)
@@ -532,9 +665,9 @@ def build_fmu(gait: str | os.PathLike[str], out: str | os.PathLike[str],
     for v in inp.table.vars:
         counts[v.causality] = counts.get(v.causality, 0) + 1
     return BuildInfo(path=out, guid=srcs.guid, model_hash=inp.model_hash,
-                     gait_hash=inp.gait_hash, degree=inp.gait.degree, variables=counts,
+                     gait_hash=inp.gait.hash, degree=inp.gait.degree, variables=counts,
                      size_bytes=out.stat().st_size, seconds=seconds)
 
 
-__all__ = ["MODEL_IDENTIFIER", "BuildInfo", "FmuBuildError", "Variable", "build_fmu",
-           "fmu_functions", "load_checked_gait"]
+__all__ = ["MODEL_IDENTIFIER", "BuildInfo", "FmuBuildError", "TrackedGait", "Variable",
+           "build_fmu", "fmu_functions", "load_checked_gait", "paper_tracked_gait"]

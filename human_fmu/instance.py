@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hp_model.domains import PAPER_DOMAINS, Domain
+from hp_model.domains import Domain
 
 #: sensor outputs in the order :meth:`HumanFmu.read` returns them (rad, rad/s, N, phase, rad)
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
@@ -218,7 +218,9 @@ class HumanFmu:
         info = self.unzipdir / "resources" / "build_info.json"
         self.build_info: dict[str, Any] = json.loads(info.read_text()) if info.is_file() else {}
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.n_theta = sum(1 for n in self.vr if n.startswith("theta_ps["))
+        #: the domains the FMU's human tracks (its graph's), each with its packed gait's size
+        self.theta_sizes = {d: sum(1 for n in self.vr if n.startswith(f"theta_{d}["))
+                            for d in Domain if f"theta_{d}[1]" in self.vr}
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(self.unzipdir),
                              modelIdentifier=self.md.coSimulation.modelIdentifier,
                              instanceName=instance)
@@ -271,13 +273,14 @@ class HumanFmu:
     def start_walk(self, thetas: Mapping[Domain, np.ndarray], q0: np.ndarray, qd0: np.ndarray,
                    real: Mapping[str, float] | None = None) -> None:
         """Start a run where the human tracks ``thetas`` (packed gait per domain) from
-        (q0, qd0) in ps, with no FMU-side perturbation or offset: the state the in-process
-        simulator starts from; ``real``: other Real parameters (e.g. fall limits)."""
+        (q0, qd0) in its graph's first domain (ps), with no FMU-side perturbation or offset:
+        the state the in-process simulator starts from; ``real``: other Real parameters (e.g.
+        fall limits)."""
         values: dict[str, float] = {}
-        for d in PAPER_DOMAINS:
+        for d, size in self.theta_sizes.items():
             th = np.asarray(thetas[d], float)
-            if th.size != self.n_theta:
-                raise ValueError(f"theta_{d} of size {th.size}; the FMU has {self.n_theta}")
+            if th.size != size:
+                raise ValueError(f"theta_{d} of size {th.size}; the FMU has {size}")
             values.update({f"theta_{d}[{i + 1}]": float(v) for i, v in enumerate(th)})
         values.update({f"q0[{i + 1}]": float(v) for i, v in enumerate(q0)})
         values.update({f"qd0[{i + 1}]": float(v) for i, v in enumerate(qd0)})

@@ -12,8 +12,10 @@ Generator (documented so any importer can reproduce it):
 
 i.e. SplitMix64 (Steele, Lea, Flood 2014) read at counter k + 1.  ``seed`` is the FMU's
 32-bit Integer parameter taken modulo 2^64 (two's complement for negative seeds).  Draw
-k = d * n_alpha + i perturbs the i-th entry of domain d's packed alpha (row-major (5, m+1);
-d = 0 for ps, 1 for pns); v_hip, p_min and p_max are not perturbed.  An amplitude of 0
+k = A_d + i perturbs the i-th entry of domain d's packed alpha (row-major (rows, m+1)), A_d
+the count of alpha entries of the domains before d in the graph's walking order (the
+paper's: ps then pns, so k = d * n_alpha + i with d = 0 for ps, 1 for pns); v_hip, p_min and
+p_max are not perturbed.  An amplitude of 0
 leaves the gait exactly nominal.
 """
 
@@ -23,8 +25,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from hp_model.domains import PAPER_DOMAINS, Domain
-from hp_model.outputs import ThetaLayout
+from hp_model.domains import Domain, DomainGraph
 
 MASK = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
@@ -47,16 +48,21 @@ def uniform(seed: int, k: int) -> float:
 
 def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: int
                      ) -> dict[Domain, np.ndarray]:
-    """The packed gait parameters the human tracks: ``thetas`` with every Bezier coefficient
-    moved by the generator's delta (see the module docstring)."""
+    """The packed gait parameters the human tracks: ``thetas`` (every domain of one graph)
+    with every Bezier coefficient moved by the generator's delta (the module docstring)."""
     if not (np.isfinite(amplitude) and amplitude >= 0):
         raise ValueError(f"amplitude must be finite and >= 0, got {amplitude}")
-    out = {d: np.array(thetas[d], dtype=float) for d in PAPER_DOMAINS}
+    keys = {Domain(d) for d in thetas}
+    graph = next((g for g in DomainGraph if set(g.domains) == keys), None)
+    if graph is None:
+        raise ValueError(f"the domains {sorted(keys)} are not those of a graph")
+    out = {d: np.array(thetas[d], dtype=float) for d in graph.domains}
     if amplitude == 0:
         return out
-    n_alpha = ThetaLayout.of_size(out[Domain.PS].size).n_alpha
-    for d in PAPER_DOMAINS:
-        k0 = d.code * n_alpha
+    k0 = 0
+    for d in graph.domains:
+        n_alpha = out[d].size - 3  # all but v_hip, p_min, p_max
         for i in range(n_alpha):
             out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)
+        k0 += n_alpha
     return out

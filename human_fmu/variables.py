@@ -14,7 +14,7 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from hp_model.domains import PAPER_DOMAINS, Domain
+from hp_model.domains import Domain, DomainGraph
 from hp_model.falls import FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import SimOptions
@@ -89,16 +89,39 @@ def coord_unit(name: str, derivative: bool = False) -> str:
     return "m" if linear else "rad"
 
 
-def theta_descriptions(domain: str, degree: int) -> tuple[list[str], list[str]]:
-    desc, units = [], []
-    for row, coord in enumerate(Domain(domain).y2_coords):
+def theta_rows(graph: DomainGraph, domain: str) -> list[tuple[str, str | None]]:
+    """(what, unit) of each alpha row of ``domain``'s packed gait on ``graph``: its y2
+    joints' angles; on the multi-contact graph then the hip progress rate where the domain
+    has that output and the leading contact's friction ratio in a double support
+    (:mod:`hp_model.contact_outputs`)."""
+    d = Domain(domain)
+    rows: list[tuple[str, str | None]] = [(coord, "rad") for coord in d.y2_coords]
+    if graph == DomainGraph.MULTICONTACT:
+        if d.velocity_output:
+            rows.append(("the hip progress rate", "m/s"))
+        if d.is_double_support:
+            rows.append(("the leading contact's friction ratio F_x/F_z", None))
+    return rows
+
+
+def theta_descriptions(domain: str, degree: int,
+                       graph: DomainGraph = DomainGraph.PAPER
+                       ) -> tuple[list[str], list[str | None]]:
+    desc: list[str] = []
+    units: list[str | None] = []
+    for row, (what, unit) in enumerate(theta_rows(graph, domain)):
         for j in range(degree + 1):
-            desc.append(f"{domain} gait: Bezier coefficient alpha[{row},{j}] of {coord}")
-            units.append("rad")
+            desc.append(f"{domain} gait: Bezier coefficient alpha[{row},{j}] of {what}")
+            units.append(unit)
     desc += [f"{domain} gait: hip velocity v_hip", f"{domain} gait: phase start p_min",
              f"{domain} gait: phase end p_max"]
     units += ["m/s", "m", "m"]
     return desc, units
+
+
+def domain_codes(graph: DomainGraph) -> str:
+    """The graph's domains by the code the ``domain`` output reports: "0 = ps, 1 = pns"."""
+    return ", ".join(f"{d.code} = {d}" for d in sorted(graph.domains, key=lambda d: d.code))
 
 
 def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray],
@@ -106,7 +129,7 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
                 options: SimOptions | None = None) -> _Table:
     """The variable table with start values from the gait (thetas, gains, initial state)."""
     opt = options or SimOptions()
-    names = model.coord_names
+    names, graph = model.coord_names, model.graph
     t = _Table()
     # inputs
     t.add("u_knee", "Real", "input", "prosthesis knee motor torque, held over the step",
@@ -119,8 +142,10 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
     t.add("knee_velocity", "Real", "output", "prosthesis knee velocity", unit="rad/s")
     t.add("ankle_velocity", "Real", "output", "prosthesis ankle velocity", unit="rad/s")
     t.add("foot_load", "Real", "output",
-          "prosthesis foot normal force (N) in ps, 0 in pns", unit="N", feedthrough=True)
-    t.add("foot_contact", "Boolean", "output", "prosthesis foot on the ground (domain ps)")
+          "prosthesis foot normal force (N) while it is on the ground (flat, heel or toe), "
+          "else 0", unit="N", feedthrough=True)
+    t.add("foot_contact", "Boolean", "output",
+          "prosthesis foot on the ground (a domain with a prosthesis contact)")
     t.add("socket_pitch", "Real", "output",
           "world pitch of the prosthesis top link (AMPRO3's IMU), about +y", unit="rad")
     # outputs: ground truth
@@ -128,11 +153,13 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
           unit="N", feedthrough=True)
     t.add("socket_Fz", "Real", "output", "socket force F_z", unit="N", feedthrough=True)
     t.add("socket_My", "Real", "output", "socket moment M_y", unit="N.m", feedthrough=True)
-    t.add("stance_Fx", "Real", "output", "stance-foot ground force F_x (world)", unit="N",
+    t.add("stance_Fx", "Real", "output",
+          "stance-foot ground force F_x (world; a double support's leading foot)", unit="N",
           feedthrough=True)
     t.add("stance_Fz", "Real", "output", "stance-foot ground force F_z (world)", unit="N",
           feedthrough=True)
-    t.add("stance_My", "Real", "output", "stance-foot ground moment M_y (world)", unit="N.m",
+    t.add("stance_My", "Real", "output",
+          "stance-foot ground moment M_y (world; 0 on a heel or a toe)", unit="N.m",
           feedthrough=True)
     t.array("q", "Real", "output", [f"coordinate {n}" for n in names],
             [coord_unit(n) for n in names])
@@ -144,16 +171,18 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
     t.add("tau", "Real", "output", "phase variable tau of the current domain")
     t.add("t_impact", "Real", "output", "time of the last impact (located), -1 before any",
           unit="s")
-    t.add("domain", "Integer", "output", "current domain: 0 = ps, 1 = pns")
-    t.add("steps", "Integer", "output", "impacts so far")
+    t.add("domain", "Integer", "output", f"current domain: {domain_codes(graph)}")
+    t.add("steps", "Integer", "output",
+          "steps so far: the impacts that start one (the paper's graph: every impact; the "
+          "multi-contact graph: the heel strikes)")
     t.add("fall", "Boolean", "output", "the walker fell (integration stopped)")
     t.add("fall_code", "Integer", "output",
           "why: " + "; ".join(f"{int(r)} {r.description}" for r in FallReason))
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
     # parameters: the gait the human tracks and its feedback gains
-    for d in PAPER_DOMAINS:
-        desc, units = theta_descriptions(d, degree)
+    for d in graph.domains:
+        desc, units = theta_descriptions(d, degree, graph)
         t.array(f"theta_{d}", "Real", "parameter", desc, units,
                 [float(v) for v in thetas[d]])
     t.add("fl_eps", "Real", "parameter", "human feedback linearization gain on y1",
@@ -171,10 +200,12 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
             [coord_unit(n) for n in names], [float(v) for v in q0])
     t.array("qd0", "Real", "parameter", [f"initial velocity of {n}" for n in names],
             [coord_unit(n, True) for n in names], [float(v) for v in qd0])
-    t.add("initial_domain", "Integer", "parameter", "initial domain: 0 = ps, 1 = pns", start=0)
+    t.add("initial_domain", "Integer", "parameter",
+          f"initial domain: {domain_codes(graph)}", start=graph.domains[0].code)
     t.add("offset_knee", "Real", "parameter",
           "initial offset added to th_pk (see README: the human put on its outputs, the "
-          "walker re-placed on its stance foot)", start=0.0, unit="rad")
+          "walker re-placed on its stance foot; the paper's graph only)", start=0.0,
+          unit="rad")
     t.add("offset_ankle", "Real", "parameter", "initial offset added to th_pa", start=0.0,
           unit="rad")
     # parameters: integration and events (SimOptions)
@@ -198,12 +229,18 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
     t.add("max_speed", "Real", "parameter",
           "fall: a generalized speed above this (m/s or rad/s: the state diverging)",
           start=opt.max_speed)
-    t.add("min_normal_force", "Real", "parameter", "fall: stance normal force below this",
-          start=opt.min_normal_force, unit="N")
+    t.add("min_normal_force", "Real", "parameter",
+          "fall: stance normal force below this (a double support's trailing foot leaves "
+          "below it)", start=opt.min_normal_force, unit="N")
     t.add("mu", "Real", "parameter", "friction coefficient of the slip check", start=opt.mu)
     t.add("cone_periods", "Integer", "parameter",
           "fall: friction cone violated this many consecutive communication steps",
           start=opt.cone_periods)
+    t.add("trailing_slip_load", "Real", "parameter",
+          "a double support's trailing contact counts as slipping above this normal force "
+          "(negative: its slip is not watched)",
+          start=-1.0 if opt.trailing_slip_load is None else
+          opt.trailing_slip_load * model.tree.total_mass * model.tree.gravity, unit="N")
     t.add("max_touchdown_pitch", "Real", "parameter",
           "fall: landing-foot pitch removed at touchdown above this",
           start=opt.max_touchdown_pitch, unit="rad")

@@ -23,7 +23,7 @@ Layout (``kind = "hpcosim-gait-multicontact"``, ``schema_version = 1``; SI units
 from __future__ import annotations
 
 import os
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
@@ -35,8 +35,10 @@ from characterization.gait.multicontact import (
     MultiContactTargets,
 )
 from characterization.gait.person_check import PersonCheck, StanceForce
-from hp_model.artifacts import load_json, save_json
+from hp_model.artifacts import ArtifactError, load_json, save_json
+from hp_model.domains import Domain
 from hp_model.gait_artifact import MULTICONTACT_KIND
+from hp_model.human_prosthesis import HumanProsthesisModel
 
 KIND = MULTICONTACT_KIND
 SCHEMA_VERSION = 1
@@ -82,3 +84,42 @@ def load_multicontact_gait(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The document of a multi-contact gait file (:class:`~hp_model.artifacts.ArtifactError`
     naming the file and field when it is not one)."""
     return dict(load_json(path, KIND, SCHEMA_VERSION))
+
+
+@dataclass(frozen=True)
+class ContactCycle:
+    """A multi-contact gait file read back: the model it was made for (its subject, device
+    and the graph), the fitted cycle's per-domain trajectories (``t``, ``q``, ``qd``, ``qdd``,
+    ``u``, ``lam``) and durations (s)."""
+
+    model: HumanProsthesisModel
+    trajectory: dict[Domain, dict[str, np.ndarray]]
+    durations: dict[Domain, float]
+
+
+def load_contact_cycle(path: str | os.PathLike[str]) -> ContactCycle:
+    """The model and the cycle of a multi-contact gait file (ArtifactError naming the file
+    and field when it is not one, or its configs are not valid)."""
+    from pydantic import ValidationError
+
+    from hp_model.config import DeviceConfig, SubjectConfig
+
+    doc = load_multicontact_gait(path)
+    try:
+        subject = SubjectConfig.model_validate(doc["subject"])
+        device = DeviceConfig.model_validate(doc["device"])
+    except (KeyError, ValidationError) as e:
+        raise ArtifactError(f"{path}: field 'subject'/'device': not a valid config "
+                            f"({str(e).splitlines()[0]})") from None
+    model = HumanProsthesisModel(subject, device, graph=GRAPH)
+    try:
+        traj = {d: {k: np.asarray(v, float) for k, v in doc["trajectory"][d.value].items()
+                    if k != "duration"} for d in GRAPH.domains}
+        durations = {d: float(doc["trajectory"][d.value]["duration"]) for d in GRAPH.domains}
+    except (KeyError, TypeError, ValueError) as e:
+        raise ArtifactError(f"{path}: field 'trajectory': {e}") from None
+    if doc.get("model_hash") not in (None, model.parameter_hash()):
+        raise ArtifactError(f"{path}: field 'model_hash': the file was made for another "
+                            "model than its own subject and device give")
+    return ContactCycle(model, traj, durations)
+

@@ -39,6 +39,7 @@ from characterization.gait.contact_gait import (
     start_state,
 )
 from characterization.gait.multicontact import GRAPH
+from characterization.gait.multicontact_artifact import load_contact_cycle
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
@@ -139,20 +140,6 @@ def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mappin
     return walks
 
 
-def _load(path: str) -> tuple[HumanProsthesisModel, dict[Domain, dict[str, Any]],
-                              dict[Domain, float]]:
-    from characterization.gait.multicontact_artifact import load_multicontact_gait
-    from hp_model.config import DeviceConfig, SubjectConfig
-
-    doc = load_multicontact_gait(path)
-    model = HumanProsthesisModel(SubjectConfig.model_validate(doc["subject"]),
-                                 DeviceConfig.model_validate(doc["device"]), graph=GRAPH)
-    traj = {d: {k: np.asarray(v, float) for k, v in doc["trajectory"][d.value].items()
-                if k != "duration"} for d in GRAPH.domains}
-    durations = {d: float(doc["trajectory"][d.value]["duration"]) for d in GRAPH.domains}
-    return model, traj, durations
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("gait")
@@ -162,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--steps", type=int, default=10)
     a = ap.parse_args(argv)
     try:
-        model, traj, durations = _load(a.gait)
+        cycle = load_contact_cycle(a.gait)
+        model, traj, durations = cycle.model, cycle.trajectory, cycle.durations
         w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps)
     except (OSError, ValueError, KeyError) as e:  # a bad file, or the held oracle fell
         print(f"contact_perturbations: error: {a.gait}: {e}", file=sys.stderr)

@@ -13,8 +13,10 @@ is evaluated along the same stance (the walker's states, wrenches and torques th
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,15 +25,19 @@ from characterization.gait.contact_gait import (
     GAINS,
     ContactGait,
     ContactWalk,
+    contact_gait_of,
     held_oracle,
     start_state,
 )
 from characterization.gait.multicontact import GRAPH
+from characterization.gait.multicontact_artifact import load_contact_cycle
+from hp_model.artifacts import canonical_hash
 from hp_model.closed_loop import ClosedLoop
 from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
+from human_fmu.build import TrackedGait
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder, measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_clf_qp import (
@@ -251,3 +257,29 @@ def walk_prosthesis_controllers(model: HumanProsthesisModel, gait: ContactGait,
         setup = LoopSetup(sim, None)
     return (walk_with_contact_clfqp(model, gait, trajectory, steps, setup=setup),
             walk_with_contact_pd(model, gait, trajectory, steps, setup=setup))
+
+
+def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
+                 trajectory: Mapping[Domain, Mapping[str, Any]], name: str,
+                 gains: tuple[float, float, float] = GAINS) -> TrackedGait:
+    """What the human FMU tracks of ``gait`` (:func:`human_fmu.build_fmu`): its packed
+    curves, the human's ``gains``, the fitted cycle's start; ``name`` the gait file's.  Its
+    hash names the model, the gains and the curves."""
+    thetas = gait.thetas()
+    q0, qd0 = start_state(trajectory)
+    identity = canonical_hash({"model_hash": model.parameter_hash(), "gains": list(gains),
+                               "params": {d.value: thetas[d] for d in GRAPH.domains}})
+    return TrackedGait(thetas, gains, q0, qd0, gait.params[GRAPH.domains[0]].degree,
+                       identity, name)
+
+
+def load_tracked_gait(path: str | os.PathLike[str]
+                      ) -> tuple[HumanProsthesisModel, TrackedGait]:
+    """The model of a multi-contact gait file and what the human FMU tracks of it
+    (:func:`tracked_gait`: its virtual constraints regressed from the stored cycle, the
+    default gains); ArtifactError for a bad file, MultiContactError for a cycle with no
+    phase."""
+    cycle = load_contact_cycle(path)
+    gait = contact_gait_of(cycle.model, cycle.trajectory, cycle.durations)
+    return cycle.model, tracked_gait(cycle.model, gait, cycle.trajectory, Path(path).name)
+

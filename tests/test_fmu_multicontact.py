@@ -1,0 +1,154 @@
+"""The human FMU on the multi-contact graph (heel strike, flat foot, heel off, toe off):
+built from the committed openOFM cycle, stepped by fmpy under the torques the in-process
+simulator applied, it reproduces that simulator's walk (the same generated functions, the
+same hybrid algorithm: lift-offs at tau = 1, the trailing foot's release, step counting);
+``hpcosim fmu build`` makes it from a multi-contact gait file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+from characterization.gait.contact_gait import contact_gait_of, held_oracle, start_state
+from characterization.gait.multicontact_artifact import KIND, SCHEMA_VERSION
+from hp_model.artifacts import save_json
+from hp_model.domains import Domain
+from hp_model.simulator import HybridSimulator, SimResult
+from human_fmu import build_fmu, perturbed_thetas
+from orchestrator.cli import main as hpcosim
+from orchestrator.experiments.contact_walk import loop_simulator, tracked_gait
+from orchestrator.loop.plant import wrench_rows
+from tests.fmu_runner import HumanFMU
+from tests.multicontact_cycle import load_cycle
+
+DT = 1e-3
+
+
+@pytest.fixture(scope="module")
+def cycle():
+    model, traj, durations, _ = load_cycle()
+    return model, traj, contact_gait_of(model, traj, durations)
+
+
+@pytest.fixture(scope="module")
+def fmu_path(tmp_path_factory, cycle):
+    model, traj, gait = cycle
+    path = tmp_path_factory.mktemp("mcfmu") / "human.fmu"
+    build_fmu(tracked_gait(model, gait, traj, "openofm cycle"), path, model=model)
+    return path
+
+
+def reference(sim: HybridSimulator, traj, thetas, steps: int) -> SimResult:
+    q0, qd0 = start_state(traj)
+    return sim.run(q0, qd0, Domain.PS, steps=steps, duration=10.0,
+                   policy=held_oracle(sim.cl, thetas, sim.gains))
+
+
+@pytest.fixture(scope="module")
+def walked(cycle):
+    model, traj, gait = cycle
+    sim = loop_simulator(model, gait, (20.0, 1600.0, 80.0))
+    return sim, reference(sim, traj, gait.thetas(), steps=6)
+
+
+def replay(path, torques: np.ndarray, real: dict | None = None, integer: dict | None = None
+           ) -> dict[str, np.ndarray]:
+    """Step the FMU one period per row of ``torques`` (knee, ankle motor torque, N m),
+    reading the state, domain, steps and the forces under each torque before its step."""
+    h = HumanFMU(str(path))
+    h.setup(real, integer)
+    f = h.fmu
+    xv = h.vrs([f"q[{i}]" for i in range(1, 13)] + [f"qd[{i}]" for i in range(1, 13)])
+    iv = h.vrs(["domain", "steps", "fall_code"])
+    uv, fv = h.vrs(["u_knee", "u_ankle"]), h.vrs(["foot_load", "socket_Fx", "socket_Fz",
+                                                  "socket_My"])
+    log: dict[str, list] = {"x": [], "domain": [], "steps": [], "forces": []}
+    for k, u in enumerate(torques):
+        log["x"].append(f.getReal(xv))
+        dom, steps, code = f.getInteger(iv)
+        assert code == 0, f"the FMU fell (code {code}) at period {k}"
+        log["domain"].append(dom)
+        log["steps"].append(steps)
+        f.setReal(uv, u.tolist())
+        log["forces"].append(f.getReal(fv))
+        f.doStep(k * DT, DT)
+    h.free()
+    return {k: np.array(v) for k, v in log.items()}
+
+
+def test_the_fmu_walks_the_simulators_walk(fmu_path, cycle, walked):
+    model, _, _ = cycle
+    sim, ref = walked
+    assert ref.fall is None and ref.steps == 6
+    into = [i.into for i in ref.impacts]
+    # the walk crosses every transition: heel strikes, the double supports' ends (the
+    # trailing foot's release or the leading toe's touchdown), and the lift-offs
+    assert {Domain.DS_H, Domain.DS_P} <= set(into)
+    assert any(i.release for i in ref.impacts)
+    assert {Domain.PS_TOE, Domain.PNS_TOE} <= {Domain.from_code(int(c)) for c in ref.domain}
+    log = replay(fmu_path, ref.u[:, 4:6])
+    x_ref = np.c_[ref.q, ref.qd]
+    # the same generated C and arithmetic (-ffp-contract=off): equal to rounding
+    assert np.abs(log["x"] - x_ref).max() <= 1e-9
+    assert np.array_equal(log["domain"], ref.domain)
+    # steps: the heel strikes so far, period by period
+    strikes = np.array([i.t for i in ref.impacts if i.starts_step])
+    assert np.array_equal(log["steps"], np.searchsorted(strikes, ref.t, side="right"))
+    rows = wrench_rows(model)
+    for k in range(0, ref.t.size, 7):
+        r = rows[Domain.from_code(int(ref.domain[k]))]
+        load = 0.0 if r.load is None else ref.lam[k, r.load]
+        assert log["forces"][k, 0] == pytest.approx(load, abs=1e-6)
+        assert log["forces"][k, 1:] == pytest.approx(ref.lam[k, r.socket], abs=1e-6)
+
+
+def test_the_human_perturbation_is_the_python_mirrors(fmu_path, cycle, walked):
+    """A perturbed human (every Bezier coefficient of the six domains moved by its draw)
+    walks in the FMU as the simulator walks :func:`perturbed_thetas`'s gait."""
+    model, traj, gait = cycle
+    sim, _ = walked
+    amplitude, seed = 0.002, 7
+    thetas = perturbed_thetas(gait.thetas(), amplitude, seed)
+    assert all(np.abs(thetas[d] - gait.thetas()[d])[-3:].max() == 0 for d in thetas)
+    psim = HybridSimulator(model, sim.cl, thetas, sim.gains)
+    ref = reference(psim, traj, thetas, steps=2)
+    assert ref.fall is None
+    log = replay(fmu_path, ref.u[:, 4:6], {"human_perturbation": amplitude},
+                 {"human_seed": seed})
+    assert np.abs(log["x"] - np.c_[ref.q, ref.qd]).max() <= 1e-9
+    assert np.array_equal(log["domain"], ref.domain)
+
+
+def test_offsets_are_refused_on_this_graph(fmu_path):
+    h = HumanFMU(str(fmu_path))
+    try:
+        with pytest.raises(FMICallException):
+            h.setup({"offset_knee": 0.02})
+    finally:
+        h.fmu.freeInstance()
+
+
+def test_fmu_build_reads_a_multicontact_gait_file(tmp_path, cycle, capsys):
+    model, traj, _ = cycle
+    gait = tmp_path / "gait.json"
+    save_json(gait, {
+        "kind": KIND, "schema_version": SCHEMA_VERSION, "model_hash": model.parameter_hash(),
+        "trajectory": {d.value: {"duration": float(traj[d]["t"][-1]), **traj[d]}
+                       for d in model.graph.domains},
+        "subject": model.subject.model_dump(mode="json"),
+        "device": model.device.model_dump(mode="json")})
+    out = tmp_path / "human.fmu"
+    assert hpcosim(["fmu", "build", "--gait", str(gait), "--out", str(out)]) == 0
+    assert validate_fmu(str(out)) == []
+    h = HumanFMU(str(out))
+    names = set(h.vr)
+    h.fmu.freeInstance()
+    assert {f"theta_{d}[1]" for d in model.graph.domains} <= names
+    # a subject given beside it is refused in one line, nothing written
+    bad = tmp_path / "bad.fmu"
+    assert hpcosim(["fmu", "build", "--gait", str(gait), "--out", str(bad), "--subject",
+                    "hp_model/configs/subject_example.toml"]) != 0
+    assert not bad.exists()
+    assert "carries its subject" in capsys.readouterr().err
