@@ -21,7 +21,7 @@ import platform
 import sys
 import time
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -33,14 +33,9 @@ from orchestrator.experiments.contact_walk import contact_clfqp, controller_tabl
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_phase_pd import ContactPhasePD, LegKinematics
+from prosthesis_controller.interface import Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle
-
-
-class Controller(Protocol):
-    def reset(self) -> None: ...
-
-    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]: ...
 
 
 def controllers() -> tuple[dict[str, Controller], Any]:
@@ -66,7 +61,7 @@ def walk_measurements(ctl: Controller, sim: Any, traj: Any, steps: int
     while plant.fall is None and plant.run.steps < steps:
         m = measurement(plant.observe())
         read.append(m)
-        plant.actuate(np.array(ctl.tick(m)))
+        plant.actuate(ctl.tick(m).torque)
         plant.advance()
     if plant.fall is not None:
         raise SystemExit(f"the controller fell on the committed cycle: {plant.fall.message()}")

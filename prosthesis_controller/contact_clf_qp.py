@@ -64,7 +64,8 @@ from hp_model.compiled import FunctionSet
 from hp_model.contact_interaction import STANCE_DOMAINS, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
-from prosthesis_controller.contact_phase_pd import ContactPhasePD
+from prosthesis_controller.contact_phase_pd import ContactPhasePD, control_output
+from prosthesis_controller.interface import ControllerMode, ControlOutput, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.qp import dense_solver, set_tolerance
 
@@ -255,9 +256,12 @@ class JointClf:
 
 class ContactClfQp:
     """The controller of the module docstring, one tick per measurement: motor torques
-    (knee, ankle; N m) clamped to the motors' limits."""
+    (knee, ankle; N m) clamped to the motors' limits, with the product's diagnostics (the
+    stance domain the gait has at the phase, pns in swing; the CLF's value and relaxation in
+    stance; mode fallback where piqp cannot solve, fault for a measurement it cannot use)."""
 
     name = "clfqp"
+    relaxed = True  # its CLF row has a relaxation (the node reports rho)
 
     def __init__(self, phase_law: ContactPhasePD, stance: StanceQp,
                  limits: tuple[float, float], config: ContactClfConfig = DEFAULT_CONFIG
@@ -288,9 +292,15 @@ class ContactClfQp:
         self.keep_qp = False  # set to keep each stance tick's QP in ``qp``
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, torque: tuple[float, float] | None = None) -> None:
+        """Forget all state; ``torque``: the previous torque to assume (N m, default 0; the
+        torque-rate box starts from it)."""
         self.law.reset()
-        self._u = (0.0, 0.0)
+        lk, la = self._limits
+        u = (0.0, 0.0) if torque is None else (float(torque[0]), float(torque[1]))
+        self._u = (min(max(u[0], -lk), lk) if math.isfinite(u[0]) else 0.0,
+                   min(max(u[1], -la), la) if math.isfinite(u[1]) else 0.0)
+        self.fallbacks = 0  # ticks whose torque came from a fallback (no QP solution, fault)
         #: the last stance tick's domain (as the gait has it at the phase; None in swing), the
         #: CLF's value, the relaxations and whether piqp solved it
         self.domain: Domain | None = None
@@ -304,22 +314,32 @@ class ContactClfQp:
     def phase(self) -> float:
         return self.law.phase
 
-    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
+    def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
         fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)
         if not all(math.isfinite(v) for v in fields):
             self._u = (0.0, 0.0)
-            return self._u
+            self.fallbacks += 1
+            return control_output(self._u, self.law.phase, Domain.PNS, ControllerMode.FAULT,
+                                  self.fallbacks)
         law = self.law
         ref = law.reference(m)  # the phase and the gait there
         u = None
         self.domain = None
+        mode, qp = ControllerMode.SWING, QpOutcome.NOT_RUN
         if m.contact:
             u = self._stance(m, law.phase, ref)
+            mode, qp = ControllerMode.STANCE, QpOutcome.SOLVED
+            if u is None:
+                mode, qp = ControllerMode.FALLBACK, QpOutcome.FAILED
+                self.fallbacks += 1
         if u is None:  # swing, or no solution: contact-pd's law
             u = law.torque(m, ref)
         (lk, la) = self._limits
         self._u = (min(max(u[0], -lk), lk), min(max(u[1], -la), la))
-        return self._u
+        stance = self.domain is not None
+        return control_output(self._u, law.phase, self.domain or Domain.PNS, mode,
+                              self.fallbacks, V=self.V if stance else 0.0,
+                              rho=self.rho if stance else 0.0, qp=qp)
 
     def _stance(self, m: ProsthesisMeasurement, s: float, ref: tuple[float, ...]
                 ) -> tuple[float, float] | None:

@@ -32,9 +32,16 @@ import casadi as ca
 import numpy as np
 
 from hp_model.compiled import NumericFunction
-from hp_model.domains import PROSTHESIS
+from hp_model.domains import PROSTHESIS, Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
-from prosthesis_controller.measurement import ProsthesisMeasurement
+from prosthesis_controller.interface import (
+    Active,
+    ControllerMode,
+    ControlOutput,
+    Diagnostics,
+    QpOutcome,
+)
+from prosthesis_controller.measurement import Fault, ProsthesisMeasurement
 
 
 @dataclass(frozen=True)
@@ -186,10 +193,23 @@ STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
 SWING_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
 
 
+def control_output(torque: tuple[float, float], phase: float, domain: Domain,
+                   mode: ControllerMode, fallbacks: int, *, V: float = 0.0, rho: float = 0.0,
+                   qp: QpOutcome = QpOutcome.NOT_RUN) -> ControlOutput:
+    """A multi-contact controller's tick as the product's controllers report one
+    (:class:`~prosthesis_controller.interface.ControlOutput`; a non-finite phase reads 0;
+    mode fault: a measurement with a non-finite field)."""
+    fault = Fault.NON_FINITE if mode == ControllerMode.FAULT else Fault.NONE
+    return ControlOutput(np.array(torque), Diagnostics(
+        phase if math.isfinite(phase) else 0.0, V, rho, qp, Active.NONE, fallbacks,
+        int(fault), domain, mode))
+
+
 class ContactPhasePD:
     """The controller of the module docstring, one tick per measurement: motor torques
     (knee, ankle; N m), clamped to ``limits`` (N m, motor side), zero for a measurement it
-    cannot use (a non-finite field or no IMU pitch)."""
+    cannot use (a non-finite field or no IMU pitch: mode fault).  Its diagnostics' domain
+    is ps in stance, pns in swing."""
 
     name = "contact-pd"
 
@@ -202,7 +222,10 @@ class ContactPhasePD:
         self._gains = {True: (stance.kp, stance.kd), False: (swing.kp, swing.kd)}
         self.reset()
 
-    def reset(self) -> None:
+    def reset(self, torque: tuple[float, float] | None = None) -> None:
+        """Forget the phase's and the bias estimate's state (``torque``: the controller
+        interface's; this law holds no torque of its own)."""
+        self.fallbacks = 0  # ticks that answered a measurement it could not use
         self._in_stance: bool | None = None
         self._t_off: float | None = None
         #: the last tick's phase (stance: the progress phase; swing: the time phase)
@@ -233,11 +256,17 @@ class ContactPhasePD:
             self._t_bias = None
         return s
 
-    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
+    def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
         fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)
         if not all(math.isfinite(v) for v in fields):
-            return 0.0, 0.0
-        return self.torque(m, self.reference(m))
+            self.fallbacks += 1
+            return control_output((0.0, 0.0), self.phase, Domain.PNS, ControllerMode.FAULT,
+                                  self.fallbacks)
+        u = self.torque(m, self.reference(m))
+        stance = bool(m.contact)
+        return control_output(u, self.phase, Domain.PS if stance else Domain.PNS,
+                              ControllerMode.STANCE if stance else ControllerMode.SWING,
+                              self.fallbacks)
 
     def reference(self, m: ProsthesisMeasurement) -> tuple[float, ...]:
         """The gait at the measurement's phase (which it sets: :attr:`phase`): th_pk, th_pa

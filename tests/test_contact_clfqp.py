@@ -25,6 +25,7 @@ from orchestrator.experiments.contact_walk import (
 )
 from orchestrator.loop.link import Encoder, measurement
 from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller.interface import ControllerMode, ControlOutput
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle
 
@@ -46,12 +47,16 @@ class Recorded:
         self.ctl, self.ticks = ctl, []
         ctl.keep_qp = True
 
-    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]:
-        u = self.ctl.tick(m)
+    def reset(self, torque=None) -> None:
+        self.ctl.reset(torque)
+
+    def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
+        out = self.ctl.tick(m)
+        u = tuple(out.torque)
         c = self.ctl
         self.ticks.append((m.contact, u, c.domain, c.solved, c.sigma, c.qp, c.rho))
         c.qp = None
-        return u
+        return out
 
 
 @pytest.fixture(scope="module")
@@ -193,12 +198,14 @@ def test_bad_measurements_give_zero_torque_and_torques_stay_bounded(cycle) -> No
                                socket_pitch=0.0)
     for bad in (replace(ok, knee_vel=math.nan), replace(ok, socket_pitch=math.nan),
                 replace(ok, t=math.inf)):
-        assert ctl.tick(bad) == (0.0, 0.0)
+        out = ctl.tick(bad)
+        assert tuple(out.torque) == (0.0, 0.0)
+        assert out.diagnostics.mode == ControllerMode.FAULT
     p = model.device.prosthesis
     lim = (p.knee.torque_limit.value, p.ankle.torque_limit.value)
     for k in range(50):  # far from the gait: bounded, finite
         u = ctl.tick(replace(ok, t=0.001 * (k + 1), knee_angle=1.2, knee_vel=-8.0,
-                                 ankle_vel=6.0))
+                             ankle_vel=6.0)).torque
         assert all(math.isfinite(v) and abs(v) <= lim_ for v, lim_ in zip(u, lim, strict=True))
 
 
@@ -218,7 +225,7 @@ def test_an_imu_bias_is_estimated_while_the_foot_is_flat(cycle) -> None:
     estimates = []
     while plant.fall is None and plant.run.steps < 10:
         obs = plant.observe()
-        plant.actuate(np.array(ctl.tick(measurement(obs, encoder, rng))))
+        plant.actuate(ctl.tick(measurement(obs, encoder, rng)).torque)
         estimates.append((obs.t, ctl.law.imu_bias))
         plant.advance()
     assert plant.fall is None, plant.fall.message()

@@ -22,6 +22,7 @@ from prosthesis_controller.contact_phase_pd import (
     LegKinematics,
     PhaseTable,
 )
+from prosthesis_controller.interface import ControllerMode
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle
 
@@ -84,13 +85,15 @@ def test_bad_input_gives_no_torque_and_the_output_is_bounded(tables) -> None:
     limits = (0.5, 0.6)
     ctl = ContactPhasePD(tab, leg, (50.0, 50.0), limits)
     ok = ProsthesisMeasurement(0.1, 0.3, 0.1, 0.0, 0.0, 300.0, True, 0.2)
-    u = ctl.tick(ok)
+    u = ctl.tick(ok).torque
     assert all(math.isfinite(v) for v in u)
     assert abs(u[0]) <= limits[0] and abs(u[1]) <= limits[1]
     for bad in (ProsthesisMeasurement(0.2, math.nan, 0.1, 0.0, 0.0, 300.0, True, 0.2),
                 ProsthesisMeasurement(0.3, 0.3, 0.1, 0.0, 0.0, 300.0, True, math.nan),
                 ProsthesisMeasurement(0.4, 0.3, 0.1, math.inf, 0.0, 300.0, False, 0.2)):
-        assert ctl.tick(bad) == (0.0, 0.0)
+        out = ctl.tick(bad)
+        assert tuple(out.torque) == (0.0, 0.0)
+        assert out.diagnostics.mode == ControllerMode.FAULT
 
 
 def test_a_phase_table_clamps_and_interpolates() -> None:

@@ -80,7 +80,7 @@ def replay(path, torques: np.ndarray, real: dict | None = None, integer: dict | 
 
 def test_the_fmu_walks_the_simulators_walk(fmu_path, cycle, walked):
     model, _, _ = cycle
-    sim, ref = walked
+    _, ref = walked
     assert ref.fall is None and ref.steps == 6
     into = [i.into for i in ref.impacts]
     # the walk crosses every transition: heel strikes, the double supports' ends (the
@@ -152,3 +152,39 @@ def test_fmu_build_reads_a_multicontact_gait_file(tmp_path, cycle, capsys):
                     "hp_model/configs/subject_example.toml"]) != 0
     assert not bad.exists()
     assert "carries its subject" in capsys.readouterr().err
+
+
+def test_clfqp_walks_the_fmu_through_the_loop(fmu_path, cycle, walked):
+    """The product's closed loop (``run_loop``) with the FMU as the plant and ``clfqp`` as
+    the controller, its measurements and torques at the CAN frames' resolution (what the
+    co-simulation's controller node sees): 10 steps, the strides the in-process plant
+    gives the same controller within 1 % (the quantization is the only difference)."""
+    from human_fmu.instance import HumanFmu
+    from orchestrator.experiments.contact_walk import contact_clfqp, walk_controller
+    from orchestrator.loop.link import ControllerLink
+    from orchestrator.loop.plant import FmuPlant
+    from orchestrator.loop.run import run_loop
+
+    model, traj, gait = cycle
+    sim, _ = walked
+    ctl = contact_clfqp(model, gait, traj)
+    in_process = walk_controller(sim, traj, ctl, 10, "clfqp")
+    assert in_process.walks, in_process.line()
+    fmu = HumanFmu(fmu_path)
+    try:
+        q0, qd0 = start_state(traj)
+        fmu.start_walk(gait.thetas(), q0, qd0)
+        log = run_loop(FmuPlant(fmu, DT), ControllerLink(ctl, quantize=True), steps=10)
+    finally:
+        fmu.free()
+    assert log.fall is None and log.fault == "", log.fall
+    assert log.steps == 10
+    domain = np.array(log.domain)
+    t = np.array(log.t)
+    # heel strikes of the human foot: entries into ds_h
+    strikes = t[1:][(domain[1:] == Domain.DS_H.code) & (domain[:-1] != Domain.DS_H.code)]
+    stride = np.median(np.diff(strikes))
+    assert stride == pytest.approx(np.median(in_process.strides), rel=0.01)
+    modes = set(log.mode)
+    assert {"stance", "swing"} <= {str(m) for m in modes}
+    assert log.fallback_count == 0

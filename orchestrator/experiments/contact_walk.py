@@ -17,7 +17,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +58,7 @@ from prosthesis_controller.contact_phase_pd import (
     first_stride,
     tables_from_walk,
 )
-from prosthesis_controller.measurement import ProsthesisMeasurement
+from prosthesis_controller.interface import Controller
 
 #: how :func:`walk_with_contact_pd` runs the prosthesis
 CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prosthesis on "
@@ -140,12 +140,8 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
     return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
 
 
-class _Controller(Protocol):
-    def tick(self, m: ProsthesisMeasurement) -> tuple[float, float]: ...
-
-
 def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
-                    controller: _Controller, steps: int, description: str,
+                    controller: Controller, steps: int, description: str,
                     encoder: Encoder = IDEAL_ENCODER) -> ContactWalk:
     """Walk ``steps`` steps of the plant ``sim`` from the fitted cycle's start with the
     prosthesis on ``controller`` (``description``: the verdict's words for it), its sensors
@@ -155,7 +151,7 @@ def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[st
     rng = np.random.default_rng(encoder.seed)
     while True:
         obs = plant.observe()
-        plant.actuate(np.array(controller.tick(measurement(obs, encoder, rng))))
+        plant.actuate(controller.tick(measurement(obs, encoder, rng)).torque)
         if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
             break
         plant.advance()
