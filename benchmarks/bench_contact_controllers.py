@@ -29,7 +29,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
 from characterization.gait.multicontact import GRAPH
-from orchestrator.experiments.contact_walk import contact_clfqp, controller_tables, loop_simulator
+from orchestrator.cosim.contact_controllers import (
+    contact_clfqp,
+    controller_tables,
+    loop_simulator,
+)
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_phase_pd import ContactPhasePD, LegKinematics

@@ -217,10 +217,22 @@ class ContactPhasePD:
                  gear: tuple[float, float], limits: tuple[float, float],
                  stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> None:
         self.tables, self.leg = tables, leg
+        #: what the law was made with (its file, :mod:`prosthesis_controller.gait_tables`)
+        self.stance_gains, self.swing_gains = stance, swing
         self._gear = (float(gear[0]), float(gear[1]))
         self._limits = (float(limits[0]), float(limits[1]))
         self._gains = {True: (stance.kp, stance.kd), False: (swing.kp, swing.kd)}
         self.reset()
+
+    @property
+    def gear(self) -> tuple[float, float]:
+        """The gear ratios (knee, ankle)."""
+        return self._gear
+
+    @property
+    def limits(self) -> tuple[float, float]:
+        """The motor torque limits (knee, ankle; N m)."""
+        return self._limits
 
     def reset(self, torque: tuple[float, float] | None = None) -> None:
         """Forget the phase's and the bias estimate's state (``torque``: the controller

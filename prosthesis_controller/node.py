@@ -44,7 +44,7 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import can
 
@@ -301,8 +301,34 @@ class ControllerNode:
 # --------------------------------------------------------------------------- serving
 
 
-def build_controller(name: str, gait_path: str, tube_path: str,
-                     subject: str | None = None, device: str | None = None) -> Controller:
+class Artifacts(NamedTuple):
+    """The files a controller is built from: the paper's gait and force tube (with the
+    subject and device configs; None: the shipped defaults), or a multi-contact gait's
+    controller file ``tables`` (:mod:`prosthesis_controller.gait_tables`; it carries its
+    subject and device)."""
+
+    gait: str | None = None
+    tube: str | None = None
+    subject: str | None = None
+    device: str | None = None
+    tables: str | None = None
+
+
+def build_controller(name: str, gait_path: str | None, tube_path: str | None,
+                     subject: str | None = None, device: str | None = None, *,
+                     tables: str | None = None) -> Controller:
+    """The controller ``name`` of the paper's gait and force tube (files), or of a
+    multi-contact gait's controller file ``tables`` (``clfqp`` only; :class:`Artifacts`)."""
+    if tables is not None:
+        from prosthesis_controller.gait_tables import load_contact_controller
+
+        if ControllerName(name) != ControllerName.CLFQP:
+            raise ValueError(f"--controller {name}: a multi-contact gait's controller file "
+                             f"runs {ControllerName.CLFQP.value} only")
+        return load_contact_controller(tables)[0]
+    if gait_path is None or tube_path is None:
+        raise ValueError("give --gait and --tube (the paper's graph), or --tables (a "
+                         "multi-contact gait's controller file)")
     import hp_model
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import load_gait
@@ -426,9 +452,8 @@ def require_plant_key(cfg: BusConfig) -> None:
             "> lab.key && chmod 600 lab.key")
 
 
-def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
-             watchdog: float = 0.05, status_every: int = 100,
-             subject: str | None = None, device: str | None = None) -> dict[str, Any]:
+def run_node(controller: str, artifacts: Artifacts, cfg: BusConfig, *,
+             watchdog: float = 0.05, status_every: int = 100) -> dict[str, Any]:
     """Check the bus config (a zenoh bus needs a key: :func:`require_plant_key`; a key
     file is read here, before the controller is built), build the controller, open the
     bus, serve (see :func:`serve`)."""
@@ -437,7 +462,8 @@ def run_node(controller: str, gait: str, tube: str, cfg: BusConfig, *,
     require_plant_key(cfg)
     if cfg.key_file is not None:
         read_key(cfg.key_file)  # a missing or unsafe key file: refused before the build
-    ctrl = build_controller(controller, gait, tube, subject, device)
+    a = artifacts
+    ctrl = build_controller(controller, a.gait, a.tube, a.subject, a.device, tables=a.tables)
     node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every)
     bus = make_bus(cfg, "ctrl", declare_alive=False)  # alive once serving (see serve)
 
@@ -456,8 +482,10 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="prosthesis_controller.node", description=__doc__.split(
         "\n\n")[0])
     p.add_argument("--controller", required=True, help=f"one of {ControllerName.choices()}")
-    p.add_argument("--gait", required=True)
-    p.add_argument("--tube", required=True)
+    p.add_argument("--gait", help="the paper's graph: the gait file (with --tube)")
+    p.add_argument("--tube", help="the paper's graph: the force-tube file")
+    p.add_argument("--tables", help="a multi-contact gait's controller file "
+                   "(prosthesis_controller.gait_tables), instead of --gait and --tube")
     p.add_argument("--bus", help="bus config file (TOML/JSON)")
     p.add_argument("--interface")
     p.add_argument("--run-id")
@@ -506,8 +534,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg, creds = _node_config(a)
         if a.cpu is not None:  # this process: the serving thread and the bus's, started after
             pin_thread(a.cpu)
-        s = run_node(a.controller, a.gait, a.tube, cfg, watchdog=a.watchdog_ms * 1e-3,
-                     status_every=a.status_every, subject=a.subject, device=a.device)
+        s = run_node(a.controller, Artifacts(a.gait, a.tube, a.subject, a.device, a.tables),
+                     cfg, watchdog=a.watchdog_ms * 1e-3, status_every=a.status_every)
     except KeyboardInterrupt:
         return 130
     except ValueError as e:  # a bad option value (e.g. --cpu): one line, no traceback

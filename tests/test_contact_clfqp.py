@@ -17,12 +17,8 @@ from characterization.gait.contact_gait import GAINS, contact_gait_of, start_sta
 from characterization.gait.multicontact import GRAPH
 from hp_model.contact_interaction import STANCE_DOMAINS, ContactInteraction
 from hp_model.domains import PROSTHESIS, Domain
-from orchestrator.experiments.contact_walk import (
-    CLFQP,
-    contact_clfqp,
-    loop_simulator,
-    walk_controller,
-)
+from orchestrator.cosim.contact_controllers import contact_clfqp, loop_simulator
+from orchestrator.experiments.contact_walk import CLFQP, walk_controller
 from orchestrator.loop.link import Encoder, measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.interface import ControllerMode, ControlOutput

@@ -18,7 +18,7 @@ from hp_model.domains import Domain
 from hp_model.simulator import HybridSimulator, SimResult
 from human_fmu import build_fmu, perturbed_thetas
 from orchestrator.cli import main as hpcosim
-from orchestrator.experiments.contact_walk import loop_simulator, tracked_gait
+from orchestrator.cosim.contact_controllers import loop_simulator, tracked_gait
 from orchestrator.loop.plant import wrench_rows
 from tests.fmu_runner import HumanFMU
 from tests.multicontact_cycle import load_cycle
@@ -160,7 +160,8 @@ def test_clfqp_walks_the_fmu_through_the_loop(fmu_path, cycle, walked):
     co-simulation's controller node sees): 10 steps, the strides the in-process plant
     gives the same controller within 1 % (the quantization is the only difference)."""
     from human_fmu.instance import HumanFmu
-    from orchestrator.experiments.contact_walk import contact_clfqp, walk_controller
+    from orchestrator.cosim.contact_controllers import contact_clfqp
+    from orchestrator.experiments.contact_walk import walk_controller
     from orchestrator.loop.link import ControllerLink
     from orchestrator.loop.plant import FmuPlant
     from orchestrator.loop.run import run_loop

@@ -59,20 +59,24 @@ def serve(
 ) -> None:
     """Serve a controller on a CAN bus until the plant leaves or SIGTERM/SIGINT."""
     from orchestrator.cli.subject import subject_source
-    from prosthesis_controller.node import bus_config_from_args, run_node
+    from prosthesis_controller.node import Artifacts, bus_config_from_args, run_node
 
     cfg = bus_config_from_args(str(bus) if bus else None, interface=interface, run_id=run_id,
                                channel=channel, listen=listen, connect=connect,
                                key_file=str(key) if key else None)
-    s = run_node(controller, str(gait), str(tube), cfg, watchdog=watchdog_ms * 1e-3,
-                 subject=subject_source(None, gait))  # the gait's own subject
+    s = run_node(controller, Artifacts(str(gait), str(tube), subject_source(None, gait)), cfg,
+                 watchdog=watchdog_ms * 1e-3)  # the gait's own subject
     Console(stderr=True).print(f"controller node: {s}")
 
 
 def run(
     controller: ControllerOpt,
-    gait: GaitOpt,
-    tube: TubeOpt,
+    gait: Annotated[Path, typer.Option(
+        "--gait", help="Gait file: the paper's graph (with --tube), or a multi-contact gait "
+        "(gait fit --domains multicontact: its subject and device, no tube; clfqp).",
+        dir_okay=False)],
+    tube: Annotated[Path | None, typer.Option(
+        "--tube", help="Force-tube file (the paper's graph).", dir_okay=False)] = None,
     steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "
@@ -92,7 +96,10 @@ def run(
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
-    """Co-simulate the human FMU with the controller in its own process over zenoh."""
+    """Co-simulate the human FMU with the controller in its own process over zenoh.  A
+    multi-contact gait's run builds (and caches) its FMU and its controller's tables from
+    the gait file."""
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
     from orchestrator.cosim.config import CosimConfig, CosimError
     from orchestrator.cosim.master import run_cosim
 
@@ -101,7 +108,9 @@ def run(
         check_output_folder(record.parent, "--record")
     from orchestrator.cli.subject import subject_source
 
-    who = subject_source(subject, gait)  # --subject, else the gait's own
+    # --subject, else the gait's own (a multi-contact gait's model is its own)
+    who = (str(subject) if subject else None) if artifact_kind(gait) == MULTICONTACT_KIND \
+        else subject_source(subject, gait)
     cfg = CosimConfig(controller=controller, gait=gait, tube=tube,
                       subject=Path(who) if who else None,
                       device=device, steps=steps, perturb=perturb, mode=mode, record=record,

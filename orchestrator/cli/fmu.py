@@ -75,7 +75,7 @@ def _build_multicontact(gait: Path, out: Path, subject: Path | None, device: Pat
                         fmi: int, say: Callable[[str], None]) -> BuildInfo:
     """The FMU of a multi-contact gait file, with the subject and device it carries."""
     from human_fmu import build_fmu
-    from orchestrator.experiments.contact_walk import load_tracked_gait
+    from orchestrator.cosim.contact_controllers import load_tracked_gait
 
     if subject is not None or device is not None:
         raise typer.BadParameter(f"{gait} is a multi-contact gait: it carries its subject and "

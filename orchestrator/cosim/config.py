@@ -32,7 +32,8 @@ class CosimConfig:
 
     controller: str
     gait: Path
-    tube: Path
+    #: the paper's graph's force tube (None: a multi-contact gait's run, which has none)
+    tube: Path | None
     _: KW_ONLY
     #: subject and device TOML (None: the shipped defaults), for the plant's model and the
     #: controller process alike

@@ -31,13 +31,16 @@ ROOT = Path(__file__).resolve().parents[2]  # the checkout (git revision, PYTHON
 
 
 def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
-                       cpu: int | None = None) -> list[str]:
+                       cpu: int | None = None, tables: Path | None = None) -> list[str]:
     """The node's command line: ``cfg``'s controller, artifacts, subject and device (as
-    absolute paths: the node runs in the checkout), the link (``run_id``, the plant's
-    ``endpoint``) and the node's CPU ``cpu``."""
+    absolute paths: the node runs in the checkout), or a multi-contact gait's controller
+    file ``tables``; the link (``run_id``, the plant's ``endpoint``) and the node's CPU
+    ``cpu``."""
     poll = bus_poll_us(cfg)
+    artifacts = (["--tables", _abs(tables)] if tables is not None else
+                 ["--gait", _abs(cfg.gait), "--tube", _abs(cfg.tube)] if cfg.tube else [])
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
-            "--gait", _abs(cfg.gait), "--tube", _abs(cfg.tube), "--run-id", run_id,
+            *artifacts, "--run-id", run_id,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
             "--status-every", str(cfg.status_every), "--auth-stdin",
             *(["--subject", _abs(cfg.subject)] if cfg.subject is not None else []),
@@ -82,8 +85,8 @@ class ControllerProcess:
     context manager's exit) ends both and puts the node's own summary into ``summary``."""
 
     def __init__(self, cfg: CosimConfig, run_id: str, *, cpu: int | None = None,
-                 summary: dict[str, Any] | None = None) -> None:
-        self.cfg, self.run_id, self.cpu = cfg, run_id, cpu
+                 summary: dict[str, Any] | None = None, tables: Path | None = None) -> None:
+        self.cfg, self.run_id, self.cpu, self.tables = cfg, run_id, cpu, tables
         self.summary = summary if summary is not None else {}
         self.lost = threading.Event()
         self._alive = threading.Event()
@@ -113,7 +116,7 @@ class ControllerProcess:
                             zenoh_options=self._creds.zenoh_options("plant"))
         self._watch = self.bus.watch_peer(self._on_liveliness)
         say(f"starting controller {cfg.controller} (run {self.run_id})")
-        self._spawn(controller_command(cfg, self.run_id, endpoint, self.cpu))
+        self._spawn(controller_command(cfg, self.run_id, endpoint, self.cpu, self.tables))
         self._wait_alive(stop)
         if not stop.is_set() and not self.bus.wait_for_peer(10.0):
             raise CosimError("controller alive but not subscribed")

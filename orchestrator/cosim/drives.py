@@ -12,7 +12,7 @@ import can
 
 from bus_schemas.transport import codec
 from bus_schemas.transport.protocol import CTRL_TO_PLANT, TORQUE_STEP, FrameId
-from hp_model.domains import Domain
+from hp_model.domains import PROSTHESIS
 
 _STATUS, _HEARTBEAT, _REJECTS = (
     int(FrameId.CTRL_STATUS), int(FrameId.CTRL_HEARTBEAT), int(FrameId.CTRL_REJECTS))
@@ -31,7 +31,7 @@ class Drives:
     def of(cls, model: Any) -> Drives:
         """The drives of a :class:`~hp_model.human_prosthesis.HumanProsthesisModel` (its
         input matrix's prosthesis entries and motor torque limits)."""
-        k, a = model.roles[Domain.PS].prosthesis
+        k, a = (model.coord_names.index(c) for c in PROSTHESIS)
         return cls((float(model.B[k, 4]), float(model.B[a, 5])),
                    (float(model.torque_limits[4]), float(model.torque_limits[5])))
 

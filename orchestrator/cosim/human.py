@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from human_fmu.build import TrackedGait
 from human_fmu.instance import HumanFmu
 from orchestrator.cosim.config import CosimError
 from orchestrator.cosim.faults import FaultPlan
@@ -20,10 +21,13 @@ def sha256(path: Path) -> str:
 
 
 def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
-               progress: Callable[[str], None] | None = None) -> Path:
+               progress: Callable[[str], None] | None = None, *,
+               tracked: TrackedGait | None = None) -> Path:
     """The FMU file: ``fmu`` if given, else a cached build for this gait, model and builder
     (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/fmu/<digest>/human.fmu; the digest covers
-    the gait file, the model parameters and :func:`human_fmu.build.builder_digest`)."""
+    the gait file, the model parameters and :func:`human_fmu.build.builder_digest`);
+    ``tracked``: what the FMU tracks of a gait of another graph than the paper's (the file's
+    multi-contact gait)."""
     if fmu is not None:
         if not Path(fmu).is_file():
             raise FileNotFoundError(f"{fmu}: no such FMU")
@@ -43,7 +47,8 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
     out = cache_root() / "fmu" / digest / "human.fmu"
     if not out.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
-        build_fmu(gait_path, out, model=model, progress=progress)
+        build_fmu(gait_path if tracked is None else tracked, out, model=model,
+                  progress=progress)
     return out
 
 

@@ -42,34 +42,44 @@ def fmu_identity(path: Path) -> dict[str, str]:
                      "modelDescription.xml; build the FMU with hpcosim fmu build")
 
 
-def check_fmu_identity(path: Path, gait: Any, model: Any, gait_path: Path | str,
+def check_fmu_identity(path: Path, gait_hash: str, model: Any, gait_path: Path | str,
                        option: str = "--fmu") -> None:
-    """Refuse the FMU at ``path`` (given as ``option``) unless it was built for ``gait``
-    (the one loaded from ``gait_path``) and ``model`` (the subject and device): one line
-    naming the FMU, what it was built for and the options that differ."""
+    """Refuse the FMU at ``path`` (given as ``option``) unless it was built for the gait of
+    hash ``gait_hash`` (the one loaded from ``gait_path``) and ``model`` (the subject and
+    device): one line naming the FMU, what it was built for and the options that differ."""
     ident = fmu_identity(path)
     if ident["model_hash"] != model.parameter_hash():
         raise CosimError(
             f"{option} {path}: built for another subject or device (model {ident['model_hash']}: "
             f"{ident.get('subject', '?')}, {ident.get('device', '?')}) than --subject/--device "
             f"give (model {model.parameter_hash()}); build one with hpcosim fmu build")
-    if ident["gait_hash"] != gait.hash():
+    if ident["gait_hash"] != gait_hash:
         raise CosimError(
             f"{option} {path}: built for another gait ({ident.get('gait_file', '?')}, gait "
-            f"{ident['gait_hash']}) than --gait {gait_path} (gait {gait.hash()}); build one "
+            f"{ident['gait_hash']}) than --gait {gait_path} (gait {gait_hash}); build one "
             f"with hpcosim fmu build --gait {gait_path}")
 
 
 @dataclass(frozen=True)
 class RunInputs:
     """The model (of the configuration's subject and device), the gait and force tube
-    loaded for it, the human FMU file and the prosthesis drives."""
+    loaded for it, the human FMU file and the prosthesis drives.  A multi-contact gait
+    (:data:`hp_model.gait_artifact.MULTICONTACT_KIND`) carries its model; its run has no
+    force tube, its controller comes from ``tables`` (made for the run:
+    :func:`orchestrator.cosim.contact_controllers.ensure_controller_file`)."""
 
     model: Any  # hp_model.human_prosthesis.HumanProsthesisModel
-    gait: Any  # hp_model.gait_artifact.Gait
-    tube: Any  # hp_model.force_tube.ForceTube
+    gait: Any  # hp_model.gait_artifact.Gait, or human_fmu.build.TrackedGait (multi-contact)
+    tube: Any  # hp_model.force_tube.ForceTube (None: multi-contact)
     fmu_path: Path
     drives: Drives
+    tables: Path | None = None  # the multi-contact controller's file
+
+    @property
+    def gait_hash(self) -> str:
+        """The gait's identity (the FMU's build names it)."""
+        h = self.gait.hash
+        return h if isinstance(h, str) else h()
 
     @classmethod
     def load(cls, cfg: CosimConfig, model: Any = None,
@@ -80,15 +90,47 @@ class RunInputs:
         steps. The FMU is built if not cached (progress through ``say``)."""
         import hp_model
         from hp_model.force_tube import load_tube
-        from hp_model.gait_artifact import load_gait
+        from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind, load_gait
 
+        if artifact_kind(cfg.gait) == MULTICONTACT_KIND:
+            return cls._multicontact(cfg, say)
+        if cfg.tube is None:
+            raise CosimError(f"--gait {cfg.gait}: a gait of the paper's graph runs with its "
+                             "force tube; give --tube")
         model = model or hp_model.load_model(_opt(cfg.subject), _opt(cfg.device))
         gait = load_gait(cfg.gait, model.parameter_hash())
         tube = load_tube(cfg.tube, gait.hash())
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
-        check_fmu_identity(fmu_path, gait, model, cfg.gait,
+        check_fmu_identity(fmu_path, gait.hash(), model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
         return cls(model, gait, tube, fmu_path, Drives.of(model))
+
+    @classmethod
+    def _multicontact(cls, cfg: CosimConfig, say: Callable[[str], None] | None
+                      ) -> RunInputs:
+        """A multi-contact gait's run: its model, what the FMU tracks, the FMU and the
+        controller's file (both built for it once and cached)."""
+        from orchestrator.cosim.contact_controllers import (
+            ensure_controller_file,
+            load_contact_run,
+        )
+
+        if cfg.subject is not None or cfg.device is not None:
+            raise CosimError(f"--gait {cfg.gait}: a multi-contact gait carries its subject "
+                             "and device; drop --subject/--device")
+        if cfg.tube is not None:
+            raise CosimError(f"--tube {cfg.tube}: a multi-contact gait's run has no force "
+                             "tube (its controller is made from the gait); drop --tube")
+        run = load_contact_run(cfg.gait)
+        model, tracked = run.model, run.tracked
+        fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)
+        check_fmu_identity(fmu_path, tracked.hash, model, cfg.gait,
+                           "--fmu" if cfg.fmu is not None else "the cached FMU")
+        try:
+            tables = ensure_controller_file(Path(cfg.gait), run, say)
+        except ValueError as e:  # the held oracle fell: the gait does not walk
+            raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
+        return cls(model, tracked, None, fmu_path, Drives.of(model), tables)
 
 
 def _opt(path: Path | None) -> str | None:

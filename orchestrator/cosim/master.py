@@ -80,7 +80,8 @@ def run_cosim(cfg: CosimConfig, *, progress: Progress | None = None, model: Any 
                   else run.enter_context(RunRecord(cfg, run_id, inputs, fmu, res)))
         run.enter_context(pinned(plant_cpu))  # before the bus: zenoh's threads inherit it
         controller = run.enter_context(
-            ControllerProcess(cfg, run_id, cpu=node_cpu, summary=res.node))
+            ControllerProcess(cfg, run_id, cpu=node_cpu, summary=res.node,
+                              tables=inputs.tables))
         if controller.open(stop, say):
             say("controller alive")
             link = CanLink(cfg, controller.bus, res, inputs.drives, plan=plan,

@@ -89,7 +89,8 @@ class RunRecord:
         try:
             self.rec.register_all()
             self._describe(cfg, fmu)
-            self._walker = WalkerFoxglove(inputs.model, inputs.gait, inputs.tube)
+            self._walker = WalkerFoxglove(inputs.model, inputs.gait if inputs.tube else None,
+                                          inputs.tube)
         except BaseException:
             self.close(failed=True)
             raise
@@ -108,16 +109,20 @@ class RunRecord:
         rec.add_metadata("config", cfg.to_dict())
         rec.add_metadata("versions", versions())
         rec.add_metadata("hashes", {"gait_sha256": sha256(cfg.gait),
-                                    "tube_sha256": sha256(cfg.tube),
+                                    "tube_sha256": sha256(cfg.tube) if cfg.tube else "",
                                     "fmu_sha256": sha256(inputs.fmu_path),
-                                    "gait_hash": inputs.gait.hash(),
+                                    "gait_hash": inputs.gait_hash,
                                     "model_hash": inputs.model.parameter_hash(),
                                     "fmu_guid": fmu.md.guid})
         ratio = inputs.drives.ratio
         rec.add_metadata("device", {"gear_ratio_knee": ratio[0],
                                     "gear_ratio_ankle": ratio[1], "dt": cfg.dt})
         rec.add_attachment("gait.json", Path(cfg.gait).read_bytes(), "application/json")
-        rec.add_attachment("tube.json", Path(cfg.tube).read_bytes(), "application/json")
+        if cfg.tube is not None:
+            rec.add_attachment("tube.json", Path(cfg.tube).read_bytes(), "application/json")
+        if inputs.tables is not None:  # a multi-contact gait's controller
+            rec.add_attachment("controller.npz", inputs.tables.read_bytes(),
+                               "application/octet-stream")
         rec.add_attachment("modelDescription.xml", fmu.model_description_xml(),
                            "application/xml")
         rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")

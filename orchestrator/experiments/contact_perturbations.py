@@ -43,14 +43,14 @@ from characterization.gait.multicontact_artifact import load_contact_cycle
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
-from orchestrator.experiments.contact_walk import (
+from orchestrator.cosim.contact_controllers import (
     LoopSetup,
     contact_clfqp,
     held_walk,
     loop_simulator,
     make_contact_pd,
-    walk_controller,
 )
+from orchestrator.experiments.contact_walk import walk_controller
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder
 
 FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture")

@@ -3,20 +3,13 @@
 baseline ``contact-pd``: :class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) in
 the in-process plant (:class:`orchestrator.loop.plant.SimulatorPlant`: what AMPRO3 senses,
 the torque held each period and bounded at the motors), the simulated human on its feedback
-linearization.
-
-The controllers' tables come from one stride of the same plant with the prosthesis holding
-the full feedback linearization's torque (:func:`characterization.gait.contact_gait.held_oracle`),
-sensed the same way: the gait as the model walks it (:func:`held_walk`); the CLF-QP's model
-is evaluated along the same stance (the walker's states, wrenches and torques there).
+linearization.  The controllers are made as a co-simulation makes them
+(:mod:`orchestrator.cosim.contact_controllers`).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -25,37 +18,30 @@ from characterization.gait.contact_gait import (
     GAINS,
     ContactGait,
     ContactWalk,
-    contact_gait_of,
-    held_oracle,
     start_state,
 )
 from characterization.gait.multicontact import GRAPH
-from characterization.gait.multicontact_artifact import load_contact_cycle
-from hp_model.artifacts import canonical_hash
-from hp_model.closed_loop import ClosedLoop
-from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.simulator import HybridSimulator
-from human_fmu.build import TrackedGait
+from orchestrator.cosim.contact_controllers import (
+    LoopSetup,
+    contact_clfqp,
+    held_walk,
+    loop_simulator,
+    phase_law,
+)
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder, measurement
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
-    MAX_WRENCH,
     ContactClfConfig,
-    ContactClfQp,
-    WalkedStance,
-    stance_qp,
 )
 from prosthesis_controller.contact_phase_pd import (
     STANCE_GAINS,
     SWING_GAINS,
-    ContactGaitTables,
-    ContactPhasePD,
     LegKinematics,
     PDGains,
-    first_stride,
     tables_from_walk,
 )
 from prosthesis_controller.interface import Controller
@@ -67,77 +53,6 @@ CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prost
 #: how :func:`walk_with_contact_clfqp` runs the prosthesis
 CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis on clfqp: "
          "the interaction-aware robust CLF-QP at a phase from its own sensors")
-
-
-def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
-                   gains: tuple[float, float, float]) -> HybridSimulator:
-    """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd)."""
-    cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
-    return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
-
-
-@dataclass(frozen=True)
-class HeldWalk:
-    """The held oracle's walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5) socket
-    pitch, knee, ankle (rad), their rates (rad/s); ``contact`` (n,) the foot switch;
-    ``torque`` (n, 2) the motor torques applied (N m); the plant's truth: ``domain`` (n,)
-    codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches (zero-padded)."""
-
-    t: np.ndarray
-    sensed: np.ndarray
-    contact: np.ndarray
-    torque: np.ndarray
-    domain: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    wrench: np.ndarray
-
-
-def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]]
-              ) -> HeldWalk:
-    """Two strides of the held oracle in the plant ``sim`` from the fitted cycle's start (a
-    stride: the trajectory's domains' ends ``t``, s).  ValueError if it falls."""
-    stride = sum(float(np.asarray(trajectory[d]["t"])[-1]) for d in GRAPH.domains)
-    q0, qd0 = start_state(trajectory)
-    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
-    policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
-    rows: list[tuple[Any, ...]] = []
-    while plant.observe().t < 2.0 * stride + 0.1:
-        obs = plant.observe()
-        st = plant.run.observe()
-        torque = policy(obs.t, st)
-        s = obs.sensed
-        wrench = np.zeros(MAX_WRENCH)
-        n = wrench_size(st.domain)
-        wrench[:n] = st.lam[:n]
-        applied = plant.actuate(torque).torque
-        rows.append((obs.t, (s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
-                             s.ankle_velocity), s.contact, applied, st.domain.code,
-                     st.q.copy(), st.qd.copy(), wrench))
-        if plant.fall is not None:
-            raise ValueError(f"the held oracle fell in the stride the tables are read from: "
-                             f"{plant.fall.message()}")
-        plant.advance()
-    cols = list(zip(*rows, strict=True))
-    return HeldWalk(*(np.array(c) for c in cols))
-
-
-@dataclass(frozen=True)
-class LoopSetup:
-    """What several walks of one gait can share: its in-process simulator
-    (:func:`loop_simulator`) and the held oracle's walk (:func:`held_walk`; None: not made,
-    or it fell)."""
-
-    sim: HybridSimulator
-    held: HeldWalk | None
-
-
-def controller_tables(sim: HybridSimulator, leg: LegKinematics,
-                      trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
-    """The tables of :func:`tables_from_walk` from :func:`held_walk`.  ValueError if it
-    falls, or if the walk gives no tables."""
-    w = held_walk(sim, trajectory)
-    return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
 
 
 def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
@@ -164,14 +79,6 @@ def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[st
                        description)
 
 
-def _phase_pd(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
-              stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> ContactPhasePD:
-    p = model.device.prosthesis
-    return ContactPhasePD(tables, leg, (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-                          (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance,
-                          swing)
-
-
 def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                          trajectory: Mapping[Domain, Mapping[str, Any]], steps: int = 10,
                          gains: tuple[float, float, float] = GAINS,
@@ -188,42 +95,8 @@ def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
     except ValueError as e:  # the verdict line says why, no walk
         return ContactWalk(0, steps, f"no tables: {e}", np.array([]), np.array([]),
                            CONTACT_PD)
-    return walk_controller(sim, trajectory, _phase_pd(model, tables, leg, stance, swing),
+    return walk_controller(sim, trajectory, phase_law(model, tables, leg, stance, swing),
                            steps, CONTACT_PD)
-
-
-def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
-                    trajectory: Mapping[Domain, Mapping[str, Any]],
-                    setup: LoopSetup | None = None) -> ContactPhasePD:
-    """contact-pd of ``gait`` with its default gains, its tables from :func:`held_walk`
-    (``setup``'s when made already; ValueError as :func:`controller_tables`)."""
-    leg = LegKinematics.of(model)
-    w = (setup and setup.held) or held_walk(
-        setup.sim if setup else loop_simulator(model, gait, GAINS), trajectory)
-    return _phase_pd(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg)
-
-
-def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
-                  trajectory: Mapping[Domain, Mapping[str, Any]],
-                  gains: tuple[float, float, float] = GAINS,
-                  config: ContactClfConfig = DEFAULT_CONFIG, *,
-                  setup: LoopSetup | None = None) -> ContactClfQp:
-    """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
-    the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
-    :func:`controller_tables`)."""
-    leg = LegKinematics.of(model)
-    w = (setup and setup.held) or held_walk(
-        setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
-    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
-    i0, i1, _ = first_stride(w.contact)
-    st = slice(i0, i1)
-    inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
-    walked = WalkedStance(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
-                          w.wrench[st], w.torque[st])
-    stance = stance_qp(walked, inter, gait.thetas(), gains, model, config)
-    p = model.device.prosthesis
-    return ContactClfQp(_phase_pd(model, tables, leg), stance,
-                        (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
 
 
 def walk_with_contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
@@ -253,29 +126,3 @@ def walk_prosthesis_controllers(model: HumanProsthesisModel, gait: ContactGait,
         setup = LoopSetup(sim, None)
     return (walk_with_contact_clfqp(model, gait, trajectory, steps, setup=setup),
             walk_with_contact_pd(model, gait, trajectory, steps, setup=setup))
-
-
-def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
-                 trajectory: Mapping[Domain, Mapping[str, Any]], name: str,
-                 gains: tuple[float, float, float] = GAINS) -> TrackedGait:
-    """What the human FMU tracks of ``gait`` (:func:`human_fmu.build_fmu`): its packed
-    curves, the human's ``gains``, the fitted cycle's start; ``name`` the gait file's.  Its
-    hash names the model, the gains and the curves."""
-    thetas = gait.thetas()
-    q0, qd0 = start_state(trajectory)
-    identity = canonical_hash({"model_hash": model.parameter_hash(), "gains": list(gains),
-                               "params": {d.value: thetas[d] for d in GRAPH.domains}})
-    return TrackedGait(thetas, gains, q0, qd0, gait.params[GRAPH.domains[0]].degree,
-                       identity, name)
-
-
-def load_tracked_gait(path: str | os.PathLike[str]
-                      ) -> tuple[HumanProsthesisModel, TrackedGait]:
-    """The model of a multi-contact gait file and what the human FMU tracks of it
-    (:func:`tracked_gait`: its virtual constraints regressed from the stored cycle, the
-    default gains); ArtifactError for a bad file, MultiContactError for a cycle with no
-    phase."""
-    cycle = load_contact_cycle(path)
-    gait = contact_gait_of(cycle.model, cycle.trajectory, cycle.durations)
-    return cycle.model, tracked_gait(cycle.model, gait, cycle.trajectory, Path(path).name)
-

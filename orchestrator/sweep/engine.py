@@ -149,7 +149,7 @@ def prepare_fmu(spec: SweepSpec) -> Path | None:
     from orchestrator.cosim.inputs import check_fmu_identity
 
     try:  # an FMU built for another gait or model: refused before the cluster starts
-        check_fmu_identity(spec.fmu, load_gait(spec.gait, model.parameter_hash()), model,
+        check_fmu_identity(spec.fmu, load_gait(spec.gait, model.parameter_hash()).hash(), model,
                            spec.gait, "the spec's fmu")
     except CosimError as e:
         raise SweepError(str(e)) from None

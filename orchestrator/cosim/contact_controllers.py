@@ -1,0 +1,249 @@
+"""The multi-contact controllers of a gait, made for a run: what ``clfqp``
+(:class:`prosthesis_controller.contact_clf_qp.ContactClfQp`) and its phase law ``contact-pd``
+(:class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) follow, and what the human
+FMU tracks (:func:`tracked_gait`).
+
+The controllers' tables come from one stride of the in-process plant
+(:class:`orchestrator.loop.plant.SimulatorPlant`: what AMPRO3 senses) with the prosthesis
+holding the full feedback linearization's torque
+(:func:`characterization.gait.contact_gait.held_oracle`), sensed the same way: the gait as
+the model walks it (:func:`held_walk`); the CLF-QP's model is evaluated along the same
+stance (the walker's states, wrenches and torques there).  The co-simulation writes them to
+a file for the controller process (:mod:`prosthesis_controller.gait_tables`); the in-process
+walks (:mod:`orchestrator.experiments.contact_walk`) use them directly.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import hp_model.contact_interaction
+import hp_model.contact_outputs
+import hp_model.simulator
+from characterization.gait.contact_gait import (
+    GAINS,
+    ContactGait,
+    contact_gait_of,
+    held_oracle,
+    start_state,
+)
+from characterization.gait.multicontact import GRAPH
+from characterization.gait.multicontact_artifact import load_contact_cycle
+from hp_model.artifacts import canonical_hash
+from hp_model.closed_loop import ClosedLoop
+from hp_model.compiled import cache_root
+from hp_model.contact_interaction import ContactInteraction, wrench_size
+from hp_model.domains import Domain
+from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.simulator import HybridSimulator
+from human_fmu.build import TrackedGait
+from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller import contact_clf_qp, contact_phase_pd, gait_tables
+from prosthesis_controller.contact_clf_qp import (
+    DEFAULT_CONFIG,
+    MAX_WRENCH,
+    ContactClfConfig,
+    ContactClfQp,
+    WalkedStance,
+    stance_qp,
+)
+from prosthesis_controller.contact_phase_pd import (
+    STANCE_GAINS,
+    SWING_GAINS,
+    ContactGaitTables,
+    ContactPhasePD,
+    LegKinematics,
+    PDGains,
+    first_stride,
+    tables_from_walk,
+)
+from prosthesis_controller.gait_tables import save_contact_controller
+
+
+def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
+                   gains: tuple[float, float, float]) -> HybridSimulator:
+    """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd)."""
+    cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
+    return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
+
+
+@dataclass(frozen=True)
+class HeldWalk:
+    """The held oracle's walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5) socket
+    pitch, knee, ankle (rad), their rates (rad/s); ``contact`` (n,) the foot switch;
+    ``torque`` (n, 2) the motor torques applied (N m); the plant's truth: ``domain`` (n,)
+    codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches (zero-padded)."""
+
+    t: np.ndarray
+    sensed: np.ndarray
+    contact: np.ndarray
+    torque: np.ndarray
+    domain: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    wrench: np.ndarray
+
+
+def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]]
+              ) -> HeldWalk:
+    """Two strides of the held oracle in the plant ``sim`` from the fitted cycle's start (a
+    stride: the trajectory's domains' ends ``t``, s).  ValueError if it falls."""
+    stride = sum(float(np.asarray(trajectory[d]["t"])[-1]) for d in GRAPH.domains)
+    q0, qd0 = start_state(trajectory)
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
+    rows: list[tuple[Any, ...]] = []
+    while plant.observe().t < 2.0 * stride + 0.1:
+        obs = plant.observe()
+        st = plant.run.observe()
+        torque = policy(obs.t, st)
+        s = obs.sensed
+        wrench = np.zeros(MAX_WRENCH)
+        n = wrench_size(st.domain)
+        wrench[:n] = st.lam[:n]
+        applied = plant.actuate(torque).torque
+        rows.append((obs.t, (s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
+                             s.ankle_velocity), s.contact, applied, st.domain.code,
+                     st.q.copy(), st.qd.copy(), wrench))
+        if plant.fall is not None:
+            raise ValueError(f"the held oracle fell in the stride the tables are read from: "
+                             f"{plant.fall.message()}")
+        plant.advance()
+    cols = list(zip(*rows, strict=True))
+    return HeldWalk(*(np.array(c) for c in cols))
+
+
+@dataclass(frozen=True)
+class LoopSetup:
+    """What several walks of one gait can share: its in-process simulator
+    (:func:`loop_simulator`) and the held oracle's walk (:func:`held_walk`; None: not made,
+    or it fell)."""
+
+    sim: HybridSimulator
+    held: HeldWalk | None
+
+
+def controller_tables(sim: HybridSimulator, leg: LegKinematics,
+                      trajectory: Mapping[Domain, Mapping[str, Any]]) -> ContactGaitTables:
+    """The tables of :func:`tables_from_walk` from :func:`held_walk`.  ValueError if it
+    falls, or if the walk gives no tables."""
+    w = held_walk(sim, trajectory)
+    return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+
+
+def phase_law(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
+              stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> ContactPhasePD:
+    p = model.device.prosthesis
+    return ContactPhasePD(tables, leg, (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
+                          (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance,
+                          swing)
+
+
+def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
+                    trajectory: Mapping[Domain, Mapping[str, Any]],
+                    setup: LoopSetup | None = None) -> ContactPhasePD:
+    """contact-pd of ``gait`` with its default gains, its tables from :func:`held_walk`
+    (``setup``'s when made already; ValueError as :func:`controller_tables`)."""
+    leg = LegKinematics.of(model)
+    w = (setup and setup.held) or held_walk(
+        setup.sim if setup else loop_simulator(model, gait, GAINS), trajectory)
+    return phase_law(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg)
+
+
+def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
+                  trajectory: Mapping[Domain, Mapping[str, Any]],
+                  gains: tuple[float, float, float] = GAINS,
+                  config: ContactClfConfig = DEFAULT_CONFIG, *,
+                  setup: LoopSetup | None = None) -> ContactClfQp:
+    """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
+    the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
+    :func:`controller_tables`)."""
+    leg = LegKinematics.of(model)
+    w = (setup and setup.held) or held_walk(
+        setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
+    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+    i0, i1, _ = first_stride(w.contact)
+    st = slice(i0, i1)
+    inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
+    walked = WalkedStance(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
+                          w.wrench[st], w.torque[st])
+    stance = stance_qp(walked, inter, gait.thetas(), gains, model, config)
+    p = model.device.prosthesis
+    return ContactClfQp(phase_law(model, tables, leg), stance,
+                        (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
+
+
+def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
+                 trajectory: Mapping[Domain, Mapping[str, Any]], name: str,
+                 gains: tuple[float, float, float] = GAINS) -> TrackedGait:
+    """What the human FMU tracks of ``gait`` (:func:`human_fmu.build_fmu`): its packed
+    curves, the human's ``gains``, the fitted cycle's start; ``name`` the gait file's.  Its
+    hash names the model, the gains and the curves."""
+    thetas = gait.thetas()
+    q0, qd0 = start_state(trajectory)
+    identity = canonical_hash({"model_hash": model.parameter_hash(), "gains": list(gains),
+                               "params": {d.value: thetas[d] for d in GRAPH.domains}})
+    return TrackedGait(thetas, gains, q0, qd0, gait.params[GRAPH.domains[0]].degree,
+                       identity, name)
+
+
+@dataclass(frozen=True)
+class ContactRun:
+    """A multi-contact gait file as a run uses it: the model it carries, the stored cycle
+    (trajectories, durations), its virtual constraints and what the human FMU tracks."""
+
+    model: HumanProsthesisModel
+    trajectory: dict[Domain, dict[str, np.ndarray]]
+    gait: ContactGait
+    tracked: TrackedGait
+
+
+def load_contact_run(path: str | os.PathLike[str]) -> ContactRun:
+    """:class:`ContactRun` of a multi-contact gait file (the virtual constraints regressed
+    from the stored cycle, the default gains); ArtifactError for a bad file,
+    MultiContactError for a cycle with no phase."""
+    cycle = load_contact_cycle(path)
+    gait = contact_gait_of(cycle.model, cycle.trajectory, cycle.durations)
+    return ContactRun(cycle.model, cycle.trajectory, gait,
+                      tracked_gait(cycle.model, gait, cycle.trajectory, Path(path).name))
+
+
+def load_tracked_gait(path: str | os.PathLike[str]
+                      ) -> tuple[HumanProsthesisModel, TrackedGait]:
+    """The model of a multi-contact gait file and what the human FMU tracks of it
+    (:func:`load_contact_run`)."""
+    run = load_contact_run(path)
+    return run.model, run.tracked
+
+
+#: the sources whose code decides a controller file's content (its cache key)
+_MAKERS = (Path(__file__), *(Path(str(m.__file__)) for m in (
+    contact_clf_qp, contact_phase_pd, gait_tables, hp_model.contact_interaction,
+    hp_model.contact_outputs, hp_model.simulator)))
+
+
+def ensure_controller_file(gait_path: Path, run: ContactRun,
+                           say: Callable[[str], None] | None = None) -> Path:
+    """The ``clfqp`` controller file of the multi-contact gait at ``gait_path`` (``run``:
+    it loaded; :mod:`prosthesis_controller.gait_tables`), made once and cached
+    (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/clfqp.npz; the digest
+    covers the gait file, the model and the code that makes it).  ValueError if the held
+    oracle falls in the stride the tables are read from."""
+    h = hashlib.sha256(Path(gait_path).read_bytes())
+    h.update(run.model.parameter_hash().encode())
+    for f in _MAKERS:
+        h.update(f.read_bytes())
+    out = cache_root() / "controller" / h.hexdigest()[:16] / "clfqp.npz"
+    if not out.is_file():
+        (say or (lambda _m: None))("making the controller's tables (the gait walked once)")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        ctl = contact_clfqp(run.model, run.gait, run.trajectory)
+        save_contact_controller(out, ctl, run.model, run.tracked.hash)
+    return out

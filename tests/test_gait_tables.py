@@ -1,0 +1,75 @@
+"""The multi-contact controller's file (:mod:`prosthesis_controller.gait_tables`): saved
+and loaded back, it is the same controller (the same torque and diagnostics, tick by tick,
+over a walk's measurements); a bad file is a one-line error naming the file and field."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from characterization.gait.contact_gait import contact_gait_of, start_state
+from characterization.gait.multicontact import GRAPH
+from hp_model.artifacts import ArtifactError
+from orchestrator.cosim.contact_controllers import contact_clfqp, loop_simulator
+from orchestrator.loop.link import measurement
+from orchestrator.loop.plant import SimulatorPlant
+from prosthesis_controller.gait_tables import load_contact_controller, save_contact_controller
+from tests.multicontact_cycle import load_cycle
+
+
+@pytest.fixture(scope="module")
+def made():
+    model, traj, durations, _ = load_cycle()
+    gait = contact_gait_of(model, traj, durations)
+    return model, traj, gait, contact_clfqp(model, gait, traj)
+
+
+def test_a_loaded_controller_ticks_as_the_one_saved(tmp_path, made):
+    model, traj, gait, ctl = made
+    path = tmp_path / "clfqp.npz"
+    save_contact_controller(path, ctl, model, "gaithash")
+    loaded, loaded_model = load_contact_controller(path, model.parameter_hash())
+    assert loaded_model.parameter_hash() == model.parameter_hash()
+    # two steps of the walk, each measurement ticked by both
+    q0, qd0 = start_state(traj)
+    plant = SimulatorPlant(loop_simulator(model, gait, (20.0, 1600.0, 80.0)), q0, qd0,
+                           GRAPH.domains[0])
+    ctl.reset()
+    stance = 0
+    while plant.run.steps < 2:
+        m = measurement(plant.observe())
+        a, b = ctl.tick(m), loaded.tick(m)
+        assert np.array_equal(a.torque, b.torque)
+        assert a.diagnostics == b.diagnostics
+        stance += a.diagnostics.mode == "stance"
+        plant.actuate(a.torque)
+        assert plant.fall is None
+        plant.advance()
+    assert stance > 300  # the QP ran through the stances
+
+
+def test_bad_files_are_one_line_errors(tmp_path, made):
+    model, _, _, ctl = made
+    path = tmp_path / "clfqp.npz"
+    save_contact_controller(path, ctl, model, "gaithash")
+    with pytest.raises(ArtifactError, match="model_hash"):
+        load_contact_controller(path, "another")
+    junk = tmp_path / "junk.npz"
+    junk.write_text("not a file of arrays")
+    with pytest.raises(ArtifactError, match=r"junk\.npz: not a controller file"):
+        load_contact_controller(junk)
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files}
+    meta = json.loads(str(data["meta"]))
+    meta["kind"] = "hpcosim-gait"
+    wrong = tmp_path / "wrong.npz"
+    np.savez(wrong, **{**data, "meta": np.array(json.dumps(meta))})
+    with pytest.raises(ArtifactError, match="field 'kind'"):
+        load_contact_controller(wrong)
+    del data["qp.G"]
+    cut = tmp_path / "cut.npz"
+    np.savez(cut, **data)
+    with pytest.raises(ArtifactError, match="field 'qp'"):
+        load_contact_controller(cut)
