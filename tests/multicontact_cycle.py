@@ -50,6 +50,24 @@ def load_cycle(path: Path = PATH) -> tuple[HumanProsthesisModel, dict[Domain, di
     return model, traj, durations, float(meta["stride_length"])
 
 
+def write_gait_file(path: Path, cycle_path: Path = PATH) -> HumanProsthesisModel:
+    """The committed cycle as a multi-contact gait file (what ``gait fit --domains
+    multicontact`` writes, the parts its readers use: the trajectories, the model's configs
+    and hash); its model."""
+    from characterization.gait.multicontact_artifact import KIND, SCHEMA_VERSION
+    from hp_model.artifacts import save_json
+
+    model, traj, durations, _ = load_cycle(cycle_path)
+    save_json(path, {
+        "kind": KIND, "schema_version": SCHEMA_VERSION, "model_hash": model.parameter_hash(),
+        "domain_graph": model.graph.value, "domains": [d.value for d in model.graph.domains],
+        "trajectory": {d.value: {"duration": durations[d], **traj[d]}
+                       for d in model.graph.domains},
+        "subject": model.subject.model_dump(mode="json"),
+        "device": model.device.model_dump(mode="json")})
+    return model
+
+
 def main() -> int:
     from characterization.gait.fit import worn_device
     from characterization.gait.multicontact import (

@@ -12,8 +12,6 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from characterization.gait.contact_gait import contact_gait_of, held_oracle, start_state
-from characterization.gait.multicontact_artifact import KIND, SCHEMA_VERSION
-from hp_model.artifacts import save_json
 from hp_model.domains import Domain
 from hp_model.simulator import HybridSimulator, SimResult
 from human_fmu import build_fmu, perturbed_thetas
@@ -21,7 +19,7 @@ from orchestrator.cli import main as hpcosim
 from orchestrator.cosim.contact_controllers import loop_simulator, tracked_gait
 from orchestrator.loop.plant import wrench_rows
 from tests.fmu_runner import HumanFMU
-from tests.multicontact_cycle import load_cycle
+from tests.multicontact_cycle import load_cycle, write_gait_file
 
 DT = 1e-3
 
@@ -131,14 +129,9 @@ def test_offsets_are_refused_on_this_graph(fmu_path):
 
 
 def test_fmu_build_reads_a_multicontact_gait_file(tmp_path, cycle, capsys):
-    model, traj, _ = cycle
+    model, _, _ = cycle
     gait = tmp_path / "gait.json"
-    save_json(gait, {
-        "kind": KIND, "schema_version": SCHEMA_VERSION, "model_hash": model.parameter_hash(),
-        "trajectory": {d.value: {"duration": float(traj[d]["t"][-1]), **traj[d]}
-                       for d in model.graph.domains},
-        "subject": model.subject.model_dump(mode="json"),
-        "device": model.device.model_dump(mode="json")})
+    write_gait_file(gait)
     out = tmp_path / "human.fmu"
     assert hpcosim(["fmu", "build", "--gait", str(gait), "--out", str(out)]) == 0
     assert validate_fmu(str(out)) == []

@@ -14,6 +14,7 @@ from xml.etree import ElementTree as ET
 from orchestrator.cosim.config import CosimConfig, CosimError
 from orchestrator.cosim.drives import Drives
 from orchestrator.cosim.human import ensure_fmu
+from prosthesis_controller.interface import ControllerName
 
 #: where an hpcosim FMU's modelDescription.xml names its build: FMI 2.0 VendorAnnotations,
 #: FMI 3.0 Annotations (human_fmu.build, human_fmu.fmi3)
@@ -121,6 +122,9 @@ class RunInputs:
         if cfg.tube is not None:
             raise CosimError(f"--tube {cfg.tube}: a multi-contact gait's run has no force "
                              "tube (its controller is made from the gait); drop --tube")
+        if cfg.controller != ControllerName.CLFQP:
+            raise CosimError(f"--controller {cfg.controller}: a multi-contact gait runs "
+                             f"{ControllerName.CLFQP.value} (the paper's graph runs the others)")
         run = load_contact_run(cfg.gait)
         model, tracked = run.model, run.tracked
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)

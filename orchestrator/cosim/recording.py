@@ -86,6 +86,26 @@ def _artifacts(rec: Recording, tmp: Path) -> tuple[Path, Path]:
     return tmp / "gait.json", tmp / "tube.json"
 
 
+#: the attachment of a multi-contact gait's run: its controller's file
+#: (:mod:`prosthesis_controller.gait_tables`), what the controller process loaded
+CONTROLLER_FILE = "controller.npz"
+
+
+def _recorded_controller(rec: Recording, name: str) -> Any:
+    """The controller of the recording's controller file (RecordingError naming the file
+    when it cannot be built: another controller name, a damaged file)."""
+    from prosthesis_controller.node import build_controller
+
+    with tempfile.TemporaryDirectory() as td:
+        f = Path(td) / CONTROLLER_FILE
+        f.write_bytes(rec.attachments[CONTROLLER_FILE])
+        try:
+            return build_controller(name, None, None, tables=str(f))
+        except ValueError as e:
+            raise RecordingError(f"{rec.path}: attachment {CONTROLLER_FILE}: "
+                                 f"{str(e).replace(str(f), CONTROLLER_FILE)}") from None
+
+
 @dataclass
 class ReplayResult:
     controller: str
@@ -115,12 +135,15 @@ def replay(path: str | Path, controller: str | None = None, *, model: Any = None
     name = controller or rec.config.get("controller")
     if not name:
         raise RecordingError(f"{rec.path}: no controller named in the recording; pass one")
-    model = model or hp_model.load_model()
-    with tempfile.TemporaryDirectory() as td:
-        gp, tp = _artifacts(rec, Path(td))
-        gait = load_gait(gp, model.parameter_hash())
-        tb = load_tube(tube if tube is not None else tp, gait.hash())
-    ctrl = make_controller(name, gait, tb, model)
+    if CONTROLLER_FILE in rec.attachments:  # a multi-contact gait's run
+        ctrl = _recorded_controller(rec, name)
+    else:
+        model = model or hp_model.load_model()
+        with tempfile.TemporaryDirectory() as td:
+            gp, tp = _artifacts(rec, Path(td))
+            gait = load_gait(gp, model.parameter_hash())
+            tb = load_tube(tube if tube is not None else tp, gait.hash())
+        ctrl = make_controller(name, gait, tb, model)
     ctrl.reset()
     by_cycle = {int(t["cycle_time_us"]): t for t in rec.torques if t.get("enable")}
     worst, at = 0.0, None

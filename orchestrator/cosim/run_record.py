@@ -15,6 +15,7 @@ from orchestrator.cosim.config import CosimConfig
 from orchestrator.cosim.controller_process import ROOT
 from orchestrator.cosim.human import sha256
 from orchestrator.cosim.inputs import RunInputs
+from orchestrator.cosim.recording import CONTROLLER_FILE
 from orchestrator.cosim.result import CosimResult
 from orchestrator.loop.foxglove import WalkerFoxglove
 from orchestrator.loop.recorder import GroundTruthRecorder
@@ -121,7 +122,7 @@ class RunRecord:
         if cfg.tube is not None:
             rec.add_attachment("tube.json", Path(cfg.tube).read_bytes(), "application/json")
         if inputs.tables is not None:  # a multi-contact gait's controller
-            rec.add_attachment("controller.npz", inputs.tables.read_bytes(),
+            rec.add_attachment(CONTROLLER_FILE, inputs.tables.read_bytes(),
                                "application/octet-stream")
         rec.add_attachment("modelDescription.xml", fmu.model_description_xml(),
                            "application/xml")

@@ -1,0 +1,89 @@
+"""The co-simulation of a multi-contact gait: ``hpcosim run --controller clfqp`` with the
+committed openOFM cycle's gait file builds the FMU of its six domains and the controller's
+file, starts the controller process over zenoh (AMPRO3's CAN frames), walks 20 steps,
+records them; the recording replays through the recorded controller with no difference, and
+the same run in process (the same controller file, measurements and torques quantized as on
+the bus) walks the same walk."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bus_schemas.recording.reader import read_messages
+from characterization.gait.contact_gait import start_state
+from orchestrator.cli import main as hpcosim
+from orchestrator.cosim.config import CosimConfig
+from orchestrator.cosim.contact_controllers import (
+    ensure_controller_file,
+    load_contact_run,
+    loop_simulator,
+)
+from orchestrator.cosim.master import run_cosim
+from orchestrator.cosim.recording import replay
+from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
+from prosthesis_controller.gait_tables import load_contact_controller
+from tests.multicontact_cycle import write_gait_file
+
+STEPS = 20
+serial = pytest.mark.serial  # wall-clock limits of a lockstep run (tests/test_cosim.py)
+
+
+@pytest.fixture(scope="module")
+def gait_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("mccosim") / "openofm_multicontact.json"
+    write_gait_file(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def walked(gait_file):
+    rec = gait_file.parent / "run.mcap"
+    res = run_cosim(CosimConfig(controller="clfqp", gait=gait_file, tube=None,
+                                steps=STEPS, record=rec))
+    return res, rec
+
+
+@serial
+def test_clfqp_walks_the_multicontact_cosimulation(walked):
+    res, _ = walked
+    assert not res.faulted and not res.fell, res
+    assert res.steps == STEPS and res.missed == 0
+    assert res.torque_clamped == 0
+    assert res.node["ticks"] == res.ticks and res.node["reason"] == "plant gone"
+    assert all(v == 0 for v in res.plant_rejects.values())
+
+
+@serial
+def test_the_recording_replays_and_equals_the_run_in_process(walked, gait_file):
+    res, rec = walked
+    assert replay(rec).max_torque_diff == 0.0
+    run = load_contact_run(gait_file)
+    ctl, _ = load_contact_controller(ensure_controller_file(gait_file, run))
+    q0, qd0 = start_state(run.trajectory)
+    plant = SimulatorPlant(loop_simulator(run.model, run.gait, run.tracked.gains), q0, qd0)
+    log = run_loop(plant, ControllerLink(ctl, quantize=True), steps=STEPS)
+    assert log.fall is None and log.steps == STEPS
+    gt = np.array([o["q"] for _, _, o in read_messages(rec, ["/ground_truth"])])
+    assert len(gt) == res.ticks
+    q = np.array(log.q)
+    n = min(len(gt), len(q))
+    assert n >= res.ticks - 1
+    # the same generated C, the same controller file, the same quantization: the prosthesis
+    # angles agree to rounding over 20 steps
+    assert np.abs(gt[:n, 10:12] - q[:n, 10:12]).max() <= 1e-6
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--tube", "tube.json"], "has no force tube"),
+    (["--subject", "hp_model/configs/subject_example.toml"], "carries its subject"),
+    (["--controller", "pd"], "a multi-contact gait runs clfqp")])
+def test_what_a_multicontact_run_refuses(gait_file, capsys, extra, words):
+    args = ["run", "--gait", str(gait_file), "--steps", "1", *extra]
+    if "--controller" not in extra:
+        args += ["--controller", "clfqp"]
+    assert hpcosim(args) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1
