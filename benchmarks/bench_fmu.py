@@ -67,7 +67,7 @@ def replayed_run(sim, q0, qd0, policy, periods: int) -> tuple[np.ndarray, Any, f
     torques: list[np.ndarray] = []
 
     def record(t, st):
-        torques.append(np.asarray(policy(t, st), float))
+        torques.append(np.array(policy(t, st), float))  # a copy: policies may reuse buffers
         return torques[-1]
 
     rec = sim.run(q0, qd0, Domain.PS, duration=periods * 1e-3, policy=record)
