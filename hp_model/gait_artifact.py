@@ -187,9 +187,10 @@ def load_gait(path: str | os.PathLike[str], model_hash: str | None = None) -> Ga
     except ArtifactError:
         if artifact_kind(path) == MULTICONTACT_KIND:
             raise ArtifactError(
-                f"{src}: a multi-contact gait (`gait fit --domains multicontact`, a "
-                "trajectory): the tube, controllers, FMU and co-simulation run the paper's "
-                f"domains for now; fit one with `hpcosim gait fit STEPS --out {src}`") from None
+                f"{src}: a multi-contact gait (`gait fit --domains multicontact`): `hpcosim "
+                "fmu build` and `hpcosim run --controller clfqp` take it; this verb runs the "
+                "paper's two domains for now (a gait of `hpcosim gait fit STEPS --out "
+                "G.json`)") from None
         raise
     if doc["schema_version"] == 1:
         raise ArtifactError(

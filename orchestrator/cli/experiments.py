@@ -43,24 +43,37 @@ def _claims_table(console: Console, metrics: dict[str, Any], *, judged: bool = T
 
 
 def experiments(
-    gait: Annotated[Path, typer.Option("--gait", help="Gait file (gait fit).", dir_okay=False)],
-    tube: Annotated[Path, typer.Option("--tube", help="Tube file (tube fit).", dir_okay=False)],
+    gait: Annotated[Path, typer.Option("--gait", help="Gait file (gait fit; a multi-contact "
+                                       "gait runs its own experiments, below).",
+                                       dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Output folder.", file_okay=False)],
+    tube: Annotated[Path | None, typer.Option("--tube", help="Tube file (tube fit; the "
+                                              "paper's graph).", dir_okay=False)] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Steps per run.")] = 20,
     eigen: Annotated[bool, typer.Option(help="Closed-loop return-map eigenvalues (finite "
                                         "differences, 24 extra runs).")] = True,
+    draws: Annotated[int, typer.Option("--draws", min=0, help="A multi-contact gait: draws "
+                                       "per perturbation family (0: none).")] = 10,
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
 ) -> None:
     """Paper Sec. V on the full closed loop: nominal walking (Fig. 7), exact vs relaxed
-    CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md."""
+    CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md.
+    A multi-contact gait (no --tube): its prosthesis controllers' nominal walks (held oracle,
+    clfqp, contact-pd) and the perturbation families on the same draws."""
     import hp_model
     from hp_model.force_tube import load_tube
-    from hp_model.gait_artifact import load_gait
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind, load_gait
     from orchestrator.cli.subject import subject_source
     from orchestrator.experiments.paper import run_experiments
     from orchestrator.experiments.report import write_report
 
+    if artifact_kind(gait) == MULTICONTACT_KIND:
+        _person_experiments(gait, out, steps, draws, tube, subject, device)
+        return
+    if tube is None:
+        raise typer.BadParameter("a gait of the paper's graph runs with its force tube",
+                                 param_hint="--tube")
     console = Console()
     model = hp_model.load_model(subject_source(subject, gait),
                                 str(device) if device else None)
@@ -161,3 +174,32 @@ def demo(
                   "all; figures, walker animations, metrics.json beside it)", soft_wrap=True)
     # --quick's 3-step runs without eigenvalues cannot show the 20-step claims: not judged
     conclude(claims_verdict(m, judged=not quick))
+
+
+def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Path | None,
+                        subject: Path | None, device: Path | None) -> None:
+    """``experiments`` of a multi-contact gait (:mod:`orchestrator.experiments.person_walks`);
+    exit 1 unless clfqp walks the nominal steps."""
+    from orchestrator.cli.outcome import HOLDS, Verdict
+    from orchestrator.experiments.person_walks import NAMES, run_person_experiments
+
+    for given, name in ((tube, "--tube"), (subject, "--subject"), (device, "--device")):
+        if given is not None:
+            raise typer.BadParameter(f"{gait} is a multi-contact gait: it carries its subject "
+                                     "and device and runs with no force tube", param_hint=name)
+    console = Console()
+    with console.status("experiments") as st:
+        m = run_person_experiments(gait, out, steps, draws, progress=lambda s: st.update(s))
+    for name in NAMES:
+        w = m["nominal"][name]
+        walk = w["walk"]
+        how = walk["fall"] or "walks"
+        _line(console, f"  {name:11s} {walk['steps']:3d} steps, knee {w['knee_rms_deg']:.2f} "
+              f"deg, ankle {w['ankle_rms_deg']:.2f} deg RMS over the last stride: {how}")
+    for family, row in m["families"].items():
+        _line(console, f"  {family:8s} " + ", ".join(f"{n} {row[n]}/{draws}" for n in NAMES))
+    console.print(f"wrote {out}/metrics.json, report.md and person.png")
+    clfqp = m["nominal"]["clfqp"]["walk"]
+    conclude(HOLDS if clfqp["walks"] else Verdict(
+        f"clfqp does not walk the gait: after {clfqp['steps']} of {steps} steps, "
+        f"{clfqp['fall']}"))

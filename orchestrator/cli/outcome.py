@@ -31,7 +31,7 @@ NEGATIVE_WHEN: dict[tuple[str, ...], str] = {
                      "a posteriori guarantee 1 - eps)",
     ("tube", "refit"): "as `tube fit`, for the refitted tube or bound",
     ("experiments",): "a paper claim not reproduced (`paper_literal`, a documented negative "
-                      "result, excepted)",
+                      "result, excepted); a multi-contact gait: `clfqp` does not walk it",
     ("demo",): "as `experiments` (`--quick`: claims not judged)",
     ("fmu", "build"): "fmpy's validation finds a problem",
     ("run",): "the walker falls or the run faults",

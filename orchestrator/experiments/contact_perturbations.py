@@ -118,17 +118,28 @@ def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[s
                            d.encoder or IDEAL_ENCODER).walks
 
 
+def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
+                          trajectory: Mapping[Domain, Mapping[str, Any]],
+                          setup: LoopSetup | None = None) -> dict[str, Any]:
+    """The controllers a family walks (:data:`CONTROLLERS`), made once from the
+    unperturbed gait (``setup``: its simulator and held walk, when made already)."""
+    if setup is None or setup.held is None:
+        sim = loop_simulator(model, gait, GAINS)
+        setup = LoopSetup(sim, held_walk(sim, trajectory))
+    return {"oracle": "oracle",
+            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup),
+            "contact-pd": make_contact_pd(model, gait, trajectory, setup)}
+
+
 def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
                  durations: Mapping[Domain, float], family: str, amplitude: float = 1.0,
-                 draws: int = 20, steps: int = 10) -> dict[str, int]:
+                 draws: int = 20, steps: int = 10, *,
+                 controllers: Mapping[str, Any] | None = None) -> dict[str, int]:
     """Walks of ``steps`` steps out of ``draws`` draws of ``family`` per controller (the
-    same draws for each; the controllers made once from the unperturbed gait)."""
+    same draws for each; ``controllers``: :func:`perturbed_controllers`, made here when not
+    given)."""
     gait = contact_gait_of(model, trajectory, durations)
-    sim = loop_simulator(model, gait, GAINS)
-    setup = LoopSetup(sim, held_walk(sim, trajectory))
-    ctls: dict[str, Any] = {"oracle": "oracle",
-                            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup),
-                            "contact-pd": make_contact_pd(model, gait, trajectory, setup)}
+    ctls = controllers or perturbed_controllers(model, gait, trajectory)
     walks = dict.fromkeys(CONTROLLERS, 0)
     for seed in range(draws):
         d = draw(gait, family, amplitude, seed)

@@ -23,7 +23,7 @@ from characterization.gait.contact_gait import (
 from characterization.gait.multicontact import GRAPH
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.simulator import HybridSimulator
+from hp_model.simulator import HybridSimulator, SimResult
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
     contact_clfqp,
@@ -55,12 +55,12 @@ CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis
          "the interaction-aware robust CLF-QP at a phase from its own sensors")
 
 
-def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
-                    controller: Controller, steps: int, description: str,
-                    encoder: Encoder = IDEAL_ENCODER) -> ContactWalk:
-    """Walk ``steps`` steps of the plant ``sim`` from the fitted cycle's start with the
-    prosthesis on ``controller`` (``description``: the verdict's words for it), its sensors
-    read through ``encoder`` (its noise from its seed)."""
+def controller_run(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
+                   controller: Controller, steps: int,
+                   encoder: Encoder = IDEAL_ENCODER) -> SimResult:
+    """The plant ``sim`` from the fitted cycle's start with the prosthesis on
+    ``controller``, its sensors read through ``encoder`` (its noise from its seed), until
+    ``steps`` steps, a fall or 2 s per step: the simulator's log."""
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     rng = np.random.default_rng(encoder.seed)
@@ -70,13 +70,28 @@ def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[st
         if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
             break
         plant.advance()
-    res = plant.run.result()
+    return plant.run.result()
+
+
+def contact_walk_of(res: SimResult, steps: int, description: str) -> ContactWalk:
+    """The :class:`ContactWalk` of a run of ``steps`` asked: its strides from the human
+    foot's heel strikes."""
     strikes = [i for i in res.impacts if i.into == Domain.DS_H]
     ts = np.array([i.t for i in strikes])
     xs = np.array([float(i.q[0]) for i in strikes])
     return ContactWalk(res.steps, steps, None if res.fall is None else res.fall.message(),
                        np.diff(ts), np.diff(xs) / np.diff(ts) if ts.size > 1 else np.array([]),
                        description)
+
+
+def walk_controller(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
+                    controller: Controller, steps: int, description: str,
+                    encoder: Encoder = IDEAL_ENCODER) -> ContactWalk:
+    """Walk ``steps`` steps of the plant ``sim`` from the fitted cycle's start with the
+    prosthesis on ``controller`` (``description``: the verdict's words for it), its sensors
+    read through ``encoder`` (:func:`controller_run`)."""
+    return contact_walk_of(controller_run(sim, trajectory, controller, steps, encoder), steps,
+                           description)
 
 
 def walk_with_contact_pd(model: HumanProsthesisModel, gait: ContactGait,

@@ -1,0 +1,68 @@
+"""``hpcosim experiments`` of a multi-contact gait (the committed openOFM cycle's file): the
+three controllers' nominal walks measured against the fitted cycle, the perturbation
+families on the same draws, metrics.json, report.md and the figure; what it refuses."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from orchestrator.cli import main as hpcosim
+from orchestrator.experiments.contact_perturbations import FAMILIES
+from orchestrator.experiments.person_walks import NAMES, fitted_stride, wilson
+from orchestrator.cosim.contact_controllers import load_contact_run
+from tests.multicontact_cycle import write_gait_file
+
+
+@pytest.fixture(scope="module")
+def gait_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("person") / "openofm_multicontact.json"
+    write_gait_file(path)
+    return path
+
+
+def test_experiments_of_a_multicontact_gait(gait_file, capsys):
+    out = gait_file.parent / "exp"
+    assert hpcosim(["experiments", "--gait", str(gait_file), "--out", str(out),
+                    "--steps", "6", "--draws", "1"]) == 0
+    m = json.loads((out / "metrics.json").read_text())
+    fit = m["fitted"]
+    for name in NAMES:
+        w = m["nominal"][name]
+        assert w["walk"]["walks"], (name, w["walk"]["fall"])
+        # the closed loop walks the fitted cycle: stride within 1 %, the prosthesis knee
+        # within a few degrees of it over the last stride (the ankle's fitted swing wiggles
+        # between the nodes, which the Bezier curves do not follow: within 5 deg)
+        assert np.median(w["walk"]["strides"]) == pytest.approx(fit["stride_time"], rel=0.01)
+        assert w["knee_rms_deg"] < 2.0 and w["ankle_rms_deg"] < 5.0
+        assert all(0 < u <= lim + 1e-9 for u, lim in zip(w["peak_torque"], (2.4, 3.0),
+                                                          strict=True))
+    assert m["nominal"]["clfqp"]["fallbacks"] == 0
+    assert set(m["families"]) == set(FAMILIES)
+    assert all(set(row) == set(NAMES) for row in m["families"].values())
+    report = (out / "report.md").read_text()
+    assert "| clfqp | 6 |" in report and "| posture |" in report
+    assert (out / "person.png").stat().st_size > 20_000
+    assert "clfqp" in capsys.readouterr().out
+
+
+def test_the_fitted_stride_starts_at_the_human_heel_strike(gait_file):
+    run = load_contact_run(gait_file)
+    s, q = fitted_stride(run)
+    assert s[0] == 0 and s[-1] == pytest.approx(1.0) and np.all(np.diff(s) >= 0)
+    assert q.shape == (s.size, 2)
+
+
+def test_wilson_interval():
+    lo, hi = wilson(20, 20)
+    assert hi == pytest.approx(1.0) and lo == pytest.approx(0.8389, abs=1e-3)
+
+
+def test_a_tube_or_subject_beside_a_multicontact_gait_is_refused(gait_file, tmp_path, capsys):
+    for extra in (["--tube", "t.json"], ["--subject", "hp_model/configs/subject_example.toml"]):
+        assert hpcosim(["experiments", "--gait", str(gait_file), "--out", str(tmp_path / "x"),
+                        *extra]) == 2
+        assert "multi-contact gait" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
