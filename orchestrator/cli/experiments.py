@@ -10,7 +10,7 @@ import typer
 from rich.console import Console
 
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
-from orchestrator.cli.outcome import claims_verdict, conclude, uncounted_claims
+from orchestrator.cli.outcome import HOLDS, Verdict, claims_verdict, conclude, uncounted_claims
 
 STAGES = ("synthetic subject", "mocap processing", "gait fit", "tube fit", "experiments",
           "report")
@@ -95,9 +95,29 @@ def demo(
                                         "verification (CI).")] = False,
     steps: Annotated[int | None, typer.Option("--steps", min=1, help="Steps per closed-loop "
                                               "run (default 20, --quick 3).")] = None,
+    take: Annotated[Path | None, typer.Option(
+        "--take", help="A lab's take (C3D, TRC, Motive CSV): the pipeline on the person's "
+        "multi-contact gait instead of the synthetic subject.", dir_okay=False)] = None,
+    mapping: Annotated[Path | None, typer.Option(
+        "--mapping", help="With --take: its mapping file (mocap inspect).", dir_okay=False)
+                       ] = None,
+    draws: Annotated[int, typer.Option("--draws", min=0, help="With --take: draws per "
+                                       "perturbation family.")] = 10,
 ) -> None:
     """The whole pipeline on the synthetic subject: mocap synth -> mocap process -> gait fit
-    -> tube fit -> experiments -> report.md."""
+    -> tube fit -> experiments -> report.md.  With --take: on a lab's take, the person's
+    multi-contact gait: mocap process -> gait fit --domains multicontact -> experiments ->
+    fmu build -> run (co-simulation, recorded) -> replay -> report.md."""
+    if take is not None:
+        _demo_take(take, mapping, out, steps or 20, draws)
+        return
+    if mapping is not None:
+        raise typer.BadParameter("--mapping goes with --take", param_hint="--mapping")
+    _demo_synthetic(out, quick, steps)
+
+
+def _demo_synthetic(out: Path, quick: bool, steps: int | None) -> None:
+    """``demo`` on the synthetic subject (the paper's graph)."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     import hp_model
@@ -180,7 +200,6 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
                         subject: Path | None, device: Path | None) -> None:
     """``experiments`` of a multi-contact gait (:mod:`orchestrator.experiments.person_walks`);
     exit 1 unless clfqp walks the nominal steps."""
-    from orchestrator.cli.outcome import HOLDS, Verdict
     from orchestrator.experiments.person_walks import NAMES, run_person_experiments
 
     for given, name in ((tube, "--tube"), (subject, "--subject"), (device, "--device")):
@@ -203,3 +222,89 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
     conclude(HOLDS if clfqp["walks"] else Verdict(
         f"clfqp does not walk the gait: after {clfqp['steps']} of {steps} steps, "
         f"{clfqp['fall']}"))
+
+
+#: what ``demo --take``'s stages' exit statuses mean (orchestrator.cli.outcome)
+_STATUS = {0: "holds", 1: "done, negative", 2: "error"}
+
+
+def _demo_take(take: Path, mapping: Path | None, out: Path, steps: int, draws: int) -> None:
+    """``demo --take``: each stage the verb a user would type (:func:`orchestrator.cli.main`),
+    its output printed as it comes; a stage that errs ends the demo (exit 2), a negative one
+    (the gait not the person's, a walk that falls) is reported and the demo goes on (exit
+    1 at the end); ``report.md`` sums the stages up."""
+    from orchestrator.cli import main as hpcosim
+
+    out.mkdir(parents=True, exist_ok=True)
+    console = Console()
+    gait, rec = out / "gait.json", out / "run.mcap"
+    stages = [
+        ("mocap processing", ["mocap", "process", str(take), "--out", str(out / "steps.npz"),
+                              *(["--mapping", str(mapping)] if mapping else [])]),
+        ("gait fit", ["gait", "fit", str(out / "steps.npz"), "--domains", "multicontact",
+                      "--allow-mismatch", "--out", str(gait)]),
+        ("experiments", ["experiments", "--gait", str(gait), "--out", str(out / "experiments"),
+                         "--steps", str(steps), "--draws", str(draws)]),
+        ("fmu build", ["fmu", "build", "--gait", str(gait), "--out", str(out / "human.fmu")]),
+        ("co-simulation", ["run", "--controller", "clfqp", "--gait", str(gait), "--fmu",
+                           str(out / "human.fmu"), "--steps", str(steps), "--record",
+                           str(rec)]),
+        ("replay", ["replay", str(rec)]),
+    ]
+    done: list[tuple[str, float, int, list[str]]] = []
+    for stage, args in stages:
+        console.rule(f"[bold]{stage}[/]: hpcosim {' '.join(args)}")
+        t0 = time.perf_counter()
+        rc = hpcosim(args)
+        done.append((stage, time.perf_counter() - t0, rc, args))
+        if rc not in (0, 1) or (stage == "gait fit" and not gait.is_file()):
+            break
+    _write_demo_report(out, take, done, gait)
+    worst = max(rc for *_x, rc, _a in done)
+    for stage, seconds, rc, _args in done:
+        _line(console, f"{stage:17s} {seconds:6.1f} s  {_STATUS.get(rc, f'exit {rc}')}")
+    console.print(f"report: [bold]{out}/report.md[/]", soft_wrap=True)
+    if worst >= 2 or len(done) < len(stages):
+        raise typer.Exit(2)
+    conclude(HOLDS if worst == 0 else Verdict(
+        "; ".join(f"{stage}: negative" for stage, _s, rc, _a in done if rc == 1)))
+
+
+def _write_demo_report(out: Path, take: Path, done: list[tuple[str, float, int, list[str]]],
+                       gait: Path) -> None:
+    """``report.md`` of ``demo --take``: each stage's command, time and outcome, the gait's
+    comparison with the take, links to what the stages wrote."""
+    import json
+
+    from hp_model.atomic_io import atomic_write_text
+
+    lines = [f"# hpcosim demo on {take.name}", "",
+             "The person's multi-contact gait, from the take to a co-simulation "
+             "(docs/gait-design.md, docs/cosim.md).  The force tube is not made on this graph "
+             "(`clfqp`'s robust margin is zero there).", "",
+             "| stage | command | seconds | outcome |", "|---|---|---:|---|"]
+    for stage, seconds, rc, args in done:
+        lines.append(f"| {stage} | `hpcosim {' '.join(args)}` | {seconds:.1f} | "
+                     f"{_STATUS.get(rc, f'exit {rc}')} |")
+    if gait.is_file():
+        doc = json.loads(gait.read_text())
+        check, walk = doc.get("check", {}), doc.get("closed_loop", {})
+        lines += ["", f"The gait against the take: {check.get('verdict', '?')}.", "",
+                  "| criterion | take | gait | error | limit | |", "|---|---:|---:|---:|---:|---|"]
+        for r in check.get("rows", []):
+            mark = {True: "ok", False: "**no**", None: ""}[r["passed"]]
+            limit = "-" if r["limit"] is None else f"{r['limit']:g} {r['unit']}"
+            lines.append(f"| {r['criterion']} | {_num(r['take'])} | {_num(r['gait'])} | "
+                         f"{_num(r['error'])} | {limit} | {mark} |")
+        lines += ["", f"The gait's closed-loop verdict: {walk.get('steps', '?')} of "
+                  f"{walk.get('wanted', '?')} steps ({walk.get('controller', '')}).", "",
+                  "![the gait against the take](gait.png)", ""]
+    lines += ["What each stage wrote: `steps.npz` (and its QA report), `gait.json`, "
+              "`experiments/report.md` (the controllers' walks and the perturbation "
+              "families), `human.fmu`, `run.mcap` (the co-simulation: Foxglove, "
+              "`hpcosim replay`)."]
+    atomic_write_text(out / "report.md", "\n".join(lines) + "\n")
+
+
+def _num(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3g}"

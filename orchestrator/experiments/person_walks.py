@@ -115,9 +115,9 @@ def stride_rms(res: SimResult, run: ContactRun) -> tuple[float, float]:
 
 
 def nominal_walks(run: ContactRun, steps: int
-                  ) -> tuple[dict[str, ControllerWalk], dict[str, SimResult], LoopSetup]:
-    """The three controllers' nominal walks (module docstring), their logs and the setup
-    they shared (ValueError if the held oracle falls in the stride the tables read)."""
+                  ) -> tuple[dict[str, ControllerWalk], dict[str, SimResult], dict[str, Any]]:
+    """The three controllers' nominal walks (module docstring), their logs and the
+    controllers (ValueError if the held oracle falls in the stride the tables read)."""
     sim = loop_simulator(run.model, run.gait, GAINS)
     setup = LoopSetup(sim, held_walk(sim, run.trajectory))
     ctls = perturbed_controllers(run.model, run.gait, run.trajectory, setup)
@@ -138,7 +138,7 @@ def nominal_walks(run: ContactRun, steps: int
         peak = np.abs(res.u[:, 4:6]).max(axis=0) if res.u.size else np.zeros(2)
         walks[name] = ControllerWalk(name, contact_walk_of(res, steps, name), knee, ankle,
                                      (float(peak[0]), float(peak[1])), fallbacks)
-    return walks, logs, setup
+    return walks, logs, ctls
 
 
 def wilson(k: int, n: int) -> tuple[float, float]:
@@ -147,18 +147,18 @@ def wilson(k: int, n: int) -> tuple[float, float]:
     return float(ci.low), float(ci.high)
 
 
-def family_table(run: ContactRun, setup: LoopSetup, draws: int,
+def family_table(run: ContactRun, controllers: Mapping[str, Any], draws: int,
                  progress: Callable[[str], None] | None = None) -> dict[str, dict[str, int]]:
     """Per family (:data:`FAMILIES`, amplitude 1), the walks of :data:`FAMILY_STEPS` steps
-    out of ``draws`` per controller, on the same draws."""
-    ctls = perturbed_controllers(run.model, run.gait, run.trajectory, setup)
+    out of ``draws`` per controller (``controllers``: :func:`nominal_walks`'), on the same
+    draws."""
     durations = {d: float(np.asarray(run.trajectory[d]["t"])[-1]) for d in GRAPH.domains}
     table = {}
     for family in FAMILIES:
         if progress is not None:
             progress(f"perturbation family {family}: {draws} draws")
         table[family] = family_walks(run.model, run.trajectory, durations, family, 1.0,
-                                     draws, FAMILY_STEPS, controllers=ctls)
+                                     draws, FAMILY_STEPS, controllers=controllers)
     return table
 
 
@@ -249,8 +249,8 @@ def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: 
     say("reading the gait")
     run = load_contact_run(gait_path)
     say(f"nominal walks: {', '.join(NAMES)}, {steps} steps")
-    walks, logs, setup = nominal_walks(run, steps)
-    families = family_table(run, setup, draws, say) if draws > 0 else {}
+    walks, logs, ctls = nominal_walks(run, steps)
+    families = family_table(run, ctls, draws, say) if draws > 0 else {}
     stride_time = sum(float(np.asarray(run.trajectory[d]["t"])[-1]) for d in GRAPH.domains)
     metrics = {"gait": Path(gait_path).name, "steps": steps, "draws": draws,
                "fitted": {"stride_time": stride_time, "speed": _cycle_speed(run, stride_time)},
