@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from orchestrator.cli import main as hpcosim
+from orchestrator.cosim.contact_controllers import load_contact_run
 from orchestrator.experiments.contact_perturbations import FAMILIES
 from orchestrator.experiments.person_walks import NAMES, fitted_stride, wilson
-from orchestrator.cosim.contact_controllers import load_contact_run
 from tests.multicontact_cycle import write_gait_file
 
 
