@@ -32,7 +32,8 @@ NEGATIVE_WHEN: dict[tuple[str, ...], str] = {
     ("tube", "refit"): "as `tube fit`, for the refitted tube or bound",
     ("experiments",): "a paper claim not reproduced (`paper_literal`, a documented negative "
                       "result, excepted); a multi-contact gait: `clfqp` does not walk it",
-    ("demo",): "as `experiments` (`--quick`: claims not judged)",
+    ("demo",): "as `experiments` (`--quick`: claims not judged); `--take`: a stage's result "
+               "negative",
     ("fmu", "build"): "fmpy's validation finds a problem",
     ("run",): "the walker falls or the run faults",
     ("controller", "serve"): "-",
