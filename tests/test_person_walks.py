@@ -45,6 +45,8 @@ def test_experiments_of_a_multicontact_gait(gait_file, capsys):
     report = (out / "report.md").read_text()
     assert "| clfqp | 6 |" in report and "| posture |" in report
     assert (out / "person.png").stat().st_size > 20_000
+    assert (out / "walker_stride.png").stat().st_size > 10_000
+    assert (out / "walker.gif").read_bytes()[:6] == b"GIF89a"
     assert "clfqp" in capsys.readouterr().out
 
 

@@ -92,7 +92,11 @@ class WalkerScene:
         self.pose = walker_poses(model, walk.q[idx])  # (m, 3, frames)
         self.ib, self.trunk = model.coord_names.index("th_B"), model.subject.lengths.trunk
         self.pitch_row = model.pitch_row("socket")
-        self.steps = np.concatenate([[0], np.cumsum(np.diff(np.asarray(walk.domain)) != 0)])
+        # steps: entries into a domain that starts one (the paper's: every domain change;
+        # the multi-contact graph: the heel strikes)
+        dom = np.asarray(walk.domain)
+        starts = np.isin(dom[1:], [d.code for d in model.graph.step_starts])
+        self.steps = np.concatenate([[0], np.cumsum((np.diff(dom) != 0) & starts)])
         self.walk, self.t, self.idx, self.ax = walk, t, idx, ax
         ax.set_aspect("equal")
         ax.set_ylim(-0.12, 1.55)
@@ -217,6 +221,43 @@ def walker_gif(model: HumanProsthesisModel, walk: WalkSeries, *, title: str = ""
     return data
 
 
+def walker_strip(model: HumanProsthesisModel, walk: WalkSeries, rows: np.ndarray, *,
+                 title: str = "", size: tuple[float, float] = (3.0, 3.2), dpi: int = 90
+                 ) -> bytes:
+    """PNG bytes of the walker at the log ``rows`` of ``walk``, side by side (the frames of
+    :func:`walker_gif`, each ``size`` inches at ``dpi``): several frames across a stride show
+    the motion one frame cannot."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib import pyplot as plt
+    from PIL import Image
+
+    rows = np.asarray(rows, int)
+    if rows.size == 0:
+        raise ValueError("no rows to draw")
+    fig, ax = plt.subplots(figsize=size, dpi=dpi)
+    scene = WalkerScene(model, walk, np.asarray(walk.t, float), rows, ax, title)
+    frames = []
+    for k in range(rows.size):
+        scene.draw(k)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
+    plt.close(fig)
+    strip = Image.new("RGB", (sum(f.width for f in frames), max(f.height for f in frames)),
+                      "white")
+    x = 0
+    for f in frames:
+        strip.paste(f, (x, 0))
+        x += f.width
+    out = io.BytesIO()
+    strip.save(out, format="PNG")
+    return out.getvalue()
+
+
 def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float = 25.0,
                   max_seconds: float | None = None) -> bytes:
     """GIF of a co-simulation recording's walk, from its ``/ground_truth`` channel (q, domain,
@@ -259,4 +300,4 @@ def _recorded_fall(summary: Mapping[str, str], t: float, domain: int, tau: float
 
 
 __all__ = ["ARROW_COLOUR", "MAX_ARROW", "WalkSeries", "WalkerScene", "arrow_vector",
-           "recording_gif", "walker_gif", "walker_poses", "walker_scene"]
+           "recording_gif", "walker_gif", "walker_poses", "walker_scene", "walker_strip"]

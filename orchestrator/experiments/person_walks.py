@@ -12,7 +12,8 @@ loop with the prosthesis on each of its controllers, and under the perturbation 
   same draws for the three controllers; per family the walks of ``FAMILY_STEPS`` steps out
   of ``draws`` with the 95 % Wilson interval.
 - ``metrics.json``, ``person.png`` (the last stride's knee, ankle and prosthesis foot load
-  against the fitted cycle) and ``report.md`` in the output folder.
+  against the fitted cycle), ``walker.gif`` and ``walker_stride.png`` (``clfqp``'s walk: its
+  first 3 s, and 9 poses across its last stride) and ``report.md`` in the output folder.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from orchestrator.cosim.contact_controllers import (
     load_contact_run,
     loop_simulator,
 )
+from orchestrator.experiments.animation import WalkSeries, walker_gif, walker_strip
 from orchestrator.experiments.contact_perturbations import (
     FAMILIES,
     family_walks,
@@ -202,6 +204,26 @@ def figure(run: ContactRun, logs: Mapping[str, SimResult]) -> bytes:
     return buf.getvalue()
 
 
+def walk_series(run: ContactRun, res: SimResult) -> WalkSeries:
+    """The walker's series of a run (the socket force from each domain's wrench rows)."""
+    rows = wrench_rows(run.model)
+    fs = np.array([res.lam[k, rows[Domain.from_code(int(c))].socket]
+                   for k, c in enumerate(res.domain)])
+    return WalkSeries(res.t, res.q, res.domain, res.tau, fs, res.fall)
+
+
+def walker_files(run: ContactRun, res: SimResult, out: Path, frames: int = 9) -> None:
+    """``walker.gif`` (the first 3 s of ``res``) and ``walker_stride.png`` (``frames`` poses
+    evenly across its last stride, side by side) in ``out``."""
+    walk = walk_series(run, res)
+    atomic_write_bytes(out / "walker.gif", walker_gif(run.model, walk, title="clfqp",
+                                                      max_seconds=3.0))
+    span = last_stride(res)
+    if span is not None:
+        rows = np.linspace(span.start, span.stop - 1, frames).round().astype(int)
+        atomic_write_bytes(out / "walker_stride.png", walker_strip(run.model, walk, rows))
+
+
 def report(metrics: Mapping[str, Any]) -> str:
     """``report.md`` of the metrics."""
     lines = [f"# The person's gait in closed loop: {metrics['gait']}", "",
@@ -224,6 +246,8 @@ def report(metrics: Mapping[str, Any]) -> str:
                      f"{w['fallbacks']} | {walk['fall'] or 'walked'} |")
     lines += ["", f"The fitted gait: stride {fit['stride_time']:.3f} s, "
               f"{fit['speed']:.3f} m/s.", "", "![the last stride](person.png)", "",
+              "`clfqp`'s walk: `walker.gif` (its first 3 s) and its last stride in 9 poses:",
+              "", "![clfqp's last stride](walker_stride.png)", "",
               f"Perturbation families ({metrics['draws']} draws each, the same draws for "
               f"the three controllers, {FAMILY_STEPS} steps asked; "
               "`orchestrator/experiments/contact_perturbations.py` defines them; the oracle "
@@ -258,6 +282,8 @@ def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: 
                "families": families}
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "person.png", figure(run, logs))
+    say("the walker: walker.gif, walker_stride.png")
+    walker_files(run, logs["clfqp"], out)
     atomic_write_text(out / "metrics.json", dumps(metrics, indent=1) + "\n")
     atomic_write_text(out / "report.md", report(metrics))
     return metrics
