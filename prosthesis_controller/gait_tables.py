@@ -32,6 +32,7 @@ from hp_model.atomic_io import atomic_write_bytes
 from hp_model.config import DeviceConfig, SubjectConfig
 from hp_model.domains import Domain, DomainGraph
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.json_io import dumps
 from prosthesis_controller.contact_clf_qp import ContactClfConfig, ContactClfQp, StanceQp
 from prosthesis_controller.contact_phase_pd import (
     ContactGaitTables,
@@ -59,7 +60,7 @@ def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,
             "stance_gains": asdict(law.stance_gains), "swing_gains": asdict(law.swing_gains),
             "gear": list(law.gear), "limits": list(law.limits), "config": asdict(ctl.config)}
     arrays: dict[str, Any] = {
-        "meta": np.array(json.dumps(meta)),
+        "meta": np.array(dumps(meta)),
         "stance.phase": tab.stance.phase, "stance.values": tab.stance.values,
         "swing.phase": tab.swing.phase, "swing.values": tab.swing.values,
         "qp.domain": np.array([d.code for d in qp.domain]),

@@ -163,6 +163,9 @@ XDIST_COST: dict[str, float] = {
     "tests/test_mocap_readers.py": 16,
     "tests/test_mocap_synthetic.py": 16,
     "tests/test_playback_cli.py": 16,
+    "tests/test_fmu_multicontact.py": 40,  # the multi-contact FMU's build and walks
+    "tests/test_person_walks.py": 30,
+    "tests/test_gait_tables.py": 10,
 }
 
 

@@ -150,7 +150,7 @@ def test_fmu_build_reads_a_multicontact_gait_file(tmp_path, cycle, capsys):
 def test_clfqp_walks_the_fmu_through_the_loop(fmu_path, cycle, walked):
     """The product's closed loop (``run_loop``) with the FMU as the plant and ``clfqp`` as
     the controller, its measurements and torques at the CAN frames' resolution (what the
-    co-simulation's controller node sees): 10 steps, the strides the in-process plant
+    co-simulation's controller node sees): 6 steps, the strides the in-process plant
     gives the same controller within 1 % (the quantization is the only difference)."""
     from human_fmu.instance import HumanFmu
     from orchestrator.cosim.contact_controllers import contact_clfqp
@@ -162,17 +162,17 @@ def test_clfqp_walks_the_fmu_through_the_loop(fmu_path, cycle, walked):
     model, traj, gait = cycle
     sim, _ = walked
     ctl = contact_clfqp(model, gait, traj)
-    in_process = walk_controller(sim, traj, ctl, 10, "clfqp")
+    in_process = walk_controller(sim, traj, ctl, 6, "clfqp")
     assert in_process.walks, in_process.line()
     fmu = HumanFmu(fmu_path)
     try:
         q0, qd0 = start_state(traj)
         fmu.start_walk(gait.thetas(), q0, qd0)
-        log = run_loop(FmuPlant(fmu, DT), ControllerLink(ctl, quantize=True), steps=10)
+        log = run_loop(FmuPlant(fmu, DT), ControllerLink(ctl, quantize=True), steps=6)
     finally:
         fmu.free()
     assert log.fall is None and log.fault == "", log.fall
-    assert log.steps == 10
+    assert log.steps == 6
     domain = np.array(log.domain)
     t = np.array(log.t)
     # heel strikes of the human foot: entries into ds_h

@@ -26,7 +26,7 @@ def gait_file(tmp_path_factory):
 def test_experiments_of_a_multicontact_gait(gait_file, capsys):
     out = gait_file.parent / "exp"
     assert hpcosim(["experiments", "--gait", str(gait_file), "--out", str(out),
-                    "--steps", "6", "--draws", "1"]) == 0
+                    "--steps", "4", "--draws", "1"]) == 0
     m = json.loads((out / "metrics.json").read_text())
     fit = m["fitted"]
     for name in NAMES:
@@ -43,7 +43,7 @@ def test_experiments_of_a_multicontact_gait(gait_file, capsys):
     assert set(m["families"]) == set(FAMILIES)
     assert all(set(row) == set(NAMES) for row in m["families"].values())
     report = (out / "report.md").read_text()
-    assert "| clfqp | 6 |" in report and "| posture |" in report
+    assert "| clfqp | 4 |" in report and "| posture |" in report
     assert (out / "person.png").stat().st_size > 20_000
     assert (out / "walker_stride.png").stat().st_size > 10_000
     assert (out / "walker.gif").read_bytes()[:6] == b"GIF89a"

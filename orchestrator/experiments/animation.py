@@ -222,31 +222,26 @@ def walker_gif(model: HumanProsthesisModel, walk: WalkSeries, *, title: str = ""
 
 
 def walker_strip(model: HumanProsthesisModel, walk: WalkSeries, rows: np.ndarray, *,
-                 title: str = "", size: tuple[float, float] = (3.0, 3.2), dpi: int = 90
-                 ) -> bytes:
+                 title: str = "", size: tuple[float, float] = (3.0, 3.2)) -> bytes:
     """PNG bytes of the walker at the log ``rows`` of ``walk``, side by side (the frames of
-    :func:`walker_gif`, each ``size`` inches at ``dpi``): several frames across a stride show
-    the motion one frame cannot."""
+    :func:`walker_gif`, each ``size`` inches): several frames across a stride show the motion
+    one frame cannot."""
     import io
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
+    from matplotlib.figure import Figure
     from PIL import Image
+
+    from hp_model.figures import figure_bytes
 
     rows = np.asarray(rows, int)
     if rows.size == 0:
         raise ValueError("no rows to draw")
-    fig, ax = plt.subplots(figsize=size, dpi=dpi)
-    scene = WalkerScene(model, walk, np.asarray(walk.t, float), rows, ax, title)
+    fig = Figure(figsize=size)  # not pyplot's: drawn and written once per frame
+    scene = WalkerScene(model, walk, np.asarray(walk.t, float), rows, fig.subplots(), title)
     frames = []
     for k in range(rows.size):
         scene.draw(k)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        frames.append(Image.open(io.BytesIO(buf.getvalue())).convert("RGB"))
-    plt.close(fig)
+        frames.append(Image.open(io.BytesIO(figure_bytes(fig))).convert("RGB"))
     strip = Image.new("RGB", (sum(f.width for f in frames), max(f.height for f in frames)),
                       "white")
     x = 0

@@ -18,7 +18,6 @@ loop with the prosthesis on each of its controllers, and under the perturbation 
 
 from __future__ import annotations
 
-import io
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from characterization.gait.contact_gait import GAINS, ContactWalk, held_oracle, 
 from characterization.gait.multicontact import GRAPH
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 from hp_model.domains import PROSTHESIS, Domain
+from hp_model.figures import figure_bytes
 from hp_model.json_io import dumps
 from hp_model.simulator import SimResult
 from orchestrator.cosim.contact_controllers import (
@@ -198,10 +198,7 @@ def figure(run: ContactRun, logs: Mapping[str, SimResult]) -> bytes:
         a.grid(alpha=0.3)
     ax[0].legend()
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+    return figure_bytes(fig)
 
 
 def walk_series(run: ContactRun, res: SimResult) -> WalkSeries:
