@@ -133,6 +133,20 @@ def test_bad_spec_is_one_line_naming_the_field(tmp_path, files, body, field):
     assert "\n" not in msg and f"field '{field}'" in msg, msg
 
 
+def test_a_multicontact_gait_is_refused_before_any_worker(tmp_path, files):
+    from tests.multicontact_cycle import write_gait_file
+
+    _, tube = files
+    gait = tmp_path / "person.json"
+    write_gait_file(gait)
+    p = tmp_path / "s.toml"
+    p.write_text(f'gait = "{gait}"\ntube = "{tube}"\ncontrollers = ["pd"]\ndraws = 2\n'
+                 'seed = 1\nfamilies.n = {}\n')
+    with pytest.raises(SpecError, match=r"field 'gait': .* multi-contact gait") as e:
+        load_spec(p)
+    assert "\n" not in str(e.value)
+
+
 def test_cli_bad_spec_exit_2_no_output(tmp_path, files, capsys):
     from orchestrator.cli import main
 

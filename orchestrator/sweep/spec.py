@@ -371,6 +371,12 @@ def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
         if not p.is_file():
             raise _fail(path, name, f"no such file: {p}")
         files[name] = p.resolve()
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+
+    if artifact_kind(files["gait"]) == MULTICONTACT_KIND:  # said here, before any worker
+        raise _fail(path, "gait", f"{files['gait']} is a multi-contact gait: the sweeps run "
+                    "the paper's two domains for now (its controllers' perturbation families: "
+                    "`hpcosim experiments --gait G`)")
     return spec.model_copy(update=files)
 
 
