@@ -237,12 +237,18 @@ def test_a_perturbation_family_is_walked_by_all_three_on_the_same_draws(cycle) -
     runs): two draws of the IMU bias (0.5 deg sd) and of the human's gains, 6 steps: clfqp
     walks all four (the table: 20 of 20 and 18 of 20); the oracle's sensor row is the draws;
     the human's posture offsets of 0 deg change nothing."""
-    from orchestrator.experiments.contact_perturbations import draw, family_walks
+    from orchestrator.experiments.contact_perturbations import (
+        draw,
+        family_walks,
+        perturbed_controllers,
+    )
 
     model, traj, durations, gait = cycle
-    w = family_walks(model, traj, durations, "bias", 1.0, draws=2, steps=6)
+    ctls = perturbed_controllers(model, gait, traj)  # made once for both families
+    w = family_walks(model, traj, durations, "bias", 1.0, draws=2, steps=6, controllers=ctls)
     assert w["clfqp"] == 2 and w["oracle"] == 2, w
-    w = family_walks(model, traj, durations, "gains", 1.0, draws=2, steps=6)
+    w = family_walks(model, traj, durations, "gains", 1.0, draws=2, steps=6,
+                     controllers=ctls)
     assert w["clfqp"] == 2, w
     same = draw(gait, "posture", 0.0, 0).gait
     for d in gait.params:

@@ -68,9 +68,12 @@ from prosthesis_controller.gait_tables import save_contact_controller
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
-                   gains: tuple[float, float, float]) -> HybridSimulator:
-    """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd)."""
-    cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
+                   gains: tuple[float, float, float], closed_loop: ClosedLoop | None = None
+                   ) -> HybridSimulator:
+    """The in-process simulator of ``gait`` with the human's ``gains`` (eps, kp, kd);
+    ``closed_loop``: the model's, when made already (it depends on the model and the
+    curves' degree, not on the gait: 1-2 s to make)."""
+    cl = closed_loop or ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
     return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
 
 

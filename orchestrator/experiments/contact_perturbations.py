@@ -40,6 +40,7 @@ from characterization.gait.contact_gait import (
 )
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
+from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
@@ -101,11 +102,13 @@ def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
 
 
 def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
-              d: Draw, controller: Any, steps: int) -> bool:
+              d: Draw, controller: Any, steps: int, closed_loop: ClosedLoop | None = None
+              ) -> bool:
     """Whether the plant of draw ``d`` takes ``steps`` steps with the prosthesis on
     ``controller`` ("oracle": :func:`held_oracle` on the plant's state; else a controller
-    with ``reset`` and ``tick``, reading the sensors through the draw's encoder)."""
-    sim = loop_simulator(model, d.gait, d.gains)
+    with ``reset`` and ``tick``, reading the sensors through the draw's encoder);
+    ``closed_loop``: the model's, shared by the draws (:func:`loop_simulator`)."""
+    sim = loop_simulator(model, d.gait, d.gains, closed_loop)
     if controller == "oracle":
         q0, qd0 = start_state(trajectory)
         policy = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()},
@@ -140,6 +143,7 @@ def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mappin
     given)."""
     gait = contact_gait_of(model, trajectory, durations)
     ctls = controllers or perturbed_controllers(model, gait, trajectory)
+    cl = ClosedLoop(model, gait.params[GRAPH.domains[0]].degree)
     walks = dict.fromkeys(CONTROLLERS, 0)
     for seed in range(draws):
         d = draw(gait, family, amplitude, seed)
@@ -147,7 +151,7 @@ def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mappin
             if name == "oracle" and d.encoder is not None:
                 walks[name] += 1  # it reads the plant's state, not the sensors
                 continue
-            walks[name] += walk_draw(model, trajectory, d, ctl, steps)
+            walks[name] += walk_draw(model, trajectory, d, ctl, steps, cl)
     return walks
 
 
