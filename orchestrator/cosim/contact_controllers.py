@@ -237,10 +237,12 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
     """The ``clfqp`` controller file of the multi-contact gait at ``gait_path`` (``run``:
     it loaded; :mod:`prosthesis_controller.gait_tables`), made once and cached
     (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/clfqp.npz; the digest
-    covers the gait file, the model and the code that makes it).  ValueError if the held
+    covers the gait file, the model, the curves the human tracks and the code that makes
+    the controller).  ValueError if the held
     oracle falls in the stride the tables are read from."""
     h = hashlib.sha256(Path(gait_path).read_bytes())
     h.update(run.model.parameter_hash().encode())
+    h.update(run.tracked.hash.encode())  # the curves the human tracks, however regressed
     for f in _MAKERS:
         h.update(f.read_bytes())
     out = cache_root() / "controller" / h.hexdigest()[:16] / "clfqp.npz"

@@ -42,8 +42,10 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
     from human_fmu import build_fmu
     from human_fmu.build import builder_digest
 
-    digest = hashlib.sha256(f"{sha256(gait_path)}\0{model.parameter_hash()}\0"
-                            f"{builder_digest()}".encode()).hexdigest()[:16]
+    # a tracked gait's hash too: its curves come from the file by code outside the builder's
+    key = f"{sha256(gait_path)}\0{model.parameter_hash()}\0{builder_digest()}"
+    digest = hashlib.sha256((key if tracked is None else f"{key}\0{tracked.hash}")
+                            .encode()).hexdigest()[:16]
     out = cache_root() / "fmu" / digest / "human.fmu"
     if not out.is_file():
         out.parent.mkdir(parents=True, exist_ok=True)
