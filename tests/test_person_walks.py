@@ -68,3 +68,18 @@ def test_a_tube_or_subject_beside_a_multicontact_gait_is_refused(gait_file, tmp_
                         *extra]) == 2
         assert "multi-contact gait" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_gait_that_does_not_walk_is_a_negative_result(gait_file, tmp_path, capsys):
+    """The held oracle falls in the stride the controllers are read from (the cycle's start
+    at a fifth of its speed): exit 1 with the fall in one line, nothing written."""
+    doc = json.loads(gait_file.read_text())
+    doc["trajectory"]["ps"]["qd"] = [[0.2 * v for v in row]
+                                     for row in doc["trajectory"]["ps"]["qd"]]
+    slow = tmp_path / "slow.json"
+    slow.write_text(json.dumps(doc))
+    assert hpcosim(["experiments", "--gait", str(slow), "--out", str(tmp_path / "x"),
+                    "--steps", "2", "--draws", "0"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "held oracle fell" in err and "\n" not in err
+    assert not (tmp_path / "x" / "metrics.json").exists()

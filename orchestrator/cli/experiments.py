@@ -206,9 +206,16 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
         if given is not None:
             raise typer.BadParameter(f"{gait} is a multi-contact gait: it carries its subject "
                                      "and device and runs with no force tube", param_hint=name)
+    from orchestrator.cosim.contact_controllers import HeldOracleFellError
+
     console = Console()
-    with console.status("experiments") as st:
-        m = run_person_experiments(gait, out, steps, draws, progress=lambda s: st.update(s))
+    try:
+        with console.status("experiments") as st:
+            m = run_person_experiments(gait, out, steps, draws,
+                                       progress=lambda s: st.update(s))
+    except HeldOracleFellError as e:  # the gait does not walk: nothing to run the controllers on
+        conclude(Verdict(f"{gait}: {e}"))
+        return
     for name in NAMES:
         w = m["nominal"][name]
         walk = w["walk"]

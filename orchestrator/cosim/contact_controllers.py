@@ -77,6 +77,11 @@ def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
     return HybridSimulator(model, cl, gait.thetas(), np.array(gains))
 
 
+class HeldOracleFellError(ValueError):
+    """The gait does not walk even with the full-state prosthesis: no controller can be
+    made from it (the tables come from that walk)."""
+
+
 @dataclass(frozen=True)
 class HeldWalk:
     """The held oracle's walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5) socket
@@ -116,8 +121,8 @@ def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any
                              s.ankle_velocity), s.contact, applied, st.domain.code,
                      st.q.copy(), st.qd.copy(), wrench))
         if plant.fall is not None:
-            raise ValueError(f"the held oracle fell in the stride the tables are read from: "
-                             f"{plant.fall.message()}")
+            raise HeldOracleFellError(f"the held oracle fell in the stride the tables are read "
+                                 f"from: {plant.fall.message()}")
         plant.advance()
     cols = list(zip(*rows, strict=True))
     return HeldWalk(*(np.array(c) for c in cols))
