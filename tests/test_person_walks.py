@@ -43,7 +43,8 @@ def test_experiments_of_a_multicontact_gait(gait_file, capsys):
     assert set(m["families"]) == set(FAMILIES)
     assert all(set(row) == set(NAMES) for row in m["families"].values())
     report = (out / "report.md").read_text()
-    assert "| clfqp | 4 |" in report and "| posture |" in report
+    assert "| clfqp | 4 |" in report and "| posture (0.3) |" in report
+    assert m["amplitudes"]["posture"] == 0.3 and m["amplitudes"]["bias"] == 1.0
     assert (out / "person.png").stat().st_size > 20_000
     assert (out / "walker_stride.png").stat().st_size > 10_000
     assert (out / "walker.gif").read_bytes()[:6] == b"GIF89a"
