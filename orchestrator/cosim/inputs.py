@@ -74,13 +74,8 @@ class RunInputs:
     tube: Any  # hp_model.force_tube.ForceTube (None: multi-contact)
     fmu_path: Path
     drives: Drives
+    gait_hash: str  # the gait's identity (the FMU's build names it)
     tables: Path | None = None  # the multi-contact controller's file
-
-    @property
-    def gait_hash(self) -> str:
-        """The gait's identity (the FMU's build names it)."""
-        h = self.gait.hash
-        return h if isinstance(h, str) else h()
 
     @classmethod
     def load(cls, cfg: CosimConfig, model: Any = None,
@@ -104,7 +99,7 @@ class RunInputs:
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say)
         check_fmu_identity(fmu_path, gait.hash(), model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
-        return cls(model, gait, tube, fmu_path, Drives.of(model))
+        return cls(model, gait, tube, fmu_path, Drives.of(model), gait.hash())
 
     @classmethod
     def _multicontact(cls, cfg: CosimConfig, say: Callable[[str], None] | None
@@ -134,7 +129,7 @@ class RunInputs:
             tables = ensure_controller_file(Path(cfg.gait), run, say)
         except ValueError as e:  # the held oracle fell: the gait does not walk
             raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
-        return cls(model, tracked, None, fmu_path, Drives.of(model), tables)
+        return cls(model, tracked, None, fmu_path, Drives.of(model), tracked.hash, tables)
 
 
 def _opt(path: Path | None) -> str | None:
