@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests.* helpers
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
 from characterization.gait.multicontact import GRAPH
+from hp_model.leg_kinematics import LegKinematics
 from orchestrator.cosim.contact_controllers import (
     contact_clfqp,
     controller_tables,
@@ -36,7 +37,7 @@ from orchestrator.cosim.contact_controllers import (
 )
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
-from prosthesis_controller.contact_phase_pd import ContactPhasePD, LegKinematics
+from prosthesis_controller.contact_phase_pd import ContactPhasePD
 from prosthesis_controller.interface import Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle

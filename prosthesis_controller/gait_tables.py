@@ -33,11 +33,11 @@ from hp_model.config import DeviceConfig, SubjectConfig
 from hp_model.domains import Domain, DomainGraph
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import dumps
+from hp_model.leg_kinematics import LegKinematics
 from prosthesis_controller.contact_clf_qp import ContactClfConfig, ContactClfQp, StanceQp
 from prosthesis_controller.contact_phase_pd import (
     ContactGaitTables,
     ContactPhasePD,
-    LegKinematics,
     PDGains,
     PhaseTable,
 )

@@ -165,6 +165,7 @@ XDIST_COST: dict[str, float] = {
     "tests/test_playback_cli.py": 16,
     "tests/test_fmu_multicontact.py": 40,  # the multi-contact FMU's build and walks
     "tests/test_person_walks.py": 30,
+    "tests/test_contact_tube.py": 45,  # the multi-contact closed loop's build, 2 playbacks
     "tests/test_gait_tables.py": 10,
 }
 

@@ -12,11 +12,11 @@ import pytest
 
 from characterization.gait.contact_gait import GAINS, contact_gait_of
 from hp_model.domains import PROSTHESIS, Domain
+from hp_model.leg_kinematics import LegKinematics
 from orchestrator.cosim.contact_controllers import controller_tables, loop_simulator
 from orchestrator.experiments.contact_walk import walk_with_contact_pd
 from prosthesis_controller.contact_phase_pd import (
     ContactPhasePD,
-    LegKinematics,
     PhaseTable,
 )
 from prosthesis_controller.interface import ControllerMode

@@ -1,6 +1,7 @@
 """``hpcosim demo --take``: the pipeline on a lab's take (openOFM's walk, tests/data) with
 the person's multi-contact gait, each stage the verb a user would type: mocap process, gait
-fit --domains multicontact, experiments, fmu build, run (the co-simulation, recorded),
+fit --domains multicontact, tube fit, experiments, fmu build, run (the co-simulation,
+recorded),
 replay; report.md sums it up.  The gait is not within 3 deg on the ankles yet (issue 37), so
 the demo ends with the gait fit's negative verdict (exit 1) after every stage ran."""
 
@@ -25,7 +26,7 @@ def test_demo_on_a_real_take(tmp_path, capsys):
                   "--draws", "0"])
     text = capsys.readouterr().out
     report = (out / "report.md").read_text()
-    for stage in ("mocap processing", "gait fit", "experiments", "fmu build",
+    for stage in ("mocap processing", "gait fit", "tube fit", "experiments", "fmu build",
                   "co-simulation", "replay"):
         assert f"| {stage} |" in report
     gait = json.loads((out / "gait.json").read_text())
@@ -39,6 +40,9 @@ def test_demo_on_a_real_take(tmp_path, capsys):
     assert (out / "run.mcap").stat().st_size > 0 and (out / "human.fmu").is_file()
     metrics = json.loads((out / "experiments" / "metrics.json").read_text())
     assert metrics["nominal"]["clfqp"]["walk"]["walks"]
+    # the take's two single supports give a tube (exit 1: two certify nothing), and the
+    # experiments measure the walks against it
+    assert (out / "tube.json").is_file() and "tube" in metrics
 
 
 def test_a_mapping_without_a_take_is_refused(tmp_path, capsys):

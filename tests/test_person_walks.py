@@ -63,8 +63,9 @@ def test_wilson_interval():
     assert hi == pytest.approx(1.0) and lo == pytest.approx(0.8389, abs=1e-3)
 
 
-def test_a_tube_or_subject_beside_a_multicontact_gait_is_refused(gait_file, tmp_path, capsys):
-    for extra in (["--tube", "t.json"], ["--subject", "hp_model/configs/subject_example.toml"]):
+def test_a_subject_beside_a_multicontact_gait_is_refused(gait_file, tmp_path, capsys):
+    for extra in (["--subject", "hp_model/configs/subject_example.toml"],
+                  ["--device", "hp_model/configs/device_ampro3.toml"]):
         assert hpcosim(["experiments", "--gait", str(gait_file), "--out", str(tmp_path / "x"),
                         *extra]) == 2
         assert "multi-contact gait" in capsys.readouterr().err

@@ -771,6 +771,21 @@ def stride_windows(touchdowns: dict[str, tuple[int, ...]], liftoffs: dict[str, t
     return out
 
 
+def flat_single_supports(liftoffs: tuple[int, ...], touchdowns: tuple[int, ...],
+                         on: np.ndarray, pitch: np.ndarray) -> list[tuple[int, int]]:
+    """The prosthesis's flat single supports of one take, in a complete stride or not: from
+    each human lift-off to the prosthesis heel off (:func:`heel_off`) before the human's next
+    touchdown, where the prosthesis foot is on the ground throughout (``on``, per frame);
+    (first, last) frames."""
+    out = []
+    for lo in liftoffs:
+        td = next((x for x in touchdowns if x > lo), None)
+        if td is None or td - lo < 3 or not on[lo:td].all():
+            continue
+        out.append((lo, heel_off(pitch, lo, td)))
+    return out
+
+
 def contact_events(contact: np.ndarray) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """(touchdowns, lift-offs) of a foot's contact (bool per frame): the first frame on the
     ground, the first frame off it."""
@@ -835,14 +850,29 @@ def flat_foot_pitch(pitch: dict[str, np.ndarray],
     return out
 
 
-def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: str = "steps"
-                       ) -> MultiContactTargets:
-    """The fit's targets from a steps file: each take's strides (a stride never spans two
-    pooled takes) from its feet's contact and the stance feet's pitch (``model``'s sole
-    frames), pooled; each ankle's angles less its foot's :func:`flat_foot_pitch` (where the
-    take's foot is flat, the model's must be: without this, the fit put the difference into
-    the ankles and the trunk, openOFM's ankles 4.2-4.4 deg RMS from the take against
-    3.6-3.8)."""
+@dataclass(frozen=True)
+class TakeStrides:
+    """A steps file's complete strides as the multi-contact graph sees them: ``q`` (n, 12)
+    the take's coordinates with each ankle less its foot's flat pitch (:func:`flat_foot_pitch`),
+    ``pitch`` each foot's sole pitch (rad, per frame, from the uncorrected q), ``windows`` each
+    stride's domain frames (:func:`stride_windows`), ``flat_pitch`` the feet's flat pitches."""
+
+    q: np.ndarray
+    pitch: dict[str, np.ndarray]
+    windows: list[dict[Domain, tuple[int, int]]]
+    flat_pitch: dict[str, float]
+    #: every flat prosthesis single support, in a complete stride or not: (first, last) frame
+    #: (:func:`flat_single_supports`)
+    single_supports: list[tuple[int, int]] = field(default_factory=list)
+
+
+def take_strides(steps: StepsArtifact, model: HumanProsthesisModel, src: str = "steps"
+                 ) -> TakeStrides:
+    """Each take's strides (a stride never spans two pooled takes) from its feet's contact and
+    the stance feet's pitch (``model``'s sole frames), pooled; each ankle's angles less its
+    foot's :func:`flat_foot_pitch` (where the take's foot is flat, the model's must be:
+    without this, the fit put the difference into the ankles and the trunk, openOFM's ankles
+    4.2-4.4 deg RMS from the take against 3.6-3.8)."""
     if steps.foot_contact is None:
         raise MultiContactError(
             f"{src}: the steps file has no foot contact (made by an older version): run "
@@ -852,6 +882,7 @@ def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: s
     rows = {foot: model.pitch_row(f"{SIDE[foot]}_sole") for foot in FEET}
     pitch = {foot: q0 @ row for foot, row in rows.items()}
     windows: list[dict[Domain, tuple[int, int]]] = []
+    singles: list[tuple[int, int]] = []
     for a, b in take_spans(steps.time):
         td, lo = {}, {}
         for k, foot in enumerate(FEET):
@@ -859,6 +890,8 @@ def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: s
             td[foot] = tuple(a + i for i in t)
             lo[foot] = tuple(a + i for i in l_)
         windows += stride_windows(td, lo, pitch)
+        on = np.asarray(steps.foot_contact[:, FEET.index("prosthesis")], bool)
+        singles += flat_single_supports(lo["human"], td["human"], on, pitch["prosthesis"])
     coords = tuple(str(c) for c in steps.coord_names)
     offsets = flat_foot_pitch(pitch, windows) if windows else {}
     q = q.copy()
@@ -866,8 +899,18 @@ def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: s
         ankle = FLAT_STANCE[foot].stance_leg.ankle
         # the sole's pitch moves one for one with its ankle's angle
         q[:, coords.index(ankle)] -= off / float(rows[foot][model.coord_names.index(ankle)])
-    targets = replace(targets_from_windows(steps.time, q, coords, windows,
-                                           steps.ground_speed or 0.0), flat_foot_pitch=offsets)
+    return TakeStrides(q, pitch, windows, offsets, singles)
+
+
+def targets_from_steps(steps: StepsArtifact, model: HumanProsthesisModel, src: str = "steps"
+                       ) -> MultiContactTargets:
+    """The fit's targets from a steps file: the domains' windows and angles of its complete
+    strides (:func:`take_strides`), and the force plates' vertical force where it has them."""
+    strides = take_strides(steps, model, src)
+    coords = tuple(str(c) for c in steps.coord_names)
+    targets = replace(targets_from_windows(steps.time, strides.q, coords, strides.windows,
+                                           steps.ground_speed or 0.0),
+                      flat_foot_pitch=strides.flat_pitch)
     plates = plate_forces(steps, src)
     if plates is None:
         return targets

@@ -35,7 +35,7 @@ from characterization.gait.multicontact import (
     MultiContactTargets,
 )
 from characterization.gait.person_check import PersonCheck, StanceForce
-from hp_model.artifacts import ArtifactError, load_json, save_json
+from hp_model.artifacts import ArtifactError, canonical_hash, load_json, save_json
 from hp_model.domains import Domain
 from hp_model.gait_artifact import MULTICONTACT_KIND
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -95,6 +95,9 @@ class ContactCycle:
     model: HumanProsthesisModel
     trajectory: dict[Domain, dict[str, np.ndarray]]
     durations: dict[Domain, float]
+    #: the file's identity: the hash of its model and its cycle (what a tube fitted around
+    #: this gait records)
+    hash: str = ""
 
 
 def load_contact_cycle(path: str | os.PathLike[str]) -> ContactCycle:
@@ -121,5 +124,7 @@ def load_contact_cycle(path: str | os.PathLike[str]) -> ContactCycle:
     if doc.get("model_hash") not in (None, model.parameter_hash()):
         raise ArtifactError(f"{path}: field 'model_hash': the file was made for another "
                             "model than its own subject and device give")
-    return ContactCycle(model, traj, durations)
+    ident = canonical_hash({"model_hash": model.parameter_hash(),
+                            "trajectory": doc["trajectory"]})
+    return ContactCycle(model, traj, durations, ident)
 

@@ -196,7 +196,8 @@ def stage_warnings(art: StepsArtifact) -> list[str]:
                if art.step_domain[i] == Domain.PS and art.step_ss_start[i] >= 0)
     if n_ss < TUBE_MIN_STEPS:
         out.append(f"`tube fit` needs at least {TUBE_MIN_STEPS} ps steps with single support "
-                   f"(a degree-3 tube); this session has {n_ss}: {MORE}")
+                   f"for a degree-3 tube (on a multi-contact gait: 2 for degree 1, and more "
+                   f"to certify it); this session has {n_ss}: {MORE}")
     return out
 
 

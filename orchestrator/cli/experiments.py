@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -59,8 +60,9 @@ def experiments(
 ) -> None:
     """Paper Sec. V on the full closed loop: nominal walking (Fig. 7), exact vs relaxed
     CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md.
-    A multi-contact gait (no --tube): its prosthesis controllers' nominal walks (held oracle,
-    clfqp, contact-pd) and the perturbation families on the same draws."""
+    A multi-contact gait: its prosthesis controllers' nominal walks (held oracle, clfqp,
+    contact-pd) and the perturbation families on the same draws; with its --tube (tube fit),
+    each walk's socket force against it."""
     import hp_model
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind, load_gait
@@ -106,8 +108,8 @@ def demo(
 ) -> None:
     """The whole pipeline on the synthetic subject: mocap synth -> mocap process -> gait fit
     -> tube fit -> experiments -> report.md.  With --take: on a lab's take, the person's
-    multi-contact gait: mocap process -> gait fit --domains multicontact -> experiments ->
-    fmu build -> run (co-simulation, recorded) -> replay -> report.md."""
+    multi-contact gait: mocap process -> gait fit --domains multicontact -> tube fit ->
+    experiments --tube -> fmu build -> run (co-simulation, recorded) -> replay -> report.md."""
     if take is not None:
         _demo_take(take, mapping, out, steps or 20, draws)
         return
@@ -202,17 +204,20 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
     exit 1 unless clfqp walks the nominal steps."""
     from orchestrator.experiments.person_walks import NAMES, run_person_experiments
 
-    for given, name in ((tube, "--tube"), (subject, "--subject"), (device, "--device")):
+    for given, name in ((subject, "--subject"), (device, "--device")):
         if given is not None:
             raise typer.BadParameter(f"{gait} is a multi-contact gait: it carries its subject "
-                                     "and device and runs with no force tube", param_hint=name)
+                                     "and device", param_hint=name)
+    from characterization.gait.multicontact_artifact import load_contact_cycle
+    from hp_model.force_tube import load_tube
     from orchestrator.cosim.contact_controllers import HeldOracleFellError
 
     console = Console()
+    tb = None if tube is None else load_tube(tube, load_contact_cycle(gait).hash)
     try:
         with console.status("experiments") as st:
             m = run_person_experiments(gait, out, steps, draws,
-                                       progress=lambda s: st.update(s))
+                                       progress=lambda s: st.update(s), tube=tb)
     except HeldOracleFellError as e:  # the gait does not walk: nothing to run the controllers on
         conclude(Verdict(f"{gait}: {e}"))
         return
@@ -224,6 +229,10 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
               f"deg, ankle {w['ankle_rms_deg']:.2f} deg RMS over the last stride: {how}")
     for family, row in m["families"].items():
         _line(console, f"  {family:8s} " + ", ".join(f"{n} {row[n]}/{draws}" for n in NAMES))
+    if "tube" in m:
+        _line(console, "  socket force inside the tube (flat single support): " + ", ".join(
+            f"{n} " + ("-" if (v := m["tube"]["inside"][n]) is None else f"{100 * v:.0f} %")
+            for n in NAMES))
     console.print(f"wrote {out}/metrics.json, report.md and person.png")
     clfqp = m["nominal"]["clfqp"]["walk"]
     conclude(HOLDS if clfqp["walks"] else Verdict(
@@ -245,21 +254,33 @@ def _demo_take(take: Path, mapping: Path | None, out: Path, steps: int, draws: i
     out.mkdir(parents=True, exist_ok=True)
     console = Console()
     gait, rec = out / "gait.json", out / "run.mcap"
-    stages = [
-        ("mocap processing", ["mocap", "process", str(take), "--out", str(out / "steps.npz"),
-                              *(["--mapping", str(mapping)] if mapping else [])]),
-        ("gait fit", ["gait", "fit", str(out / "steps.npz"), "--domains", "multicontact",
-                      "--allow-mismatch", "--out", str(gait)]),
-        ("experiments", ["experiments", "--gait", str(gait), "--out", str(out / "experiments"),
-                         "--steps", str(steps), "--draws", str(draws)]),
-        ("fmu build", ["fmu", "build", "--gait", str(gait), "--out", str(out / "human.fmu")]),
-        ("co-simulation", ["run", "--controller", "clfqp", "--gait", str(gait), "--fmu",
-                           str(out / "human.fmu"), "--steps", str(steps), "--record",
-                           str(rec)]),
-        ("replay", ["replay", str(rec)]),
+    tube = out / "tube.json"
+
+    def experiments_args() -> list[str]:  # with the tube when its stage wrote one
+        return ["experiments", "--gait", str(gait), "--out", str(out / "experiments"),
+                "--steps", str(steps), "--draws", str(draws),
+                *(["--tube", str(tube)] if tube.is_file() else [])]
+
+    stages: list[tuple[str, Callable[[], list[str]]]] = [
+        ("mocap processing", lambda: ["mocap", "process", str(take), "--out",
+                                      str(out / "steps.npz"),
+                                      *(["--mapping", str(mapping)] if mapping else [])]),
+        ("gait fit", lambda: ["gait", "fit", str(out / "steps.npz"), "--domains",
+                              "multicontact", "--allow-mismatch", "--out", str(gait)]),
+        ("tube fit", lambda: ["tube", "fit", str(out / "steps.npz"), "--gait", str(gait),
+                              "--out", str(tube)]),
+        ("experiments", experiments_args),
+        ("fmu build", lambda: ["fmu", "build", "--gait", str(gait), "--out",
+                               str(out / "human.fmu")]),
+        ("co-simulation", lambda: ["run", "--controller", "clfqp", "--gait", str(gait),
+                                   "--fmu", str(out / "human.fmu"), "--steps", str(steps),
+                                   "--record", str(rec)]),
+        ("replay", lambda: ["replay", str(rec)]),
     ]
+    tube.unlink(missing_ok=True)  # a tube of an earlier demo in the folder is not this one's
     done: list[tuple[str, float, int, list[str]]] = []
-    for stage, args in stages:
+    for stage, make_args in stages:
+        args = make_args()
         console.rule(f"[bold]{stage}[/]: hpcosim {' '.join(args)}")
         t0 = time.perf_counter()
         rc = hpcosim(args)
@@ -287,8 +308,10 @@ def _write_demo_report(out: Path, take: Path, done: list[tuple[str, float, int, 
 
     lines = [f"# hpcosim demo on {take.name}", "",
              "The person's multi-contact gait, from the take to a co-simulation "
-             "(docs/gait-design.md, docs/cosim.md).  The force tube is not made on this graph "
-             "(`clfqp`'s robust margin is zero there).", "",
+             "(docs/gait-design.md, docs/cosim.md).  The force tube is made on the flat "
+             "prosthesis single supports (`tube.md`) and the experiments measure the walks' "
+             "socket force against it; the multi-contact `clfqp` does not use it (no robust "
+             "term yet).", "",
              "| stage | command | seconds | outcome |", "|---|---|---:|---|"]
     for stage, seconds, rc, args in done:
         lines.append(f"| {stage} | `hpcosim {' '.join(args)}` | {seconds:.1f} | "

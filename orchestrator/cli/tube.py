@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from hp_model.force_tube import TubePhase
+from hp_model.force_tube import ForceTube, TubePhase
 from orchestrator.cli.options import DeviceOpt, SubjectOpt, check_output_file
 from orchestrator.cli.outcome import HOLDS, combine, conclude, coverage_verdict
 
@@ -28,8 +28,9 @@ def fit(
     out: Annotated[Path, typer.Option("--out", help="Tube file to write (.json); the Fig. 5 "
                                       "figure (<stem>_fig5.png) and the report (<stem>.md) go "
                                       "next to it.", dir_okay=False)],
-    degree: Annotated[int, typer.Option("--degree", min=0, max=20,
-                                        help="Bezier degree of the tube's bounds.")] = 3,
+    degree: Annotated[int | None, typer.Option(
+        "--degree", min=0, max=20, help="Bezier degree of the tube's bounds (default 3; on a "
+        "multi-contact gait the highest its strides support, at most 3).")] = None,
     n_steps: Annotated[int | None, typer.Option(
         "--steps", min=1, help="Play back the first N prosthesis-stance steps (default: "
         "all; the paper used 20).")] = None,
@@ -70,7 +71,9 @@ def fit(
 ) -> None:
     """Play back every prosthesis-stance step on the full model, estimate the socket force,
     and fit the certified force tube around its deviation from the gait's nominal F*; with
-    it (default) the mid-stance bound of clfqp's model error along the same playbacks."""
+    it (default) the mid-stance bound of clfqp's model error along the same playbacks.  A
+    multi-contact gait: every flat prosthesis single support played back on its domain, the
+    tube over the prosthesis controllers' stance phase (no model-error bound)."""
     import hp_model
     from characterization.mocap.steps_artifact import load_steps
     from characterization.tube.playback import (
@@ -80,13 +83,21 @@ def fit(
         fit_force_tube,
         write_outputs,
     )
-    from hp_model.gait_artifact import load_gait
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind, load_gait
     from orchestrator.cli.subject import subject_source
 
     console = Console()
     if out.suffix != ".json":
         raise PlaybackError(f"{out}: the tube file must end in .json")
     check_output_file(out)
+    if artifact_kind(gait) == MULTICONTACT_KIND:
+        given = {"--subject": subject is not None, "--device": device is not None,
+                 "--steps": n_steps is not None, "--whole-step-fit": whole_step_fit,
+                 "--stop-at-touchdown": stop_at_touchdown, "--phase step": phase != TubePhase.GAIT}
+        _contact_tube(console, steps, gait, out, degree, allowance, min_coverage,
+                      [k for k, v in given.items() if v])
+        return
+    degree = 3 if degree is None else degree
     with console.status("loading the model (compiled once, then cached)"):
         model = hp_model.load_model(subject_source(subject, gait),
                                     str(device) if device else None)
@@ -118,20 +129,7 @@ def fit(
                   f"{res.phase} phase)")
     for i, why in res.playback.skipped:
         console.print(f"  [yellow]skipped[/] step {i}: {why}")
-    table = Table(title=f"force tube (degree {t.degree}) around F* of gait {t.gait_hash}")
-    for head in ("component", "lower min", "upper max", "mean width"):
-        table.add_column(head, justify="right")
-    lo, hi = t.delta_bounds(np.linspace(t.tau_lo, t.tau_hi, 201))
-    for c, (name, unit) in enumerate(zip(("F_x", "F_z", "M_y"), ("N", "N", "N m"),
-                                         strict=True)):
-        table.add_row(f"{name} ({unit})", f"{lo[:, c].min():.1f}", f"{hi[:, c].max():.1f}",
-                      f"{np.mean(hi[:, c] - lo[:, c]):.1f}")
-    console.print(table)
-    post = cred["a_posteriori"]
-    console.print(f"certificate: inside {cred['certificate']['inside']}, optimal "
-                  f"{cred['certificate']['optimal']}; a posteriori k = {post['k_tube']}, "
-                  f"eps = {post['epsilon_tube']:.3f} at {cred['confidence']:.0%}; leave-one-out "
-                  f"coverage {cred['leave_one_out']['coverage']:.2f}")
+    _print_tube(console, t)
     me = t.model_error
     if me is not None:
         mc = me.credibility
@@ -149,3 +147,67 @@ def fit(
     conclude(combine(coverage_verdict("force tube", cred, min_coverage),
                      coverage_verdict("model-error bound", me.credibility, min_coverage)
                      if me is not None else HOLDS))
+
+
+def _contact_tube(console: Console, steps: Path, gait: Path, out: Path, degree: int | None,
+                  allowance: float, min_coverage: float | None, refused: list[str]) -> None:
+    """``tube fit`` on a multi-contact gait (:mod:`characterization.tube.contact_playback`)."""
+    from characterization.gait.multicontact_artifact import load_contact_cycle
+    from characterization.mocap.steps_artifact import load_steps
+    from characterization.tube.contact_playback import fit_contact_tube, write_outputs
+
+    if refused:
+        raise typer.BadParameter(
+            f"{gait} is a multi-contact gait: it carries its subject and device, and its tube "
+            f"plays back every flat single support in the controllers' phase; drop "
+            f"{', '.join(refused)}", param_hint="--gait")
+    with console.status("loading the multi-contact gait and the steps"):
+        g = load_contact_cycle(gait)
+        s = load_steps(steps)
+    with Progress(TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"), TimeElapsedColumn(),
+                  console=console, transient=True) as prog:
+        task = prog.add_task("walking the gait for F*", total=None)
+
+        def progress(what: str, done: int, total: int) -> None:
+            prog.update(task, description=what, completed=done, total=total)
+
+        res = fit_contact_tube(g, s, degree, allowance, progress, src=str(steps),
+                               gait_src=str(gait))
+    paths = write_outputs(out, res, str(steps), str(gait))
+    t, cred = res.tube, res.tube.credibility
+    console.print(f"[bold]{steps}[/]: {len(res.playbacks)} flat prosthesis single supports "
+                  f"played back in {res.seconds['playback']:.2f} s; stance phase in "
+                  f"[{t.tau_lo:.3f}, {t.tau_hi:.3f}] (the controllers' phase, multi-contact "
+                  "graph)")
+    for k, why in res.skipped:
+        console.print(f"  [yellow]skipped[/] single support {k}: {why}")
+    _print_tube(console, t)
+    console.print("model error: not characterised on the multi-contact graph (its clfqp "
+                  "linearizes the gait as the model walks it)")
+    console.print(f"wrote {paths['tube']}, {paths['figure'].name}, {paths['report'].name}")
+    eps = cred["a_posteriori"]["epsilon_tube"]
+    if eps >= 1.0:
+        console.print(f"{len(res.playbacks)} single supports certify nothing (a posteriori "
+                      f"eps {eps:.2f}): a tube a controller can lean on needs more strides; "
+                      "pool walkway trials with `hpcosim mocap process A B C --out steps.npz`")
+    conclude(coverage_verdict("force tube", cred, min_coverage))
+
+
+def _print_tube(console: Console, t: ForceTube) -> None:
+    """The tube's bounds per component and its certificate and credibility, printed."""
+    cred = t.credibility
+    table = Table(title=f"force tube (degree {t.degree}) around F* of gait {t.gait_hash}")
+    for head in ("component", "lower min", "upper max", "mean width"):
+        table.add_column(head, justify="right")
+    lo, hi = t.delta_bounds(np.linspace(t.tau_lo, t.tau_hi, 201))
+    for c, (name, unit) in enumerate(zip(("F_x", "F_z", "M_y"), ("N", "N", "N m"),
+                                         strict=True)):
+        table.add_row(f"{name} ({unit})", f"{lo[:, c].min():.1f}", f"{hi[:, c].max():.1f}",
+                      f"{np.mean(hi[:, c] - lo[:, c]):.1f}")
+    console.print(table)
+    post = cred["a_posteriori"]
+    console.print(f"certificate: inside {cred['certificate']['inside']}, optimal "
+                  f"{cred['certificate']['optimal']}; a posteriori k = {post['k_tube']}, "
+                  f"eps = {post['epsilon_tube']:.3f} at {cred['confidence']:.0%}; leave-one-out "
+                  f"coverage {cred['leave_one_out']['coverage']:.2f}")

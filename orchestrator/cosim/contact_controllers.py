@@ -42,6 +42,7 @@ from hp_model.compiled import cache_root
 from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.leg_kinematics import LegKinematics
 from hp_model.simulator import HybridSimulator
 from human_fmu.build import TrackedGait
 from orchestrator.loop.plant import SimulatorPlant
@@ -59,7 +60,6 @@ from prosthesis_controller.contact_phase_pd import (
     SWING_GAINS,
     ContactGaitTables,
     ContactPhasePD,
-    LegKinematics,
     PDGains,
     first_stride,
     tables_from_walk,

@@ -23,6 +23,7 @@ from characterization.gait.contact_gait import (
 from characterization.gait.multicontact import GRAPH
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
+from hp_model.leg_kinematics import LegKinematics
 from hp_model.simulator import HybridSimulator, SimResult
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
@@ -40,7 +41,6 @@ from prosthesis_controller.contact_clf_qp import (
 from prosthesis_controller.contact_phase_pd import (
     STANCE_GAINS,
     SWING_GAINS,
-    LegKinematics,
     PDGains,
     tables_from_walk,
 )

@@ -29,9 +29,11 @@ from scipy.stats import binomtest
 
 from characterization.gait.contact_gait import GAINS, ContactWalk, held_oracle, start_state
 from characterization.gait.multicontact import GRAPH
+from characterization.tube.contact_playback import share_inside
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 from hp_model.domains import PROSTHESIS, Domain
 from hp_model.figures import figure_bytes
+from hp_model.force_tube import ForceTube
 from hp_model.json_io import dumps
 from hp_model.simulator import SimResult
 from orchestrator.cosim.contact_controllers import (
@@ -248,7 +250,17 @@ def report(metrics: Mapping[str, Any]) -> str:
                      f"{w['peak_torque'][0]:.2f} / {w['peak_torque'][1]:.2f} | "
                      f"{w['fallbacks']} | {walk['fall'] or 'walked'} |")
     lines += ["", f"The fitted gait: stride {fit['stride_time']:.3f} s, "
-              f"{fit['speed']:.3f} m/s.", "", "![the last stride](person.png)", "",
+              f"{fit['speed']:.3f} m/s.", ""]
+    tube = metrics.get("tube")
+    if tube is not None:
+        shares = ", ".join(f"{n} " + ("-" if (v := tube["inside"][n]) is None else
+                                      f"{100 * v:.0f} %") for n in NAMES)
+        lines += [f"Socket force inside the force tube (`tube fit`, stance phase "
+                  f"{tube['tau'][0]:.3f}-{tube['tau'][1]:.3f}), share of the flat single "
+                  f"support's periods: {shares}. The multi-contact `clfqp` does not use the "
+                  "tube (no robust term yet); the share says how far the nominal walks' "
+                  "socket force stays within what the recorded steps spanned.", ""]
+    lines += [ "![the last stride](person.png)", "",
               "`clfqp`'s walk: `walker.gif` (its first 3 s) and its last stride in 9 poses:",
               "", "![clfqp's last stride](walker_stride.png)", "",
               f"Perturbation families ({metrics['draws']} draws each, the same draws for "
@@ -270,10 +282,11 @@ def report(metrics: Mapping[str, Any]) -> str:
 
 
 def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: int = 20,
-                           draws: int = 10, progress: Callable[[str], None] | None = None
-                           ) -> dict[str, Any]:
+                           draws: int = 10, progress: Callable[[str], None] | None = None,
+                           tube: ForceTube | None = None) -> dict[str, Any]:
     """The experiments of the module docstring on the multi-contact gait file, written to
-    ``out`` (created); the metrics."""
+    ``out`` (created); the metrics.  With the gait's ``tube`` (``tube fit``), each nominal
+    walk's share of flat single-support periods with the socket force inside it."""
     say = progress or (lambda _m: None)
     say("reading the gait")
     run = load_contact_run(gait_path)
@@ -286,6 +299,10 @@ def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: 
                "nominal": {n: w.to_json() for n, w in walks.items()},
                "families": families,
                "amplitudes": {f: AMPLITUDE.get(f, 1.0) for f in families}}
+    if tube is not None:
+        metrics["tube"] = {"gait_hash": tube.gait_hash, "tau": [tube.tau_lo, tube.tau_hi],
+                           "inside": {n: share_inside(tube, run.model, logs[n])
+                                      for n in NAMES}}
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "person.png", figure(run, logs))
     say("the walker: walker.gif, walker_stride.png")
