@@ -269,24 +269,11 @@ class ContactClfQp:
         self.law, self.stance, self.config = phase_law, stance, config
         self._clf = JointClf.of(config.eps)
         self._limits = (float(limits[0]), float(limits[1]))
-        #: one piqp solver per domain, set up once with its rows; its G, h, bounds buffers
+        #: each domain's G, h buffers; its piqp solver is set up by :meth:`reset`
+        self._G = {d: np.zeros((qp_rows(d), 4)) for d in STANCE_DOMAINS}
+        self._h = {d: np.zeros(qp_rows(d)) for d in STANCE_DOMAINS}
         self._solvers: dict[Domain, piqp.DenseSolver] = {}
-        self._G: dict[Domain, np.ndarray] = {}
-        self._h: dict[Domain, np.ndarray] = {}
-        for d in STANCE_DOMAINS:
-            rows = qp_rows(d)
-            self._G[d], self._h[d] = np.zeros((rows, 4)), np.zeros(rows)
-            self._solvers[d] = dense_solver(
-                config.solver_eps, P=np.eye(4), c=np.zeros(4), G=np.ones((rows, 4)),
-                h_l=np.full(rows, -math.inf), h_u=np.ones(rows), x_l=-np.ones(4),
-                x_u=np.ones(4))
-            # one equilibration pass, not piqp's 10: its update + solve 19 us, not 24, on
-            # the committed cycle's stance QPs; the torques within 1e-4 N m of the default's
-            # (the QP is strictly convex in them) (the tick is held to 40 us)
-            self._solvers[d].settings.preconditioner_iter = 1
-        #: each solver's solution, read through a view made once (piqp keeps its result in
-        #: place; ``result`` makes a new object, ~1 us)
-        self._z = {d: sol.result.x for d, sol in self._solvers.items()}
+        self._z: dict[Domain, np.ndarray] = {}
         self._xl = np.array([0.0, 0.0, 0.0, 0.0])
         self._xu = np.array([0.0, 0.0, math.inf, 1.0])
         self.keep_qp = False  # set to keep each stance tick's QP in ``qp``
@@ -296,6 +283,7 @@ class ContactClfQp:
         """Forget all state; ``torque``: the previous torque to assume (N m, default 0; the
         torque-rate box starts from it)."""
         self.law.reset()
+        self._new_solvers()
         lk, la = self._limits
         u = (0.0, 0.0) if torque is None else (float(torque[0]), float(torque[1]))
         self._u = (min(max(u[0], -lk), lk) if math.isfinite(u[0]) else 0.0,
@@ -309,6 +297,24 @@ class ContactClfQp:
         #: the last stance QP as piqp got it (copies): (P, c, G, h, x_l, x_u),
         #: min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
         self.qp: tuple[np.ndarray, ...] | None = None
+
+    def _new_solvers(self) -> None:
+        """One piqp solver per domain, set up with its rows (a solver keeps its scaling and
+        iterates from solve to solve: a run after a reset does not depend on the runs
+        before it, tests/test_sweep_contact.py)."""
+        for d in STANCE_DOMAINS:
+            rows = qp_rows(d)
+            self._solvers[d] = dense_solver(
+                self.config.solver_eps, P=np.eye(4), c=np.zeros(4), G=np.ones((rows, 4)),
+                h_l=np.full(rows, -math.inf), h_u=np.ones(rows), x_l=-np.ones(4),
+                x_u=np.ones(4))
+            # one equilibration pass, not piqp's 10: its update + solve 19 us, not 24, on
+            # the committed cycle's stance QPs; the torques within 1e-4 N m of the default's
+            # (the QP is strictly convex in them) (the tick is held to 40 us)
+            self._solvers[d].settings.preconditioner_iter = 1
+            #: its solution, read through a view made once (piqp keeps its result in
+            #: place; ``result`` makes a new object, ~1 us)
+            self._z[d] = self._solvers[d].result.x
 
     @property
     def phase(self) -> float:

@@ -166,6 +166,7 @@ XDIST_COST: dict[str, float] = {
     "tests/test_fmu_multicontact.py": 40,  # the multi-contact FMU's build and walks
     "tests/test_person_walks.py": 30,
     "tests/test_contact_tube.py": 45,  # the multi-contact closed loop's build, 2 playbacks
+    "tests/test_sweep_contact.py": 65,  # a Dask worker's set-up, 12 runs, 3 replays
     "tests/test_gait_tables.py": 10,
 }
 

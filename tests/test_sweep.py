@@ -133,16 +133,11 @@ def test_bad_spec_is_one_line_naming_the_field(tmp_path, files, body, field):
     assert "\n" not in msg and f"field '{field}'" in msg, msg
 
 
-def test_a_multicontact_gait_is_refused_before_any_worker(tmp_path, files):
-    from tests.multicontact_cycle import write_gait_file
-
-    _, tube = files
-    gait = tmp_path / "person.json"
-    write_gait_file(gait)
+def test_a_paper_gait_without_its_tube_is_refused(tmp_path):
     p = tmp_path / "s.toml"
-    p.write_text(f'gait = "{gait}"\ntube = "{tube}"\ncontrollers = ["pd"]\ndraws = 2\n'
-                 'seed = 1\nfamilies.n = {}\n')
-    with pytest.raises(SpecError, match=r"field 'gait': .* multi-contact gait") as e:
+    p.write_text(f'gait = "{GAIT}"\ncontrollers = ["pd"]\ndraws = 2\nseed = 1\n'
+                 'families.n = {}\n')
+    with pytest.raises(SpecError, match=r"field 'tube': .* force tube") as e:
         load_spec(p)
     assert "\n" not in str(e.value)
 

@@ -9,7 +9,7 @@ linearization.  The controllers are made as a co-simulation makes them
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -44,7 +44,7 @@ from prosthesis_controller.contact_phase_pd import (
     PDGains,
     tables_from_walk,
 )
-from prosthesis_controller.interface import Controller
+from prosthesis_controller.interface import Controller, ControlOutput
 
 #: how :func:`walk_with_contact_pd` runs the prosthesis
 CONTACT_PD = ("the human on feedback linearization of the fitted gait, the prosthesis on "
@@ -57,16 +57,21 @@ CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis
 
 def controller_run(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
                    controller: Controller, steps: int,
-                   encoder: Encoder = IDEAL_ENCODER) -> SimResult:
+                   encoder: Encoder = IDEAL_ENCODER,
+                   on_output: Callable[[ControlOutput], None] | None = None) -> SimResult:
     """The plant ``sim`` from the fitted cycle's start with the prosthesis on
     ``controller``, its sensors read through ``encoder`` (its noise from its seed), until
-    ``steps`` steps, a fall or 2 s per step: the simulator's log."""
+    ``steps`` steps, a fall or 2 s per step: the simulator's log (``on_output`` sees each
+    tick's output)."""
     q0, qd0 = start_state(trajectory)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     rng = np.random.default_rng(encoder.seed)
     while True:
         obs = plant.observe()
-        plant.actuate(controller.tick(measurement(obs, encoder, rng)).torque)
+        out = controller.tick(measurement(obs, encoder, rng))
+        if on_output is not None:
+            on_output(out)
+        plant.actuate(out.torque)
         if plant.fall is not None or plant.run.steps >= steps or obs.t >= 2.0 * steps:
             break
         plant.advance()

@@ -10,7 +10,7 @@ from typing import Any
 from orchestrator.modes import SweepBackend
 from orchestrator.sweep.draws import RunKey, make_draw
 from orchestrator.sweep.engine import prepare_fmu
-from orchestrator.sweep.runs import Artifacts, Resources, run_draw
+from orchestrator.sweep.runs import Artifacts, make_resources, run_draw
 from orchestrator.sweep.store import VOLATILE, ResultStore, read_results
 
 
@@ -82,7 +82,7 @@ def replay_run(out: str | Path, key: str, backend: SweepBackend | str | None = N
     if other:
         spec = spec.model_copy(update={"backend": backend, "fmu": None})
     draw = make_draw(spec, k.family, k.draw)
-    res = Resources(Artifacts.from_spec(spec, prepare_fmu(spec)))
+    res = make_resources(Artifacts.from_spec(spec, prepare_fmu(spec)))
     try:
         row = run_draw(res, spec, k, draw)
     finally:

@@ -78,13 +78,20 @@ def replay_command(out: Path, key: str) -> str:
 def cosim_command(out: Path, row: dict[str, Any]) -> str | None:
     """The single co-simulation run of a draw that only perturbs the human's Bezier
     coefficients (the FMU's own generator); None for other draws."""
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+
     d = draw_of(row)
     if not d.is_bezier_only or row["controller"] == ORACLE:
         return None
+    gait = out / "artifacts" / "gait.json"
+    person = artifact_kind(gait) == MULTICONTACT_KIND  # its co-simulation runs clfqp alone
+    if person and row["controller"] != "clfqp":
+        return None
     pert = f" --perturb human:{d.bezier_amplitude!r}:{d.bezier_seed}" \
         if d.bezier_amplitude > 0 else ""
-    return (f"hpcosim run --controller {row['controller']} --gait {out}/artifacts/gait.json "
-            f"--tube {out}/artifacts/tube.json --steps {row['steps_requested']}{pert}")
+    tube = "" if person else f" --tube {out}/artifacts/tube.json"
+    return (f"hpcosim run --controller {row['controller']} --gait {gait}{tube} "
+            f"--steps {row['steps_requested']}{pert}")
 
 
 def draw_of(row: dict[str, Any]) -> Draw:

@@ -44,6 +44,7 @@ from orchestrator.experiments.scenarios import (
 )
 from orchestrator.loop import Encoder
 from orchestrator.modes import SweepBackend
+from orchestrator.sweep.contact import ContactResources, run_contact_draw
 from orchestrator.sweep.draws import HUMAN_JOINTS, Draw, RunKey
 from orchestrator.sweep.spec import SweepSpec
 from orchestrator.sweep.tempdirs import WorkFolder
@@ -60,7 +61,7 @@ class Artifacts:
     """File contents a run depends on (bytes; None = default or unused)."""
 
     gait: bytes
-    tube: bytes
+    tube: bytes | None
     fmu: bytes | None = None
     subject: bytes | None = None
     device: bytes | None = None
@@ -72,7 +73,7 @@ class Artifacts:
         def read(p: Path | None) -> bytes | None:
             return Path(p).read_bytes() if p is not None else None
 
-        return cls(spec.gait.read_bytes(), spec.tube.read_bytes(),
+        return cls(spec.gait.read_bytes(), read(spec.tube),
                    read(fmu or spec.fmu) if spec.backend == SweepBackend.FMU else None,
                    read(spec.subject), read(spec.device))
 
@@ -194,13 +195,15 @@ class Resources:
         self._folder = WorkFolder(self.digest[:12], workdir)
         self.workdir = self._folder.path
         gait_path = self._put("gait.json", artifacts.gait)
-        tube_path = self._put("tube.json", artifacts.tube)
+        tube_path = None if artifacts.tube is None else self._put("tube.json", artifacts.tube)
         fmu_path, subject_path, device_path = (
             None if data is None else self._put(name, data)
             for name, data in (("fmu.fmu", artifacts.fmu), ("subject.toml", artifacts.subject),
                                ("device.toml", artifacts.device)))
         self.model = hp_model.load_model(subject_path, device_path)
         self.gait = load_gait(gait_path, self.model.parameter_hash())
+        if tube_path is None:
+            raise ValueError("a sweep of the paper's graph needs its tube")
         self.tube = load_tube(tube_path, self.gait.hash())
         self.closed_loop = ClosedLoop(self.model, self.gait.degree)
         self.closed_loop.numeric()
@@ -318,8 +321,28 @@ def base_row(spec: SweepSpec, artifacts_digest: str, key: RunKey, draw: Draw | N
     return row
 
 
-def run_draw(res: Resources, spec: SweepSpec, key: RunKey, draw: Draw) -> dict[str, Any]:
+def make_resources(artifacts: Artifacts, workdir: Path | None = None
+                   ) -> Resources | ContactResources:
+    """A worker's resources for the sweep's gait: the paper's graph (:class:`Resources`) or
+    a multi-contact gait (:class:`orchestrator.sweep.contact.ContactResources`)."""
+    import json
+
+    from hp_model.gait_artifact import MULTICONTACT_KIND
+
+    try:
+        kind = json.loads(artifacts.gait).get("kind")
+    except (ValueError, AttributeError):
+        kind = None
+    if kind == MULTICONTACT_KIND:
+        return ContactResources(artifacts, workdir)
+    return Resources(artifacts, workdir)
+
+
+def run_draw(res: Resources | ContactResources, spec: SweepSpec, key: RunKey, draw: Draw
+             ) -> dict[str, Any]:
     """One run (module docstring): never raises for an error of the run itself."""
+    if isinstance(res, ContactResources):
+        return run_contact_draw(res, spec, key, draw)
     t0 = time.perf_counter()
     row = base_row(spec, res.digest, key, draw)
     try:
@@ -370,10 +393,10 @@ class SweepSetup(WorkerPlugin):
     def __init__(self, artifacts: Artifacts) -> None:
         self.artifacts = artifacts
         self.name = plugin_name(artifacts.digest())
-        self.resources: Resources | None = None
+        self.resources: Resources | ContactResources | None = None
 
     def setup(self, worker: Any) -> None:
-        self.resources = Resources(self.artifacts, Path(worker.local_directory))
+        self.resources = make_resources(self.artifacts, Path(worker.local_directory))
 
     def teardown(self, worker: Any) -> None:
         if self.resources is not None:

@@ -1,0 +1,200 @@
+"""A sweep of a multi-contact gait (``gait fit --domains multicontact``): the same runs,
+draws and rows as the paper's (:mod:`orchestrator.sweep.runs`), on the person's graph.
+
+Per draw, the simulated human walks the gait's curves (:mod:`characterization.gait.
+contact_gait`) moved as the draw says, in the in-process plant (AMPRO3's sensors through the
+draw's encoder, the torque held 1 ms within the motors):
+
+    human.bezier_amplitude  every coefficient of every domain's curves, the SplitMix64
+                            generator of :mod:`human_fmu.perturbation` (its graph's order)
+    human.output_offset     a constant on each human joint's curve (th_lh, th_lk, th_la,
+                            th_rh), in every domain where it is an output
+    human.stiffness         the human's gains (eps, kp, kd) -> (s eps, s^2 kp, s kd)
+    sensor.*                the prosthesis's encoders and IMU
+
+The controllers are made once per worker from the unperturbed gait (its held oracle's walk,
+:mod:`orchestrator.cosim.contact_controllers`): ``clfqp`` (:class:`prosthesis_controller.
+contact_clf_qp.ContactClfQp`) and ``phase-pd`` (contact-pd, :class:`prosthesis_controller.
+contact_phase_pd.ContactPhasePD`); the ``oracle`` run of a draw is the held oracle on the
+plant's state (perfect sensing).  Every run starts from the fitted cycle's start.  The other
+quantities of a family (a tube margin, a controller model of its own, the plant's body, the
+delayed human, a placed start) are refused by the spec (:func:`orchestrator.sweep.spec.
+check_multicontact`).  With the gait's tube (``tube fit``), ``socket_force_in_tube`` is the
+share of the flat single support's periods with the socket force inside it
+(:func:`characterization.tube.contact_playback.share_inside`).
+
+Row columns as the paper's; ``knee_rms_ps_rad`` and ``knee_rms_all_rad`` are the prosthesis
+knee's RMS deviation from the fitted cycle over the run's last complete stride (rad; None
+without one).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from characterization.gait.contact_gait import GAINS, ContactGait, held_oracle, start_state
+from characterization.gait.multicontact import GRAPH
+from characterization.tube.contact_playback import share_inside
+from hp_model.domains import Domain
+from hp_model.json_io import finite_or_none
+from hp_model.outputs import GaitParams
+from hp_model.simulator import HybridSimulator, SimResult
+from human_fmu.perturbation import perturbed_thetas
+from orchestrator.cosim.contact_controllers import (
+    LoopSetup,
+    contact_clfqp,
+    held_walk,
+    load_contact_run,
+    loop_simulator,
+    make_contact_pd,
+)
+from orchestrator.experiments.contact_walk import controller_run
+from orchestrator.experiments.person_walks import stride_rms
+from orchestrator.experiments.scenarios import ORACLE
+from orchestrator.sweep.draws import HUMAN_JOINTS, Draw, RunKey
+from orchestrator.sweep.spec import SweepSpec
+from orchestrator.sweep.tempdirs import WorkFolder
+from prosthesis_controller.contact_clf_qp import ContactClfQp
+from prosthesis_controller.contact_phase_pd import ContactPhasePD
+from prosthesis_controller.interface import ControllerMode, ControlOutput
+
+
+def draw_gait(gait: ContactGait, draw: Draw) -> dict[Domain, np.ndarray]:
+    """The packed curves the human tracks in a draw (module docstring): each human joint's
+    offset on its rows, then the Bezier perturbation."""
+    params = {}
+    for d, p in gait.params.items():
+        alpha = np.array(p.alpha, float)
+        for joint, off in zip(HUMAN_JOINTS, draw.output_offset, strict=True):
+            if off != 0.0 and joint in d.y2_coords:
+                alpha[d.y2_coords.index(joint)] += off
+        params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
+    thetas = {d.value: th for d, th in ContactGait(params, gait.rms).thetas().items()}
+    return perturbed_thetas(thetas, draw.bezier_amplitude, draw.bezier_seed)
+
+
+def draw_gains(draw: Draw) -> np.ndarray:
+    """The human's gains (eps, kp, kd) in a draw: its stiffness s scales the bandwidth."""
+    s = draw.human_stiffness
+    if not (math.isfinite(s) and s > 0):
+        raise ValueError(f"human stiffness must be finite and > 0, got {s}")
+    eps, kp, kd = GAINS
+    return np.array([s * eps, s * s * kp, s * kd])
+
+
+class ContactResources:
+    """What a worker builds once from the artifacts of a multi-contact sweep: the gait's run
+    (model, curves, fitted cycle), its compiled closed loop, the two controllers (made from
+    the held oracle's walk) and the tube when there is one."""
+
+    def __init__(self, artifacts: Any, workdir: Path | None = None) -> None:
+        from hp_model.force_tube import load_tube
+
+        self.digest = artifacts.digest()
+        self.setup_id = f"{socket.gethostname()}:{os.getpid()}:{time.time_ns()}"
+        self._folder = WorkFolder(self.digest[:12], workdir)
+        gait_path = self._folder.path / "gait.json"
+        gait_path.write_bytes(artifacts.gait)
+        self.run = load_contact_run(gait_path)
+        sim = loop_simulator(self.run.model, self.run.gait, GAINS)
+        self.closed_loop = sim.cl
+        setup = LoopSetup(sim, held_walk(sim, self.run.trajectory))
+        self.controllers: dict[str, ContactClfQp | ContactPhasePD] = {
+            "clfqp": contact_clfqp(self.run.model, self.run.gait, self.run.trajectory,
+                                   setup=setup),
+            "phase-pd": make_contact_pd(self.run.model, self.run.gait, self.run.trajectory,
+                                        setup)}
+        self.tube = None
+        if artifacts.tube is not None:
+            from characterization.gait.multicontact_artifact import load_contact_cycle
+
+            tube_path = self._folder.path / "tube.json"
+            tube_path.write_bytes(artifacts.tube)
+            self.tube = load_tube(tube_path, load_contact_cycle(gait_path).hash)
+
+    def plant(self, draw: Draw) -> HybridSimulator:
+        """The simulated walker of a draw: the draw's curves and gains on the shared closed
+        loop."""
+        return HybridSimulator(self.run.model, self.closed_loop, draw_gait(self.run.gait, draw),
+                               draw_gains(draw))
+
+    def close(self) -> None:
+        self._folder.close()
+
+
+def walk(res: ContactResources, controller: str, draw: Draw, steps: int
+         ) -> tuple[SimResult, Counter[ControllerMode], int]:
+    """One run's log, its controller's modes tick by tick and its fallbacks."""
+    from orchestrator.sweep.runs import encoder_of
+
+    sim = res.plant(draw)
+    if controller == ORACLE:
+        thetas = {Domain(k): th for k, th in sim.thetas.items()}
+        log = sim.run(*start_state(res.run.trajectory), GRAPH.domains[0], steps=steps,
+                      duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains))
+        return log, Counter(), 0
+    ctl = res.controllers[controller]
+    ctl.reset()
+    modes: Counter[ControllerMode] = Counter()
+
+    def count(out: ControlOutput) -> None:
+        modes[out.diagnostics.mode] += 1
+
+    log = controller_run(sim, res.run.trajectory, ctl, steps, encoder_of(draw), count)
+    return log, modes, int(ctl.fallbacks)
+
+
+def result_columns(res: ContactResources, log: SimResult, modes: Counter[ControllerMode],
+                   fallbacks: int, steps: int) -> dict[str, Any]:
+    """The measured columns of one run (the paper's rows', module docstring)."""
+    fall = log.fall
+    tq = np.asarray(log.u[:, 4:6], float)
+    finite = bool(np.all(np.isfinite(tq)))
+    peak = np.abs(tq).max(axis=0) if tq.size else np.zeros(2)
+    knee, _ = stride_rms(log, res.run)
+    knee_rad = finite_or_none(math.radians(knee))
+    return {"steps_completed": int(log.steps), "success": fall is None and log.steps >= steps,
+            "failed": fall is not None,
+            "reason": fall.message() if fall is not None else "",
+            "fall_reason": fall.reason.label if fall is not None else None,
+            "fail_t": finite_or_none(fall.t) if fall is not None else None,
+            "fail_tau": finite_or_none(fall.tau) if fall is not None else None,
+            "fail_domain": str(fall.domain) if fall is not None else None,
+            "duration_s": float(log.t[-1]) if log.t.size else 0.0,
+            "knee_rms_ps_rad": knee_rad, "knee_rms_all_rad": knee_rad,
+            "fallback_count": fallbacks,
+            "fallback_ticks": int(modes.get(ControllerMode.FALLBACK, 0)),
+            "fault_ticks": int(modes.get(ControllerMode.FAULT, 0)),
+            "max_torque_knee": finite_or_none(peak[0]) if finite else None,
+            "max_torque_ankle": finite_or_none(peak[1]) if finite else None,
+            "torque_finite": finite,
+            "socket_force_in_tube": (None if res.tube is None else
+                                     finite_or_none(share_inside(res.tube, res.run.model, log)))}
+
+
+def run_contact_draw(res: ContactResources, spec: SweepSpec, key: RunKey, draw: Draw
+                     ) -> dict[str, Any]:
+    """One run of a multi-contact sweep: never raises for an error of the run itself."""
+    from orchestrator.sweep.runs import EMPTY_RESULT, base_row
+
+    t0 = time.perf_counter()
+    row = base_row(spec, res.digest, key, draw)
+    try:
+        log, modes, fallbacks = walk(res, key.controller, draw, spec.steps)
+        row.update(result_columns(res, log, modes, fallbacks, spec.steps))
+        row.update(error=None, error_kind=None)
+    except Exception as e:  # a run's own failure is a result, not a crash of the sweep
+        row.update(EMPTY_RESULT)
+        row.update(error=f"{type(e).__name__}: {e}", error_kind="run")
+    row.update(wall_s=time.perf_counter() - t0, worker=f"{socket.gethostname()}:{os.getpid()}",
+               setup=res.setup_id)
+    return row
+
