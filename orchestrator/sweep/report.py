@@ -297,6 +297,16 @@ def _f(v: Any, fmt: str = ".3g") -> str:
     return "-" if v is None else format(v, fmt)
 
 
+def _knee_rms_words(out: Path) -> str:
+    """What the knee RMS columns measure, for the sweep's gait (its stored artifact)."""
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+
+    if artifact_kind(out / "artifacts" / "gait.json") == MULTICONTACT_KIND:
+        return ("the prosthesis knee against the fitted cycle at the same stride fraction, "
+                "over the run's last complete stride (none without one)")
+    return "th_pk - B_pk(tau) over the run's ps samples, until the run ended (a fall shortens it)"
+
+
 def markdown(s: dict[str, Any], figs: list[str]) -> str:
     spec = s["spec"]
     L = [f"# Sweep report: {spec['name']}", ""]
@@ -314,9 +324,9 @@ def markdown(s: dict[str, Any], figs: list[str]) -> str:
         L.append(f"- **{f}**: " + ("; ".join(q) if q else "nominal (no perturbation)"))
     L += ["", "## Success rate and tracking", "",
           "A run succeeds when it completes the requested steps without a fall. Interval: "
-          "Wilson score, 95 %. Knee RMS: th_pk - B_pk(tau) over the run's ps samples, until "
-          "the run ended (a fall shortens it). Walkable: the draws the `oracle` (full-state "
-          "feedback linearization of the prosthesis with perfect knowledge and sensing) "
+          "Wilson score, 95 %. Knee RMS: " + _knee_rms_words(Path(s["out"]))
+          + ". Walkable: the draws the `oracle` (full-state feedback linearization of the "
+          "prosthesis with perfect knowledge and sensing) "
           "walks; the oracle's own row is the fraction of walkable draws.", "",
           "| family | controller | runs | errors | success | rate | 95 % interval | "
           "walkable: success / runs | rate | 95 % interval | steps (mean) | time walked "
