@@ -36,8 +36,9 @@ from orchestrator.cosim.cpus import cpu_plan
 from orchestrator.cosim.drives import Drives, Plant
 from orchestrator.cosim.faults import FaultPlan
 from orchestrator.cosim.master import run_cosim
-from orchestrator.cosim.recording import play_to_bus, read_recording, refit_tube, replay
+from orchestrator.cosim.recording import play_to_bus, read_recording, replay
 from orchestrator.cosim.result import CosimResult, tick_breakdown
+from orchestrator.cosim.tube_refit import refit_tube
 from orchestrator.loop import ControllerLink, Observation, Sensed, SimulatorPlant, run_loop
 from prosthesis_controller import make_controller
 from prosthesis_controller.node import ControllerNode

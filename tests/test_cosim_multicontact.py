@@ -1,9 +1,9 @@
 """The co-simulation of a multi-contact gait: ``hpcosim run --controller clfqp`` with the
 committed openOFM cycle's gait file builds the FMU of its six domains and the controller's
 file, starts the controller process over zenoh (AMPRO3's CAN frames), walks 10 steps,
-records them; the recording replays through the recorded controller with no difference, and
-the same run in process (the same controller file, measurements and torques quantized as on
-the bus) walks the same walk."""
+records them; the recording replays through the recorded controller with no difference, the
+same run in process (the same controller file, measurements and torques quantized as on the
+bus) walks the same walk, and the force tube refits from the recording."""
 
 from __future__ import annotations
 
@@ -74,6 +74,39 @@ def test_the_recording_replays_and_equals_the_run_in_process(walked, gait_file):
     # the same generated C, the same controller file, the same quantization: the prosthesis
     # angles agree to rounding over the steps
     assert np.abs(gt[:n, 10:12] - q[:n, 10:12]).max() <= 1e-6
+
+
+@serial
+def test_the_tube_refits_from_the_recording(walked, gait_file, capsys):
+    """``tube refit`` of a multi-contact recording: the ground truth's socket force over the
+    flat single supports entered from a double support (every one but the run's first, in
+    which the run starts), around the gait's F* in the controllers' stance phase.  The
+    closed loop walks the gait itself: its socket force stays within a quarter of the
+    socket's peak load (874 N) of F* at the same phase (misplaced phases would put it
+    hundreds of N off: F* falls from 874 to 552 N over the first third)."""
+    from characterization.gait.multicontact_artifact import load_contact_cycle
+    from characterization.tube.contact_playback import gait_nominal
+    from hp_model.force_tube import load_tube
+
+    _, rec = walked
+    out = gait_file.parent / "refit.json"
+    assert hpcosim(["tube", "refit", str(rec), "--gait", str(gait_file), "--out", str(out),
+                    "--degree", "1"]) in (0, 1)
+    assert "'steps': 4" in " ".join(capsys.readouterr().out.split())  # 5 stances, 4 entered
+    tube = load_tube(out, load_contact_cycle(gait_file).hash)
+    assert tube.source["domain_graph"] == "multicontact" and tube.n_steps == 4
+    cert = tube.credibility["certificate"]
+    assert cert["inside"] and cert["optimal"]
+    nominal = gait_nominal(load_contact_cycle(gait_file))
+    s = np.linspace(tube.tau_lo, tube.tau_hi, 50)
+    peak = np.abs(nominal.socket).max(axis=0)
+    star = np.column_stack([np.interp(s, nominal.phase, nominal.socket[:, c])
+                            for c in range(3)])
+    assert np.all(np.abs(tube.nominal_force(s) - star) < 0.02 * peak)  # the same F*
+    lo, hi = tube.delta_bounds(s)
+    assert np.all(np.maximum(np.abs(lo), np.abs(hi)) < 0.25 * peak[1])
+    assert hpcosim(["tube", "refit", str(rec), "--gait", str(gait_file), "--out",
+                    str(gait_file.parent / "x.json"), "--model-error"]) == 2
 
 
 @pytest.mark.parametrize("extra, words", [

@@ -52,6 +52,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.optimize import brentq
@@ -431,8 +432,26 @@ def fit_contact_tube(gait: ContactCycle, steps: StepsArtifact, degree: int | Non
             f"{src}: {len(out)} played-back single support(s) cannot support a degree-{deg} "
             f"tube: need at least {max(deg + 1, 2)} (record more strides and pool the takes"
             + (f"; {why})" if why else ")"))
-    tau_lo, tau_hi = tube_interval([sp.interval for sp in out])
-    # F* is the gait's over its own flat single support
+    tube, profiles = tube_around(
+        nominal, [sp.profile for sp in out], deg, gait.hash, gait_src,
+        {"steps": src, "gait": gait_src, "strides": [sp.stride for sp in out],
+         "skipped": [[k, why] for k, why in skipped],
+         "fit_rms_max": [float(v) for v in np.max([sp.fit_rms for sp in out], axis=0)],
+         "cone_periods": [sp.cone_periods for sp in out], "playback_seconds": t_play})
+    tau_lo, tau_hi = tube.tau_lo, tube.tau_hi
+    peak = peak_socket_force([sp.profile for sp in out], tau_lo, tau_hi)
+    tube = with_allowance(tube, allowance * np.asarray(peak, float))
+    return ContactTubeResult(out, skipped, tube, profiles, nominal,
+                             {"playback": t_play, "total": time.perf_counter() - t0})
+
+
+def tube_around(nominal: NominalStance, steps: list[tuple[np.ndarray, np.ndarray]],
+                degree: int, gait_hash: str, gait_src: str = "gait",
+                source: Mapping[str, Any] | None = None) -> tuple[ForceTube, list[Profile]]:
+    """The certified tube (no allowance) of single supports ``steps`` ((stance phase (n,),
+    F_s (n, 3)) each) around the gait's F* (module docstring), and their deviation
+    profiles: on the phases every step covers, within the gait's own flat single support."""
+    tau_lo, tau_hi = tube_interval([(float(t[0]), float(t[-1])) for t, _ in steps])
     tau_lo, tau_hi = max(tau_lo, float(nominal.phase[0])), min(tau_hi, float(nominal.phase[-1]))
     inside = (nominal.phase >= tau_lo) & (nominal.phase <= tau_hi)
     if not tau_hi > tau_lo or inside.sum() < NOMINAL_DEGREE + 1:
@@ -441,22 +460,20 @@ def fit_contact_tube(gait: ContactCycle, steps: StepsArtifact, degree: int | Non
             f"(stance phase [{tau_lo:.3f}, {tau_hi:.3f}])")
     s = (nominal.phase[inside] - tau_lo) / (tau_hi - tau_lo)
     nfit = fit_bezier(s, nominal.socket[inside], NOMINAL_DEGREE)
-    profiles = deviation_profiles([sp.profile for sp in out], nfit.alpha, tau_lo, tau_hi)
-    tube = fit_tube(profiles, nfit.alpha, tau_lo, tau_hi, degree=deg, gait_hash=gait.hash,
-                    source={"steps": src, "gait": gait_src, "domain_graph": GRAPH.value,
+    profiles = deviation_profiles(steps, nfit.alpha, tau_lo, tau_hi)
+    tube = fit_tube(profiles, nfit.alpha, tau_lo, tau_hi, degree=degree, gait_hash=gait_hash,
+                    source={**(source or {}), "domain_graph": GRAPH.value,
                             "phase": "the prosthesis controllers' stance phase",
                             "stance_progress": list(nominal.progress),
-                            "strides": [sp.stride for sp in out],
-                            "skipped": [[k, why] for k, why in skipped],
-                            "nominal_fit_rms": [float(v) for v in nfit.rms],
-                            "fit_rms_max": [float(v) for v in
-                                            np.max([sp.fit_rms for sp in out], axis=0)],
-                            "cone_periods": [sp.cone_periods for sp in out],
-                            "playback_seconds": t_play})
-    peak = peak_socket_force([sp.profile for sp in out], tau_lo, tau_hi)
-    tube = with_allowance(tube, allowance * np.asarray(peak, float))
-    return ContactTubeResult(out, skipped, tube, profiles, nominal,
-                             {"playback": t_play, "total": time.perf_counter() - t0})
+                            "nominal_fit_rms": [float(v) for v in nfit.rms]})
+    return tube, profiles
+
+
+def gait_nominal(gait: ContactCycle) -> NominalStance:
+    """The gait's nominal stance (:func:`nominal_stance`) with its own closed loop and curves."""
+    thetas = contact_gait_of(gait.model, gait.trajectory, gait.durations).thetas()
+    return nominal_stance(gait.model, ClosedLoop(gait.model, DEGREE), thetas, gait,
+                          LegKinematics.of(gait.model))
 
 
 def report_markdown(res: ContactTubeResult, steps_src: str = "steps",

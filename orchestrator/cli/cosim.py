@@ -227,10 +227,16 @@ def refit(
         "this (default: its a posteriori guarantee 1 - eps); the file is written all the "
         "same.")] = None,
 ) -> None:
-    """Refit the force tube from recorded ground-truth socket force (ps portions), or with
+    """Refit the force tube from recorded ground-truth socket force (ps portions; of a
+    multi-contact gait: its flat single supports, in the controllers' stance phase), or with
     --model-error the model-error bound from the controller's recorded estimates."""
     from hp_model.force_tube import load_tube
-    from orchestrator.cosim.recording import refit_model_error, refit_tube
+    from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+    from orchestrator.cosim.tube_refit import refit_model_error, refit_tube
+
+    if model_error and artifact_kind(gait) == MULTICONTACT_KIND:
+        raise typer.BadParameter(f"{gait} is a multi-contact gait: its clfqp has no "
+                                 "model-error bound to refit", param_hint="--model-error")
 
     paths = [str(absolute(p)) for r in recordings for p in (sorted(glob.glob(r)) or [r])]
     if model_error:
