@@ -70,6 +70,7 @@ class SynthSource(Choice):
 
     MODEL = "model"  # the model walks a reference gait
     TEMPLATE = "template"  # the kinematic template of characterization.mocap.synthetic_gait
+    PERSON = "person"  # the model walks a multi-contact gait (characterization.gait.person_synth)
 
 
 #: limb -> (frame giving its origin, coordinates summed for its pitch)
@@ -356,9 +357,21 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
         source = SynthSource(opts.source)
     except ValueError as e:
         raise MocapError(f"synthetic subject: {e}") from None
+    if source == SynthSource.PERSON:
+        raise MocapError("synthetic subject: --source person walks a multi-contact gait "
+                         "(characterization.gait.person_synth)")
     rng = np.random.default_rng(opts.seed)
     motion = _template_motion if source == SynthSource.TEMPLATE else _model_motion
     t, q, ev, stride_time = motion(model, opts, rng)
+    return take_of_motion(model, t, q, ev, stride_time, opts, rng, source.value)
+
+
+def take_of_motion(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, ev: GaitEvents,
+                   stride_time: float, opts: SynthOptions, rng: np.random.Generator,
+                   source: str) -> SyntheticTake:
+    """The take of a motion q (n, 12) of ``model`` at times t (s), its contact events and
+    mean stride time (s): the markers with the noise and dropouts of ``opts`` (from
+    ``rng``) and the truth of :func:`synthesize`."""
     take, take_c3d, limb_pose, joint_pos, exact = _markers(model, t, q, opts, rng)
     limb_pitch = np.column_stack([limb_pose[k][:, 2] for k in LIMBS])
     ci = {c: k for k, c in enumerate(model.coord_names)}
@@ -389,7 +402,7 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
     q = q.copy()
     q[:, 0:2] += shift
     truth = {
-        "source": np.array(source.value), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
+        "source": np.array(source), "time": t - t[0], "q": q, "limb_pitch": limb_pitch,
         "joint_position": joint_pos, "joint_lambda": lam, "delta_ps": delta,
         "step_domain": np.array([s[0] for s in steps]),
         "step_start": np.array([s[1] for s in steps], dtype=np.int64),
@@ -403,8 +416,9 @@ def synthesize(model: HumanProsthesisModel, opts: SynthOptions = SynthOptions()
 
 
 def write_synthetic(out_dir: str | os.PathLike[str], synth: SyntheticTake,
-                    opts: SynthOptions) -> dict[str, Path]:
-    """Write take.csv (Motive), take.c3d, truth.npz, mapping.toml and options.json."""
+                    opts: SynthOptions, mapping: MocapMapping | None = None) -> dict[str, Path]:
+    """Write take.csv (Motive), take.c3d, truth.npz, mapping.toml (``mapping``, default
+    :func:`default_mapping`) and options.json."""
     d = Path(out_dir)
     d.mkdir(parents=True, exist_ok=True)
     paths = {"csv": d / "take.csv", "c3d": d / "take.c3d", "truth": d / "truth.npz",
@@ -414,7 +428,7 @@ def write_synthetic(out_dir: str | os.PathLike[str], synth: SyntheticTake,
     buf = io.BytesIO()
     np.savez_compressed(buf, allow_pickle=False, **synth.truth)  # numeric arrays only
     atomic_write_bytes(paths["truth"], buf.getvalue())
-    atomic_write_text(paths["mapping"], mapping_toml(default_mapping()))
+    atomic_write_text(paths["mapping"], mapping_toml(mapping or default_mapping()))
     atomic_write_text(paths["options"], dumps(asdict(opts), indent=2))
     return paths
 

@@ -169,10 +169,13 @@ def synth(
     rate: Annotated[float, typer.Option(min=1, help="Frame rate, Hz.")] = 120.0,
     source: Annotated[str, typer.Option(
         help="'model': the model walks a reference gait (hybrid simulator, dynamically "
-        "consistent); 'template': a kinematic template with double support.")] = "model",
+        "consistent); 'template': a kinematic template with double support; 'person': the "
+        "model of a multi-contact gait (--gait) walks it, with its double supports.")
+    ] = "model",
     gait: Annotated[Path | None, typer.Option(
         "--gait", help="Reference gait of --source model (default: the packaged gait of the "
-        "default subject and device).", dir_okay=False)] = None,
+        "default subject and device); the multi-contact gait of --source person.",
+        dir_okay=False)] = None,
     variability: Annotated[float, typer.Option(
         min=0, help="--source model: SD of the interior Bezier coefficients per step, "
         "rad.")] = 0.03,
@@ -200,12 +203,29 @@ def synth(
                         dropout_rate=dropout_rate, dropout_max_frames=dropout_frames,
                         rate=rate, source=motion, gait_file=str(gait) if gait else None,
                         sigma=variability, sigma_v_hip=speed_variability)
-    with console.status("generating the synthetic take"):
-        model = hp_model.load_model(str(subject) if subject else None,
-                                    str(device) if device else None)
-        s = synthesize(model, opts)
-        paths = write_synthetic(out, s, opts)
+    if motion == SynthSource.PERSON:
+        from characterization.gait.person_synth import synthesize_person, write_person
+        from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+
+        if gait is None or artifact_kind(gait) != MULTICONTACT_KIND:
+            raise typer.BadParameter("--source person walks a multi-contact gait file (gait "
+                                     "fit --domains multicontact)", param_hint="--gait")
+        if subject is not None or device is not None:
+            raise typer.BadParameter("--source person walks the gait's own subject and "
+                                     "device; drop --subject/--device", param_hint="--gait")
+        with console.status("walking the gait's model"):
+            s, person = synthesize_person(gait, opts)
+            paths = write_person(out, s, person, opts)
+    else:
+        with console.status("generating the synthetic take"):
+            model = hp_model.load_model(str(subject) if subject else None,
+                                        str(device) if device else None)
+            s = synthesize(model, opts)
+            paths = write_synthetic(out, s, opts)
     console.print(f"{steps} step cycles ({source}), {s.take.n_frames} frames at {rate:g} Hz, "
                   f"{len(s.truth['step_domain'])} complete steps in the truth")
     for k, v in paths.items():
         console.print(f"  {k}: {v}")
+    if motion == SynthSource.PERSON:
+        console.print(f"process it as the person it is: hpcosim mocap process {paths['csv']} "
+                      f"--subject {paths['subject']} --out steps.npz")
