@@ -69,17 +69,15 @@ from characterization.tube.fit import (
     deviation_profiles,
     fit_tube,
     peak_socket_force,
-    save_tube_figure,
     tube_interval,
     with_allowance,
 )
-from characterization.tube.playback import output_paths
+from characterization.tube.playback import write_tube_files
 from hp_model import bezier
-from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
 from hp_model.contact_outputs import ContactConstraints, selection
 from hp_model.domains import Domain
-from hp_model.force_tube import COMPONENTS, ForceTube, save_tube
+from hp_model.force_tube import COMPONENTS, ForceTube
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.leg_kinematics import LegKinematics
 from hp_model.outputs import GaitParams
@@ -519,8 +517,5 @@ def report_markdown(res: ContactTubeResult, steps_src: str = "steps",
 def write_outputs(out: str | Path, res: ContactTubeResult, steps_src: str = "steps",
                   gait_src: str = "gait") -> dict[str, Path]:
     """Write the figure and the report next to the tube, then the tube (all atomically)."""
-    paths = output_paths(out)
-    save_tube_figure(paths["figure"], res.tube, res.profiles)
-    atomic_write_text(paths["report"], report_markdown(res, steps_src, gait_src) + "\n")
-    save_tube(paths["tube"], res.tube)
-    return paths
+    return write_tube_files(out, res.tube, res.profiles,
+                            report_markdown(res, steps_src, gait_src))

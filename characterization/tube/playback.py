@@ -586,8 +586,16 @@ def output_paths(out: str | Path) -> dict[str, Path]:
 def write_outputs(out: str | Path, res: TubeResult, steps_src: str = "steps",
                   gait_src: str = "gait") -> dict[str, Path]:
     """Write the figure and the report next to the tube, then the tube (all atomically)."""
+    return write_tube_files(out, res.tube, res.profiles,
+                            report_markdown(res, steps_src, gait_src))
+
+
+def write_tube_files(out: str | Path, tube: ForceTube, profiles: list[Profile], report: str
+                     ) -> dict[str, Path]:
+    """The Fig. 5 figure of ``profiles`` and the ``report`` next to the tube file ``out``,
+    then the tube (all atomically); their paths (:func:`output_paths`)."""
     paths = output_paths(out)
-    save_tube_figure(paths["figure"], res.tube, res.profiles)
-    atomic_write_text(paths["report"], report_markdown(res, steps_src, gait_src) + "\n")
-    save_tube(paths["tube"], res.tube)
+    save_tube_figure(paths["figure"], tube, profiles)
+    atomic_write_text(paths["report"], report + "\n")
+    save_tube(paths["tube"], tube)
     return paths

@@ -6,7 +6,7 @@ and the model-error bound of ``clfqp``'s nominal-human model."""
 from __future__ import annotations
 
 import tempfile
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -56,7 +56,8 @@ def refit_tube(paths: Iterable[str | Path], gait_path: str | Path, out: str | Pa
     model = model or hp_model.load_model()
     gait = load_gait(gait_path, model.parameter_hash())
     paths = [Path(p) for p in paths]
-    _check_gait(paths, gait, gait_path, model)
+    check_recorded_gait(paths, gait.hash(), gait_path,
+                        lambda f: load_gait(f, model.parameter_hash()).hash())
     steps: list[tuple[np.ndarray, np.ndarray]] = []
     for p in paths:
         steps.extend(ps_profiles(p))
@@ -124,17 +125,7 @@ def refit_contact_tube(paths: Iterable[str | Path], gait_path: str | Path, out: 
 
     cycle = load_contact_cycle(gait_path)
     paths = [Path(p) for p in paths]
-    for p in paths:  # every recording made with this gait
-        rec = read_recording(p, messages=False)
-        if "gait.json" not in rec.attachments:
-            raise RecordingError(f"{p}: attachment gait.json missing")
-        with tempfile.TemporaryDirectory() as td:
-            f = Path(td) / "gait.json"
-            f.write_bytes(rec.attachments["gait.json"])
-            h = load_contact_cycle(f).hash
-        if h != cycle.hash:
-            raise RecordingError(f"{p}: recorded with gait {h}, not with {gait_path} "
-                                 f"({cycle.hash})")
+    check_recorded_gait(paths, cycle.hash, gait_path, lambda f: load_contact_cycle(f).hash)
     nominal = gait_nominal(cycle)
     steps: list[tuple[np.ndarray, np.ndarray]] = []
     for p in paths:
@@ -164,11 +155,12 @@ def old_coverage(old: Any, steps: list[tuple[np.ndarray, np.ndarray]]) -> dict[s
             "old_coverage_steps": inside_steps / len(steps)}
 
 
-def _check_gait(paths: Iterable[str | Path], gait: Any, gait_path: str | Path, model: Any) -> None:
-    """Every recording was made with ``gait`` (its attached gait has the same hash): a tube
-    refitted against another gait's phase and nominal force would be mislabelled."""
+def check_recorded_gait(paths: Iterable[str | Path], gait_hash: str, gait_path: str | Path,
+                        hash_of: Callable[[Path], str]) -> None:
+    """Every recording was made with the gait of hash ``gait_hash`` (``hash_of`` reads the
+    hash of its attached gait file, an ArtifactError when it does not fit): a tube refitted
+    against another gait's phase and nominal force would be mislabelled."""
     from hp_model.artifacts import ArtifactError
-    from hp_model.gait_artifact import load_gait
 
     for p in paths:
         rec = read_recording(p, messages=False)
@@ -178,13 +170,13 @@ def _check_gait(paths: Iterable[str | Path], gait: Any, gait_path: str | Path, m
             f = Path(td) / "gait.json"
             f.write_bytes(rec.attachments["gait.json"])
             try:
-                h = load_gait(f, model.parameter_hash()).hash()
+                h = hash_of(f)
             except ArtifactError as e:
                 raise RecordingError(f"{p}: its gait does not fit this model "
                                      f"({str(e).replace(str(f), 'gait.json')})") from None
-        if h != gait.hash():
+        if h != gait_hash:
             raise RecordingError(f"{p}: recorded with gait {h}, not with {gait_path} "
-                                 f"({gait.hash()})")
+                                 f"({gait_hash})")
 
 
 def _old_tube(first: str | Path, old_tube: str | Path | None, gait_hash: str) -> Any:
@@ -256,7 +248,8 @@ def refit_model_error(paths: Iterable[str | Path], gait_path: str | Path, out: s
     model = model or hp_model.load_model()
     gait = load_gait(gait_path, model.parameter_hash())
     paths = [Path(p) for p in paths]
-    _check_gait(paths, gait, gait_path, model)
+    check_recorded_gait(paths, gait.hash(), gait_path,
+                        lambda f: load_gait(f, model.parameter_hash()).hash())
     old = _old_tube(paths[0], old_tube, gait.hash())
     if old is None:
         raise RecordingError(f"{paths[0]}: no tube attached; pass the tube to refit with "

@@ -183,18 +183,10 @@ def result_columns(res: ContactResources, log: SimResult, modes: Counter[Control
 def run_contact_draw(res: ContactResources, spec: SweepSpec, key: RunKey, draw: Draw
                      ) -> dict[str, Any]:
     """One run of a multi-contact sweep: never raises for an error of the run itself."""
-    from orchestrator.sweep.runs import EMPTY_RESULT, base_row
+    from orchestrator.sweep.runs import measured_row
 
-    t0 = time.perf_counter()
-    row = base_row(spec, res.digest, key, draw)
-    try:
+    def measure() -> dict[str, Any]:
         log, modes, fallbacks = walk(res, key.controller, draw, spec.steps)
-        row.update(result_columns(res, log, modes, fallbacks, spec.steps))
-        row.update(error=None, error_kind=None)
-    except Exception as e:  # a run's own failure is a result, not a crash of the sweep
-        row.update(EMPTY_RESULT)
-        row.update(error=f"{type(e).__name__}: {e}", error_kind="run")
-    row.update(wall_s=time.perf_counter() - t0, worker=f"{socket.gethostname()}:{os.getpid()}",
-               setup=res.setup_id)
-    return row
+        return result_columns(res, log, modes, fallbacks, spec.steps)
 
+    return measured_row(spec, res.digest, res.setup_id, key, draw, measure)

@@ -19,6 +19,7 @@ import os
 import socket
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -343,9 +344,8 @@ def run_draw(res: Resources | ContactResources, spec: SweepSpec, key: RunKey, dr
     """One run (module docstring): never raises for an error of the run itself."""
     if isinstance(res, ContactResources):
         return run_contact_draw(res, spec, key, draw)
-    t0 = time.perf_counter()
-    row = base_row(spec, res.digest, key, draw)
-    try:
+
+    def measure() -> dict[str, Any]:
         ctx = res.context(draw)
         scenario = Scenario(key.controller, DrawPerturbation(
             f"{key.family}/{key.draw}", draw.bezier_amplitude, draw.bezier_seed, draw),
@@ -364,13 +364,26 @@ def run_draw(res: Resources | ContactResources, spec: SweepSpec, key: RunKey, dr
             q0, qd0 = initial_state(res.model, res.gait, scenario.initial_offset)
             r = run_fmu_scenario(res.fmu, res.model, res.gait, ctx, scenario, (q0, qd0),
                                  encoder=encoder_of(draw))
-        row.update(result_columns(r))
+        return result_columns(r)
+
+    return measured_row(spec, res.digest, res.setup_id, key, draw, measure)
+
+
+def measured_row(spec: SweepSpec, digest: str, setup_id: str, key: RunKey, draw: Draw,
+                 measure: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """A run's row: its identity, ``measure()``'s columns (an exception in it is the row's
+    ``error``: a run's own failure is a result, not a crash of the sweep), where and how
+    long it ran."""
+    t0 = time.perf_counter()
+    row = base_row(spec, digest, key, draw)
+    try:
+        row.update(measure())
         row.update(error=None, error_kind=None)
-    except Exception as e:  # a run's own failure is a result, not a crash of the sweep
+    except Exception as e:
         row.update(EMPTY_RESULT)
         row.update(error=f"{type(e).__name__}: {e}", error_kind="run")
     row.update(wall_s=time.perf_counter() - t0, worker=f"{socket.gethostname()}:{os.getpid()}",
-               setup=res.setup_id)
+               setup=setup_id)
     return row
 
 
