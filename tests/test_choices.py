@@ -37,7 +37,7 @@ CASES: list[tuple[type[Choice], tuple[str, ...]]] = [
     (SegmentationMethod, ("paper", "contact")),
     (FitSegments, ("touchdown", "paper")),
     (TubePhase, ("gait", "step")),
-    (SynthSource, ("model", "template")),
+    (SynthSource, ("model", "template", "person")),
 ]
 IDS = [e.__name__ for e, _ in CASES]
 

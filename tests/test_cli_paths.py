@@ -102,7 +102,7 @@ def test_links_are_kept_and_home_expanded(tmp_path, monkeypatch, link):
 def test_text_paths_are_taken_from_the_working_folder_too(tmp_path, monkeypatch):
     """The two verbs that take a path as text: ``tube refit``'s recordings (globs) and
     ``animate``'s RUN.mcap reach their functions as absolute paths."""
-    import orchestrator.cosim.recording as recording
+    import orchestrator.cosim.tube_refit as tube_refit
     import orchestrator.experiments.animation as animation
 
     got: dict[str, object] = {}
@@ -116,7 +116,7 @@ def test_text_paths_are_taken_from_the_working_folder_too(tmp_path, monkeypatch)
         got["animate"] = source
         return b"GIF89a"
 
-    monkeypatch.setattr(recording, "refit_tube", refit)
+    monkeypatch.setattr(tube_refit, "refit_tube", refit)
     monkeypatch.setattr(animation, "recording_gif", gif)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "runs").mkdir()
