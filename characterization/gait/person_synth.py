@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
+from characterization.gait.contact_gait import DEGREE, GAINS, contact_gait_of, start_state
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import ContactCycle, load_contact_cycle
 from characterization.mocap.synthetic_gait import GaitEvents
@@ -38,9 +38,6 @@ from hp_model.atomic_io import atomic_write_text
 from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
 from hp_model.simulator import HybridSimulator
-
-#: the Bezier degree of the gait's curves (:data:`characterization.gait.contact_gait.DEGREE`)
-DEGREE = 5
 
 
 def person_motion(gait: ContactCycle, opts: SynthOptions

@@ -58,7 +58,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from characterization.gait.bezier_fit import fit_bezier
-from characterization.gait.contact_gait import GAINS, contact_gait_of, start_state
+from characterization.gait.contact_gait import DEGREE, GAINS, contact_gait_of, start_state
 from characterization.gait.multicontact import GRAPH, TakeStrides, take_strides
 from characterization.gait.multicontact_artifact import ContactCycle
 from characterization.mocap.steps_artifact import StepsArtifact
@@ -87,9 +87,6 @@ from hp_model.simulator import HybridSimulator, SimOptions, SimResult
 DOMAIN = Domain.PS
 #: the prosthesis's stance, heel strike to toe-off
 STANCE = (Domain.DS_P, Domain.PS, Domain.PS_TOE, Domain.DS_H)
-#: the Bezier degree of the stride's curves (the gait's, :data:`characterization.gait.
-#: contact_gait.DEGREE`)
-DEGREE = 5
 #: the degree of a recorded window's hip rate: a person's hip slows over the flat foot and
 #: speeds up again, a parabola.  The rate is the finite differences of the hip's progress,
 #: and on the takes in the tests a quintic through them swung the socket's F_x by up to
