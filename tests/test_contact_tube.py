@@ -132,6 +132,18 @@ def test_paper_options_beside_a_multicontact_gait_are_refused(gait_file, steps_f
     assert not out.exists()
 
 
+def test_steps_of_another_person_are_refused(gait_file, tmp_path, capsys):
+    steps = tmp_path / "other.npz"  # the same take processed as the example subject
+    process_session([TAKE / "dynamic.c3d"], steps, mapping=TAKE / "mapping.toml",
+                    subject="hp_model/configs/subject_example.toml", with_figures=False)
+    out = tmp_path / "t.json"
+    assert hpcosim(["tube", "fit", str(steps), "--gait", str(gait_file), "--out",
+                    str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "field 'subject'" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 def test_a_paper_tube_beside_a_multicontact_gait_is_refused(gait_file, tmp_path, capsys):
     paper_tube = "tests/data/controller/tube_demo_v2.json"
     assert hpcosim(["experiments", "--gait", str(gait_file), "--tube", paper_tube, "--out",

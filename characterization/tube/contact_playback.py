@@ -361,6 +361,26 @@ def default_degree(n_strides: int) -> int:
     return max(0, min(MAX_DEFAULT_DEGREE, n_strides - 1))
 
 
+def check_person(steps: StepsArtifact, model: HumanProsthesisModel, src: str = "steps") -> None:
+    """Refuse steps of another person than the gait's model (the subject ``mocap process``
+    stored with them; its name and notes aside): played back on another body, their socket
+    force would be another person's."""
+    from characterization.mocap.steps_artifact import steps_subject
+
+    found = steps_subject(steps, src)
+    if found is None:
+        return
+
+    def body(subject: Any) -> dict[str, Any]:
+        return subject.model_dump(mode="json", exclude={"name", "notes"})
+
+    if body(found[0]) != body(model.subject):
+        raise ContactPlaybackError(
+            f"{src}: field 'subject': the steps are of another person ({found[0].name}, "
+            f"{found[0].body_mass:g} kg) than the gait's model ({model.subject.name}, "
+            f"{model.subject.body_mass:g} kg); fit the gait from these steps")
+
+
 def play_strides(gait: ContactCycle, steps: StepsArtifact, progress: Progress | None = None,
                  src: str = "steps"
                  ) -> tuple[list[StancePlayback], list[tuple[int, str]], NominalStance]:
@@ -371,6 +391,7 @@ def play_strides(gait: ContactCycle, steps: StepsArtifact, progress: Progress | 
     if names != list(model.coord_names):
         raise ContactPlaybackError(f"{src}: field 'coord_names' {names} are not the model's "
                                    f"coordinates {list(model.coord_names)}")
+    check_person(steps, model, src)
     try:
         strides = take_strides(steps, model, src)
     except ValueError as e:
