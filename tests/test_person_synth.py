@@ -60,12 +60,14 @@ def test_the_takes_contact_events_are_the_walks(person):
 @pytest.mark.slow
 def test_the_fit_gives_the_generator_back(person):
     """The fit of the model's own walk: speed and stride within 3 %, every angle within 3 deg
-    RMS of the take (the ankles are the worst, 2.5 deg: what the fit's ground-force
-    constraints bend them by, not the take's noise).  Its closed loop is not judged here."""
+    RMS of the take (the ankles are the worst, 1.8-2.0 deg), and it walks in closed loop:
+    the product's `clfqp` with the simulated human, the held oracle and contact-pd, 10 steps
+    each (with heel offs found 40-60 ms late and heel strikes at 0.02 m/s, the toe domains
+    came out a third as long as the walk's, and the held oracle fell in the first one)."""
     d, gait, _, steps = person
     out = d / "fit.json"
-    hpcosim(["gait", "fit", str(steps), "--domains", "multicontact", "--allow-mismatch",
-             "--out", str(out)])
+    assert hpcosim(["gait", "fit", str(steps), "--domains", "multicontact",
+                    "--out", str(out)]) == 0
     doc = json.loads(out.read_text())
     rows = {r["criterion"]: r for r in doc["check"]["rows"]}
     cycle = load_contact_cycle(gait)
@@ -75,3 +77,5 @@ def test_the_fit_gives_the_generator_back(person):
         assert rows[name]["passed"], rows[name]
     angles = [r for n, r in rows.items() if n.endswith(" RMS")]
     assert len(angles) == 7 and all(r["passed"] for r in angles), angles
+    for key in ("closed_loop", "closed_loop_reference", "closed_loop_contact_pd"):
+        assert doc[key]["walks"], (key, doc[key]["fall"])
