@@ -17,9 +17,11 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
 
 Not the paper's CLF-QP: the product's ``clfqp`` runs the paper's two domains only.  Measured
 with the simulated human on its feedback linearization (docs/gait-design.md): 20 steps on
-openOFM's fits; on OpenSim's strides' fit 16, then the prosthesis's heel strike pulls (in a
-double support the prosthesis's torque sets how the load is shared between the feet, and a
-joint PD's errors there unload a contact).
+openOFM's fits with heel offs at a 3 deg rise, 4 on its fit with heel offs from the rise's
+onset (in ``ds_p`` the prosthesis foot lands flat 5 ms late and the trailing toe pulls); on
+OpenSim's strides' fit 16, then the prosthesis's heel strike pulls (in a double support the
+prosthesis's torque sets how the load is shared between the feet, and a joint PD's errors
+there unload a contact).
 """
 
 from __future__ import annotations
