@@ -204,3 +204,60 @@ def test_no_complete_step_is_an_error(synth, coef) -> None:
                       for k, v in short.rigid_bodies.items()})
     with pytest.raises(MocapError, match="no complete step"):
         process_take(take, default_mapping(), coef)
+
+
+def test_the_templates_rolling_foot_turns_about_its_heel_and_its_toe() -> None:
+    """With the foot's roll on (``GaitParams.heel_strike_pitch``, ``toe_off_pitch``,
+    ``heel_rise``), each foot of the template lands on its heel pitched toe-up, turns about
+    the heel (on the ground) to flat by the other foot's lift-off, and from its heel rise
+    turns about its toe (on the ground) to the toe-off pitch at its lift-off; the model's
+    frames of the truth say so to a micrometre, and the toe markers sit no further forward
+    than the toe (a person's foot: the toe at its metatarsal heads)."""
+    from characterization.gait.fit import worn_device
+    from characterization.mocap.subject_from_take import ROLL_OFF_OF_FOOT
+    from characterization.mocap.synthetic_gait import GaitParams
+    from characterization.mocap.synthetic_subject import MARKERS, marker_offsets
+    from hp_model.config import (
+        SubjectConfig,
+        default_device_path,
+        default_subject_path,
+        load_device,
+        load_subject,
+    )
+
+    doc = load_subject(default_subject_path()).model_dump(mode="json")
+    doc["lengths"]["foot"] *= ROLL_OFF_OF_FOOT
+    person = SubjectConfig.model_validate(doc)
+    m = hp_model.HumanProsthesisModel(person, worn_device(person,
+                                                          load_device(default_device_path()))[0])
+    g = GaitParams(heel_strike_pitch=0.2, toe_off_pitch=0.7, heel_rise=0.12)
+    st = synthesize(m, SynthOptions(n_strides=3, seed=1, rate=200, source="template", gait=g))
+    tr = st.truth
+    t, q = tr["time"], tr["q"]
+    frames = m.numeric()["frames"]
+    pose = np.array([frames(qi, np.zeros(m.nq))[0].copy() for qi in q])  # (n, 3, frames)
+    fi = {f: k for k, f in enumerate(m.frame_names)}
+    for side, (land, flat, lift, other_land) in (
+            ("l", (tr["h_land"], tr["p_lift"], tr["h_lift"][1:], tr["p_land"][1:])),
+            ("p", (tr["p_land"][1:], tr["h_lift"][1:], tr["p_lift"][:-1], tr["h_land"][:-1]))):
+        pitch = q @ m.pitch_row(f"{side}_sole")
+        floor = np.min(pose[:, 1, fi[f"{side}_heel"]])  # the truth's floor height
+        for a, b in zip(land, flat, strict=False):  # landing: about the heel
+            k = (t > a) & (t < b)
+            if not k.any():
+                continue
+            assert np.max(np.abs(pose[k, 1, fi[f"{side}_heel"]] - floor)) < 1e-6
+            assert np.all(pitch[k] <= 0) and np.all(np.diff(pitch[k]) > 0)
+        for a, b in zip(other_land - g.heel_rise, lift, strict=False):  # heel rise: about the toe
+            k = (t > a) & (t < b)
+            if not k.any():
+                continue
+            assert np.max(np.abs(pose[k, 1, fi[f"{side}_toe"]] - floor)) < 1e-6
+            assert np.all(pitch[k] >= 0) and np.all(np.diff(pitch[k]) > 0)
+            assert pitch[k][-1] == pytest.approx(g.toe_off_pitch, abs=0.05)
+    offs = marker_offsets(m)
+    z0 = frames(np.zeros(m.nq), np.zeros(m.nq))[0]
+    for limb, side in (("l_foot", "l"), ("p_foot", "p")):
+        toe = z0[0, fi[f"{side}_toe"]] - z0[0, fi[f"{side}_ankle"]]
+        assert offs[limb][1][0] == pytest.approx(min(MARKERS[limb][1][0], toe))
+    assert marker_offsets(hp_model.load_model()) == MARKERS  # the example subject's: as before

@@ -138,6 +138,13 @@ class MultiContactOptions:
     #  above the ground times (1 - s) (s the domain's fraction): a leading foot skimmed the
     #  ground flat for the last quarter of its double support, and any tracking error in
     #  closed loop then kept it up (it landed at tau 1.1, the trailing toe pulling)
+    weight_acceptance: float = 0.5  # BW: in a double support the leading foot's normal force
+    #  is at least this times min(1, 3 s), s the domain's fraction: it takes the weight over
+    #  within the first third (a person's loading response; openOFM's fit carries 0.75-1.0
+    #  BW at the double supports' ends and never meets the bound).  Without it, the fit of a
+    #  kinematic template with a rolling foot left the struck heel unloaded (3-20 N) over the
+    #  first third of ds_p, and in closed loop the heel pulled on the ground 5 ms after the
+    #  strike
     flat_landing_velocity: float = 0.02  # m/s, least downward toe speed as a foot lands flat
     #  (at 0 the fitted foot settled onto the ground with no speed left, and in closed loop
     #  a tracking error of 0.006 rad, 1 mm at the toe, delayed the landing by 10 % of the
@@ -445,6 +452,10 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     soft += [len(nlp.g), len(nlp.g) + 1]
     nlp.geq(step - change)
     nlp.geq(step + change)
+    if d.is_double_support:  # the leading contact (the first) takes the weight over
+        soft.append(len(nlp.g))
+        ramp = np.minimum(1.0, 3.0 * np.linspace(0.0, 1.0, P)[1:])
+        nlp.geq(X["lam"][1, 1:] - opt.weight_acceptance * ramp[None, :])
     # the free points above the ground; the one this domain ends by landing (its guard's)
     # by landing_clearance (1 - s) at least: it lands at the end, not before
     td = GRAPH.touchdown_frame(d)

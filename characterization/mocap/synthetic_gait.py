@@ -42,6 +42,14 @@ class GaitParams:
     max_leg_extension: float = 0.993  # hip-ankle distance / leg length, at most
     height_smoothing: float = 0.004  # m, of the smooth minimum limiting the hip height
     height_lowpass_hz: float = 4.0  # zero-phase low-pass of the hip height (0 = off)
+    #: the foot's roll in stance (all 0: flat from touchdown to lift-off, as before): it
+    #: lands on its heel pitched toe-up by ``heel_strike_pitch`` (rad) and rolls flat about
+    #: the heel by the other foot's lift-off; its heel rises ``heel_rise`` s before the other
+    #: foot's touchdown, the foot turning about its toe (pitch rising as the square of time)
+    #: to ``toe_off_pitch`` (rad, toe down) at its lift-off
+    heel_strike_pitch: float = 0.0
+    toe_off_pitch: float = 0.0
+    heel_rise: float = 0.0
     sd_stride_time: float = 0.03
     sd_step_length: float = 0.015
     sd_double_support: float = 0.01
@@ -83,21 +91,65 @@ def gait_events(n_strides: int, p: GaitParams, rng: np.random.Generator) -> Gait
                       p_print=p_print, h_print=p_print + sh)
 
 
+@dataclass(frozen=True)
+class _Roll:
+    """One foot's roll (:class:`GaitParams`): per landing i the time it is flat
+    (``flats[i]``), per lift-off i the time its heel rises (``rises[i]``); pitches (rad) and
+    the heel and toe lengths (m) of :class:`LegGeometry`."""
+
+    flats: np.ndarray
+    rises: np.ndarray
+    strike_pitch: float = 0.0
+    off_pitch: float = 0.0
+    heel: float = 0.0
+    toe: float = 0.0
+
+    def pose(self, print_x: float, pitch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sole point under the ankle (x, z) of a foot at ``pitch`` (toe down positive)
+        on the print ``print_x`` (its flat sole point): turned about the heel when toe-up,
+        about the toe when toe-down."""
+        heel_x, toe_x = print_x - self.heel, print_x + self.toe
+        up = pitch < 0
+        x = np.where(up, heel_x + self.heel * np.cos(pitch), toe_x - self.toe * np.cos(pitch))
+        z = np.where(up, -self.heel * np.sin(pitch), self.toe * np.sin(pitch))
+        return x, z
+
+
 def _foot(t: np.ndarray, lifts: np.ndarray, lands: np.ndarray, prints_from: np.ndarray,
-          prints_to: np.ndarray, clearance: np.ndarray, toe_up: float, first_print: float
-          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sole point (x, z) and foot pitch of one foot; swing i goes lifts[i] -> lands[i]."""
-    x = np.full_like(t, first_print)
+          prints_to: np.ndarray, clearance: np.ndarray, toe_up: float,
+          roll: _Roll | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sole point (x, z) and foot pitch of one foot; swing i goes lifts[i] -> lands[i], from
+    the pose of its lift-off to that of its landing (flat both without a ``roll``)."""
+    x = np.full_like(t, prints_from[0])
     z = np.zeros_like(t)
     ph = np.zeros_like(t)
     for i in range(len(lifts)):
         after = t >= lands[i]
         x[after] = prints_to[i]
-        sw = (t > lifts[i]) & (t < lands[i])
+        z[after], ph[after] = 0.0, 0.0
+        start, end = (0.0, 0.0), (0.0, 0.0)
+        pitch0, pitch1 = 0.0, 0.0
+        if roll is not None:
+            rise = (t >= roll.rises[i]) & (t < lifts[i])
+            u = (t[rise] - roll.rises[i]) / (lifts[i] - roll.rises[i])
+            ph[rise] = roll.off_pitch * u**2
+            x[rise], z[rise] = roll.pose(prints_from[i], ph[rise])
+            down = (t >= lands[i]) & (t < roll.flats[i])
+            u = (t[down] - lands[i]) / (roll.flats[i] - lands[i])
+            ph[down] = -roll.strike_pitch * (1.0 - u)
+            x[down], z[down] = roll.pose(prints_to[i], ph[down])
+            pitch0, pitch1 = roll.off_pitch, -roll.strike_pitch
+            a, b = roll.pose(prints_from[i], np.array([pitch0])), \
+                roll.pose(prints_to[i], np.array([pitch1]))
+            start = (float(a[0][0]) - prints_from[i], float(a[1][0]))
+            end = (float(b[0][0]) - prints_to[i], float(b[1][0]))
+        sw = (t >= lifts[i]) & (t < lands[i])
         s = (t[sw] - lifts[i]) / (lands[i] - lifts[i])
-        x[sw] = prints_from[i] + (prints_to[i] - prints_from[i]) * _quintic(s)
-        z[sw] = clearance[i] * _bump(s)
-        ph[sw] = -toe_up * _bump(s)
+        blend = _quintic(s)
+        x0, x1 = prints_from[i] + start[0], prints_to[i] + end[0]
+        x[sw] = x0 + (x1 - x0) * blend
+        z[sw] = start[1] + (end[1] - start[1]) * blend + clearance[i] * _bump(s)
+        ph[sw] = pitch0 + (pitch1 - pitch0) * blend - toe_up * _bump(s)
     return x, z, ph
 
 
@@ -119,11 +171,14 @@ def _two_link_ik(hip: np.ndarray, ankle: np.ndarray, l1: float, l2: float, what:
 
 @dataclass(frozen=True)
 class LegGeometry:
-    """Sagittal lengths (m): hip -> knee, knee -> ankle, ankle above the sole."""
+    """Sagittal lengths (m): hip -> knee, knee -> ankle, ankle above the sole, and the sole's
+    heel behind and toe ahead of the ankle (the points the foot rolls about)."""
 
     thigh: float
     shank: float
     ankle_height: float
+    heel: float = 0.0
+    toe: float = 0.0
 
 
 def gait_q(t: np.ndarray, ev: GaitEvents, p: GaitParams, left: LegGeometry,
@@ -152,10 +207,17 @@ def gait_q(t: np.ndarray, ev: GaitEvents, p: GaitParams, left: LegGeometry,
     th_b = p.trunk_lean + p.trunk_sway * np.sin(4 * np.pi * phase)
     clr = p.clearance + p.sd_clearance * rng.standard_normal((2, n_str))
     # human foot: swing k from h_prev[k] to h_print[k]; prosthesis: p_print[k] -> p_print[k+1]
+    rolls = p.heel_strike_pitch or p.toe_off_pitch
+    # the human foot is flat at the prosthesis's lift-off, its heel rises before the
+    # prosthesis's next touchdown; the prosthesis foot alike
+    h_roll = _Roll(ev.p_lift, ev.p_land - p.heel_rise,
+                   p.heel_strike_pitch, p.toe_off_pitch, left.heel, left.toe) if rolls else None
+    p_roll = _Roll(ev.h_lift[1:], ev.h_land[:-1] - p.heel_rise, p.heel_strike_pitch,
+                   p.toe_off_pitch, right.heel, right.toe) if rolls else None
     hx, hz, hph = _foot(t, ev.h_lift, ev.h_land, h_prev, ev.h_print, clr[0], p.toe_up_human,
-                        h_prev[0])
+                        h_roll)
     px, pz, pph = _foot(t, ev.p_lift[:-1], ev.p_land[1:], ev.p_print[:-1], ev.p_print[1:],
-                        clr[1], p.toe_up_prosthesis, ev.p_print[0])
+                        clr[1], p.toe_up_prosthesis, p_roll)
     legs = ((hx, hz, hph, left, (3, 4, 5), "left leg"),
             (px, pz, pph, right, (6, 10, 11), "right leg"))
     ankles = [np.column_stack([sx + g.ankle_height * np.sin(ph),

@@ -197,10 +197,10 @@ def _template_motion(model: HumanProsthesisModel, opts: SynthOptions,
     template (:mod:`characterization.mocap.synthetic_gait`)."""
     z0 = model.numeric()["frames"](np.zeros(model.nq), np.zeros(model.nq))[0].copy()
     zf = {n: z0[:, i] for i, n in enumerate(model.frame_names)}
-    left = LegGeometry(-zf["l_knee"][1], zf["l_knee"][1] - zf["l_ankle"][1],
-                       zf["l_ankle"][1] - zf["l_sole"][1])
-    right = LegGeometry(-zf["p_knee"][1], zf["p_knee"][1] - zf["p_ankle"][1],
-                        zf["p_ankle"][1] - zf["p_sole"][1])
+    left, right = (LegGeometry(-zf[f"{s}_knee"][1], zf[f"{s}_knee"][1] - zf[f"{s}_ankle"][1],
+                               zf[f"{s}_ankle"][1] - zf[f"{s}_sole"][1],
+                               zf[f"{s}_ankle"][0] - zf[f"{s}_heel"][0],
+                               zf[f"{s}_toe"][0] - zf[f"{s}_ankle"][0]) for s in ("l", "p"))
     g = opts.gait
     ev = gait_events(opts.n_strides + 2, g, rng)
     t0, t1 = ev.p_land[1] - opts.lead, ev.p_land[-1] + opts.lead
@@ -248,6 +248,21 @@ def _model_motion(model: HumanProsthesisModel, opts: SynthOptions,
     return t, q, ev, float(np.mean(np.diff(p_land)))
 
 
+def marker_offsets(model: HumanProsthesisModel) -> dict[str, tuple[tuple[float, ...], ...]]:
+    """:data:`MARKERS` on ``model``: each foot's toe marker (Marker2) no further forward than
+    the model's toe, the point its rigid foot rolls off (a lab's marker on the metatarsal
+    heads).  Ahead of it the marker would sink into the floor as the foot rolls; behind it
+    it rises and the contact rule sees the foot leave the ground at the heel off.  The
+    example subject's toes are ahead of both markers: its takes are unchanged."""
+    z0 = model.numeric()["frames"](np.zeros(model.nq), np.zeros(model.nq))[0]
+    x = {n: float(z0[0, i]) for i, n in enumerate(model.frame_names)}
+    out: dict[str, tuple[tuple[float, ...], ...]] = dict(MARKERS)
+    for limb, side in (("l_foot", "l"), ("p_foot", "p")):
+        heel, (bx, by, bz), *rest = MARKERS[limb]
+        out[limb] = (heel, (min(bx, x[f"{side}_toe"] - x[f"{side}_ankle"]), by, bz), *rest)
+    return out
+
+
 def _markers(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, opts: SynthOptions,
              rng: np.random.Generator) -> tuple[Take, Take, dict[str, np.ndarray],
                                                 np.ndarray, dict[str, np.ndarray]]:
@@ -276,7 +291,8 @@ def _markers(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, opts: Sy
     # markers in the model frame (x, y, z), exact
     exact: dict[str, np.ndarray] = {}
     rbn = synthetic_names()
-    for limb, offs in MARKERS.items():
+    offsets = marker_offsets(model)
+    for limb, offs in offsets.items():
         p = limb_pose[limb]
         c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
         for k, (bx, by, bz) in enumerate(offs):
@@ -296,7 +312,7 @@ def _markers(model: HumanProsthesisModel, t: np.ndarray, q: np.ndarray, opts: Sy
 
     bodies: dict[str, RigidBodyTrack] = {}
     rb_markers: dict[str, np.ndarray] = {}
-    for limb, offs in MARKERS.items():
+    for limb, offs in offsets.items():
         mk = [f"{rbn[limb]}:Marker{k + 1}" for k in range(len(offs))]
         template = np.array([[bx, LATERAL[limb] + by, bz] for bx, by, bz in offs])
         template = template - template.mean(0)
