@@ -168,6 +168,7 @@ XDIST_COST: dict[str, float] = {
     "tests/test_contact_tube.py": 45,  # the multi-contact closed loop's build, 2 playbacks
     "tests/test_sweep_contact.py": 65,  # a Dask worker's set-up, 12 runs, 3 replays
     "tests/test_person_synth.py": 110,  # the person's walk, its take processed and fitted
+    "tests/test_person_reference.py": 80,  # the packaged person's recipe, processed and fitted
     "tests/test_gait_tables.py": 10,
 }
 

@@ -83,10 +83,18 @@ def person_motion(gait: ContactCycle, opts: SynthOptions
     return t, q, ev, float(np.mean(np.diff(p_land)))
 
 
-def synthesize_person(gait_path: str | os.PathLike[str], opts: SynthOptions
+#: the packaged multi-contact gait the synthetic person walks by default: the example
+#: subject's rolling-foot template walk, fitted (``tests/person_reference.py``, its NOTICE
+#: in the folder)
+REFERENCE_PERSON_GAIT = Path(__file__).resolve().parents[1] / "data" / \
+    "reference_person_gait.json"
+
+
+def synthesize_person(gait_path: str | os.PathLike[str] | None, opts: SynthOptions
                       ) -> tuple[SyntheticTake, ContactCycle]:
-    """The take of the model of the multi-contact gait file walking it, and the gait."""
-    gait = load_contact_cycle(gait_path)
+    """The take of the model of the multi-contact gait file walking it (None: the packaged
+    :data:`REFERENCE_PERSON_GAIT`), and the gait."""
+    gait = load_contact_cycle(gait_path or REFERENCE_PERSON_GAIT)
     t, q, ev, stride_time = person_motion(gait, opts)
     rng = np.random.default_rng(opts.seed)
     return take_of_motion(gait.model, t, q, ev, stride_time, opts, rng, "person"), gait

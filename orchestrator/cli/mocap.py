@@ -174,7 +174,8 @@ def synth(
     ] = "model",
     gait: Annotated[Path | None, typer.Option(
         "--gait", help="Reference gait of --source model (default: the packaged gait of the "
-        "default subject and device); the multi-contact gait of --source person.",
+        "default subject and device); the multi-contact gait of --source person (default: "
+        "the packaged synthetic person's).",
         dir_okay=False)] = None,
     variability: Annotated[float, typer.Option(
         min=0, help="--source model: SD of the interior Bezier coefficients per step, "
@@ -207,7 +208,7 @@ def synth(
         from characterization.gait.person_synth import synthesize_person, write_person
         from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
 
-        if gait is None or artifact_kind(gait) != MULTICONTACT_KIND:
+        if gait is not None and artifact_kind(gait) != MULTICONTACT_KIND:
             raise typer.BadParameter("--source person walks a multi-contact gait file (gait "
                                      "fit --domains multicontact)", param_hint="--gait")
         if subject is not None or device is not None:
