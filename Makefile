@@ -14,11 +14,14 @@ $(STAMP): pyproject.toml $(LOCK)
 	$(VENV)/bin/python -m pip check
 	touch $(STAMP)
 
-# The main job, on the embedded default input (the synthetic subject): model self-check,
-# then `hpcosim demo`: synthetic take -> steps -> gait -> tube -> experiments -> report.md
-# (outputs in out/demo/).
+# The main job, on the embedded default inputs: model self-check, then `hpcosim demo` twice:
+# the synthetic person with double support on the multi-contact graph (synthetic take ->
+# steps -> the person's gait -> tube -> experiments -> FMU -> co-simulation -> replay,
+# out/demo-person/), and the synthetic subject on the paper's two domains, the paper's claims
+# judged (synthetic take -> steps -> gait -> tube -> experiments, out/demo/).
 demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
+	$(VENV)/bin/hpcosim demo --domains multicontact --out out/demo-person
 	$(VENV)/bin/hpcosim demo --out out/demo
 
 # The suite in two phases (README, Tests; docs/tests.md): first every test not marked `serial`

@@ -49,3 +49,36 @@ def test_a_mapping_without_a_take_is_refused(tmp_path, capsys):
     assert hpcosim(["demo", "--mapping", str(TAKE / "mapping.toml"), "--out",
                     str(tmp_path / "d")]) == 2
     assert "--mapping goes with --take" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.serial  # its co-simulation's replies are judged against wall-clock deadlines
+def test_the_main_job_on_the_synthetic_person(tmp_path, capsys):
+    """``demo --domains multicontact``: the synthetic person with double support (12 strides
+    of the packaged person) through every stage, each holding (exit 0): its fitted gait is
+    the person's and `clfqp` walks it, the tube of its 12 single supports holds some of them
+    left out (openOFM's two hold none), the co-simulation walks and replays with no
+    difference."""
+    out = tmp_path / "person"
+    rc = hpcosim(["demo", "--domains", "multicontact", "--out", str(out), "--steps", "6",
+                  "--draws", "0"])
+    text = capsys.readouterr().out
+    assert rc == 0, text[-2000:]
+    report = (out / "report.md").read_text()
+    for stage in ("synthetic person", "mocap processing", "gait fit", "tube fit",
+                  "experiments", "fmu build", "co-simulation", "replay"):
+        assert f"| {stage} |" in report and f"| {stage} | `" in report
+    gait = json.loads((out / "gait.json").read_text())
+    assert gait["check"]["passed"] and not gait["mismatch_allowed"]
+    assert [r["gait"] for r in gait["check"]["rows"] if r["criterion"].startswith("double")]
+    tube = json.loads((out / "tube.json").read_text())
+    assert tube["n_steps"] >= 10 and tube["credibility"]["leave_one_out"]["coverage"] > 0
+    metrics = json.loads((out / "experiments" / "metrics.json").read_text())
+    assert metrics["nominal"]["clfqp"]["walk"]["walks"]
+    assert "largest torque difference 0 N m" in text
+
+
+def test_the_paper_graph_and_a_take_do_not_go_together(tmp_path, capsys):
+    assert hpcosim(["demo", "--take", str(TAKE / "dynamic.c3d"), "--domains", "paper",
+                    "--out", str(tmp_path / "d")]) == 2
+    assert "--take runs the person's multi-contact gait" in capsys.readouterr().err

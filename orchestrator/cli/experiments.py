@@ -10,6 +10,7 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 
+from hp_model.domains import DomainGraph
 from orchestrator.cli.options import DeviceOpt, SubjectOpt
 from orchestrator.cli.outcome import HOLDS, Verdict, claims_verdict, conclude, uncounted_claims
 
@@ -103,18 +104,32 @@ def demo(
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="With --take: its mapping file (mocap inspect).", dir_okay=False)
                        ] = None,
-    draws: Annotated[int, typer.Option("--draws", min=0, help="With --take: draws per "
-                                       "perturbation family.")] = 10,
+    draws: Annotated[int, typer.Option("--draws", min=0, help="With --take or --domains "
+                                       "multicontact: draws per perturbation family.")] = 10,
+    domains: Annotated[DomainGraph | None, typer.Option(
+        help="'paper' (default): the synthetic subject on the paper's two domains, its "
+        "claims judged; 'multicontact': the synthetic person with double support (mocap "
+        "synth --source person) on the multi-contact graph, every stage to a replayed "
+        "co-simulation.")] = None,
 ) -> None:
     """The whole pipeline on the synthetic subject: mocap synth -> mocap process -> gait fit
-    -> tube fit -> experiments -> report.md.  With --take: on a lab's take, the person's
-    multi-contact gait: mocap process -> gait fit --domains multicontact -> tube fit ->
-    experiments --tube -> fmu build -> run (co-simulation, recorded) -> replay -> report.md."""
+    -> tube fit -> experiments -> report.md.  With --domains multicontact (on the synthetic
+    person) or --take (a lab's take), the person's multi-contact gait: mocap process -> gait
+    fit --domains multicontact -> tube fit -> experiments --tube -> fmu build -> run
+    (co-simulation, recorded) -> replay -> report.md."""
     if take is not None:
+        if domains == DomainGraph.PAPER:
+            raise typer.BadParameter("--take runs the person's multi-contact gait",
+                                     param_hint="--domains")
         _demo_take(take, mapping, out, steps or 20, draws)
         return
     if mapping is not None:
         raise typer.BadParameter("--mapping goes with --take", param_hint="--mapping")
+    if domains == DomainGraph.MULTICONTACT:
+        if quick:
+            raise typer.BadParameter("--quick runs the paper's graph", param_hint="--quick")
+        _demo_person(out, steps or 20, draws)
+        return
     _demo_synthetic(out, quick, steps)
 
 
@@ -245,10 +260,38 @@ _STATUS = {0: "holds", 1: "done, negative", 2: "error"}
 
 
 def _demo_take(take: Path, mapping: Path | None, out: Path, steps: int, draws: int) -> None:
-    """``demo --take``: each stage the verb a user would type (:func:`orchestrator.cli.main`),
-    its output printed as it comes; a stage that errs ends the demo (exit 2), a negative one
-    (the gait not the person's, a walk that falls) is reported and the demo goes on (exit
-    1 at the end); ``report.md`` sums the stages up."""
+    """``demo --take``: the person's pipeline (:func:`_demo_pipeline`) on a lab's take, the
+    gait written even when it is not the person's (``--allow-mismatch``)."""
+    _demo_pipeline(out, take, steps, draws, [],
+                   [*(["--mapping", str(mapping)] if mapping else [])], ["--allow-mismatch"])
+
+
+#: strides of the synthetic person's take in ``demo --domains multicontact``: 12 give the
+#: tube 12 flat single supports (openOFM's take has 2, which certify nothing)
+PERSON_STRIDES = 12
+
+
+def _demo_person(out: Path, steps: int, draws: int) -> None:
+    """``demo --domains multicontact``: the person's pipeline on the synthetic person with
+    double support (``mocap synth --source person``: the packaged person's gait walked by its
+    model), processed as the person it is; its fitted gait must be the person's."""
+    take = out / "take"
+    synth = ("synthetic person", lambda: ["mocap", "synth", "--source", "person", "--out",
+                                          str(take), "--steps", str(PERSON_STRIDES),
+                                          "--seed", "1"])
+    _demo_pipeline(out, take / "take.csv", steps, draws, [synth],
+                   ["--subject", str(take / "subject.toml")], [])
+
+
+def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
+                   before: list[tuple[str, Callable[[], list[str]]]], process_args: list[str],
+                   fit_args: list[str]) -> None:
+    """Each stage the verb a user would type (:func:`orchestrator.cli.main`), its output
+    printed as it comes: ``before`` (e.g. making the take), then mocap process ->
+    gait fit --domains multicontact -> tube fit -> experiments --tube -> fmu build -> run
+    (co-simulation, recorded) -> replay.  A stage that errs ends the demo (exit 2), a
+    negative one (the gait not the person's, a walk that falls) is reported and the demo
+    goes on (exit 1 at the end); ``report.md`` sums the stages up."""
     from orchestrator.cli import main as hpcosim
 
     out.mkdir(parents=True, exist_ok=True)
@@ -262,11 +305,11 @@ def _demo_take(take: Path, mapping: Path | None, out: Path, steps: int, draws: i
                 *(["--tube", str(tube)] if tube.is_file() else [])]
 
     stages: list[tuple[str, Callable[[], list[str]]]] = [
+        *before,
         ("mocap processing", lambda: ["mocap", "process", str(take), "--out",
-                                      str(out / "steps.npz"),
-                                      *(["--mapping", str(mapping)] if mapping else [])]),
+                                      str(out / "steps.npz"), *process_args]),
         ("gait fit", lambda: ["gait", "fit", str(out / "steps.npz"), "--domains",
-                              "multicontact", "--allow-mismatch", "--out", str(gait)]),
+                              "multicontact", *fit_args, "--out", str(gait)]),
         ("tube fit", lambda: ["tube", "fit", str(out / "steps.npz"), "--gait", str(gait),
                               "--out", str(tube)]),
         ("experiments", experiments_args),
@@ -277,7 +320,8 @@ def _demo_take(take: Path, mapping: Path | None, out: Path, steps: int, draws: i
                                    "--record", str(rec)]),
         ("replay", lambda: ["replay", str(rec)]),
     ]
-    tube.unlink(missing_ok=True)  # a tube of an earlier demo in the folder is not this one's
+    for stale in (tube, gait):  # an earlier demo's in the folder is not this one's
+        stale.unlink(missing_ok=True)
     done: list[tuple[str, float, int, list[str]]] = []
     for stage, make_args in stages:
         args = make_args()
