@@ -21,8 +21,8 @@ $(STAMP): pyproject.toml $(LOCK)
 # judged (synthetic take -> steps -> gait -> tube -> experiments, out/demo/).
 demo: $(STAMP)
 	$(VENV)/bin/hpcosim model check
-	$(VENV)/bin/hpcosim demo --domains multicontact --out out/demo-person
-	$(VENV)/bin/hpcosim demo --out out/demo
+	$(VENV)/bin/hpcosim demo --out out/demo-person
+	$(VENV)/bin/hpcosim demo --domains paper --out out/demo
 
 # The suite in two phases (README, Tests; docs/tests.md): first every test not marked `serial`
 # on pytest-xdist workers, one per core (TEST_WORKERS), the tests of a file together on one

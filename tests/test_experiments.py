@@ -148,7 +148,7 @@ def test_demo_end_to_end_gives_the_results_the_readme_states(tmp_path, capsys, m
     monkeypatch.setenv("COLUMNS", "80")
     monkeypatch.setenv("LINES", "24")
     capsys.readouterr()
-    assert main(["demo", "--out", str(out)]) == 0
+    assert main(["demo", "--domains", "paper", "--out", str(out)]) == 0
     printed = capsys.readouterr().out.rstrip("\n").splitlines()
     print("\n".join(printed))
     assert_fits_one_screen(printed, out)

@@ -49,7 +49,8 @@ def steps_file(tmp_path_factory):
 
 def test_ipopt_failure_is_reported_and_writes_nothing(steps_file, tmp_path):
     out = tmp_path / "gait.json"
-    r = run("gait", "fit", str(steps_file), "--out", str(out), "--max-iter", "3")
+    r = run("gait", "fit", "--domains", "paper", str(steps_file), "--out", str(out),
+            "--max-iter", "3")
     assert r.returncode == 2
     assert "IPOPT status 'Maximum_Iterations_Exceeded'" in r.stderr
     assert "Traceback" not in r.stderr
@@ -57,7 +58,7 @@ def test_ipopt_failure_is_reported_and_writes_nothing(steps_file, tmp_path):
 
 
 def test_bad_segments_option_is_one_line(steps_file, tmp_path):
-    r = run("gait", "fit", str(steps_file), "--out", str(tmp_path / "g.json"),
+    r = run("gait", "fit", "--domains", "paper", str(steps_file), "--out", str(tmp_path / "g.json"),
             "--segments", "steps")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.strip().splitlines() == [
@@ -66,7 +67,7 @@ def test_bad_segments_option_is_one_line(steps_file, tmp_path):
 
 def test_fit_recovers_the_reference_gait(steps_file, tmp_path, model):
     out = tmp_path / "gait.json"
-    r = run("gait", "fit", str(steps_file), "--out", str(out))
+    r = run("gait", "fit", "--domains", "paper", str(steps_file), "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "gait.png").stat().st_size > 10_000
     doc = json.loads(out.read_text())
@@ -98,7 +99,7 @@ def test_a_gait_that_does_not_walk_is_not_written(steps_file, tmp_path):
     the optimized gait fall: one line naming the failed checks with their numbers, exit 1, no
     file; --allow-unstable writes it, marked as not walking."""
     out = tmp_path / "soft.json"
-    args = ("gait", "fit", str(steps_file), "--out", str(out), "--nodes", "5",
+    args = ("gait", "fit", "--domains", "paper", str(steps_file), "--out", str(out), "--nodes", "5",
             "--track-kp", "25", "--track-kd", "10", "--no-figure")
     r = run(*args)
     assert r.returncode == 1, r.stderr
@@ -118,3 +119,21 @@ def test_a_gait_that_does_not_walk_is_not_written(steps_file, tmp_path):
     v = json.loads(out.read_text())["verification"]
     assert v["walks"] is False and v["steps_simulated"] < 20
     assert "does NOT walk" in r.stdout
+
+
+def test_the_default_multi_contact_fit_sends_a_walk_without_double_support_to_paper(
+        steps_file, tmp_path):
+    """The multi-contact graph is the default: on the model source's take (flat feet to
+    the lift-off, no heel off) it stops before any optimization in one line that names
+    `--domains paper`; an option of the paper's fit given to it is refused in one line, and
+    one of the multi-contact fit given to the paper's."""
+    out = tmp_path / "g.json"
+    for args, words in (((), "gait fit --domains paper"),
+                        (("--touchdown-slip", "0.5"), "--touchdown-slip: an option of the paper"),
+                        (("--domains", "paper", "--allow-mismatch"),
+                         "--allow-mismatch: an option of the multicontact")):
+        r = run("gait", "fit", str(steps_file), "--out", str(out), *args)
+        assert r.returncode == 2, r.stderr
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and words in lines[0] and "Traceback" not in r.stderr
+        assert not out.exists() and "IPOPT" not in r.stdout

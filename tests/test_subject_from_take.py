@@ -204,7 +204,8 @@ def test_bad_subject_file_is_one_line_before_optimization(tmp_path):
     bad.write_text('schema_version = 1\nname = "x"\nsex = "male"\nbody_mass = 800.0\n'
                    'radii_of_gyration = "winter"\n[lengths]\nthigh = 0.44\nshank = 0.44\n'
                    'ankle_height = 0.07\nfoot = 0.27\nheel = 0.05\ntrunk = 0.52\n')
-    r = run("gait", "fit", str(steps), "--subject", str(bad), "--out", str(tmp_path / "g.json"))
+    r = run("gait", "fit", "--domains", "paper", str(steps), "--subject", str(bad), "--out",
+            str(tmp_path / "g.json"))
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in r.stderr
@@ -218,7 +219,7 @@ def test_bad_stored_subject_is_one_line_before_optimization(tmp_path):
         record["config"]["lengths"]["heel"] = 0.2
 
     steps = _steps_with_subject(tmp_path, mutate)
-    r = run("gait", "fit", str(steps), "--out", str(tmp_path / "g.json"))
+    r = run("gait", "fit", "--domains", "paper", str(steps), "--out", str(tmp_path / "g.json"))
     assert r.returncode == 2, r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in r.stderr
@@ -234,8 +235,8 @@ def test_subject_whose_leg_the_device_does_not_fit_is_warned_before_optimization
     subj.write_text('schema_version = 1\nname = "lab-m80"\nsex = "male"\nbody_mass = 80.0\n'
                     'radii_of_gyration = "de_leva"\n[lengths]\nthigh = 0.441\nshank = 0.443\n'
                     'ankle_height = 0.070\nfoot = 0.274\nheel = 0.050\ntrunk = 0.518\n')
-    r = run("gait", "fit", str(steps), "--subject", str(subj), "--out", str(tmp_path / "g.json"),
-            "--max-iter", "2", "--no-verify")
+    r = run("gait", "fit", "--domains", "paper", str(steps), "--subject", str(subj), "--out",
+            str(tmp_path / "g.json"), "--max-iter", "2", "--no-verify")
     lines = r.stderr.splitlines()
     assert "'lab-m80' from --subject" in r.stdout  # which subject, and not the steps'
     warn = [ln for ln in lines if ln.startswith("warning:")]

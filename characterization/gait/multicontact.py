@@ -100,7 +100,10 @@ class MultiContactTargets:
                                         f"{', '.join(GRAPH.domains)})")
             T = self.durations[d]
             if not (np.isfinite(T) and 0.01 < T < 3.0):
-                raise MultiContactError(f"targets: {d} lasts {T:.3f} s (need 0.01-3 s)")
+                raise MultiContactError(
+                    f"targets: {d} lasts {T:.3f} s in the take (need 0.01-3 s): a walk "
+                    "without heel offs or double supports (as `mocap synth`'s model source) "
+                    "is the paper's: `gait fit --domains paper`")
             a = np.asarray(self.angles[d])
             if a.ndim != 2 or a.shape[0] != len(TRACKED) or a.shape[1] < 2:
                 raise MultiContactError(f"targets: {d} angles have shape {a.shape}, "
@@ -849,7 +852,8 @@ def targets_from_windows(time: np.ndarray, q: np.ndarray, coord_names: tuple[str
             "no complete stride with both feet's events (prosthesis touchdown, human "
             "lift-off, human touchdown, prosthesis lift-off, prosthesis touchdown): the "
             "multi-contact fit needs at least one; record a longer walk or pool takes with "
-            "`hpcosim mocap process A B C --out steps.npz`")
+            "`hpcosim mocap process A B C --out steps.npz` (a walk without double support, "
+            "as `mocap synth`'s model source: `gait fit --domains paper`)")
     names = list(coord_names)
     idx = [names.index(c) for c in TRACKED]
     durations, angles = {}, {}

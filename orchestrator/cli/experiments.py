@@ -107,16 +107,17 @@ def demo(
     draws: Annotated[int, typer.Option("--draws", min=0, help="With --take or --domains "
                                        "multicontact: draws per perturbation family.")] = 10,
     domains: Annotated[DomainGraph | None, typer.Option(
-        help="'paper' (default): the synthetic subject on the paper's two domains, its "
-        "claims judged; 'multicontact': the synthetic person with double support (mocap "
-        "synth --source person) on the multi-contact graph, every stage to a replayed "
-        "co-simulation.")] = None,
+        help="'multicontact' (default; --quick: paper): the synthetic person with double "
+        "support (mocap synth --source person) on the multi-contact graph, every stage to a "
+        "replayed co-simulation; 'paper': the synthetic subject on the paper's two domains, "
+        "its claims judged.")] = None,
 ) -> None:
-    """The whole pipeline on the synthetic subject: mocap synth -> mocap process -> gait fit
-    -> tube fit -> experiments -> report.md.  With --domains multicontact (on the synthetic
-    person) or --take (a lab's take), the person's multi-contact gait: mocap process -> gait
-    fit --domains multicontact -> tube fit -> experiments --tube -> fmu build -> run
-    (co-simulation, recorded) -> replay -> report.md."""
+    """The whole pipeline on the synthetic person with double support (or --take: a lab's
+    take), the person's multi-contact gait: mocap synth --source person -> mocap process ->
+    gait fit -> tube fit -> experiments --tube -> fmu build -> run (co-simulation,
+    recorded) -> replay -> report.md.  With --domains paper: on the synthetic subject and
+    the paper's two domains, its claims judged: mocap synth -> mocap process -> gait fit
+    --domains paper -> tube fit -> experiments -> report.md."""
     if take is not None:
         if domains == DomainGraph.PAPER:
             raise typer.BadParameter("--take runs the person's multi-contact gait",
@@ -125,7 +126,7 @@ def demo(
         return
     if mapping is not None:
         raise typer.BadParameter("--mapping goes with --take", param_hint="--mapping")
-    if domains == DomainGraph.MULTICONTACT:
+    if domains == DomainGraph.MULTICONTACT or (domains is None and not quick):
         if quick:
             raise typer.BadParameter("--quick runs the paper's graph", param_hint="--quick")
         _demo_person(out, steps or 20, draws)

@@ -18,48 +18,63 @@ gait_app = typer.Typer(help="Gait design: Bezier regression and PHZD optimizatio
                        no_args_is_help=True)
 
 
+#: ``gait fit``'s options of the paper's PHZD fit only (refused with --domains multicontact)
+PAPER_ONLY = ("degree", "segments", "offset_weight", "touchdown_slip", "track_kp", "track_kd",
+              "verify", "allow_unstable")
+#: and those of the multi-contact fit only
+MULTICONTACT_ONLY = ("allow_mismatch", "motor_margin", "max_joint_speed")
+
+
+def _given(ctx: typer.Context, names: tuple[str, ...]) -> list[str]:
+    """The options among ``names`` the command line set (as ``--option-name``; the source
+    compared by name: typer carries its own copy of click's ``ParameterSource``)."""
+    return [f"--{n.replace('_', '-')}" for n in names
+            if getattr(ctx.get_parameter_source(n), "name", None) == "COMMANDLINE"]
+
+
 @gait_app.command("fit")
 def fit(
+    ctx: typer.Context,
     steps: Annotated[Path, typer.Argument(help="Steps file from `hpcosim mocap process`.",
                                           dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Gait file to write (.json); the Fig. 4 "
                                       "figure goes next to it.", dir_okay=False)],
     subject: SubjectOpt = None,
     device: DeviceOpt = None,
-    degree: Annotated[int, typer.Option(help="Bezier degree of the joint outputs.",
+    degree: Annotated[int, typer.Option(help="paper: Bezier degree of the joint outputs.",
                                         min=1, max=9)] = 5,
     nodes: Annotated[int | None, typer.Option(
         help="Collocation nodes per domain (default: 21 paper, 9 multicontact).",
         min=3, max=101)] = None,
     max_iter: Annotated[int, typer.Option(help="IPOPT iteration limit.", min=1)] = 1000,
     segments: Annotated[str, typer.Option(
-        help="Portions of the take regressed per domain: 'touchdown' (the model's domains, "
+        help="paper: portions of the take regressed per domain: 'touchdown' (the model's domains, "
         "touchdown to touchdown) or 'paper' (delta_p_hip rising = ps, falling = pns).")
     ] = "touchdown",
     offset_weight: Annotated[float, typer.Option(
-        help="Weight of the squared offsets delta_alpha in the cost (0 = the paper's cost).",
+        help="paper: weight of the squared offsets delta_alpha in the cost (0 = the paper's cost).",
         min=0.0)] = 0.1,
     touchdown_slip: Annotated[float | None, typer.Option(
-        help="Largest forward/backward speed of the swing sole at touchdown, m/s (default: "
+        help="paper: largest forward/backward speed of the swing sole at touchdown, m/s (default: "
         "not bounded).", min=0.0)] = None,
     track_kp: Annotated[float, typer.Option(
-        help="Stiffness (1/s^2) of the human's output tracking stored with the gait (the "
+        help="paper: stiffness (1/s^2) of the human's output tracking stored with the gait (the "
         "simulated human, the FMU); the orbit does not depend on it, its stability does.",
         min=0.0)] = 1600.0,
-    track_kd: Annotated[float, typer.Option(help="Damping (1/s) of that tracking.",
+    track_kd: Annotated[float, typer.Option(help="paper: damping (1/s) of that tracking.",
                                             min=0.0)] = 80.0,
-    verify: Annotated[bool, typer.Option(help="Closed-loop verification (20 steps, "
+    verify: Annotated[bool, typer.Option(help="paper: closed-loop verification (20 steps, "
                                          "return map); a gait that fails it is not written.")
                       ] = True,
     allow_unstable: Annotated[bool, typer.Option(
-        help="Write the gait even when it falls or its return map is not contracting "
+        help="paper: write the gait even when it falls or its return map is not contracting "
         "(marked walks: false in its verification).")] = False,
     figure: Annotated[bool, typer.Option(help="Write the Fig. 4 figure.")] = True,
     domains: Annotated[DomainGraph, typer.Option(
-        help="The walk's cycle of domains: 'paper' (ps -> pns, flat feet: the paper's PHZD "
-        "gait, what the tube, controllers and co-simulation run) or 'multicontact' (heel "
-        "strike, foot flat, heel off, toe off, double supports: the person's gait as a "
-        "trajectory, compared with the take; docs/gait-design.md).")] = DomainGraph.PAPER,
+        help="The walk's cycle of domains: 'multicontact' (heel strike, foot flat, heel off, "
+        "toe off, double supports: the person's gait, compared with the take; "
+        "docs/gait-design.md) or 'paper' (ps -> pns, flat feet: the paper's PHZD gait, for "
+        "its claims and for takes without double support).")] = DomainGraph.MULTICONTACT,
     allow_mismatch: Annotated[bool, typer.Option(
         help="multicontact: write the gait even when it is not the person's (marked "
         "mismatch_allowed).")] = False,
@@ -71,9 +86,9 @@ def fit(
         help="multicontact: a bound on every joint's rate, rad/s (default: none; the takes' "
         "fastest joint moves at 5.4-7 rad/s).", min=0.1)] = None,
 ) -> None:
-    """Regress the recorded steps, optimize a periodic PHZD gait, verify it, write it (or,
-    with --domains multicontact, fit the person's multi-contact gait and compare it with
-    the take)."""
+    """Fit the person's multi-contact gait and compare it with the take (or, with --domains
+    paper, regress the recorded steps, optimize a periodic PHZD gait on the paper's two
+    domains, verify it, write it)."""
     import hp_model
     from characterization.gait.figures import save_gait_figure
     from characterization.gait.fit import check_subject_fits_steps, fit_gait, fit_segments
@@ -85,6 +100,13 @@ def fit(
     from orchestrator.cli.options import check_output_file
     from orchestrator.cli.subject import subject_note, subject_source
 
+    wrong = _given(ctx, PAPER_ONLY if domains == DomainGraph.MULTICONTACT else
+                   MULTICONTACT_ONLY)
+    if wrong:
+        other = "paper" if domains == DomainGraph.MULTICONTACT else "multicontact"
+        raise typer.BadParameter(f"{', '.join(wrong)}: an option of the {other} fit, not of "
+                                 f"the {domains} one (--domains {other})",
+                                 param_hint="--domains")
     if domains == DomainGraph.MULTICONTACT:
         from orchestrator.cli.gait_multicontact import fit_multicontact_gait
 

@@ -25,15 +25,17 @@ NEGATIVE_WHEN: dict[tuple[str, ...], str] = {
     ("mocap", "synth"): "-",
     ("mocap", "inspect"): "-",
     ("mocap", "process"): "- (a take that fails a plausibility check is bad input)",
-    ("gait", "fit"): "the gait does not walk (falls, or its return map does not contract)",
+    ("gait", "fit"): "multi-contact: not the person's gait or `clfqp` does not walk it; "
+                    "paper: the gait does not walk (falls, or its return map does not "
+                    "contract)",
     ("gait", "export"): "-",
     ("tube", "fit"): "leave-one-out coverage 0 or below `--min-coverage` (default: the "
                      "a posteriori guarantee 1 - eps)",
     ("tube", "refit"): "as `tube fit`, for the refitted tube or bound",
     ("experiments",): "a paper claim not reproduced (`paper_literal`, a documented negative "
                       "result, excepted); a multi-contact gait: `clfqp` does not walk it",
-    ("demo",): "as `experiments` (`--quick`: claims not judged); `--take`: a stage's result "
-               "negative",
+    ("demo",): "a stage's result negative; `--domains paper`: as `experiments` (`--quick`: "
+               "claims not judged)",
     ("fmu", "build"): "fmpy's validation finds a problem",
     ("run",): "the walker falls or the run faults",
     ("controller", "serve"): "-",
