@@ -100,7 +100,7 @@ def demo(
                                               "run (default 20, --quick 3).")] = None,
     take: Annotated[Path | None, typer.Option(
         "--take", help="A lab's take (C3D, TRC, Motive CSV): the pipeline on the person's "
-        "multi-contact gait instead of the synthetic subject.", dir_okay=False)] = None,
+        "multi-contact gait instead of the synthetic person.", dir_okay=False)] = None,
     mapping: Annotated[Path | None, typer.Option(
         "--mapping", help="With --take: its mapping file (mocap inspect).", dir_okay=False)
                        ] = None,
