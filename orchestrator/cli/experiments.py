@@ -273,20 +273,21 @@ PERSON_STRIDES = 12
 
 
 def _demo_person(out: Path, steps: int, draws: int) -> None:
-    """``demo --domains multicontact``: the person's pipeline on the synthetic person with
-    double support (``mocap synth --source person``: the packaged person's gait walked by its
-    model), processed as the person it is; its fitted gait must be the person's."""
+    """``demo`` (``--domains multicontact``, the default): the person's pipeline on the
+    synthetic person with double support (``mocap synth --source person``: the packaged
+    person's gait walked by its model), processed as the person it is; its fitted gait must
+    be the person's."""
     take = out / "take"
     synth = ("synthetic person", lambda: ["mocap", "synth", "--source", "person", "--out",
                                           str(take), "--steps", str(PERSON_STRIDES),
                                           "--seed", "1"])
     _demo_pipeline(out, take / "take.csv", steps, draws, [synth],
-                   ["--subject", str(take / "subject.toml")], [])
+                   ["--subject", str(take / "subject.toml")], [], "the synthetic person")
 
 
 def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
                    before: list[tuple[str, Callable[[], list[str]]]], process_args: list[str],
-                   fit_args: list[str]) -> None:
+                   fit_args: list[str], who: str | None = None) -> None:
     """Each stage the verb a user would type (:func:`orchestrator.cli.main`), its output
     printed as it comes: ``before`` (e.g. making the take), then mocap process ->
     gait fit --domains multicontact -> tube fit -> experiments --tube -> fmu build -> run
@@ -332,7 +333,7 @@ def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
         done.append((stage, time.perf_counter() - t0, rc, args))
         if rc not in (0, 1) or (stage == "gait fit" and not gait.is_file()):
             break
-    _write_demo_report(out, take, done, gait)
+    _write_demo_report(out, who or take.name, done, gait)
     worst = max(rc for *_x, rc, _a in done)
     for stage, seconds, rc, _args in done:
         _line(console, f"{stage:17s} {seconds:6.1f} s  {_STATUS.get(rc, f'exit {rc}')}")
@@ -343,15 +344,16 @@ def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
         "; ".join(f"{stage}: negative" for stage, _s, rc, _a in done if rc == 1)))
 
 
-def _write_demo_report(out: Path, take: Path, done: list[tuple[str, float, int, list[str]]],
+def _write_demo_report(out: Path, who: str, done: list[tuple[str, float, int, list[str]]],
                        gait: Path) -> None:
-    """``report.md`` of ``demo --take``: each stage's command, time and outcome, the gait's
-    comparison with the take, links to what the stages wrote."""
+    """``report.md`` of ``demo`` on ``who`` (the synthetic person, or a take's file name):
+    each stage's command, time and outcome, the gait's comparison with the take, links to
+    what the stages wrote."""
     import json
 
     from hp_model.atomic_io import atomic_write_text
 
-    lines = [f"# hpcosim demo on {take.name}", "",
+    lines = [f"# hpcosim demo on {who}", "",
              "The person's multi-contact gait, from the take to a co-simulation "
              "(docs/gait-design.md, docs/cosim.md).  The force tube is made on the flat "
              "prosthesis single supports (`tube.md`) and the experiments measure the walks' "
