@@ -75,6 +75,9 @@ def test_the_main_job_on_the_synthetic_person(tmp_path, capsys):
     assert tube["n_steps"] >= 10 and tube["credibility"]["leave_one_out"]["coverage"] > 0
     metrics = json.loads((out / "experiments" / "metrics.json").read_text())
     assert metrics["nominal"]["clfqp"]["walk"]["walks"]
+    # the baseline too: with the struck heel unloaded at the strike (touchdown_load 0) the
+    # loop's heel started at about -60 N and contact-pd fell at its 2nd step
+    assert metrics["nominal"]["contact-pd"]["walk"]["walks"]
     assert "largest torque difference 0 N m" in text
 
 

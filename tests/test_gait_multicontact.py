@@ -136,9 +136,10 @@ def test_the_fit_walks_like_the_take(fitted, mc_model):
 @pytest.mark.slow
 def test_the_ground_forces_are_a_persons(fitted, mc_model):
     """Each foot's ground force over its stance as force plates show a person's (Perry,
-    Winter; OpenSim's subject01 plates, tests/data/opensim-walk): it starts and ends at zero
-    (a heel strike's new contact and the trailing toe's lift-off carry nothing: below 1 % BW,
-    the solver's tolerance on a wrench in body weights being 1e-6), rises and falls no
+    Winter; OpenSim's subject01 plates, tests/data/opensim-walk): the struck heel starts
+    loaded within ``touchdown_load`` (0.1-0.3 BW: what plates show within 17-50 ms of a heel
+    strike, and the closed loop's margin), the trailing toe leaves carrying nothing (below 1 %
+    BW, the solver's tolerance on a wrench in body weights being 1e-6), it rises and falls no
     faster than the rate bound (15 BW/s), the centre of pressure reaches the toe end at the
     heel off (within 1 mm) and starts on the heel end when the foot lands flat, never moving
     back; the vertical force is a double hump with peaks under 1.5 BW (people: 1.1-1.2; the
@@ -173,7 +174,8 @@ def test_the_ground_forces_are_a_persons(fitted, mc_model):
     for foot in ("human", "prosthesis"):
         s = gait_summary(mc_model, r).grf[foot]
         fz = s.fz / weight
-        assert fz[0] < 0.01 and fz[-1] < 0.01, foot
+        low, high = opt.touchdown_load
+        assert low - 1e-6 <= fz[0] <= high + 1e-6 and fz[-1] < 0.01, (foot, fz[0], fz[-1])
         p1, valley, p2, two = hump(fz)
         assert two, (foot, p1, valley, p2)
         assert max(p1, p2) < 1.5, (foot, p1, p2)

@@ -23,13 +23,13 @@ forward translation of one stride.
 
 The ground force is a person's through the transitions, as force plates show it (Perry,
 Winter; OpenSim's subject01 plates): a contact that leaves (the trailing toe at the end of a
-double support) carries nothing at its last point, a heel strike's new contact nothing at its
-first; at the heel off the flat foot's centre of pressure is on the toe end (the heel carries
-nothing) and its force goes on on the toe; a foot landing flat from its heel starts with its
-centre of pressure on the heel end; each contact force changes at a bounded rate
-(``force_rate``, ``shear_rate``, ``moment_rate``; through a rigid impact by no more than one
-interval's worth) and a flat foot's centre of pressure rolls toward the toe no faster than
-``cop_speed``.  The impacts stay rigid (their impulses are not force samples).
+double support) carries nothing at its last point, a heel strike's new contact 0.1-0.3 BW at
+its first (``touchdown_load``); at the heel off the flat foot's centre of pressure is on the
+toe end (the heel carries nothing) and its force goes on on the toe; a foot landing flat from
+its heel starts with its centre of pressure on the heel end; each contact force changes at a
+bounded rate (``force_rate``, ``shear_rate``, ``moment_rate``; through a rigid impact by no
+more than one interval's worth) and a flat foot's centre of pressure rolls toward the toe no
+faster than ``cop_speed``.  The impacts stay rigid (their impulses are not force samples).
 
 Cost: the integral of squared differences of the trunk pitch and the six joint angles from
 the take's (per domain, over normalized time), the squared differences of each domain's
@@ -148,6 +148,15 @@ class MultiContactOptions:
     #  kinematic template with a rolling foot left the struck heel unloaded (3-20 N) over the
     #  first third of ds_p, and in closed loop the heel pulled on the ground 5 ms after the
     #  strike
+    touchdown_load: tuple[float, float] = (0.1, 0.3)  # BW: a struck heel's normal force at
+    #  its first point, within this range (a rigid impact stops the heel, and the force after
+    #  it is finite).  Plates put 0.03-0.14 BW under a heel within 17 ms of its contact and
+    #  0.25-0.35 BW within 33-50 ms (OpenSim's subject01, 60 Hz).  With the heel carrying
+    #  nothing there (0, 0) the closed loop's struck heel started at about -60 N and pulled:
+    #  contact-pd fell at the first prosthesis heel strike on the synthetic person's fit and
+    #  at the 4th on openOFM's.  With a least load only, the fit put 0.86-1.17 BW on
+    #  openOFM's heels at the strike.  Held from the first solve on, the range converged on
+    #  both real takes and two synthetic ones in 20-35 s
     flat_landing_velocity: float = 0.02  # m/s, least downward toe speed as a foot lands flat
     #  (at 0 the fitted foot settled onto the ground with no speed left, and in closed loop
     #  a tracking error of 0.006 rad, 1 mm at the toe, delayed the landing by 10 % of the
@@ -563,12 +572,12 @@ def _transitions(nlp: NLP, model: HumanProsthesisModel,
                  soft: list[int]) -> None:
     """The ground force of each foot through the domains' transitions, as a person's: a
     contact that leaves (the trailing toe at the end of a double support) carries nothing
-    at its last point; a new one (a heel strike) carries nothing at its first; a heel off
-    has the flat foot's centre of pressure on the toe end (the heel carries nothing) and
-    the same force on the toe after it; a foot landing flat from its heel starts with its
-    centre of pressure on the heel end (the toe carries nothing yet).  Through a rigid
-    impact a kept contact's force changes by no more than its rate allows over the next
-    domain's first interval; without an impact it is continuous."""
+    at its last point; a new one (a heel strike) carries ``touchdown_load`` at its first;
+    a heel off has the flat foot's centre of pressure on the toe end (the heel carries
+    nothing) and the same force on the toe after it; a foot landing flat from its heel
+    starts with its centre of pressure on the heel end (the toe carries nothing yet).
+    Through a rigid impact a kept contact's force changes by no more than its rate allows
+    over the next domain's first interval; without an impact it is continuous."""
     P = 2 * opt.nodes - 1
     for d in GRAPH.domains:
         nxt = GRAPH.next(d)
@@ -595,7 +604,10 @@ def _transitions(nlp: NLP, model: HumanProsthesisModel,
                 nlp.eq(heel * B[o2 + 1, 0] + B[o2 + 2, 0])
         for side, (_, o2) in after.items():
             if side not in before:  # touchdown
-                nlp.eq(B[o2:o2 + 2, 0])
+                low, high = opt.touchdown_load  # in every solve (relaxed in the first,
+                # IPOPT did not converge in 1000 iterations on openOFM's take)
+                nlp.geq(B[o2 + 1, 0] - low)
+                nlp.geq(high - B[o2 + 1, 0])
 
 
 def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
