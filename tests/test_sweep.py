@@ -8,6 +8,7 @@ that as it is)."""
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
@@ -386,7 +387,6 @@ def reference(tmp_path_factory, spec_path):
 
 @pytest.mark.slow
 def test_sweep_on_one_worker_completes_with_report(reference, spec_path):
-    import json
 
     out, rows = reference
     spec = load_spec(spec_path)
@@ -504,7 +504,6 @@ def test_ctrl_c_then_resume_without_redoing(reference, files, tmp_path):
     """SIGINT (Ctrl-C) to ``hpcosim sweep`` once the first results are on disk: exit 130,
     every consumed result saved; the same sweep again runs exactly the missing runs and
     gives the 1-worker rows."""
-    import json
     import subprocess
     import sys
     import time
@@ -548,10 +547,19 @@ def test_ctrl_c_then_resume_without_redoing(reference, files, tmp_path):
                          ids=lambda p: p.name)
 def test_example_specs_load_with_a_consistent_gait_and_tube(spec_file, model):
     """The shipped example specs work as the README says: their gait is one of this model
-    and their tube was fitted for that gait (a regenerated gait needs a refitted tube)."""
+    (a paper gait) or a multi-contact gait whose model matches its stored configs, and their
+    tube, when they have one, was fitted for that gait (a regenerated gait needs a refitted
+    tube)."""
+    from characterization.gait.multicontact_artifact import load_contact_cycle
     from hp_model.force_tube import load_tube
-    from hp_model.gait_artifact import load_gait
+    from hp_model.gait_artifact import MULTICONTACT_KIND, load_gait
 
     spec = load_spec(spec_file)
+    if json.loads(Path(spec.gait).read_text()).get("kind") == MULTICONTACT_KIND:
+        cycle = load_contact_cycle(spec.gait)  # refuses a gait its model's hash disowns
+        assert spec.controllers and set(spec.controllers) <= {"clfqp", "phase-pd"}
+        if spec.tube is not None:
+            load_tube(spec.tube, cycle.hash)
+        return
     gait = load_gait(spec.gait, model.parameter_hash())
     load_tube(spec.tube, gait.hash())
