@@ -29,11 +29,13 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         MultiContactError,
         MultiContactOptions,
         fit_multicontact,
+        take_strides,
         targets_from_steps,
     )
     from characterization.gait.multicontact_artifact import save_multicontact_gait, to_document
     from characterization.gait.multicontact_summary import gait_summary, take_summary
     from characterization.gait.person_check import StanceForce, check_person, print_check
+    from characterization.gait.take_closure import closure_line, double_support_closure
     from characterization.mocap.steps_artifact import load_steps, plate_forces
     from hp_model.config import (
         default_device_path,
@@ -58,6 +60,9 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     model = HumanProsthesisModel(person, dev, graph=GRAPH)
     targets = targets_from_steps(data, model, str(steps))
     _say_flat_feet(targets.flat_foot_pitch)
+    closure = double_support_closure(model, take_strides(data, model, str(steps)))
+    if closure:
+        Console().print(closure_line(closure), soft_wrap=True, highlight=False)
     opt = MultiContactOptions(nodes=nodes, max_iter=max_iter, motor_margin=motor_margin,
                               max_joint_speed=max_joint_speed)
     with console.status(f"gait fit: multi-contact ({', '.join(GRAPH.domains)})"):
@@ -78,6 +83,7 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
                           mismatch_allowed=not passed)
+        doc["targets"]["double_support_closure"] = [c.to_json() for c in closure]
         doc["subject"] = person.model_dump(mode="json")
         doc["device"] = dev.model_dump(mode="json")  # the gait's model, remade from the file
         doc["virtual_constraints"] = outputs.to_json()
