@@ -170,6 +170,7 @@ XDIST_COST: dict[str, float] = {
     "tests/test_person_synth.py": 110,  # the person's walk, its take processed and fitted
     "tests/test_person_reference.py": 80,  # the packaged person's recipe, processed and fitted
     "tests/test_gait_tables.py": 10,
+    "tests/test_take_closure.py": 30,  # the packaged person's walk, its take processed
 }
 
 

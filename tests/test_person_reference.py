@@ -19,6 +19,7 @@ def _figures(doc: dict) -> dict[str, float]:
             "ds1": rows["double support 1"]["gait"], "ds2": rows["double support 2"]["gait"]}
 
 
+@pytest.mark.slow  # the person's closed loop compiled on a cold cache: about 45 s
 def test_the_packaged_person_is_the_default_of_mocap_synth(tmp_path):
     """No --gait: the packaged person walks 2 strides, its subject written beside the take
     (the example subject with its foot to the metatarsal heads)."""

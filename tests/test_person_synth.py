@@ -34,6 +34,7 @@ def person(tmp_path_factory):
     return d, gait, take, steps
 
 
+@pytest.mark.slow  # its fixture simulates and processes the walk: about 50 s
 def test_the_takes_contact_events_are_the_walks(person):
     """Each foot's touchdowns and lift-offs found from the markers near the walk's domain
     changes (the truth): measured at 100 Hz, the prosthesis heel strikes 25-30 ms late (its

@@ -33,6 +33,7 @@ def _closure(steps_path: Path, subject=None):
     return double_support_closure(model, take_strides(steps, model))
 
 
+@pytest.mark.slow  # the person's closed loop compiled on a cold cache: about 45 s
 def test_the_models_own_walk_closes(tmp_path):
     take = tmp_path / "take"
     assert hpcosim(["mocap", "synth", "--source", "person", "--out", str(take), "--steps", "3",
