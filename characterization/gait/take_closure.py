@@ -8,7 +8,7 @@ ankles' error comes from")."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import casadi as ca
 import numpy as np
@@ -32,8 +32,7 @@ class DoubleSupportClosure:
     least_change_deg: float
 
     def to_json(self) -> dict[str, float | int | str]:
-        return {"domain": self.domain, "frames": self.frames, "gap_mm": self.gap_mm,
-                "least_change_deg": self.least_change_deg}
+        return asdict(self)
 
 
 def double_support_closure(model: HumanProsthesisModel, strides: TakeStrides
