@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import casadi as ca
@@ -170,6 +171,18 @@ class MultiContactOptions:
     cop_speed: float = 1.5  # m/s, largest speed of a flat foot's centre of pressure along
     #  its sole (the same plates: 0.96 m/s relative to the heel marker; 1.5 times that)
     w_angles: float = 1000.0  # 1 / (rad^2 s): the tracked angles' squared error integral
+    angle_rms_limit: float = np.radians(2.5)  # rad: each tracked angle's RMS error over the
+    #  stride, held below this by a fourth solve (:func:`_solve`) with ``w_angle_limit`` on
+    #  its excess (rad^2): the check's 3 deg (``person_check.Limits``) less a margin for its
+    #  comparing over the normalized cycle (at 2.7, openOFM's human ankle came out at 3.03
+    #  there).  With one weight for all, the fit put that take's error in its ankles (3.4 /
+    #  3.0 deg, every other angle within 2.4)
+    angle_limit_reach: float = np.radians(4.0)  # rad: the fourth solve runs when no angle
+    #  is further than this from the take: beyond it the limit took the error out of the
+    #  speed, the double supports and the ground forces instead (OpenSim's strides, 6.3 deg
+    #  at worst: speed 21 % slow, and the fit no longer walked)
+    w_angle_limit: float = 3.0e4  # per rad^2 of a mean squared error above the limit (0: no
+    #  fourth solve)
     w_force: float = 300.0  # 1 / (BW^2 s): each foot's vertical force against the take's
     #  force plates (where it has them), squared error integral over the foot's stance
     w_duration: float = 3000.0  # 1 / s^2 (at 1000 the double supports came out 20-50 ms
@@ -188,6 +201,11 @@ class MultiContactOptions:
     first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
     duration_range: tuple[float, float] = (0.5, 2.0)  # each domain's duration, as a
     #  fraction of the take's (and at least 10 ms): keeps IPOPT near the person's timing
+    double_support_tolerance: float = 0.025  # s: in the fourth solve each double support
+    #  stays within this of the take's (the check's 30 ms less a margin): the angles' limit
+    #  alone shortened OpenSim's strides' double supports from 0.14-0.16 s to 0.07-0.08 s.
+    #  Not in the first three: there it made IPOPT fail on the synthetic person (1000
+    #  iterations; 24 without)
     max_iter: int = 1000  # per solve, as `gait fit --max-iter` (OpenSim's strides need 600-1000
     #  in the contacts' solve)
     tol: float = 1e-6
@@ -616,13 +634,9 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     weights), its duration's squared error, the torques' squared integral, the wrenches'
     and torques' changes between points (the jerk is :func:`_jerk`, weighted apart)."""
     P = 2 * opt.nodes - 1
-    A = resample_rows(targets.angles[d], P)
-    w = np.ones(P)
-    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
-    w = w / w.sum()  # Simpson weights of the mean over the domain
+    w = _mean_weights(P)
     T = X["T"]
-    e = X["q"][idx, :] - A
-    cost = opt.w_angles * T * ca.sum2(ca.sum1(e**2) * w[None, :])
+    cost = opt.w_angles * T * ca.sum1(_angle_mse(X, targets, d, idx, opt))
     cost += opt.w_torque * T * ca.sum2(ca.sum1(X["u"] ** 2) * w[None, :])
     cost += opt.w_duration * (T - targets.durations[d]) ** 2
     for row, fz in plate_rows(targets, d, P):
@@ -630,6 +644,53 @@ def _cost(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: lis
     cost += opt.w_smooth * (ca.sumsqr(ca.diff(X["lam"], 1, 1))
                             + ca.sumsqr(ca.diff(X["u"], 1, 1) / 100.0))
     return cost
+
+
+def _mean_weights(n: int) -> np.ndarray:
+    """Simpson weights (n odd) of the mean of n evenly spaced samples over a domain."""
+    w = np.ones(n)
+    w[1:-1:2], w[2:-1:2] = 4.0, 2.0
+    return w / w.sum()
+
+
+def _angle_mse(X: dict[str, ca.MX], targets: MultiContactTargets, d: Domain, idx: list[int],
+               opt: MultiContactOptions) -> ca.MX:
+    """Each tracked angle's mean squared error over ``d`` (rad^2, a column)."""
+    P = 2 * opt.nodes - 1
+    e = X["q"][idx, :] - resample_rows(targets.angles[d], P)
+    return ca.mtimes(e**2, _mean_weights(P))
+
+
+#: rad^2: the angles' slack while their limit is off (far above any mean squared error)
+LIMIT_OFF = 1.0
+
+
+@dataclass(frozen=True)
+class AngleLimit:
+    """The soft limit on each tracked angle's RMS error over the stride
+    (:func:`_angle_limit`): ``mse`` (rad^2, a column) its domains' mean squared errors
+    weighted by their durations, ``mse <= limit^2 + s`` with the slack ``s`` (variable block
+    ``excess``, held at :data:`LIMIT_OFF` until the fourth solve frees it to s >= 0),
+    ``excess`` = sum(s), the cost the fourth solve weights; ``durations``: the bounds (s) of
+    the double supports' durations (their blocks ``T_<d>``) in the fourth solve."""
+
+    excess: ca.MX
+    mse: ca.MX
+    durations: dict[str, tuple[float, float]]
+
+
+def _angle_limit(nlp: NLP, dec: dict[Domain, dict[str, ca.MX]], targets: MultiContactTargets,
+                 idx: list[int], opt: MultiContactOptions) -> AngleLimit:
+    total = sum(dec[d]["T"] for d in GRAPH.domains)
+    mse = sum((dec[d]["T"] * _angle_mse(dec[d], targets, d, idx, opt)
+               for d in GRAPH.domains), ca.MX(0)) / total
+    n = len(idx)
+    excess = nlp.var("angle_excess", (n, 1), np.full(n, LIMIT_OFF), lb=LIMIT_OFF, ub=LIMIT_OFF)
+    nlp.geq(opt.angle_rms_limit**2 + excess - mse)
+    tol = opt.double_support_tolerance
+    durations = {f"T_{d}": (max(0.01, targets.durations[d] - tol), targets.durations[d] + tol)
+                 for d in GRAPH.domains if d.is_double_support}
+    return AngleLimit(ca.sum1(excess), mse, durations)
 
 
 def plate_rows(targets: MultiContactTargets, d: Domain, n: int
@@ -686,22 +747,30 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
     _transitions(nlp, model, dec, opt, soft)
     total = sum(dec[d]["T"] for d in GRAPH.domains)
     cost += opt.w_speed * (stride / total - targets.speed) ** 2
-    return _solve(nlp, (cost, jerk), dec, stride, opt, soft, body_weight(model))
+    limit = _angle_limit(nlp, dec, targets, idx, opt)
+    return _solve(nlp, (cost, jerk), limit, dec, stride, opt, soft, body_weight(model))
 
 
-def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.MX]],
-           stride: ca.MX, opt: MultiContactOptions, soft: list[int], weight: float
-           ) -> MultiContactResult:
-    """Three solves of one NLP (cost: ``costs[0]`` plus ``w_jerk`` times the jerk
-    ``costs[1]``, the weight a parameter of the NLP): first without the contact inequalities
-    (``soft``: a motion the model can make near the take's, from a guess its body cannot
-    follow) and without the jerk, then with the inequalities, then with the jerk, each from
-    the last.  The jerk's solve converges from a gait that already has the person's contacts
-    (from the take's guess it did not on every take); if it does not, the result is the
-    second solve's, with ``stats["jerk_stage"]`` saying so."""
-    w_jerk = ca.MX.sym("w_jerk")
-    problem = {"x": ca.vertcat(*nlp.w), "f": costs[0] + w_jerk * costs[1],
-               "g": ca.vertcat(*nlp.g), "p": w_jerk}
+def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], limit: AngleLimit,
+           dec: dict[Domain, dict[str, ca.MX]], stride: ca.MX, opt: MultiContactOptions,
+           soft: list[int], weight: float) -> MultiContactResult:
+    """Up to four solves of one NLP, each from the last (cost: ``costs[0]``, plus ``w_jerk``
+    times the jerk ``costs[1]`` and ``w_angle_limit`` times the angles' excess over their
+    limit (:class:`AngleLimit`), both weights parameters of the NLP):
+
+    1. without the contact inequalities (``soft``: a motion the model can make near the
+       take's, from a guess its body cannot follow) and without the jerk;
+    2. with the inequalities;
+    3. with the jerk: it converges from a gait that already has the person's contacts (from
+       the take's guess it did not on every take); if it does not, the second solve's result
+       is kept, with ``stats["jerk_stage"]`` saying so;
+    4. with the angles' limit, when some tracked angle's RMS error exceeds
+       ``angle_rms_limit`` and none ``angle_limit_reach``; kept when it converges
+       (``stats["angle_limit_stage"]`` says what happened)."""
+    w_jerk, w_limit = ca.MX.sym("w_jerk"), ca.MX.sym("w_angle_limit")
+    problem = {"x": ca.vertcat(*nlp.w),
+               "f": costs[0] + w_jerk * costs[1] + w_limit * limit.excess,
+               "g": ca.vertcat(*nlp.g), "p": ca.vertcat(w_jerk, w_limit)}
     ipopt: dict[str, int | float | str] = {
         "max_iter": opt.max_iter, "tol": opt.tol, "print_level": opt.print_level,
         "linear_solver": "mumps", "mu_strategy": "adaptive", "sb": "yes"}
@@ -711,6 +780,13 @@ def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.
     relaxed = [np.full_like(lo, -np.inf) if j in soft else lo for j, lo in enumerate(nlp.lbg)]
     bounds = {"lbx": np.concatenate(nlp.lbw), "ubx": np.concatenate(nlp.ubw),
               "ubg": np.concatenate(nlp.ubg)}
+    angle_rms = ca.Function("angle_rms", [ca.vertcat(*nlp.w)], [ca.sqrt(limit.mse)])
+    free = {"lbx": bounds["lbx"].copy(), "ubx": bounds["ubx"].copy(), "ubg": bounds["ubg"]}
+    free["lbx"][nlp.span("angle_excess")], free["ubx"][nlp.span("angle_excess")] = 0.0, np.inf
+    for name, (lo, hi) in limit.durations.items():
+        k = nlp.span(name)
+        free["lbx"][k] = np.maximum(free["lbx"][k], lo)
+        free["ubx"][k] = np.minimum(free["ubx"][k], hi)
     t0 = time.perf_counter()
     warm = ca.nlpsol("multicontact_warm", "ipopt", problem,
                      {"ipopt": warm_start, "print_time": False, "expand": True})
@@ -718,18 +794,21 @@ def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.
     first_solver = ca.nlpsol("multicontact_first", "ipopt", problem,
                              {"ipopt": first_ipopt, "print_time": False, "expand": True})
     lbg = np.concatenate(nlp.lbg)
+
+    def again(last: dict[str, ca.DM], p: list[float]) -> tuple[dict[str, ca.DM], dict]:
+        out = warm(x0=last["x"], lam_x0=last["lam_x"], lam_g0=last["lam_g"], lbg=lbg, p=p,
+                   **(free if p[1] > 0 else bounds))
+        return out, dict(warm.stats())
+
     with single_threaded_blas():
-        first = first_solver(x0=np.concatenate(nlp.w0), lbg=np.concatenate(relaxed), p=0.0,
-                             **bounds)
-        second = warm(x0=first["x"], lam_x0=first["lam_x"], lam_g0=first["lam_g"], lbg=lbg,
-                      p=0.0, **bounds)
-        stats = dict(warm.stats())
-        sol, jerk_stage = second, ("off (w_jerk = 0)" if opt.w_jerk <= 0 else
-                                   "not run (the contacts' solve did not converge)")
-        if stats["success"] and opt.w_jerk > 0:
-            third = warm(x0=second["x"], lam_x0=second["lam_x"], lam_g0=second["lam_g"],
-                         lbg=lbg, p=opt.w_jerk, **bounds)
-            third_stats = dict(warm.stats())
+        first = first_solver(x0=np.concatenate(nlp.w0), lbg=np.concatenate(relaxed),
+                             p=[0.0, 0.0], **bounds)
+        sol, stats = again(first, [0.0, 0.0])
+        jerk_stage = ("off (w_jerk = 0)" if opt.w_jerk <= 0 else
+                      "not run (the contacts' solve did not converge)")
+        w = [opt.w_jerk if stats["success"] and opt.w_jerk > 0 else 0.0, 0.0]
+        if w[0] > 0:
+            third, third_stats = again(sol, w)
             jerk_stage = (f"{third_stats['return_status']} after "
                           f"{third_stats['iter_count']} iterations")
             if third_stats["success"]:
@@ -737,7 +816,10 @@ def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.
                                      + third_stats["iter_count"]}
             else:
                 jerk_stage += ": the contacts' solve kept"
+                w[0] = 0.0
         stats["jerk_stage"] = jerk_stage
+        stage, sol, stats = _limited(angle_rms, again, sol, stats, w, opt)
+        stats["angle_limit_stage"] = stage
     elapsed = time.perf_counter() - t0
     keys = ("q", "qd", "qdd", "u", "lam", "T")
     unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
@@ -756,6 +838,32 @@ def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], dec: dict[Domain, dict[str, ca.
         status=str(stats["return_status"]), success=bool(stats["success"]),
         iterations=int(stats["iter_count"]), solve_seconds=elapsed, cost=float(sol["f"]),
         stats={k: v for k, v in stats.items() if isinstance(v, int | float | str)})
+
+
+def _limited(angle_rms: ca.Function, again: Callable[[dict, list[float]], tuple[dict, dict]],
+             sol: dict, stats: dict, w: list[float], opt: MultiContactOptions
+             ) -> tuple[str, dict, dict]:
+    """The fourth solve of :func:`_solve` when it is due (``again(last, p)`` runs the warm
+    solve): (a line saying what happened, the solution and the stats kept)."""
+    rms = np.degrees(np.asarray(angle_rms(sol["x"])).ravel())
+    limit, reach = np.degrees(opt.angle_rms_limit), np.degrees(opt.angle_limit_reach)
+    if opt.w_angle_limit <= 0:
+        return "off (w_angle_limit = 0)", sol, stats
+    if not stats["success"]:
+        return "not run (the earlier solves did not converge)", sol, stats
+    if rms.max() <= limit:
+        return f"not needed (every angle within {limit:.1f} deg)", sol, stats
+    if rms.max() > reach:
+        return (f"not run: an angle {rms.max():.1f} deg from the take, beyond the {reach:.1f} "
+                "deg the limit can reach", sol, stats)
+    limited, limited_stats = again(sol, [w[0], opt.w_angle_limit])
+    line = f"{limited_stats['return_status']} after {limited_stats['iter_count']} iterations"
+    if not limited_stats["success"]:
+        return line + ": the earlier solve kept", sol, stats
+    after = np.degrees(np.asarray(angle_rms(limited["x"])).ravel())
+    return (f"{line}: worst angle {rms.max():.2f} -> {after.max():.2f} deg", limited,
+            {**limited_stats, "iter_count": stats["iter_count"] + limited_stats["iter_count"],
+             "jerk_stage": stats["jerk_stage"]})
 
 
 # -- the targets from a take ---------------------------------------------------------------------

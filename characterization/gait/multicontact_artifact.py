@@ -71,7 +71,8 @@ def to_document(result: MultiContactResult, targets: MultiContactTargets,
         "options": asdict(options),
         "solver": {"status": result.status, "success": result.success,
                    "iterations": result.iterations, "seconds": result.solve_seconds,
-                   "cost": result.cost, "jerk_stage": result.stats.get("jerk_stage")},
+                   "cost": result.cost, "jerk_stage": result.stats.get("jerk_stage"),
+                   "angle_limit_stage": result.stats.get("angle_limit_stage")},
     }
 
 

@@ -22,11 +22,13 @@ class NLP:
         self.g: list[ca.MX] = []
         self.lbg: list[np.ndarray] = []
         self.ubg: list[np.ndarray] = []
+        self.blocks: dict[str, int] = {}  # a variable block's name -> its index in w
 
     def var(self, name: str, shape: tuple[int, int], init: ArrayLike, lb: ArrayLike = -np.inf,
             ub: ArrayLike = np.inf) -> ca.MX:
         """A new block of variables (column-major in w) with its initial guess and bounds."""
         v = ca.MX.sym(name, *shape)
+        self.blocks[name] = len(self.w)
         self.w.append(ca.vec(v))
         init = np.asarray(init, dtype=float)
         if init.ndim == 1 and shape[1] == 1:
@@ -35,6 +37,12 @@ class NLP:
         self.lbw.append(np.broadcast_to(lb, shape).ravel(order="F"))
         self.ubw.append(np.broadcast_to(ub, shape).ravel(order="F"))
         return v
+
+    def span(self, name: str) -> slice:
+        """Where the block ``name`` lies in w (and in the bounds concatenated)."""
+        k = self.blocks[name]
+        start = sum(len(b) for b in self.lbw[:k])
+        return slice(start, start + len(self.lbw[k]))
 
     def eq(self, expr: ca.MX) -> None:
         """expr = 0 (every element)."""

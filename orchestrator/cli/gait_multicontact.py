@@ -98,7 +98,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
                         + ", ".join(f"{d} {T * 1000:.0f} ms"
                                     for d, T in result.double_supports().items())
                         + f"; IPOPT {result.iterations} iterations, "
-                        f"{result.solve_seconds:.1f} s", highlight=False)
+                        f"{result.solve_seconds:.1f} s; angles' limit: "
+                        f"{result.stats.get('angle_limit_stage')}", highlight=False)
     why = "; ".join(w for w, bad in ((check.verdict(), not check.passed),
                                      (f"the gait {walk.line()}", not walk.walks)) if bad)
     conclude(_verdict(passed, why, allow_mismatch))
