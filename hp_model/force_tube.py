@@ -22,7 +22,10 @@ nominal-human model (:mod:`hp_model.interaction`) does not explain, per output a
 the mid-stance range [tau_lo, tau_hi] of the gait's ps phase, valid from
 ``exclude_after_touchdown`` seconds after the prosthesis's touchdown on (the impact transient
 before that is left to the CLF relaxation); outside its range the bound is not defined (the
-controller's margin is zero there).
+controller's margin is zero there).  On the multi-contact graph the components are the
+prosthesis joints' accelerations (qdd_pk, qdd_pa [rad/s^2]) against the multi-contact
+``clfqp``'s model, over the controllers' stance phase
+(:mod:`characterization.tube.contact_model_error`).
 
 File layout (``kind = "hpcosim-tube"``, ``schema_version = 2``): gait_hash, tau_lo, tau_hi,
 degree, nominal (3, k+1), lower (3, m+1), upper (3, m+1), allowance (3,) (optional, default
@@ -52,6 +55,12 @@ READABLE_VERSIONS = (1, 2)
 COMPONENTS = ("F_x", "F_z", "M_y")
 ERROR_COMPONENTS = ("dy1", "d2y2")  # model error d: output accelerations
 ERROR_UNITS = ("m/s^2", "rad/s^2")
+#: the multi-contact ``clfqp``'s model error: the prosthesis joints' accelerations
+#: (:mod:`characterization.tube.contact_model_error`)
+CONTACT_ERROR_COMPONENTS = ("qdd_pk", "qdd_pa")
+#: each model error a bound may hold, its components -> their units
+ERROR_KINDS = {ERROR_COMPONENTS: ERROR_UNITS,
+               CONTACT_ERROR_COMPONENTS: ("rad/s^2", "rad/s^2")}
 #: default time after the prosthesis's touchdown excluded from the model-error bound (s)
 EXCLUDE_AFTER_TOUCHDOWN = 0.03
 
@@ -78,8 +87,15 @@ class ModelErrorBound:
     n_steps: int = 0
     credibility: Mapping[str, Any] = field(default_factory=dict)
     source: Mapping[str, Any] = field(default_factory=dict)
+    #: what d is (a key of :data:`ERROR_KINDS`): the paper graph's output accelerations or
+    #: the multi-contact controller's joint accelerations
+    components: tuple[str, str] = ERROR_COMPONENTS
 
     def __post_init__(self) -> None:
+        if tuple(self.components) not in ERROR_KINDS:
+            raise ValueError(f"model error: components {list(self.components)} are not one "
+                             f"of {[list(k) for k in ERROR_KINDS]}")
+        object.__setattr__(self, "components", tuple(self.components))
         if not (math.isfinite(self.tau_lo) and math.isfinite(self.tau_hi)
                 and self.tau_hi > self.tau_lo):
             raise ValueError(f"model error: need finite tau_lo < tau_hi, got "
@@ -100,6 +116,10 @@ class ModelErrorBound:
     @property
     def degree(self) -> int:
         return self.lower.shape[1] - 1
+
+    @property
+    def units(self) -> tuple[str, str]:
+        return ERROR_KINDS[self.components]
 
     def phase(self, tau: float | np.ndarray) -> np.ndarray:
         """s(tau) clipped to [0, 1]."""
@@ -124,7 +144,7 @@ class ModelErrorBound:
         return np.all((d >= lo - tol) & (d <= hi + tol), axis=1)
 
     def to_document(self) -> dict[str, Any]:
-        return {"components": list(ERROR_COMPONENTS), "units": list(ERROR_UNITS),
+        return {"components": list(self.components), "units": list(self.units),
                 "tau_lo": self.tau_lo, "tau_hi": self.tau_hi, "degree": self.degree,
                 "lower": self.lower, "upper": self.upper,
                 "exclude_after_touchdown": self.exclude_after_touchdown,
@@ -260,8 +280,10 @@ def _read_model_error(r: FieldReader) -> ModelErrorBound:
         raise r.fail("model_error", "not part of schema 1 (write schema_version 2)")
     if not isinstance(r.get("model_error"), Mapping):
         raise r.fail("model_error", "not an object")
-    if list(r.get("model_error.components")) != list(ERROR_COMPONENTS):
-        raise r.fail("model_error.components", f"expected {list(ERROR_COMPONENTS)}")
+    components = tuple(r.get("model_error.components") or ())
+    if components not in ERROR_KINDS:
+        raise r.fail("model_error.components",
+                     f"expected one of {[list(k) for k in ERROR_KINDS]}")
     lo_t = r.number("model_error.tau_lo", -0.5, 1.5)
     hi_t = r.number("model_error.tau_hi", -0.5, 1.5)
     if not hi_t > lo_t:
@@ -280,4 +302,4 @@ def _read_model_error(r: FieldReader) -> ModelErrorBound:
         tau_lo=lo_t, tau_hi=hi_t, lower=lower, upper=upper,
         exclude_after_touchdown=r.number("model_error.exclude_after_touchdown", 0.0, 10.0),
         n_steps=int(r.number("model_error.n_steps", 0, 1e9)), credibility=dict(cred),
-        source=dict(source))
+        source=dict(source), components=components)

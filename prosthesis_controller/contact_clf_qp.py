@@ -28,11 +28,17 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   eta = (e_k, e_a, de_k, de_a); nu = qdd_p - qdd_ref = g (u - u_ref).  A RES-CLF of the
   two double integrators, the sum of each joint's (:class:`JointClf`: CARE with Q = I,
   R = 1, the position scaled by 1/eps, the paper's eps).
+- **Robust term** (the paper's, on this model): where the gait's force tube carries the
+  bound of this model's error d = qdd_true - qdd_ref - g (u - u_ref) (rad/s^2, per joint;
+  :mod:`characterization.tube.contact_model_error`: characterised by playback of the
+  recorded flat single supports, the tube's phase range of ``ps``), its worst case over the
+  box [c_d - r_d, c_d + r_d] enters the CLF row: dV/dnu . c_d + |dV/dnu| . r_d.  Zero
+  elsewhere, and without a bound.
 - **QP**, z = (u_k, u_a, rho, sigma):
 
       min  |nu|^2 + w_force |(w - w_ref) / W_body|^2 + w_torque |u - u_ref|^2
            + c_rho rho + c_sigma sigma                  (over its trace, for piqp)
-      s.t. LgV u - rho <= -(gamma/eps) V - LfV                            (the CLF)
+      s.t. LgV u - rho <= -(gamma/eps) V - LfV - dV/dnu c_d - |dV/dnu| r_d   (the CLF)
            per contact: |F_x| <= mu F_z + sigma, F_z >= f_min - sigma; a flat sole's centre
            of pressure on the sole (rows in body weights)
            max(-u_max, u_prev - du) <= u <= min(u_max, u_prev + du), 0 <= rho, 0 <= sigma
@@ -54,7 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import piqp
@@ -63,6 +69,7 @@ from scipy.linalg import solve_continuous_are
 from hp_model.compiled import FunctionSet
 from hp_model.contact_interaction import STANCE_DOMAINS, wrench_size
 from hp_model.domains import Domain
+from hp_model.force_tube import CONTACT_ERROR_COMPONENTS, ModelErrorBound
 from hp_model.human_prosthesis import HumanProsthesisModel
 from prosthesis_controller.contact_phase_pd import ContactPhasePD, control_output
 from prosthesis_controller.interface import ControllerMode, ControlOutput, QpOutcome
@@ -147,22 +154,29 @@ class StanceQp:
     """Everything of the QP that depends on the phase alone (module docstring), per sample of
     one stance as the model walks it (``phase`` (n,), non-decreasing): ``domain`` (n,) the
     gait's domain; ``g`` (n, 2, 2) the torque authority on the joint accelerations
-    (rad/s^2 per motor N m); ``u_ref`` (n, 2) the gait's motor torques (N m); ``P`` (n, 4, 4)
-    and ``c`` (n, 4) the cost in z = (u, rho, sigma); ``G`` (n, 6, 4) and ``h`` (n, 6) the
-    contact rows (a domain's first ``qp_rows(d) - 1``; their slack sigma in body weights)."""
+    (rad/s^2 per motor N m); ``u_ref`` (n, 2) the gait's motor torques (N m); ``qdd_ref``
+    (n, 2) its prosthesis joint accelerations (rad/s^2); ``P`` (n, 4, 4) and ``c`` (n, 4) the
+    cost in z = (u, rho, sigma); ``G`` (n, 6, 4) and ``h`` (n, 6) the contact rows (a
+    domain's first ``qp_rows(d) - 1``; their slack sigma in body weights); ``d_center``,
+    ``d_radius`` (n, 2) the model error's box (rad/s^2; zero where no bound holds: the
+    robust term)."""
 
     phase: np.ndarray
     domain: tuple[Domain, ...]
     g: np.ndarray
     u_ref: np.ndarray
+    qdd_ref: np.ndarray
     P: np.ndarray
     c: np.ndarray
     G: np.ndarray
     h: np.ndarray
+    d_center: np.ndarray
+    d_radius: np.ndarray
 
     _phases: list[float] = field(init=False, repr=False, compare=False)
     g_rows: list[list[list[float]]] = field(init=False, repr=False, compare=False)
     u_rows: list[list[float]] = field(init=False, repr=False, compare=False)
+    margin_rows: list[list[float]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # the phases, g and u_ref as floats: a search ~0.3 us, not numpy's ~1.5 us, and the
@@ -171,6 +185,25 @@ class StanceQp:
         object.__setattr__(self, "_phases", self.phase.tolist())
         object.__setattr__(self, "g_rows", self.g.tolist())
         object.__setattr__(self, "u_rows", self.u_ref.tolist())
+        object.__setattr__(self, "margin_rows", np.hstack(
+            [np.reshape(self.d_center, (-1, 2)), np.reshape(self.d_radius, (-1, 2))]).tolist())
+
+    def with_margin(self, bound: ModelErrorBound | None) -> StanceQp:
+        """These samples with the robust term of ``bound`` (the multi-contact model error,
+        :data:`hp_model.force_tube.CONTACT_ERROR_COMPONENTS`): its box at each ``ps`` sample
+        inside its phase range, zero elsewhere; ``None``: no robust term."""
+        center, radius = np.zeros((len(self.phase), 2)), np.zeros((len(self.phase), 2))
+        if bound is not None:
+            if bound.components != CONTACT_ERROR_COMPONENTS:
+                raise ValueError(f"the model-error bound is of {list(bound.components)}, not "
+                                 f"the multi-contact controller's "
+                                 f"{list(CONTACT_ERROR_COMPONENTS)}")
+            on = (np.array([d is Domain.PS for d in self.domain])
+                  & (self.phase >= bound.tau_lo) & (self.phase <= bound.tau_hi))
+            if on.any():
+                lo, hi = bound.bounds(self.phase[on])
+                center[on], radius[on] = 0.5 * (lo + hi), 0.5 * np.maximum(hi - lo, 0.0)
+        return replace(self, d_center=center, d_radius=radius)
 
     def index(self, s: float) -> int:
         """The sample at or before phase ``s`` (the first or the last outside the stance)."""
@@ -206,12 +239,13 @@ def stance_qp(walked: WalkedStance, interaction: FunctionSet,
     feet = soles(model)
     n = len(phase)
     doms = tuple(Domain.from_code(int(c)) for c in domain)
-    g_all, P_all = np.zeros((n, 2, 2)), np.zeros((n, 4, 4))
+    g_all, P_all, acc_all = np.zeros((n, 2, 2)), np.zeros((n, 4, 4)), np.zeros((n, 2))
     c_all, G_all = np.zeros((n, 4)), np.zeros((n, MAX_CONTACT_ROWS, 4))
     h_all = np.ones((n, MAX_CONTACT_ROWS))
     for i, d in enumerate(doms):
-        _, g, _, W = (np.asarray(a) for a in interaction[f"interaction_{d}"](
+        f, g, _, W = (np.asarray(a) for a in interaction[f"interaction_{d}"](
             q[i], qd[i], np.asarray(thetas[d], float), np.asarray(gains, float)))
+        acc_all[i] = f.ravel() + g @ u_ref[i]
         nw = wrench_size(d)
         Wn, wn = W / weight, wrench[i, :nw] / weight  # body weights
         H = g.T @ g + config.w_force * Wn.T @ Wn + config.w_torque * np.eye(2)
@@ -225,8 +259,8 @@ def stance_qp(walked: WalkedStance, interaction: FunctionSet,
                             feet)
         for r, (row_u, row_h) in enumerate(rows):
             G_all[i, r, :2], G_all[i, r, 3], h_all[i, r] = row_u, -1.0, row_h
-    return StanceQp(np.asarray(phase, float), doms, g_all, np.asarray(u_ref, float), P_all,
-                    c_all, G_all, h_all)
+    return StanceQp(np.asarray(phase, float), doms, g_all, np.asarray(u_ref, float), acc_all,
+                    P_all, c_all, G_all, h_all, np.zeros((n, 2)), np.zeros((n, 2)))
 
 
 @dataclass(frozen=True)
@@ -364,9 +398,11 @@ class ContactClfQp:
         lg0, lg1 = wk * g00 + wa * g10, wk * g01 + wa * g11  # LgV: its rate per du
         scale = max(math.hypot(lg0, lg1), 1e-9)
         ur0, ur1 = st.u_rows[i]
+        c0, c1, r0, r1 = st.margin_rows[i]  # the model error's box (0 without a bound)
+        margin = wk * c0 + wa * c1 + abs(wk) * r0 + abs(wa) * r1
         G, h = self._G[d], self._h[d]
         G[0, 0], G[0, 1], G[0, 2], G[0, 3] = lg0 / scale, lg1 / scale, -1.0 / scale, 0.0
-        h[0] = (-cfg.gamma / cfg.eps * V - LfV + lg0 * ur0 + lg1 * ur1) / scale
+        h[0] = (-cfg.gamma / cfg.eps * V - LfV - margin + lg0 * ur0 + lg1 * ur1) / scale
         G[1:] = st.G[i, :G.shape[0] - 1]
         h[1:] = st.h[i, :G.shape[0] - 1]
         du, (lk, la), (u0, u1) = cfg.delta_u, self._limits, self._u

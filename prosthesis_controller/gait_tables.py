@@ -5,15 +5,20 @@ which cannot walk the model itself.
 
 Layout (``numpy.savez``, no pickles; SI units, rad):
 
-    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 1; the model
+    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 2; the model
                     (subject, device: the leg's geometry the phase is sensed with) and its
                     hash; the gait's hash; the phase law's progress (m), swing time (s), flat
                     stance phases, gains (joint N m/rad, N m s/rad), gear ratios, motor
                     limits (N m); the CLF-QP's constants (:class:`ContactClfConfig`)
     stance.phase, stance.values, swing.phase, swing.values
                     the phase law's tables (:class:`PhaseTable`)
-    qp.phase, qp.domain (Domain.code), qp.g, qp.u_ref, qp.P, qp.c, qp.G, qp.h
-                    the stance QP's per-sample data (:class:`StanceQp`)
+    qp.phase, qp.domain (Domain.code), qp.g, qp.u_ref, qp.qdd_ref, qp.P, qp.c, qp.G, qp.h,
+    qp.d_center, qp.d_radius
+                    the stance QP's per-sample data (:class:`StanceQp`; the last two the
+                    robust term's box, zero without a model-error bound)
+
+Schema 1 (no qdd_ref, no robust term) is refused: the file is a cache, made again from the
+gait.
 """
 
 from __future__ import annotations
@@ -43,8 +48,8 @@ from prosthesis_controller.contact_phase_pd import (
 )
 
 KIND = "hpcosim-contact-controller"
-SCHEMA_VERSION = 1
-_QP = ("phase", "g", "u_ref", "P", "c", "G", "h")
+SCHEMA_VERSION = 2
+_QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius")
 
 
 def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,

@@ -263,3 +263,59 @@ def test_the_perturbation_script_refuses_a_missing_gait_in_one_line(capsys) -> N
     assert main(["/nonexistent/gait.json", "--family", "bias"]) == 2
     err = capsys.readouterr().err.strip()
     assert "/nonexistent/gait.json" in err and "\n" not in err
+
+
+def test_the_robust_term_enters_the_clf_row_where_its_bound_holds(cycle) -> None:
+    """The tube's model-error bound (``StanceQp.with_margin``): its box at the flat single
+    support's samples inside its phase range, zero elsewhere; in the CLF row it lowers the
+    right-hand side by the box's worst case, dV/dnu . c + |dV/dnu| . r (rad/s^2 against
+    the CLF's rate per joint acceleration), and nowhere else; a paper-graph bound is
+    refused."""
+    from hp_model.force_tube import ModelErrorBound
+
+    model, traj, _, gait = cycle
+    plain = contact_clfqp(model, gait, traj)
+    st = plain.stance
+    ps = np.array([d is Domain.PS for d in st.domain])
+    lo_t, hi_t = float(np.quantile(st.phase[ps], 0.2)), float(np.quantile(st.phase[ps], 0.8))
+    center, radius = np.array([4.0, -6.0]), np.array([10.0, 3.0])
+    bound = ModelErrorBound(lo_t, hi_t, np.tile((center - radius)[:, None], (1, 2)),
+                            np.tile((center + radius)[:, None], (1, 2)),
+                            components=("qdd_pk", "qdd_pa"))
+    robust = contact_clfqp(model, gait, traj, model_error=bound)
+    on = ps & (st.phase >= lo_t) & (st.phase <= hi_t)
+    assert on.sum() > 50
+    assert np.allclose(robust.stance.d_center[on], center)
+    assert np.allclose(robust.stance.d_radius[on], radius)
+    assert not robust.stance.d_center[~on].any() and not robust.stance.d_radius[~on].any()
+    with pytest.raises(ValueError, match="multi-contact controller"):
+        st.with_margin(replace(bound, components=("dy1", "d2y2")))
+    # the same measurements ticked by both (the plain one's torque applied): the CLF rows
+    # differ by the margin where it holds; dV/dnu = w from the row's LgV = g^T w
+    plain.keep_qp = robust.keep_qp = True
+    plain.reset()
+    robust.reset()
+    q0, qd0 = start_state(traj)
+    plant = SimulatorPlant(loop_simulator(model, gait, GAINS), q0, qd0, GRAPH.domains[0])
+    seen = 0
+    while plant.observe().t < 1.2:
+        m = measurement(plant.observe())
+        out = plain.tick(m)
+        robust.tick(m)
+        if plain.domain is not None:
+            i = st.index(plain.phase)
+            G0, h0 = plain.qp[2][0], plain.qp[3][0]
+            scale = -1.0 / G0[2]  # the row: (LgV / scale, -1 / scale, 0) . z <= h / scale
+            assert np.array_equal(robust.qp[2][0], G0)
+            if on[i]:
+                w = np.linalg.solve(st.g[i].T, G0[:2] * scale)
+                margin = w @ center + np.abs(w) @ radius
+                assert robust.qp[3][0] == pytest.approx(h0 - margin / scale, rel=1e-6,
+                                                        abs=1e-9)
+                seen += 1
+            else:
+                assert robust.qp[3][0] == h0
+        plant.actuate(out.torque)
+        assert plant.fall is None
+        plant.advance()
+    assert seen > 50

@@ -75,8 +75,9 @@ def test_playback_of_the_gaits_own_walk_gives_its_socket_force(gait_file):
 
 def test_tube_fit_on_a_real_take(gait_file, steps_file, capsys):
     """openOFM's take: its two flat prosthesis single supports played back, a degree-1 tube
-    around the gait's F*, written with its figure and report; two steps certify nothing,
-    so `tube fit` says so and exits 1 with the files written."""
+    around the gait's F*, written with its figure and report, carrying the degree-1 bound of
+    clfqp's model error along the same playbacks (its robust term); two steps certify
+    nothing, so `tube fit` says so and exits 1 with the files written."""
     out = gait_file.parent / "tube.json"
     rc = hpcosim(["tube", "fit", str(steps_file), "--gait", str(gait_file), "--out", str(out)])
     text = " ".join(capsys.readouterr().out.split())  # rich wraps its lines
@@ -89,6 +90,16 @@ def test_tube_fit_on_a_real_take(gait_file, steps_file, capsys):
     assert 0.0 < tube.tau_lo < tube.tau_hi < 1.0  # inside the stance, its flat single support
     assert (out.with_name("tube_fig5.png")).stat().st_size > 20_000
     assert "multi-contact graph" in out.with_name("tube.md").read_text()
+    me = tube.model_error
+    assert me is not None and me.components == ("qdd_pk", "qdd_pa")
+    assert me.degree == 1 and me.n_steps == 2
+    assert tube.tau_lo <= me.tau_lo < me.tau_hi <= tube.tau_hi
+    # every sample inside its own bound (the LPs' constraints); a person's joint
+    # accelerations differ from the gait's by tens of rad/s^2, not thousands
+    assert me.credibility["samples_inside_fraction"] == 1.0
+    assert 0.0 < max(me.source["max_abs"]) < 500.0
+    assert "model error of clfqp's model" in text
+    assert "Model error of the nominal-human model" in out.with_name("tube.md").read_text()
 
 
 def test_a_real_takes_socket_force_carries_the_body(gait_file, steps_file):
@@ -117,7 +128,11 @@ def test_experiments_measure_the_walks_against_the_tube(gait_file, steps_file):
     assert set(inside) == {"oracle", "clfqp", "contact-pd"}
     assert all(v is None or 0.0 <= v <= 1.0 for v in inside.values())
     assert inside["clfqp"] is not None
-    assert "Socket force inside the force tube" in (exp / "report.md").read_text()
+    report = (exp / "report.md").read_text()
+    assert "Socket force inside the force tube" in report
+    # clfqp walked with the tube's model-error bound in its CLF row
+    assert m["tube"]["robust_term"] and "carries the tube's bound" in report
+    assert m["nominal"]["clfqp"]["walk"]["walks"]
 
 
 @pytest.mark.parametrize("extra", [["--whole-step-fit"], ["--phase", "step"],

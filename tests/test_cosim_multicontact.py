@@ -110,7 +110,7 @@ def test_the_tube_refits_from_the_recording(walked, gait_file, capsys):
 
 
 @pytest.mark.parametrize("extra, words", [
-    (["--tube", "tube.json"], "has no force tube"),
+    (["--tube", "tests/data/controller/tube_demo_v2.json"], "refit the tube"),
     (["--subject", "hp_model/configs/subject_example.toml"], "carries its subject"),
     (["--controller", "pd"], "a multi-contact gait runs clfqp")])
 def test_what_a_multicontact_run_refuses(gait_file, capsys, extra, words):

@@ -21,9 +21,17 @@ from tests.multicontact_cycle import load_cycle
 
 @pytest.fixture(scope="module")
 def made():
+    """The controller with a robust term (a model-error box over the middle of its flat
+    single support), so that the file carries one."""
+    from hp_model.force_tube import ModelErrorBound
+
     model, traj, durations, _ = load_cycle()
     gait = contact_gait_of(model, traj, durations)
-    return model, traj, gait, contact_clfqp(model, gait, traj)
+    box = ModelErrorBound(0.3, 0.5, np.array([[-3.0, -1.0], [-2.0, -2.0]]),
+                          np.array([[1.0, 3.0], [2.0, 4.0]]), components=("qdd_pk", "qdd_pa"))
+    ctl = contact_clfqp(model, gait, traj, model_error=box)
+    assert np.any(ctl.stance.d_radius > 0)
+    return model, traj, gait, ctl
 
 
 def test_a_loaded_controller_ticks_as_the_one_saved(tmp_path, made):

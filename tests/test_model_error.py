@@ -68,6 +68,13 @@ def test_schema_2_round_trips(tmp_path, demo_tube, demo_gait):
         np.testing.assert_array_equal(getattr(back, f), getattr(t, f))
     assert (me.tau_lo, me.tau_hi, me.exclude_after_touchdown, me.n_steps) == (0.2, 0.9, 0.03, 5)
     assert me.credibility == {"N": 5} and me.source == {"test": True}
+    # the multi-contact controller's (joint accelerations) round-trips as what it is
+    t = dataclasses.replace(demo_tube, model_error=dataclasses.replace(
+        _bound(), components=("qdd_pk", "qdd_pa")))
+    save_tube(p, t)
+    doc = json.loads(p.read_text())
+    assert doc["model_error"]["units"] == ["rad/s^2", "rad/s^2"]
+    assert load_tube(p).model_error.components == ("qdd_pk", "qdd_pa")
     # without a model error, schema 2 too
     save_tube(p, demo_tube)
     assert json.loads(p.read_text())["schema_version"] == 2
@@ -80,6 +87,7 @@ def test_schema_2_round_trips(tmp_path, demo_tube, demo_gait):
     (lambda d: d["model_error"].update(tau_hi=0.1), "model_error.tau_hi"),
     (lambda d: d["model_error"].pop("degree"), "model_error.degree"),
     (lambda d: d.update(schema_version=1), "model_error"),
+    (lambda d: d["model_error"].update(components=["qdd_pk", "dy1"]), "model_error.components"),
 ])
 def test_bad_tube_files_are_refused_in_one_line(tmp_path, demo_tube, edit, field):
     p = tmp_path / "tube.json"

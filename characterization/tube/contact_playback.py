@@ -72,6 +72,7 @@ from characterization.tube.fit import (
     tube_interval,
     with_allowance,
 )
+from characterization.tube.model_error import markdown as error_markdown
 from characterization.tube.playback import write_tube_files
 from hp_model import bezier
 from hp_model.closed_loop import ClosedLoop
@@ -115,8 +116,9 @@ class StancePlayback:
     """One recorded flat prosthesis single support played back (module docstring): the
     stride, its first and last frame in the steps file, its fitted parameters and their RMS
     residuals (the joints' rad, the hip rate's m/s), the simulated log (1 ms): t (s), q and
-    qd (n, 12), the socket force F_s (n, 3: N, N, N m) and the stance phase; the periods with
-    the sole outside the friction cone (reported, not enforced)."""
+    qd (n, 12), the torques u (n, 6; the prosthesis's at the motor), the socket force F_s
+    (n, 3: N, N, N m) and the stance phase; the periods with the sole outside the friction
+    cone (reported, not enforced)."""
 
     stride: int
     frames: tuple[int, int]
@@ -125,6 +127,7 @@ class StancePlayback:
     t: np.ndarray
     q: np.ndarray
     qd: np.ndarray
+    u: np.ndarray
     socket: np.ndarray
     phase: np.ndarray
     cone_periods: int
@@ -322,7 +325,7 @@ def play_stride(model: HumanProsthesisModel, cl: ClosedLoop, thetas: Mapping[Dom
               "duration" if end is None else "non-finite socket force")
     return StancePlayback(
         stride=k, frames=(a, b), params=params, fit_rms=rms, t=log.t, q=log.q, qd=log.qd,
-        socket=socket, phase=stance_phase(leg, model, log.q, progress), cone_periods=cone,
+        u=log.u, socket=socket, phase=stance_phase(leg, model, log.q, progress), cone_periods=cone,
         failed=failed, reason=reason if failed else "")
 
 
@@ -529,6 +532,10 @@ def report_markdown(res: ContactTubeResult, steps_src: str = "steps",
         lines.append(f"| {name} ({unit}) | {lo[:, c].min():.1f} | {hi[:, c].max():.1f} "
                      f"| {np.mean(hi[:, c] - lo[:, c]):.1f} | {t.allowance[c]:.1f} |")
     lines += ["", credibility_markdown(t.credibility)]
+    if t.model_error is not None:
+        lines += ["", error_markdown(t.model_error)]
+    elif "model_error" in t.source:
+        lines += ["", f"Model error of clfqp's model: {t.source['model_error']}"]
     return "\n".join(lines)
 
 

@@ -49,7 +49,7 @@ from hp_model import bezier
 from hp_model.domains import Domain
 from hp_model.force_tube import (
     ERROR_COMPONENTS,
-    ERROR_UNITS,
+    ERROR_KINDS,
     EXCLUDE_AFTER_TOUCHDOWN,
     ModelErrorBound,
 )
@@ -140,13 +140,14 @@ def common_range(samples: Sequence[ErrorSamples], exclude: float,
 
 
 def _fit(per_step: Sequence[tuple[np.ndarray, np.ndarray]], tau_lo: float, tau_hi: float,
-         degree: int) -> tuple[np.ndarray, np.ndarray]:
+         degree: int, components: Sequence[str] = ERROR_COMPONENTS
+         ) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper), (2, degree + 1) each: the LP bounds of the pooled samples."""
     s = np.concatenate([(t - tau_lo) / (tau_hi - tau_lo) for t, _ in per_step])
     y = np.concatenate([d for _, d in per_step])
     B = bezier.basis(degree, np.clip(s, 0.0, 1.0))
     lower, upper = np.empty((2, degree + 1)), np.empty((2, degree + 1))
-    for c, name in enumerate(ERROR_COMPONENTS):
+    for c, name in enumerate(components):
         scale = float(np.max(np.abs(y[:, c]))) or 1.0
         for side, out in (("lower", lower), ("upper", upper)):
             out[c] = fit_bound_curve(B, y[:, c] / scale, side, s,
@@ -162,8 +163,8 @@ def _inside(tau: np.ndarray, d: np.ndarray, lower: np.ndarray, upper: np.ndarray
 
 
 def credibility(per_step: Sequence[tuple[np.ndarray, np.ndarray]], lower: np.ndarray,
-                upper: np.ndarray, tau_lo: float, tau_hi: float, beta: float = 0.05
-                ) -> dict[str, Any]:
+                upper: np.ndarray, tau_lo: float, tau_hi: float, beta: float = 0.05,
+                components: Sequence[str] = ERROR_COMPONENTS) -> dict[str, Any]:
     """The credibility of a model-error bound fitted to ``per_step`` (module docstring)."""
     N, m = len(per_step), lower.shape[1] - 1
     y = np.concatenate([d for _, d in per_step])
@@ -171,7 +172,7 @@ def credibility(per_step: Sequence[tuple[np.ndarray, np.ndarray]], lower: np.nda
     tol = 1e-9 * scale
     touching = np.zeros(N, bool)
     per_curve: dict[str, Any] = {}
-    for c, name in enumerate(ERROR_COMPONENTS):
+    for c, name in enumerate(components):
         for side, coeffs in (("lower", lower[c]), ("upper", upper[c])):
             touch = np.zeros(N, bool)
             for i, (t, d) in enumerate(per_step):
@@ -197,7 +198,7 @@ def credibility(per_step: Sequence[tuple[np.ndarray, np.ndarray]], lower: np.nda
                 held_in += t.size
                 continue
             lo_i, hi_i = _fit([p for j, p in enumerate(per_step) if j != i], tau_lo, tau_hi,
-                              m)
+                              m, components)
             ok = _inside(t, d, lo_i, hi_i, tau_lo, tau_hi, tol)
             held_in += int(ok.sum())
             loo_steps[i] = bool(ok.all())
@@ -218,9 +219,10 @@ def credibility(per_step: Sequence[tuple[np.ndarray, np.ndarray]], lower: np.nda
 def fit_model_error(samples: Sequence[ErrorSamples], degree: int = 3,
                     exclude_after_touchdown: float = EXCLUDE_AFTER_TOUCHDOWN,
                     within: tuple[float, float] | None = None,
-                    source: Mapping[str, Any] | None = None, beta: float = 0.05
-                    ) -> ModelErrorBound:
-    """The mid-stance bound of the model error of N steps (module docstring); raises
+                    source: Mapping[str, Any] | None = None, beta: float = 0.05,
+                    components: tuple[str, str] = ERROR_COMPONENTS) -> ModelErrorBound:
+    """The mid-stance bound of the model error of N steps (module docstring; ``components``
+    a key of :data:`hp_model.force_tube.ERROR_KINDS`, what the samples' d is); raises
     :class:`TubeFitError` (one line) when the samples cannot determine it."""
     if isinstance(degree, bool) or int(degree) != degree or not 0 <= degree <= 20:
         raise TubeFitError(f"model-error degree must be an integer in [0, 20], got {degree}")
@@ -231,16 +233,17 @@ def fit_model_error(samples: Sequence[ErrorSamples], degree: int = 3,
     if len(per_step) < degree + 1:
         raise TubeFitError(f"{len(per_step)} step(s) with model-error samples cannot support "
                            f"a degree-{degree} bound: need at least {degree + 1}")
-    lower, upper = _fit(per_step, tau_lo, tau_hi, degree)
-    cred = credibility(per_step, lower, upper, tau_lo, tau_hi, beta)
+    lower, upper = _fit(per_step, tau_lo, tau_hi, degree, components)
+    cred = credibility(per_step, lower, upper, tau_lo, tau_hi, beta, components)
     y = np.concatenate([d for _, d in per_step])
     src = dict(source or {})
-    src.update({"n_samples": int(y.shape[0]), "units": list(ERROR_UNITS),
+    src.update({"n_samples": int(y.shape[0]), "units": list(ERROR_KINDS[components]),
                 "max_abs": [float(v) for v in np.max(np.abs(y), axis=0)],
                 "method": "scipy.optimize.linprog(highs), the force tube's LPs"})
     return ModelErrorBound(tau_lo=tau_lo, tau_hi=tau_hi, lower=lower, upper=upper,
                            exclude_after_touchdown=float(exclude_after_touchdown),
-                           n_steps=len(per_step), credibility=cred, source=src)
+                           n_steps=len(per_step), credibility=cred, source=src,
+                           components=components)
 
 
 def margin_torque(bound: ModelErrorBound, tau: float, A: np.ndarray) -> float:
@@ -258,13 +261,18 @@ def markdown(bound: ModelErrorBound) -> str:
     c = bound.credibility
     tau = np.linspace(bound.tau_lo, bound.tau_hi, 201)
     lo, hi = bound.bounds(tau)
+    if bound.components == ERROR_COMPONENTS:
+        what = (f"d = nu_true - (a + A u_p) over tau in [{bound.tau_lo:.3f}, "
+                f"{bound.tau_hi:.3f}] (the gait's phase), the first "
+                f"{bound.exclude_after_touchdown * 1e3:.0f} ms after touchdown excluded (left "
+                "to the relaxation)")
+    else:
+        what = (f"d = qdd_true - qdd_ref - g (u - u_ref) (the multi-contact clfqp's model) over "
+                f"the stance phase [{bound.tau_lo:.3f}, {bound.tau_hi:.3f}]")
     lines = ["### Model error of the nominal-human model (clfqp's margin)", "",
-             f"d = nu_true - (a + A u_p) over tau in [{bound.tau_lo:.3f}, {bound.tau_hi:.3f}] "
-             f"(the gait's phase), the first {bound.exclude_after_touchdown * 1e3:.0f} ms "
-             f"after touchdown excluded (left to the relaxation); {bound.n_steps} steps, "
-             f"degree-{bound.degree} Bezier bounds.", "",
+             f"{what}; {bound.n_steps} steps, degree-{bound.degree} Bezier bounds.", "",
              "| component | lower min | upper max | mean width | unit |", "|---|---|---|---|---|"]
-    for k, (name, unit) in enumerate(zip(ERROR_COMPONENTS, ERROR_UNITS, strict=True)):
+    for k, (name, unit) in enumerate(zip(bound.components, bound.units, strict=True)):
         lines.append(f"| {name} | {lo[:, k].min():.3g} | {hi[:, k].max():.3g} | "
                      f"{np.mean(hi[:, k] - lo[:, k]):.3g} | {unit} |")
     if c:

@@ -76,7 +76,9 @@ def run(
         "(gait fit --domains multicontact: its subject and device, no tube; clfqp).",
         dir_okay=False)],
     tube: Annotated[Path | None, typer.Option(
-        "--tube", help="Force-tube file (the paper's graph).", dir_okay=False)] = None,
+        "--tube", help="Force-tube file (tube fit): the paper's graph needs it; a "
+        "multi-contact gait's gives clfqp its robust term (the tube's model-error bound).",
+        dir_okay=False)] = None,
     steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "

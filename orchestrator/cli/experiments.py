@@ -50,7 +50,10 @@ def experiments(
                                        dir_okay=False)],
     out: Annotated[Path, typer.Option("--out", help="Output folder.", file_okay=False)],
     tube: Annotated[Path | None, typer.Option("--tube", help="Tube file (tube fit; the "
-                                              "paper's graph).", dir_okay=False)] = None,
+                                              "paper's graph needs it; a multi-contact gait: "
+                                              "the socket force's share inside it, and "
+                                              "clfqp's robust term from its model-error "
+                                              "bound).", dir_okay=False)] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, help="Steps per run.")] = 20,
     eigen: Annotated[bool, typer.Option(help="Closed-loop return-map eigenvalues (finite "
                                         "differences, 24 extra runs).")] = True,
@@ -319,7 +322,8 @@ def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
                                str(out / "human.fmu")]),
         ("co-simulation", lambda: ["run", "--controller", "clfqp", "--gait", str(gait),
                                    "--fmu", str(out / "human.fmu"), "--steps", str(steps),
-                                   "--record", str(rec)]),
+                                   "--record", str(rec),
+                                   *(["--tube", str(tube)] if tube.is_file() else [])]),
         ("replay", lambda: ["replay", str(rec)]),
     ]
     for stale in (tube, gait):  # an earlier demo's in the folder is not this one's
@@ -356,9 +360,10 @@ def _write_demo_report(out: Path, who: str, done: list[tuple[str, float, int, li
     lines = [f"# hpcosim demo on {who}", "",
              "The person's multi-contact gait, from the take to a co-simulation "
              "(docs/gait-design.md, docs/cosim.md).  The force tube is made on the flat "
-             "prosthesis single supports (`tube.md`) and the experiments measure the walks' "
-             "socket force against it; the multi-contact `clfqp` does not use it (no robust "
-             "term yet).", "",
+             "prosthesis single supports (`tube.md`) with the bound of `clfqp`'s model "
+             "error along the same playbacks; the experiments measure the walks' socket force "
+             "against the tube, and `clfqp` (experiments and co-simulation) carries the bound "
+             "in its CLF row (its robust term) when the tube holds one.", "",
              "| stage | command | seconds | outcome |", "|---|---|---:|---|"]
     for stage, seconds, rc, args in done:
         lines.append(f"| {stage} | `hpcosim {' '.join(args)}` | {seconds:.1f} | "

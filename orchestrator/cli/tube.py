@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -73,7 +74,8 @@ def fit(
     and fit the certified force tube around its deviation from the gait's nominal F*; with
     it (default) the mid-stance bound of clfqp's model error along the same playbacks.  A
     multi-contact gait: every flat prosthesis single support played back on its domain, the
-    tube over the prosthesis controllers' stance phase (no model-error bound)."""
+    tube over the prosthesis controllers' stance phase, and the bound of its clfqp's model
+    error along the same playbacks."""
     import hp_model
     from characterization.mocap.steps_artifact import load_steps
     from characterization.tube.playback import (
@@ -155,6 +157,7 @@ def _contact_tube(console: Console, steps: Path, gait: Path, out: Path, degree: 
     from characterization.gait.multicontact_artifact import load_contact_cycle
     from characterization.mocap.steps_artifact import load_steps
     from characterization.tube.contact_playback import fit_contact_tube, write_outputs
+    from orchestrator.cosim.contact_controllers import load_contact_run, tube_with_model_error
 
     if refused:
         raise typer.BadParameter(
@@ -174,6 +177,12 @@ def _contact_tube(console: Console, steps: Path, gait: Path, out: Path, degree: 
 
         res = fit_contact_tube(g, s, degree, allowance, progress, src=str(steps),
                                gait_src=str(gait))
+    with console.status("clfqp's model error along the playbacks (the gait walked once)"):
+        try:
+            res = tube_with_model_error(res, load_contact_run(gait))
+        except ValueError as e:  # the held oracle fell: no controller to characterise
+            res = replace(res, tube=replace(res.tube, source={
+                **res.tube.source, "model_error": f"not fitted: {e}"}))
     paths = write_outputs(out, res, str(steps), str(gait))
     t, cred = res.tube, res.tube.credibility
     console.print(f"[bold]{steps}[/]: {len(res.playbacks)} flat prosthesis single supports "
@@ -183,8 +192,15 @@ def _contact_tube(console: Console, steps: Path, gait: Path, out: Path, degree: 
     for k, why in res.skipped:
         console.print(f"  [yellow]skipped[/] single support {k}: {why}")
     _print_tube(console, t)
-    console.print("model error: not characterised on the multi-contact graph (its clfqp "
-                  "linearizes the gait as the model walks it)")
+    me = t.model_error
+    if me is not None:
+        lo, hi = me.bounds(np.linspace(me.tau_lo, me.tau_hi, 201))
+        console.print(f"model error of clfqp's model: stance phase [{me.tau_lo:.3f}, "
+                      f"{me.tau_hi:.3f}], knee {lo[:, 0].min():.1f} .. {hi[:, 0].max():.1f}, "
+                      f"ankle {lo[:, 1].min():.1f} .. {hi[:, 1].max():.1f} rad/s^2 (its "
+                      f"robust term when the tube is given to experiments, run or sweep)")
+    else:
+        console.print(f"[yellow]model error[/]: {t.source.get('model_error', 'not fitted')}")
     console.print(f"wrote {paths['tube']}, {paths['figure'].name}, {paths['report'].name}")
     eps = cred["a_posteriori"]["epsilon_tube"]
     if eps >= 1.0:

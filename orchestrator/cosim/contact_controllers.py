@@ -18,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -36,11 +36,15 @@ from characterization.gait.contact_gait import (
 )
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
+from characterization.tube.contact_model_error import Linearization, fit_contact_model_error
+from characterization.tube.contact_playback import ContactTubeResult
+from characterization.tube.fit import TubeFitError
 from hp_model.artifacts import canonical_hash
 from hp_model.closed_loop import ClosedLoop
 from hp_model.compiled import cache_root
 from hp_model.contact_interaction import ContactInteraction, wrench_size
 from hp_model.domains import Domain
+from hp_model.force_tube import ModelErrorBound
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.leg_kinematics import LegKinematics
 from hp_model.simulator import HybridSimulator
@@ -169,10 +173,13 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   trajectory: Mapping[Domain, Mapping[str, Any]],
                   gains: tuple[float, float, float] = GAINS,
                   config: ContactClfConfig = DEFAULT_CONFIG, *,
-                  setup: LoopSetup | None = None) -> ContactClfQp:
+                  setup: LoopSetup | None = None,
+                  model_error: ModelErrorBound | None = None) -> ContactClfQp:
     """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
     the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
-    :func:`controller_tables`)."""
+    :func:`controller_tables`); ``model_error``: the bound of its model's error (the gait's
+    force tube's, :func:`characterization.tube.contact_model_error.fit_contact_model_error`)
+    for the robust term of its CLF row (None: none)."""
     leg = LegKinematics.of(model)
     w = (setup and setup.held) or held_walk(
         setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
@@ -182,7 +189,8 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
     inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
     walked = WalkedStance(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
                           w.wrench[st], w.torque[st])
-    stance = stance_qp(walked, inter, gait.thetas(), gains, model, config)
+    stance = stance_qp(walked, inter, gait.thetas(), gains, model, config
+                       ).with_margin(model_error)
     p = model.device.prosthesis
     return ContactClfQp(phase_law(model, tables, leg), stance,
                         (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
@@ -205,12 +213,14 @@ def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
 @dataclass(frozen=True)
 class ContactRun:
     """A multi-contact gait file as a run uses it: the model it carries, the stored cycle
-    (trajectories, durations), its virtual constraints and what the human FMU tracks."""
+    (trajectories, durations), its virtual constraints, what the human FMU tracks and the
+    file's identity (``hash``: what a tube fitted around it names)."""
 
     model: HumanProsthesisModel
     trajectory: dict[Domain, dict[str, np.ndarray]]
     gait: ContactGait
     tracked: TrackedGait
+    hash: str
 
 
 def load_contact_run(path: str | os.PathLike[str]) -> ContactRun:
@@ -220,7 +230,8 @@ def load_contact_run(path: str | os.PathLike[str]) -> ContactRun:
     cycle = load_contact_cycle(path)
     gait = contact_gait_of(cycle.model, cycle.trajectory, cycle.durations)
     return ContactRun(cycle.model, cycle.trajectory, gait,
-                      tracked_gait(cycle.model, gait, cycle.trajectory, Path(path).name))
+                      tracked_gait(cycle.model, gait, cycle.trajectory, Path(path).name),
+                      cycle.hash)
 
 
 def load_tracked_gait(path: str | os.PathLike[str]
@@ -238,14 +249,18 @@ _MAKERS = (Path(__file__), *(Path(str(m.__file__)) for m in (
 
 
 def ensure_controller_file(gait_path: Path, run: ContactRun,
-                           say: Callable[[str], None] | None = None) -> Path:
+                           say: Callable[[str], None] | None = None,
+                           tube: tuple[Path, ModelErrorBound | None] | None = None) -> Path:
     """The ``clfqp`` controller file of the multi-contact gait at ``gait_path`` (``run``:
     it loaded; :mod:`prosthesis_controller.gait_tables`), made once and cached
     (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/clfqp.npz; the digest
-    covers the gait file, the model, the curves the human tracks and the code that makes
-    the controller).  ValueError if the held
-    oracle falls in the stride the tables are read from."""
+    covers the gait file, the model, the curves the human tracks, the tube file and the
+    code that makes the controller); ``tube``: the tube file and its model-error bound,
+    ``clfqp``'s robust term.  ValueError if the held oracle falls in the stride the tables
+    are read from."""
     h = hashlib.sha256(Path(gait_path).read_bytes())
+    if tube is not None:
+        h.update(Path(tube[0]).read_bytes())
     h.update(run.model.parameter_hash().encode())
     h.update(run.tracked.hash.encode())  # the curves the human tracks, however regressed
     for f in _MAKERS:
@@ -254,6 +269,30 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
     if not out.is_file():
         (say or (lambda _m: None))("making the controller's tables (the gait walked once)")
         out.parent.mkdir(parents=True, exist_ok=True)
-        ctl = contact_clfqp(run.model, run.gait, run.trajectory)
+        ctl = contact_clfqp(run.model, run.gait, run.trajectory,
+                            model_error=tube[1] if tube is not None else None)
         save_contact_controller(out, ctl, run.model, run.tracked.hash)
     return out
+
+
+def controller_linearization(ctl: ContactClfQp) -> Linearization:
+    """What the model-error characterization needs of ``clfqp``'s model along its stance."""
+    st = ctl.stance
+    return Linearization(st.phase, st.g, st.u_ref, st.qdd_ref, ctl.law.tables.progress)
+
+
+def tube_with_model_error(res: ContactTubeResult, run: ContactRun) -> ContactTubeResult:
+    """``res`` with its tube carrying the bound of ``clfqp``'s model error along the same
+    playbacks (:mod:`characterization.tube.contact_model_error`, at the tube's degree and
+    over its phase range); when the playbacks cannot give one, the tube's
+    ``source["model_error"]`` says why.  ValueError as :func:`contact_clfqp` (the held
+    oracle fell)."""
+    tube = res.tube
+    lin = controller_linearization(contact_clfqp(run.model, run.gait, run.trajectory))
+    try:
+        bound = fit_contact_model_error(run.model, lin, res.playbacks, tube.degree,
+                                        (tube.tau_lo, tube.tau_hi))
+    except TubeFitError as e:
+        return replace(res, tube=replace(tube, source={**tube.source,
+                                                       "model_error": f"not fitted: {e}"}))
+    return replace(res, tube=replace(tube, model_error=bound))

@@ -65,13 +65,14 @@ def check_fmu_identity(path: Path, gait_hash: str, model: Any, gait_path: Path |
 class RunInputs:
     """The model (of the configuration's subject and device), the gait and force tube
     loaded for it, the human FMU file and the prosthesis drives.  A multi-contact gait
-    (:data:`hp_model.gait_artifact.MULTICONTACT_KIND`) carries its model; its run has no
-    force tube, its controller comes from ``tables`` (made for the run:
+    (:data:`hp_model.gait_artifact.MULTICONTACT_KIND`) carries its model; its controller
+    comes from ``tables`` (made for the run, with the robust term of the tube's model-error
+    bound when a tube is given:
     :func:`orchestrator.cosim.contact_controllers.ensure_controller_file`)."""
 
     model: Any  # hp_model.human_prosthesis.HumanProsthesisModel
     gait: Any  # hp_model.gait_artifact.Gait, or human_fmu.build.TrackedGait (multi-contact)
-    tube: Any  # hp_model.force_tube.ForceTube (None: multi-contact)
+    tube: Any  # hp_model.force_tube.ForceTube (None: a multi-contact run without one)
     fmu_path: Path
     drives: Drives
     gait_hash: str  # the gait's identity (the FMU's build names it)
@@ -105,7 +106,8 @@ class RunInputs:
     def _multicontact(cls, cfg: CosimConfig, say: Callable[[str], None] | None
                       ) -> RunInputs:
         """A multi-contact gait's run: its model, what the FMU tracks, the FMU and the
-        controller's file (both built for it once and cached)."""
+        controller's file (both built for it once and cached), the tube when given."""
+        from hp_model.force_tube import load_tube
         from orchestrator.cosim.contact_controllers import (
             ensure_controller_file,
             load_contact_run,
@@ -114,22 +116,23 @@ class RunInputs:
         if cfg.subject is not None or cfg.device is not None:
             raise CosimError(f"--gait {cfg.gait}: a multi-contact gait carries its subject "
                              "and device; drop --subject/--device")
-        if cfg.tube is not None:
-            raise CosimError(f"--tube {cfg.tube}: a multi-contact gait's run has no force "
-                             "tube (its controller is made from the gait); drop --tube")
         if cfg.controller != ControllerName.CLFQP:
             raise CosimError(f"--controller {cfg.controller}: a multi-contact gait runs "
                              f"{ControllerName.CLFQP.value} (the paper's graph runs the others)")
         run = load_contact_run(cfg.gait)
         model, tracked = run.model, run.tracked
+        tube = None if cfg.tube is None else load_tube(cfg.tube, run.hash)
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)
         check_fmu_identity(fmu_path, tracked.hash, model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
         try:
-            tables = ensure_controller_file(Path(cfg.gait), run, say)
+            tables = ensure_controller_file(
+                Path(cfg.gait), run, say,
+                None if tube is None or cfg.tube is None
+                else (Path(cfg.tube), tube.model_error))
         except ValueError as e:  # the held oracle fell: the gait does not walk
             raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
-        return cls(model, tracked, None, fmu_path, Drives.of(model), tracked.hash, tables)
+        return cls(model, tracked, tube, fmu_path, Drives.of(model), tracked.hash, tables)
 
 
 def _opt(path: Path | None) -> str | None:

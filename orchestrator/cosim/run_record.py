@@ -90,8 +90,11 @@ class RunRecord:
         try:
             self.rec.register_all()
             self._describe(cfg, fmu)
-            self._walker = WalkerFoxglove(inputs.model, inputs.gait if inputs.tube else None,
-                                          inputs.tube)
+            # the reference panel's desired angles and tube: the paper graph's gait (a
+            # multi-contact run's tube is over the controllers' stance phase, not tau)
+            paper = inputs.tables is None and inputs.tube is not None
+            self._walker = WalkerFoxglove(inputs.model, inputs.gait if paper else None,
+                                          inputs.tube if paper else None)
         except BaseException:
             self.close(failed=True)
             raise

@@ -42,6 +42,7 @@ from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
 from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
+from hp_model.force_tube import ModelErrorBound
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
 from orchestrator.cosim.contact_controllers import (
@@ -123,14 +124,17 @@ def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[s
 
 def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
                           trajectory: Mapping[Domain, Mapping[str, Any]],
-                          setup: LoopSetup | None = None) -> dict[str, Any]:
+                          setup: LoopSetup | None = None,
+                          model_error: ModelErrorBound | None = None) -> dict[str, Any]:
     """The controllers a family walks (:data:`CONTROLLERS`), made once from the
-    unperturbed gait (``setup``: its simulator and held walk, when made already)."""
+    unperturbed gait (``setup``: its simulator and held walk, when made already;
+    ``model_error``: the tube's bound, ``clfqp``'s robust term)."""
     if setup is None or setup.held is None:
         sim = loop_simulator(model, gait, GAINS)
         setup = LoopSetup(sim, held_walk(sim, trajectory))
     return {"oracle": "oracle",
-            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup),
+            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup,
+                                   model_error=model_error),
             "contact-pd": make_contact_pd(model, gait, trajectory, setup)}
 
 

@@ -33,7 +33,7 @@ from characterization.tube.contact_playback import share_inside
 from hp_model.atomic_io import atomic_write_bytes, atomic_write_text
 from hp_model.domains import PROSTHESIS, Domain
 from hp_model.figures import figure_bytes
-from hp_model.force_tube import ForceTube
+from hp_model.force_tube import ForceTube, ModelErrorBound
 from hp_model.json_io import dumps
 from hp_model.simulator import SimResult
 from orchestrator.cosim.contact_controllers import (
@@ -123,13 +123,14 @@ def stride_rms(res: SimResult, run: ContactRun) -> tuple[float, float]:
     return float(np.sqrt(np.mean(err[:, 0] ** 2))), float(np.sqrt(np.mean(err[:, 1] ** 2)))
 
 
-def nominal_walks(run: ContactRun, steps: int
+def nominal_walks(run: ContactRun, steps: int, model_error: ModelErrorBound | None = None
                   ) -> tuple[dict[str, ControllerWalk], dict[str, SimResult], dict[str, Any]]:
     """The three controllers' nominal walks (module docstring), their logs and the
-    controllers (ValueError if the held oracle falls in the stride the tables read)."""
+    controllers (ValueError if the held oracle falls in the stride the tables read);
+    ``model_error``: ``clfqp``'s robust term (the tube's bound)."""
     sim = loop_simulator(run.model, run.gait, GAINS)
     setup = LoopSetup(sim, held_walk(sim, run.trajectory))
-    ctls = perturbed_controllers(run.model, run.gait, run.trajectory, setup)
+    ctls = perturbed_controllers(run.model, run.gait, run.trajectory, setup, model_error)
     logs: dict[str, SimResult] = {}
     walks: dict[str, ControllerWalk] = {}
     for name in NAMES:
@@ -257,9 +258,14 @@ def report(metrics: Mapping[str, Any]) -> str:
                                       f"{100 * v:.0f} %") for n in NAMES)
         lines += [f"Socket force inside the force tube (`tube fit`, stance phase "
                   f"{tube['tau'][0]:.3f}-{tube['tau'][1]:.3f}), share of the flat single "
-                  f"support's periods: {shares}. The multi-contact `clfqp` does not use the "
-                  "tube (no robust term yet); the share says how far the nominal walks' "
-                  "socket force stays within what the recorded steps spanned.", ""]
+                  f"support's periods: {shares}. "
+                  + ("`clfqp`'s CLF row carries the tube's bound of its model's error (its "
+                     "robust term, in the tube's phase range of the flat single support)"
+                     if tube.get("robust_term") else
+                     "The tube carries no bound of `clfqp`'s model error, so `clfqp` has no "
+                     "robust term")
+                  + "; the share says how far the nominal walks' socket force stays within "
+                  "what the recorded steps spanned.", ""]
     lines += [ "![the last stride](person.png)", "",
               "`clfqp`'s walk: `walker.gif` (its first 3 s) and its last stride in 9 poses:",
               "", "![clfqp's last stride](walker_stride.png)", "",
@@ -286,12 +292,14 @@ def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: 
                            tube: ForceTube | None = None) -> dict[str, Any]:
     """The experiments of the module docstring on the multi-contact gait file, written to
     ``out`` (created); the metrics.  With the gait's ``tube`` (``tube fit``), each nominal
-    walk's share of flat single-support periods with the socket force inside it."""
+    walk's share of flat single-support periods with the socket force inside it, and
+    ``clfqp``'s robust term from its model-error bound when it carries one."""
     say = progress or (lambda _m: None)
     say("reading the gait")
     run = load_contact_run(gait_path)
     say(f"nominal walks: {', '.join(NAMES)}, {steps} steps")
-    walks, logs, ctls = nominal_walks(run, steps)
+    model_error = tube.model_error if tube is not None else None
+    walks, logs, ctls = nominal_walks(run, steps, model_error)
     families = family_table(run, ctls, draws, say) if draws > 0 else {}
     stride_time = sum(float(np.asarray(run.trajectory[d]["t"])[-1]) for d in GRAPH.domains)
     metrics = {"gait": Path(gait_path).name, "steps": steps, "draws": draws,
@@ -301,6 +309,7 @@ def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: 
                "amplitudes": {f: AMPLITUDE.get(f, 1.0) for f in families}}
     if tube is not None:
         metrics["tube"] = {"gait_hash": tube.gait_hash, "tau": [tube.tau_lo, tube.tau_hi],
+                           "robust_term": model_error is not None,
                            "inside": {n: share_inside(tube, run.model, logs[n])
                                       for n in NAMES}}
     out.mkdir(parents=True, exist_ok=True)

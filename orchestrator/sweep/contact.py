@@ -92,8 +92,9 @@ def draw_gains(draw: Draw) -> np.ndarray:
 
 class ContactResources:
     """What a worker builds once from the artifacts of a multi-contact sweep: the gait's run
-    (model, curves, fitted cycle), its compiled closed loop, the two controllers (made from
-    the held oracle's walk) and the tube when there is one."""
+    (model, curves, fitted cycle), its compiled closed loop, the tube when there is one and
+    the two controllers (made from the held oracle's walk; ``clfqp`` with the tube's
+    model-error bound, its robust term, when it carries one)."""
 
     def __init__(self, artifacts: Any, workdir: Path | None = None) -> None:
         from hp_model.force_tube import load_tube
@@ -107,18 +108,17 @@ class ContactResources:
         sim = loop_simulator(self.run.model, self.run.gait, GAINS)
         self.closed_loop = sim.cl
         setup = LoopSetup(sim, held_walk(sim, self.run.trajectory))
-        self.controllers: dict[str, ContactClfQp | ContactPhasePD] = {
-            "clfqp": contact_clfqp(self.run.model, self.run.gait, self.run.trajectory,
-                                   setup=setup),
-            "phase-pd": make_contact_pd(self.run.model, self.run.gait, self.run.trajectory,
-                                        setup)}
         self.tube = None
         if artifacts.tube is not None:
-            from characterization.gait.multicontact_artifact import load_contact_cycle
-
             tube_path = self._folder.path / "tube.json"
             tube_path.write_bytes(artifacts.tube)
-            self.tube = load_tube(tube_path, load_contact_cycle(gait_path).hash)
+            self.tube = load_tube(tube_path, self.run.hash)
+        self.controllers: dict[str, ContactClfQp | ContactPhasePD] = {
+            "clfqp": contact_clfqp(  # with the tube's model-error bound: its robust term
+                self.run.model, self.run.gait, self.run.trajectory, setup=setup,
+                model_error=self.tube.model_error if self.tube is not None else None),
+            "phase-pd": make_contact_pd(self.run.model, self.run.gait, self.run.trajectory,
+                                        setup)}
 
     def plant(self, draw: Draw) -> HybridSimulator:
         """The simulated walker of a draw: the draw's curves and gains on the shared closed
