@@ -4,9 +4,10 @@ complete stride; the NLP's size does not depend on the number of strides, which 
 the targets).
 
 The walker is the take's person (75 kg, 1.83 m, stored with the steps) on the device they
-would wear (its pylon cut to their leg), as ``gait fit`` uses by default.  Per repeat:
-targets from the steps, NLP construction and the two IPOPT solves (wall), the
-iterations; printed: median and spread, and the comparison with the take (speed, stride,
+would wear (its pylon cut to their leg, its foot their foot's size), as ``gait fit`` uses by
+default.  Per repeat: targets from the steps, NLP construction and the IPOPT solves (three,
+and the fourth of the angles' limit where it runs) (wall), the iterations; printed: median
+and spread, what the fourth solve did, and the comparison with the take (speed, stride,
 double supports, angle RMS).
 
     PYTHONPATH=. python benchmarks/bench_gait_multicontact.py [--repeats 3] [--json out.json]
@@ -21,7 +22,7 @@ import time
 from pathlib import Path
 
 import hp_model
-from characterization.gait.fit import pylon_fitted
+from characterization.gait.fit import worn_device
 from characterization.gait.multicontact import GRAPH, fit_multicontact, targets_from_steps
 from characterization.gait.multicontact_summary import gait_summary, take_summary
 from characterization.gait.person_check import check_person
@@ -47,7 +48,7 @@ def main() -> None:
     if stored is None:
         raise SystemExit("the steps carry no subject")
     person = stored[0]
-    device, _ = pylon_fitted(person, hp_model.load_model().device)
+    device, _ = worn_device(person, hp_model.load_model().device)
     model = HumanProsthesisModel(person, device, graph=GRAPH)
     model.numeric()  # compiled once, outside the timing
     walls, iters = [], []
@@ -57,7 +58,8 @@ def main() -> None:
         r = fit_multicontact(model, targets)
         walls.append(time.perf_counter() - t0)
         iters.append(r.iterations)
-        print(f"repeat {k + 1}: {walls[-1]:.1f} s, {r.status}, {r.iterations} iterations")
+        print(f"repeat {k + 1}: {walls[-1]:.1f} s, {r.status}, {r.iterations} iterations; "
+              f"angles' limit: {r.stats.get('angle_limit_stage')}")
     check = check_person(take_summary(targets), gait_summary(model, r))
     rows = {row.criterion: row.error for row in check.rows}
     med = statistics.median(walls)
