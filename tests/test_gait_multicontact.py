@@ -411,3 +411,47 @@ def test_a_takes_feet_are_flat_where_they_stand_flat(steps, mc_model):
             pose = np.asarray(frames(q, np.zeros(mc_model.nq))[0])
             pitches.append(pose[2, mc_model.frame_index(f"{SIDE[foot]}_sole")])
         assert abs(np.degrees(np.median(pitches))) < 0.5, (foot, np.degrees(pitches))
+
+
+@pytest.mark.slow
+def test_gait_fit_goes_back_when_the_limited_gait_does_not_walk(fitted, mc_model,
+                                                                 monkeypatch):
+    """openOFM's fit keeps the fit before the fourth solve (``without_limit``); when the
+    limited gait's closed loop falls and the one before walks, `gait fit` keeps that one,
+    its ``angle_limit_stage`` saying why; when both fall it keeps the limited one.  (The
+    closed loops are stood in for by their verdicts: the decision is what is tested.)"""
+    from dataclasses import dataclass
+
+    from characterization.gait.multicontact_summary import take_summary
+    from orchestrator.cli import gait_multicontact as cli
+
+    targets, r = fitted
+    before = r.without_limit
+    assert before is not None and before.without_limit is None
+    assert before.stats["angle_limit_stage"].startswith("not run")
+
+    @dataclass
+    class Verdict:
+        walks: bool
+
+        def line(self) -> str:
+            return "walks" if self.walks else "does not walk: fell"
+
+    def fake_walks(walks_of):
+        def walks(model, outputs, trajectory, console):
+            w = Verdict(walks_of(trajectory))
+            return w, w, w
+        return walks
+
+    take = take_summary(targets)
+    console = cli.Console()
+    monkeypatch.setattr(cli, "_walks", fake_walks(lambda tr: tr is before.trajectory))
+    kept, _, _, _, walks = cli._judged(mc_model, take, r, "g.json", console)
+    assert kept.trajectory is before.trajectory and walks[0].walks
+    assert kept.stats["angle_limit_stage"].endswith("the fit before it kept")
+    monkeypatch.setattr(cli, "_walks", fake_walks(lambda tr: False))
+    kept, *_ = cli._judged(mc_model, take, r, "g.json", console)
+    assert kept is r
+    monkeypatch.setattr(cli, "_walks", fake_walks(lambda tr: True))
+    kept, *_ = cli._judged(mc_model, take, r, "g.json", console)
+    assert kept is r

@@ -249,6 +249,9 @@ class MultiContactResult:
     solve_seconds: float
     cost: float
     stats: dict = field(default_factory=dict)
+    #: the fit before the fourth solve (the angles' limit) when that solve replaced it:
+    #: ``gait fit`` goes back to it when the limited gait does not walk
+    without_limit: MultiContactResult | None = None
 
     @property
     def stride_time(self) -> float:
@@ -818,26 +821,35 @@ def _solve(nlp: NLP, costs: tuple[ca.MX, ca.MX], limit: AngleLimit,
                 jerk_stage += ": the contacts' solve kept"
                 w[0] = 0.0
         stats["jerk_stage"] = jerk_stage
+        before, before_stats = sol, {**stats, "angle_limit_stage": "not run (the fit before "
+                                     "the fourth solve)"}
         stage, sol, stats = _limited(angle_rms, again, sol, stats, w, opt)
         stats["angle_limit_stage"] = stage
     elapsed = time.perf_counter() - t0
     keys = ("q", "qd", "qdd", "u", "lam", "T")
     unpack = ca.Function("unpack", [ca.vertcat(*nlp.w)],
                          [dec[d][k] for d in GRAPH.domains for k in keys] + [stride])
-    vals = [np.array(v) for v in unpack(np.array(sol["x"]).ravel())]
     P = 2 * opt.nodes - 1
-    traj: dict[Domain, dict[str, np.ndarray]] = {}
-    durations: dict[Domain, float] = {}
-    for i, d in enumerate(GRAPH.domains):
-        q, qd, qdd, u, lam, T = vals[6 * i: 6 * i + 6]
-        durations[d] = float(T.item())
-        traj[d] = {"t": np.linspace(0.0, durations[d], P), "q": q, "qd": qd, "qdd": qdd,
-                   "u": u, "lam": lam * weight}
-    return MultiContactResult(
-        durations=durations, trajectory=traj, stride_length=float(vals[-1].item()),
-        status=str(stats["return_status"]), success=bool(stats["success"]),
-        iterations=int(stats["iter_count"]), solve_seconds=elapsed, cost=float(sol["f"]),
-        stats={k: v for k, v in stats.items() if isinstance(v, int | float | str)})
+
+    def result(sol: dict, stats: dict) -> MultiContactResult:
+        vals = [np.array(v) for v in unpack(np.array(sol["x"]).ravel())]
+        traj: dict[Domain, dict[str, np.ndarray]] = {}
+        durations: dict[Domain, float] = {}
+        for i, d in enumerate(GRAPH.domains):
+            q, qd, qdd, u, lam, T = vals[6 * i: 6 * i + 6]
+            durations[d] = float(T.item())
+            traj[d] = {"t": np.linspace(0.0, durations[d], P), "q": q, "qd": qd, "qdd": qdd,
+                       "u": u, "lam": lam * weight}
+        return MultiContactResult(
+            durations=durations, trajectory=traj, stride_length=float(vals[-1].item()),
+            status=str(stats["return_status"]), success=bool(stats["success"]),
+            iterations=int(stats["iter_count"]), solve_seconds=elapsed, cost=float(sol["f"]),
+            stats={k: v for k, v in stats.items() if isinstance(v, int | float | str)})
+
+    out = result(sol, stats)
+    if sol is not before:  # the fourth solve replaced the fit: keep the one before it too
+        out = replace(out, without_limit=result(before, before_stats))
+    return out
 
 
 def _limited(angle_rms: ca.Function, again: Callable[[dict, list[float]], tuple[dict, dict]],

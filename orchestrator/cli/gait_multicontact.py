@@ -6,6 +6,7 @@ the person's or does not walk is refused unless ``--allow-mismatch``."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,6 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     """Targets from the steps, the fit, the comparison printed, the artifact (and, with
     ``figure``, its figure against the take next to it) written (a mismatch only with
     ``allow_mismatch``), the verdict as the exit code."""
-    from characterization.gait.contact_gait import contact_gait
     from characterization.gait.figures import save_person_figure
     from characterization.gait.fit import worn_device
     from characterization.gait.multicontact import (
@@ -33,8 +33,8 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
         targets_from_steps,
     )
     from characterization.gait.multicontact_artifact import save_multicontact_gait, to_document
-    from characterization.gait.multicontact_summary import gait_summary, take_summary
-    from characterization.gait.person_check import StanceForce, check_person, print_check
+    from characterization.gait.multicontact_summary import take_summary
+    from characterization.gait.person_check import StanceForce
     from characterization.gait.take_closure import closure_line, double_support_closure
     from characterization.mocap.steps_artifact import load_steps, plate_forces
     from hp_model.config import (
@@ -70,15 +70,12 @@ def fit_multicontact_gait(steps: Path, out: Path, subject: Path | None, device: 
     if not result.success:
         raise MultiContactError(f"gait fit, multi-contact optimization: IPOPT ended with "
                                 f"{result.status} after {result.iterations} iterations")
-    gait = gait_summary(model, result, str(out))
     plates = plate_forces(data, str(steps))  # the take's force plates, where it has them
     grf, bw = ({f: StanceForce(fx=s.fx, fz=s.fz) for f, s in plates[0].items()}, plates[1]) \
         if plates is not None else (None, float("nan"))
     take = take_summary(targets, str(steps), grf, bw)
-    check = check_person(take, gait)
-    print_check(Console(), check)
-    outputs = contact_gait(model, result)
-    walk, reference, pd_walk = _walks(model, outputs, result.trajectory, console)
+    result, gait, check, outputs, (walk, reference, pd_walk) = _judged(model, take, result,
+                                                                       str(out), console)
     passed = check.passed and walk.walks
     if passed or allow_mismatch:
         doc = to_document(result, targets, dict(gait.grf), check, model.parameter_hash(), opt,
@@ -114,6 +111,38 @@ def _say_flat_feet(pitch: dict[str, float]) -> None:
             f"{math.degrees(v):+.1f} deg ({foot})" for foot, v in pitch.items())
             + " while flat on the ground; taken out of the ankles' angles (the model's "
             "flat sole is at 0)", soft_wrap=True, highlight=False)
+
+
+def _judged(model: Any, take: Any, result: Any, name: str, console: Console
+            ) -> tuple[Any, Any, Any, Any, tuple[Any, ...]]:
+    """The fit compared with the take (printed) and walked (:func:`_walks`): (the result
+    kept, its summary, the comparison, its virtual constraints, the walks).  When the gait of
+    the angles' limit (the fit's fourth solve) does not walk and the fit before it does, that
+    one is kept, its ``angle_limit_stage`` saying why."""
+    from characterization.gait.contact_gait import contact_gait
+    from characterization.gait.multicontact_summary import gait_summary
+    from characterization.gait.person_check import check_person, print_check
+
+    def judge(r: Any) -> tuple[Any, Any, Any, tuple[Any, ...]]:
+        gait = gait_summary(model, r, name)
+        check = check_person(take, gait)
+        print_check(Console(), check)
+        outputs = contact_gait(model, r)
+        return gait, check, outputs, _walks(model, outputs, r.trajectory, console)
+
+    gait, check, outputs, walks = judge(result)
+    before = result.without_limit
+    if walks[0].walks or before is None:
+        return result, gait, check, outputs, walks
+    Console().print("the gait of the angles' limit does not walk: the fit before its solve, "
+                    "compared and walked", highlight=False)
+    b_gait, b_check, b_outputs, b_walks = judge(before)
+    if not b_walks[0].walks:
+        return result, gait, check, outputs, walks
+    stage = (f"{result.stats.get('angle_limit_stage')}; its gait {walks[0].line()}: the fit "
+             "before it kept")
+    kept = replace(before, stats={**before.stats, "angle_limit_stage": stage})
+    return kept, b_gait, b_check, b_outputs, b_walks
 
 
 def _walks(model: Any, outputs: Any, trajectory: Any, console: Console) -> tuple[Any, ...]:
