@@ -72,16 +72,20 @@ def test_the_plates_reach_the_targets_in_body_weights(steps, mc_model):
 
 
 @pytest.mark.slow
-def test_the_fit_meets_the_force_criteria_on_the_plates(steps, mc_model):
-    """Measured: correlation 0.98 / 0.97, peaks within 0.3-7.6 % BW (limits 0.9, 15 %);
-    without the plates in the cost 0.88 / 0.79 and a second peak 21 % BW high."""
+def test_the_fit_is_the_persons_gait_on_the_plates(steps, mc_model):
+    """Every criterion of the comparison holds (issue 37), the force criteria among them.
+    Measured: correlation 0.99 / 0.96, peaks within 1.7-5.4 % BW (limits 0.9, 15 %); without
+    the plates in the cost 0.88 / 0.79 and a second peak 21 % BW high.  The angles within
+    0.6-2.9 deg RMS since the mapping's static calibration takes each leg segment's standing
+    pitch from its landmarks (without it: the ankles 4.9 / 6.3, the trunk 3.9)."""
     t = targets_from_steps(steps, mc_model)
     result = fit_multicontact(mc_model, t, MultiContactOptions())
     assert result.success, result.status
     grf, weight = plate_forces(steps)
     take = take_summary(t, "take", {f: StanceForce(fx=m.fx, fz=m.fz) for f, m in grf.items()},
                         weight)
-    rows = [r for r in check_person(take, gait_summary(mc_model, result)).rows
-            if "F_z" in r.criterion]
+    check = check_person(take, gait_summary(mc_model, result))
+    rows = [r for r in check.rows if "F_z" in r.criterion]
     assert len(rows) == 6  # each foot: correlation, first and second peak
     assert all(r.passed for r in rows), [(r.criterion, r.error) for r in rows]
+    assert check.passed, check.verdict()

@@ -166,3 +166,49 @@ def test_the_paper_domains_are_found_on_the_treadmill(tmp_path) -> None:
         landed = max(c for c in _crossings(rec, own, up=True) if c <= t)
         left = min(c for c in _crossings(rec, other, up=False) if c >= landed)
         assert landed <= t <= left + 3.0 / RATE, (s, t, landed, left)
+
+
+def test_the_static_calibration_takes_the_legs_standing_pitch_from_their_landmarks() -> None:
+    """The mapping's ``calibration.landmarks``: each leg segment's offset is its marker pair's
+    standing pitch less its landmarks' axis (the epicondyles' and the malleoli's midpoints;
+    the hip by Harrington et al. 2007).  The subject stood with the shanks 4.5-4.7 deg
+    forward (the knees ahead of the ankles, as people stand) and the thighs 6-10 deg; the
+    other limbs keep the upright assumption.  A wrong landmark is one line naming it."""
+    from characterization.mocap.mapping import load_mapping
+    from characterization.mocap.pipeline import static_offsets
+    from characterization.mocap.take import MocapError
+
+    mapping = load_mapping(TAKE / "mapping.toml")
+    static = read_take(TAKE / "subject01_static.trc")
+    plain = static_offsets(static, mapping.model_copy(update={
+        "calibration": mapping.calibration.model_copy(update={"landmarks": {}})}))
+    landmarked = static_offsets(static, mapping)
+    shift = {k: np.degrees(plain[k] - landmarked[k]) for k in plain}
+    assert shift["l_shank"] == pytest.approx(4.5, abs=0.2)
+    assert shift["p_shin"] == pytest.approx(4.7, abs=0.2)
+    assert 5.0 < shift["l_thigh"] < 11.0 and 5.0 < shift["r_thigh"] < 11.0
+    for limb in ("hat", "l_foot", "p_foot"):
+        assert shift[limb] == 0.0
+    bad = mapping.model_copy(update={"calibration": mapping.calibration.model_copy(
+        update={"landmarks": {"l_shank": (["L.Knee.Lat"], ["L.Ankle.Nowhere"])}})})
+    with pytest.raises(MocapError, match=r"landmarks\.l_shank: no marker 'L\.Ankle\.Nowhere'"):
+        static_offsets(static, bad)
+
+
+@pytest.mark.parametrize("text, words", [
+    ('landmarks.l_thigh = ["hip", ["L.Knee.Lat"]]\n', "'hip' needs [calibration.pelvis]"),
+    ('landmarks.l_foot = [["L.Heel"], ["L.Toe.Tip"]]\n', "unknown landmark limb 'l_foot'"),
+])
+def test_a_bad_landmark_calibration_is_one_line(tmp_path, text, words) -> None:
+    from characterization.mocap.mapping import load_mapping
+    from characterization.mocap.take import MocapError
+
+    src = (TAKE / "mapping.toml").read_text()
+    start = src.index("[calibration]")
+    end = src.index("[force_plates]")
+    path = tmp_path / "mapping.toml"
+    path.write_text(src[:start] + '[calibration]\nstatic_trial = "x.trc"\n' + text + "\n"
+                    + src[end:])
+    with pytest.raises(MocapError) as e:
+        load_mapping(path)
+    assert words in str(e.value) and "\n" not in str(e.value)

@@ -34,6 +34,10 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     lowpass_hz = 15.0      # zero-phase Butterworth on limb pitches; 0 = off
     [calibration]
     static_trial = "static.c3d"  # standing in the neutral posture: per-limb pitch offsets
+    # optional: a leg limb's standing axis from anatomical landmarks (proximal, distal)
+    landmarks.l_shank = [["LKNE", "LKNM"], ["LANK", "LMMA"]]
+    landmarks.l_thigh = ["hip", ["LKNE", "LKNM"]]   # "hip": Harrington's, from the pelvis
+    pelvis = { asis = ["RASI", "LASI"], sacrum = ["LPSI", "RPSI"] }
     [subject]              # the person, when the take's file does not say (docs/subject.md)
     mass_kg = 72.5
     height_m = 1.78
@@ -138,12 +142,47 @@ class Processing(StrictConfig):
     min_joint_rotation_deg: Positive = 5.0
 
 
+#: a landmark list's stand-in for the hip joint centre (:class:`Pelvis`)
+HIP = "hip"
+#: the limbs whose axis anatomical landmarks can give in a static trial
+LANDMARK_LIMBS = ("l_thigh", "l_shank", "r_thigh", "p_shin")
+
+
+class Pelvis(StrictConfig):
+    """The pelvis's landmarks in the static trial, for the hip joint centre of Harrington et
+    al. 2007 (J Biomech 40: 595-602; its pelvis-width and -depth regression, in the sagittal
+    plane): behind the ASIS midpoint by 0.24 PD + 9.9 mm and below it by 0.30 PW + 10.9 mm,
+    PW the distance between the two ASIS, PD from their midpoint to the sacrum (the mean of
+    ``sacrum``: the sacral marker, or the two PSIS)."""
+
+    asis: tuple[str, str]
+    sacrum: list[str] = Field(min_length=1, max_length=2)
+
+
 class Calibration(StrictConfig):
     """Anatomical calibration: a static trial of the subject standing in the neutral
-    posture (every joint angle and the trunk pitch zero); each limb's median pitch in it is
-    that limb's offset.  The path is relative to the mapping file."""
+    posture; each limb's median pitch in it is that limb's offset (the limb taken as
+    upright while standing).  ``landmarks``: for a leg limb (:data:`LANDMARK_LIMBS`), its
+    axis in the static trial from anatomical landmarks, (proximal, distal), each a list of
+    markers averaged (e.g. the lateral and medial epicondyles) or ``"hip"`` (the hip joint
+    centre from ``pelvis``): the limb's offset then makes its standing pitch that axis's,
+    not zero (people stand with the shanks 3-6 deg forward).  The path is relative to the
+    mapping file."""
 
     static_trial: str
+    landmarks: dict[str, tuple[list[str] | Literal["hip"], list[str]]] = Field(
+        default_factory=dict)
+    pelvis: Pelvis | None = None
+
+    @model_validator(mode="after")
+    def _landmarks(self) -> Calibration:
+        _known_keys(self.landmarks, LANDMARK_LIMBS, "landmark limb")
+        for limb, (prox, dist) in self.landmarks.items():
+            if not dist or (prox != HIP and not prox):
+                raise ValueError(f"landmarks.{limb}: give a marker list for each end")
+            if prox == HIP and self.pelvis is None:
+                raise ValueError(f"landmarks.{limb}: 'hip' needs [calibration.pelvis]")
+        return self
 
 
 class ForcePlates(StrictConfig):
@@ -217,7 +256,8 @@ def load_mapping(path: str | os.PathLike[str]) -> MocapMapping:
         raise MocapError(f"{p}: {validation_message(e)}") from None
     if m.calibration is not None:  # relative to the mapping file
         trial = p.parent / m.calibration.static_trial
-        m = m.model_copy(update={"calibration": Calibration(static_trial=str(trial))})
+        m = m.model_copy(update={"calibration": m.calibration.model_copy(
+            update={"static_trial": str(trial)})})
     if m.force_plates is not None:  # relative to the mapping file; its columns checked now
         from characterization.mocap.force_plates import check_mot_prefixes
 

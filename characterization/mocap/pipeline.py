@@ -45,10 +45,13 @@ from characterization.mocap.force_plates import STANCE_SAMPLES, TakePlates, mapp
 from characterization.mocap.joint_centres import JointCentreFit, fit_joint_centre
 from characterization.mocap.limb_angles import LimbPitch, limb_pitch, lowpass, pair_pitch
 from characterization.mocap.mapping import (
+    HIP,
     JOINTS,
     LIMBS,
     AxisSpec,
+    Calibration,
     MocapMapping,
+    Pelvis,
     Segmentation,
     SegmentationMethod,
 )
@@ -350,7 +353,54 @@ def static_offsets(static: Take, mapping: MocapMapping,
         if th.size == 0:
             raise MocapError(f"{static.source}: static trial: limb '{limb}' has no pitch")
         out[limb] = float(np.median(th))
+    cal = mapping.calibration
+    if cal is not None:
+        for limb, (prox, dist) in cal.landmarks.items():
+            if limb in out:  # its pitch while standing is its landmarks' axis, not zero
+                out[limb] -= landmark_pitch(static, frame, cal, prox, dist, limb)
     return out
+
+
+def _landmark(static: Take, names: list[str], what: str) -> np.ndarray:
+    """The mean lab position (m) over the static trial of the markers ``names``."""
+    for n in names:
+        if n not in static.markers:
+            raise MocapError(f"{static.source}: static trial: {what}: no marker '{n}'")
+    p = np.nanmedian(np.mean([static.marker(n) for n in names], axis=0), axis=0)
+    if not np.all(np.isfinite(p)):
+        raise MocapError(f"{static.source}: static trial: {what}: markers "
+                         f"{', '.join(names)} empty")
+    return p
+
+
+def hip_centre(static: Take, frame: SagittalFrame, pelvis: Pelvis) -> np.ndarray:
+    """The hip joint centre (sagittal x, z; m) in the static trial by Harrington et al.'s
+    regression (:class:`~characterization.mocap.mapping.Pelvis`)."""
+    asis = [_landmark(static, [n], "pelvis.asis") for n in pelvis.asis]
+    sacrum = _landmark(static, list(pelvis.sacrum), "pelvis.sacrum")
+    mid = 0.5 * (asis[0] + asis[1])
+    width = 1000.0 * float(np.linalg.norm(asis[0] - asis[1]))  # mm
+    depth = 1000.0 * float(np.linalg.norm(mid - sacrum))
+    m2, s2 = frame.project(mid[None, :])[0], frame.project(sacrum[None, :])[0]
+    forward = (m2 - s2) / np.linalg.norm(m2 - s2)  # the pelvis's anterior axis, sagittal
+    up = np.array([-forward[1], forward[0]])
+    up = up if up[1] > 0 else -up
+    return m2 - (0.24 * depth + 9.9) / 1000.0 * forward - (0.30 * width + 10.9) / 1000.0 * up
+
+
+def landmark_pitch(static: Take, frame: SagittalFrame, cal: Calibration,
+                   prox: list[str] | str, dist: list[str], limb: str) -> float:
+    """A limb's pitch (rad) in the static trial along its anatomical landmarks (the
+    mapping's ``calibration.landmarks``): from the distal end to the proximal one."""
+    what = f"calibration.landmarks.{limb}"
+    if prox == HIP:
+        assert cal.pelvis is not None  # the mapping's validation
+        top = hip_centre(static, frame, cal.pelvis)
+    else:
+        top = frame.project(_landmark(static, list(prox), what)[None, :])[0]
+    bottom = frame.project(_landmark(static, dist, what)[None, :])[0]
+    v = top - bottom
+    return float(np.arctan2(v[0], v[1]))
 
 
 def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficients,
