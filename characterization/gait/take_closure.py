@@ -71,4 +71,5 @@ def closure_line(closures: tuple[DoubleSupportClosure, ...]) -> str:
              "deg)" for c in closures]
     return ("take: through the model's legs, each double support's leading heel sits above "
             "its trailing toe by " + ", ".join(parts) + ": what the fit must change to put "
-            "both feet down (0 where the legs close; docs/gait-design.md)")
+            "both feet down (0 where the legs close; a static trial's leg landmarks take out "
+            "a standing lean, docs/recording.md; docs/gait-design.md)")
