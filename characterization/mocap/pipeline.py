@@ -510,8 +510,11 @@ def _calibrated(pitches: dict[str, LimbPitch], mapping: MocapMapping,
              for k in pitches}
     if not any(calib.values()):
         return pitches
+    landmarked = list(mapping.calibration.landmarks) if mapping.calibration else []
     checks.append("calibration (pitch offsets subtracted, deg): " + ", ".join(
-        f"{k} {np.degrees(v):+.1f}" for k, v in calib.items()))
+        f"{k} {np.degrees(v):+.1f}" for k, v in calib.items())
+        + (f"; the standing pitch of {', '.join(landmarked)} from the static trial's "
+           "landmarks" if landmarked and offsets else ""))
     return {k: _shifted(lp, calib[k]) for k, lp in pitches.items()}
 
 
