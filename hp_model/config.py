@@ -242,6 +242,14 @@ class DeviceConfig(StrictConfig):
     prosthesis: ProsthesisConfig
     notes: str = ""
 
+    def without_armature(self) -> DeviceConfig:
+        """This device with its drives' rotor inertia left out (rigid links and ideal
+        drives: the paper's model), its dump and hash those of a file without it."""
+        p = self.prosthesis
+        drives = {j: getattr(p, j).model_copy(update={"rotor_inertia": None})
+                  for j in ("knee", "ankle")}
+        return self.model_copy(update={"prosthesis": p.model_copy(update=drives)})
+
 
 def read_toml(path: Path | str, error: type[Exception] = ValueError) -> dict[str, Any]:
     """The TOML document at ``path``; an unreadable or invalid file raises ``error`` with a

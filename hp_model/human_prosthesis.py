@@ -218,11 +218,15 @@ class HumanProsthesisModel(HybridModel):
                  body: BodyVariation = NOMINAL_BODY,
                  backend: CompileBackend | str = CompileBackend.AUTO,
                  graph: DomainGraph | str = DomainGraph.PAPER) -> None:
+        #: the walk's cycle of domains the model is built for
+        self.graph = DomainGraph(graph)
+        if self.graph == DomainGraph.PAPER:
+            # the paper's model has rigid links and ideal drives: its graph reproduces the
+            # paper with the drives' rotor inertia left out (docs/subject.md, "armature")
+            device = device.without_armature()
         self.subject = subject
         self.device = device
         self.body = body
-        #: the walk's cycle of domains the model is built for
-        self.graph = DomainGraph(graph)
         tree = build_tree(subject, device, body)
         p = device.prosthesis
         ratios = (1.0, 1.0, 1.0, 1.0, p.knee.gear_ratio.value, p.ankle.gear_ratio.value)

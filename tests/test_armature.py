@@ -4,6 +4,8 @@ the model's tree carry it (Pinocchio's agreement: test_model_pinocchio.py)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -71,38 +73,52 @@ def test_bad_armature_is_a_model_error(joint, coords, armature, why):
         Body("shin", "thigh", joint, coords, armature=armature)
 
 
-#: the estimate docs/subject.md gives (a 2.4-3 N m peak motor's rotor, 3.3e-6 kg m^2, plus a
-#: CSD-17 wave generator, 7.9e-6), motor side; the shipped device does not carry it yet
-ROTOR = "rotor_inertia = { value = 1.1e-5, estimate = true, source = \"motor side\" }\n"
+def _shipped_device():
+    """The shipped device: each drive's rotor_inertia is docs/subject.md's estimate (a 2.4-3
+    N m peak motor's rotor, 3.3e-6 kg m^2, plus a CSD-17 wave generator, 7.9e-6), motor side."""
+    return hp_model.load_device(hp_model.default_device_path())
 
 
-def _device_with_rotors(tmp_path):
-    from hp_model.config import load_device
-
-    src = hp_model.default_device_path().read_text()
-    for joint in ("knee", "ankle"):
-        src = src.replace(f"[prosthesis.{joint}]\n", f"[prosthesis.{joint}]\n{ROTOR}")
-    path = tmp_path / "device.toml"
-    path.write_text(src)
-    return load_device(path)
-
-
-def test_device_config_gives_each_drive_its_reflected_inertia(tmp_path):
+def test_device_config_gives_each_drive_its_reflected_inertia():
     """J_rotor N^2: 1.1e-5 kg m^2 through the file's 50:1, 0.0275 kg m^2 at each joint."""
-    d = _device_with_rotors(tmp_path)
+    d = _shipped_device()
     for drive in (d.prosthesis.knee, d.prosthesis.ankle):
         assert drive.armature == pytest.approx(
             drive.rotor_inertia.value * drive.gear_ratio.value ** 2, rel=1e-12)
         assert drive.armature == pytest.approx(0.0275, rel=1e-12)
-    shipped = hp_model.load_device(hp_model.default_device_path())
-    assert shipped.prosthesis.knee.armature == 0.0  # not in the shipped estimates yet
 
 
-def test_model_tree_carries_the_device_armature(tmp_path, model):
+def test_the_papers_graph_leaves_the_armature_out(model):
+    """The paper's model has rigid links and ideal drives: on its graph the shipped device's
+    rotor inertia is left out, and the model's hash is the one the paper's gaits recorded;
+    the multi-contact graph keeps it, at the prosthesis knee and ankle only."""
+    import json
+
+    from hp_model.human_prosthesis import HumanProsthesisModel
+
+    device = hp_model.load_device(hp_model.default_device_path())
+    paper = HumanProsthesisModel(model.subject, device)
+    assert paper.tree.armature == {}
+    assert "rotor_inertia" not in paper.device.model_dump(mode="json")["prosthesis"]["knee"]
+    recorded = json.loads(
+        (Path(__file__).parents[1] / "characterization/data/reference_gait.json").read_text())
+    assert paper.parameter_hash() == recorded["model_hash"]
+    multi = HumanProsthesisModel(model.subject, device, graph="multicontact")
+    assert multi.tree.armature == pytest.approx({"th_pk": 0.0275, "th_pa": 0.0275})
+    q = np.random.default_rng(3).uniform(-0.5, 0.5, multi.nq)
+    (D_multi, H_multi), (D_paper, H_paper) = (_D_H(m.tree, q, q) for m in (multi, paper))
+    added = np.zeros(multi.nq)
+    for c in ("th_pk", "th_pa"):
+        added[multi.tree.coord_index(c)] = 0.0275
+    np.testing.assert_allclose(D_multi - D_paper, np.diag(added), atol=1e-12)
+    np.testing.assert_allclose(H_multi, H_paper, atol=1e-9)
+
+
+def test_model_tree_carries_the_device_armature(model):
     """build_tree passes each drive's armature to its joint (th_pk: knee, th_pa: ankle)."""
     from hp_model.human_prosthesis import build_tree
 
-    d = _device_with_rotors(tmp_path)
+    d = _shipped_device()
     tree = build_tree(model.subject, d)
     assert tree.armature == pytest.approx({"th_pk": d.prosthesis.knee.armature,
                                            "th_pa": d.prosthesis.ankle.armature})

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import hp_model
 from hp_model.domains import PAPER_DOMAINS
 from hp_model.urdf import to_urdf
 from tests.conftest import random_state
@@ -57,6 +58,32 @@ def test_full_model_D_H_match_pinocchio(model, rng):
 def test_subsystem_D_H_match_pinocchio(subsystem, rng):
     states = [(rng.normal(size=5), rng.normal(scale=2.0, size=5)) for _ in range(N_STATES)]
     _compare(subsystem, subsystem.tree, states)
+
+
+@pytest.fixture(scope="module")
+def worn(model):
+    """The multi-contact model of the shipped device: its drives carry their armature (the
+    paper's graph leaves it out, so ``model`` has none)."""
+    from hp_model.human_prosthesis import HumanProsthesisModel
+
+    m = HumanProsthesisModel(model.subject, hp_model.load_device(hp_model.default_device_path()),
+                             graph="multicontact")
+    assert set(m.tree.armature) == {"th_pk", "th_pa"}
+    return m
+
+
+def test_model_with_armature_D_H_match_pinocchio(worn, rng):
+    states = [random_state(worn, rng, on_socket=False, scale=1.0) for _ in range(N_STATES)]
+    _compare(worn, worn.tree, states)
+
+
+def test_subsystem_with_armature_D_H_match_pinocchio(worn, rng):
+    from hp_model.prosthesis import ProsthesisSubsystem
+
+    sub = ProsthesisSubsystem(worn)
+    assert set(sub.tree.armature) == {"th_pk", "th_pa"}
+    states = [(rng.normal(size=5), rng.normal(scale=2.0, size=5)) for _ in range(N_STATES)]
+    _compare(sub, sub.tree, states)
 
 
 def test_frame_positions_match_pinocchio(model, rng):
