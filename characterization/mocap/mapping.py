@@ -42,6 +42,9 @@ Example (the synthetic subject's naming is :func:`default_mapping`)::
     mass_kg = 72.5
     height_m = 1.78
     sex = "male"           # selects the segment-mass table's column
+    [virtual_markers]      # points built from markers in every frame, used as markers
+    LKJC = ["LLEK", "LMEK"]          # the mean of the markers (the knee's centre)
+    HJC = { asis = ["LASI", "RASI"], sacrum = ["LPSI", "RPSI"] }  # hip centre (Harrington)
     [force_plates]         # the take's plates in a separate file (a C3D's own plates need
                            # nothing here)
     file = "walk_grf.mot"  # OpenSim ground reactions, lab axes as the take's, relative path
@@ -221,6 +224,11 @@ class MocapMapping(StrictConfig):
     subject: SubjectMeasures | None = None
     #: the take's force plates in a separate file (:class:`ForcePlates`)
     force_plates: ForcePlates | None = None
+    #: points built from markers in every frame, used as markers
+    #: (:mod:`characterization.mocap.virtual_markers`): a list of markers (their mean) or a
+    #: pelvis (the hip joint centre on its midline)
+    virtual_markers: dict[str, Annotated[list[str], Field(min_length=1)] | Pelvis] = Field(
+        default_factory=dict)
 
     @field_validator("limbs")
     @classmethod

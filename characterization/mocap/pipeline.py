@@ -64,6 +64,7 @@ from characterization.mocap.step_segmentation import (
 )
 from characterization.mocap.steps_artifact import FEET, StepsArtifact
 from characterization.mocap.take import MocapError, Take
+from characterization.mocap.virtual_markers import with_virtual_markers
 from hp_model import COORDS
 from hp_model.config import SubjectLengths, default_subject_path, load_subject
 from hp_model.domains import Domain
@@ -345,6 +346,7 @@ def static_offsets(static: Take, mapping: MocapMapping,
     (the trunk above the feet; forward from the feet when the trunk does not travel)."""
     if lengths is None:
         lengths = load_subject(default_subject_path()).lengths
+    static = with_virtual_markers(static, mapping)
     check_names(static, mapping)
     frame = resolve_frame(static, mapping, None, _hip_height(lengths))
     out = {}
@@ -417,6 +419,7 @@ def process_take(take: Take, mapping: MocapMapping, coefficients: HipCoefficient
     (:mod:`characterization.mocap.checks`).
     """
     seg = _segmentation(mapping)
+    take = with_virtual_markers(take, mapping)
     check_names(take, mapping)
     if lengths is None:
         lengths = load_subject(default_subject_path()).lengths

@@ -103,7 +103,9 @@ def take_joint_centres(take: Take, mapping: MocapMapping) -> dict[str, JointCent
     """The paper's joint-centre fit of every joint in the mapping (the frame and the limb
     pitches as ``mocap process`` finds them, without calibration offsets)."""
     from characterization.mocap.pipeline import fit_joints, limb_pitches, resolve_frame
+    from characterization.mocap.virtual_markers import with_virtual_markers
 
+    take = with_virtual_markers(take, mapping)
     frame = resolve_frame(take, mapping)
     return fit_joints(take, mapping, frame, limb_pitches(take, mapping, frame))
 
@@ -115,7 +117,9 @@ def static_joint_centres(static: Take, mapping: MocapMapping,
     limb pitches, the two estimates averaged."""
     from characterization.mocap.mapping import JOINTS
     from characterization.mocap.pipeline import limb_pitches, resolve_frame
+    from characterization.mocap.virtual_markers import with_virtual_markers
 
+    static = with_virtual_markers(static, mapping)
     frame = resolve_frame(static, mapping)
     pitches = limb_pitches(static, mapping, frame)
     out = {}
