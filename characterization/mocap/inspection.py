@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from characterization.mocap.landmark_names import leg_landmarks, pelvis_landmarks
 from characterization.mocap.mapping import JOINTS, LIMBS
 from characterization.mocap.take import Take
 
@@ -194,8 +195,96 @@ def _q(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def mapping_skeleton(take: Take) -> str:
-    """A mapping TOML to edit (module docstring)."""
+#: the model's leg limbs -> (side, proximal centre, distal centre) of :func:`_anatomical`
+ANATOMICAL_LIMBS = {"l_thigh": ("l", "HJC", "KJC"), "l_shank": ("l", "KJC", "AJC"),
+                    "r_thigh": ("r", "HJC", "KJC"), "p_shin": ("r", "KJC", "AJC")}
+
+
+def _anatomical(take: Take) -> dict[str, list[str]] | None:
+    """The virtual markers (name -> TOML value) that put the legs on their anatomical axes
+    in every frame, when the take carries both epicondyles and malleoli of each leg and the
+    pelvis's spines (:mod:`characterization.mocap.landmark_names`); None otherwise."""
+    names = [*take.markers]
+    legs, pelvis = leg_landmarks(names), pelvis_landmarks(names)
+    if set(legs) != {"l", "r"} or pelvis is None:
+        return None
+    asis, back = pelvis
+    out = {"HJC": [f"{{ asis = [{_q(asis[0])}, {_q(asis[1])}], sacrum = ["
+                   + ", ".join(_q(b) for b in back) + "] }",
+                   "the hip centre (Harrington et al. 2007) on the pelvis's midline"]}
+    for side in ("l", "r"):
+        lm = legs[side]
+        out[f"{side.upper()}KJC"] = [f"[{_q(lm['knee_lat'])}, {_q(lm['knee_med'])}]",
+                                     "the knee centre: the epicondyles' midpoint"]
+        out[f"{side.upper()}AJC"] = [f"[{_q(lm['ankle_lat'])}, {_q(lm['ankle_med'])}]",
+                                     "the ankle centre: the malleoli's midpoint"]
+    if any(n in take.markers for n in out):
+        return None
+    return out
+
+
+def _calibration(static: Take, static_path: str) -> list[str]:
+    """The mapping's ``[calibration]`` for a static trial: its path, and its legs' landmarks
+    and pelvis when it carries them all (the standing pitch of each leg segment)."""
+    lines = ["[calibration]", f"static_trial = {_q(static_path)}"
+             "   # standing in the neutral posture; relative to this file"]
+    names = [*static.markers]
+    legs, pelvis = leg_landmarks(names), pelvis_landmarks(names)
+    if set(legs) != {"l", "r"} or pelvis is None:
+        return [*lines, "# (no leg landmarks named in it: each limb taken as upright "
+                "while standing)", ""]
+    lines.append("# each leg segment's standing axis from the static trial's landmarks")
+    for limb, (side, _, _) in ANATOMICAL_LIMBS.items():
+        lm = legs[side]
+        knee = f"[{_q(lm['knee_lat'])}, {_q(lm['knee_med'])}]"
+        ankle = f"[{_q(lm['ankle_lat'])}, {_q(lm['ankle_med'])}]"
+        lines.append(f"landmarks.{limb} = " + (f'["hip", {knee}]' if limb.endswith("thigh")
+                                                 else f"[{knee}, {ankle}]"))
+    asis, back = pelvis
+    lines += [f"pelvis = {{ asis = [{_q(asis[0])}, {_q(asis[1])}], sacrum = ["
+              + ", ".join(_q(b) for b in back) + "] }", ""]
+    return lines
+
+
+def _limb_entry(take: Take, limb: str, up_axis: str | None, anatomical: bool
+                ) -> tuple[list[str], str]:
+    """A limb's lines of the skeleton and its first (distal) marker; ``anatomical``: the
+    leg segments on the virtual markers' centres (:func:`_anatomical`)."""
+    if anatomical and limb in ANATOMICAL_LIMBS:
+        side, prox, dist = ANATOMICAL_LIMBS[limb]
+        top = prox if prox == "HJC" else side.upper() + prox
+        pair = [side.upper() + dist, top]
+        return [f"[limbs.{limb}]", f"markers = [{_q(pair[0])}, {_q(pair[1])}]   # distal -> "
+                "proximal centre (virtual markers)", ""], pair[0]
+    rb, mk = _limb_guess(limb, take)
+    foot = limb.endswith("foot")
+    pelvis = _pelvis_pair(mk) if limb == "hat" else None
+    pair = (mk[:2] if foot else pelvis if pelvis else _distal_proximal(take, mk, up_axis))
+    if foot and len(mk) >= 2:
+        heel = next((m for m in mk if _HEEL.search(m.split(":")[-1])), None)
+        toe = next((m for m in mk if _TOE.search(m.split(":")[-1]) and m != heel), None)
+        if heel and toe:
+            pair = [heel, toe]
+    lines = [f"[limbs.{limb}]"]
+    if take.rigid_bodies:  # a take without any (C3D) is processed from the markers
+        lines.append(f"rigid_body = {_q(rb) if rb else _q(TODO)}"
+                     + ("" if rb else "   # or delete this line if the limb has none"))
+    a, b = [*pair, TODO, TODO][:2]
+    axis = ("heel -> toe" if foot else
+            "posterior -> anterior (no trunk marker: the pelvis stands in)" if pelvis
+            else "distal -> proximal")
+    lines.append(f"markers = [{_q(a)}, {_q(b)}]   # {axis}")
+    if foot:
+        lines += ['pair_axis = "forward"', 'rigid_body_axis = "forward"']
+    elif pelvis:
+        lines.append('pair_axis = "forward"')
+    lines.append("")
+    return lines, (pair[0] if pair else TODO)
+
+
+def mapping_skeleton(take: Take, static: Take | None = None, static_path: str = "") -> str:
+    """A mapping TOML to edit (module docstring); with ``static`` (a static trial, at
+    ``static_path`` relative to the mapping) its ``[calibration]``."""
     s = summarize(take)
     lines = [f"# mapping skeleton for {take.source} (hpcosim mocap inspect): check every",
              f"# entry; \"{TODO}\" marks what the names did not tell.  Format: README,",
@@ -213,33 +302,16 @@ def mapping_skeleton(take: Take) -> str:
                  if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL else
                  f"; the markers travel only {s.walk_travel:.2f} m: a treadmill?"
                  if s.walk_axis else ""), ""]
+    virtual = _anatomical(take)
+    if virtual is not None:
+        lines += ["[virtual_markers]   # the legs' landmarks are on in walking: each leg "
+                  "segment on its anatomical axis in every frame"]
+        lines += [f"{name} = {value}   # {why}" for name, (value, why) in virtual.items()]
+        lines.append("")
     first: dict[str, str] = {}
     for limb in LIMBS:
-        rb, mk = _limb_guess(limb, take)
-        foot = limb.endswith("foot")
-        pelvis = _pelvis_pair(mk) if limb == "hat" else None
-        pair = (mk[:2] if foot else pelvis if pelvis
-                else _distal_proximal(take, mk, s.up_axis))
-        if foot and len(mk) >= 2:
-            heel = next((m for m in mk if _HEEL.search(m.split(":")[-1])), None)
-            toe = next((m for m in mk if _TOE.search(m.split(":")[-1]) and m != heel), None)
-            if heel and toe:
-                pair = [heel, toe]
-        lines.append(f"[limbs.{limb}]")
-        if take.rigid_bodies:  # a take without any (C3D) is processed from the markers
-            lines.append(f"rigid_body = {_q(rb) if rb else _q(TODO)}"
-                         + ("" if rb else "   # or delete this line if the limb has none"))
-        a, b = [*pair, TODO, TODO][:2]
-        axis = ("heel -> toe" if foot else
-                "posterior -> anterior (no trunk marker: the pelvis stands in)" if pelvis
-                else "distal -> proximal")
-        lines.append(f"markers = [{_q(a)}, {_q(b)}]   # {axis}")
-        if foot:
-            lines += ['pair_axis = "forward"', 'rigid_body_axis = "forward"']
-        elif pelvis:
-            lines.append('pair_axis = "forward"')
-        lines.append("")
-        first[limb] = pair[0] if pair else TODO
+        entry, first[limb] = _limb_entry(take, limb, s.up_axis, virtual is not None)
+        lines += entry
     for j, (a, b) in JOINTS.items():
         lines += [f"[joints.{j}]   # one marker on {a}, one on {b}",
                   f"markers = [{_q(first[a])}, {_q(first[b])}]", ""]
@@ -247,4 +319,6 @@ def mapping_skeleton(take: Take) -> str:
               f"human_foot_marker = {_q(first['l_foot'])}",
               f"prosthesis_foot_marker = {_q(first['p_foot'])}", "",
               "[processing]", "max_gap = 0.1", "lowpass_hz = 15.0", ""]
+    if static is not None:
+        lines += _calibration(static, static_path)
     return "\n".join(lines)

@@ -117,9 +117,15 @@ def inspect(
     mapping_out: Annotated[Path | None, typer.Option(
         "--mapping-out", help="Write a mapping skeleton (TOML) to edit for this take's "
         "names.", dir_okay=False)] = None,
+    static: Annotated[Path | None, typer.Option(
+        "--static", help="The session's static trial (standing): the skeleton's "
+        "[calibration], with its legs' landmarks where their names tell.",
+        dir_okay=False)] = None,
 ) -> None:
     """What a take holds (markers, rigid bodies, rate, length, gaps, an axes guess), and
     optionally a mapping to start from."""
+    import os
+
     from characterization.mocap.files import read_take
     from characterization.mocap.inspection import TREADMILL_TRAVEL, mapping_skeleton, summarize
     from hp_model.atomic_io import atomic_write_bytes
@@ -127,6 +133,9 @@ def inspect(
 
     if mapping_out is not None:
         check_output_file(mapping_out, "--mapping-out")
+    elif static is not None:
+        raise typer.BadParameter("the static trial goes into a mapping skeleton: give "
+                                 "--mapping-out too", param_hint="--static")
     t = read_take(take)
     s = summarize(t)
     console = Console()
@@ -150,7 +159,10 @@ def inspect(
         console.print("the lab's model outputs (not markers): "
                       + ", ".join(f"{n} {k}" for k, n in s.model_outputs))
     if mapping_out is not None:
-        atomic_write_bytes(mapping_out, mapping_skeleton(t).encode())
+        trial = read_take(static) if static is not None else None
+        where = (os.path.relpath(static.resolve(), mapping_out.resolve().parent)
+                 if static is not None else "")
+        atomic_write_bytes(mapping_out, mapping_skeleton(t, trial, where).encode())
         console.print(f"wrote {mapping_out}: edit every entry, then hpcosim mocap process "
                       f"{take} --mapping {mapping_out} --out steps.npz")
 
