@@ -39,6 +39,13 @@ def test_a_mean_of_markers_frame_by_frame_and_missing_where_one_is():
     np.testing.assert_array_equal(take.marker("A"), a)  # the take's own markers unchanged
 
 
+def test_a_virtual_marker_may_be_built_from_the_ones_before_it():
+    a, b, c = (np.full((3, 3), v) for v in (0.0, 2.0, 5.0))
+    take = with_virtual_markers(_take(A=a, B=b, C=c),
+                                _mapping({"AB": ["A", "B"], "ABC": ["AB", "C"]}))
+    np.testing.assert_allclose(take.marker("ABC"), np.full((3, 3), 3.0))
+
+
 def test_hip_centre_on_a_level_pelvis_is_harringtons():
     """A pelvis 0.25 m wide and 0.16 m deep, level, facing +x, z up: behind the ASIS
     midpoint by 0.24 * 160 + 9.9 mm and below it by 0.30 * 250 + 10.9 mm."""

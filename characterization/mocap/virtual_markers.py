@@ -32,21 +32,20 @@ HARRINGTON = ((0.24, 9.9), (0.30, 10.9))
 
 
 def with_virtual_markers(take: Take, mapping: MocapMapping) -> Take:
-    """``take`` with the mapping's virtual markers added (``take`` itself when it names
-    none); a :class:`MocapError` naming the entry when a marker it is built from is not in
-    the take or its name is already a column of the take."""
-    if not mapping.virtual_markers:
-        return take
-    added: dict[str, np.ndarray] = {}
-    for name, spec in mapping.virtual_markers.items():
+    """``take`` with the mapping's virtual markers added, in the mapping's order (one may be
+    built from those before it; ``take`` itself when it names none); a :class:`MocapError`
+    naming the entry when a marker it is built from is not in the take or its name is
+    already a column of the take."""
+    for name, spec in mapping.virtual_markers.items():  # in order: one may use the ones before
         if name in take.markers or name in take.rigid_body_markers:
             raise MocapError(f"{take.source}: virtual_markers.{name}: the take already has a "
                              f"marker '{name}'; name the virtual marker otherwise")
         what = f"virtual_markers.{name}"
-        added[name] = (hip_centre_track(take, spec, _below(take, mapping), what)
-                       if isinstance(spec, Pelvis) else
-                       np.mean([_marker(take, m, what) for m in spec], axis=0))
-    return take.replace(markers={**take.markers, **added})
+        point = (hip_centre_track(take, spec, _below(take, mapping), what)
+                 if isinstance(spec, Pelvis) else
+                 np.mean([_marker(take, m, what) for m in spec], axis=0))
+        take = take.replace(markers={**take.markers, name: point})
+    return take
 
 
 def hip_centre_track(take: Take, pelvis: Pelvis, below: np.ndarray, what: str) -> np.ndarray:
