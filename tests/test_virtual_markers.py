@@ -46,17 +46,20 @@ def test_a_virtual_marker_may_be_built_from_the_ones_before_it():
     np.testing.assert_allclose(take.marker("ABC"), np.full((3, 3), 3.0))
 
 
-def test_hip_centre_on_a_level_pelvis_is_harringtons():
+@pytest.mark.parametrize("feet", [True, False])
+def test_hip_centre_on_a_level_pelvis_is_harringtons(feet):
     """A pelvis 0.25 m wide and 0.16 m deep, level, facing +x, z up: behind the ASIS
-    midpoint by 0.24 * 160 + 9.9 mm and below it by 0.30 * 250 + 10.9 mm."""
+    midpoint by 0.24 * 160 + 9.9 mm and below it by 0.30 * 250 + 10.9 mm; "below" toward
+    the feet's markers, or without any the file's down axis."""
     n = 3
     asis_l = np.tile([0.0, 0.125, 1.0], (n, 1))
     asis_r = np.tile([0.0, -0.125, 1.0], (n, 1))
     sacrum = np.tile([-0.16, 0.0, 1.0], (n, 1))
     heel = np.tile([0.0, 0.1, 0.05], (n, 1))
     take = _take(LASI=asis_l, RASI=asis_r, SACR=sacrum, LHEE=heel)
+    limb = "l_foot" if feet else "hat"
     m = MocapMapping.model_validate({
-        "limbs": {"l_foot": {"markers": ["LHEE", "LHEE"]}},
+        "limbs": {limb: {"markers": ["LHEE", "LHEE"]}},
         "virtual_markers": {"HJC": {"asis": ["LASI", "RASI"], "sacrum": ["SACR"]}}})
     hjc = with_virtual_markers(take, m).marker("HJC")
     expected = [-(0.24 * 160 + 9.9) / 1000, 0.0, 1.0 - (0.30 * 250 + 10.9) / 1000]

@@ -41,20 +41,22 @@ def with_virtual_markers(take: Take, mapping: MocapMapping) -> Take:
             raise MocapError(f"{take.source}: virtual_markers.{name}: the take already has a "
                              f"marker '{name}'; name the virtual marker otherwise")
         what = f"virtual_markers.{name}"
-        point = (hip_centre_track(take, spec, _below(take, mapping), what)
+        point = (hip_centre_track(take, spec, _feet(take, mapping), what)
                  if isinstance(spec, Pelvis) else
                  np.mean([_marker(take, m, what) for m in spec], axis=0))
         take = take.replace(markers={**take.markers, name: point})
     return take
 
 
-def hip_centre_track(take: Take, pelvis: Pelvis, below: np.ndarray, what: str) -> np.ndarray:
+def hip_centre_track(take: Take, pelvis: Pelvis, feet: np.ndarray | None, what: str
+                     ) -> np.ndarray:
     """The hip joint centre on the pelvis's midline in every frame (n, 3), m (module
-    docstring); ``below``: a lab direction toward the feet, which picks the pelvis normal's
-    sign."""
+    docstring); ``feet``: the feet's mean lab position, which picks the sign of the pelvis's
+    normal (toward them; without it, the file's down axis)."""
     a0, a1 = (_marker(take, m, what) for m in pelvis.asis)
     sacrum = np.mean([_marker(take, m, what) for m in pelvis.sacrum], axis=0)
     mid = 0.5 * (a0 + a1)
+    below = _file_down(take) if feet is None else feet - np.nanmean(mid, axis=0)
     width = 1000.0 * np.linalg.norm(a0 - a1, axis=1, keepdims=True)  # mm
     depth = 1000.0 * np.linalg.norm(mid - sacrum, axis=1, keepdims=True)
     forward = _unit(mid - sacrum)
@@ -78,22 +80,23 @@ def _unit(v: np.ndarray) -> np.ndarray:
         return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def _below(take: Take, mapping: MocapMapping) -> np.ndarray:
-    """A lab direction toward the feet: from the mean of the take's markers to the mean of
-    the feet's (the mapping's foot limbs and segmentation markers); the file's down axis when
-    the mapping names no foot marker the take has."""
+def _feet(take: Take, mapping: MocapMapping) -> np.ndarray | None:
+    """The mean lab position of the feet's markers (the mapping's foot limbs and
+    segmentation markers that the take has); None without one."""
     names = [m for limb in ("l_foot", "p_foot") if limb in mapping.limbs
              for m in (mapping.limbs[limb].markers or ())]
     if mapping.segmentation is not None:
         names += [mapping.segmentation.human_foot_marker,
                   mapping.segmentation.prosthesis_foot_marker]
     feet = [take.markers[n] for n in names if n in take.markers]
-    if feet:
-        every = np.concatenate([v for v in take.markers.values()], axis=0)
-        d = np.nanmean(np.concatenate(feet, axis=0), axis=0) - np.nanmean(every, axis=0)
-        if np.all(np.isfinite(d)) and np.linalg.norm(d) > 0:
-            return d / np.linalg.norm(d)
-    sign, axis = (-1.0 if take.up_axis.startswith("+") else 1.0), "xyz".index(take.up_axis[-1])
+    if not feet:
+        return None
+    p = np.nanmean(np.concatenate(feet, axis=0), axis=0)
+    return p if np.all(np.isfinite(p)) else None
+
+
+def _file_down(take: Take) -> np.ndarray:
+    """The file's down axis (the opposite of its up axis, e.g. "+z")."""
     out = np.zeros(3)
-    out[axis] = sign
+    out["xyz".index(take.up_axis[-1])] = -1.0 if take.up_axis.startswith("+") else 1.0
     return out
