@@ -45,15 +45,18 @@ def _skeleton(tmp_path: Path, take: Path, *more: str) -> Path:
 
 
 def test_a_take_with_its_landmarks_on_gets_the_legs_anatomical_axes(tmp_path):
-    """gaitalytics' treadmill take: the skeleton's virtual markers and leg limbs are the
-    hand-written mapping's, and it processes as is into the same 21 steps."""
+    """gaitalytics' treadmill take: the skeleton's virtual markers, leg limbs and trunk (PSIS
+    midpoint -> C7) are the hand-written mapping's, and it processes as is into the same 21
+    steps."""
     take = DATA / "gaitalytics-treadmill" / "treadmill_events.c3d"
     out = _skeleton(tmp_path, take)
     ours, shipped = load_mapping(out), load_mapping(take.parent / "mapping.toml")
     for name in ("HJC", "LKJC", "RKJC", "LAJC", "RAJC"):
         assert ours.virtual_markers[name] == shipped.virtual_markers[name], name
-    for limb in ("l_thigh", "l_shank", "r_thigh", "p_shin"):
+    for limb in ("hat", "l_thigh", "l_shank", "r_thigh", "p_shin"):
         assert ours.limbs[limb].markers == shipped.limbs[limb].markers, limb
+    assert ours.virtual_markers["PSIS"] == shipped.virtual_markers["PSIS"]  # the trunk:
+    # along the back (an ASIS -> C7 pair read the trunk 21.5 deg off)
     steps = tmp_path / "steps.npz"
     r = hpcosim("mocap", "process", str(take), "--mapping", str(out), "--out", str(steps),
                 "--no-figures")

@@ -223,6 +223,29 @@ def _anatomical(take: Take) -> dict[str, list[str]] | None:
     return out
 
 
+#: a trunk marker on the spine's 7th cervical vertebra (Plug-in Gait's, HBM2's, ISB's C7)
+_C7 = re.compile(r"(^|[^a-z0-9])c7($|[^a-z0-9])", re.I)
+
+
+def _spine(take: Take) -> tuple[dict[str, list[str]], list[str]] | None:
+    """The trunk along the back, when the take has a C7 marker and the pelvis's posterior
+    spines or sacrum: (the virtual marker it needs, name -> [TOML value, why]; the hat's
+    pair, posterior pelvis -> C7).  A pair from an anterior pelvis marker to C7 leans the
+    trunk by tens of degrees (gaitalytics' take: ASIS -> C7 read 21.5 deg off PSIS -> C7)."""
+    names = [*take.markers]
+    c7 = [n for n in names if _C7.search(n.split(":")[-1])]
+    pelvis = pelvis_landmarks(names)
+    if len(c7) != 1 or pelvis is None:
+        return None
+    back = pelvis[1]
+    if len(back) == 1:
+        return {}, [back[0], c7[0]]
+    if "PSIS" in take.markers:
+        return None
+    return ({"PSIS": [f"[{_q(back[0])}, {_q(back[1])}]", "the posterior spines' midpoint"]},
+            ["PSIS", c7[0]])
+
+
 def _calibration(static: Take, static_path: str) -> list[str]:
     """The mapping's ``[calibration]`` for a static trial: its path, and its legs' landmarks
     and pelvis when it carries them all (the standing pitch of each leg segment)."""
@@ -246,10 +269,14 @@ def _calibration(static: Take, static_path: str) -> list[str]:
     return lines
 
 
-def _limb_entry(take: Take, limb: str, up_axis: str | None, anatomical: bool
-                ) -> tuple[list[str], str]:
+def _limb_entry(take: Take, limb: str, up_axis: str | None, anatomical: bool,
+                trunk: list[str] | None) -> tuple[list[str], str]:
     """A limb's lines of the skeleton and its first (distal) marker; ``anatomical``: the
-    leg segments on the virtual markers' centres (:func:`_anatomical`)."""
+    leg segments on the virtual markers' centres (:func:`_anatomical`); ``trunk``: the
+    hat's pair along the back (:func:`_spine`)."""
+    if limb == "hat" and trunk is not None:
+        return [f"[limbs.{limb}]", f"markers = [{_q(trunk[0])}, {_q(trunk[1])}]   # "
+                "distal -> proximal along the back", ""], trunk[0]
     if anatomical and limb in ANATOMICAL_LIMBS:
         side, prox, dist = ANATOMICAL_LIMBS[limb]
         top = prox if prox == "HJC" else side.upper() + prox
@@ -302,15 +329,18 @@ def mapping_skeleton(take: Take, static: Take | None = None, static_path: str = 
                  if s.walk_axis and s.walk_travel >= TREADMILL_TRAVEL else
                  f"; the markers travel only {s.walk_travel:.2f} m: a treadmill?"
                  if s.walk_axis else ""), ""]
-    virtual = _anatomical(take)
-    if virtual is not None:
-        lines += ["[virtual_markers]   # the legs' landmarks are on in walking: each leg "
-                  "segment on its anatomical axis in every frame"]
+    legs, spine = _anatomical(take), _spine(take)
+    virtual = {**(legs or {}), **(spine[0] if spine else {})}
+    if virtual:
+        lines += ["[virtual_markers]   # points built from the markers in every frame"
+                  + ("; the legs' landmarks are on in walking: each leg segment on its "
+                     "anatomical axis" if legs else "")]
         lines += [f"{name} = {value}   # {why}" for name, (value, why) in virtual.items()]
         lines.append("")
     first: dict[str, str] = {}
     for limb in LIMBS:
-        entry, first[limb] = _limb_entry(take, limb, s.up_axis, virtual is not None)
+        entry, first[limb] = _limb_entry(take, limb, s.up_axis, legs is not None,
+                                         spine[1] if spine else None)
         lines += entry
     for j, (a, b) in JOINTS.items():
         lines += [f"[joints.{j}]   # one marker on {a}, one on {b}",
