@@ -17,18 +17,15 @@ import pytest
 from characterization.gait.multicontact import (
     GRAPH,
     STANCE,
-    MultiContactOptions,
-    fit_multicontact,
     plate_rows,
     targets_from_steps,
 )
-from characterization.gait.multicontact_summary import gait_summary, take_summary
-from characterization.gait.person_check import StanceForce, check_person
 from characterization.mocap.session import process_session
-from characterization.mocap.steps_artifact import load_steps, plate_forces
+from characterization.mocap.steps_artifact import load_steps
 from hp_model.compiled import CompileBackend
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
+from tests.plate_fit import fit_against_plates
 
 TAKE = Path(__file__).parent / "data" / "opensim-walk-strides"
 
@@ -78,13 +75,7 @@ def test_the_fit_is_the_persons_gait_on_the_plates(steps, mc_model):
     the plates in the cost 0.88 / 0.79 and a second peak 21 % BW high.  The angles within
     0.6-2.9 deg RMS since the mapping's static calibration takes each leg segment's standing
     pitch from its landmarks (without it: the ankles 4.9 / 6.3, the trunk 3.9)."""
-    t = targets_from_steps(steps, mc_model)
-    result = fit_multicontact(mc_model, t, MultiContactOptions())
-    assert result.success, result.status
-    grf, weight = plate_forces(steps)
-    take = take_summary(t, "take", {f: StanceForce(fx=m.fx, fz=m.fz) for f, m in grf.items()},
-                        weight)
-    check = check_person(take, gait_summary(mc_model, result))
+    check = fit_against_plates(steps, mc_model)
     rows = [r for r in check.rows if "F_z" in r.criterion]
     assert len(rows) == 6  # each foot: correlation, first and second peak
     assert all(r.passed for r in rows), [(r.criterion, r.error) for r in rows]

@@ -124,29 +124,9 @@ def test_the_fit_is_the_persons_gait_on_both_plates(steps):
     9 % BW of its plate's (measured 2026-11-29; limits 10 %, 30 ms, 3 deg, 0.9, 15 % BW).
     (Whether it walks in closed loop is not asserted here: its simulated person lands its
     swing heel late, docs/gait-design.md, issue 38.)"""
-    from characterization.gait.fit import worn_device
-    from characterization.gait.multicontact import (
-        GRAPH,
-        MultiContactOptions,
-        fit_multicontact,
-        targets_from_steps,
-    )
-    from characterization.gait.multicontact_summary import gait_summary, take_summary
-    from characterization.gait.person_check import StanceForce, check_person
-    from characterization.mocap.steps_artifact import steps_subject
-    from hp_model.config import default_device_path, load_device
-    from hp_model.human_prosthesis import HumanProsthesisModel
+    from tests.plate_fit import fit_against_plates, worn_model
 
     _, s = steps
-    person, _ = steps_subject(s, "gaitalytics steps")
-    device, _ = worn_device(person, load_device(default_device_path()))
-    model = HumanProsthesisModel(person, device, graph=GRAPH)
-    t = targets_from_steps(s, model)
-    result = fit_multicontact(model, t, MultiContactOptions())
-    assert result.success, result.status
-    grf, weight = plate_forces(s)
-    take = take_summary(t, "take", {f: StanceForce(fx=m.fx, fz=m.fz) for f, m in grf.items()},
-                        weight)
-    check = check_person(take, gait_summary(model, result))
+    check = fit_against_plates(s, worn_model(s, "gaitalytics steps"))
     assert len([r for r in check.rows if "F_z" in r.criterion]) == 6
     assert check.passed, check.verdict()

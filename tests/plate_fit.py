@@ -1,0 +1,39 @@
+"""The multi-contact fit of a steps file with force plates, compared with the take as
+``gait fit`` compares it (the closed-loop walks left out): shared by the real takes' tests."""
+
+from __future__ import annotations
+
+from characterization.gait.multicontact import (
+    GRAPH,
+    MultiContactOptions,
+    fit_multicontact,
+    targets_from_steps,
+)
+from characterization.gait.multicontact_summary import gait_summary, take_summary
+from characterization.gait.person_check import PersonCheck, StanceForce, check_person
+from characterization.mocap.steps_artifact import StepsArtifact, plate_forces, steps_subject
+from hp_model.human_prosthesis import HumanProsthesisModel
+
+
+def worn_model(steps: StepsArtifact, src: str = "steps") -> HumanProsthesisModel:
+    """The steps' subject on the device they would wear: what `gait fit` uses."""
+    from characterization.gait.fit import worn_device
+    from hp_model.config import default_device_path, load_device
+
+    person, _ = steps_subject(steps, src)
+    device, _ = worn_device(person, load_device(default_device_path()))
+    return HumanProsthesisModel(person, device, graph=GRAPH)
+
+
+def fit_against_plates(steps: StepsArtifact, model: HumanProsthesisModel) -> PersonCheck:
+    """The fit with default options (asserted converged), compared with the take and its
+    plates."""
+    t = targets_from_steps(steps, model)
+    result = fit_multicontact(model, t, MultiContactOptions())
+    assert result.success, result.status
+    plates = plate_forces(steps)
+    assert plates is not None, "the steps have no plates"
+    grf, weight = plates
+    take = take_summary(t, "take", {f: StanceForce(fx=m.fx, fz=m.fz) for f, m in grf.items()},
+                        weight)
+    return check_person(take, gait_summary(model, result))
