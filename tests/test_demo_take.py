@@ -89,3 +89,22 @@ def test_the_paper_graph_and_a_take_do_not_go_together(tmp_path, capsys):
     assert hpcosim(["demo", "--take", str(TAKE / "dynamic.c3d"), "--domains", "paper",
                     "--out", str(tmp_path / "d")]) == 2
     assert "--take runs the person's multi-contact gait" in capsys.readouterr().err
+
+
+def test_the_demo_stops_after_a_gait_that_does_not_walk(tmp_path):
+    """A gait file whose cycle does not walk even under the held oracle (gaitalytics' take
+    today, docs/gait-design.md): the later stages are not run, and the demo says why; a gait
+    that walks, or a file from before the reference walk was stored, goes on."""
+    import json
+
+    from orchestrator.cli.experiments import _no_walk
+
+    gait = tmp_path / "gait.json"
+    fall = "t = 0.452 s, pns, tau = -0.323: landed on heel or toe (foot pitch -0.175 rad)"
+    gait.write_text(json.dumps({"closed_loop_reference": {"walks": False, "fall": fall}}))
+    why = _no_walk(gait)
+    assert fall in why and "held oracle" in why
+    gait.write_text(json.dumps({"closed_loop_reference": {"walks": True, "fall": None}}))
+    assert _no_walk(gait) == ""
+    gait.write_text(json.dumps({}))
+    assert _no_walk(gait) == ""

@@ -329,6 +329,7 @@ def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
     for stale in (tube, gait):  # an earlier demo's in the folder is not this one's
         stale.unlink(missing_ok=True)
     done: list[tuple[str, float, int, list[str]]] = []
+    stopped = ""  # why the stages after a negative one cannot run
     for stage, make_args in stages:
         args = make_args()
         console.rule(f"[bold]{stage}[/]: hpcosim {' '.join(args)}")
@@ -337,19 +338,37 @@ def _demo_pipeline(out: Path, take: Path, steps: int, draws: int,
         done.append((stage, time.perf_counter() - t0, rc, args))
         if rc not in (0, 1) or (stage == "gait fit" and not gait.is_file()):
             break
-    _write_demo_report(out, who or take.name, done, gait)
+        if stage == "gait fit" and (stopped := _no_walk(gait)):
+            break
+    _write_demo_report(out, who or take.name, done, gait, stopped)
     worst = max(rc for *_x, rc, _a in done)
     for stage, seconds, rc, _args in done:
         _line(console, f"{stage:17s} {seconds:6.1f} s  {_STATUS.get(rc, f'exit {rc}')}")
+    if stopped:
+        _line(console, f"the later stages not run: {stopped}")
     console.print(f"report: [bold]{out}/report.md[/]", soft_wrap=True)
-    if worst >= 2 or len(done) < len(stages):
+    if worst >= 2 or (len(done) < len(stages) and not stopped):
         raise typer.Exit(2)
     conclude(HOLDS if worst == 0 else Verdict(
-        "; ".join(f"{stage}: negative" for stage, _s, rc, _a in done if rc == 1)))
+        "; ".join([*(f"{stage}: negative" for stage, _s, rc, _a in done if rc == 1),
+                   *([f"the later stages not run ({stopped})"] if stopped else [])])))
+
+
+def _no_walk(gait: Path) -> str:
+    """Why the stages after ``gait fit`` cannot run on the gait file ``gait`` (its cycle
+    does not walk even under the held oracle: the tube's playback, the controllers' tables
+    and the co-simulation all start from its walk), or ""."""
+    import json
+
+    reference = json.loads(gait.read_text()).get("closed_loop_reference", {})
+    if reference.get("walks", True):
+        return ""
+    return (f"the gait does not walk even under the held oracle ({reference.get('fall')}); "
+            "the tube, the experiments and the co-simulation start from its walk")
 
 
 def _write_demo_report(out: Path, who: str, done: list[tuple[str, float, int, list[str]]],
-                       gait: Path) -> None:
+                       gait: Path, stopped: str = "") -> None:
     """``report.md`` of ``demo`` on ``who`` (the synthetic person, or a take's file name):
     each stage's command, time and outcome, the gait's comparison with the take, links to
     what the stages wrote."""
@@ -368,6 +387,8 @@ def _write_demo_report(out: Path, who: str, done: list[tuple[str, float, int, li
     for stage, seconds, rc, args in done:
         lines.append(f"| {stage} | `hpcosim {' '.join(args)}` | {seconds:.1f} | "
                      f"{_STATUS.get(rc, f'exit {rc}')} |")
+    if stopped:
+        lines += ["", f"The later stages were not run: {stopped}."]
     if gait.is_file():
         doc = json.loads(gait.read_text())
         check, walk = doc.get("check", {}), doc.get("closed_loop", {})
