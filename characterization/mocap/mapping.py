@@ -152,11 +152,12 @@ LANDMARK_LIMBS = ("l_thigh", "l_shank", "r_thigh", "p_shin")
 
 
 class Pelvis(StrictConfig):
-    """The pelvis's landmarks in the static trial, for the hip joint centre of Harrington et
-    al. 2007 (J Biomech 40: 595-602; its pelvis-width and -depth regression, in the sagittal
-    plane): behind the ASIS midpoint by 0.24 PD + 9.9 mm and below it by 0.30 PW + 10.9 mm,
-    PW the distance between the two ASIS, PD from their midpoint to the sacrum (the mean of
-    ``sacrum``: the sacral marker, or the two PSIS)."""
+    """The pelvis's landmarks (in the static trial, or a virtual marker's in every frame),
+    for the hip joint centre of Harrington et al. 2007 (J Biomech 40: 595-602; its
+    pelvis-width and -depth regression, on the pelvis's midline): behind the ASIS midpoint by
+    0.24 PD + 9.9 mm and below it by 0.30 PW + 10.9 mm, PW the distance between the two
+    ASIS, PD from their midpoint to the sacrum (the mean of ``sacrum``: the sacral marker, or
+    the two PSIS); :func:`characterization.mocap.virtual_markers.hip_centre_track`."""
 
     asis: tuple[str, str]
     sacrum: list[str] = Field(min_length=1, max_length=2)

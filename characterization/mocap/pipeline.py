@@ -49,7 +49,6 @@ from characterization.mocap.mapping import (
     JOINTS,
     LIMBS,
     AxisSpec,
-    Calibration,
     MocapMapping,
     Pelvis,
     Segmentation,
@@ -64,7 +63,7 @@ from characterization.mocap.step_segmentation import (
 )
 from characterization.mocap.steps_artifact import FEET, StepsArtifact
 from characterization.mocap.take import MocapError, Take
-from characterization.mocap.virtual_markers import with_virtual_markers
+from characterization.mocap.virtual_markers import hip_centre_track, with_virtual_markers
 from hp_model import COORDS
 from hp_model.config import SubjectLengths, default_subject_path, load_subject
 from hp_model.domains import Domain
@@ -359,7 +358,7 @@ def static_offsets(static: Take, mapping: MocapMapping,
     if cal is not None:
         for limb, (prox, dist) in cal.landmarks.items():
             if limb in out:  # its pitch while standing is its landmarks' axis, not zero
-                out[limb] -= landmark_pitch(static, frame, cal, prox, dist, limb)
+                out[limb] -= landmark_pitch(static, frame, mapping, prox, dist, limb)
     return out
 
 
@@ -375,29 +374,27 @@ def _landmark(static: Take, names: list[str], what: str) -> np.ndarray:
     return p
 
 
-def hip_centre(static: Take, frame: SagittalFrame, pelvis: Pelvis) -> np.ndarray:
-    """The hip joint centre (sagittal x, z; m) in the static trial by Harrington et al.'s
-    regression (:class:`~characterization.mocap.mapping.Pelvis`)."""
-    asis = [_landmark(static, [n], "pelvis.asis") for n in pelvis.asis]
-    sacrum = _landmark(static, list(pelvis.sacrum), "pelvis.sacrum")
-    mid = 0.5 * (asis[0] + asis[1])
-    width = 1000.0 * float(np.linalg.norm(asis[0] - asis[1]))  # mm
-    depth = 1000.0 * float(np.linalg.norm(mid - sacrum))
-    m2, s2 = frame.project(mid[None, :])[0], frame.project(sacrum[None, :])[0]
-    forward = (m2 - s2) / np.linalg.norm(m2 - s2)  # the pelvis's anterior axis, sagittal
-    up = np.array([-forward[1], forward[0]])
-    up = up if up[1] > 0 else -up
-    return m2 - (0.24 * depth + 9.9) / 1000.0 * forward - (0.30 * width + 10.9) / 1000.0 * up
+def hip_centre(static: Take, frame: SagittalFrame, mapping: MocapMapping, pelvis: Pelvis
+               ) -> np.ndarray:
+    """The hip joint centre (sagittal x, z; m) in the static trial: the median over its
+    frames of Harrington et al.'s (:func:`~characterization.mocap.virtual_markers.
+    hip_centre_track`)."""
+    track = hip_centre_track(static, pelvis, mapping, "calibration.pelvis")
+    p = np.nanmedian(frame.project(track), axis=0)
+    if not np.all(np.isfinite(p)):
+        raise MocapError(f"{static.source}: static trial: calibration.pelvis: its markers "
+                         "are empty")
+    return p
 
 
-def landmark_pitch(static: Take, frame: SagittalFrame, cal: Calibration,
+def landmark_pitch(static: Take, frame: SagittalFrame, mapping: MocapMapping,
                    prox: list[str] | str, dist: list[str], limb: str) -> float:
     """A limb's pitch (rad) in the static trial along its anatomical landmarks (the
     mapping's ``calibration.landmarks``): from the distal end to the proximal one."""
     what = f"calibration.landmarks.{limb}"
     if prox == HIP:
-        assert cal.pelvis is not None  # the mapping's validation
-        top = hip_centre(static, frame, cal.pelvis)
+        assert mapping.calibration is not None and mapping.calibration.pelvis is not None
+        top = hip_centre(static, frame, mapping, mapping.calibration.pelvis)
     else:
         top = frame.project(_landmark(static, list(prox), what)[None, :])[0]
     bottom = frame.project(_landmark(static, dist, what)[None, :])[0]

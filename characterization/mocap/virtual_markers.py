@@ -41,18 +41,20 @@ def with_virtual_markers(take: Take, mapping: MocapMapping) -> Take:
             raise MocapError(f"{take.source}: virtual_markers.{name}: the take already has a "
                              f"marker '{name}'; name the virtual marker otherwise")
         what = f"virtual_markers.{name}"
-        point = (hip_centre_track(take, spec, _feet(take, mapping), what)
+        point = (hip_centre_track(take, spec, mapping, what)
                  if isinstance(spec, Pelvis) else
                  np.mean([_marker(take, m, what) for m in spec], axis=0))
         take = take.replace(markers={**take.markers, name: point})
     return take
 
 
-def hip_centre_track(take: Take, pelvis: Pelvis, feet: np.ndarray | None, what: str
+def hip_centre_track(take: Take, pelvis: Pelvis, mapping: MocapMapping, what: str
                      ) -> np.ndarray:
     """The hip joint centre on the pelvis's midline in every frame (n, 3), m (module
-    docstring); ``feet``: the feet's mean lab position, which picks the sign of the pelvis's
-    normal (toward them; without it, the file's down axis)."""
+    docstring); the sign of the pelvis's normal toward the mean of the feet's markers that
+    ``mapping`` names (without any, the file's down axis); ``what``: the mapping entry the
+    errors name."""
+    feet = _feet(take, mapping)
     a0, a1 = (_marker(take, m, what) for m in pelvis.asis)
     sacrum = np.mean([_marker(take, m, what) for m in pelvis.sacrum], axis=0)
     mid = 0.5 * (a0 + a1)
