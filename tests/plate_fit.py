@@ -3,9 +3,11 @@
 
 from __future__ import annotations
 
+from characterization.gait.contact_gait import ContactWalk
 from characterization.gait.multicontact import (
     GRAPH,
     MultiContactOptions,
+    MultiContactResult,
     fit_multicontact,
     targets_from_steps,
 )
@@ -28,9 +30,30 @@ def worn_model(steps: StepsArtifact, src: str = "steps") -> HumanProsthesisModel
 def fit_against_plates(steps: StepsArtifact, model: HumanProsthesisModel) -> PersonCheck:
     """The fit with default options (asserted converged), compared with the take and its
     plates."""
-    t = targets_from_steps(steps, model)
-    result = fit_multicontact(model, t, MultiContactOptions())
+    return _checked(steps, model, _fit(steps, model))
+
+
+def fit_walks_on_clfqp(steps: StepsArtifact, model: HumanProsthesisModel
+                       ) -> tuple[PersonCheck, ContactWalk]:
+    """The comparison of :func:`fit_against_plates` and the fitted cycle walked 10 steps with
+    the prosthesis on ``clfqp`` (the human on the fitted gait): `gait fit`'s verdict."""
+    from characterization.gait.contact_gait import contact_gait
+    from orchestrator.experiments.contact_walk import walk_with_contact_clfqp
+
+    result = _fit(steps, model)
+    walk = walk_with_contact_clfqp(model, contact_gait(model, result), result.trajectory, 10)
+    return _checked(steps, model, result), walk
+
+
+def _fit(steps: StepsArtifact, model: HumanProsthesisModel) -> MultiContactResult:
+    result = fit_multicontact(model, targets_from_steps(steps, model), MultiContactOptions())
     assert result.success, result.status
+    return result
+
+
+def _checked(steps: StepsArtifact, model: HumanProsthesisModel,
+             result: MultiContactResult) -> PersonCheck:
+    t = targets_from_steps(steps, model)
     plates = plate_forces(steps)
     assert plates is not None, "the steps have no plates"
     grf, weight = plates
