@@ -93,8 +93,9 @@ def test_the_paper_graph_and_a_take_do_not_go_together(tmp_path, capsys):
 
 def test_the_demo_stops_after_a_gait_that_does_not_walk(tmp_path):
     """A gait file whose cycle does not walk even under the held oracle (gaitalytics' take
-    today, docs/gait-design.md): the later stages are not run, and the demo says why; a gait
-    that walks, or a file from before the reference walk was stored, goes on."""
+    before the landing ankle's bound, docs/gait-design.md): the later stages are not run,
+    and the demo says why; a gait that walks, or a file from before the reference walk was
+    stored, goes on."""
     import json
 
     from orchestrator.cli.experiments import _no_walk
