@@ -128,6 +128,13 @@ def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
     return ca.solve(A[rows, 0:4], -(rhs[rows] + A[rows, 4:6] @ u_p))
 
 
+def hip_progress(model: HumanProsthesisModel, domain: Domain) -> ca.SX:
+    """delta_p_hip(q): the hip's forward position over ``domain``'s stance contact (its first
+    contact: a flat sole, a heel or a toe), m; the numerator of the domain's phase."""
+    frame = Domain(domain).contacts[0].frame
+    return model.frame_expr("hip")[0] - model.frame_expr(frame)[0]
+
+
 class ContactConstraints:
     """Phase, outputs and feedback linearization of one domain of the multi-contact graph
     (module docstring); ``degree`` the Bezier degree of its curves."""
@@ -146,7 +153,7 @@ class ContactConstraints:
         q, qd, nq = model.q, model.qd, model.nq
         #: the frame the phase is measured from: the domain's first contact
         self.reference_frame = d.contacts[0].frame
-        progress = model.frame_expr("hip")[0] - model.frame_expr(self.reference_frame)[0]
+        progress = hip_progress(model, d)
         Jp = ca.jacobian(progress, q)
         progress_dot = Jp @ qd
         Jpdot_qd = ca.jtimes(progress_dot, q, qd)

