@@ -8,8 +8,11 @@ controller read is kept, then replayed through the reset controller ``--repeats`
 each tick timed.  Issue 37's target: the controller tick <= 40 us median.  The machine is
 shared and noisy: the spread over the repeats is printed with the median.
 
-Usage: python benchmarks/bench_contact_controllers.py [--steps 6] [--repeats 5]
-       [--json out.json]
+With ``--cycle GAIT.json`` the cycle of a multi-contact gait file instead (``gait fit``'s:
+its model carries the drives' armature, which the committed cycle predates).
+
+Usage: python benchmarks/bench_contact_controllers.py [--cycle GAIT.json] [--steps 6]
+       [--repeats 5] [--json out.json]
 """
 
 from __future__ import annotations
@@ -43,9 +46,20 @@ from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle
 
 
-def controllers() -> tuple[dict[str, Controller], Any]:
-    """The two controllers of the committed cycle, and its in-process simulator."""
-    model, traj, durations, _ = load_cycle()
+def cycle(path: Path | None) -> tuple[Any, Any, Any]:
+    """(model, trajectories, durations) of a gait file's cycle, else of the committed one."""
+    if path is None:
+        model, traj, durations, _ = load_cycle()
+        return model, traj, durations
+    from characterization.gait.multicontact_artifact import load_contact_cycle
+
+    c = load_contact_cycle(path)
+    return c.model, c.trajectory, c.durations
+
+
+def controllers(path: Path | None = None) -> tuple[dict[str, Controller], Any]:
+    """The two controllers of the cycle (:func:`cycle`), and its in-process simulator."""
+    model, traj, durations = cycle(path)
     gait = contact_gait_of(model, traj, durations)
     sim = loop_simulator(model, gait, GAINS)
     leg = LegKinematics.of(model)
@@ -107,11 +121,13 @@ def measure(ctl: Controller, read: list[ProsthesisMeasurement], repeats: int
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cycle", type=Path, help="multi-contact gait file (default: the "
+                    "committed openOFM cycle)")
     ap.add_argument("--steps", type=int, default=6)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path)
     a = ap.parse_args()
-    ctls, (sim, traj) = controllers()
+    ctls, (sim, traj) = controllers(a.cycle)
     rows = {name: measure(c, walk_measurements(c, sim, traj, a.steps), a.repeats)
             for name, c in ctls.items()}
     print("| tick | ticks x repeats | median (us) | range over repeats | p99 | stance | swing |")

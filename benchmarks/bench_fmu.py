@@ -22,8 +22,9 @@ Targets (issue 22): doStep median <= 15 us (at the accuracy bench_accuracy.py ch
 doStep <= 30 us.
 The machines are shared: quote ratios.
 
-Usage: PYTHONPATH=. python benchmarks/bench_fmu.py [--gait gait.json] [--periods 3000]
-       [--json out.json]   (without --gait, the tests' committed template gait)
+Usage: PYTHONPATH=. python benchmarks/bench_fmu.py [--gait gait.json] [--cycle mc.json]
+       [--periods 3000] [--json out.json]   (without --gait, the tests' committed template
+       gait; without --cycle, the committed openOFM multi-contact cycle)
 """
 
 from __future__ import annotations
@@ -160,15 +161,21 @@ def paper(tmp: Path, gait_arg: Path | None, periods: int) -> dict[str, Any]:
             "python_us_per_period": py, **time_fmu(fmu_path, u, rep)}
 
 
-def multicontact(tmp: Path, periods: int) -> dict[str, Any]:
-    """The multi-contact graph: the FMU of the committed openOFM cycle under the held
-    oracle's torques."""
+def multicontact(tmp: Path, periods: int, cycle: Path | None = None) -> dict[str, Any]:
+    """The multi-contact graph: the FMU of the committed openOFM cycle (or of the
+    multi-contact gait file ``cycle``) under the held oracle's torques."""
     from characterization.gait.contact_gait import GAINS, contact_gait_of, held_oracle
     from characterization.gait.contact_gait import start_state as cycle_start
     from orchestrator.cosim.contact_controllers import loop_simulator, tracked_gait
     from tests.multicontact_cycle import load_cycle
 
-    model, traj, durations, _ = load_cycle()
+    if cycle is None:
+        model, traj, durations, _ = load_cycle()
+    else:
+        from characterization.gait.multicontact_artifact import load_contact_cycle
+
+        c = load_contact_cycle(cycle)
+        model, traj, durations = c.model, c.trajectory, c.durations
     gait = contact_gait_of(model, traj, durations)
     fmu_path = tmp / "human_multicontact.fmu"
     info = build_fmu(tracked_gait(model, gait, traj, "openofm cycle"), fmu_path, model=model)
@@ -183,12 +190,14 @@ def multicontact(tmp: Path, periods: int) -> dict[str, Any]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--gait", type=Path, help="gait file (default: the tests' template gait)")
+    ap.add_argument("--cycle", type=Path, help="multi-contact gait file (default: the "
+                    "committed openOFM cycle)")
     ap.add_argument("--periods", type=int, default=3000)
     ap.add_argument("--json", help="also write the figures to this JSON file")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         fig = paper(Path(tmp), a.gait, a.periods)
-        mc = multicontact(Path(tmp), a.periods)
+        mc = multicontact(Path(tmp), a.periods, a.cycle)
     for f in (fig, mc):
         f["ratio_median"] = f["python_us_per_period"] / f["fmu_doStep_us_median"]
         f["ratio_mean"] = f["python_us_per_period"] / f["fmu_doStep_us_mean"]

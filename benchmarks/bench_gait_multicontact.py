@@ -23,13 +23,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import hp_model
 from characterization.gait.fit import worn_device
 from characterization.gait.multicontact import GRAPH, fit_multicontact, targets_from_steps
 from characterization.gait.multicontact_summary import gait_summary, take_summary
 from characterization.gait.person_check import StanceForce, check_person
 from characterization.mocap.session import process_session
 from characterization.mocap.steps_artifact import load_steps, plate_forces, steps_subject
+from hp_model.config import default_device_path, load_device
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import write_json
 
@@ -57,7 +57,7 @@ def main() -> None:
     if stored is None:
         raise SystemExit("the steps carry no subject")
     person = stored[0]
-    device, _ = worn_device(person, hp_model.load_model().device)
+    device, _ = worn_device(person, load_device(default_device_path()))  # with its armature
     model = HumanProsthesisModel(person, device, graph=GRAPH)
     model.numeric()  # compiled once, outside the timing
     walls, iters = [], []

@@ -68,15 +68,18 @@ def steps(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def mc_model(model, steps):
+def mc_model(steps):
     """The person of the take (75 kg, 1.83 m, from the C3D and the static trial) on the
     device they would wear (its pylon cut to their leg, its foot their foot's size): what
     `gait fit` uses."""
     from characterization.gait.fit import worn_device
     from characterization.mocap.steps_artifact import steps_subject
+    from hp_model.config import default_device_path, load_device
 
     person, _ = steps_subject(steps, "openofm steps")
-    device, _ = worn_device(person, model.device)
+    # the shipped device file, with its drives' armature (the paper's model, ``model``,
+    # leaves it out)
+    device, _ = worn_device(person, load_device(default_device_path()))
     return HumanProsthesisModel(person, device, graph=GRAPH, backend=CompileBackend.AUTO)
 
 
