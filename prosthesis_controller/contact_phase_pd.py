@@ -10,7 +10,14 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
   It rises monotonically over the whole stance, so one law runs the stance without deciding
   which domain it is in (a prototype that switched laws on a detected contact part fell when
   2 ms of the wrong law ran at the heel off).
-- **Swing** (foot switch off): the time since toe-off over the gait's swing time.
+- **Swing** (foot switch off): the time since toe-off over the gait's swing time (``"time"``,
+  the default), or with ``swing_phase="thigh"`` the residual thigh's place along the gait's
+  own thigh pitch over its swing (the socket IMU's pitch less the bias estimated in stance:
+  :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`), which follows a person who
+  swings faster or slower than the gait.  Not the default yet: on the simulated person its
+  phase lags the clock by about 0.01 (4 ms) in a nominal walk, where the thigh really is, and
+  that alone made contact-pd's first prosthesis heel strike on OpenSim's fit too late to walk
+  (the simulated person's fragility, issue 38; docs/gait-design.md).
 - **Reference**: one stride of the gait as the model walks it (:func:`tables_from_walk`: the
   knee's and the ankle's angles, rates and motor torques against the phase), interpolated
   linearly in the phase (the torque has kinks at the contact transitions).
@@ -42,6 +49,7 @@ from prosthesis_controller.interface import (
     QpOutcome,
 )
 from prosthesis_controller.measurement import Fault, ProsthesisMeasurement
+from prosthesis_controller.thigh_phase import ThighSwingPhase
 
 
 @dataclass(frozen=True)
@@ -75,15 +83,18 @@ class PhaseTable:
 @dataclass(frozen=True)
 class ContactGaitTables:
     """What :class:`ContactPhasePD` follows: the stance against its phase, the swing against
-    time over ``swing_time`` (s), the hip's progress (m) at heel strike and toe-off, and
-    ``flat``: the stance phases between which the foot is flat on the ground (within
-    :data:`FLAT_MARGIN` of where it lands flat and where its heel rises)."""
+    its phase (time over ``swing_time`` (s) in the gait's walk), the hip's progress (m) at
+    heel strike and toe-off, ``flat``: the stance phases between which the foot is flat on
+    the ground (within :data:`FLAT_MARGIN` of where it lands flat and where its heel rises),
+    and ``swing_pitch``: the socket's world pitch (rad) at the swing table's phases (the swing
+    phase's measure: :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`)."""
 
     stance: PhaseTable
     swing: PhaseTable
     progress: tuple[float, float]
     swing_time: float
     flat: tuple[float, float]
+    swing_pitch: np.ndarray
 
 
 #: a foot with its heel within this angle of its toe (rad) is flat
@@ -133,7 +144,8 @@ def tables_from_walk(leg: LegKinematics, t: np.ndarray, sensed: np.ndarray,
     return ContactGaitTables(PhaseTable(phase, vals[i0:i1]),
                              PhaseTable((t[i1:i2] - t[i1]) / swing_time, vals[i1:i2]),
                              (float(p[0]), float(p[-1])), swing_time,
-                             (float(flat[0]) + margin, float(flat[-1]) - margin))
+                             (float(flat[0]) + margin, float(flat[-1]) - margin),
+                             x[i1:i2, 0].copy())
 
 
 @dataclass(frozen=True)
@@ -146,6 +158,9 @@ class PDGains:
 
 #: the time constant of the IMU bias's estimate (s)
 BIAS_TIME = 0.05
+
+#: how the swing's phase is measured (:class:`ContactPhasePD`)
+SWING_PHASES = ("time", "thigh")
 
 #: the defaults (docs/gait-design.md: the window of gains that walk is narrow)
 STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
@@ -174,13 +189,19 @@ class ContactPhasePD:
 
     def __init__(self, tables: ContactGaitTables, leg: LegKinematics,
                  gear: tuple[float, float], limits: tuple[float, float],
-                 stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> None:
-        self.tables, self.leg = tables, leg
+                 stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS,
+                 swing_phase: str = "time") -> None:
+        if swing_phase not in SWING_PHASES:
+            raise ValueError(f"swing_phase {swing_phase!r}: choose from "
+                             f"{', '.join(SWING_PHASES)}")
+        self.tables, self.leg, self.swing_phase = tables, leg, swing_phase
         #: what the law was made with (its file, :mod:`prosthesis_controller.gait_tables`)
         self.stance_gains, self.swing_gains = stance, swing
         self._gear = (float(gear[0]), float(gear[1]))
         self._limits = (float(limits[0]), float(limits[1]))
         self._gains = {True: (stance.kp, stance.kd), False: (swing.kp, swing.kd)}
+        self._thigh = (ThighSwingPhase(tables.swing.phase, tables.swing_pitch)
+                       if swing_phase == "thigh" else None)
         self.reset()
 
     @property
@@ -199,7 +220,7 @@ class ContactPhasePD:
         self.fallbacks = 0  # ticks that answered a measurement it could not use
         self._in_stance: bool | None = None
         self._t_off: float | None = None
-        #: the last tick's phase (stance: the progress phase; swing: the time phase)
+        #: the last tick's phase (stance: the progress phase; swing: the time's or thigh's)
         self.phase = math.nan
         #: the estimate of the IMU pitch's bias (rad), subtracted from its readings, and the
         #: time of its last update (s)
@@ -248,12 +269,23 @@ class ContactPhasePD:
             s = self.stance_phase(m)
             ref = tab.stance.at(s)
         else:
-            if self._in_stance is not False or self._t_off is None:
-                self._t_off = m.t  # toe-off (or a start in swing)
-            s = (m.t - self._t_off) / tab.swing_time
+            s = self.swing_phase_of(m)
             ref = tab.swing.at(s)
         self._in_stance, self.phase = stance, s
         return ref
+
+    def swing_phase_of(self, m: ProsthesisMeasurement) -> float:
+        """The swing phase of a measurement in swing (``swing_phase``: the time since toe-off
+        over the gait's swing time, or the thigh's)."""
+        toe_off = self._in_stance is not False  # (or a start in swing)
+        if self._thigh is not None:
+            pitch = m.socket_pitch - self.imu_bias
+            if toe_off:
+                self._thigh.reset(m.t, pitch)
+            return self._thigh.update(m.t, pitch)
+        if toe_off or self._t_off is None:
+            self._t_off = m.t
+        return (m.t - self._t_off) / self.tables.swing_time
 
     def torque(self, m: ProsthesisMeasurement, ref: tuple[float, ...]) -> tuple[float, float]:
         """The law's motor torques (N m, within the limits) about the reference ``ref``

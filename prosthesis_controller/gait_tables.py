@@ -5,20 +5,23 @@ which cannot walk the model itself.
 
 Layout (``numpy.savez``, no pickles; SI units, rad):
 
-    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 2; the model
+    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 3; the model
                     (subject, device: the leg's geometry the phase is sensed with) and its
                     hash; the gait's hash; the phase law's progress (m), swing time (s), flat
-                    stance phases, gains (joint N m/rad, N m s/rad), gear ratios, motor
+                    stance phases, gains (joint N m/rad, N m s/rad), the swing phase's measure
+                    (``time`` or ``thigh``), gear ratios, motor
                     limits (N m); the CLF-QP's constants (:class:`ContactClfConfig`)
     stance.phase, stance.values, swing.phase, swing.values
                     the phase law's tables (:class:`PhaseTable`)
+    swing.pitch     the socket's world pitch at swing.phase (the swing phase's measure,
+                    :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`)
     qp.phase, qp.domain (Domain.code), qp.g, qp.u_ref, qp.qdd_ref, qp.P, qp.c, qp.G, qp.h,
     qp.d_center, qp.d_radius
                     the stance QP's per-sample data (:class:`StanceQp`; the last two the
                     robust term's box, zero without a model-error bound)
 
-Schema 1 (no qdd_ref, no robust term) is refused: the file is a cache, made again from the
-gait.
+Older schemas (1: no qdd_ref, no robust term; 2: no swing pitch) are refused: the file is a
+cache, made again from the gait.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from prosthesis_controller.contact_phase_pd import (
 )
 
 KIND = "hpcosim-contact-controller"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3  # 3: the swing's thigh pitch (the swing phase's measure)
 _QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius")
 
 
@@ -63,11 +66,13 @@ def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,
             "progress": list(tab.progress), "swing_time": tab.swing_time,
             "flat": list(tab.flat),
             "stance_gains": asdict(law.stance_gains), "swing_gains": asdict(law.swing_gains),
+            "swing_phase": law.swing_phase,
             "gear": list(law.gear), "limits": list(law.limits), "config": asdict(ctl.config)}
     arrays: dict[str, Any] = {
         "meta": np.array(dumps(meta)),
         "stance.phase": tab.stance.phase, "stance.values": tab.stance.values,
         "swing.phase": tab.swing.phase, "swing.values": tab.swing.values,
+        "swing.pitch": tab.swing_pitch,
         "qp.domain": np.array([d.code for d in qp.domain]),
         **{f"qp.{k}": getattr(qp, k) for k in _QP}}
     buf = io.BytesIO()
@@ -113,11 +118,13 @@ def load_contact_controller(path: str | os.PathLike[str], model_hash: str | None
             PhaseTable(data["stance.phase"], data["stance.values"]),
             PhaseTable(data["swing.phase"], data["swing.values"]),
             (float(meta["progress"][0]), float(meta["progress"][1])),
-            float(meta["swing_time"]), (float(meta["flat"][0]), float(meta["flat"][1])))
+            float(meta["swing_time"]), (float(meta["flat"][0]), float(meta["flat"][1])),
+            np.asarray(data["swing.pitch"], float))
         law = ContactPhasePD(tables, LegKinematics.of(model),
                              (float(meta["gear"][0]), float(meta["gear"][1])),
                              (float(meta["limits"][0]), float(meta["limits"][1])),
-                             _gains(meta, "stance_gains"), _gains(meta, "swing_gains"))
+                             _gains(meta, "stance_gains"), _gains(meta, "swing_gains"),
+                             str(meta["swing_phase"]))
         field = "qp"
         stance = StanceQp(domain=tuple(Domain.from_code(int(c)) for c in data["qp.domain"]),
                           **{k: np.asarray(data[f"qp.{k}"], float) for k in _QP})

@@ -257,6 +257,29 @@ def test_a_perturbation_family_is_walked_by_all_three_on_the_same_draws(cycle) -
         draw(gait, "wind", 1.0, 0)
 
 
+def test_the_pace_family_scales_the_hips_rate_only(cycle) -> None:
+    """``pace``: in each domain with a velocity output the hip's rate curve (the row after
+    the joints') and v_hip times the draw's factor, every other row and the toe domains
+    unchanged; amplitude 0 is the gait."""
+    from orchestrator.experiments.contact_perturbations import draw, paced
+
+    _, _, _, gait = cycle
+    fast = paced(gait, 1.1)
+    for d, p in gait.params.items():
+        a, b = np.asarray(p.alpha), np.asarray(fast.params[d].alpha)
+        n = len(d.y2_coords)
+        np.testing.assert_array_equal(b[:n], a[:n])
+        if d.velocity_output:
+            np.testing.assert_allclose(b[n], 1.1 * a[n])
+            assert fast.params[d].v_hip == pytest.approx(1.1 * p.v_hip)
+        else:
+            np.testing.assert_array_equal(b, a)
+        np.testing.assert_array_equal(b[n + d.velocity_output:], a[n + d.velocity_output:])
+    same = draw(gait, "pace", 0.0, 3).gait
+    for d in gait.params:
+        np.testing.assert_array_equal(same.params[d].alpha, gait.params[d].alpha)
+
+
 def test_the_perturbation_script_refuses_a_missing_gait_in_one_line(capsys) -> None:
     from orchestrator.experiments.contact_perturbations import main
 

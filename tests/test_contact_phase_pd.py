@@ -111,3 +111,51 @@ def test_the_committed_cycle_walks_with_contact_pd(cycle) -> None:
     assert np.all(np.abs(walk.strides / stride - 1) < 0.03), walk.strides
     assert np.all(np.abs(walk.speeds / (stride_length / stride) - 1) < 0.03), walk.speeds
     assert "contact-pd" in walk.line() and walk.to_json()["controller"].endswith("sensors")
+
+
+def _swing_ends(model, traj, gait, ctl, steps: int) -> list[tuple[float, float]]:
+    """Each completed swing's (duration (s), phase at its last tick) as ``ctl`` walks the
+    plant of ``gait`` (the in-process plant with ideal sensors) for ``steps`` steps."""
+    from characterization.gait.contact_gait import start_state
+    from characterization.gait.multicontact import GRAPH
+    from orchestrator.loop.link import measurement
+    from orchestrator.loop.plant import SimulatorPlant
+
+    plant = SimulatorPlant(loop_simulator(model, gait, GAINS), *start_state(traj),
+                           GRAPH.domains[0])
+    ctl.reset()
+    ends, t_off, last = [], None, (0.0, math.nan)
+    while plant.fall is None and plant.run.steps < steps:
+        m = measurement(plant.observe())
+        out = ctl.tick(m)
+        if not m.contact:
+            t_off = m.t if t_off is None else t_off
+            last = (m.t, out.diagnostics.tau)
+        elif t_off is not None:
+            ends.append((last[0] - t_off, last[1]))
+            t_off = None
+        plant.actuate(out.torque)
+        if plant.fall is not None:
+            break
+        plant.advance()
+    return ends
+
+
+def test_the_thigh_phase_follows_a_person_who_swings_faster(cycle) -> None:
+    """``swing_phase="thigh"``: with the simulated person's hip 8 % faster than the gait's
+    (thigh and all: its joints follow the hip's progress), each prosthesis swing ends with
+    the thigh's phase near 1, where the time since toe-off over the gait's swing time would
+    read the swing's shortening (about 1 / 1.08); on the gait's own pace both read about
+    1."""
+    from orchestrator.cosim.contact_controllers import contact_clfqp
+    from orchestrator.experiments.contact_perturbations import paced
+
+    model, traj, _, gait = cycle
+    ctl = contact_clfqp(model, gait, traj, swing_phase="thigh")
+    T = ctl.law.tables.swing_time
+    for pace in (1.0, 1.08):
+        ends = _swing_ends(model, traj, paced(gait, pace), ctl, 6)
+        assert len(ends) >= 2, pace
+        for duration, phase in ends:
+            assert phase == pytest.approx(1.0, abs=0.05), (pace, phase)
+            assert duration / T == pytest.approx(1.0 / pace, abs=0.03), (pace, duration)

@@ -34,12 +34,16 @@ def made():
     return model, traj, gait, ctl
 
 
-def test_a_loaded_controller_ticks_as_the_one_saved(tmp_path, made):
+@pytest.mark.parametrize("swing_phase", ["time", "thigh"])
+def test_a_loaded_controller_ticks_as_the_one_saved(tmp_path, made, swing_phase):
     model, traj, gait, ctl = made
+    if swing_phase != ctl.law.swing_phase:
+        ctl = contact_clfqp(model, gait, traj, swing_phase=swing_phase)
     path = tmp_path / "clfqp.npz"
     save_contact_controller(path, ctl, model, "gaithash")
     loaded, loaded_model = load_contact_controller(path, model.parameter_hash())
     assert loaded_model.parameter_hash() == model.parameter_hash()
+    assert loaded.law.swing_phase == swing_phase
     # two steps of the walk, each measurement ticked by both
     q0, qd0 = start_state(traj)
     plant = SimulatorPlant(loop_simulator(model, gait, (20.0, 1600.0, 80.0)), q0, qd0,

@@ -151,22 +151,26 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
 
 
 def phase_law(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
-              stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS) -> ContactPhasePD:
+              stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS,
+              swing_phase: str = "time") -> ContactPhasePD:
     p = model.device.prosthesis
     return ContactPhasePD(tables, leg, (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
                           (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance,
-                          swing)
+                          swing, swing_phase)
 
 
 def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                     trajectory: Mapping[Domain, Mapping[str, Any]],
-                    setup: LoopSetup | None = None) -> ContactPhasePD:
+                    setup: LoopSetup | None = None, swing_phase: str = "time"
+                    ) -> ContactPhasePD:
     """contact-pd of ``gait`` with its default gains, its tables from :func:`held_walk`
-    (``setup``'s when made already; ValueError as :func:`controller_tables`)."""
+    (``setup``'s when made already; ValueError as :func:`controller_tables`);
+    ``swing_phase``: :class:`ContactPhasePD`'s."""
     leg = LegKinematics.of(model)
     w = (setup and setup.held) or held_walk(
         setup.sim if setup else loop_simulator(model, gait, GAINS), trajectory)
-    return phase_law(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg)
+    return phase_law(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg,
+                     swing_phase=swing_phase)
 
 
 def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
@@ -174,12 +178,14 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   gains: tuple[float, float, float] = GAINS,
                   config: ContactClfConfig = DEFAULT_CONFIG, *,
                   setup: LoopSetup | None = None,
-                  model_error: ModelErrorBound | None = None) -> ContactClfQp:
+                  model_error: ModelErrorBound | None = None,
+                  swing_phase: str = "time") -> ContactClfQp:
     """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
     the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
     :func:`controller_tables`); ``model_error``: the bound of its model's error (the gait's
     force tube's, :func:`characterization.tube.contact_model_error.fit_contact_model_error`)
-    for the robust term of its CLF row (None: none)."""
+    for the robust term of its CLF row (None: none); ``swing_phase``: its phase law's
+    (:class:`ContactPhasePD`)."""
     leg = LegKinematics.of(model)
     w = (setup and setup.held) or held_walk(
         setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
@@ -192,7 +198,7 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
     stance = stance_qp(walked, inter, gait.thetas(), gains, model, config
                        ).with_margin(model_error)
     p = model.device.prosthesis
-    return ContactClfQp(phase_law(model, tables, leg), stance,
+    return ContactClfQp(phase_law(model, tables, leg, swing_phase=swing_phase), stance,
                         (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
 
 

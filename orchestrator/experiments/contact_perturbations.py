@@ -11,12 +11,15 @@ Families (``amplitude`` scales each; per draw, from its seed):
     sensors  all three together
     gains    the simulated human's gains (eps, kp, kd) each x exp(N(0, 0.3 x amplitude))
     posture  the human's four joints' curves offset by N(0, 1 deg x amplitude), every domain
+    pace     the human's hip-rate curves (and v_hip) x exp(N(0, 0.05 x amplitude)), in every
+             domain that has one: a person walking faster or slower than the gait, thigh
+             and all (its joints follow the hip's progress)
 
 The oracle reads the plant's state, not the sensors: in the sensor families it is not walked
 (its row is the draws).
 
 Usage: python -m orchestrator.experiments.contact_perturbations GAIT.json --family bias
-       [--amplitude 1] [--draws 20] [--steps 10]
+       [--amplitude 1] [--draws 20] [--steps 10] [--swing-phase time|thigh]
 (GAIT.json: a multi-contact gait written by ``hpcosim gait fit --domains multicontact``.)
 """
 
@@ -54,8 +57,9 @@ from orchestrator.cosim.contact_controllers import (
 )
 from orchestrator.experiments.contact_walk import walk_controller
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder
+from prosthesis_controller.contact_phase_pd import SWING_PHASES
 
-FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture")
+FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture", "pace")
 #: the human's joints whose curves the posture family offsets
 HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
 CONTROLLERS = ("oracle", "clfqp", "contact-pd")
@@ -99,7 +103,24 @@ def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
                 alpha[row] += offset.get(coord, 0.0)
             params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
         return Draw(ContactGait(params, gait.rms), GAINS, None)
+    if family == "pace":
+        return Draw(paced(gait, float(np.exp(rng.normal(0, 0.05 * a)))), GAINS, None)
     raise ValueError(f"unknown family {family!r}; choose from {', '.join(FAMILIES)}")
+
+
+def paced(gait: ContactGait, factor: float) -> ContactGait:
+    """``gait`` with the hip's rate curve V(tau) and its mean v_hip times ``factor`` in each
+    domain with a velocity output (:mod:`hp_model.contact_outputs`); the toe domains' pace
+    is their zero dynamics'."""
+    params = {}
+    for d, p in gait.params.items():
+        alpha = np.array(p.alpha, float)
+        v_hip = p.v_hip
+        if d.velocity_output:
+            alpha[len(d.y2_coords)] *= factor
+            v_hip *= factor
+        params[d] = GaitParams(alpha, v_hip, p.p_min, p.p_max)
+    return ContactGait(params, gait.rms)
 
 
 def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
@@ -125,17 +146,19 @@ def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[s
 def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
                           trajectory: Mapping[Domain, Mapping[str, Any]],
                           setup: LoopSetup | None = None,
-                          model_error: ModelErrorBound | None = None) -> dict[str, Any]:
+                          model_error: ModelErrorBound | None = None,
+                          swing_phase: str = "time") -> dict[str, Any]:
     """The controllers a family walks (:data:`CONTROLLERS`), made once from the
     unperturbed gait (``setup``: its simulator and held walk, when made already;
-    ``model_error``: the tube's bound, ``clfqp``'s robust term)."""
+    ``model_error``: the tube's bound, ``clfqp``'s robust term; ``swing_phase``: how both
+    measure the swing's phase, :class:`~prosthesis_controller.contact_phase_pd.ContactPhasePD`)."""
     if setup is None or setup.held is None:
         sim = loop_simulator(model, gait, GAINS)
         setup = LoopSetup(sim, held_walk(sim, trajectory))
     return {"oracle": "oracle",
             "clfqp": contact_clfqp(model, gait, trajectory, setup=setup,
-                                   model_error=model_error),
-            "contact-pd": make_contact_pd(model, gait, trajectory, setup)}
+                                   model_error=model_error, swing_phase=swing_phase),
+            "contact-pd": make_contact_pd(model, gait, trajectory, setup, swing_phase)}
 
 
 def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],
@@ -166,11 +189,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--amplitude", type=float, default=1.0)
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--steps", type=int, default=10)
+    ap.add_argument("--swing-phase", choices=SWING_PHASES, default="time",
+                    help="how the prosthesis controllers measure the swing's phase")
     a = ap.parse_args(argv)
     try:
         cycle = load_contact_cycle(a.gait)
         model, traj, durations = cycle.model, cycle.trajectory, cycle.durations
-        w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps)
+        ctls = perturbed_controllers(model, contact_gait_of(model, traj, durations), traj,
+                                     swing_phase=a.swing_phase)
+        w = family_walks(model, traj, durations, a.family, a.amplitude, a.draws, a.steps,
+                         controllers=ctls)
     except (OSError, ValueError, KeyError) as e:  # a bad file, or the held oracle fell
         print(f"contact_perturbations: error: {a.gait}: {e}", file=sys.stderr)
         return 2
