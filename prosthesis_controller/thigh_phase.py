@@ -7,9 +7,9 @@ deg), then rises a few degrees as the person retracts the leg for the heel strik
 is read off the gait's own thigh pitch against its swing phase (``tables_from_walk``), one
 branch at a time:
 
-- theta is the pitch low-passed over ``SMOOTHING`` against the IMU's noise (the phase never
-  falls back, so raw noise would ratchet it ahead, most near the peak where the pitch is
-  flat);
+- theta is the pitch as read on the steep part of the flexion (no lag there), else
+  low-passed over ``SMOOTHING`` against the IMU's noise (the phase never falls back, so raw
+  noise would ratchet it ahead, most near the peak where the pitch is flat);
 - **flexing** (from toe-off): s = S_flex(theta - delta), delta = the pitch at toe-off less
   the gait's (a person's posture offset or an IMU bias moves the whole thigh curve);
 - **retracting** (once theta has risen ``TURN`` above its least value since toe-off):
@@ -42,7 +42,8 @@ import numpy as np
 #: retracting branch takes over (above the IMU noise the perturbation families put on it,
 #: 0.2 deg, smoothed)
 TURN = math.radians(1.0)
-#: s: the time constant of the pitch's low-pass for the turn's detection
+#: s: the time constant of the pitch's low-pass (the turn's detection, the flat peak and the
+#: retraction)
 SMOOTHING = 0.005
 #: the flexing branch runs to this fraction of its phase span before a turn is believed
 EARLIEST_TURN = 0.5
