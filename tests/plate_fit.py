@@ -30,7 +30,7 @@ def worn_model(steps: StepsArtifact, src: str = "steps") -> HumanProsthesisModel
 def fit_against_plates(steps: StepsArtifact, model: HumanProsthesisModel) -> PersonCheck:
     """The fit with default options (asserted converged), compared with the take and its
     plates."""
-    return _checked(steps, model, _fit(steps, model))
+    return _fitted(steps, model)[0]
 
 
 def fit_walks_on_clfqp(steps: StepsArtifact, model: HumanProsthesisModel
@@ -40,23 +40,20 @@ def fit_walks_on_clfqp(steps: StepsArtifact, model: HumanProsthesisModel
     from characterization.gait.contact_gait import contact_gait
     from orchestrator.experiments.contact_walk import walk_with_contact_clfqp
 
-    result = _fit(steps, model)
+    check, result = _fitted(steps, model)
     walk = walk_with_contact_clfqp(model, contact_gait(model, result), result.trajectory, 10)
-    return _checked(steps, model, result), walk
+    return check, walk
 
 
-def _fit(steps: StepsArtifact, model: HumanProsthesisModel) -> MultiContactResult:
-    result = fit_multicontact(model, targets_from_steps(steps, model), MultiContactOptions())
-    assert result.success, result.status
-    return result
-
-
-def _checked(steps: StepsArtifact, model: HumanProsthesisModel,
-             result: MultiContactResult) -> PersonCheck:
+def _fitted(steps: StepsArtifact, model: HumanProsthesisModel
+            ) -> tuple[PersonCheck, MultiContactResult]:
+    """The fit (asserted converged) and its comparison with the take and its plates."""
     t = targets_from_steps(steps, model)
+    result = fit_multicontact(model, t, MultiContactOptions())
+    assert result.success, result.status
     plates = plate_forces(steps)
     assert plates is not None, "the steps have no plates"
     grf, weight = plates
     take = take_summary(t, "take", {f: StanceForce(fx=m.fx, fz=m.fz) for f, m in grf.items()},
                         weight)
-    return check_person(take, gait_summary(model, result))
+    return check_person(take, gait_summary(model, result)), result

@@ -65,8 +65,6 @@ GRAPH = DomainGraph.MULTICONTACT
 TRACKED = ("th_B", "th_lh", "th_lk", "th_la", "th_rh", "th_pk", "th_pa")
 #: the floating base's coordinates: the hip's position and the trunk's pitch
 BASE = ("x_B", "z_B", "th_B")
-#: each side's ankle
-ANKLE = {"l": "th_la", "p": "th_pa"}
 #: the ground points of the two feet
 FOOT_POINTS = ("l_heel", "l_toe", "p_heel", "p_toe")
 #: each foot's stance, in walking order, and the side of its frames
@@ -572,7 +570,8 @@ def _boundaries(nlp: NLP, model: HumanProsthesisModel, d: Domain, X: dict[str, c
         nlp.within(vel_e[1], -np.inf, -(opt.touchdown_velocity if td.endswith("_heel")
                                         else opt.flat_landing_velocity))
         if td.endswith("_heel") and opt.landing_ankle_speed is not None:
-            ankle = model.coord_names.index(ANKLE[td.split("_")[0]])
+            # the heel that lands leads the next domain's stance
+            ankle = model.coord_names.index(GRAPH.next(d).stance_leg.ankle)
             P = 2 * opt.nodes - 1
             nlp.geq(opt.landing_ankle_speed - qd[ankle, P // 2:])
             nlp.geq(opt.landing_ankle_speed + qd[ankle, P // 2:])
