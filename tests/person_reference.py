@@ -39,6 +39,19 @@ STRIDES, RATE, SEED = 6, 100.0, 1
 
 def make(out: Path, work: Path) -> int:
     """Write the gait to ``out`` (work files in ``work``); ``gait fit``'s exit code."""
+    from orchestrator.cli import main as hpcosim
+
+    steps = work / "steps.npz"
+    rc = make_steps(steps, work)
+    if rc != 0:
+        return rc
+    return hpcosim(["gait", "fit", str(steps), "--domains", "multicontact", "--no-figure",
+                    "--out", str(out)])
+
+
+def make_steps(steps: Path, work: Path) -> int:
+    """The person's take (module docstring) processed into ``steps`` (work files in
+    ``work``); ``mocap process``'s exit code."""
     from characterization.gait.fit import worn_device
     from characterization.mocap.subject_from_take import ROLL_OFF_OF_FOOT
     from characterization.mocap.synthetic_subject import (
@@ -69,13 +82,8 @@ def make(out: Path, work: Path) -> int:
     take = work / "take"
     write_synthetic(take, synthesize(model, opts), opts)
     (take / "subject.toml").write_text(tomli_w.dumps(doc))
-    steps = work / "steps.npz"
-    rc = hpcosim(["mocap", "process", str(take / "take.csv"), "--subject",
-                  str(take / "subject.toml"), "--out", str(steps), "--no-figures"])
-    if rc != 0:
-        return rc
-    return hpcosim(["gait", "fit", str(steps), "--domains", "multicontact", "--no-figure",
-                    "--out", str(out)])
+    return hpcosim(["mocap", "process", str(take / "take.csv"), "--subject",
+                    str(take / "subject.toml"), "--out", str(steps), "--no-figures"])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 
 import casadi as ca
@@ -439,6 +439,21 @@ def initial_guess(model: HumanProsthesisModel, targets: MultiContactTargets, n_p
     return out
 
 
+def cycle_guess(trajectory: Mapping[Domain, Mapping[str, np.ndarray]],
+                durations: Mapping[Domain, float], n_points: int
+                ) -> dict[Domain, dict[str, np.ndarray]]:
+    """A fitted cycle (its per-domain ``q``, ``qd``, ``qdd``, ``u``, ``lam`` at evenly spaced
+    points, and durations, s) as the guess of another fit (:func:`fit_multicontact`), its
+    rows resampled to ``n_points``: a fit continued from it."""
+    out: dict[Domain, dict[str, np.ndarray]] = {}
+    for d in GRAPH.domains:
+        tr = trajectory[d]
+        out[d] = {k: resample_rows(np.asarray(tr[k], float), n_points)
+                  for k in ("q", "qd", "qdd", "u", "lam")}
+        out[d]["T"] = np.array(float(durations[d]))
+    return out
+
+
 # -- the NLP -----------------------------------------------------------------------------------
 def _duration_bounds(take: float, opt: MultiContactOptions) -> tuple[float, float]:
     """A domain's duration bounds (s) about the take's ``take``."""
@@ -766,15 +781,22 @@ def _jerk(X: dict[str, ca.MX], opt: MultiContactOptions, base: list[int]) -> ca.
 
 
 def fit_multicontact(model: HumanProsthesisModel, targets: MultiContactTargets,
-                     opt: MultiContactOptions | None = None) -> MultiContactResult:
+                     opt: MultiContactOptions | None = None,
+                     guess: Mapping[Domain, Mapping[str, np.ndarray]] | None = None
+                     ) -> MultiContactResult:
     """Solve the multi-contact fit with IPOPT (exact Hessian, MUMPS); ``model`` must be built
-    on the multi-contact graph."""
+    on the multi-contact graph.  ``guess``: where IPOPT starts, per domain ``q``, ``qd``,
+    ``qdd`` (nq, P), ``u`` (nu, P), ``lam`` (n_c, P; N) and ``T`` (s) at P = 2 nodes - 1
+    evenly spaced points (a fitted cycle: :func:`cycle_guess`; default: the take's angles,
+    :func:`initial_guess`); each domain's duration stays within ``duration_range`` of its
+    guess's."""
     opt = opt or MultiContactOptions()
     if model.graph != GRAPH:
         raise MultiContactError(f"the model is built on the {model.graph} graph; the "
                                 f"multi-contact fit needs graph={GRAPH}")
     P = 2 * opt.nodes - 1
-    guess = initial_guess(model, targets, P)
+    guess = (initial_guess(model, targets, P) if guess is None else
+             {d: dict(guess[d]) for d in GRAPH.domains})
     idx = [model.coord_names.index(c) for c in TRACKED]
     base = [model.coord_names.index(c) for c in BASE]
     nlp = NLP()

@@ -23,13 +23,14 @@ Layout (``kind = "hpcosim-gait-multicontact"``, ``schema_version = 1``; SI units
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from characterization.gait.multicontact import (
     GRAPH,
+    MultiContactError,
     MultiContactOptions,
     MultiContactResult,
     MultiContactTargets,
@@ -79,6 +80,18 @@ def to_document(result: MultiContactResult, targets: MultiContactTargets,
 def save_multicontact_gait(path: str | os.PathLike[str], doc: dict[str, Any]) -> None:
     """Write the document atomically (strict JSON: non-finite numbers as null)."""
     save_json(path, doc)
+
+
+def fit_options(doc: dict[str, Any], path: str | os.PathLike[str] = "gait") -> MultiContactOptions:
+    """The fit's settings a gait document records (``options``; ArtifactError naming the
+    file and field when they are not the fit's)."""
+    known = {f.name for f in fields(MultiContactOptions)}
+    try:
+        kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v
+                              for k, v in doc["options"].items() if k in known}
+        return MultiContactOptions(**kw)
+    except (KeyError, TypeError, AttributeError, MultiContactError) as e:
+        raise ArtifactError(f"{path}: field 'options': {e}") from None
 
 
 def load_multicontact_gait(path: str | os.PathLike[str]) -> dict[str, Any]:

@@ -167,3 +167,27 @@ def _summary(console: Console, gait, out: Path) -> None:
                       f"return-map spectral radius {v['spectral_radius']:.3g} ({verdict})")
     else:
         console.print("closed loop: not verified (--no-verify)")
+
+
+@gait_app.command("library")
+def library(
+    steps: Annotated[Path, typer.Argument(help="Steps file of the take the gait was fitted "
+                                          "from (`hpcosim mocap process`).", dir_okay=False)],
+    gait: Annotated[Path, typer.Option("--gait", help="The person's multi-contact gait "
+                                       "(`hpcosim gait fit`).", dir_okay=False)],
+    out: Annotated[Path, typer.Option("--out", help="Library file to write (.json).",
+                                      dir_okay=False)],
+    speeds: Annotated[str, typer.Option(
+        help="Walking speeds to fit, m/s, comma-separated (the gait's own is in the library "
+        "already).")] = "0.6,0.8,1.0,1.2,1.4",
+) -> None:
+    """Fit the person's gait again at other walking speeds, each fit continued from its
+    neighbour's, and write the gaits as one library (docs/gait-design.md); each is walked
+    with the held oracle."""
+    from orchestrator.cli.gait_library import make_gait_library, parse_speeds
+
+    try:
+        wanted = parse_speeds(speeds)
+    except ValueError as e:
+        raise typer.BadParameter(str(e), param_hint="--speeds") from None
+    make_gait_library(steps, gait, out, wanted)

@@ -29,6 +29,7 @@ NEGATIVE_WHEN: dict[tuple[str, ...], str] = {
                     "paper: the gait does not walk (falls, or its return map does not "
                     "contract)",
     ("gait", "export"): "-",
+    ("gait", "library"): "a speed's gait does not walk with the held oracle",
     ("tube", "fit"): "leave-one-out coverage 0 or below `--min-coverage` (default: the "
                      "a posteriori guarantee 1 - eps)",
     ("tube", "refit"): "as `tube fit`, for the refitted tube or bound",

@@ -1,0 +1,155 @@
+"""The gait library over walking speed (``characterization/gait/library.py``, ``hpcosim gait
+library``): the targets at another speed, the artifact read back, the curves between speeds,
+and (slow) the packaged person's gait fitted again at 0.9 m/s from its own take."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from characterization.gait.library import (
+    KIND,
+    LibraryGait,
+    LibraryOptions,
+    fit_library,
+    load_gait_library,
+    save_gait_library,
+    source_gait,
+    speed_targets,
+    to_document,
+)
+from characterization.gait.multicontact import (
+    GRAPH,
+    STANCE,
+    TRACKED,
+    MultiContactError,
+    MultiContactOptions,
+    MultiContactTargets,
+)
+from characterization.gait.multicontact_artifact import (
+    load_contact_cycle,
+    load_multicontact_gait,
+)
+from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
+from hp_model.artifacts import ArtifactError
+from tests import person_reference
+from tests.cli_support import hpcosim
+
+
+@pytest.fixture(scope="module")
+def cycle():
+    return load_contact_cycle(REFERENCE_PERSON_GAIT)
+
+
+def _quickened(g: LibraryGait, k: float) -> LibraryGait:
+    """The same cycle run k times faster (time / k, rates x k, accelerations x k^2): a
+    stand-in for another speed's fit (same stride, speed x k)."""
+    traj = {d: {**tr, "t": np.asarray(tr["t"]) / k, "qd": np.asarray(tr["qd"]) * k,
+                "qdd": np.asarray(tr["qdd"]) * k * k} for d, tr in g.trajectory.items()}
+    return LibraryGait(g.speed * k, traj, {d: T / k for d, T in g.durations.items()},
+                       g.stride_length, {"status": "scaled"}, None)
+
+
+@pytest.fixture(scope="module")
+def library_file(cycle, tmp_path_factory):
+    """A library of the packaged person's gait and the same cycle 20 % faster."""
+    base = source_gait(cycle)
+    doc = load_multicontact_gait(REFERENCE_PERSON_GAIT)
+    path = tmp_path_factory.mktemp("library") / "lib.json"
+    save_gait_library(path, to_document([base, _quickened(base, 1.2)], cycle, "person.json",
+                                        doc["subject"], doc["device"], MultiContactOptions(),
+                                        LibraryOptions()))
+    return path
+
+
+def test_targets_at_another_speed_keep_the_angles_and_share_the_change():
+    """Faster by k: durations x k^-0.5, so stride length x k^0.5 too; angles kept, no
+    plates."""
+    ang = {d: np.zeros((len(TRACKED), 5)) for d in GRAPH.domains}
+    t = MultiContactTargets({d: 0.2 for d in GRAPH.domains}, ang, 1.0,
+                            stance_fz={next(iter(STANCE)): np.ones(5)})
+    f = speed_targets(t, 1.44, 0.5)
+    assert f.speed == 1.44 and f.stance_fz == {}
+    assert all(f.durations[d] == pytest.approx(0.2 / 1.2) for d in GRAPH.domains)
+    assert f.angles is t.angles
+    assert f.speed * f.stride_time == pytest.approx(t.speed * t.stride_time * 1.2)
+
+
+def test_the_source_entry_is_the_gait_files_stride(cycle):
+    doc = load_multicontact_gait(REFERENCE_PERSON_GAIT)
+    base = source_gait(cycle)
+    assert base.source and base.speed == pytest.approx(doc["stride"]["speed"], rel=1e-9)
+    assert base.stride_time == pytest.approx(doc["stride"]["time"], rel=1e-12)
+
+
+def test_the_library_reads_back_and_interpolates_between_speeds(cycle, library_file):
+    lib = load_gait_library(library_file)
+    v0 = source_gait(cycle).speed
+    assert lib.speeds == pytest.approx([v0, 1.2 * v0])
+    lo, hi = lib.curves
+    for v, want in ((v0, lo), (1.2 * v0, hi), (0.5, lo), (3.0, hi)):  # clamped outside
+        got = lib.gait_at(v)
+        for d in GRAPH.domains:
+            assert np.allclose(got.params[d].alpha, want.params[d].alpha, atol=1e-12)
+    mid = lib.gait_at(1.1 * v0)
+    for d in GRAPH.domains:
+        a, b, m = lo.params[d], hi.params[d], mid.params[d]
+        assert np.allclose(m.alpha, (np.asarray(a.alpha) + b.alpha) / 2, atol=1e-12)
+        assert m.v_hip == pytest.approx((a.v_hip + b.v_hip) / 2)
+        # the same stride's cycle run faster: the hip-rate curve scales, the joints' don't
+        assert b.v_hip == pytest.approx(1.2 * a.v_hip, rel=1e-9)
+
+
+def test_a_library_whose_speeds_do_not_increase_is_refused(library_file, tmp_path):
+    doc = json.loads(library_file.read_text())
+    doc["gaits"] = doc["gaits"][::-1]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ArtifactError, match=r"field 'gaits'.*do not increase"):
+        load_gait_library(bad)
+    doc["kind"] = "hpcosim-gait-multicontact"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(ArtifactError, match="kind"):
+        load_gait_library(bad)
+    assert json.loads(library_file.read_text())["kind"] == KIND
+
+
+def test_bad_speeds_and_options_are_one_line_errors(cycle, tmp_path):
+    r = hpcosim("gait", "library", "steps.npz", "--gait", str(REFERENCE_PERSON_GAIT),
+                "--out", str(tmp_path / "l.json"), "--speeds", "0.8,fast")
+    assert r.returncode == 2 and "'fast' is not a speed" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    with pytest.raises(MultiContactError, match="cadence_exponent"):
+        LibraryOptions(cadence_exponent=2.0)
+    t = MultiContactTargets({d: 0.2 for d in GRAPH.domains},
+                            {d: np.zeros((len(TRACKED), 5)) for d in GRAPH.domains}, 1.0)
+    with pytest.raises(MultiContactError, match=r"speed 5\.0 m/s is outside"):
+        fit_library(cycle.model, t, cycle, [5.0])
+
+
+@pytest.mark.slow  # the take made and processed, one fit (about 25 s) and two walks
+def test_the_person_fitted_again_at_a_slower_speed_walks(tmp_path):
+    """`gait library` at 0.9 m/s from the packaged person (1.07 m/s) and its take: exit 0,
+    two gaits; the new one within 2 % of 0.9 m/s, its stride time the person's times
+    (1.07 / 0.9)^0.5 within 5 % (the durations' targets; the fit trades them against the
+    speed), and both walk 10 steps with the held oracle."""
+    steps = tmp_path / "steps.npz"
+    assert person_reference.make_steps(steps, tmp_path) == 0
+    out = tmp_path / "lib.json"
+    r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
+                "--out", str(out), "--speeds", "0.9")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(out.read_text())
+    slow, base = doc["gaits"]
+    assert base["source"] and not slow["source"]
+    assert slow["speed"] == pytest.approx(0.9, rel=0.02)
+    ratio = (base["speed"] / slow["speed"]) ** 0.5
+    assert slow["stride"]["time"] == pytest.approx(base["stride"]["time"] * ratio, rel=0.05)
+    assert slow["closed_loop"]["walks"] and base["closed_loop"]["walks"]
+    lib = load_gait_library(out)
+    assert lib.gait_at(0.9).params[GRAPH.domains[0]].v_hip < \
+        lib.gait_at(base["speed"]).params[GRAPH.domains[0]].v_hip
+    assert replace(LibraryOptions(), steps=3).steps == 3
