@@ -101,6 +101,11 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 #: clamps it to the device's motor limits, ``model.torque_limits``)
 Policy = Callable[[float, "SimState"], np.ndarray]
 
+#: the gait the human tracks in each domain it enters: (domain, time s) -> its packed gait
+#: theta (the person's choice, e.g. the curves at a commanded speed of a gait library;
+#: called at the start and at each domain switch)
+GaitSchedule = Callable[[Domain, float], np.ndarray]
+
 #: one RK4 step from a fixed state under fixed inputs, as a function of its length (s): the
 #: new state and the swing sole height (m) at its end (:meth:`HybridSimulator._rk4` bound)
 StepFrom = Callable[[float], tuple[np.ndarray, float]]
@@ -150,6 +155,9 @@ class SimState:
     tau: float
     lam: np.ndarray  # constraint wrenches of the current domain (foot, socket)
     steps: int  # steps so far (impacts that start one)
+    #: the packed gait the human tracks in this domain now (None: the simulator's own,
+    #: ``HybridSimulator.thetas``)
+    theta: np.ndarray | None = None
 
 
 @dataclass
@@ -299,37 +307,42 @@ class HybridSimulator:
 
     # -- pieces ------------------------------------------------------------------------------
     def _rk4(self, mode: str, d: Domain, x: np.ndarray, u_p: np.ndarray, h: float,
-             vhold: np.ndarray | None, k1: np.ndarray | None = None
-             ) -> tuple[np.ndarray, float]:
+             vhold: np.ndarray | None, k1: np.ndarray | None = None,
+             theta: np.ndarray | None = None) -> tuple[np.ndarray, float]:
         """One RK4 step of h s: the new state and the swing sole height (m) at its end;
         ``vhold``: the delayed human's feedback held over the period (None: continuous);
         ``k1``: the vector field at x under the same inputs, if known (``rk4k``: the same
-        numbers, one evaluation less; not with ``vhold``)."""
+        numbers, one evaluation less; not with ``vhold``); ``theta``: the gait the human
+        tracks (None: the simulator's, ``thetas[d]``)."""
+        th = self.thetas[d] if theta is None else theta
         if k1 is not None:
             f = self.fs[f"rk4k_{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
-                xn, z = f(x, self.thetas[d], self.gains, h, k1)
+                xn, z = f(x, th, self.gains, h, k1)
             else:
-                xn, z = f(x, self.thetas[d], self.gains, u_p, h, k1)
+                xn, z = f(x, th, self.gains, u_p, h, k1)
             return xn.copy(), float(z[0])
         if vhold is not None:
             assert self.dfs is not None  # a held feedback is the delayed human's
             f = self.dfs[f"rk4_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
-                xn, z = f(x, self.thetas[d], vhold, h)
+                xn, z = f(x, th, vhold, h)
             else:
-                xn, z = f(x, self.thetas[d], vhold, u_p, h)
+                xn, z = f(x, th, vhold, u_p, h)
             return xn.copy(), float(z[0])
         f = self.fs[f"rk4_{mode}_{d}"]
         if mode == ClosedLoopMode.FULL:
-            xn, z = f(x, self.thetas[d], self.gains, h)
+            xn, z = f(x, th, self.gains, h)
         else:
-            xn, z = f(x, self.thetas[d], self.gains, u_p, h)
+            xn, z = f(x, th, self.gains, u_p, h)
         return xn.copy(), float(z[0])
 
-    def _feedback(self, d: Domain, x: np.ndarray) -> np.ndarray:
-        """The feedback term v (6) of the outputs at state x: (eps y1, kp y2 + kd dy2)."""
-        y1, y2, dy2, _ = self.fs[f"outputs_{d}"](x[:self.nq], x[self.nq:], self.thetas[d])
+    def _feedback(self, d: Domain, x: np.ndarray, theta: np.ndarray | None = None
+                  ) -> np.ndarray:
+        """The feedback term v (6) of the outputs at state x: (eps y1, kp y2 + kd dy2)
+        (``theta`` as :meth:`_rk4`'s)."""
+        th = self.thetas[d] if theta is None else theta
+        y1, y2, dy2, _ = self.fs[f"outputs_{d}"](x[:self.nq], x[self.nq:], th)
         g = self.gains
         return np.r_[g[0] * y1, g[1] * y2 + g[2] * dy2]
 
@@ -346,22 +359,24 @@ class HybridSimulator:
         return pipeline[0][rows].copy()
 
     def _eval(self, mode: str, d: Domain | str, x: np.ndarray, u_p: np.ndarray,
-              vhold: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              vhold: np.ndarray | None, theta: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The vector field xdot (24), the torques u (6, N m) and the constraint wrenches
-        lam (6) at state x."""
+        lam (6) at state x (``theta`` as :meth:`_rk4`'s)."""
+        th = self.thetas[Domain(d)] if theta is None else theta
         if vhold is not None:
             assert self.dfs is not None  # a held feedback is the delayed human's
             f = self.dfs[f"xdot_d{mode}_{d}"]
             if mode == ClosedLoopMode.FULL:
-                xdot, u, lam = f(x, self.thetas[d], vhold)
+                xdot, u, lam = f(x, th, vhold)
             else:
-                xdot, u, lam = f(x, self.thetas[d], vhold, u_p)
+                xdot, u, lam = f(x, th, vhold, u_p)
             return xdot.copy(), u.copy(), lam.copy()
         f = self.fs[f"xdot_{mode}_{d}"]
         if mode == ClosedLoopMode.FULL:
-            xdot, u, lam = f(x, self.thetas[d], self.gains)
+            xdot, u, lam = f(x, th, self.gains)
         else:
-            xdot, u, lam = f(x, self.thetas[d], self.gains, u_p)
+            xdot, u, lam = f(x, th, self.gains, u_p)
         return xdot.copy(), u.copy(), lam.copy()
 
     def phase(self, d: Domain | str, q: np.ndarray) -> float:
@@ -455,27 +470,32 @@ class HybridSimulator:
 
     # -- runs ---------------------------------------------------------------------------------
     def start(self, q0: np.ndarray, qd0: np.ndarray, domain: Domain | str,
-              mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
-              ) -> SimulationRun:
+              mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN,
+              gaits: GaitSchedule | None = None) -> SimulationRun:
         """A run from (q0, qd0) in ``domain``, to be stepped one period at a time (module
         docstring).  ``mode`` "human": the prosthesis motor torque comes from
-        :meth:`SimulationRun.apply`; "full": feedback linearization of all six torques."""
-        return SimulationRun(self, q0, qd0, domain, mode)
+        :meth:`SimulationRun.apply`; "full": feedback linearization of all six torques.
+        ``gaits``: the gait the human tracks in each domain it enters (None: ``thetas``
+        throughout)."""
+        return SimulationRun(self, q0, qd0, domain, mode, gaits)
 
     def run(self, q0: np.ndarray, qd0: np.ndarray, domain: Domain | str, *,
             steps: int | None = None,
             duration: float | None = None, policy: Policy | None = None,
-            progress: Callable[[float, int], None] | None = None) -> SimResult:
+            progress: Callable[[float, int], None] | None = None,
+            gaits: GaitSchedule | None = None) -> SimResult:
         """Simulate from (q0, qd0) in ``domain`` until ``steps`` impacts or ``duration`` s
         (whichever comes first; at least one must be given), or a fall; ``policy`` gives the
-        prosthesis motor torque of each period (None: mode full)."""
+        prosthesis motor torque of each period (None: mode full); ``gaits`` as
+        :meth:`start`'s."""
         if steps is None and duration is None:
             raise ValueError("give steps or duration")
         max_steps = np.inf if steps is None else steps
         n_periods = (int(np.floor(duration / self.opt.dt + 1e-9))
                      if duration is not None and np.isfinite(duration) else None)
         r = self.start(q0, qd0, domain,
-                       mode=ClosedLoopMode.FULL if policy is None else ClosedLoopMode.HUMAN)
+                       mode=ClosedLoopMode.FULL if policy is None else ClosedLoopMode.HUMAN,
+                       gaits=gaits)
         while True:
             st = r.observe()
             fall = r.apply(None if policy is None else policy(st.t, st))
@@ -496,7 +516,8 @@ class SimulationRun:
 
     def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
                  domain: Domain | str,
-                 mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN) -> None:
+                 mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN,
+                 gaits: GaitSchedule | None = None) -> None:
         mode = ClosedLoopMode(mode)
         if domain not in sim.model.domains:
             raise ValueError(f"unknown domain {domain!r}")
@@ -524,14 +545,33 @@ class SimulationRun:
         self._k1: np.ndarray | None = None
         self._applied = False
         self._lam = np.zeros(0)  # the constraint wrenches under the torque applied
-        #: tau of a state x (q first) per domain, for the gait tracked at the start
+        #: the gait the human tracks per domain (its last entry's, from ``gaits``)
+        self.thetas = dict(sim.thetas)
+        self._gaits = gaits
+        #: tau of a state x (q first) per domain, for the gait tracked
         self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
                        for dd in sim.model.graph.domains}
+        self._track(self.domain, 0.0)
 
     @property
     def steps(self) -> int:
         """Steps so far: the impacts that start one (:attr:`SimResult.steps`)."""
         return sum(i.starts_step for i in self.impacts)
+
+    def _track(self, d: Domain, t: float) -> None:
+        """Entering ``d`` at t s: the gait the human tracks there from the schedule, if
+        any (ValueError when it is not one of ``d``'s packed gaits)."""
+        if self._gaits is None:
+            return
+        th = np.asarray(self._gaits(d, t), dtype=float)
+        if th.shape != self.sim.thetas[d].shape:
+            raise ValueError(f"the gait schedule gave {d} at t = {t:.3f} s a gait of shape "
+                             f"{th.shape}, not {self.sim.thetas[d].shape}")
+        if not np.all(np.isfinite(th)):
+            raise ValueError(f"the gait schedule gave {d} at t = {t:.3f} s a gait with "
+                             "non-finite entries")
+        self.thetas[d] = th
+        self._phase[d] = self.sim.cl.vcs[d].phase_function(th)
 
     def observe(self) -> SimState:
         """The state at the start of the current period, with the constraint wrenches under
@@ -540,7 +580,7 @@ class SimulationRun:
         x, nq = self._x, self.sim.nq
         tau, _, lam = self._evaluate()
         return SimState(self.t, self.domain, x[:nq].copy(), x[nq:].copy(), tau, lam.copy(),
-                        self.steps)
+                        self.steps, self.thetas[self.domain])
 
     def _evaluate(self) -> tuple[float, np.ndarray, np.ndarray]:
         """(tau, u, lam) at the start of the period under the torque held so far, evaluated
@@ -549,12 +589,12 @@ class SimulationRun:
             sim, x, d = self.sim, self._x, self.domain
             tau = self._phase[d](x)
             if self._n_delay is not None:  # the delayed human (module docstring)
-                v_now = sim._feedback(d, x)
+                v_now = sim._feedback(d, x, self.thetas[d])
                 self._pipeline.append(v_now)
                 while len(self._pipeline) > self._n_delay + 1:
                     self._pipeline.popleft()
                 self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
-            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold, self.thetas[d])
             self._obs = (tau, u, lam)
             self._k1 = xdot if self._n_delay is None else None
         return self._obs
@@ -575,7 +615,7 @@ class SimulationRun:
             lim = sim._u_limit  # bounded at the plant (the FMU does the same)
             self._u_p = np.minimum(np.maximum(np.asarray(u_p, dtype=float).reshape(2), -lim),
                                    lim)
-            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold)
+            xdot, u, lam = sim._eval(self.mode, d, x, self._u_p, self._vhold, self.thetas[d])
             self._k1 = xdot if self._n_delay is None else None
         elif u_p is not None:
             raise ValueError("mode full: the torques come from feedback linearization; "
@@ -625,7 +665,8 @@ class SimulationRun:
         for j in range(opt.substeps):
             rest = h
             while rest > 0:
-                step = partial(sim._rk4, mode, d, x, u_p, vhold=self._vhold, k1=k1)
+                step = partial(sim._rk4, mode, d, x, u_p, vhold=self._vhold, k1=k1,
+                               theta=self.thetas[d])
                 xn, z = step(rest)
                 armed = (sim.model.domains[d].swing_frame is not None
                          and self._phase[d](x) >= opt.guard_tau_min)
@@ -653,6 +694,7 @@ class SimulationRun:
                 if sim.model.domains[d].swing_frame is None and self._phase[d](x) >= 1.0:
                     # a lift-off (a heel leaves the ground): no impact, at the step's end
                     d = sim.model.graph.next(d)
+                    self._track(d, t + (j + 1) * h)
                     self._z_prev = sim.guard_height(d, x)
                     self._tau_peak = -np.inf
         self._x, self.domain = x, d
@@ -665,12 +707,13 @@ class SimulationRun:
         touchdown on heel or toe flagged, the delayed human's pipeline restarted, the guard,
         the phase's running peak and the stall clock reset."""
         sim = self.sim
+        self._track(d, impact.t)
         self.impacts.append(impact)
         if abs(impact.foot_pitch) > sim.opt.max_touchdown_pitch:
             self._heel = impact.foot_pitch
         if self._n_delay is not None:  # the pipeline restarts at touchdown
             self._pipeline.clear()
-            v_now = sim._feedback(d, x)
+            v_now = sim._feedback(d, x, self.thetas[d])
             self._pipeline.append(v_now)
             self._vhold = sim._hold(self.mode, d, self._pipeline, v_now)
         self._z_prev = sim.guard_height(d, x)

@@ -210,6 +210,26 @@ class StanceQp:
         return min(max(bisect.bisect_right(self._phases, s) - 1, 0), len(self._phases) - 1)
 
 
+def blend_stance(a: StanceQp, b: StanceQp, w: float) -> StanceQp:
+    """The stance QP's data (1 - w) a + w b (0 <= w <= 1; two speeds' of a gait library), on
+    the phase grid of the nearer (a for w <= 0.5): the other's sample at or before each
+    phase blended in where the two are in the same domain, the nearer's alone where not
+    (the domains' boundaries move with the speed)."""
+    if w > 0.5:
+        a, b, w = b, a, 1.0 - w
+    j = np.array([b.index(s) for s in a.phase])
+    same = np.array([da is b.domain[k] for da, k in zip(a.domain, j, strict=True)])
+
+    def mix(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        out = np.array(x, dtype=float, copy=True)
+        out[same] = (1.0 - w) * x[same] + w * y[j][same]
+        return out
+
+    return StanceQp(a.phase.copy(), a.domain, *(mix(getattr(a, k), getattr(b, k)) for k in
+                                                ("g", "u_ref", "qdd_ref", "P", "c", "G", "h",
+                                                 "d_center", "d_radius")))
+
+
 @dataclass(frozen=True)
 class WalkedStance:
     """One stance as the model walks it, sampled each period: ``phase`` (n,) its stance
@@ -331,6 +351,20 @@ class ContactClfQp:
         #: the last stance QP as piqp got it (copies): (P, c, G, h, x_l, x_u),
         #: min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
         self.qp: tuple[np.ndarray, ...] | None = None
+
+    def blended(self, other: ContactClfQp, w: float) -> ContactClfQp:
+        """This controller with its references and stance QP blended with ``other``'s,
+        (1 - w) these + w other's (:meth:`ContactPhasePD.blended`, :func:`blend_stance`)."""
+        return ContactClfQp(self.law.blended(other.law, w),
+                            blend_stance(self.stance, other.stance, w), self._limits,
+                            self.config)
+
+    def take_over(self, other: ContactClfQp) -> None:
+        """Continue from ``other``'s state (another gait's controller of the same leg and
+        motors: a switch of speed, :mod:`prosthesis_controller.speed_following`): its phase
+        law's, the torque its rate limit starts from and its counts."""
+        self.law.take_over(other.law)
+        self._u, self.fallbacks = other._u, other.fallbacks
 
     def _new_solvers(self) -> None:
         """One piqp solver per domain, set up with its rows (a solver keeps its scaling and

@@ -97,6 +97,26 @@ class ContactGaitTables:
     swing_pitch: np.ndarray
 
 
+def blend_tables(a: ContactGaitTables, b: ContactGaitTables, w: float) -> ContactGaitTables:
+    """The tables (1 - w) a + w b (0 <= w <= 1; two speeds' of a gait library: the
+    references between them), on a's phase grids: b's values interpolated to a's phases,
+    every number blended linearly."""
+
+    def table(ta: PhaseTable, tb: PhaseTable) -> PhaseTable:
+        vb = np.column_stack([np.interp(ta.phase, tb.phase, col) for col in tb.values.T])
+        return PhaseTable(ta.phase.copy(), (1.0 - w) * ta.values + w * vb)
+
+    def mix(x: float, y: float) -> float:
+        return (1.0 - w) * x + w * y
+
+    pitch = np.interp(a.swing.phase, b.swing.phase, b.swing_pitch)
+    return ContactGaitTables(
+        table(a.stance, b.stance), table(a.swing, b.swing),
+        (mix(a.progress[0], b.progress[0]), mix(a.progress[1], b.progress[1])),
+        mix(a.swing_time, b.swing_time), (mix(a.flat[0], b.flat[0]), mix(a.flat[1], b.flat[1])),
+        (1.0 - w) * a.swing_pitch + w * pitch)
+
+
 #: a foot with its heel within this angle of its toe (rad) is flat
 FLAT_PITCH = 1e-3
 #: the part of the flat stance left out at each end (of its phase span) for the IMU's bias
@@ -226,6 +246,21 @@ class ContactPhasePD:
         #: time of its last update (s)
         self.imu_bias = 0.0
         self._t_bias: float | None = None
+
+    def blended(self, other: ContactPhasePD, w: float) -> ContactPhasePD:
+        """This law with its tables blended with ``other``'s, (1 - w) these + w other's
+        (:func:`blend_tables`; the same leg, motors, gains and swing phase)."""
+        return ContactPhasePD(blend_tables(self.tables, other.tables, w), self.leg, self._gear,
+                              self._limits, self.stance_gains, self.swing_gains,
+                              self.swing_phase)
+
+    def take_over(self, other: ContactPhasePD) -> None:
+        """Continue from ``other``'s state (the same leg, another gait's tables: a switch of
+        speed, :mod:`prosthesis_controller.speed_following`): its phase's, its IMU bias
+        estimate's and its counts."""
+        self.fallbacks, self._in_stance, self._t_off = (other.fallbacks, other._in_stance,
+                                                        other._t_off)
+        self.phase, self.imu_bias, self._t_bias = other.phase, other.imu_bias, other._t_bias
 
     def stance_phase(self, m: ProsthesisMeasurement) -> float:
         """The stance phase of a measurement: the hip's progress over the heel's ground point

@@ -1,11 +1,11 @@
 """The gait library over walking speed (``characterization/gait/library.py``, ``hpcosim gait
 library``): the targets at another speed, the artifact read back, the curves between speeds,
-and (slow) the packaged person's gait fitted again at 0.9 m/s from its own take."""
+and (slow) the packaged person's gait fitted again at 0.9 and 1.25 m/s from its own take,
+walked along a changing speed."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -35,6 +35,7 @@ from characterization.gait.multicontact_artifact import (
 )
 from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
 from hp_model.artifacts import ArtifactError
+from hp_model.speed_profile import SpeedProfile
 from tests import person_reference
 from tests.cli_support import hpcosim
 
@@ -130,26 +131,37 @@ def test_bad_speeds_and_options_are_one_line_errors(cycle, tmp_path):
         fit_library(cycle.model, t, cycle, [5.0])
 
 
-@pytest.mark.slow  # the take made and processed, one fit (about 25 s) and two walks
-def test_the_person_fitted_again_at_a_slower_speed_walks(tmp_path):
-    """`gait library` at 0.9 m/s from the packaged person (1.07 m/s) and its take: exit 0,
-    two gaits; the new one within 2 % of 0.9 m/s, its stride time the person's times
-    (1.07 / 0.9)^0.5 within 5 % (the durations' targets; the fit trades them against the
-    speed), and both walk 10 steps with the held oracle."""
+@pytest.mark.slow  # the take made and processed, two fits (about 25 s each), the walks
+def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(tmp_path):
+    """`gait library` at 0.9 and 1.25 m/s from the packaged person (1.07 m/s) and its take:
+    exit 0, three gaits, each within 2 % of its speed, its stride time the person's times
+    (1.07 / v)^0.5 within 5 % (the durations' targets; the fit trades them against the
+    speed), each walking 10 steps with the held oracle.  On it, the person walks 30 steps
+    while the command goes 0.9 -> 1.25 -> 0.9 m/s, each stride within 0.05 m/s RMS of the
+    command (a stride's lag: 0.04 m/s per stride on the ramps), and `clfqp` following its
+    speed walks it at 1.0 m/s, between the library's gaits, reading that speed from its
+    strides."""
+    from orchestrator.experiments.speed_walk import speed_walk
+
     steps = tmp_path / "steps.npz"
     assert person_reference.make_steps(steps, tmp_path) == 0
     out = tmp_path / "lib.json"
     r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
-                "--out", str(out), "--speeds", "0.9")
+                "--out", str(out), "--speeds", "0.9,1.25")
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
-    slow, base = doc["gaits"]
-    assert base["source"] and not slow["source"]
-    assert slow["speed"] == pytest.approx(0.9, rel=0.02)
-    ratio = (base["speed"] / slow["speed"]) ** 0.5
-    assert slow["stride"]["time"] == pytest.approx(base["stride"]["time"] * ratio, rel=0.05)
-    assert slow["closed_loop"]["walks"] and base["closed_loop"]["walks"]
+    slow, base, fast = doc["gaits"]
+    assert base["source"] and not slow["source"] and not fast["source"]
+    for g, v in ((slow, 0.9), (fast, 1.25)):
+        assert g["speed"] == pytest.approx(v, rel=0.02)
+        ratio = (base["speed"] / g["speed"]) ** 0.5
+        assert g["stride"]["time"] == pytest.approx(base["stride"]["time"] * ratio, rel=0.05)
+    assert all(g["closed_loop"]["walks"] for g in doc["gaits"])
     lib = load_gait_library(out)
-    assert lib.gait_at(0.9).params[GRAPH.domains[0]].v_hip < \
-        lib.gait_at(base["speed"]).params[GRAPH.domains[0]].v_hip
-    assert replace(LibraryOptions(), steps=3).steps == 3
+    w = speed_walk(lib, SpeedProfile.parse("0:0.9,8:1.25,12:1.25,20:0.9"), 30)
+    assert w.walks, w.line()
+    assert w.lag_rms() < 0.05 and w.speed.min() < 0.95 and w.speed.max() > 1.2
+    c = speed_walk(lib, SpeedProfile.constant(1.0), 10, "clfqp")
+    assert c.walks, c.line()
+    assert c.speed[-1] == pytest.approx(1.0, abs=0.03)
+    assert c.estimate[-1] == pytest.approx(c.speed[-1], abs=0.03)

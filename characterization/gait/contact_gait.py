@@ -210,11 +210,13 @@ def held_oracle(closed_loop: ClosedLoop, thetas: Mapping[Domain, np.ndarray],
     """The prosthesis policy that applies, each period, the motor torque (2, N m) the full
     feedback linearization of the gait gives at the period's start (the simulator holds it
     over the period and clamps it to the motors' limits): full-state feedback, what a
-    prosthesis controller's torque is measured against."""
+    prosthesis controller's torque is measured against.  It follows the gait the human
+    tracks (the state's ``theta``, when the run has a gait schedule; else ``thetas``)."""
     fl = {d: closed_loop.vcs[d].numeric()[f"fl_{d}"] for d in closed_loop.model.graph.domains}
 
     def policy(_t: float, st: SimState) -> np.ndarray:
-        u = fl[st.domain](st.q, st.qd, thetas[st.domain], gains)[0]
+        theta = thetas[st.domain] if st.theta is None else st.theta  # the human's, now
+        u = fl[st.domain](st.q, st.qd, theta, gains)[0]
         return np.asarray(u).ravel()[4:6]
 
     return policy

@@ -49,6 +49,7 @@ from characterization.gait.contact_gait import (
     ContactGait,
     ContactWalk,
     contact_gait_of,
+    start_state,
     walk_contact_gait,
 )
 from characterization.gait.multicontact import (
@@ -64,6 +65,8 @@ from hp_model.artifacts import ArtifactError, load_json, save_json
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
+from hp_model.simulator import GaitSchedule
+from hp_model.speed_profile import SpeedProfile
 
 KIND = "hpcosim-gait-library"
 SCHEMA_VERSION = 1
@@ -249,6 +252,30 @@ class GaitLibrary:
                                    (1 - w) * pa.p_max + w * pb.p_max)
         return ContactGait(params, {d: np.maximum(a.rms[d], b.rms[d]) for d in GRAPH.domains})
 
+    def stride_at(self, speed: float) -> float:
+        """The stride period (s) of the curves at ``speed`` (:meth:`gait_at`): each domain's
+        hip progress over its mean rate, summed (the person's stride when it walks them;
+        what a controller reads the person's speed from)."""
+        g = self.gait_at(speed)
+        return float(sum((p.p_max - p.p_min) / p.v_hip for p in g.params.values()))
+
+
+def start_at(library: GaitLibrary, speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """The walker's state (q, qd) at the start of the cycle at ``speed`` (m/s, clamped to
+    the library's range): the two nearest speeds' fitted starts blended as
+    :meth:`GaitLibrary.gait_at` blends their curves, placed on the first domain's stance
+    foot (:meth:`hp_model.hybrid.HybridModel.stance_state`)."""
+    v = library.speeds
+    s = float(np.clip(speed, v[0], v[-1]))
+    j = int(np.clip(np.searchsorted(v, s) - 1, 0, max(len(v) - 2, 0)))
+    starts = [start_state(g.trajectory) for g in library.gaits]
+    if len(v) == 1:
+        return starts[0]
+    w = (s - v[j]) / (v[j + 1] - v[j])
+    q = (1 - w) * starts[j][0] + w * starts[j + 1][0]
+    qd = (1 - w) * starts[j][1] + w * starts[j + 1][1]
+    return library.model.stance_state(q, qd, GRAPH.domains[0].value)
+
 
 def load_gait_library(path: str | os.PathLike[str]) -> GaitLibrary:
     """The library of a file written by ``hpcosim gait library`` (ArtifactError naming the
@@ -292,3 +319,15 @@ def load_gait_library(path: str | os.PathLike[str]) -> GaitLibrary:
     except MultiContactError as e:
         raise ArtifactError(f"{path}: field 'gaits': {e}") from None
     return GaitLibrary(model, tuple(gaits), curves)
+
+
+def speed_schedule(library: GaitLibrary, profile: SpeedProfile) -> GaitSchedule:
+    """The simulated person walking ``library`` at the speed ``profile`` commands: entering
+    a domain at t s, it tracks that domain's curves at the commanded speed
+    (:meth:`GaitLibrary.gait_at`; the hip's rate output then brings its speed there within
+    the step)."""
+
+    def gait(d: Domain, t: float) -> np.ndarray:
+        return library.gait_at(profile.at(t)).thetas()[d]
+
+    return gait

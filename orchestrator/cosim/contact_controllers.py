@@ -34,6 +34,7 @@ from characterization.gait.contact_gait import (
     held_oracle,
     start_state,
 )
+from characterization.gait.library import GaitLibrary
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
 from characterization.tube.contact_model_error import Linearization, fit_contact_model_error
@@ -69,6 +70,7 @@ from prosthesis_controller.contact_phase_pd import (
     tables_from_walk,
 )
 from prosthesis_controller.gait_tables import save_contact_controller
+from prosthesis_controller.speed_following import SPEED_RESOLUTION, SpeedFollowing, filled
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
@@ -302,3 +304,32 @@ def tube_with_model_error(res: ContactTubeResult, run: ContactRun) -> ContactTub
         return replace(res, tube=replace(tube, source={**tube.source,
                                                        "model_error": f"not fitted: {e}"}))
     return replace(res, tube=replace(tube, model_error=bound))
+
+
+def speed_following(library: GaitLibrary, controller: str = "clfqp",
+                    speed: float | None = None, swing_phase: str = "time",
+                    closed_loop: ClosedLoop | None = None, resolution: float = SPEED_RESOLUTION
+                    ) -> SpeedFollowing:
+    """The prosthesis controller that follows the person's speed over ``library``
+    (:class:`~prosthesis_controller.speed_following.SpeedFollowing`): ``controller``
+    ("clfqp" or "contact-pd") made from each speed's gait and its held walk, starting on
+    ``speed`` (m/s; None: the fitted gait's), switching between its speeds and others every
+    ``resolution`` m/s between them (:func:`~prosthesis_controller.speed_following.filled`).
+    HeldOracleFellError naming the speed whose held walk falls (no tables from it)."""
+    if controller not in ("clfqp", "contact-pd"):
+        raise ValueError(f"controller {controller!r}: choose clfqp or contact-pd")
+    model = library.model
+    cl = closed_loop or ClosedLoop(model, library.curves[0].params[GRAPH.domains[0]].degree)
+    ctls: list[Any] = []
+    for g, curves in zip(library.gaits, library.curves, strict=True):
+        sim = loop_simulator(model, curves, GAINS, cl)
+        try:
+            setup = LoopSetup(sim, held_walk(sim, g.trajectory))
+        except HeldOracleFellError as e:
+            raise HeldOracleFellError(f"the library's gait at {g.speed:.2f} m/s: {e}") from None
+        ctls.append(contact_clfqp(model, curves, g.trajectory, setup=setup,
+                                  swing_phase=swing_phase) if controller == "clfqp" else
+                    make_contact_pd(model, curves, g.trajectory, setup, swing_phase))
+    start = next(g.speed for g in library.gaits if g.source) if speed is None else speed
+    grid, speeds = filled(ctls, library.speeds.tolist(), resolution)
+    return SpeedFollowing(grid, speeds.tolist(), [library.stride_at(v) for v in speeds], start)

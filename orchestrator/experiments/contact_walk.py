@@ -24,7 +24,7 @@ from characterization.gait.multicontact import GRAPH
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.leg_kinematics import LegKinematics
-from hp_model.simulator import HybridSimulator, SimResult
+from hp_model.simulator import GaitSchedule, HybridSimulator, SimResult
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
     contact_clfqp,
@@ -58,13 +58,16 @@ CLFQP = ("the human on feedback linearization of the fitted gait, the prosthesis
 def controller_run(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
                    controller: Controller, steps: int,
                    encoder: Encoder = IDEAL_ENCODER,
-                   on_output: Callable[[ControlOutput], None] | None = None) -> SimResult:
+                   on_output: Callable[[ControlOutput], None] | None = None,
+                   gaits: GaitSchedule | None = None,
+                   start: tuple[np.ndarray, np.ndarray] | None = None) -> SimResult:
     """The plant ``sim`` from the fitted cycle's start with the prosthesis on
     ``controller``, its sensors read through ``encoder`` (its noise from its seed), until
     ``steps`` steps, a fall or 2 s per step: the simulator's log (``on_output`` sees each
-    tick's output)."""
-    q0, qd0 = start_state(trajectory)
-    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
+    tick's output; ``gaits``: the gait the person tracks in each domain it enters, e.g. a
+    speed profile on a gait library; ``start``: (q0, qd0) instead of the cycle's start)."""
+    q0, qd0 = start_state(trajectory) if start is None else start
+    plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0], gaits=gaits)
     rng = np.random.default_rng(encoder.seed)
     while True:
         obs = plant.observe()

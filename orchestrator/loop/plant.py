@@ -31,7 +31,7 @@ from hp_model.closed_loop import ClosedLoopMode
 from hp_model.domains import PROSTHESIS, Domain
 from hp_model.falls import Fall, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.simulator import HybridSimulator, SimState
+from hp_model.simulator import GaitSchedule, HybridSimulator, SimState
 from human_fmu.instance import HumanFmu
 
 #: a short vector of floats as the plants and links give it: a tuple, a list or a 1-D array
@@ -139,15 +139,17 @@ def observe_state(k: int, st: SimState, knee_ankle: tuple[int, int],
 class SimulatorPlant:
     """The in-process hybrid simulator (:class:`HybridSimulator`) as a plant, started from
     (q0, qd0) in ``domain``; ``mode`` "human" (the prosthesis torque comes from the loop)
-    or "full" (the plant's own feedback linearization of all six torques: the oracle)."""
+    or "full" (the plant's own feedback linearization of all six torques: the oracle);
+    ``gaits``: the gait the simulated person tracks in each domain it enters (a speed
+    profile on a gait library; None: the simulator's gait throughout)."""
 
     def __init__(self, sim: HybridSimulator, q0: np.ndarray, qd0: np.ndarray,
-                 domain: str = Domain.PS, *, mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN
-                 ) -> None:
+                 domain: str = Domain.PS, *, mode: ClosedLoopMode | str = ClosedLoopMode.HUMAN,
+                 gaits: GaitSchedule | None = None) -> None:
         self.sim = sim
         self.model: HumanProsthesisModel = sim.model
         self.dt = sim.opt.dt
-        self.run = sim.start(q0, qd0, domain, mode=mode)
+        self.run = sim.start(q0, qd0, domain, mode=mode, gaits=gaits)
         self._pk, self._pa = (self.model.coord_names.index(c) for c in PROSTHESIS)
         self._pitch = self.model.pitch_row("socket")
         self._rows = wrench_rows(self.model)
