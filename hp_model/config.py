@@ -242,6 +242,20 @@ class DeviceConfig(StrictConfig):
     prosthesis: ProsthesisConfig
     notes: str = ""
 
+    def with_armature_scaled(self, factor: float) -> DeviceConfig:
+        """This device with its drives' rotor inertia (so their armature) times ``factor``
+        (> 0; a device without rotor inertia stays without)."""
+        if not (factor > 0 and factor < float("inf")):
+            raise ValueError(f"an armature factor must be finite and > 0, got {factor}")
+        p = self.prosthesis
+        drives = {}
+        for j in ("knee", "ankle"):
+            a = getattr(p, j)
+            r = a.rotor_inertia
+            drives[j] = a if r is None else a.model_copy(update={
+                "rotor_inertia": r.model_copy(update={"value": r.value * factor})})
+        return self.model_copy(update={"prosthesis": p.model_copy(update=drives)})
+
     def without_armature(self) -> DeviceConfig:
         """This device with its drives' rotor inertia left out (rigid links and ideal
         drives: the paper's model), its dump and hash those of a file without it."""

@@ -138,3 +138,20 @@ def test_device_file_without_rotor_inertia_keeps_its_hash(tmp_path):
     d = load_device(p)
     assert d.prosthesis.knee.armature == 0.0 and d.prosthesis.ankle.armature == 0.0
     assert "rotor_inertia" not in d.model_dump(mode="json")["prosthesis"]["knee"]
+
+
+def test_a_device_with_its_armature_scaled():
+    """The sweep's `plant.armature`: each drive's rotor inertia (so its armature) times the
+    factor, nothing else; a bad factor is refused."""
+    from hp_model.config import default_device_path, load_device
+
+    dev = load_device(default_device_path())
+    heavy = dev.with_armature_scaled(1.5)
+    for j in ("knee", "ankle"):
+        assert getattr(heavy.prosthesis, j).armature == pytest.approx(
+            1.5 * getattr(dev.prosthesis, j).armature)
+    assert heavy.prosthesis.shin == dev.prosthesis.shin and heavy.iwalk == dev.iwalk
+    assert dev.without_armature().with_armature_scaled(2.0) == dev.without_armature()
+    for bad in (0.0, -1.0, float("inf")):
+        with pytest.raises(ValueError, match="armature factor"):
+            dev.with_armature_scaled(bad)

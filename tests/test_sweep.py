@@ -117,6 +117,9 @@ def spec_path(files):
     ('families."a/b" = {}', "families"),
     ('backend = "gpu"', "backend"),
     ('tube = "missing.json"', "tube"),
+    ("families.x.human.stride_cv = 0.03", "families.x.human.stride_cv"),  # a person's only
+    ("families.x.human.stride_cv = -0.01", "families.x.human.stride_cv"),
+    ("families.x.plant.armature = 1.5", "families.x.plant.armature"),  # a person's only
 ])
 def test_bad_spec_is_one_line_naming_the_field(tmp_path, files, body, field):
     _, tube = files

@@ -37,6 +37,9 @@ steps = 3
 [families.sensors]
 sensor.imu_bias = {{ dist = "normal", mean = 0.0, std = 0.003 }}
 sensor.angle_noise = 0.001
+
+[families.stride]
+human.stride_cv = 0.03
 """
 
 
@@ -70,7 +73,7 @@ def swept(files):
 
 def test_a_multicontact_sweep_runs_its_controllers_on_the_same_draws(swept):
     out, rows = swept
-    assert len(rows) == 3 * 2 * 2  # oracle, clfqp, phase-pd x 2 families x 2 draws
+    assert len(rows) == 3 * 3 * 2  # oracle, clfqp, phase-pd x 3 families x 2 draws
     assert all(r["error"] is None for r in rows.values()), [
         r["error"] for r in rows.values() if r["error"]]
     for c in ("oracle", "clfqp", "phase-pd"):
@@ -78,6 +81,12 @@ def test_a_multicontact_sweep_runs_its_controllers_on_the_same_draws(swept):
             r = rows[f"{c}/nominal/{i}"]
             assert r["success"] and r["steps_completed"] == 3, r["reason"]
             assert r["torque_finite"] and abs(r["max_torque_knee"]) <= 2.4 + 1e-9
+    # the person's pace from stride to stride: the same draw for every controller, its own
+    # seed per draw
+    stride = [rows[f"{c}/stride/{i}"] for c in ("oracle", "clfqp") for i in range(2)]
+    assert all(r["draw_stride_cv"] == 0.03 for r in stride)
+    assert stride[0]["draw_stride_seed"] == stride[2]["draw_stride_seed"] != \
+        stride[1]["draw_stride_seed"]
     nominal = [rows[f"clfqp/nominal/{i}"] for i in range(2)]
     assert nominal[0]["knee_rms_ps_rad"] == nominal[1]["knee_rms_ps_rad"]  # one run, twice
     # the tube of the take's steps: the share of the flat single support inside it
@@ -90,7 +99,8 @@ def test_a_multicontact_sweep_runs_its_controllers_on_the_same_draws(swept):
     assert all("--controller clfqp" in line and "--tube" not in line for line in runs)
 
 
-@pytest.mark.parametrize("key", ["clfqp/sensors/1", "phase-pd/nominal/0", "oracle/sensors/0"])
+@pytest.mark.parametrize("key", ["clfqp/sensors/1", "phase-pd/nominal/0", "oracle/sensors/0",
+                                 "clfqp/stride/1"])
 def test_a_replay_equals_the_stored_run(swept, key, capsys):
     """A run is a pure function of its key: replayed alone in this process (fresh
     controllers) it gives the row the worker wrote after other runs (controllers reset)."""
@@ -103,6 +113,10 @@ def test_a_replay_equals_the_stored_run(swept, key, capsys):
     ('\n[families.t]\nsocket.tube_scale = 2.0\n', "families.t.socket.tube_scale"),
     ('\n[families.p]\nplant.segment_mass = 1.1\n', "families.p.plant.segment_mass"),
     ('\n[families.i]\ninitial.knee = 0.01\n', "families.i.initial.knee"),
+    ('\n[families.a]\nplant.armature = {dist = "uniform", low = 0.5, high = 1.5}\n',
+     "families.a.plant.armature"),
+    # the committed cycle's device has no rotor inertia: no armature to scale
+    ('\n[families.a]\nplant.armature = 1.5\n', "families.a.plant.armature"),
 ])
 def test_quantities_a_multicontact_sweep_does_not_draw_are_refused(files, tmp_path, extra,
                                                                    field):
@@ -141,3 +155,40 @@ def test_a_draw_moves_only_the_human_joints_curves(files):
             want = dict(zip(HUMAN_JOINTS, off, strict=True)).get(coord, 0.0)
             np.testing.assert_allclose(got[row], want, atol=1e-12)
         np.testing.assert_array_equal(got[len(d.y2_coords):], 0.0)  # hip rate, squeeze
+
+
+ARMATURE_SPEC = """
+name = "armature"
+gait = "{gait}"
+controllers = ["clfqp", "phase-pd"]
+draws = 1
+seed = 5
+steps = 3
+
+[families.nominal]
+
+[families.light]
+plant.armature = 0.5
+"""
+
+
+def test_the_walkers_armature_is_the_draws(tmp_path):
+    """The packaged person (its device with the drives' rotor inertia): with half the
+    armature the walker is another (its own model, compiled once), the controllers keep the
+    device's.  The oracle (the plant's own feedback linearization) and contact-pd walk it;
+    `clfqp`'s run is not the nominal's (its stance QP's model is the device's: on 200 such
+    draws it falls in `ds_p`, docs/sweeps.md)."""
+    from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(ARMATURE_SPEC.format(gait=REFERENCE_PERSON_GAIT))
+    out = tmp_path / "out"
+    assert hpcosim(["sweep", str(spec), "--out", str(out), "--workers", "1"]) in (0, 1)
+    rows = {r["key"]: r for r in read_results(out).to_pylist()}
+    assert all(r["error"] is None for r in rows.values())
+    assert rows["oracle/light/0"]["draw_armature"] == 0.5
+    assert rows["oracle/light/0"]["success"] and rows["phase-pd/light/0"]["success"]
+    nominal, light = rows["clfqp/nominal/0"], rows["clfqp/light/0"]
+    assert nominal["success"]
+    assert (light["success"], light["duration_s"], light["max_torque_ankle"]) != \
+        (nominal["success"], nominal["duration_s"], nominal["max_torque_ankle"])

@@ -14,6 +14,8 @@ Families (``amplitude`` scales each; per draw, from its seed):
     pace     the human's hip-rate curves (and v_hip) x exp(N(0, 0.05 x amplitude)), in every
              domain that has one: a person walking faster or slower than the gait, thigh
              and all (its joints follow the hip's progress)
+    stride   the person's pace varying from stride to stride, coefficient of variation
+             3 % x amplitude (:mod:`characterization.gait.pace_variability`)
 
 The oracle reads the plant's state, not the sensors: in the sensor families it is not walked
 (its row is the draws).
@@ -43,11 +45,13 @@ from characterization.gait.contact_gait import (
 )
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
+from characterization.gait.pace_variability import varying_pace
 from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
 from hp_model.force_tube import ModelErrorBound
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
+from hp_model.simulator import GaitSchedule
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
     contact_clfqp,
@@ -55,11 +59,13 @@ from orchestrator.cosim.contact_controllers import (
     loop_simulator,
     make_contact_pd,
 )
-from orchestrator.experiments.contact_walk import walk_controller
+from orchestrator.experiments.contact_walk import controller_run
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder
 from prosthesis_controller.contact_phase_pd import SWING_PHASES
 
-FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture", "pace")
+FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture", "pace", "stride")
+#: the stride family's coefficient of variation at amplitude 1 (healthy walking: 2-3 %)
+STRIDE_CV = 0.03
 #: the human's joints whose curves the posture family offsets
 HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
 CONTROLLERS = ("oracle", "clfqp", "contact-pd")
@@ -72,6 +78,16 @@ class Draw:
     gait: ContactGait
     gains: tuple[float, float, float]
     encoder: Encoder | None
+    #: the pace's variation from stride to stride (coefficient of variation) and its seed
+    stride_cv: float = 0.0
+    stride_seed: int = 0
+
+    def schedule(self) -> GaitSchedule | None:
+        """The person's gait schedule (a fresh one per walk; None: the gait throughout)."""
+        if self.stride_cv == 0.0:
+            return None
+        return varying_pace(self.gait.thetas(), self.stride_cv, self.stride_seed,
+                            self.gait.params[GRAPH.domains[0]].degree)
 
 
 def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
@@ -105,6 +121,8 @@ def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
         return Draw(ContactGait(params, gait.rms), GAINS, None)
     if family == "pace":
         return Draw(paced(gait, float(np.exp(rng.normal(0, 0.05 * a)))), GAINS, None)
+    if family == "stride":
+        return Draw(gait, GAINS, None, STRIDE_CV * a, seed)
     raise ValueError(f"unknown family {family!r}; choose from {', '.join(FAMILIES)}")
 
 
@@ -136,11 +154,12 @@ def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[s
         policy = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()},
                              sim.gains)
         res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
-                      policy=policy)
+                      policy=policy, gaits=d.schedule())
         return res.fall is None and res.steps >= steps
     controller.reset()
-    return walk_controller(sim, trajectory, controller, steps, "",
-                           d.encoder or IDEAL_ENCODER).walks
+    res = controller_run(sim, trajectory, controller, steps, d.encoder or IDEAL_ENCODER,
+                         gaits=d.schedule())
+    return res.fall is None and res.steps >= steps
 
 
 def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,

@@ -10,6 +10,10 @@ draw's encoder, the torque held 1 ms within the motors):
     human.output_offset     a constant on each human joint's curve (th_lh, th_lk, th_la,
                             th_rh), in every domain where it is an output
     human.stiffness         the human's gains (eps, kp, kd) -> (s eps, s^2 kp, s kd)
+    human.stride_cv         the person's pace varying from stride to stride (its draws from
+                            the run's own seed, :mod:`characterization.gait.pace_variability`)
+    plant.armature          the plant's drives' armature times this factor (the controllers
+                            keep the nominal device; the oracle knows the plant's)
     sensor.*                the prosthesis's encoders and IMU
 
 The controllers are made once per worker from the unperturbed gait (its held oracle's walk,
@@ -17,10 +21,11 @@ The controllers are made once per worker from the unperturbed gait (its held ora
 contact_clf_qp.ContactClfQp`) and ``phase-pd`` (contact-pd, :class:`prosthesis_controller.
 contact_phase_pd.ContactPhasePD`); the ``oracle`` run of a draw is the held oracle on the
 plant's state (perfect sensing).  Every run starts from the fitted cycle's start.  The other
-quantities of a family (a tube margin, a controller model of its own, the plant's body, the
-delayed human, a placed start) are refused by the spec (:func:`orchestrator.sweep.spec.
-check_multicontact`).  With the gait's tube (``tube fit``), ``socket_force_in_tube`` is the
-share of the flat single support's periods with the socket force inside it
+quantities of a family (a tube margin, a controller model of its own, the plant's body but
+its armature, the delayed human, a placed start) are refused by the spec
+(:func:`orchestrator.sweep.contact_spec.check_multicontact`).  With the gait's tube (``tube
+fit``), ``socket_force_in_tube`` is the share of the flat single support's periods with the
+socket force inside it
 (:func:`characterization.tube.contact_playback.share_inside`).
 
 Row columns as the paper's; ``knee_rms_ps_rad`` and ``knee_rms_all_rad`` are the prosthesis
@@ -42,8 +47,11 @@ import numpy as np
 
 from characterization.gait.contact_gait import GAINS, ContactGait, held_oracle, start_state
 from characterization.gait.multicontact import GRAPH
+from characterization.gait.pace_variability import varying_pace
 from characterization.tube.contact_playback import share_inside
+from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
+from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import finite_or_none
 from hp_model.outputs import GaitParams
 from hp_model.simulator import HybridSimulator, SimResult
@@ -107,6 +115,10 @@ class ContactResources:
         self.run = load_contact_run(gait_path)
         sim = loop_simulator(self.run.model, self.run.gait, GAINS)
         self.closed_loop = sim.cl
+        #: the Bezier degree of the gait's curves
+        self.degree = sim.cl.degree
+        #: the walkers of other armatures (factor -> model, closed loop)
+        self._walkers: dict[float, tuple[HumanProsthesisModel, ClosedLoop]] = {}
         setup = LoopSetup(sim, held_walk(sim, self.run.trajectory))
         self.tube = None
         if artifacts.tube is not None:
@@ -122,9 +134,17 @@ class ContactResources:
 
     def plant(self, draw: Draw) -> HybridSimulator:
         """The simulated walker of a draw: the draw's curves and gains on the shared closed
-        loop."""
-        return HybridSimulator(self.run.model, self.closed_loop, draw_gait(self.run.gait, draw),
-                               draw_gains(draw))
+        loop, or, with another armature, on that walker's (made once per worker and
+        armature; compiled once, then cached on disk by its source: about 20 s)."""
+        model, cl = self.run.model, self.closed_loop
+        if draw.armature != 1.0:
+            if draw.armature not in self._walkers:
+                m = HumanProsthesisModel(model.subject,
+                                         model.device.with_armature_scaled(draw.armature),
+                                         graph=GRAPH)
+                self._walkers[draw.armature] = (m, ClosedLoop(m, self.degree))
+            model, cl = self._walkers[draw.armature]
+        return HybridSimulator(model, cl, draw_gait(self.run.gait, draw), draw_gains(draw))
 
     def close(self) -> None:
         self._folder.close()
@@ -136,10 +156,13 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
     from orchestrator.sweep.runs import encoder_of
 
     sim = res.plant(draw)
+    thetas = {Domain(k): th for k, th in sim.thetas.items()}
+    schedule = (varying_pace(thetas, draw.stride_cv, draw.stride_seed, res.degree)
+                if draw.stride_cv != 0.0 else None)
     if controller == ORACLE:
-        thetas = {Domain(k): th for k, th in sim.thetas.items()}
         log = sim.run(*start_state(res.run.trajectory), GRAPH.domains[0], steps=steps,
-                      duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains))
+                      duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains),
+                      gaits=schedule)
         return log, Counter(), 0
     ctl = res.controllers[controller]
     ctl.reset()
@@ -148,7 +171,8 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
     def count(out: ControlOutput) -> None:
         modes[out.diagnostics.mode] += 1
 
-    log = controller_run(sim, res.run.trajectory, ctl, steps, encoder_of(draw), count)
+    log = controller_run(sim, res.run.trajectory, ctl, steps, encoder_of(draw), count,
+                         gaits=schedule)
     return log, modes, int(ctl.fallbacks)
 
 

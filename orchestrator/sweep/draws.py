@@ -82,6 +82,10 @@ class Draw:
     # AMPRO3's IMU on the top link (socket pitch)
     imu_bias: float = 0.0  # rad
     imu_noise: float = 0.0  # rad, standard deviation
+    # the person's pace from stride to stride (multi-contact gaits)
+    stride_cv: float = 0.0  # coefficient of variation
+    stride_seed: int = 0
+    armature: float = 1.0  # factor on the plant's drives' armature (multi-contact gaits)
 
     def columns(self) -> dict[str, Any]:
         """The draw as flat result columns (``draw_`` prefix, offsets and segment masses one
@@ -195,7 +199,11 @@ def make_draw(spec: SweepSpec, family: str, index: int) -> Draw:
                 get("human.stiffness", 1.0), get("human.delay", None),
                 get("sensor.angle_noise", 0.0), get("sensor.velocity_noise", 0.0),
                 get("sensor.angle_resolution", 0.0), get("sensor.velocity_resolution", 0.0),
-                sensor_seed, get("sensor.imu_bias", 0.0), get("sensor.imu_noise", 0.0))
+                sensor_seed, get("sensor.imu_bias", 0.0), get("sensor.imu_noise", 0.0),
+                get("human.stride_cv", 0.0),
+                int(quantity_rng(spec.seed, family, index, "human.stride_seed")
+                    .integers(0, SEED_LIMIT)) if "human.stride_cv" in q else 0,
+                get("plant.armature", 1.0))
 
 
 def run_keys(spec: SweepSpec) -> Iterator[RunKey]:

@@ -24,6 +24,9 @@ quantity given as a number (fixed) or a distribution::
                             # tracking bandwidth: (eps, kp, kd) -> (s eps, s^2 kp, s kd)
     human.delay            = {dist = "uniform", low = 0.0, high = 0.03}   # s, the human's
                             # feedback delay (hp_model.simulator); absent: continuous human
+    human.stride_cv        = {dist = "uniform", low = 0.0, high = 0.03}   # the person's
+                            # pace varying from stride to stride, coefficient of variation
+                            # (characterization.gait.pace_variability; multi-contact gaits only)
     plant.segment_mass     = {dist = "uniform", low = 0.8, high = 1.2}    # the simulated
                             # human's segment masses (hat, thigh, shank, foot, each drawn)
     plant.hat_com          = 1.0      # HAT COM distance from the hip, factor
@@ -31,6 +34,9 @@ quantity given as a number (fixed) or a distribution::
     plant.prosthesis_mass  = 1.0      # the plant's prosthesis links (the controller keeps
     plant.prosthesis_inertia = 1.0    # the nominal ones): mass, inertia, COM factors
     plant.prosthesis_com   = 1.0
+    plant.armature         = {dist = "choice", values = [0.5, 1.5]}  # the plant's drives'
+                            # reflected rotor inertia (the device's armature), factor; fixed
+                            # or choice (each value compiles a walker); multi-contact only
     sensor.angle_noise     = 0.0      # rad, std of white noise on the encoder angles
     sensor.velocity_noise  = 0.0      # rad/s, std on the joint velocities
     sensor.angle_resolution = 0.0     # rad, quantization step (0: none)
@@ -57,8 +63,8 @@ recorded.
 A multi-contact gait (``gait fit --domains multicontact``) sweeps the person's graph
 (:mod:`orchestrator.sweep.contact`): its controllers ``clfqp`` and ``phase-pd``, the
 simulator backend, the quantities ``human.bezier_amplitude``, ``human.output_offset``,
-``human.stiffness`` and ``sensor.*``, and optionally a tube fitted around it
-(:func:`check_multicontact`).
+``human.stiffness``, ``human.stride_cv``, ``plant.armature`` and ``sensor.*``, and
+optionally a tube fitted around it (:func:`orchestrator.sweep.contact_spec.check_multicontact`).
 
 A bad spec is refused with one line naming the file and the field (:class:`SpecError`).
 """
@@ -172,8 +178,9 @@ class HumanGroup(_Group):
     output_offset: Dist | None = None
     stiffness: Dist | None = None
     delay: Dist | None = None
+    stride_cv: Dist | None = None
 
-    @field_validator("bezier_amplitude", "delay")
+    @field_validator("bezier_amplitude", "delay", "stride_cv")
     @classmethod
     def _nonnegative(cls, d: Any) -> Any:
         return _check_range(d, 0.0, strict=False)
@@ -220,11 +227,20 @@ class PlantGroup(_Group):
     prosthesis_mass: Dist | None = None
     prosthesis_inertia: Dist | None = None
     prosthesis_com: Dist | None = None
+    armature: Dist | None = None
 
     @field_validator("segment_mass", "hat_com", "iwalk_mass", "prosthesis_mass",
                      "prosthesis_inertia")
     @classmethod
     def _positive(cls, d: Any) -> Any:
+        return _check_range(d, 0.0, strict=True)
+
+    @field_validator("armature")
+    @classmethod
+    def _armature(cls, d: Any) -> Any:
+        if d is not None and not isinstance(d, Fixed | Choice):
+            raise ValueError("the armature takes a fixed value or a choice (each distinct "
+                             "value compiles the walker's model)")
         return _check_range(d, 0.0, strict=True)
 
     @field_validator("prosthesis_com")
@@ -378,50 +394,13 @@ def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
             raise _fail(path, name, f"no such file: {p}")
         files[name] = p.resolve()
     from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+    from orchestrator.sweep.contact_spec import check_multicontact, check_paper
 
     if artifact_kind(files["gait"]) == MULTICONTACT_KIND:  # said here, before any worker
         check_multicontact(spec, path, files)
-    elif "tube" not in files:
-        raise _fail(path, "tube", "a gait of the paper's graph runs with its force tube "
-                    "(`hpcosim tube fit`)")
+    else:
+        check_paper(spec, path, files)
     return spec.model_copy(update=files)
-
-
-#: the quantities a sweep of a multi-contact gait draws (the rest change what its controllers
-#: do not have yet: a tube margin, a model of their own, the delayed human, a placed start)
-MULTICONTACT_QUANTITIES = ("human.bezier_amplitude", "human.output_offset",
-                           "human.stiffness", "sensor.")
-#: the controllers of a multi-contact gait's sweep: its robust CLF-QP and its phase PD
-#: (``contact-pd``: :mod:`prosthesis_controller.contact_phase_pd`)
-MULTICONTACT_CONTROLLERS = ("clfqp", "phase-pd")
-
-
-def check_multicontact(spec: SweepSpec, path: Path, files: dict[str, Path]) -> None:
-    """What a sweep of a multi-contact gait runs (:mod:`orchestrator.sweep.contact`): the
-    simulator backend, its two controllers, the families' quantities it draws, and a tube
-    (optional) fitted around this gait; one line naming the field otherwise."""
-    if spec.backend != SweepBackend.SIMULATOR:
-        raise _fail(path, "backend", "a multi-contact gait's sweep runs the in-process "
-                    "simulator ('simulator')")
-    bad = [c for c in spec.controllers if c not in MULTICONTACT_CONTROLLERS]
-    if bad:
-        raise _fail(path, "controllers", f"{', '.join(bad)}: a multi-contact gait's sweep "
-                    f"runs {' and '.join(MULTICONTACT_CONTROLLERS)}")
-    for name, fam in spec.families.items():
-        for q in fam.quantities():
-            if not q.startswith(MULTICONTACT_QUANTITIES):
-                raise _fail(path, f"families.{name}.{q}", "not drawn on a multi-contact gait "
-                            "(it draws human.bezier_amplitude, human.output_offset, "
-                            "human.stiffness and sensor.*)")
-    if "tube" in files:
-        from characterization.gait.multicontact_artifact import load_contact_cycle
-        from hp_model.artifacts import ArtifactError
-        from hp_model.force_tube import load_tube
-
-        try:
-            load_tube(files["tube"], load_contact_cycle(files["gait"]).hash)
-        except (ArtifactError, ValueError) as e:
-            raise _fail(path, "tube", str(e)) from None
 
 
 def load_spec(path: str | Path, overrides: dict[str, Any] | None = None) -> SweepSpec:

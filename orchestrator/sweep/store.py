@@ -62,6 +62,8 @@ COLUMNS = pa.schema([
     ("draw_velocity_noise", pa.float64()), ("draw_angle_resolution", pa.float64()),
     ("draw_velocity_resolution", pa.float64()), ("draw_sensor_seed", pa.int64()),
     ("draw_imu_bias", pa.float64()), ("draw_imu_noise", pa.float64()),
+    ("draw_stride_cv", pa.float64()), ("draw_stride_seed", pa.int64()),
+    ("draw_armature", pa.float64()),
     ("steps_completed", pa.int64()), ("success", pa.bool_()), ("failed", pa.bool_()),
     ("reason", pa.string()), ("fall_reason", pa.string()), ("fail_t", pa.float64()),
     ("fail_tau", pa.float64()),
