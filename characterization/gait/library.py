@@ -60,7 +60,7 @@ from characterization.gait.multicontact import (
     cycle_guess,
     fit_multicontact,
 )
-from characterization.gait.multicontact_artifact import ContactCycle
+from characterization.gait.multicontact_artifact import ContactCycle, model_of
 from hp_model.artifacts import ArtifactError, load_json, save_json
 from hp_model.domains import Domain
 from hp_model.human_prosthesis import HumanProsthesisModel
@@ -280,18 +280,8 @@ def start_at(library: GaitLibrary, speed: float) -> tuple[np.ndarray, np.ndarray
 def load_gait_library(path: str | os.PathLike[str]) -> GaitLibrary:
     """The library of a file written by ``hpcosim gait library`` (ArtifactError naming the
     file and field when it is not one)."""
-    from pydantic import ValidationError
-
-    from hp_model.config import DeviceConfig, SubjectConfig
-
-    doc = load_json(path, KIND, SCHEMA_VERSION)
-    try:
-        subject = SubjectConfig.model_validate(doc["subject"])
-        device = DeviceConfig.model_validate(doc["device"])
-    except (KeyError, ValidationError) as e:
-        raise ArtifactError(f"{path}: field 'subject'/'device': not a valid config "
-                            f"({str(e).splitlines()[0]})") from None
-    model = HumanProsthesisModel(subject, device, graph=GRAPH)
+    doc = dict(load_json(path, KIND, SCHEMA_VERSION))
+    model = model_of(doc, path)
     if doc.get("model_hash") != model.parameter_hash():
         raise ArtifactError(f"{path}: field 'model_hash': the file was made for another "
                             "model than its own subject and device give")

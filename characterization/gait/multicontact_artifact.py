@@ -114,21 +114,27 @@ class ContactCycle:
     hash: str = ""
 
 
-def load_contact_cycle(path: str | os.PathLike[str]) -> ContactCycle:
-    """The model and the cycle of a multi-contact gait file (ArtifactError naming the file
-    and field when it is not one, or its configs are not valid)."""
+def model_of(doc: dict[str, Any], path: str | os.PathLike[str]) -> HumanProsthesisModel:
+    """The multi-contact model a document's ``subject`` and ``device`` make (ArtifactError
+    naming the file and field when they are not valid configs)."""
     from pydantic import ValidationError
 
     from hp_model.config import DeviceConfig, SubjectConfig
 
-    doc = load_multicontact_gait(path)
     try:
         subject = SubjectConfig.model_validate(doc["subject"])
         device = DeviceConfig.model_validate(doc["device"])
     except (KeyError, ValidationError) as e:
         raise ArtifactError(f"{path}: field 'subject'/'device': not a valid config "
                             f"({str(e).splitlines()[0]})") from None
-    model = HumanProsthesisModel(subject, device, graph=GRAPH)
+    return HumanProsthesisModel(subject, device, graph=GRAPH)
+
+
+def load_contact_cycle(path: str | os.PathLike[str]) -> ContactCycle:
+    """The model and the cycle of a multi-contact gait file (ArtifactError naming the file
+    and field when it is not one, or its configs are not valid)."""
+    doc = load_multicontact_gait(path)
+    model = model_of(doc, path)
     try:
         traj = {d: {k: np.asarray(v, float) for k, v in doc["trajectory"][d.value].items()
                     if k != "duration"} for d in GRAPH.domains}
