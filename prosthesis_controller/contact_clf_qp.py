@@ -71,7 +71,11 @@ from hp_model.contact_interaction import STANCE_DOMAINS, wrench_size
 from hp_model.domains import Domain
 from hp_model.force_tube import CONTACT_ERROR_COMPONENTS, ModelErrorBound
 from hp_model.human_prosthesis import HumanProsthesisModel
-from prosthesis_controller.contact_phase_pd import ContactPhasePD, control_output
+from prosthesis_controller.contact_phase_pd import (
+    ContactGaitTables,
+    ContactPhasePD,
+    control_output,
+)
 from prosthesis_controller.interface import ControllerMode, ControlOutput, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.qp import dense_solver, set_tolerance
@@ -387,6 +391,11 @@ class ContactClfQp:
     @property
     def phase(self) -> float:
         return self.law.phase
+
+    @property
+    def tables(self) -> ContactGaitTables:
+        """Its phase law's gait tables."""
+        return self.law.tables
 
     def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
         fields = (m.t, m.knee_angle, m.ankle_angle, m.knee_vel, m.ankle_vel, m.socket_pitch)

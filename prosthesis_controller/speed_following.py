@@ -1,20 +1,36 @@
 """A prosthesis controller that follows the person's walking speed (:class:`SpeedFollowing`):
 one multi-contact controller per speed of a gait library (each made from that speed's gait,
 as the single-gait controllers are), the active one the nearest to the speed it estimates
-from its own strides.  No clock, no speed sensor: the foot switch and the library.
+from its own sensors.  No clock, no speed sensor: the socket IMU, the encoders, the foot
+switch and the library.
 
-- **Estimate**: at each heel strike of the prosthesis foot (the foot switch turning on) the
-  time since the last one is the person's stride period; the speed is read off the
-  library's stride periods against its speeds (a person walking faster takes shorter
-  strides: on gaitalytics' take 1.52 s at 0.6 m/s to 0.98 s at 1.4), linearly between and
-  clamped to its range.  Strides outside 0.5-2.5 s (a stop, a stumble, the start) leave the
-  estimate as it was.
-- **Switch**: at that heel strike, to the controller of the speed nearest the estimate
-  (the library's speeds and others between them, :func:`filled`), handed the outgoing
-  one's state (the IMU bias estimate, the torque the rate limit starts from, the counts:
-  ``take_over``), so the stance starts on the references of the person's speed.
+- **Estimate**: while the prosthesis foot is flat in stance (its active controller's
+  ``tables.flat`` window of the stance phase), the hip's progress over the foot is the
+  phase's (:meth:`~prosthesis_controller.contact_phase_pd.ContactPhasePD.stance_phase`: the
+  leg's kinematics from the IMU and the encoders); its mean rate over that window, read at
+  toe-off, is the hip's speed over the flat foot, which the person's own hip sets (the
+  simulated person's rate output; a person walking faster moves the hip faster over the
+  stance foot).  The speed is read off the rates of the person walking each controller's
+  speed (:func:`flat_stance_rate` of its held walk), linearly between and clamped to their
+  range: measured there, not interpolated between the library's speeds, whose curves
+  blended walk up to 0.03 m/s off the blend of their rates.  A stance whose flat window
+  lasts under 0.05 s (a stumble) or over 2 s (a stop) leaves the estimate as it was.
+- **Switch**: at the next heel strike, to the controller nearest the estimate less
+  ``MARGIN`` (the library's speeds and others between them, :func:`filled`), handed the
+  outgoing one's state (the IMU bias estimate, the torque the rate limit starts from, the
+  counts: ``take_over``), so the stance runs on the references of the person's speed.  The
+  margin centres the controller in the speeds it walks: on gaitalytics' library a
+  controller made at u walked a person at v (12 steps from the cycle's start) for
+  v - 0.08 <= u <= v + 0.015 m/s (``clfqp`` at 0.9 m/s; contact-pd v + 0.05), and fell
+  within two steps when made faster (docs/gait-design.md).
 - **Start**: the controller of ``speed`` (the speed the person starts at, a setting as a
-  prosthetist sets one) until the first full stride.
+  prosthetist sets one) until the first flat stance is read.
+
+Before, the estimate was the stride period (heel strike to heel strike) read off the
+library's strides: one stride late, and read through the coupled walk (under ``clfqp`` the
+person's strides came out 1-2 % shorter than its curves', 0.03 m/s of speed), it lagged a
+ramp of 0.02 m/s per s by 0.04-0.07 m/s, past the controllers' window (a controller made
+0.05 m/s off the person's speed fell within a few steps), docs/gait-design.md.
 """
 
 from __future__ import annotations
@@ -25,24 +41,30 @@ from typing import Protocol
 
 import numpy as np
 
+from prosthesis_controller.contact_phase_pd import ContactGaitTables, first_stride
 from prosthesis_controller.interface import ControlOutput
 from prosthesis_controller.measurement import ProsthesisMeasurement
 
 #: m/s: the default spacing of the speeds the controller switches between (:func:`filled`)
 SPEED_RESOLUTION = 0.02
-#: the share of a stride's speed the estimate takes (an exponential filter over strides)
-GAIN = 0.5
-#: s: stride periods outside this range are not walking strides (the estimate is kept)
-STRIDE_RANGE = (0.5, 2.5)
+#: s: a flat stance shorter than this, or longer than the second, is not a walking stance
+#: (the estimate is kept)
+WINDOW_RANGE = (0.05, 2.0)
+#: m/s: the active controller is the one nearest the estimate less this (module docstring)
+MARGIN = 0.03
 
 
 class Handover(Protocol):
     """A multi-contact controller that can take over another's state."""
 
     name: str
+    fallbacks: int
 
     @property
     def phase(self) -> float: ...
+
+    @property
+    def tables(self) -> ContactGaitTables: ...
 
     def reset(self, torque: tuple[float, float] | None = None) -> None: ...
 
@@ -51,6 +73,37 @@ class Handover(Protocol):
     def take_over(self, other: Handover) -> None: ...
 
     def blended(self, other: Handover, w: float) -> Handover: ...
+
+
+def flat_stance_rate(tables: ContactGaitTables, t: np.ndarray, phase: np.ndarray,
+                     contact: np.ndarray) -> float:
+    """The hip's mean progress rate (m/s) over the flat window of the first stance of a walk
+    sampled each period: ``t`` (n,) s, ``phase`` (n,) the stance phase the controller of
+    ``tables`` reads, ``contact`` (n,) the foot switch (the estimate's measure, module
+    docstring).  ValueError without a stance or a flat window in it."""
+    i0, i1, _ = first_stride(contact)
+    s = np.asarray(phase, float)[i0:i1]
+    f0, f1 = tables.flat
+    k = np.flatnonzero((s >= f0) & (s <= f1))
+    if k.size < 2 or t[i0 + k[-1]] <= t[i0 + k[0]]:
+        raise ValueError("the walk's first stance has no flat window")
+    a, b = k[0], k[-1]
+    span = tables.progress[1] - tables.progress[0]
+    return float((s[b] - s[a]) * span / (t[i0 + b] - t[i0 + a]))
+
+
+def rising(rates: Sequence[float]) -> list[int]:
+    """The places of the longest strictly rising run (not necessarily contiguous) of
+    ``rates`` (m/s, in their speeds' order): the calibration points the estimate keeps.  A
+    walk that is not yet periodic reads off its neighbours (the packaged person's gait at
+    0.9 m/s strides at 0.94-0.96 m/s in closed loop, and its flat stance read 1.01 m/s where
+    its neighbours read 0.89 and above)."""
+    r = list(rates)
+    best: list[list[int]] = []
+    for i, x in enumerate(r):
+        prev = [b for j, b in enumerate(best) if r[j] < x]
+        best.append([*max(prev, key=len, default=[]), i])
+    return max(best, key=len, default=[])
 
 
 def filled(controllers: Sequence[Handover], speeds: Sequence[float], resolution: float
@@ -77,34 +130,54 @@ def filled(controllers: Sequence[Handover], speeds: Sequence[float], resolution:
 
 
 class SpeedFollowing:
-    """The controller of the module docstring: ``controllers[i]`` made from the library's
-    gait at ``speeds[i]`` (m/s, increasing) whose stride lasts ``strides[i]`` (s); it
-    starts on the one nearest ``speed``."""
+    """The controller of the module docstring: ``controllers`` at ``speeds`` (m/s,
+    increasing: the library's and those between, :func:`filled`); the estimate reads the
+    flat stance's hip rate against ``rates`` (m/s) measured at ``rate_speeds`` (m/s; both
+    rising: :func:`rising`); it starts on the controller nearest ``speed`` less
+    ``MARGIN``."""
 
     def __init__(self, controllers: Sequence[Handover], speeds: Sequence[float],
-                 strides: Sequence[float], speed: float) -> None:
-        v, T = np.asarray(speeds, float), np.asarray(strides, float)
-        if len(controllers) == 0 or len(controllers) != v.size or v.shape != T.shape:
-            raise ValueError("one controller per library speed, with its stride period")
-        if np.any(np.diff(v) <= 0) or np.any(np.diff(T) >= 0):
-            raise ValueError(f"the library's speeds must increase and its strides shorten "
-                             f"(speeds {v.round(3).tolist()}, strides {T.round(3).tolist()})")
+                 rate_speeds: Sequence[float], rates: Sequence[float], speed: float) -> None:
+        v, rv, r = (np.asarray(x, float) for x in (speeds, rate_speeds, rates))
+        if len(controllers) == 0 or len(controllers) != v.size or np.any(np.diff(v) <= 0):
+            raise ValueError("one controller per speed, the speeds increasing")
+        if rv.size < 2 or rv.shape != r.shape or np.any(np.diff(rv) <= 0) \
+                or np.any(np.diff(r) <= 0):
+            raise ValueError(f"the flat-stance hip rates and their speeds must rise together, "
+                             f"two or more (speeds {rv.round(3).tolist()}, rates "
+                             f"{r.round(3).tolist()})")
         if not math.isfinite(speed):
             raise ValueError(f"the initial speed must be finite, got {speed}")
-        self.controllers, self.speeds, self.strides = tuple(controllers), v, T
+        self.controllers, self.speeds = tuple(controllers), v
+        self.rate_speeds, self.rates = rv, r
         self.name = self.controllers[0].name
         self.initial_speed = float(speed)
         self.reset()
 
     def reset(self, torque: tuple[float, float] | None = None) -> None:
-        """Back to the initial speed's controller, no stride measured."""
+        """Back to the initial speed's controller, no stance measured."""
         #: the estimated walking speed (m/s) and the active controller's place
         self.speed = self.initial_speed
-        self.active = self._nearest(self.speed)
+        self.active = self._nearest(self.speed - MARGIN)
         for c in self.controllers:
             c.reset(torque)
         self._contact: bool | None = None
-        self._t_strike: float | None = None
+        #: the flat window's first and last (t, phase) of this stance
+        self._first: tuple[float, float] | None = None
+        self._last: tuple[float, float] | None = None
+
+    def restart(self, speed: float) -> None:
+        """:meth:`reset` with the person starting at ``speed`` (m/s) from now on."""
+        if not math.isfinite(speed):
+            raise ValueError(f"the initial speed must be finite, got {speed}")
+        self.initial_speed = float(speed)
+        self.reset()
+
+    @property
+    def fallbacks(self) -> int:
+        """The active controller's count of ticks it could not use (each takes over the
+        outgoing one's)."""
+        return self.controller.fallbacks
 
     def _nearest(self, v: float) -> int:
         return int(np.argmin(np.abs(self.speeds - v)))
@@ -118,22 +191,40 @@ class SpeedFollowing:
     def phase(self) -> float:
         return self.controller.phase
 
-    def speed_of(self, stride: float) -> float:
-        """The walking speed (m/s) of a stride period (s), from the library (module
-        docstring)."""
-        return float(np.interp(stride, self.strides[::-1], self.speeds[::-1]))
+    def speed_of(self, rate: float) -> float:
+        """The walking speed (m/s) of a flat stance's hip rate (m/s) (module docstring)."""
+        return float(np.interp(rate, self.rates, self.rate_speeds))
 
     def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
         contact = bool(m.contact)
-        if contact and self._contact is False and math.isfinite(m.t):  # a heel strike
-            if self._t_strike is not None:
-                stride = m.t - self._t_strike
-                if STRIDE_RANGE[0] <= stride <= STRIDE_RANGE[1]:
-                    self.speed += GAIN * (self.speed_of(stride) - self.speed)
-                    nxt = self._nearest(self.speed)
-                    if nxt != self.active:
-                        self.controllers[nxt].take_over(self.controller)
-                        self.active = nxt
-            self._t_strike = m.t
+        if not contact and self._contact:  # a toe-off
+            self._read_stance()
+        elif contact and self._contact is False:  # a heel strike
+            self._switch()
+        out = self.controller.tick(m)
+        if contact and math.isfinite(m.t):
+            s, (f0, f1) = self.controller.phase, self.controller.tables.flat
+            if f0 <= s <= f1:
+                if self._first is None:
+                    self._first = (m.t, s)
+                self._last = (m.t, s)
         self._contact = contact
-        return self.controller.tick(m)
+        return out
+
+    def _read_stance(self) -> None:
+        """The estimate from the flat window of the stance that ended (module docstring)."""
+        first, last, self._first, self._last = self._first, self._last, None, None
+        if first is None or last is None:
+            return
+        window = last[0] - first[0]
+        if not WINDOW_RANGE[0] <= window <= WINDOW_RANGE[1]:
+            return
+        p0, p1 = self.controller.tables.progress
+        self.speed = self.speed_of((last[1] - first[1]) * (p1 - p0) / window)
+
+    def _switch(self) -> None:
+        """To the controller of the estimate (module docstring), at a heel strike."""
+        nxt = self._nearest(self.speed - MARGIN)
+        if nxt != self.active:
+            self.controllers[nxt].take_over(self.controller)
+            self.active = nxt

@@ -6,6 +6,7 @@ walked along a changing speed."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -131,8 +132,53 @@ def test_bad_speeds_and_options_are_one_line_errors(cycle, tmp_path):
         fit_library(cycle.model, t, cycle, [5.0])
 
 
+def test_a_speed_family_needs_the_library_and_draws_only_sensors_beside_it(library_file,
+                                                                           tmp_path):
+    """A sweep spec's ``human.speed``: refused without ``library``, beside a quantity other
+    than ``sensor.*``, outside the speeds a person walks, and on the paper's graph; one line
+    naming the field."""
+    from orchestrator.sweep.spec import SpecError, load_spec
+
+    base = (f'gait = "{REFERENCE_PERSON_GAIT}"\ncontrollers = ["clfqp"]\ndraws = 2\n'
+            f'seed = 1\n')
+    lib = f'library = "{library_file}"\n'
+    speed = 'human.speed = {dist = "uniform", low = 0.9, high = 1.2}\n'
+    data = Path("tests/data/controller").resolve()
+    paper = f'gait = "{data / "gait_demo.json"}"\ntube = "{data / "tube_demo.json"}"\n'
+    for text, field in (
+            (base + "[families.s]\n" + speed, "families.s.human.speed"),
+            (base + lib + "[families.s]\n" + speed + "human.stride_cv = 0.01\n",
+             "families.s.human.stride_cv"),
+            (base + lib + "[families.s]\nhuman.speed = 3.0\n", "families.s.human.speed"),
+            (base + lib + "[families.s]\n"
+             'human.speed = {dist = "normal", mean = 1.0, std = 0.1}\n',
+             "families.s.human.speed"),
+            (paper + lib + 'controllers = ["pd"]\ndraws = 2\nseed = 1\n[families.n]\n',
+             "library")):
+        p = tmp_path / "spec.toml"
+        p.write_text(text)
+        with pytest.raises(SpecError) as e:
+            load_spec(p)
+        assert f"field '{field}'" in str(e.value) and "\n" not in str(e.value), text
+    p.write_text(base + lib + "[families.s]\n" + speed + "sensor.angle_noise = 0.001\n")
+    assert load_spec(p).library == library_file.resolve()
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """`gait library` at 0.9 and 1.25 m/s from the packaged person (1.07 m/s) and its take:
+    the command's result and the library file."""
+    d = tmp_path_factory.mktemp("fitted-library")
+    steps = d / "steps.npz"
+    assert person_reference.make_steps(steps, d) == 0
+    out = d / "lib.json"
+    r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
+                "--out", str(out), "--speeds", "0.9,1.25")
+    return r, out
+
+
 @pytest.mark.slow  # the take made and processed, two fits (about 25 s each), the walks
-def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(tmp_path):
+def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(fitted):
     """`gait library` at 0.9 and 1.25 m/s from the packaged person (1.07 m/s) and its take:
     exit 0, three gaits, each within 2 % of its speed, its stride time the person's times
     (1.07 / v)^0.5 within 5 % (the durations' targets; the fit trades them against the
@@ -140,14 +186,10 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(tmp_pat
     while the command goes 0.9 -> 1.25 -> 0.9 m/s, each stride within 0.05 m/s RMS of the
     command (a stride's lag: 0.04 m/s per stride on the ramps), and `clfqp` following its
     speed walks it at 1.0 m/s, between the library's gaits, reading that speed from its
-    strides."""
+    flat stances (the hip's rate over the flat foot)."""
     from orchestrator.experiments.speed_walk import speed_walk
 
-    steps = tmp_path / "steps.npz"
-    assert person_reference.make_steps(steps, tmp_path) == 0
-    out = tmp_path / "lib.json"
-    r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
-                "--out", str(out), "--speeds", "0.9,1.25")
+    r, out = fitted
     assert r.returncode == 0, r.stderr
     doc = json.loads(out.read_text())
     slow, base, fast = doc["gaits"]
@@ -165,3 +207,39 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(tmp_pat
     assert c.walks, c.line()
     assert c.speed[-1] == pytest.approx(1.0, abs=0.03)
     assert c.estimate[-1] == pytest.approx(c.speed[-1], abs=0.03)
+
+
+@pytest.mark.slow  # the library of the test above, a worker's controllers over it, 9 runs
+def test_a_sweep_changes_the_persons_speed_over_the_library(fitted, tmp_path):
+    """A sweep family ``human.speed`` on the fitted library (``orchestrator/sweep/contact.py``):
+    each draw's two speeds within the family's range, the same for every controller; the
+    oracle (the person's own curves of the moment, held) walks every draw; the rows carry
+    the draws and a replay equals its stored row."""
+    from orchestrator.sweep.contact import speed_change
+    from orchestrator.sweep.store import read_results
+
+    r, lib = fitted
+    assert r.returncode == 0, r.stderr
+    spec = tmp_path / "speed.toml"
+    spec.write_text(f'gait = "{REFERENCE_PERSON_GAIT}"\nlibrary = "{lib}"\n'
+                    'controllers = ["clfqp", "phase-pd"]\ndraws = 3\nseed = 3\nsteps = 8\n'
+                    '[families.speed]\n'
+                    'human.speed = {dist = "uniform", low = 0.95, high = 1.2}\n')
+    out = tmp_path / "out"
+    s = hpcosim("sweep", "run", str(spec), "--out", str(out), "--workers", "1")
+    assert s.returncode == 0, s.stderr
+    rows = {row["key"]: row for row in read_results(out).to_pylist()}
+    assert len(rows) == 9
+    for i in range(3):
+        draws = {(rows[f"{c}/speed/{i}"]["draw_speed_start"],
+                  rows[f"{c}/speed/{i}"]["draw_speed_end"])
+                 for c in ("oracle", "clfqp", "phase-pd")}
+        assert len(draws) == 1
+        (v0, v1), = draws
+        assert 0.95 <= v0 <= 1.2 and 0.95 <= v1 <= 1.2 and v0 != v1
+        assert rows[f"oracle/speed/{i}"]["success"], rows[f"oracle/speed/{i}"]["reason"]
+    profile = speed_change(1.0, 1.2)
+    assert profile.at(0.5) == 1.0 and profile.at(1.0 + 0.1 / 0.06) == pytest.approx(1.1)
+    rep = hpcosim("sweep", "replay", str(out), "clfqp/speed/0")
+    assert rep.returncode == 0, rep.stderr
+    assert "identical to the stored result" in rep.stdout

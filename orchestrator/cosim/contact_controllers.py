@@ -34,7 +34,7 @@ from characterization.gait.contact_gait import (
     held_oracle,
     start_state,
 )
-from characterization.gait.library import GaitLibrary
+from characterization.gait.library import GaitLibrary, start_at
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
 from characterization.tube.contact_model_error import Linearization, fit_contact_model_error
@@ -70,7 +70,13 @@ from prosthesis_controller.contact_phase_pd import (
     tables_from_walk,
 )
 from prosthesis_controller.gait_tables import save_contact_controller
-from prosthesis_controller.speed_following import SPEED_RESOLUTION, SpeedFollowing, filled
+from prosthesis_controller.speed_following import (
+    SPEED_RESOLUTION,
+    SpeedFollowing,
+    filled,
+    flat_stance_rate,
+    rising,
+)
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
@@ -105,12 +111,13 @@ class HeldWalk:
     wrench: np.ndarray
 
 
-def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]]
-              ) -> HeldWalk:
+def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
+              start: tuple[np.ndarray, np.ndarray] | None = None) -> HeldWalk:
     """Two strides of the held oracle in the plant ``sim`` from the fitted cycle's start (a
-    stride: the trajectory's domains' ends ``t``, s).  ValueError if it falls."""
+    stride: the trajectory's domains' ends ``t``, s; ``start``: (q0, qd0) instead of the
+    cycle's).  ValueError if it falls."""
     stride = sum(float(np.asarray(trajectory[d]["t"])[-1]) for d in GRAPH.domains)
-    q0, qd0 = start_state(trajectory)
+    q0, qd0 = start_state(trajectory) if start is None else start
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()}, sim.gains)
     rows: list[tuple[Any, ...]] = []
@@ -321,6 +328,7 @@ def speed_following(library: GaitLibrary, controller: str = "clfqp",
     model = library.model
     cl = closed_loop or ClosedLoop(model, library.curves[0].params[GRAPH.domains[0]].degree)
     ctls: list[Any] = []
+    leg = LegKinematics.of(model)
     for g, curves in zip(library.gaits, library.curves, strict=True):
         sim = loop_simulator(model, curves, GAINS, cl)
         try:
@@ -332,4 +340,25 @@ def speed_following(library: GaitLibrary, controller: str = "clfqp",
                     make_contact_pd(model, curves, g.trajectory, setup, swing_phase))
     start = next(g.speed for g in library.gaits if g.source) if speed is None else speed
     grid, speeds = filled(ctls, library.speeds.tolist(), resolution)
-    return SpeedFollowing(grid, speeds.tolist(), [library.stride_at(v) for v in speeds], start)
+    rates = [walk_rate(leg, c.tables, library, float(v), cl) for c, v in zip(grid, speeds,
+                                                                          strict=True)]
+    keep = rising(rates)
+    return SpeedFollowing(grid, speeds.tolist(), [float(speeds[i]) for i in keep],
+                          [rates[i] for i in keep], start)
+
+
+def walk_rate(leg: LegKinematics, tables: ContactGaitTables, library: GaitLibrary,
+              speed: float, closed_loop: ClosedLoop) -> float:
+    """The flat stance's hip rate (m/s) of the person walking ``library`` at ``speed``
+    (m/s) with the held oracle, as a controller of ``tables`` on ``leg`` reads it
+    (:func:`~prosthesis_controller.speed_following.flat_stance_rate`; about 0.4 s).
+    HeldOracleFellError if that walk falls."""
+    sim = loop_simulator(library.model, library.gait_at(speed), GAINS, closed_loop)
+    slower = library.gaits[max(int(np.searchsorted(library.speeds, speed)) - 1, 0)]
+    try:
+        walk = held_walk(sim, slower.trajectory, start_at(library, speed))
+    except HeldOracleFellError as e:
+        raise HeldOracleFellError(f"the library's gait at {speed:.2f} m/s: {e}") from None
+    p0, p1 = tables.progress
+    phase = np.array([(leg.progress(*x[:3]) - p0) / (p1 - p0) for x in walk.sensed])
+    return flat_stance_rate(tables, walk.t, phase, walk.contact)

@@ -12,6 +12,13 @@ draw's encoder, the torque held 1 ms within the motors):
     human.stiffness         the human's gains (eps, kp, kd) -> (s eps, s^2 kp, s kd)
     human.stride_cv         the person's pace varying from stride to stride (its draws from
                             the run's own seed, :mod:`characterization.gait.pace_variability`)
+    human.speed             the person walking the spec's gait library, starting at the
+                            first speed drawn and changing to the second (:func:`speed_change`:
+                            from ``CHANGE_AT`` s at ``ACCELERATION`` m/s^2); the controllers
+                            follow it over the library (:func:`orchestrator.cosim.
+                            contact_controllers.speed_following`), the oracle holds the
+                            person's curves of the moment; it starts from the library's cycle
+                            at the first speed
     plant.armature          the plant's drives' armature times this factor (the controllers
                             keep the nominal device; the oracle knows the plant's)
     sensor.*                the prosthesis's encoders and IMU
@@ -46,6 +53,12 @@ from typing import Any
 import numpy as np
 
 from characterization.gait.contact_gait import GAINS, ContactGait, held_oracle, start_state
+from characterization.gait.library import (
+    GaitLibrary,
+    load_gait_library,
+    speed_schedule,
+    start_at,
+)
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.pace_variability import varying_pace
 from characterization.tube.contact_playback import share_inside
@@ -55,6 +68,7 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import finite_or_none
 from hp_model.outputs import GaitParams
 from hp_model.simulator import HybridSimulator, SimResult
+from hp_model.speed_profile import SpeedProfile
 from human_fmu.perturbation import perturbed_thetas
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
@@ -63,6 +77,7 @@ from orchestrator.cosim.contact_controllers import (
     load_contact_run,
     loop_simulator,
     make_contact_pd,
+    speed_following,
 )
 from orchestrator.experiments.contact_walk import controller_run
 from orchestrator.experiments.person_walks import stride_rms
@@ -73,6 +88,24 @@ from orchestrator.sweep.tempdirs import WorkFolder
 from prosthesis_controller.contact_clf_qp import ContactClfQp
 from prosthesis_controller.contact_phase_pd import ContactPhasePD
 from prosthesis_controller.interface import ControllerMode, ControlOutput
+from prosthesis_controller.speed_following import SpeedFollowing
+
+#: s: when a ``human.speed`` draw's person starts changing its speed
+CHANGE_AT = 1.0
+#: m/s^2: how fast it changes it (the held oracle walked 0.08 on gaitalytics' library, 0.7 to
+#: 1.3 m/s, and fell at 0.12: the person takes the new speed's curves at each domain's entry)
+ACCELERATION = 0.06
+#: the sweep's controller names and what :func:`speed_following` calls them
+_FOLLOWING = {"clfqp": "clfqp", "phase-pd": "contact-pd"}
+
+
+def speed_change(start: float, end: float) -> SpeedProfile:
+    """The speed a ``human.speed`` draw commands (m/s): ``start`` until :data:`CHANGE_AT`,
+    then towards ``end`` at :data:`ACCELERATION`, then ``end``."""
+    if start == end:
+        return SpeedProfile.constant(start)
+    return SpeedProfile((0.0, CHANGE_AT, CHANGE_AT + abs(end - start) / ACCELERATION),
+                        (start, start, end))
 
 
 def draw_gait(gait: ContactGait, draw: Draw) -> dict[Domain, np.ndarray]:
@@ -125,6 +158,11 @@ class ContactResources:
             tube_path = self._folder.path / "tube.json"
             tube_path.write_bytes(artifacts.tube)
             self.tube = load_tube(tube_path, self.run.hash)
+        self._library: GaitLibrary | None = None
+        self._library_bytes = artifacts.library
+        #: the controllers that follow the person's speed over the library (made when a
+        #: draw first needs one)
+        self._following: dict[str, SpeedFollowing] = {}
         self.controllers: dict[str, ContactClfQp | ContactPhasePD] = {
             "clfqp": contact_clfqp(  # with the tube's model-error bound: its robust term
                 self.run.model, self.run.gait, self.run.trajectory, setup=setup,
@@ -146,8 +184,55 @@ class ContactResources:
             model, cl = self._walkers[draw.armature]
         return HybridSimulator(model, cl, draw_gait(self.run.gait, draw), draw_gains(draw))
 
+    @property
+    def library(self) -> GaitLibrary:
+        """The spec's gait library (read once; ValueError without one)."""
+        if self._library is None:
+            if self._library_bytes is None:
+                raise ValueError("a human.speed draw needs the spec's 'library'")
+            path = self._folder.path / "library.json"
+            path.write_bytes(self._library_bytes)
+            self._library = load_gait_library(path)
+        return self._library
+
+    def following(self, controller: str) -> SpeedFollowing:
+        """``controller`` following the person's speed over the library (made once per
+        worker: each library speed's held walk and controller, about 5 s)."""
+        if controller not in self._following:
+            self._following[controller] = speed_following(self.library,
+                                                          _FOLLOWING[controller])
+        return self._following[controller]
+
     def close(self) -> None:
         self._folder.close()
+
+
+def speed_walk(res: ContactResources, controller: str, draw: Draw, steps: int
+               ) -> tuple[SimResult, Counter[ControllerMode], int]:
+    """A ``human.speed`` draw's run (module docstring): its log, modes and fallbacks."""
+    from orchestrator.sweep.runs import encoder_of
+
+    assert draw.speed_start is not None and draw.speed_end is not None
+    lib = res.library
+    profile = speed_change(draw.speed_start, draw.speed_end)
+    sim = loop_simulator(lib.model, lib.gait_at(draw.speed_start), GAINS)
+    schedule, start = speed_schedule(lib, profile), start_at(lib, draw.speed_start)
+    if controller == ORACLE:
+        policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()},
+                             sim.gains)
+        log = sim.run(*start, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
+                      policy=policy, gaits=schedule)
+        return log, Counter(), 0
+    ctl = res.following(controller)
+    ctl.restart(draw.speed_start)
+    modes: Counter[ControllerMode] = Counter()
+
+    def count(out: ControlOutput) -> None:
+        modes[out.diagnostics.mode] += 1
+
+    log = controller_run(sim, lib.gaits[0].trajectory, ctl, steps, encoder_of(draw), count,
+                         gaits=schedule, start=start)
+    return log, modes, int(ctl.fallbacks)
 
 
 def walk(res: ContactResources, controller: str, draw: Draw, steps: int
@@ -155,6 +240,8 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
     """One run's log, its controller's modes tick by tick and its fallbacks."""
     from orchestrator.sweep.runs import encoder_of
 
+    if draw.speed_start is not None:
+        return speed_walk(res, controller, draw, steps)
     sim = res.plant(draw)
     thetas = {Domain(k): th for k, th in sim.thetas.items()}
     schedule = (varying_pace(thetas, draw.stride_cv, draw.stride_seed, res.degree)

@@ -86,6 +86,10 @@ class Draw:
     stride_cv: float = 0.0  # coefficient of variation
     stride_seed: int = 0
     armature: float = 1.0  # factor on the plant's drives' armature (multi-contact gaits)
+    # the person's walking speed over a gait library (m/s): the one it starts at and the one
+    # it changes to (orchestrator.sweep.contact.speed_change); None: the gait's own
+    speed_start: float | None = None
+    speed_end: float | None = None
 
     def columns(self) -> dict[str, Any]:
         """The draw as flat result columns (``draw_`` prefix, offsets and segment masses one
@@ -203,7 +207,7 @@ def make_draw(spec: SweepSpec, family: str, index: int) -> Draw:
                 get("human.stride_cv", 0.0),
                 int(quantity_rng(spec.seed, family, index, "human.stride_seed")
                     .integers(0, SEED_LIMIT)) if "human.stride_cv" in q else 0,
-                get("plant.armature", 1.0))
+                get("plant.armature", 1.0), *get("human.speed", [None, None], 2))
 
 
 def run_keys(spec: SweepSpec) -> Iterator[RunKey]:

@@ -293,7 +293,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, scheduler: str | None = None,
     digest = art.digest()
     store = ResultStore(Path(out))
     files = {"gait": art.gait, "tube": art.tube, "fmu": art.fmu, "subject": art.subject,
-             "device": art.device}
+             "device": art.device, "library": art.library}
     store.check(spec, art.hashes(), digest)
     keys = list(run_keys(spec))
     have = done_keys(out)

@@ -66,6 +66,7 @@ class Artifacts:
     fmu: bytes | None = None
     subject: bytes | None = None
     device: bytes | None = None
+    library: bytes | None = None
 
     @classmethod
     def from_spec(cls, spec: SweepSpec, fmu: Path | None = None) -> Artifacts:
@@ -76,13 +77,17 @@ class Artifacts:
 
         return cls(spec.gait.read_bytes(), read(spec.tube),
                    read(fmu or spec.fmu) if spec.backend == SweepBackend.FMU else None,
-                   read(spec.subject), read(spec.device))
+                   read(spec.subject), read(spec.device), read(spec.library))
 
     def hashes(self) -> dict[str, str | None]:
-        """sha256 of each file (None if absent)."""
-        return {k: (hashlib.sha256(v).hexdigest() if v is not None else None)
-                for k, v in (("gait", self.gait), ("tube", self.tube), ("fmu", self.fmu),
-                             ("subject", self.subject), ("device", self.device))}
+        """sha256 of each file (None if absent; the library named only when given, so an
+        older sweep's digest stands)."""
+        out = {k: (hashlib.sha256(v).hexdigest() if v is not None else None)
+               for k, v in (("gait", self.gait), ("tube", self.tube), ("fmu", self.fmu),
+                            ("subject", self.subject), ("device", self.device))}
+        if self.library is not None:
+            out["library"] = hashlib.sha256(self.library).hexdigest()
+        return out
 
     def digest(self) -> str:
         return canonical_hash(self.hashes())

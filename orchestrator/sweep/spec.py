@@ -27,6 +27,9 @@ quantity given as a number (fixed) or a distribution::
     human.stride_cv        = {dist = "uniform", low = 0.0, high = 0.03}   # the person's
                             # pace varying from stride to stride, coefficient of variation
                             # (characterization.gait.pace_variability; multi-contact gaits only)
+    human.speed            = {dist = "uniform", low = 0.7, high = 1.3}    # m/s, the speed the
+                            # person starts at and the one it changes to (two draws), walking
+                            # the spec's gait library (orchestrator.sweep.contact; multi-contact)
     plant.segment_mass     = {dist = "uniform", low = 0.8, high = 1.2}    # the simulated
                             # human's segment masses (hat, thigh, shank, foot, each drawn)
     plant.hat_com          = 1.0      # HAT COM distance from the hip, factor
@@ -63,7 +66,8 @@ recorded.
 A multi-contact gait (``gait fit --domains multicontact``) sweeps the person's graph
 (:mod:`orchestrator.sweep.contact`): its controllers ``clfqp`` and ``phase-pd``, the
 simulator backend, the quantities ``human.bezier_amplitude``, ``human.output_offset``,
-``human.stiffness``, ``human.stride_cv``, ``plant.armature`` and ``sensor.*``, and
+``human.stiffness``, ``human.stride_cv``, ``human.speed`` (with ``library``, a gait library
+of the gait's person: ``hpcosim gait library``), ``plant.armature`` and ``sensor.*``, and
 optionally a tube fitted around it (:func:`orchestrator.sweep.contact_spec.check_multicontact`).
 
 A bad spec is refused with one line naming the file and the field (:class:`SpecError`).
@@ -179,11 +183,23 @@ class HumanGroup(_Group):
     stiffness: Dist | None = None
     delay: Dist | None = None
     stride_cv: Dist | None = None
+    speed: Dist | None = None
 
     @field_validator("bezier_amplitude", "delay", "stride_cv")
     @classmethod
     def _nonnegative(cls, d: Any) -> Any:
         return _check_range(d, 0.0, strict=False)
+
+    @field_validator("speed")
+    @classmethod
+    def _speed(cls, d: Any) -> Any:
+        from hp_model.speed_profile import SPEED_RANGE
+
+        s = None if d is None else support(d)
+        if d is not None and (s is None or s[0] < SPEED_RANGE[0] or s[1] > SPEED_RANGE[1]):
+            raise ValueError(f"must draw within {SPEED_RANGE[0]:g}-{SPEED_RANGE[1]:g} m/s "
+                             "(a bounded distribution)")
+        return d
 
     @field_validator("stiffness")
     @classmethod
@@ -306,6 +322,8 @@ class SweepSpec(StrictConfig):
     name: str = "sweep"
     gait: Path
     tube: Path | None = None
+    #: a gait library of the gait's person (``hpcosim gait library``): ``human.speed``'s
+    library: Path | None = None
     subject: Path | None = None
     device: Path | None = None
     controllers: tuple[ControllerName, ...] = Field(min_length=1)
@@ -385,7 +403,7 @@ def parse_spec(data: dict[str, Any], path: Path) -> SweepSpec:
         raise SpecError(f"{path}: {validation_message(e, skip=DISTRIBUTIONS)}") from None
     base = path.parent
     files: dict[str, Path] = {}
-    for name in ("gait", "tube", "subject", "device", "fmu"):
+    for name in ("gait", "tube", "library", "subject", "device", "fmu"):
         p = getattr(spec, name)
         if p is None:
             continue

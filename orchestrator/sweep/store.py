@@ -63,7 +63,8 @@ COLUMNS = pa.schema([
     ("draw_velocity_resolution", pa.float64()), ("draw_sensor_seed", pa.int64()),
     ("draw_imu_bias", pa.float64()), ("draw_imu_noise", pa.float64()),
     ("draw_stride_cv", pa.float64()), ("draw_stride_seed", pa.int64()),
-    ("draw_armature", pa.float64()),
+    ("draw_armature", pa.float64()), ("draw_speed_start", pa.float64()),
+    ("draw_speed_end", pa.float64()),
     ("steps_completed", pa.int64()), ("success", pa.bool_()), ("failed", pa.bool_()),
     ("reason", pa.string()), ("fall_reason", pa.string()), ("fail_t", pa.float64()),
     ("fail_tau", pa.float64()),
@@ -81,7 +82,8 @@ COLUMNS = pa.schema([
 #: columns that depend on where and when a run ran, not on what it computed
 VOLATILE = ("wall_s", "worker", "setup", "session", "seq")
 ARTIFACT_NAMES = {"gait": "gait.json", "tube": "tube.json", "fmu": "human.fmu",
-                  "subject": "subject.toml", "device": "device.toml"}
+                  "subject": "subject.toml", "device": "device.toml",
+                  "library": "library.json"}
 
 
 def _now() -> str:
