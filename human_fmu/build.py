@@ -374,7 +374,8 @@ def config_header(table: _Table, cl: ClosedLoop, guid: str) -> str:
         lines.append(f"#define HPFMU_N_{up} {len(vs)}")
         for v in vs:
             lines.append(f"#define VR_{v.macro} {v.vr}")
-        kind = "".join({"input": "i", "output": "o", "parameter": "p", "local": "c"}[v.causality]
+        kind = "".join("t" if v.variability == "tunable" else
+                       {"input": "i", "output": "o", "parameter": "p", "local": "c"}[v.causality]
                        for v in vs)
         lines.append(f"static const char HPFMU_{up}_KIND[{len(vs) + 1}] = {_c_str(kind)};")
         lines.append(f"static const char *const HPFMU_{up}_NAME[{len(vs)}] = {{")

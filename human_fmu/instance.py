@@ -31,7 +31,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from hp_model.domains import Domain
+from hp_model.domains import Domain, DomainGraph
 
 #: sensor outputs in the order :meth:`HumanFmu.read` returns them (rad, rad/s, N, phase, rad)
 SENSORS = ("knee_angle", "ankle_angle", "knee_velocity", "ankle_velocity", "foot_load", "tau",
@@ -221,6 +221,11 @@ class HumanFmu:
         #: the domains the FMU's human tracks (its graph's), each with its packed gait's size
         self.theta_sizes = {d: sum(1 for n in self.vr if n.startswith(f"theta_{d}["))
                             for d in Domain if f"theta_{d}[1]" in self.vr}
+        #: its graph (the domains it tracks a gait in) and each domain's gait's references
+        self.graph = next((g for g in DomainGraph if set(g.domains) == set(self.theta_sizes)),
+                          None)
+        self._theta_refs = {d: self.vrs(f"theta_{d}[{i + 1}]" for i in range(n))
+                            for d, n in self.theta_sizes.items()}
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(self.unzipdir),
                              modelIdentifier=self.md.coSimulation.modelIdentifier,
                              instanceName=instance)
@@ -287,6 +292,16 @@ class HumanFmu:
         values.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
         values.update(real or {})
         self.start(values, {"human_seed": 0, "initial_domain": 0})
+
+    def set_gait(self, domain: Domain, theta: np.ndarray) -> None:
+        """The packed gait the human tracks the next time it enters ``domain`` (the theta
+        parameters are tunable in step mode: the FMU takes them up at the domain's entry,
+        with its human perturbation on top).  ValueError for a gait of the wrong size."""
+        refs = self._theta_refs[Domain(domain)]
+        th = np.asarray(theta, float)
+        if th.size != len(refs):
+            raise ValueError(f"theta_{domain} of size {th.size}; the FMU has {len(refs)}")
+        self.fmu.setReal(refs, th.tolist())
 
     def model_description_xml(self) -> bytes:
         return (self.unzipdir / "modelDescription.xml").read_bytes()

@@ -9,7 +9,7 @@ element, the rest follow consecutively).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -72,13 +72,16 @@ class _Table:
 
     def array(self, base: str, type_: str, causality: str, descriptions: Sequence[str],
               units: Sequence[str | None], starts: Sequence | None = None,
-              feedthrough: Sequence[bool] | None = None) -> None:
+              feedthrough: Sequence[bool] | None = None, tunable: bool = False) -> None:
         first = self.count[type_]
         for k, (desc, unit) in enumerate(zip(descriptions, units, strict=True)):
             self.add(f"{base}[{k + 1}]", type_, causality, desc,
                      start=None if starts is None else starts[k], unit=unit,
                      macro=f"{base.upper()}_{k + 1}",
                      feedthrough=bool(feedthrough[k]) if feedthrough is not None else False)
+        if tunable:  # parameters settable in step mode
+            n = len(descriptions)
+            self.vars[-n:] = [replace(v, variability="tunable") for v in self.vars[-n:]]
         self.arrays[base.upper()] = (type_, first, len(descriptions))
 
 
@@ -180,11 +183,13 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
           "why: " + "; ".join(f"{int(r)} {r.description}" for r in FallReason))
     t.add("torque_clamped", "Integer", "output",
           "torque inputs set outside the device's motor limits so far (applied at the limit)")
-    # parameters: the gait the human tracks and its feedback gains
+    # parameters: the gait the human tracks and its feedback gains; a domain's gait is tunable
+    # in step mode, taken up the next time the walker enters the domain (a person changing
+    # speed: the master sets the curves of the speed commanded, README)
     for d in graph.domains:
         desc, units = theta_descriptions(d, degree, graph)
         t.array(f"theta_{d}", "Real", "parameter", desc, units,
-                [float(v) for v in thetas[d]])
+                [float(v) for v in thetas[d]], tunable=True)
     t.add("fl_eps", "Real", "parameter", "human feedback linearization gain on y1",
           start=float(gains[0]), unit="1/s")
     t.add("fl_kp", "Real", "parameter", "human feedback linearization gain kp on y2",

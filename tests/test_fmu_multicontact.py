@@ -182,3 +182,52 @@ def test_clfqp_walks_the_fmu_through_the_loop(fmu_path, cycle, walked):
     modes = set(log.mode)
     assert {"stance", "swing"} <= {str(m) for m in modes}
     assert log.fallback_count == 0
+
+
+def test_a_gait_set_in_step_mode_is_taken_up_as_the_walker_enters_its_domain(fmu_path, cycle,
+                                                                             walked):
+    """The master's gait schedule (``FmuPlant(gaits=...)``, a person changing speed): the
+    FMU walks the in-process simulator's walk under the same schedule, to rounding; a gait
+    that is not one (v_hip <= 0) is refused and the domain keeps its own."""
+    from human_fmu.instance import HumanFmu
+    from orchestrator.experiments.contact_perturbations import paced
+    from orchestrator.loop.plant import FmuPlant
+
+    _, traj, gait = cycle
+    sim, nominal = walked
+    base, fast = gait.thetas(), paced(gait, 1.03).thetas()
+    entries = [i.t for i in nominal.impacts]
+    switch = 0.5 * (entries[2] + entries[3])  # between two entries: both ask alike
+
+    def schedule(d: Domain, t: float) -> np.ndarray:
+        return fast[d] if t >= switch else base[d]
+
+    q0, qd0 = start_state(traj)
+    ref = sim.run(q0, qd0, Domain.PS, steps=5, duration=10.0,
+                  policy=held_oracle(sim.cl, base, sim.gains), gaits=schedule)
+    assert ref.fall is None
+    n = min(ref.t.size, nominal.t.size)
+    assert np.abs(ref.q[:n] - nominal.q[:n]).max() > 1e-3  # the schedule changed the walk
+
+    def fmu_walk(gaits, torques: np.ndarray) -> np.ndarray:
+        fmu = HumanFmu(fmu_path)
+        try:
+            fmu.start_walk(base, q0, qd0)
+            plant = FmuPlant(fmu, DT, gaits=gaits)
+            x = []
+            for u in torques:
+                if plant.observe().held:
+                    break
+                truth = plant.actuate(u)
+                x.append(np.r_[truth.q, truth.qd])
+                plant.advance()
+            return np.array(x)
+        finally:
+            fmu.free()
+
+    assert np.abs(fmu_walk(schedule, ref.u[:, 4:6]) - np.c_[ref.q, ref.qd]).max() <= 1e-9
+    bad = {d: th.copy() for d, th in fast.items()}
+    for th in bad.values():
+        th[-3] = -1.0  # v_hip
+    x = fmu_walk(lambda d, t: bad[d] if t >= switch else base[d], nominal.u[:, 4:6])
+    assert np.abs(x - np.c_[nominal.q, nominal.qd]).max() <= 1e-9  # the base gait kept

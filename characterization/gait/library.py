@@ -38,6 +38,7 @@ two nearest speeds' regressed curves).
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -232,16 +233,36 @@ class GaitLibrary:
         """The gaits' speeds (m/s), increasing."""
         return np.array([g.speed for g in self.gaits])
 
+    def _between(self, speed: float) -> tuple[int, float]:
+        """The lower of the two nearest speeds' places and the weight of the upper one at
+        ``speed`` (m/s, clamped to the library's range; (0, 0) for a single speed)."""
+        v = self.speeds
+        if len(v) == 1:
+            return 0, 0.0
+        s = float(np.clip(speed, v[0], v[-1]))
+        j = int(np.clip(np.searchsorted(v, s) - 1, 0, len(v) - 2))
+        return j, (s - v[j]) / (v[j + 1] - v[j])
+
+    @functools.cached_property
+    def _thetas(self) -> tuple[dict[Domain, np.ndarray], ...]:
+        return tuple(c.thetas() for c in self.curves)
+
+    def theta_at(self, speed: float, domain: Domain) -> np.ndarray:
+        """``domain``'s packed gait at ``speed`` (m/s): :meth:`gait_at`'s, interpolated
+        packed (the same numbers, without making the whole gait: a person changing speed
+        asks for it at every domain's entry, the FMU's master at every period)."""
+        j, w = self._between(speed)
+        if len(self.curves) == 1:
+            return self._thetas[0][domain].copy()
+        return (1 - w) * self._thetas[j][domain] + w * self._thetas[j + 1][domain]
+
     def gait_at(self, speed: float) -> ContactGait:
         """The virtual constraints at ``speed`` (m/s; clamped to the library's range): each
         domain's coefficients, v_hip, p_min and p_max interpolated linearly between the two
         nearest speeds."""
-        v = self.speeds
-        s = float(np.clip(speed, v[0], v[-1]))
-        j = int(np.clip(np.searchsorted(v, s) - 1, 0, len(v) - 2)) if len(v) > 1 else 0
-        if len(v) == 1:
+        if len(self.curves) == 1:
             return self.curves[0]
-        w = (s - v[j]) / (v[j + 1] - v[j])
+        j, w = self._between(speed)
         a, b = self.curves[j], self.curves[j + 1]
         params = {}
         for d in GRAPH.domains:
@@ -318,6 +339,6 @@ def speed_schedule(library: GaitLibrary, profile: SpeedProfile) -> GaitSchedule:
     the step)."""
 
     def gait(d: Domain, t: float) -> np.ndarray:
-        return library.gait_at(profile.at(t)).thetas()[d]
+        return library.theta_at(profile.at(t), d)
 
     return gait

@@ -187,10 +187,20 @@ class FmuPlant:
     happened).  The ``fall_code`` output gives the reason (:class:`FmuEndError` without one);
     the :class:`Fall` has the observed time, domain and phase (the FMU reports its code,
     not the event's numbers).  A fall of the initial state (no step taken) is read from the
-    ``fall`` output."""
+    ``fall`` output.
 
-    def __init__(self, fmu: HumanFmu, dt: float) -> None:
-        self.fmu, self.dt = fmu, float(dt)
+    ``gaits``: the gait the human tracks in each domain it enters (a person changing speed:
+    :data:`hp_model.simulator.GaitSchedule`), the FMU started on the schedule's gaits at
+    t = 0.  Before each step the plant sets the gait of the domain that follows the
+    current one to the schedule's at the step's start (:meth:`HumanFmu.set_gait`; the FMU
+    takes it up as it enters that domain): the in-process plant asks at the entry's time
+    instead, within one period of it."""
+
+    def __init__(self, fmu: HumanFmu, dt: float, gaits: GaitSchedule | None = None) -> None:
+        if gaits is not None and fmu.graph is None:
+            raise ValueError("a gait schedule needs an FMU of a known domain graph")
+        self.fmu, self.dt, self.gaits = fmu, float(dt), gaits
+        self._domain: Domain | None = None
         self._k = 0
         self._fall: Fall | None = None
         self._obs: Observation | None = None
@@ -224,6 +234,7 @@ class FmuPlant:
         self._state = None if self._apart else r.state
         if not obs.held:
             self._obs = obs
+        self._domain = dom
         return obs
 
     def read_truth(self) -> None:
@@ -247,6 +258,10 @@ class FmuPlant:
     def advance(self) -> None:
         if self._ended_at is not None:
             raise RuntimeError("the FMU has ended the run")
-        if not self.fmu.step(self._k * self.dt, self.dt):  # fmi2Discard + fmi2Terminated
+        t = self._k * self.dt
+        if self.gaits is not None and self._domain is not None and self.fmu.graph is not None:
+            nxt = self.fmu.graph.next(self._domain)
+            self.fmu.set_gait(nxt, self.gaits(nxt, t))
+        if not self.fmu.step(t, self.dt):  # fmi2Discard + fmi2Terminated
             self._ended_at = self.fmu.last_successful_time()
         self._k += 1
