@@ -22,7 +22,8 @@ switch and the library.
   margin centres the controller in the speeds it walks: on gaitalytics' library a
   controller made at u walked a person at v (12 steps from the cycle's start) for
   v - 0.08 <= u <= v + 0.015 m/s (``clfqp`` at 0.9 m/s; contact-pd v + 0.05), and fell
-  within two steps when made faster (docs/gait-design.md).
+  within two steps when made faster, up to 1.1 m/s; from 1.2 m/s ``clfqp``'s window turns
+  to the faster side, where the margin does not serve it (docs/gait-design.md).
 - **Start**: the controller of ``speed`` (the speed the person starts at, a setting as a
   prosthetist sets one) until the first flat stance is read.
 
