@@ -9,10 +9,14 @@ each tick timed.  Issue 37's target: the controller tick <= 40 us median.  The m
 shared and noisy: the spread over the repeats is printed with the median.
 
 With ``--cycle GAIT.json`` the cycle of a multi-contact gait file instead (``gait fit``'s:
-its model carries the drives' armature, which the committed cycle predates).
+its model carries the drives' armature, which the committed cycle predates).  With
+``--library LIB.json`` (``hpcosim gait library``) the two controllers following the
+person's speed over it (:func:`orchestrator.cosim.contact_controllers.speed_following`),
+the person walking the library at ``--speed`` (issue 38's target: the same 40 us).
 
 Usage: python benchmarks/bench_contact_controllers.py [--cycle GAIT.json]
-       [--swing-phase time|thigh] [--steps 6] [--repeats 5] [--json out.json]
+       [--library LIB.json [--speed 0.9]] [--swing-phase time|thigh] [--steps 6]
+       [--repeats 5] [--json out.json]
 """
 
 from __future__ import annotations
@@ -74,12 +78,27 @@ def controllers(path: Path | None = None, swing_phase: str = "time"
             "contact-pd": pd}, (sim, traj)
 
 
+def following(path: Path, speed: float, swing_phase: str = "time"
+              ) -> tuple[dict[str, Controller], Any]:
+    """The two controllers following the person's speed over the library at ``path``,
+    started at ``speed`` (m/s), and the in-process simulator of its curves there with the
+    cycle's start at that speed."""
+    from characterization.gait.library import load_gait_library, start_at
+    from orchestrator.cosim.contact_controllers import speed_following
+
+    lib = load_gait_library(path)
+    sim = loop_simulator(lib.model, lib.gait_at(speed), GAINS)
+    return ({c: speed_following(lib, c, speed, swing_phase, sim.cl)
+             for c in ("clfqp", "contact-pd")}, (sim, start_at(lib, speed)))
+
+
 def walk_measurements(ctl: Controller, sim: Any, traj: Any, steps: int
                       ) -> list[ProsthesisMeasurement]:
-    """What ``ctl`` read over ``steps`` steps of the cycle (up to a fall, said on a line:
-    its ticks still measure the controller's cost)."""
+    """What ``ctl`` read over ``steps`` steps of the cycle (``traj``: its trajectories, or
+    the (q0, qd0) to start from; up to a fall, said on a line: its ticks still measure the
+    controller's cost)."""
     ctl.reset()
-    q0, qd0 = start_state(traj)
+    q0, qd0 = traj if isinstance(traj, tuple) else start_state(traj)
     plant = SimulatorPlant(sim, q0, qd0, GRAPH.domains[0])
     read: list[ProsthesisMeasurement] = []
     while plant.run.steps < steps:
@@ -130,12 +149,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycle", type=Path, help="multi-contact gait file (default: the "
                     "committed openOFM cycle)")
+    ap.add_argument("--library", type=Path, help="gait library (hpcosim gait library): the "
+                    "controllers following the person's speed over it")
+    ap.add_argument("--speed", type=float, default=0.9, help="m/s, with --library")
     ap.add_argument("--swing-phase", choices=("time", "thigh"), default="time")
     ap.add_argument("--steps", type=int, default=6)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path)
     a = ap.parse_args()
-    ctls, (sim, traj) = controllers(a.cycle, a.swing_phase)
+    ctls, (sim, traj) = (following(a.library, a.speed, a.swing_phase) if a.library else
+                         controllers(a.cycle, a.swing_phase))
     rows = {name: measure(c, walk_measurements(c, sim, traj, a.steps), a.repeats)
             for name, c in ctls.items()}
     print("| tick | ticks x repeats | median (us) | range over repeats | p99 | stance | swing |")
