@@ -321,8 +321,10 @@ def speed_following(library: GaitLibrary, controller: str = "clfqp",
     (:class:`~prosthesis_controller.speed_following.SpeedFollowing`): ``controller``
     ("clfqp" or "contact-pd") made from each speed's gait and its held walk, starting on
     ``speed`` (m/s; None: the fitted gait's), switching between its speeds and others every
-    ``resolution`` m/s between them (:func:`~prosthesis_controller.speed_following.filled`).
-    HeldOracleFellError naming the speed whose held walk falls (no tables from it)."""
+    ``resolution`` m/s between them (:func:`~prosthesis_controller.speed_following.filled`),
+    its estimate calibrated on the person walking each of those speeds (:func:`walk_rate`,
+    about 0.4 s each).  HeldOracleFellError naming the speed whose held walk falls (no
+    tables from it)."""
     if controller not in ("clfqp", "contact-pd"):
         raise ValueError(f"controller {controller!r}: choose clfqp or contact-pd")
     model = library.model
