@@ -158,7 +158,7 @@ class ContactResources:
             tube_path = self._folder.path / "tube.json"
             tube_path.write_bytes(artifacts.tube)
             self.tube = load_tube(tube_path, self.run.hash)
-        self._library: GaitLibrary | None = None
+        self._library: tuple[GaitLibrary, ClosedLoop] | None = None
         self._library_bytes = artifacts.library
         #: the controllers that follow the person's speed over the library (made when a
         #: draw first needs one)
@@ -185,22 +185,27 @@ class ContactResources:
         return HybridSimulator(model, cl, draw_gait(self.run.gait, draw), draw_gains(draw))
 
     @property
-    def library(self) -> GaitLibrary:
-        """The spec's gait library (read once; ValueError without one)."""
+    def library(self) -> tuple[GaitLibrary, ClosedLoop]:
+        """The spec's gait library and its walker's closed loop (made once per worker;
+        ValueError without one)."""
         if self._library is None:
             if self._library_bytes is None:
                 raise ValueError("a human.speed draw needs the spec's 'library'")
             path = self._folder.path / "library.json"
             path.write_bytes(self._library_bytes)
-            self._library = load_gait_library(path)
+            lib = load_gait_library(path)
+            self._library = lib, ClosedLoop(lib.model,
+                                            lib.curves[0].params[GRAPH.domains[0]].degree)
         return self._library
 
     def following(self, controller: str) -> SpeedFollowing:
         """``controller`` following the person's speed over the library (made once per
-        worker: each library speed's held walk and controller, about 5 s)."""
+        worker: each library speed's held walk and controller, its estimate's calibration
+        walks; 10-30 s)."""
         if controller not in self._following:
-            self._following[controller] = speed_following(self.library,
-                                                          _FOLLOWING[controller])
+            lib, cl = self.library
+            self._following[controller] = speed_following(lib, _FOLLOWING[controller],
+                                                          closed_loop=cl)
         return self._following[controller]
 
     def close(self) -> None:
@@ -213,9 +218,9 @@ def speed_walk(res: ContactResources, controller: str, draw: Draw, steps: int
     from orchestrator.sweep.runs import encoder_of
 
     assert draw.speed_start is not None and draw.speed_end is not None
-    lib = res.library
+    lib, cl = res.library
     profile = speed_change(draw.speed_start, draw.speed_end)
-    sim = loop_simulator(lib.model, lib.gait_at(draw.speed_start), GAINS)
+    sim = loop_simulator(lib.model, lib.gait_at(draw.speed_start), GAINS, cl)
     schedule, start = speed_schedule(lib, profile), start_at(lib, draw.speed_start)
     if controller == ORACLE:
         policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()},
