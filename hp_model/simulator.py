@@ -559,8 +559,10 @@ class SimulationRun:
         return sum(i.starts_step for i in self.impacts)
 
     def _track(self, d: Domain, t: float) -> None:
-        """Entering ``d`` at t s: the gait the human tracks there from the schedule, if
-        any (ValueError when it is not one of ``d``'s packed gaits)."""
+        """Entering ``d`` in the period that starts at t s: the gait the human tracks there
+        from the schedule at t (sampled at the period's start, as the FMU's master sets it
+        before each step: the same walk either way), if any (ValueError when it is not one
+        of ``d``'s packed gaits)."""
         if self._gaits is None:
             return
         th = np.asarray(self._gaits(d, t), dtype=float)
@@ -694,7 +696,7 @@ class SimulationRun:
                 if sim.model.domains[d].swing_frame is None and self._phase[d](x) >= 1.0:
                     # a lift-off (a heel leaves the ground): no impact, at the step's end
                     d = sim.model.graph.next(d)
-                    self._track(d, t + (j + 1) * h)
+                    self._track(d, t)
                     self._z_prev = sim.guard_height(d, x)
                     self._tau_peak = -np.inf
         self._x, self.domain = x, d
@@ -707,7 +709,7 @@ class SimulationRun:
         touchdown on heel or toe flagged, the delayed human's pipeline restarted, the guard,
         the phase's running peak and the stall clock reset."""
         sim = self.sim
-        self._track(d, impact.t)
+        self._track(d, self.t)
         self.impacts.append(impact)
         if abs(impact.foot_pitch) > sim.opt.max_touchdown_pitch:
             self._heel = impact.foot_pitch

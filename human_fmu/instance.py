@@ -281,6 +281,16 @@ class HumanFmu:
         (q0, qd0) in its graph's first domain (ps), with no FMU-side perturbation or offset:
         the state the in-process simulator starts from; ``real``: other Real parameters (e.g.
         fall limits)."""
+        values = self.walk_values(thetas, q0, qd0)
+        values.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
+        values.update(real or {})
+        self.start(values, {"human_seed": 0, "initial_domain": 0})
+
+    def walk_values(self, thetas: Mapping[Domain, np.ndarray], q0: np.ndarray,
+                    qd0: np.ndarray) -> dict[str, float]:
+        """The Real start values of the human tracking ``thetas`` (packed gait per domain of
+        its graph) from (q0, qd0) (:meth:`start`'s ``real``).  ValueError for a gait of
+        another size than the FMU's."""
         values: dict[str, float] = {}
         for d, size in self.theta_sizes.items():
             th = np.asarray(thetas[d], float)
@@ -289,9 +299,7 @@ class HumanFmu:
             values.update({f"theta_{d}[{i + 1}]": float(v) for i, v in enumerate(th)})
         values.update({f"q0[{i + 1}]": float(v) for i, v in enumerate(q0)})
         values.update({f"qd0[{i + 1}]": float(v) for i, v in enumerate(qd0)})
-        values.update(human_perturbation=0.0, offset_knee=0.0, offset_ankle=0.0)
-        values.update(real or {})
-        self.start(values, {"human_seed": 0, "initial_domain": 0})
+        return values
 
     def set_gait(self, domain: Domain, theta: np.ndarray) -> None:
         """The packed gait the human tracks the next time it enters ``domain`` (the theta

@@ -22,6 +22,14 @@ Layout (``numpy.savez``, no pickles; SI units, rad):
 
 Older schemas (1: no qdd_ref, no robust term; 2: no swing pitch) are refused: the file is a
 cache, made again from the gait.
+
+A controller following the person's speed over a gait library
+(:class:`~prosthesis_controller.speed_following.SpeedFollowing`) has its own kind,
+``hpcosim-speed-following-controller`` (schema 1): the model as above, the library's hash,
+its speeds (m/s), the resolution of the controllers switched between (m/s), the estimate's
+calibration (``rate_speeds``, ``rates``, m/s) and per library speed i a controller's meta
+(``controllers``) with its arrays under ``c<i>.`` (``c0.stance.phase``, ...).  The controllers
+between the library's speeds are blended from these when loaded, as in process.
 """
 
 from __future__ import annotations
@@ -49,35 +57,74 @@ from prosthesis_controller.contact_phase_pd import (
     PDGains,
     PhaseTable,
 )
+from prosthesis_controller.speed_following import FollowingSetup, SpeedFollowing
 
 KIND = "hpcosim-contact-controller"
 SCHEMA_VERSION = 3  # 3: the swing's thigh pitch (the swing phase's measure)
+#: a speed-following controller's file (:class:`FollowingSetup`): the controllers at a gait
+#: library's speeds, each under its own prefix ``c<i>.`` as above, and the estimate's
+#: calibration
+FOLLOWING_KIND = "hpcosim-speed-following-controller"
+FOLLOWING_SCHEMA_VERSION = 1
 _QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius")
 
 
-def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,
-                            model: HumanProsthesisModel, gait_hash: str) -> None:
-    """Write ``ctl`` (made for ``model`` and the gait of hash ``gait_hash``) atomically."""
-    law, tab, qp = ctl.law, ctl.law.tables, ctl.stance
-    meta = {"kind": KIND, "schema_version": SCHEMA_VERSION,
-            "model_hash": model.parameter_hash(), "gait_hash": gait_hash,
+def _model_meta(model: HumanProsthesisModel) -> dict[str, Any]:
+    return {"model_hash": model.parameter_hash(),
             "subject": model.subject.model_dump(mode="json"),
-            "device": model.device.model_dump(mode="json"),
-            "progress": list(tab.progress), "swing_time": tab.swing_time,
+            "device": model.device.model_dump(mode="json")}
+
+
+def _controller_parts(ctl: ContactClfQp, prefix: str = ""
+                      ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The meta (JSON) and the arrays (named under ``prefix``) of one controller."""
+    law, tab, qp = ctl.law, ctl.law.tables, ctl.stance
+    meta = {"progress": list(tab.progress), "swing_time": tab.swing_time,
             "flat": list(tab.flat),
             "stance_gains": asdict(law.stance_gains), "swing_gains": asdict(law.swing_gains),
             "swing_phase": law.swing_phase,
             "gear": list(law.gear), "limits": list(law.limits), "config": asdict(ctl.config)}
     arrays: dict[str, Any] = {
-        "meta": np.array(dumps(meta)),
         "stance.phase": tab.stance.phase, "stance.values": tab.stance.values,
         "swing.phase": tab.swing.phase, "swing.values": tab.swing.values,
         "swing.pitch": tab.swing_pitch,
         "qp.domain": np.array([d.code for d in qp.domain]),
         **{f"qp.{k}": getattr(qp, k) for k in _QP}}
+    return meta, {prefix + k: v for k, v in arrays.items()}
+
+
+def _write(path: str | os.PathLike[str], meta: dict[str, Any], arrays: dict[str, Any]) -> None:
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, meta=np.array(dumps(meta)), **arrays)
     atomic_write_bytes(path, buf.getvalue())
+
+
+def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,
+                            model: HumanProsthesisModel, gait_hash: str) -> None:
+    """Write ``ctl`` (made for ``model`` and the gait of hash ``gait_hash``) atomically."""
+    meta, arrays = _controller_parts(ctl)
+    _write(path, {"kind": KIND, "schema_version": SCHEMA_VERSION, **_model_meta(model),
+                  "gait_hash": gait_hash, **meta}, arrays)
+
+
+def save_speed_following(path: str | os.PathLike[str], setup: FollowingSetup,
+                         model: HumanProsthesisModel, library_hash: str) -> None:
+    """Write ``setup`` (its controllers ``clfqp``'s, made for ``model`` from the gait library
+    of hash ``library_hash``) atomically."""
+    metas: list[dict[str, Any]] = []
+    arrays: dict[str, Any] = {}
+    for i, c in enumerate(setup.controllers):
+        if not isinstance(c, ContactClfQp):
+            raise TypeError(f"controller {i}: a file holds clfqp controllers, not "
+                            f"{type(c).__name__}")
+        m, a = _controller_parts(c, f"c{i}.")
+        metas.append(m)
+        arrays.update(a)
+    _write(path, {"kind": FOLLOWING_KIND, "schema_version": FOLLOWING_SCHEMA_VERSION,
+                  **_model_meta(model), "library_hash": library_hash,
+                  "speeds": list(setup.speeds), "resolution": setup.resolution,
+                  "rate_speeds": list(setup.rate_speeds), "rates": list(setup.rates),
+                  "controllers": metas}, arrays)
 
 
 def _gains(meta: dict[str, Any], key: str) -> PDGains:
@@ -85,11 +132,8 @@ def _gains(meta: dict[str, Any], key: str) -> PDGains:
     return PDGains((float(g["kp"][0]), float(g["kp"][1])), (float(g["kd"][0]), float(g["kd"][1])))
 
 
-def load_contact_controller(path: str | os.PathLike[str], model_hash: str | None = None
-                            ) -> tuple[ContactClfQp, HumanProsthesisModel]:
-    """The controller of the file and the model it was made for (ArtifactError naming the
-    file and field when it is not such a file, or, with ``model_hash``, made for another
-    model)."""
+def _read(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The meta and the arrays of a controller file (ArtifactError naming it)."""
     src = str(path)
     try:
         with np.load(Path(path), allow_pickle=False) as z:
@@ -100,38 +144,113 @@ def load_contact_controller(path: str | os.PathLike[str], model_hash: str | None
         meta = json.loads(str(data.pop("meta")))
     except (KeyError, ValueError) as e:
         raise ArtifactError(f"{src}: field 'meta': missing or not JSON ({e})") from None
-    if meta.get("kind") != KIND or meta.get("schema_version") != SCHEMA_VERSION:
-        raise ArtifactError(f"{src}: field 'kind': not a multi-contact controller file of "
-                            f"version {SCHEMA_VERSION} ({meta.get('kind')!r}, "
-                            f"{meta.get('schema_version')!r})")
+    if not isinstance(meta, dict):
+        raise ArtifactError(f"{src}: field 'meta': not a JSON object")
+    return meta, data
+
+
+def _model(src: str, meta: dict[str, Any], model_hash: str | None) -> HumanProsthesisModel:
     if model_hash is not None and meta.get("model_hash") != model_hash:
         raise ArtifactError(f"{src}: field 'model_hash': made for another model "
                             f"({meta.get('model_hash')}, not {model_hash})")
-    field = "meta"
     try:
         model = HumanProsthesisModel(SubjectConfig.model_validate(meta["subject"]),
                                      DeviceConfig.model_validate(meta["device"]),
                                      graph=DomainGraph.MULTICONTACT)
         if model.parameter_hash() != meta["model_hash"]:
             raise ValueError("its subject and device give another model than its model_hash")
+    except (KeyError, TypeError, ValueError) as e:
+        raise ArtifactError(f"{src}: field 'meta': {e}") from None
+    return model
+
+
+def _controller(src: str, meta: dict[str, Any], data: dict[str, Any], model: HumanProsthesisModel,
+                prefix: str = "") -> ContactClfQp:
+    """The controller of ``meta`` and the arrays under ``prefix`` (ArtifactError naming the
+    field)."""
+    field = f"{prefix}meta" if prefix else "meta"
+    try:
         tables = ContactGaitTables(
-            PhaseTable(data["stance.phase"], data["stance.values"]),
-            PhaseTable(data["swing.phase"], data["swing.values"]),
+            PhaseTable(data[f"{prefix}stance.phase"], data[f"{prefix}stance.values"]),
+            PhaseTable(data[f"{prefix}swing.phase"], data[f"{prefix}swing.values"]),
             (float(meta["progress"][0]), float(meta["progress"][1])),
             float(meta["swing_time"]), (float(meta["flat"][0]), float(meta["flat"][1])),
-            np.asarray(data["swing.pitch"], float))
+            np.asarray(data[f"{prefix}swing.pitch"], float))
         law = ContactPhasePD(tables, LegKinematics.of(model),
                              (float(meta["gear"][0]), float(meta["gear"][1])),
                              (float(meta["limits"][0]), float(meta["limits"][1])),
                              _gains(meta, "stance_gains"), _gains(meta, "swing_gains"),
                              str(meta["swing_phase"]))
-        field = "qp"
-        stance = StanceQp(domain=tuple(Domain.from_code(int(c)) for c in data["qp.domain"]),
-                          **{k: np.asarray(data[f"qp.{k}"], float) for k in _QP})
+        field = f"{prefix}qp"
+        stance = StanceQp(domain=tuple(Domain.from_code(int(c))
+                                       for c in data[f"{prefix}qp.domain"]),
+                          **{k: np.asarray(data[f"{prefix}qp.{k}"], float) for k in _QP})
         config = ContactClfConfig(**meta["config"])
     except (KeyError, TypeError, ValueError) as e:
         raise ArtifactError(f"{src}: field '{field}': {e}") from None
-    return ContactClfQp(law, stance, law.limits, config), model
+    return ContactClfQp(law, stance, law.limits, config)
 
 
-__all__ = ["KIND", "SCHEMA_VERSION", "load_contact_controller", "save_contact_controller"]
+def _check_kind(src: str, meta: dict[str, Any], kind: str, version: int) -> None:
+    if meta.get("kind") != kind or meta.get("schema_version") != version:
+        raise ArtifactError(f"{src}: field 'kind': not a {kind} file of version {version} "
+                            f"({meta.get('kind')!r}, {meta.get('schema_version')!r})")
+
+
+def load_contact_controller(path: str | os.PathLike[str], model_hash: str | None = None
+                            ) -> tuple[ContactClfQp, HumanProsthesisModel]:
+    """The controller of the file and the model it was made for (ArtifactError naming the
+    file and field when it is not such a file, or, with ``model_hash``, made for another
+    model)."""
+    src = str(path)
+    meta, data = _read(path)
+    _check_kind(src, meta, KIND, SCHEMA_VERSION)
+    model = _model(src, meta, model_hash)
+    return _controller(src, meta, data, model), model
+
+
+def load_speed_following(path: str | os.PathLike[str], model_hash: str | None = None
+                         ) -> tuple[FollowingSetup, HumanProsthesisModel, str]:
+    """The speed-following setup of the file, the model it was made for and its gait
+    library's hash (ArtifactError as :func:`load_contact_controller`)."""
+    src = str(path)
+    meta, data = _read(path)
+    _check_kind(src, meta, FOLLOWING_KIND, FOLLOWING_SCHEMA_VERSION)
+    model = _model(src, meta, model_hash)
+    try:
+        metas = list(meta["controllers"])
+        # ContactClfQp hands over to its own kind: a Handover as SpeedFollowing uses it
+        ctls: tuple[Any, ...] = tuple(_controller(src, m, data, model, f"c{i}.")
+                                      for i, m in enumerate(metas))
+        setup = FollowingSetup(ctls, tuple(float(v) for v in meta["speeds"]),
+                               float(meta["resolution"]),
+                               tuple(float(v) for v in meta["rate_speeds"]),
+                               tuple(float(v) for v in meta["rates"]))
+        library_hash = str(meta["library_hash"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise ArtifactError(f"{src}: field 'meta': {e}") from None
+    return setup, model, library_hash
+
+
+def load_controller_file(path: str | os.PathLike[str], speed: float | None = None
+                         ) -> ContactClfQp | SpeedFollowing:
+    """The controller of either kind of file: a gait's ``clfqp``, or one following the
+    person's speed over a gait library, starting at ``speed`` (m/s; None: the library's
+    slowest).  ArtifactError as :func:`load_contact_controller`; ValueError for a speed with
+    a single gait's file."""
+    meta, _ = _read(path)
+    if meta.get("kind") == FOLLOWING_KIND:
+        setup = load_speed_following(path)[0]
+        try:
+            return setup.controller(setup.speeds[0] if speed is None else speed)
+        except ValueError as e:
+            raise ArtifactError(f"{path}: field 'meta': {e}") from None
+    if speed is not None:
+        raise ValueError(f"{path}: a single gait's controller file; a speed needs a gait "
+                         "library's (speed following)")
+    return load_contact_controller(path)[0]
+
+
+__all__ = ["FOLLOWING_KIND", "KIND", "SCHEMA_VERSION", "load_contact_controller",
+           "load_controller_file", "load_speed_following", "save_contact_controller",
+           "save_speed_following"]

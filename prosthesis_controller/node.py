@@ -305,27 +305,32 @@ class Artifacts(NamedTuple):
     """The files a controller is built from: the paper's gait and force tube (with the
     subject and device configs; None: the shipped defaults), or a multi-contact gait's
     controller file ``tables`` (:mod:`prosthesis_controller.gait_tables`; it carries its
-    subject and device)."""
+    subject and device), a gait library's following the person's speed from ``speed`` (m/s,
+    the person's first; None: the library's slowest)."""
 
     gait: str | None = None
     tube: str | None = None
     subject: str | None = None
     device: str | None = None
     tables: str | None = None
+    speed: float | None = None
 
 
 def build_controller(name: str, gait_path: str | None, tube_path: str | None,
                      subject: str | None = None, device: str | None = None, *,
-                     tables: str | None = None) -> Controller:
+                     tables: str | None = None, speed: float | None = None) -> Controller:
     """The controller ``name`` of the paper's gait and force tube (files), or of a
-    multi-contact gait's controller file ``tables`` (``clfqp`` only; :class:`Artifacts`)."""
+    multi-contact gait's controller file ``tables`` (``clfqp`` only; a gait library's
+    starting at ``speed``: :class:`Artifacts`)."""
     if tables is not None:
-        from prosthesis_controller.gait_tables import load_contact_controller
+        from prosthesis_controller.gait_tables import load_controller_file
 
         if ControllerName(name) != ControllerName.CLFQP:
             raise ValueError(f"--controller {name}: a multi-contact gait's controller file "
                              f"runs {ControllerName.CLFQP.value} only")
-        return load_contact_controller(tables)[0]
+        return load_controller_file(tables, speed)
+    if speed is not None:
+        raise ValueError("--speed: a gait library's controller file (--tables) only")
     if gait_path is None or tube_path is None:
         raise ValueError("give --gait and --tube (the paper's graph), or --tables (a "
                          "multi-contact gait's controller file)")
@@ -463,7 +468,8 @@ def run_node(controller: str, artifacts: Artifacts, cfg: BusConfig, *,
     if cfg.key_file is not None:
         read_key(cfg.key_file)  # a missing or unsafe key file: refused before the build
     a = artifacts
-    ctrl = build_controller(controller, a.gait, a.tube, a.subject, a.device, tables=a.tables)
+    ctrl = build_controller(controller, a.gait, a.tube, a.subject, a.device, tables=a.tables,
+                            speed=a.speed)
     node = ControllerNode(ctrl, watchdog=watchdog, status_every=status_every)
     bus = make_bus(cfg, "ctrl", declare_alive=False)  # alive once serving (see serve)
 
@@ -486,6 +492,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--tube", help="the paper's graph: the force-tube file")
     p.add_argument("--tables", help="a multi-contact gait's controller file "
                    "(prosthesis_controller.gait_tables), instead of --gait and --tube")
+    p.add_argument("--speed", type=float, help="a gait library's controller file: the "
+                   "person's first walking speed (m/s)")
     p.add_argument("--bus", help="bus config file (TOML/JSON)")
     p.add_argument("--interface")
     p.add_argument("--run-id")
@@ -534,7 +542,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg, creds = _node_config(a)
         if a.cpu is not None:  # this process: the serving thread and the bus's, started after
             pin_thread(a.cpu)
-        s = run_node(a.controller, Artifacts(a.gait, a.tube, a.subject, a.device, a.tables),
+        s = run_node(a.controller, Artifacts(a.gait, a.tube, a.subject, a.device, a.tables,
+                                                   a.speed),
                      cfg, watchdog=a.watchdog_ms * 1e-3, status_every=a.status_every)
     except KeyboardInterrupt:
         return 130

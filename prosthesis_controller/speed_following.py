@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -229,3 +230,23 @@ class SpeedFollowing:
         if nxt != self.active:
             self.controllers[nxt].take_over(self.controller)
             self.active = nxt
+
+
+@dataclass(frozen=True)
+class FollowingSetup:
+    """What a :class:`SpeedFollowing` is made of, as its file keeps it
+    (:func:`prosthesis_controller.gait_tables.save_speed_following`): the ``controllers`` at
+    a gait library's ``speeds`` (m/s, increasing), the ``resolution`` (m/s) of those
+    switched between (:func:`filled`), and the estimate's calibration, the flat-stance hip
+    ``rates`` (m/s) of the person walking ``rate_speeds`` (m/s; both rising)."""
+
+    controllers: tuple[Handover, ...]
+    speeds: tuple[float, ...]
+    resolution: float
+    rate_speeds: tuple[float, ...]
+    rates: tuple[float, ...]
+
+    def controller(self, speed: float) -> SpeedFollowing:
+        """The controller following the person, who starts at ``speed`` (m/s)."""
+        grid, speeds = filled(self.controllers, self.speeds, self.resolution)
+        return SpeedFollowing(grid, speeds.tolist(), self.rate_speeds, self.rates, speed)

@@ -188,7 +188,10 @@ def test_a_gait_set_in_step_mode_is_taken_up_as_the_walker_enters_its_domain(fmu
                                                                              walked):
     """The master's gait schedule (``FmuPlant(gaits=...)``, a person changing speed): the
     FMU walks the in-process simulator's walk under the same schedule, to rounding; a gait
-    that is not one (v_hip <= 0) is refused and the domain keeps its own."""
+    that is not one (v_hip <= 0) is refused and the domain keeps its own.  The schedule
+    ramps from the gait to a 3 % faster one over the walk, so every entry (the impacts and
+    the heels' lift-offs alike) takes a gait of its own, sampled at the period's start on
+    both sides."""
     from human_fmu.instance import HumanFmu
     from orchestrator.experiments.contact_perturbations import paced
     from orchestrator.loop.plant import FmuPlant
@@ -197,10 +200,12 @@ def test_a_gait_set_in_step_mode_is_taken_up_as_the_walker_enters_its_domain(fmu
     sim, nominal = walked
     base, fast = gait.thetas(), paced(gait, 1.03).thetas()
     entries = [i.t for i in nominal.impacts]
-    switch = 0.5 * (entries[2] + entries[3])  # between two entries: both ask alike
+    switch = 0.5 * (entries[2] + entries[3])  # the bad gait: from between two entries
+    ramp = entries[-1]
 
     def schedule(d: Domain, t: float) -> np.ndarray:
-        return fast[d] if t >= switch else base[d]
+        w = min(t / ramp, 1.0)
+        return (1.0 - w) * base[d] + w * fast[d]
 
     q0, qd0 = start_state(traj)
     ref = sim.run(q0, qd0, Domain.PS, steps=5, duration=10.0,

@@ -85,3 +85,57 @@ def test_bad_files_are_one_line_errors(tmp_path, made):
     np.savez(cut, **data)
     with pytest.raises(ArtifactError, match="field 'qp'"):
         load_contact_controller(cut)
+
+
+def test_a_speed_following_file_ticks_as_the_setup_saved(tmp_path, made):
+    """A gait library's controller file (:class:`FollowingSetup`: controllers at two
+    speeds, the estimate's calibration) loads as the same speed-following controller: the
+    same torques, diagnostics, estimates and switches, tick by tick over three steps; the
+    file kinds are told apart, and a damaged one is a one-line error naming its field."""
+    from prosthesis_controller.gait_tables import (
+        load_controller_file,
+        load_speed_following,
+        save_speed_following,
+    )
+    from prosthesis_controller.speed_following import FollowingSetup
+
+    model, traj, gait, robust = made
+    plain = contact_clfqp(model, gait, traj)
+    # the hip's flat-stance rate r reads as 0.9 + 0.2 (r - 0.5) m/s: about 1.0 on this gait,
+    # so the controller starting at 0.9 m/s switches at the second heel strike
+    setup = FollowingSetup((robust, plain), (0.9, 1.1), 0.05, (0.9, 1.1), (0.5, 1.5))
+    path = tmp_path / "following.npz"
+    save_speed_following(path, setup, model, "libhash")
+    back, back_model, library_hash = load_speed_following(path, model.parameter_hash())
+    assert library_hash == "libhash" and back_model.parameter_hash() == model.parameter_hash()
+    assert back.speeds == setup.speeds and back.rates == setup.rates
+    a, b = setup.controller(0.9), load_controller_file(path, 0.9)
+    assert len(a.controllers) == len(b.controllers) == 5  # 0.9, 0.95, ..., 1.1
+    q0, qd0 = start_state(traj)
+    plant = SimulatorPlant(loop_simulator(model, gait, (20.0, 1600.0, 80.0)), q0, qd0,
+                           GRAPH.domains[0])
+    actives = set()
+    while plant.run.steps < 3:
+        m = measurement(plant.observe())
+        x, y = a.tick(m), b.tick(m)
+        assert np.array_equal(x.torque, y.torque) and x.diagnostics == y.diagnostics
+        assert (a.speed, a.active) == (b.speed, b.active)
+        actives.add(a.active)
+        plant.actuate(x.torque)
+        assert plant.fall is None
+        plant.advance()
+    assert len(actives) >= 2 and 0.95 < a.speed < 1.1  # it read the walk and switched
+    assert load_controller_file(path).initial_speed == 0.9  # default: the slowest
+    single = tmp_path / "clfqp.npz"
+    save_contact_controller(single, plain, model, "gaithash")
+    with pytest.raises(ValueError, match="single gait"):
+        load_controller_file(single, 1.0)
+    with pytest.raises(ArtifactError, match="field 'kind'"):
+        load_speed_following(single)
+    with np.load(path) as z:
+        data = {k: z[k] for k in z.files}
+    del data["c1.qp.G"]
+    cut = tmp_path / "cut.npz"
+    np.savez(cut, **data)
+    with pytest.raises(ArtifactError, match=r"field 'c1\.qp'"):
+        load_controller_file(cut, 1.0)

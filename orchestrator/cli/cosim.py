@@ -79,6 +79,14 @@ def run(
         "--tube", help="Force-tube file (tube fit): the paper's graph needs it; a "
         "multi-contact gait's gives clfqp its robust term (the tube's model-error bound).",
         dir_okay=False)] = None,
+    library: Annotated[Path | None, typer.Option(
+        "--library", help="A gait library of the multi-contact gait's person (gait library): "
+        "the person walks it at --speed-profile and clfqp follows the person's speed over "
+        "it (its controllers made once, about a minute, and cached).", dir_okay=False)] = None,
+    speed_profile: Annotated[str | None, typer.Option(
+        "--speed-profile", help="With --library: the walking speed commanded over time, "
+        "t:v pairs (s:m/s) linear between, e.g. 0:0.8,20:1.2,40:0.8 (default: the gait's "
+        "own speed).")] = None,
     steps: Annotated[int, typer.Option(min=1, help="Stop after this many impacts.")] = 20,
     perturb: Annotated[str, typer.Option(help="none, drop, delay, duplicate, "
                                          "corrupt-counter, corrupt-checksum, corrupt-length, "
@@ -115,7 +123,8 @@ def run(
         else subject_source(subject, gait)
     cfg = CosimConfig(controller=controller, gait=gait, tube=tube,
                       subject=Path(who) if who else None,
-                      device=device, steps=steps, perturb=perturb, mode=mode, record=record,
+                      device=device, library=library, speed_profile=speed_profile,
+                      steps=steps, perturb=perturb, mode=mode, record=record,
                       fmu=fmu, max_time=max_time, pin_cpus=pin)
 
     with console.status("starting") as status:

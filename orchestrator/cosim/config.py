@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bus_schemas.transport.keys import validate_run_id
+from hp_model.speed_profile import SpeedProfile
 from orchestrator.cosim.faults import FaultPlan
 from orchestrator.modes import CosimMode
 from prosthesis_controller.interface import ControllerName
@@ -39,6 +40,11 @@ class CosimConfig:
     #: controller process alike
     subject: Path | None = None
     device: Path | None = None
+    #: a multi-contact gait's run: a gait library of its person (``hpcosim gait library``),
+    #: the person walking it at the commanded ``speed_profile`` (SpeedProfile's text form;
+    #: None: the gait's own speed) and ``clfqp`` following the person's speed over it
+    library: Path | None = None
+    speed_profile: str | None = None
     steps: int = 20
     max_time: float = 60.0  # s of simulation time
     mode: CosimMode = CosimMode.LOCKSTEP  # or its value
@@ -86,12 +92,27 @@ class CosimConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise CosimError(f"{name} {v!r}: expected a whole number >= 1")
+        self.profile  # noqa: B018 (checked: CosimError naming --speed-profile)
         try:
             FaultPlan.parse(self.perturb)
             if self.run_id is not None:
                 validate_run_id(self.run_id)
         except ValueError as e:
             raise CosimError(str(e)) from None
+
+    @property
+    def profile(self) -> SpeedProfile | None:
+        """The commanded speed (None: none given); CosimError naming ``--speed-profile``
+        when it is not one, or given without a library."""
+        if self.speed_profile is None:
+            return None
+        if self.library is None:
+            raise CosimError("--speed-profile: the person changes speed over a gait library; "
+                             "give --library")
+        try:
+            return SpeedProfile.parse(self.speed_profile)
+        except ValueError as e:
+            raise CosimError(f"--speed-profile {self.speed_profile!r}: {e}") from None
 
     @property
     def realtime(self) -> bool:

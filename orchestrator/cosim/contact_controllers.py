@@ -52,6 +52,7 @@ from hp_model.simulator import HybridSimulator
 from human_fmu.build import TrackedGait
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller import contact_clf_qp, contact_phase_pd, gait_tables
+from prosthesis_controller import speed_following as speed_following_module
 from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
     MAX_WRENCH,
@@ -69,9 +70,10 @@ from prosthesis_controller.contact_phase_pd import (
     first_stride,
     tables_from_walk,
 )
-from prosthesis_controller.gait_tables import save_contact_controller
+from prosthesis_controller.gait_tables import save_contact_controller, save_speed_following
 from prosthesis_controller.speed_following import (
     SPEED_RESOLUTION,
+    FollowingSetup,
     SpeedFollowing,
     filled,
     flat_stance_rate,
@@ -290,6 +292,27 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
     return out
 
 
+def ensure_following_file(library_path: Path, library: GaitLibrary,
+                          say: Callable[[str], None] | None = None) -> Path:
+    """The file of ``clfqp`` following the person's speed over the gait library at
+    ``library_path`` (``library``: it loaded; :func:`following_setup`,
+    :func:`prosthesis_controller.gait_tables.save_speed_following`), made once (about a
+    minute) and cached (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/
+    following.npz; the digest covers the library file, its model and the code that makes
+    the controllers).  HeldOracleFellError naming a speed whose held walk falls."""
+    data = Path(library_path).read_bytes()
+    h = hashlib.sha256(data)
+    h.update(library.model.parameter_hash().encode())
+    for f in (*_MAKERS, Path(str(speed_following_module.__file__))):
+        h.update(f.read_bytes())
+    out = cache_root() / "controller" / h.hexdigest()[:16] / "following.npz"
+    if not out.is_file():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        setup = following_setup(library, "clfqp", say=say)
+        save_speed_following(out, setup, library.model, hashlib.sha256(data).hexdigest())
+    return out
+
+
 def controller_linearization(ctl: ContactClfQp) -> Linearization:
     """What the model-error characterization needs of ``clfqp``'s model along its stance."""
     st = ctl.stance
@@ -313,25 +336,26 @@ def tube_with_model_error(res: ContactTubeResult, run: ContactRun) -> ContactTub
     return replace(res, tube=replace(tube, model_error=bound))
 
 
-def speed_following(library: GaitLibrary, controller: str = "clfqp",
-                    speed: float | None = None, swing_phase: str = "time",
-                    closed_loop: ClosedLoop | None = None, resolution: float = SPEED_RESOLUTION
-                    ) -> SpeedFollowing:
-    """The prosthesis controller that follows the person's speed over ``library``
-    (:class:`~prosthesis_controller.speed_following.SpeedFollowing`): ``controller``
-    ("clfqp" or "contact-pd") made from each speed's gait and its held walk, starting on
-    ``speed`` (m/s; None: the fitted gait's), switching between its speeds and others every
-    ``resolution`` m/s between them (:func:`~prosthesis_controller.speed_following.filled`),
+def following_setup(library: GaitLibrary, controller: str = "clfqp",
+                    swing_phase: str = "time", closed_loop: ClosedLoop | None = None,
+                    resolution: float = SPEED_RESOLUTION,
+                    say: Callable[[str], None] | None = None) -> FollowingSetup:
+    """What the controller following the person's speed over ``library`` is made of
+    (:class:`~prosthesis_controller.speed_following.FollowingSetup`): ``controller``
+    ("clfqp" or "contact-pd") made from each speed's gait and its held walk, switched
+    between every ``resolution`` m/s (:func:`~prosthesis_controller.speed_following.filled`),
     its estimate calibrated on the person walking each of those speeds (:func:`walk_rate`,
-    about 0.4 s each).  HeldOracleFellError naming the speed whose held walk falls (no
-    tables from it)."""
+    about 0.4 s each; progress through ``say``).  HeldOracleFellError naming the speed whose
+    held walk falls (no tables from it)."""
     if controller not in ("clfqp", "contact-pd"):
         raise ValueError(f"controller {controller!r}: choose clfqp or contact-pd")
+    say = say or (lambda _m: None)
     model = library.model
     cl = closed_loop or ClosedLoop(model, library.curves[0].params[GRAPH.domains[0]].degree)
     ctls: list[Any] = []
     leg = LegKinematics.of(model)
     for g, curves in zip(library.gaits, library.curves, strict=True):
+        say(f"the controller at {g.speed:.2f} m/s (the gait walked once)")
         sim = loop_simulator(model, curves, GAINS, cl)
         try:
             setup = LoopSetup(sim, held_walk(sim, g.trajectory))
@@ -340,13 +364,26 @@ def speed_following(library: GaitLibrary, controller: str = "clfqp",
         ctls.append(contact_clfqp(model, curves, g.trajectory, setup=setup,
                                   swing_phase=swing_phase) if controller == "clfqp" else
                     make_contact_pd(model, curves, g.trajectory, setup, swing_phase))
-    start = next(g.speed for g in library.gaits if g.source) if speed is None else speed
     grid, speeds = filled(ctls, library.speeds.tolist(), resolution)
-    rates = [walk_rate(leg, c.tables, library, float(v), cl) for c, v in zip(grid, speeds,
-                                                                          strict=True)]
+    rates = []
+    for c, v in zip(grid, speeds, strict=True):
+        say(f"the speed estimate's calibration: the person at {v:.2f} m/s")
+        rates.append(walk_rate(leg, c.tables, library, float(v), cl))
     keep = rising(rates)
-    return SpeedFollowing(grid, speeds.tolist(), [float(speeds[i]) for i in keep],
-                          [rates[i] for i in keep], start)
+    return FollowingSetup(tuple(ctls), tuple(float(v) for v in library.speeds), resolution,
+                          tuple(float(speeds[i]) for i in keep), tuple(rates[i] for i in keep))
+
+
+def speed_following(library: GaitLibrary, controller: str = "clfqp",
+                    speed: float | None = None, swing_phase: str = "time",
+                    closed_loop: ClosedLoop | None = None, resolution: float = SPEED_RESOLUTION
+                    ) -> SpeedFollowing:
+    """The prosthesis controller that follows the person's speed over ``library``
+    (:class:`~prosthesis_controller.speed_following.SpeedFollowing`, made as
+    :func:`following_setup` says), starting on ``speed`` (m/s; None: the fitted gait's)."""
+    setup = following_setup(library, controller, swing_phase, closed_loop, resolution)
+    start = next(g.speed for g in library.gaits if g.source) if speed is None else speed
+    return setup.controller(start)
 
 
 def walk_rate(leg: LegKinematics, tables: ContactGaitTables, library: GaitLibrary,

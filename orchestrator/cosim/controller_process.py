@@ -31,16 +31,18 @@ ROOT = Path(__file__).resolve().parents[2]  # the checkout (git revision, PYTHON
 
 
 def controller_command(cfg: CosimConfig, run_id: str, endpoint: str,
-                       cpu: int | None = None, tables: Path | None = None) -> list[str]:
+                       cpu: int | None = None, tables: Path | None = None,
+                       speed: float | None = None) -> list[str]:
     """The node's command line: ``cfg``'s controller, artifacts, subject and device (as
     absolute paths: the node runs in the checkout), or a multi-contact gait's controller
-    file ``tables``; the link (``run_id``, the plant's ``endpoint``) and the node's CPU
-    ``cpu``."""
+    file ``tables`` (a gait library's: the person's first ``speed``, m/s); the link
+    (``run_id``, the plant's ``endpoint``) and the node's CPU ``cpu``."""
     poll = bus_poll_us(cfg)
     artifacts = (["--tables", _abs(tables)] if tables is not None else
                  ["--gait", _abs(cfg.gait), "--tube", _abs(cfg.tube)] if cfg.tube else [])
     return [sys.executable, "-m", "prosthesis_controller.node", "--controller", cfg.controller,
-            *artifacts, "--run-id", run_id,
+            *artifacts, *(["--speed", repr(float(speed))] if speed is not None else []),
+            "--run-id", run_id,
             "--connect", endpoint, "--watchdog-ms", str(cfg.controller_watchdog * 1e3),
             "--status-every", str(cfg.status_every), "--auth-stdin",
             *(["--subject", _abs(cfg.subject)] if cfg.subject is not None else []),
@@ -85,8 +87,10 @@ class ControllerProcess:
     context manager's exit) ends both and puts the node's own summary into ``summary``."""
 
     def __init__(self, cfg: CosimConfig, run_id: str, *, cpu: int | None = None,
-                 summary: dict[str, Any] | None = None, tables: Path | None = None) -> None:
+                 summary: dict[str, Any] | None = None, tables: Path | None = None,
+                 speed: float | None = None) -> None:
         self.cfg, self.run_id, self.cpu, self.tables = cfg, run_id, cpu, tables
+        self.speed = speed  # a gait library's controller: the person's first speed, m/s
         self.summary = summary if summary is not None else {}
         self.lost = threading.Event()
         self._alive = threading.Event()
@@ -116,7 +120,8 @@ class ControllerProcess:
                             zenoh_options=self._creds.zenoh_options("plant"))
         self._watch = self.bus.watch_peer(self._on_liveliness)
         say(f"starting controller {cfg.controller} (run {self.run_id})")
-        self._spawn(controller_command(cfg, self.run_id, endpoint, self.cpu, self.tables))
+        self._spawn(controller_command(cfg, self.run_id, endpoint, self.cpu, self.tables,
+                                        self.speed))
         self._wait_alive(stop)
         if not stop.is_set() and not self.bus.wait_for_peer(10.0):
             raise CosimError("controller alive but not subscribed")

@@ -55,12 +55,18 @@ def ensure_fmu(gait_path: Path, model: Any, fmu: Path | None = None,
 
 
 @contextlib.contextmanager
-def started_fmu(path: Path, plan: FaultPlan) -> Iterator[HumanFmu]:
+def started_fmu(path: Path, plan: FaultPlan, walk: tuple[Any, Any, Any] | None = None
+                ) -> Iterator[HumanFmu]:
     """The FMU at ``path`` instantiated and started with the plan's human perturbation
-    (:meth:`FaultPlan.fmu_parameters`); freed when the block ends."""
+    (:meth:`FaultPlan.fmu_parameters`), on ``walk`` when given (the gait per domain and the
+    state (q0, qd0) it starts from: :meth:`HumanFmu.walk_values`; else the gait it was
+    built for); freed when the block ends."""
     fmu = HumanFmu(path)
     try:
-        fmu.start(*plan.fmu_parameters())
+        real, integer = plan.fmu_parameters()
+        if walk is not None:
+            real = {**fmu.walk_values(*walk), **real}
+        fmu.start(real, integer)
         yield fmu
     finally:
         fmu.free()

@@ -77,6 +77,37 @@ class RunInputs:
     drives: Drives
     gait_hash: str  # the gait's identity (the FMU's build names it)
     tables: Path | None = None  # the multi-contact controller's file
+    #: a gait library's run: the library (characterization.gait.library.GaitLibrary) and
+    #: the speed the person is commanded (hp_model.speed_profile.SpeedProfile)
+    library: Any = None
+    profile: Any = None
+
+    @property
+    def start_speed(self) -> float | None:
+        """The person's first commanded speed (m/s; None: not a library's run)."""
+        return None if self.profile is None else self.profile.at(0.0)
+
+    def walk_start(self) -> tuple[dict[Any, Any], Any, Any] | None:
+        """A library's run: the person's gait per domain at its first speed and its state
+        there (q0, qd0: the cycle's start at that speed), what the FMU starts on; None
+        otherwise."""
+        if self.library is None or self.start_speed is None:
+            return None
+        from characterization.gait.library import start_at
+        from characterization.gait.multicontact import GRAPH
+
+        v0 = self.start_speed
+        return ({d: self.library.theta_at(v0, d) for d in GRAPH.domains},
+                *start_at(self.library, v0))
+
+    def gaits(self) -> Any:
+        """A library's run: the gait the person tracks entering each domain at t s
+        (:func:`characterization.gait.library.speed_schedule`); None otherwise."""
+        if self.library is None or self.profile is None:
+            return None
+        from characterization.gait.library import speed_schedule
+
+        return speed_schedule(self.library, self.profile)
 
     @classmethod
     def load(cls, cfg: CosimConfig, model: Any = None,
@@ -91,6 +122,10 @@ class RunInputs:
 
         if artifact_kind(cfg.gait) == MULTICONTACT_KIND:
             return cls._multicontact(cfg, say)
+        if cfg.library is not None:
+            raise CosimError(f"--library {cfg.library}: a gait library is walked by a "
+                             f"multi-contact gait's person; --gait {cfg.gait} is of the "
+                             "paper's graph")
         if cfg.tube is None:
             raise CosimError(f"--gait {cfg.gait}: a gait of the paper's graph runs with its "
                              "force tube; give --tube")
@@ -125,6 +160,8 @@ class RunInputs:
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)
         check_fmu_identity(fmu_path, tracked.hash, model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
+        if cfg.library is not None:
+            return cls._library(cfg, run, fmu_path, say)
         try:
             tables = ensure_controller_file(
                 Path(cfg.gait), run, say,
@@ -133,6 +170,45 @@ class RunInputs:
         except ValueError as e:  # the held oracle fell: the gait does not walk
             raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
         return cls(model, tracked, tube, fmu_path, Drives.of(model), tracked.hash, tables)
+
+    @classmethod
+    def _library(cls, cfg: CosimConfig, run: Any, fmu_path: Path,
+                 say: Callable[[str], None] | None) -> RunInputs:
+        """A gait library's run (``cfg.library``): the person of ``run`` (the gait's) walking
+        the library at the commanded speed, ``clfqp`` following it (its file made once and
+        cached: :func:`orchestrator.cosim.contact_controllers.ensure_following_file`)."""
+        from characterization.gait.library import load_gait_library
+        from hp_model.artifacts import ArtifactError
+        from hp_model.speed_profile import SpeedProfile
+        from orchestrator.cosim.contact_controllers import ensure_following_file
+
+        assert cfg.library is not None
+        if cfg.tube is not None:
+            raise CosimError(f"--tube {cfg.tube}: a gait library's controllers have no "
+                             "model-error bound (a tube is fitted around one gait); drop --tube")
+        try:
+            library = load_gait_library(cfg.library)
+        except (ArtifactError, OSError) as e:
+            raise CosimError(f"--library {' '.join(str(e).split())}") from None
+        if library.model.parameter_hash() != run.model.parameter_hash():
+            raise CosimError(f"--library {cfg.library}: not of --gait {cfg.gait}'s subject and "
+                             "device (its model's parameters differ)")
+        sizes = {d: t.size for d, t in run.tracked.thetas.items()}
+        if any(library.theta_at(library.speeds[0], d).size != n for d, n in sizes.items()):
+            raise CosimError(f"--library {cfg.library}: its curves are of another degree than "
+                             f"--gait {cfg.gait}'s (the FMU tracks those)")
+        source = next((g.speed for g in library.gaits if g.source), library.speeds[0])
+        profile = cfg.profile or SpeedProfile.constant(float(source))
+        lo, hi = float(library.speeds[0]), float(library.speeds[-1])
+        if min(profile.speeds) < lo - 1e-9 or max(profile.speeds) > hi + 1e-9:
+            raise CosimError(f"--speed-profile {profile.text()}: outside --library "
+                             f"{cfg.library}'s speeds, {lo:.2f}-{hi:.2f} m/s")
+        try:
+            tables = ensure_following_file(Path(cfg.library), library, say)
+        except ValueError as e:  # a held oracle fell: that speed's gait does not walk
+            raise CosimError(f"--library {cfg.library}: no controller: {e}") from None
+        return cls(run.model, run.tracked, None, fmu_path, Drives.of(run.model),
+                   run.tracked.hash, tables, library, profile)
 
 
 def _opt(path: Path | None) -> str | None:

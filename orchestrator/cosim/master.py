@@ -38,7 +38,6 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from bus_schemas.transport import keys
-from human_fmu.instance import HumanFmu
 from orchestrator.cosim.can_link import CanLink
 from orchestrator.cosim.config import CosimConfig
 from orchestrator.cosim.controller_process import ControllerProcess
@@ -75,28 +74,29 @@ def run_cosim(cfg: CosimConfig, *, progress: Progress | None = None, model: Any 
     with contextlib.ExitStack() as run:  # everything ended in the reverse order
         if install_signal_handlers:
             run.enter_context(_stop_on_signals(res, stop))
-        fmu = run.enter_context(started_fmu(inputs.fmu_path, plan))
+        fmu = run.enter_context(started_fmu(inputs.fmu_path, plan, inputs.walk_start()))
         record = (None if cfg.record is None
                   else run.enter_context(RunRecord(cfg, run_id, inputs, fmu, res)))
         run.enter_context(pinned(plant_cpu))  # before the bus: zenoh's threads inherit it
         controller = run.enter_context(
             ControllerProcess(cfg, run_id, cpu=node_cpu, summary=res.node,
-                              tables=inputs.tables))
+                              tables=inputs.tables, speed=inputs.start_speed))
         if controller.open(stop, say):
             say("controller alive")
             link = CanLink(cfg, controller.bus, res, inputs.drives, plan=plan,
                            rec=None if record is None else record.rec, controller=controller)
-            _walk(cfg, link, fmu, record, stop, progress)
+            _walk(cfg, link, FmuPlant(fmu, cfg.dt, gaits=inputs.gaits()), record, stop,
+                  progress)
     return res
 
 
-def _walk(cfg: CosimConfig, link: CanLink, fmu: HumanFmu, record: RunRecord | None,
+def _walk(cfg: CosimConfig, link: CanLink, plant: FmuPlant, record: RunRecord | None,
           stop: threading.Event, progress: Progress | None) -> None:
     """The tick loop: :func:`orchestrator.loop.run_loop` of the FMU plant and the CAN link
     (ground truth and the walker for Foxglove recorded, deferred, with a recording), and
     the run's result from it."""
     usage = Usage()
-    log = run_loop(FmuPlant(fmu, cfg.dt), link, steps=cfg.steps,
+    log = run_loop(plant, link, steps=cfg.steps,
                    periods=round(cfg.max_time / cfg.dt), stop=stop, progress=progress,
                    recorder=None if record is None else record.ground_truth(link.log_ns),
                    timed=True, samples=False)

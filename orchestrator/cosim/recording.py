@@ -87,6 +87,11 @@ def _artifacts(rec: Recording, tmp: Path) -> tuple[Path, Path]:
 #: the attachment of a multi-contact gait's run: its controller's file
 #: (:mod:`prosthesis_controller.gait_tables`), what the controller process loaded
 CONTROLLER_FILE = "controller.npz"
+#: a gait library's run: the library (attachment) and the speed commanded, the metadata's
+#: ``profile`` (:class:`hp_model.speed_profile.SpeedProfile`'s text) and ``start`` (m/s, the
+#: controller's first speed)
+LIBRARY_FILE = "library.json"
+SPEED_METADATA = "speed"
 
 
 def _recorded_controller(rec: Recording, name: str) -> Any:
@@ -94,11 +99,13 @@ def _recorded_controller(rec: Recording, name: str) -> Any:
     when it cannot be built: another controller name, a damaged file)."""
     from prosthesis_controller.node import build_controller
 
+    start = rec.metadata.get(SPEED_METADATA, {}).get("start")
     with tempfile.TemporaryDirectory() as td:
         f = Path(td) / CONTROLLER_FILE
         f.write_bytes(rec.attachments[CONTROLLER_FILE])
         try:
-            return build_controller(name, None, None, tables=str(f))
+            return build_controller(name, None, None, tables=str(f),
+                                    speed=None if start is None else float(start))
         except ValueError as e:
             raise RecordingError(f"{rec.path}: attachment {CONTROLLER_FILE}: "
                                  f"{str(e).replace(str(f), CONTROLLER_FILE)}") from None

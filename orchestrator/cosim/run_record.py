@@ -15,7 +15,7 @@ from orchestrator.cosim.config import CosimConfig
 from orchestrator.cosim.controller_process import ROOT
 from orchestrator.cosim.human import sha256
 from orchestrator.cosim.inputs import RunInputs
-from orchestrator.cosim.recording import CONTROLLER_FILE
+from orchestrator.cosim.recording import CONTROLLER_FILE, LIBRARY_FILE, SPEED_METADATA
 from orchestrator.cosim.result import CosimResult
 from orchestrator.loop.foxglove import WalkerFoxglove
 from orchestrator.loop.recorder import GroundTruthRecorder
@@ -127,6 +127,11 @@ class RunRecord:
         if inputs.tables is not None:  # a multi-contact gait's controller
             rec.add_attachment(CONTROLLER_FILE, inputs.tables.read_bytes(),
                                "application/octet-stream")
+        if cfg.library is not None:  # the person's gait library and the speed commanded
+            rec.add_attachment(LIBRARY_FILE, Path(cfg.library).read_bytes(),
+                               "application/json")
+            rec.add_metadata(SPEED_METADATA, {"profile": inputs.profile.text(),
+                                              "start": repr(inputs.start_speed)})
         rec.add_attachment("modelDescription.xml", fmu.model_description_xml(),
                            "application/xml")
         rec.add_attachment("ampro3.dbc", Path(DBC_PATH).read_bytes(), "text/plain")
