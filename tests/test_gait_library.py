@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -165,13 +166,18 @@ def test_a_speed_family_needs_the_library_and_draws_only_sensors_beside_it(libra
 
 
 @pytest.fixture(scope="module")
-def fitted(tmp_path_factory):
+def fitted(private_cache):
     """`gait library` at 0.9 and 1.25 m/s from the packaged person (1.07 m/s) and its take:
-    the command's result and the library file."""
-    d = tmp_path_factory.mktemp("fitted-library")
+    the command's result and the library file, kept in the run's cache (``HPCOSIM_CACHE``):
+    ``make test``'s serial phase (the co-simulation below) takes the parallel phase's
+    (the result then: the library file made, exit 0)."""
+    d = private_cache / "test-person-library"
+    out = d / "lib.json"
+    if out.is_file():  # written atomically by a `gait library` that exited 0
+        return SimpleNamespace(returncode=0, stderr="", stdout=""), out
+    d.mkdir(parents=True, exist_ok=True)
     steps = d / "steps.npz"
     assert person_reference.make_steps(steps, d) == 0
-    out = d / "lib.json"
     r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
                 "--out", str(out), "--speeds", "0.9,1.25")
     return r, out
@@ -243,3 +249,72 @@ def test_a_sweep_changes_the_persons_speed_over_the_library(fitted, tmp_path):
     rep = hpcosim("sweep", "replay", str(out), "clfqp/speed/0")
     assert rep.returncode == 0, rep.stderr
     assert "identical to the stored result" in rep.stdout
+
+
+@pytest.mark.slow  # the library above, the speed-following controller's file (about 15 s)
+@pytest.mark.serial  # a lockstep co-simulation: wall-clock reply limits (tests/test_cosim.py)
+def test_the_cosimulation_changes_the_persons_speed_and_clfqp_follows(fitted, tmp_path):
+    """``hpcosim run --library --speed-profile``: the human FMU walks the fitted library at
+    the commanded speed (1.0 m/s, up to 1.1 from 0 to 4 s) while ``clfqp`` follows it over
+    the library in its own process; 12 steps, no reply missed.  The strides speed up with
+    the command (the first within 0.02 m/s of 1.0, the last, past the ramp, of 1.1); the
+    recording carries the library and the command and replays with no difference, and its
+    export the controller's speed estimate, which reads the last stride's speed; the same
+    run in process (the simulator under the same schedule, measurements and torques
+    quantized as on the bus) is the same walk, to rounding.  A library of another person
+    is refused."""
+    from bus_schemas.recording.reader import read_messages
+    from characterization.gait.contact_gait import GAINS
+    from characterization.gait.library import speed_schedule, start_at
+    from orchestrator.cosim.config import CosimConfig
+    from orchestrator.cosim.contact_controllers import ensure_following_file, loop_simulator
+    from orchestrator.cosim.export import run_table
+    from orchestrator.cosim.master import run_cosim
+    from orchestrator.cosim.recording import read_recording, replay
+    from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop
+    from prosthesis_controller.gait_tables import load_controller_file
+    from tests.multicontact_cycle import write_gait_file
+
+    r, lib = fitted
+    assert r.returncode == 0, r.stderr
+    rec, steps, command = tmp_path / "run.mcap", 12, "0:1.0,4:1.1"
+    res = run_cosim(CosimConfig(controller="clfqp", gait=REFERENCE_PERSON_GAIT, tube=None,
+                                library=lib, speed_profile=command, steps=steps, record=rec))
+    assert not res.fell and not res.faulted, res
+    assert res.steps == steps and res.missed == 0 and res.torque_clamped == 0
+    truth = [o for _, _, o in read_messages(rec, ["/ground_truth"])]
+    t = np.array([o["t"] for o in truth])
+    x = np.array([o["q"][0] for o in truth])
+    strikes = [i for i in range(1, len(truth))
+               if truth[i]["domain"] == "ds_h" and truth[i - 1]["domain"] != "ds_h"]
+    speeds = np.diff(x[strikes]) / np.diff(t[strikes])
+    assert len(speeds) >= 4 and t[strikes[-2]] > 4.0
+    assert speeds[0] == pytest.approx(1.0, abs=0.02)
+    assert speeds[-1] == pytest.approx(1.1, abs=0.02)
+    recording = read_recording(rec, messages=False)
+    assert "library.json" in recording.attachments
+    assert recording.metadata["speed"] == {"profile": "0:1,4:1.1", "start": "1.0"}
+    assert replay(rec).max_torque_diff == 0.0
+    # what the controller made of it (its measurements replayed through its file): its
+    # estimate reads the strides' speeds, one stance late; the export carries it
+    table = run_table(rec)
+    assert table.speed is not None
+    est = table.speed.estimate
+    assert est[0] == 1.0 and est[-1] == pytest.approx(speeds[-1], abs=0.02)
+    assert np.nanmax(table.speed.command) == pytest.approx(1.1)
+    library, profile = load_gait_library(lib), SpeedProfile.parse(command)
+    ctl = load_controller_file(ensure_following_file(lib, library), 1.0)
+    plant = SimulatorPlant(loop_simulator(library.model, library.gait_at(1.0), GAINS),
+                           *start_at(library, 1.0), gaits=speed_schedule(library, profile))
+    log = run_loop(plant, ControllerLink(ctl, quantize=True), steps=steps)
+    assert log.fall is None and log.steps == steps
+    gt, q = np.array([o["q"] for o in truth]), np.array(log.q)
+    n = min(len(gt), len(q))
+    assert n >= res.ticks - 1
+    assert np.abs(gt[:n] - q[:n]).max() <= 1e-6  # the same generated C, the same schedule
+    other = tmp_path / "openofm.json"
+    write_gait_file(other)
+    bad = hpcosim("run", "--controller", "clfqp", "--gait", str(other), "--library",
+                  str(lib), "--steps", "1")
+    assert bad.returncode == 2 and "subject and device" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1

@@ -17,6 +17,12 @@ CSV columns:
                               ``hpcosim run`` writes); absent otherwise
     V [1], rho [1]            the controller's CLF value and relaxation, empty where it
                               reported none (e.g. a PD controller)
+    speed_command, speed_estimate, speed_controller [m/s], controller_phase [1]
+                              a person walking a gait library (``hpcosim run --library``):
+                              the speed commanded, the controller's estimate, the speed of
+                              the controller it ran and its phase, its measurements replayed
+                              through its file (:mod:`orchestrator.cosim.speed_trace`);
+                              absent for other runs
 
 The ``.mot`` (``--mot``) holds time and the 12 coordinates, angles in degrees
 (``inDegrees=yes``), as :mod:`characterization.gait.export`'s ``kinematics.mot``.
@@ -26,7 +32,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +41,7 @@ import numpy as np
 from hp_model.human_prosthesis import COORDS
 from hp_model.tables import Column, MotTable, write_csv, write_mot
 from orchestrator.cosim.recording import RecordingError, read_recording
+from orchestrator.cosim.speed_trace import SpeedTrace, speed_trace
 
 GROUND_TRUTH, CLF = "/ground_truth", "/controller/clf"
 #: which coordinates are angles (the others are lengths, m): the pitches
@@ -57,6 +64,7 @@ class RunTable:
     ratio: tuple[float, float] | None
     V: np.ndarray
     rho: np.ndarray
+    speed: SpeedTrace | None = None  # a gait library's run, at ``t``
 
 
 def _messages(path: Path, topic: str) -> list[dict[str, Any]]:
@@ -112,7 +120,8 @@ def run_table(path: str | os.PathLike[str]) -> RunTable:
     if q.ndim != 2 or q.shape[1] != len(COORDS):
         raise RecordingError(f"{p}: {GROUND_TRUTH} q has {q.shape[-1]} coordinates, the "
                              f"model {len(COORDS)}")
-    return table
+    trace = speed_trace(p)
+    return table if trace is None else replace(table, speed=trace.at(t))
 
 
 def run_columns(r: RunTable) -> list[Column]:
@@ -128,7 +137,13 @@ def run_columns(r: RunTable) -> list[Column]:
     if r.ratio is not None:
         cols += [Column("knee_torque", "N m", r.ratio[0] * r.motor[:, 0]),
                  Column("ankle_torque", "N m", r.ratio[1] * r.motor[:, 1])]
-    return [*cols, Column("V", "1", r.V), Column("rho", "1", r.rho)]
+    cols += [Column("V", "1", r.V), Column("rho", "1", r.rho)]
+    if r.speed is not None:
+        cols += [Column("speed_command", "m/s", r.speed.command),
+                 Column("speed_estimate", "m/s", r.speed.estimate),
+                 Column("speed_controller", "m/s", r.speed.running),
+                 Column("controller_phase", "1", r.speed.phase)]
+    return cols
 
 
 def export_recording(path: str | os.PathLike[str], out: str | os.PathLike[str],

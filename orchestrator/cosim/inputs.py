@@ -145,6 +145,7 @@ class RunInputs:
         from hp_model.force_tube import load_tube
         from orchestrator.cosim.contact_controllers import (
             ensure_controller_file,
+            ensure_following_file,
             load_contact_run,
         )
 
@@ -157,11 +158,17 @@ class RunInputs:
         run = load_contact_run(cfg.gait)
         model, tracked = run.model, run.tracked
         tube = None if cfg.tube is None else load_tube(cfg.tube, run.hash)
+        library, profile = cls._library(cfg, run) if cfg.library is not None else (None, None)
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)
         check_fmu_identity(fmu_path, tracked.hash, model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
-        if cfg.library is not None:
-            return cls._library(cfg, run, fmu_path, say)
+        if library is not None:
+            try:
+                tables = ensure_following_file(Path(str(cfg.library)), library, say)
+            except ValueError as e:  # a held oracle fell: that speed's gait does not walk
+                raise CosimError(f"--library {cfg.library}: no controller: {e}") from None
+            return cls(model, tracked, None, fmu_path, Drives.of(model), tracked.hash, tables,
+                       library, profile)
         try:
             tables = ensure_controller_file(
                 Path(cfg.gait), run, say,
@@ -171,16 +178,15 @@ class RunInputs:
             raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
         return cls(model, tracked, tube, fmu_path, Drives.of(model), tracked.hash, tables)
 
-    @classmethod
-    def _library(cls, cfg: CosimConfig, run: Any, fmu_path: Path,
-                 say: Callable[[str], None] | None) -> RunInputs:
-        """A gait library's run (``cfg.library``): the person of ``run`` (the gait's) walking
-        the library at the commanded speed, ``clfqp`` following it (its file made once and
-        cached: :func:`orchestrator.cosim.contact_controllers.ensure_following_file`)."""
+    @staticmethod
+    def _library(cfg: CosimConfig, run: Any) -> tuple[Any, Any]:
+        """A gait library's run (``cfg.library``): the library, of the person of ``run``
+        (the gait's), and the speed commanded (within the library's speeds; default: the
+        gait's own).  ``clfqp`` follows the person over it (its file made once and cached:
+        :func:`orchestrator.cosim.contact_controllers.ensure_following_file`)."""
         from characterization.gait.library import load_gait_library
         from hp_model.artifacts import ArtifactError
         from hp_model.speed_profile import SpeedProfile
-        from orchestrator.cosim.contact_controllers import ensure_following_file
 
         assert cfg.library is not None
         if cfg.tube is not None:
@@ -203,12 +209,7 @@ class RunInputs:
         if min(profile.speeds) < lo - 1e-9 or max(profile.speeds) > hi + 1e-9:
             raise CosimError(f"--speed-profile {profile.text()}: outside --library "
                              f"{cfg.library}'s speeds, {lo:.2f}-{hi:.2f} m/s")
-        try:
-            tables = ensure_following_file(Path(cfg.library), library, say)
-        except ValueError as e:  # a held oracle fell: that speed's gait does not walk
-            raise CosimError(f"--library {cfg.library}: no controller: {e}") from None
-        return cls(run.model, run.tracked, None, fmu_path, Drives.of(run.model),
-                   run.tracked.hash, tables, library, profile)
+        return library, profile
 
 
 def _opt(path: Path | None) -> str | None:

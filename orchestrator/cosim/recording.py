@@ -124,6 +124,27 @@ def _pitch(v: Any) -> float:
     return math.nan if v is None else float(v)
 
 
+def recorded_measurement(m: dict[str, Any]) -> Any:
+    """The :class:`~prosthesis_controller.measurement.ProsthesisMeasurement` of a recorded
+    ``/prosthesis/measurements`` message (as the controller decoded it)."""
+    from prosthesis_controller import ProsthesisMeasurement
+
+    return ProsthesisMeasurement(m["sim_time_us"] * 1e-6, m["knee_angle"], m["ankle_angle"],
+                                 m["knee_velocity"], m["ankle_velocity"], m["foot_load"],
+                                 bool(m["contact"]), _pitch(m.get("socket_pitch")))
+
+
+def recorded_controller(rec: Recording, name: str | None = None) -> Any:
+    """The controller of a multi-contact run's recording, built from its controller file
+    (``name``: default the recorded one; a gait library's starting at the recorded first
+    speed).  RecordingError naming the file when it has none or it cannot be built."""
+    name = name or rec.config.get("controller")
+    if not name or CONTROLLER_FILE not in rec.attachments:
+        raise RecordingError(f"{rec.path}: not a multi-contact run's recording (no "
+                             f"{CONTROLLER_FILE} attachment)")
+    return _recorded_controller(rec, name)
+
+
 def replay(path: str | Path, controller: str | None = None, *, model: Any = None,
            tube: str | Path | None = None) -> ReplayResult:
     """Feed the recorded measurements (as the controller decoded them) to ``controller``
@@ -134,7 +155,7 @@ def replay(path: str | Path, controller: str | None = None, *, model: Any = None
     import hp_model
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import load_gait
-    from prosthesis_controller import ProsthesisMeasurement, make_controller
+    from prosthesis_controller import make_controller
 
     rec = read_recording(path)
     name = controller or rec.config.get("controller")
@@ -153,11 +174,7 @@ def replay(path: str | Path, controller: str | None = None, *, model: Any = None
     by_cycle = {int(t["cycle_time_us"]): t for t in rec.torques if t.get("enable")}
     worst, at = 0.0, None
     for m in rec.measurements:
-        meas = ProsthesisMeasurement(m["sim_time_us"] * 1e-6, m["knee_angle"],
-                                     m["ankle_angle"], m["knee_velocity"],
-                                     m["ankle_velocity"], m["foot_load"], bool(m["contact"]),
-                                     _pitch(m.get("socket_pitch")))
-        u = ctrl.tick(meas).torque
+        u = ctrl.tick(recorded_measurement(m)).torque
         r = by_cycle.get(int(m["sim_time_us"]))
         if r is None:
             continue

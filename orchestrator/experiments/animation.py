@@ -22,7 +22,7 @@ import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -43,6 +43,7 @@ ARROW_COLOUR = "#b00020"
 FALL_COLOUR = "#d0006f"  # the fall's banner (magenta: apart from the arrow's red)
 FALL_HOLD = 1.0  # s: a run that fell ends on its last pose, held this long with the banner
 GROUND_MARK = 0.25  # m between the ground's marks (the view follows the hip: they move back)
+SPEED_WINDOW = 1.0  # s: the walking speed shown is the hip's mean over this (about a stride)
 
 
 def arrow_vector(fx: float, fz: float) -> tuple[float, float]:
@@ -79,6 +80,9 @@ class WalkSeries:
     tau: np.ndarray
     socket_force: np.ndarray | None = None
     fall: Fall | None = None  # how the run ended: shown on its last row's frames
+    #: (n,) m/s: the walking speed commanded (a person walking a gait library along a speed
+    #: profile), shown beside the hip's speed over the last second; None: not shown
+    command: np.ndarray | None = None
 
 
 class WalkerScene:
@@ -143,11 +147,25 @@ class WalkerScene:
             self._draw_force(self.walk.socket_force[i], qi, xy["socket"])
         self.ax.set_xlim(hx - 1.0, hx + 1.0)
         d = Domain.from_code(self.walk.domain[i])
+        speed = ""
+        if self.walk.command is not None:
+            speed = (f"\nspeed {self._walked(i):.2f} m/s over the last {SPEED_WINDOW:g} s, "
+                     f"commanded {self.walk.command[i]:.2f}")
         self.label.set_text(f"t {self.t[i]:.2f} s  {d}  tau {self.walk.tau[i]:.2f}  "
-                            f"step {int(self.steps[i])}")
+                            f"step {int(self.steps[i])}{speed}")
         self._draw_fall(i)
         return (*self.lines, self.head, self.arrow, self.force_label, self.label,
                 self.banner)
+
+    def _walked(self, i: int) -> float:
+        """The hip's mean forward speed (m/s) over the :data:`SPEED_WINDOW` before row ``i``
+        (less at the run's start; NaN on its first row)."""
+        t = self.walk.t
+        j = int(np.searchsorted(t, t[i] - SPEED_WINDOW))
+        if j >= i:
+            return math.nan
+        x = self.walk.q[:, 0]
+        return float((x[i] - x[j]) / (t[i] - t[j]))
 
     def _draw_fall(self, i: int) -> None:
         """The fall's banner on the frames of the last row of a run that fell."""
@@ -275,9 +293,26 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
     fs = np.array([[o["socket_force"][k] for k in ("Fx", "Fz", "My")] for o in rows], float)
     ctrl = rec.config.get("controller", "")
     fall = _recorded_fall(rec.metadata.get("summary", {}), t[-1], dom[-1], tau[-1])
-    return walker_gif(model, WalkSeries(t, q, dom, tau, fs, fall), fps=fps,
+    return walker_gif(model, WalkSeries(t, q, dom, tau, fs, fall, _recorded_command(rec, t)),
+                      fps=fps,
                       max_seconds=max_seconds,
                       title=f"{Path(path).name}" + (f" ({ctrl})" if ctrl else ""))
+
+
+def _recorded_command(rec: Any, t: np.ndarray) -> np.ndarray | None:
+    """The speed commanded at times ``t`` (s) of a recording of a person walking a gait
+    library (its ``speed`` metadata's profile), None for any other run."""
+    from hp_model.speed_profile import SpeedProfile
+    from orchestrator.cosim.recording import SPEED_METADATA, RecordingError
+
+    text = rec.metadata.get(SPEED_METADATA, {}).get("profile")
+    if text is None:
+        return None
+    try:
+        profile = SpeedProfile.parse(text)
+    except ValueError as e:
+        raise RecordingError(f"{rec.path}: metadata '{SPEED_METADATA}': {e}") from None
+    return np.array([profile.at(float(s)) for s in t])
 
 
 def _recorded_fall(summary: Mapping[str, str], t: float, domain: int, tau: float
