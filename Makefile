@@ -5,7 +5,7 @@ VENV   ?= .venv
 STAMP  := $(VENV)/.installed
 LOCK   := requirements.lock
 
-.PHONY: demo test lint bench lock clean
+.PHONY: demo test test-quick lint bench lock clean
 
 $(STAMP): pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
@@ -32,14 +32,20 @@ demo: $(STAMP)
 # report; the target fails if either fails.  They share one cache of compiled models and
 # FMUs, made for this run and removed after it.  --durations: the slowest tests are printed
 # with every run (the suite's time is a target).
+# `make test-quick`: the same two phases without the tests marked `slow` (the longer end-to-end
+# runs: fits, libraries, demos), what a change is checked with before `make test`.
 TEST_WORKERS ?= auto
+TEST_MARK ?=
 test: $(STAMP)
 	cache=$$(mktemp -d "$${TMPDIR:-/tmp}/hpcosim-test-cache.XXXXXX") || exit 1; \
 	trap 'rm -rf "$$cache"' EXIT; export HPCOSIM_TEST_CACHE="$$cache"; \
 	$(VENV)/bin/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder \
-	    -m "not serial" --durations=15; parallel=$$?; \
-	$(VENV)/bin/python -m pytest -m serial --durations=5; serial=$$?; \
+	    -m "not serial $(TEST_MARK)" --durations=15; parallel=$$?; \
+	$(VENV)/bin/python -m pytest -m "serial $(TEST_MARK)" --durations=5; serial=$$?; \
 	test $$parallel -eq 0 && test $$serial -eq 0
+
+test-quick:
+	$(MAKE) test TEST_MARK="and not slow"
 
 # ruff: style, imports and the size and complexity guards; mypy: the six product packages
 # (both configured in pyproject.toml: [tool.ruff.lint], [tool.mypy]).  Both always run.
