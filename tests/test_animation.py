@@ -46,6 +46,36 @@ def test_walker_gif_of_a_short_run(model, template_gait):
         walker_gif(model, WalkSeries(r.t[:0], r.q[:0], r.domain[:0], r.tau[:0]))
 
 
+def test_the_speed_is_shown_beside_the_command(model, template_gait):
+    """A walk along a commanded speed (a person walking a gait library): each frame's status
+    line shows the hip's mean forward speed over the last second, (x_i - x_j) / (t_i - t_j)
+    with t_j one second before, beside the speed commanded; a walk without a command shows
+    no speed."""
+    from matplotlib import pyplot as plt
+
+    from orchestrator.experiments.animation import SPEED_WINDOW, walker_scene
+
+    tube = tube_about_nominal(template_gait, (40.0, 60.0, 8.0))
+    r = run_scenario(model, template_gait, tube, Scenario("phase-pd", NOMINAL, 8))
+    assert r.q is not None and r.t[-1] > 2 * SPEED_WINDOW
+    command = 0.5 + 0.1 * r.t
+    fig, scene = walker_scene(model, WalkSeries(r.t, r.q, r.domain, r.tau, command=command),
+                              fps=5.0)
+    k = len(scene.idx) - 1
+    scene.draw(k)
+    i = scene.idx[k]
+    j = int(np.searchsorted(r.t, r.t[i] - SPEED_WINDOW))
+    walked = (r.q[i, 0] - r.q[j, 0]) / (r.t[i] - r.t[j])
+    assert 0.1 < walked < 2.0  # it walks forward
+    text = scene.label.get_text()
+    assert f"speed {walked:.2f} m/s over the last 1 s, commanded {command[i]:.2f}" in text
+    plt.close(fig)
+    fig, scene = walker_scene(model, WalkSeries(r.t, r.q, r.domain, r.tau), fps=5.0)
+    scene.draw(k)
+    assert "speed" not in scene.label.get_text()
+    plt.close(fig)
+
+
 def _frame(data: bytes) -> np.ndarray:
     with Image.open(io.BytesIO(data)) as im:
         return np.asarray(im.convert("RGB")).astype(int)

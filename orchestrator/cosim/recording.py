@@ -124,6 +124,21 @@ def _pitch(v: Any) -> float:
     return math.nan if v is None else float(v)
 
 
+def recorded_profile(rec: Recording) -> Any:
+    """The speed commanded in a recorded run of a person walking a gait library (its
+    ``speed`` metadata's :class:`~hp_model.speed_profile.SpeedProfile`), None for any other
+    run; RecordingError naming the file when the metadata is damaged."""
+    from hp_model.speed_profile import SpeedProfile
+
+    text = rec.metadata.get(SPEED_METADATA, {}).get("profile")
+    if text is None:
+        return None
+    try:
+        return SpeedProfile.parse(text)
+    except ValueError as e:
+        raise RecordingError(f"{rec.path}: metadata '{SPEED_METADATA}': {e}") from None
+
+
 def recorded_measurement(m: dict[str, Any]) -> Any:
     """The :class:`~prosthesis_controller.measurement.ProsthesisMeasurement` of a recorded
     ``/prosthesis/measurements`` message (as the controller decoded it)."""

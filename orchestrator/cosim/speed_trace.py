@@ -11,13 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hp_model.speed_profile import SpeedProfile
 from orchestrator.cosim.recording import (
-    SPEED_METADATA,
     RecordingError,
     read_recording,
     recorded_controller,
     recorded_measurement,
+    recorded_profile,
 )
 
 
@@ -53,13 +52,9 @@ def speed_trace(path: str | Path) -> SpeedTrace | None:
     other run.  RecordingError naming the file when its speed metadata or controller file
     is damaged."""
     rec = read_recording(path)
-    text = rec.metadata.get(SPEED_METADATA, {}).get("profile")
-    if text is None:
+    profile = recorded_profile(rec)
+    if profile is None:
         return None
-    try:
-        profile = SpeedProfile.parse(text)
-    except ValueError as e:
-        raise RecordingError(f"{rec.path}: metadata '{SPEED_METADATA}': {e}") from None
     ctl = recorded_controller(rec)
     if not hasattr(ctl, "speeds"):
         raise RecordingError(f"{rec.path}: its controller file is not a gait library's "

@@ -301,18 +301,11 @@ def recording_gif(path: str | Path, model: HumanProsthesisModel, *, fps: float =
 
 def _recorded_command(rec: Any, t: np.ndarray) -> np.ndarray | None:
     """The speed commanded at times ``t`` (s) of a recording of a person walking a gait
-    library (its ``speed`` metadata's profile), None for any other run."""
-    from hp_model.speed_profile import SpeedProfile
-    from orchestrator.cosim.recording import SPEED_METADATA, RecordingError
+    library, None for any other run."""
+    from orchestrator.cosim.recording import recorded_profile
 
-    text = rec.metadata.get(SPEED_METADATA, {}).get("profile")
-    if text is None:
-        return None
-    try:
-        profile = SpeedProfile.parse(text)
-    except ValueError as e:
-        raise RecordingError(f"{rec.path}: metadata '{SPEED_METADATA}': {e}") from None
-    return np.array([profile.at(float(s)) for s in t])
+    profile = recorded_profile(rec)
+    return None if profile is None else np.array([profile.at(float(s)) for s in t])
 
 
 def _recorded_fall(summary: Mapping[str, str], t: float, domain: int, tau: float
