@@ -5,7 +5,8 @@ between them, MCAP recording.
 The run puts together its parts, each a module of this package:
 
     config              CosimConfig (what ``hpcosim run`` sets), CosimError
-    inputs              the model, gait, tube, FMU file and drives, loaded and checked
+    inputs              the model, gait, tube, FMU file and drives, loaded and checked (a
+                        gait library's run: the speed commanded, the gaits scheduled)
     faults              the fault plan (``--perturb``) and its cases (PerturbCase)
     human               the FMU file (cached build) and its instance for the run
     cpus                the CPU of each process (lockstep), polling before blocking
