@@ -6,6 +6,9 @@ walked along a changing speed."""
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -168,18 +171,23 @@ def test_a_speed_family_needs_the_library_and_draws_only_sensors_beside_it(libra
 @pytest.fixture(scope="module")
 def fitted(private_cache):
     """`gait library` at 0.9 and 1.25 m/s from the packaged person (1.07 m/s) and its take:
-    the command's result and the library file, kept in the run's cache (``HPCOSIM_CACHE``):
-    ``make test``'s serial phase (the co-simulation below) takes the parallel phase's
-    (the result then: the library file made, exit 0)."""
-    d = private_cache / "test-person-library"
-    out = d / "lib.json"
-    if out.is_file():  # written atomically by a `gait library` that exited 0
-        return SimpleNamespace(returncode=0, stderr="", stdout=""), out
-    d.mkdir(parents=True, exist_ok=True)
+    the command's result and the library file.  Made in a folder of this process's own and
+    published to the run's cache (``HPCOSIM_CACHE``) by an atomic rename: ``make test``'s
+    serial phase (the co-simulation below) takes the parallel phase's (the result then: the
+    library file made, exit 0), and two workers making it at once each keep their own."""
+    shared = private_cache / "test-person-library.json"
+    if shared.is_file():  # published only by a `gait library` that exited 0
+        return SimpleNamespace(returncode=0, stderr="", stdout=""), shared
+    d = Path(tempfile.mkdtemp(prefix="fitted-library-", dir=private_cache))
     steps = d / "steps.npz"
     assert person_reference.make_steps(steps, d) == 0
+    out = d / "lib.json"
     r = hpcosim("gait", "library", str(steps), "--gait", str(REFERENCE_PERSON_GAIT),
                 "--out", str(out), "--speeds", "0.9,1.25")
+    if r.returncode == 0:
+        part = d / "published.part"
+        shutil.copyfile(out, part)
+        os.replace(part, shared)
     return r, out
 
 
