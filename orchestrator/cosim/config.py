@@ -92,7 +92,7 @@ class CosimConfig:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise CosimError(f"{name} {v!r}: expected a whole number >= 1")
-        self.profile  # noqa: B018 (checked: CosimError naming --speed-profile)
+        _speed_profile(self.speed_profile, self.library)  # CosimError if bad
         try:
             FaultPlan.parse(self.perturb)
             if self.run_id is not None:
@@ -102,17 +102,8 @@ class CosimConfig:
 
     @property
     def profile(self) -> SpeedProfile | None:
-        """The commanded speed (None: none given); CosimError naming ``--speed-profile``
-        when it is not one, or given without a library."""
-        if self.speed_profile is None:
-            return None
-        if self.library is None:
-            raise CosimError("--speed-profile: the person changes speed over a gait library; "
-                             "give --library")
-        try:
-            return SpeedProfile.parse(self.speed_profile)
-        except ValueError as e:
-            raise CosimError(f"--speed-profile {self.speed_profile!r}: {e}") from None
+        """The commanded speed (None: none given)."""
+        return _speed_profile(self.speed_profile, self.library)
 
     @property
     def realtime(self) -> bool:
@@ -121,3 +112,17 @@ class CosimConfig:
     def to_dict(self) -> dict[str, Any]:
         """The configuration as plain values (paths as strings), as recordings store it."""
         return {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(self).items()}
+
+
+def _speed_profile(text: str | None, library: Path | None) -> SpeedProfile | None:
+    """``--speed-profile``'s text parsed (None: none given); CosimError naming the option when
+    it is not a profile, or given without ``--library``."""
+    if text is None:
+        return None
+    if library is None:
+        raise CosimError("--speed-profile: the person changes speed over a gait library; "
+                         "give --library")
+    try:
+        return SpeedProfile.parse(text)
+    except ValueError as e:
+        raise CosimError(f"--speed-profile {text!r}: {e}") from None

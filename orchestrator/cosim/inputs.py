@@ -158,13 +158,13 @@ class RunInputs:
         run = load_contact_run(cfg.gait)
         model, tracked = run.model, run.tracked
         tube = None if cfg.tube is None else load_tube(cfg.tube, run.hash)
-        library, profile = cls._library(cfg, run) if cfg.library is not None else (None, None)
+        library, profile = (None, None) if cfg.library is None else cls._library(cfg, run)
         fmu_path = ensure_fmu(Path(cfg.gait), model, cfg.fmu, say, tracked=tracked)
         check_fmu_identity(fmu_path, tracked.hash, model, cfg.gait,
                            "--fmu" if cfg.fmu is not None else "the cached FMU")
-        if library is not None:
+        if library is not None and cfg.library is not None:
             try:
-                tables = ensure_following_file(Path(str(cfg.library)), library, say)
+                tables = ensure_following_file(Path(cfg.library), library, say)
             except ValueError as e:  # a held oracle fell: that speed's gait does not walk
                 raise CosimError(f"--library {cfg.library}: no controller: {e}") from None
             return cls(model, tracked, None, fmu_path, Drives.of(model), tracked.hash, tables,

@@ -18,6 +18,7 @@ from orchestrator.cosim.recording import (
     recorded_measurement,
     recorded_profile,
 )
+from prosthesis_controller.speed_following import SpeedFollowing
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ def speed_trace(path: str | Path) -> SpeedTrace | None:
     if profile is None:
         return None
     ctl = recorded_controller(rec)
-    if not hasattr(ctl, "speeds"):
+    if not isinstance(ctl, SpeedFollowing):
         raise RecordingError(f"{rec.path}: its controller file is not a gait library's "
                              "(speed following)")
     ctl.reset()
