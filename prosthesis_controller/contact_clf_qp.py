@@ -98,7 +98,7 @@ class ContactClfConfig:
     gamma: float = 0.3
     w_force: float = 1.0e4
     w_torque: float = 1.0
-    c_rho: float = 1.0e2
+    c_rho: float = 1.0e1
     c_sigma: float = 1.0e6
     mu: float = 0.6
     f_min: float = 30.0

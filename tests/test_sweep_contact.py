@@ -192,3 +192,15 @@ def test_the_walkers_armature_is_the_draws(tmp_path):
     assert nominal["success"]
     assert (light["success"], light["duration_s"], light["max_torque_ankle"]) != \
         (nominal["success"], nominal["duration_s"], nominal["max_torque_ankle"])
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "sweep"
+
+
+@pytest.mark.parametrize("name", sorted(p.name for p in EXAMPLES.glob("*.toml")))
+def test_every_example_spec_is_a_valid_sweep(name: str) -> None:
+    """The specs the README and docs run (`hpcosim sweep run examples/sweep/NAME`) load and
+    pass the sweep's checks (their gait and tube files found, every quantity one their graph
+    draws)."""
+    spec = load_spec(EXAMPLES / name)
+    assert spec.draws >= 1 and spec.families and spec.controllers
