@@ -6,8 +6,10 @@ walker state (q, qd) (a controller builds it from the gait at the phase it measu
 own joints from its encoders) and the domain's gait parameters theta:
 
 - the human's four torques from its feedback linearization given the prosthesis motor torque
-  u_p (``hfl_<d>`` of :class:`hp_model.contact_outputs.ContactConstraints`: the human holds
-  its rows of the domain's outputs, in a double support the squeeze among them in ``ds_h``);
+  u_p (``hfeedback_<d>`` of :class:`hp_model.contact_outputs.ContactConstraints`, all of its
+  feedback: the human holds its rows of the domain's outputs, in a double support the
+  squeeze among them in ``ds_h``; the simulated person's ``hfl_<d>`` yields a share of its
+  feedback where its contacts could not take it, which is not affine in u_p);
 - the domain's constrained dynamics ``dyn_<d>``: the prosthesis joint accelerations and the
   wrenches of every contact on the ground (the stance foot's first: (F_x, F_z[, M_y]) per
   contact, N and N m, at the contact's frame; a flat sole's M_y about its sole frame).
@@ -62,7 +64,11 @@ class ContactInteraction:
         for d in STANCE_DOMAINS:
             vc = ContactConstraints(model, d, degree)
             theta = ca.SX.sym("theta", vc.n_params)
-            u = vc.functions[f"hfl_{d}"](q, qd, theta, gains, u_p)
+            # the human's law with the whole of its feedback (the paper's: affine in u_p),
+            # not the share the simulated person yields to its contacts (a bound the model
+            # leaves to the QP's own contact rows)
+            u_ff, u_fb, _ = vc.functions[f"hfeedback_{d}"](q, qd, theta, gains, u_p)
+            u = u_ff + u_fb
             qdd, lam = model.function(f"dyn_{d}")(q, qd, u)
             acc = qdd[joints]
             w = lam[:wrench_size(d)]

@@ -47,7 +47,22 @@ With qdd = a(q, qd) + b(q) u (the domain's constrained dynamics) and step = p_ma
 so A = [J_p b; M b], L_f = [J_p a + Jdot_p qd - dV/dtau tau_dot; M a - ...] (in a double
 support also the squeeze's row: lam = lam_a(q, qd) + lam_b(q) u, the rows of the leading
 contact's F_x - R(tau) F_z) and the feedback linearization is the paper's,
-u = -A^-1 (L_f + v), v = (eps y1, kp y2 + kd dy2, 0).
+u = -A^-1 (L_f + v), v = (eps y1, kp y2 + kd dy2, 0), with one change: the simulated person
+yields to its contacts.  Of the feedback's torques -A^-1 v it applies the largest share s in
+[0, 1] for which the wrench the model predicts (lam, affine in u) keeps every contact on the
+ground within a friction ratio of 0.7 with 30 N of load (:func:`feedback_share`;
+:data:`PERSON_MU`, :data:`PERSON_MIN_LOAD`): u = -A^-1 (L_f + s v).  Where its curves ask
+more of the ground than it can give (a posture that is not the gait's, a landing off its
+time) a person gives up tracking before it slips, and the closed loop's outputs then obey
+ddy2 = -s (kp y2 + kd dy2).  People walk well inside their friction cone (the friction
+they use in level walking is 0.15-0.25 of the load; Redfern, Cham, Gielo-Perczak et al.,
+Ergonomics 44(13), 2001); whole-body controllers of humanoids put the same contact bounds
+on their torques (as constraints of a QP; here one line search, closed form, so that the
+FMU's generated C holds it too).  Measured on the packaged person (held oracle, 20 draws,
+10 steps): with its four joints' curves offset by U(-1, 1) deg it walks 20 (18 without),
+by U(-3, 3) deg 8 (2), with Bezier perturbations U(0, 0.025) 9 (3); the nominal walk's
+strides are the same to 0.3 ms.  ``feedback_<d>`` and ``hfeedback_<d>`` give the two parts
+and the share.
 
 Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
 (:func:`hp_model.outputs.resting`: the swing leg holds its landing posture); a double
@@ -120,12 +135,51 @@ def selection(model: HumanProsthesisModel, names: tuple[str, ...]) -> np.ndarray
     return S
 
 
-def _human_torques(A: ca.SX, rhs: ca.SX, rows: list[int], u_p: ca.SX) -> ca.SX:
-    """The human's four torques u_h with A_h u_h = -(rhs_h + A_p u_p) (its four output
-    rows, given the prosthesis motor torque u_p): given the u_p that ``fl`` computes, ``fl``'s
-    own.  In a double support the human's rows include the squeeze: it holds the gait's
-    friction ratio of the leading contact whatever u_p."""
-    return ca.solve(A[rows, 0:4], -(rhs[rows] + A[rows, 4:6] @ u_p))
+#: the simulated person's contact margin (:func:`feedback_share`): the friction ratio its
+#: feedback keeps its stance contact within (the simulator calls a slip at 0.8) and the load
+#: it leaves on it (N)
+PERSON_MU = 0.7
+PERSON_MIN_LOAD = 30.0
+
+
+def feedback_share(wrench_ff: ca.SX, wrench_fb: ca.SX, domain: Domain) -> ca.SX:
+    """The largest share s in [0, 1] of the feedback torques for which the predicted wrench
+    wrench_ff + s wrench_fb (lam's rows, N) keeps every contact of ``domain`` on the ground
+    within the friction ratio :data:`PERSON_MU` with at least :data:`PERSON_MIN_LOAD` of
+    load (0 where the feedforward torques alone do not: the feedback cannot help there).
+    Each bound is affine in s: s <= -a / b where b > 0."""
+    share, row = ca.SX(1), 0
+    for contact in domain.contacts:
+        fx0, fz0 = wrench_ff[row], wrench_ff[row + 1]
+        fx1, fz1 = wrench_fb[row], wrench_fb[row + 1]
+        for a, b in ((fx0 - PERSON_MU * fz0, fx1 - PERSON_MU * fz1),
+                     (-fx0 - PERSON_MU * fz0, -fx1 - PERSON_MU * fz1),
+                     (PERSON_MIN_LOAD - fz0, -fz1)):
+            share = ca.fmin(share, ca.if_else(b > 0, -a / ca.fmax(b, 1e-12), 1))
+        row += contact.size
+    return ca.fmax(share, 0)
+
+
+def _yielding_laws(A: ca.SX, Lf: ca.SX, v: ca.SX, lam: ca.SX, u_sym: ca.SX, u_p: ca.SX,
+                   domain: Domain) -> tuple[tuple[ca.SX, ca.SX, ca.SX], ...]:
+    """The feedback linearization A u = -(L_f + s v) of all six torques, and of the human's
+    four given the prosthesis motor torque u_p (``hfl``: its rows ``Domain.human_outputs``;
+    in a double support they include the squeeze, so it holds the gait's friction ratio of
+    the leading contact whatever u_p), each as its torques without feedback (v = 0), the
+    feedback's torques and the share s of them applied (:func:`feedback_share`, from the
+    wrench lam, affine in the torques u_sym).  One factorization per law for its two
+    parts."""
+    lam_u = ca.jacobian(lam, u_sym)
+    lam_0 = ca.substitute(lam, u_sym, ca.DM.zeros(u_sym.numel()))
+    parts = -ca.solve(A, ca.horzcat(Lf, v))
+    u_ff, u_fb = parts[:, 0], parts[:, 1]
+    share = feedback_share(lam_0 + lam_u @ u_ff, lam_u @ u_fb, domain)
+    rows = list(domain.human_outputs)
+    h_parts = ca.solve(A[rows, 0:4], -ca.horzcat(Lf[rows] + A[rows, 4:6] @ u_p, v[rows]))
+    h_ff = ca.vertcat(h_parts[:, 0], u_p)
+    h_fb = ca.vertcat(h_parts[:, 1], ca.DM.zeros(2))
+    h_share = feedback_share(lam_0 + lam_u @ h_ff, lam_u @ h_fb, domain)
+    return (u_ff, u_fb, share), (h_ff, h_fb, h_share)
 
 
 def hip_progress(model: HumanProsthesisModel, domain: Domain) -> ca.SX:
@@ -198,10 +252,10 @@ class ContactConstraints:
         #: the prosthesis's motor torques last)
         self.decoupling = ca.Function(f"decoupling_{d}", [q, qd, theta], [A],
                                       ["q", "qd", "theta"], ["A"])
-        rhs = Lf + v
-        u = -ca.solve(A, rhs)
         u_p = ca.SX.sym("u_p", 2)
-        u_hfl = ca.vertcat(_human_torques(A, rhs, list(d.human_outputs), u_p), u_p)
+        full, human = _yielding_laws(A, Lf, v, lam, model.u, u_p, d)
+        u = full[0] + full[2] * full[1]
+        u_hfl = human[0] + human[2] * human[1]
 
         tau = o.tau
         self.functions = {
@@ -213,6 +267,13 @@ class ContactConstraints:
                                    ["u", "y1", "y2", "dy2", "tau"]),
             f"hfl_{d}": ca.Function(f"hfl_{d}", [q, qd, theta, gains, u_p], [u_hfl],
                                     ["q", "qd", "theta", "gains", "u_p"], ["u"]),
+            # the two laws' parts (_yielding_laws): u = u_ff + share u_fb
+            f"feedback_{d}": ca.Function(f"feedback_{d}", [q, qd, theta, gains], list(full),
+                                         ["q", "qd", "theta", "gains"],
+                                         ["u_ff", "u_fb", "share"]),
+            f"hfeedback_{d}": ca.Function(f"hfeedback_{d}", [q, qd, theta, gains, u_p],
+                                          list(human), ["q", "qd", "theta", "gains", "u_p"],
+                                          ["u_ff", "u_fb", "share"]),
         }
         #: hip progress (m) over the reference frame of a configuration: the phase's numerator
         self.progress = ca.Function(f"progress_{d}", [q, qd], [progress, progress_dot],

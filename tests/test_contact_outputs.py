@@ -11,7 +11,12 @@ import pytest
 from characterization.gait.contact_gait import fit_with_rates
 from hp_model import bezier
 from hp_model.config import default_device_path, default_subject_path, load_device, load_subject
-from hp_model.contact_outputs import ContactConstraints, virtual_constraints
+from hp_model.contact_outputs import (
+    PERSON_MIN_LOAD,
+    PERSON_MU,
+    ContactConstraints,
+    virtual_constraints,
+)
 from hp_model.domains import Domain, DomainGraph
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import VirtualConstraints
@@ -48,14 +53,15 @@ def _theta(vc: ContactConstraints, rng: np.random.Generator) -> np.ndarray:
     return np.r_[alpha.ravel(), 1.2, -0.1, 0.1]
 
 
-def _stacked(vc: ContactConstraints, q, qd, qdd, u, theta) -> np.ndarray:
-    """The closed loop's error per row of the stack: dy1 + eps y1 (where there is y1),
-    ddy2 + kp y2 + kd dy2, and in a double support the squeeze row's F_x - R(tau) F_z (N,
-    divided by 100 to be of the rows' size)."""
+def _stacked(vc: ContactConstraints, q, qd, qdd, u, theta, share: float = 1.0
+             ) -> np.ndarray:
+    """The closed loop's error per row of the stack with ``share`` of the feedback applied:
+    dy1 + s eps y1 (where there is y1), ddy2 + s (kp y2 + kd dy2), and in a double support
+    the squeeze row's F_x - R(tau) F_z (N, divided by 100 to be of the rows' size)."""
     y1, y2, dy2, dy1_num, _, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
-    rows = ddy2_num + GAINS[1] * y2 + GAINS[2] * dy2
+    rows = ddy2_num + share * (GAINS[1] * y2 + GAINS[2] * dy2)
     if vc.domain.velocity_output:
-        rows = np.r_[dy1_num + GAINS[0] * y1, rows]
+        rows = np.r_[dy1_num + share * GAINS[0] * y1, rows]
     if vc.squeeze is not None:
         rows = np.r_[rows, float(vc.squeeze(q, qd, theta, u)[0]) / 100.0]
     return rows
@@ -92,19 +98,22 @@ def test_feedback_linearization_gives_the_outputs_their_dynamics(
     """fl: dy1 = -eps y1 (where there is y1) and ddy2 = -kp y2 - kd dy2, with qdd from the
     domain's constrained dynamics; hfl: the same on the human's rows whatever u_p."""
     vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=7)
+    share = float(vc.functions[f"feedback_{domain}"](q, qd, theta, GAINS)[2])
     qdd = np.array(dyn(q, qd, u)[0]).ravel()
     _, y2, dy2, _, dy2_num, ddy2_num = _output_rates(vc, q, qd, qdd, theta)
     np.testing.assert_allclose(dy2_num, dy2, atol=1e-7)  # dy2 is y2's rate
     scale = np.abs(GAINS[1] * y2).max()
-    np.testing.assert_allclose(ddy2_num, -GAINS[1] * y2 - GAINS[2] * dy2, atol=1e-6 * scale)
-    stacked = _stacked(vc, q, qd, qdd, u, theta)
+    np.testing.assert_allclose(ddy2_num, -share * (GAINS[1] * y2 + GAINS[2] * dy2),
+                               atol=1e-6 * scale)
+    stacked = _stacked(vc, q, qd, qdd, u, theta, share)
     np.testing.assert_allclose(stacked, 0.0, atol=1e-6 * scale)  # y1 and the squeeze too
     # the human's feedback linearization, the prosthesis torque given
     u_p = np.array([3.0, -2.0])
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u_p)).ravel()
+    h_share = float(vc.functions[f"hfeedback_{domain}"](q, qd, theta, GAINS, u_p)[2])
     np.testing.assert_array_equal(u_h[4:], u_p)
     qdd = np.array(dyn(q, qd, u_h)[0]).ravel()
-    closed = _stacked(vc, q, qd, qdd, u_h, theta)
+    closed = _stacked(vc, q, qd, qdd, u_h, theta, h_share)
     rows = list(domain.human_outputs)
     np.testing.assert_allclose(closed[rows], 0.0, atol=1e-6 * scale)
     assert np.abs(closed[[r for r in range(closed.size) if r not in rows]]).max() > 1e-3, \
@@ -114,15 +123,22 @@ def test_feedback_linearization_gives_the_outputs_their_dynamics(
 @pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
 def test_the_human_given_the_oracles_prosthesis_torque_is_the_oracle(
         model: HumanProsthesisModel, domain: Domain) -> None:
-    """hfl given the u_p that fl computes returns fl's six torques (so a prosthesis that
-    applies the oracle's torque walks the oracle's walk).  In a double support (a closed
+    """hfl given the u_p that fl computes returns fl's six torques at fl's share of the
+    feedback (so a prosthesis that applies the oracle's torque walks the oracle's walk while
+    neither yields); the human's own share is at least fl's (fl's point keeps its contacts,
+    and the human's line through it yields no sooner).  In a double support (a closed
     chain: one torque direction only presses the legs against each other and moves nothing)
     that squeeze is a row of its own, the leading contact's F_x / F_z on its curve; in
     ``ds_h`` the human holds it whatever u_p, in ``ds_p`` the prosthesis's torque sets it
     (hp_model.contact_outputs: the human's rows with it go singular there)."""
     vc, dyn, q, qd, theta, u = _fl_at_random_state(model, domain, seed=11)
+    share = float(vc.functions[f"feedback_{domain}"](q, qd, theta, GAINS)[2])
+    h_ff, h_fb, h_share = (np.array(a).ravel() for a in vc.functions[f"hfeedback_{domain}"](
+        q, qd, theta, GAINS, u[4:]))
+    np.testing.assert_allclose(h_ff + share * h_fb, u, rtol=1e-7, atol=1e-7 * np.abs(u).max())
+    assert h_share.item() >= share - 1e-9
     u_h = np.array(vc.functions[f"hfl_{domain}"](q, qd, theta, GAINS, u[4:])).ravel()
-    np.testing.assert_allclose(u_h, u, rtol=1e-7, atol=1e-7 * np.abs(u).max())
+    np.testing.assert_allclose(u_h, h_ff + h_share.item() * h_fb, rtol=1e-12, atol=1e-9)
     if not domain.is_double_support:
         return
     # the null direction, numerically: torques that leave every acceleration unchanged
@@ -185,3 +201,46 @@ def test_symbolic_functions_are_sx(model: HumanProsthesisModel) -> None:
     for f in vc.functions.values():
         assert f.is_a("SXFunction") and not f.has_free()
     assert isinstance(vc.functions["fl_ps_toe"].sx_in(0), ca.SX)
+
+
+@pytest.mark.parametrize("domain", list(DomainGraph.MULTICONTACT.domains))
+def test_the_person_yields_its_feedback_to_its_contacts(
+        model: HumanProsthesisModel, domain: Domain) -> None:
+    """Over random states, the margin rows of every contact (mu F_z - F_x, mu F_z + F_x,
+    F_z - min load with PERSON_MU and PERSON_MIN_LOAD; >= 0 inside) under the torques fl
+    applies, u_ff + s u_fb: each row the feedback lowers that held without it still holds;
+    s < 1 only where such a row is on its margin at s (or already off it without feedback:
+    s = 0); s = 1 otherwise (the paper's law)."""
+    rng = np.random.default_rng(3)
+    vc = ContactConstraints(model, domain, degree=4)
+    fs, dyn = vc.functions, model.function(f"dyn_{domain}")
+    yielded = whole = 0
+
+    def rows(q, qd, torques):
+        lam, out, r = np.array(dyn(q, qd, torques)[1]).ravel(), [], 0
+        for c in domain.contacts:
+            fx, fz = lam[r], lam[r + 1]
+            out += [PERSON_MU * fz - fx, PERSON_MU * fz + fx, fz - PERSON_MIN_LOAD]
+            r += c.size
+        return np.array(out)
+
+    for _ in range(40):
+        q, qd = _state(rng)
+        theta = _theta(vc, rng)
+        u_ff, u_fb, share = (np.array(a).ravel() for a in fs[f"feedback_{domain}"](
+            q, qd, theta, GAINS))
+        s = share.item()
+        u = np.array(fs[f"fl_{domain}"](q, qd, theta, GAINS)[0]).ravel()
+        np.testing.assert_allclose(u, u_ff + s * u_fb, rtol=1e-12, atol=1e-9)
+        g0, g1, g = rows(q, qd, u_ff), rows(q, qd, u_ff + u_fb), rows(q, qd, u)
+        tol = 1e-6 * max(np.abs(g0).max(), np.abs(g1).max())
+        lowered = g1 < g0 - tol
+        assert np.all(g[lowered & (g0 >= 0)] >= -tol)  # held without feedback: still holds
+        assert 0.0 <= s <= 1.0
+        if s < 1.0:
+            yielded += 1
+            on_margin = np.abs(g[lowered]).min() <= tol if lowered.any() else False
+            assert on_margin or (s == 0.0 and np.any(g0[lowered] < 0)), (s, g0, g1, g)
+        else:
+            whole += 1
+    assert yielded, (yielded, whole)  # the test saw the person yield

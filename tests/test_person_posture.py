@@ -1,0 +1,57 @@
+"""The simulated person with a posture of its own (issue 38): its curves offset as the sweep's
+``human.output_offset`` draws them, walked with the held oracle.  The person yields its
+feedback to its contacts (``hp_model.contact_outputs.feedback_share``); before it did, these
+draws fell in their first steps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from characterization.gait.contact_gait import GAINS, held_oracle, start_state
+from characterization.gait.multicontact import GRAPH
+from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
+from hp_model.domains import Domain
+from hp_model.simulator import HybridSimulator
+from orchestrator.cosim.contact_controllers import load_contact_run, loop_simulator
+from orchestrator.sweep.contact import draw_gait
+from orchestrator.sweep.draws import Draw
+
+
+def _walk(run, cl, thetas):
+    """10 steps of the person tracking ``thetas`` with the held oracle, from the cycle's start:
+    (the log, its strides between the human's heel strikes (s) and their speeds (m/s))."""
+    sim = HybridSimulator(run.model, cl, thetas, np.array(GAINS))
+    held = {Domain(k): v for k, v in sim.thetas.items()}
+    log = sim.run(*start_state(run.trajectory), GRAPH.domains[0], steps=10, duration=20.0,
+                  policy=held_oracle(cl, held, sim.gains))
+    strikes = [i for i in log.impacts if i.into == Domain.DS_H]
+    t, x = np.array([i.t for i in strikes]), np.array([float(i.q[0]) for i in strikes])
+    return log, np.diff(t), np.diff(x) / np.diff(t)
+
+
+@pytest.fixture(scope="module")
+def person():
+    run = load_contact_run(REFERENCE_PERSON_GAIT)
+    cl = loop_simulator(run.model, run.gait, GAINS).cl
+    log, strides, speeds = _walk(run, cl, {d.value: th for d, th in run.gait.thetas().items()})
+    assert log.fall is None, log.fall
+    return run, cl, float(np.median(strides)), float(np.median(speeds))
+
+
+@pytest.mark.parametrize("offsets_deg", [(-0.93, 0.03, -0.07, 0.84),  # fell: toe landing
+                                         (0.89, 0.81, 0.14, -0.71)])  # fell: heel slipped
+def test_a_person_with_a_posture_of_its_own_walks(person, offsets_deg) -> None:
+    """Offsets of up to 1 deg on th_lh, th_lk, th_la, th_rh: 10 steps with the held oracle.
+    From the third stride on its speed is within 2 % of the nominal walk's (the hip's rate is
+    an output of every flat stance) and its stride within 5 % (the step's length moves with
+    the posture: 1 deg at each of the leg's joints is about 3 cm of a 1.2 m stride)."""
+    run, cl, stride, speed = person
+    off = tuple(math.radians(v) for v in offsets_deg)
+    log, strides, speeds = _walk(run, cl, draw_gait(run.gait, Draw("posture", 0,
+                                                                   output_offset=off)))
+    assert log.fall is None and log.steps >= 10, log.fall
+    np.testing.assert_allclose(speeds[2:], speed, rtol=0.02)
+    np.testing.assert_allclose(strides[2:], stride, rtol=0.05)
