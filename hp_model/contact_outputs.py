@@ -50,7 +50,8 @@ contact's F_x - R(tau) F_z) and the feedback linearization is the paper's,
 u = -A^-1 (L_f + v), v = (eps y1, kp y2 + kd dy2, 0), with one change: the simulated person
 yields to its contacts.  Of the feedback's torques -A^-1 v it applies the largest share s in
 [0, 1] for which the wrench the model predicts (lam, affine in u) keeps every contact on the
-ground within a friction ratio of 0.7 with 30 N of load (:func:`feedback_share`;
+ground within a friction ratio of 0.7, the stance contact with 30 N of load and a double
+support's trailing one unloading no further than to zero (:func:`feedback_share`;
 :data:`PERSON_MU`, :data:`PERSON_MIN_LOAD`): u = -A^-1 (L_f + s v).  Where its curves ask
 more of the ground than it can give (a posture that is not the gait's, a landing off its
 time) a person gives up tracking before it slips, and the closed loop's outputs then obey
@@ -145,16 +146,18 @@ PERSON_MIN_LOAD = 30.0
 def feedback_share(wrench_ff: ca.SX, wrench_fb: ca.SX, domain: Domain) -> ca.SX:
     """The largest share s in [0, 1] of the feedback torques for which the predicted wrench
     wrench_ff + s wrench_fb (lam's rows, N) keeps every contact of ``domain`` on the ground
-    within the friction ratio :data:`PERSON_MU` with at least :data:`PERSON_MIN_LOAD` of
-    load (0 where the feedforward torques alone do not: the feedback cannot help there).
-    Each bound is affine in s: s <= -a / b where b > 0."""
+    within the friction ratio :data:`PERSON_MU`, the stance contact (the first) with at least
+    :data:`PERSON_MIN_LOAD` of load, a double support's trailing contact with a load >= 0 (it
+    unloads to its lift-off); 0 where the feedforward torques alone do not (the feedback
+    cannot help there).  Each bound is affine in s: s <= -a / b where b > 0."""
     share, row = ca.SX(1), 0
-    for contact in domain.contacts:
+    for k, contact in enumerate(domain.contacts):
         fx0, fz0 = wrench_ff[row], wrench_ff[row + 1]
         fx1, fz1 = wrench_fb[row], wrench_fb[row + 1]
+        load = PERSON_MIN_LOAD if k == 0 else 0.0
         for a, b in ((fx0 - PERSON_MU * fz0, fx1 - PERSON_MU * fz1),
                      (-fx0 - PERSON_MU * fz0, -fx1 - PERSON_MU * fz1),
-                     (PERSON_MIN_LOAD - fz0, -fz1)):
+                     (load - fz0, -fz1)):
             share = ca.fmin(share, ca.if_else(b > 0, -a / ca.fmax(b, 1e-12), 1))
         row += contact.size
     return ca.fmax(share, 0)

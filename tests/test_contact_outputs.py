@@ -207,7 +207,8 @@ def test_symbolic_functions_are_sx(model: HumanProsthesisModel) -> None:
 def test_the_person_yields_its_feedback_to_its_contacts(
         model: HumanProsthesisModel, domain: Domain) -> None:
     """Over random states, the margin rows of every contact (mu F_z - F_x, mu F_z + F_x,
-    F_z - min load with PERSON_MU and PERSON_MIN_LOAD; >= 0 inside) under the torques fl
+    F_z - min load with PERSON_MU, and PERSON_MIN_LOAD on the stance contact, 0 on a double
+    support's trailing one; >= 0 inside) under the torques fl
     applies, u_ff + s u_fb: each row the feedback lowers that held without it still holds;
     s < 1 only where such a row is on its margin at s (or already off it without feedback:
     s = 0); s = 1 otherwise (the paper's law)."""
@@ -218,9 +219,10 @@ def test_the_person_yields_its_feedback_to_its_contacts(
 
     def rows(q, qd, torques):
         lam, out, r = np.array(dyn(q, qd, torques)[1]).ravel(), [], 0
-        for c in domain.contacts:
+        for k, c in enumerate(domain.contacts):  # the stance contact's load, the other's >= 0
             fx, fz = lam[r], lam[r + 1]
-            out += [PERSON_MU * fz - fx, PERSON_MU * fz + fx, fz - PERSON_MIN_LOAD]
+            out += [PERSON_MU * fz - fx, PERSON_MU * fz + fx,
+                    fz - (PERSON_MIN_LOAD if k == 0 else 0.0)]
             r += c.size
         return np.array(out)
 
