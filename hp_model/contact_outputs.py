@@ -137,8 +137,8 @@ def selection(model: HumanProsthesisModel, names: tuple[str, ...]) -> np.ndarray
 
 
 #: the simulated person's contact margin (:func:`feedback_share`): the friction ratio its
-#: feedback keeps its stance contact within (the simulator calls a slip at 0.8) and the load
-#: it leaves on it (N)
+#: feedback keeps every contact within (the simulator calls a slip at 0.8) and the load it
+#: leaves on its stance contact (N)
 PERSON_MU = 0.7
 PERSON_MIN_LOAD = 30.0
 
