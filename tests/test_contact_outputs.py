@@ -215,7 +215,7 @@ def test_the_person_yields_its_feedback_to_its_contacts(
     rng = np.random.default_rng(3)
     vc = ContactConstraints(model, domain, degree=4)
     fs, dyn = vc.functions, model.function(f"dyn_{domain}")
-    yielded = whole = 0
+    yielded = 0
 
     def rows(q, qd, torques):
         lam, out, r = np.array(dyn(q, qd, torques)[1]).ravel(), [], 0
@@ -243,6 +243,4 @@ def test_the_person_yields_its_feedback_to_its_contacts(
             yielded += 1
             on_margin = np.abs(g[lowered]).min() <= tol if lowered.any() else False
             assert on_margin or (s == 0.0 and np.any(g0[lowered] < 0)), (s, g0, g1, g)
-        else:
-            whole += 1
-    assert yielded, (yielded, whole)  # the test saw the person yield
+    assert yielded  # the test saw the person yield
