@@ -7,9 +7,10 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   encoders (one phase across ``ds_p``, ``ps``, ``ps_toe`` and ``ds_h``), in swing the time
   since toe-off.  The swing runs contact-pd's law (joint PD and the gait's torque).
 - **Model** (stance): the human-prosthesis loop restricted to the nominal human
-  (:mod:`hp_model.contact_interaction`), in the domain the gait is in at the phase and at
-  the gait's walker state there (one stance as the model walks it, :class:`WalkedStance`),
-  linearized about the gait:
+  (:mod:`hp_model.contact_interaction`), in the domain the gait is in at the phase (but
+  ``ds_p``'s last sample while the gait's foot is flat and the sensed one is still on its
+  heel, :data:`HEEL_DOWN`) and at the gait's walker state there (one stance as the model
+  walks it, :class:`WalkedStance`), linearized about the gait:
 
       qdd_p = qdd_ref + g (u - u_ref),     w = w_ref + W (u - u_ref)
 
@@ -49,6 +50,10 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   along the ground (the gait's squeeze).  The torque term keeps the solution unique.
   f_min of a contact is half the gait's normal force where that is lower (a trailing toe
   unloads to zero as its double support ends).
+- **Measured load**: the contact rows' wrench is the gait's shifted by what the foot's load
+  cell reads above the model's prediction under the last tick's torque (that much more
+  normal force on the prosthesis foot, and as much less on the person's other foot in a
+  double support): the rows hold the contacts as they are, not as the gait has them.
 
 Every torque is bounded at the motors; a measurement it cannot use (a non-finite field or no
 IMU pitch) gives zero torque; a QP that piqp cannot solve (retried once at 100x its
@@ -82,6 +87,13 @@ from prosthesis_controller.qp import dense_solver, set_tolerance
 
 #: the largest number of contact wrench rows of a stance domain (a double support: 2 + 2)
 MAX_WRENCH = 4
+#: rad: a sensed heel this far below the toe is still on its heel, not flat (the plant lands
+#: the foot flat at 0; the sensors' noise, 0.2 deg per encoder in the sweeps' sensor family,
+#: does not hold it again once it read flat: :attr:`ContactClfQp.landed`)
+HEEL_DOWN = math.radians(0.5)
+#: a foot sensed flat carrying less than this share of the flat foot's load the model
+#: predicts is still in the double support (the person's trailing toe loaded)
+FLAT_LOAD = 0.9
 #: the largest number of contact rows of a stance domain's QP (a double support: 3 per
 #: heel or toe; a flat sole: 5)
 MAX_CONTACT_ROWS = 6
@@ -148,6 +160,28 @@ def contact_rows(domain: Domain, W: np.ndarray, w0: np.ndarray, w_ref: np.ndarra
     return rows
 
 
+def load_shift(domain: Domain) -> np.ndarray:
+    """The wrench (per contact (F_x, F_z[, M_y]), contact order) of one unit more normal
+    force on the prosthesis foot than the model's, and as much less on the other foot in a
+    double support (the body's weight is shared between them): what a load cell's reading
+    above the model's tells of the wrench."""
+    e, k = np.zeros(wrench_size(domain)), 0
+    for contact in domain.contacts:
+        e[k + 1] = 1.0 if contact.side == "p" else -1.0
+        k += contact.size
+    return e
+
+
+def prosthesis_normal(domain: Domain) -> int:
+    """The wrench row of the prosthesis foot's normal force in ``domain`` (a stance one)."""
+    k = 0
+    for contact in domain.contacts:
+        if contact.side == "p":
+            return k + 1
+        k += contact.size
+    raise ValueError(f"{domain} has no prosthesis contact")
+
+
 def qp_rows(domain: Domain) -> int:
     """Rows of ``domain``'s QP: the CLF's and its contacts'."""
     return 1 + sum(5 if c.is_flat else 3 for c in domain.contacts)
@@ -163,7 +197,10 @@ class StanceQp:
     cost in z = (u, rho, sigma); ``G`` (n, 6, 4) and ``h`` (n, 6) the contact rows (a
     domain's first ``qp_rows(d) - 1``; their slack sigma in body weights); ``d_center``,
     ``d_radius`` (n, 2) the model error's box (rad/s^2; zero where no bound holds: the
-    robust term)."""
+    robust term); ``load_ref`` (n,) the prosthesis foot's normal force in the gait (N),
+    ``load_gain`` (n, 2) its change per motor N m and ``load_h`` (n, 6) the change of the
+    contact rows' h per N of load the load cell measures above the model's (the rest of
+    the body's weight on the other foot in a double support: :meth:`ContactClfQp._stance`)."""
 
     phase: np.ndarray
     domain: tuple[Domain, ...]
@@ -176,11 +213,17 @@ class StanceQp:
     h: np.ndarray
     d_center: np.ndarray
     d_radius: np.ndarray
+    load_ref: np.ndarray
+    load_gain: np.ndarray
+    load_h: np.ndarray
 
     _phases: list[float] = field(init=False, repr=False, compare=False)
     g_rows: list[list[list[float]]] = field(init=False, repr=False, compare=False)
     u_rows: list[list[float]] = field(init=False, repr=False, compare=False)
     margin_rows: list[list[float]] = field(init=False, repr=False, compare=False)
+    load_rows: list[list[float]] = field(init=False, repr=False, compare=False)
+    #: the last ``ds_p`` sample (-1: none): where a foot still on its heel is held
+    heel_end: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # the phases, g and u_ref as floats: a search ~0.3 us, not numpy's ~1.5 us, and the
@@ -191,6 +234,10 @@ class StanceQp:
         object.__setattr__(self, "u_rows", self.u_ref.tolist())
         object.__setattr__(self, "margin_rows", np.hstack(
             [np.reshape(self.d_center, (-1, 2)), np.reshape(self.d_radius, (-1, 2))]).tolist())
+        object.__setattr__(self, "load_rows", np.column_stack(
+            [self.load_ref, np.reshape(self.load_gain, (-1, 2))]).tolist())
+        heel = [i for i, d in enumerate(self.domain) if d is Domain.DS_P]
+        object.__setattr__(self, "heel_end", heel[-1] if heel else -1)
 
     def with_margin(self, bound: ModelErrorBound | None) -> StanceQp:
         """These samples with the robust term of ``bound`` (the multi-contact model error,
@@ -214,24 +261,55 @@ class StanceQp:
         return min(max(bisect.bisect_right(self._phases, s) - 1, 0), len(self._phases) - 1)
 
 
+def domain_spans(st: StanceQp) -> list[tuple[Domain, int, int]] | None:
+    """The stance's domains in their order, each with its first and last sample (None if a
+    domain comes back after another)."""
+    spans: list[tuple[Domain, int, int]] = []
+    for i, d in enumerate(st.domain):
+        if spans and spans[-1][0] is d:
+            spans[-1] = (d, spans[-1][1], i)
+        elif any(x is d for x, _, _ in spans):
+            return None
+        else:
+            spans.append((d, i, i))
+    return spans
+
+
 def blend_stance(a: StanceQp, b: StanceQp, w: float) -> StanceQp:
-    """The stance QP's data (1 - w) a + w b (0 <= w <= 1; two speeds' of a gait library), on
-    the phase grid of the nearer (a for w <= 0.5): the other's sample at or before each
-    phase blended in where the two are in the same domain, the nearer's alone where not
-    (the domains' boundaries move with the speed)."""
+    """The stance QP's data (1 - w) a + w b (0 <= w <= 1; two speeds' of a gait library),
+    domain by domain: each domain's span of the phase blended between the two's (the
+    domains' boundaries move with the speed), each of the nearer's samples (a for w <= 0.5)
+    placed at its share of its domain's span and blended with the other's sample at or
+    before the same share of its.  Two stances whose domains differ: on the nearer's grid,
+    the other's sample at or before each phase blended in where the two are in the same
+    domain, the nearer's alone where not."""
     if w > 0.5:
         a, b, w = b, a, 1.0 - w
-    j = np.array([b.index(s) for s in a.phase])
-    same = np.array([da is b.domain[k] for da, k in zip(a.domain, j, strict=True)])
+    sa, sb = domain_spans(a), domain_spans(b)
+    phase = a.phase.copy()
+    if sa is not None and sb is not None and [d for d, _, _ in sa] == [d for d, _, _ in sb]:
+        j = np.zeros(len(a.phase), dtype=int)
+        for (_, i0, i1), (_, k0, k1) in zip(sa, sb, strict=True):
+            pa, pb = a.phase[i0:i1 + 1], b.phase[k0:k1 + 1]
+            share = (pa - pa[0]) / (pa[-1] - pa[0]) if pa[-1] > pa[0] else np.zeros(pa.size)
+            at = pb[0] + share * (pb[-1] - pb[0])
+            phase[i0:i1 + 1] = (1.0 - w) * pa + w * at
+            j[i0:i1 + 1] = k0 + np.clip(np.searchsorted(pb, at, side="right") - 1, 0,
+                                        k1 - k0)
+        same = np.ones(len(a.phase), dtype=bool)
+    else:
+        j = np.array([b.index(s) for s in a.phase])
+        same = np.array([da is b.domain[k] for da, k in zip(a.domain, j, strict=True)])
 
     def mix(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         out = np.array(x, dtype=float, copy=True)
         out[same] = (1.0 - w) * x[same] + w * y[j][same]
         return out
 
-    return StanceQp(a.phase.copy(), a.domain, *(mix(getattr(a, k), getattr(b, k)) for k in
-                                                ("g", "u_ref", "qdd_ref", "P", "c", "G", "h",
-                                                 "d_center", "d_radius")))
+    return StanceQp(phase, a.domain, *(mix(getattr(a, k), getattr(b, k)) for k in
+                                       ("g", "u_ref", "qdd_ref", "P", "c", "G", "h",
+                                        "d_center", "d_radius", "load_ref", "load_gain",
+                                        "load_h")))
 
 
 @dataclass(frozen=True)
@@ -266,6 +344,8 @@ def stance_qp(walked: WalkedStance, interaction: FunctionSet,
     g_all, P_all, acc_all = np.zeros((n, 2, 2)), np.zeros((n, 4, 4)), np.zeros((n, 2))
     c_all, G_all = np.zeros((n, 4)), np.zeros((n, MAX_CONTACT_ROWS, 4))
     h_all = np.ones((n, MAX_CONTACT_ROWS))
+    load_ref, load_gain = np.zeros(n), np.zeros((n, 2))
+    load_h = np.zeros((n, MAX_CONTACT_ROWS))
     for i, d in enumerate(doms):
         f, g, _, W = (np.asarray(a) for a in interaction[f"interaction_{d}"](
             q[i], qd[i], np.asarray(thetas[d], float), np.asarray(gains, float)))
@@ -279,12 +359,18 @@ def stance_qp(walked: WalkedStance, interaction: FunctionSet,
         P_all[i, :2, :2] = 2.0 * H / k
         P_all[i, 2, 2] = P_all[i, 3, 3] = 1e-9
         c_all[i] = (*(-2.0 * H @ u_ref[i] / k), config.c_rho / k, config.c_sigma / k)
-        rows = contact_rows(d, Wn, wn - Wn @ u_ref[i], wn, config.mu, config.f_min / weight,
-                            feet)
-        for r, (row_u, row_h) in enumerate(rows):
+        w0 = wn - Wn @ u_ref[i]
+        rows = contact_rows(d, Wn, w0, wn, config.mu, config.f_min / weight, feet)
+        shifted = contact_rows(d, Wn, w0 + load_shift(d), wn, config.mu,
+                               config.f_min / weight, feet)  # rows affine in w0
+        for r, ((row_u, row_h), (_, row_s)) in enumerate(zip(rows, shifted, strict=True)):
             G_all[i, r, :2], G_all[i, r, 3], h_all[i, r] = row_u, -1.0, row_h
+            load_h[i, r] = (row_s - row_h) / weight
+        z = prosthesis_normal(d)
+        load_ref[i], load_gain[i] = wrench[i, z], W[z]
     return StanceQp(np.asarray(phase, float), doms, g_all, np.asarray(u_ref, float), acc_all,
-                    P_all, c_all, G_all, h_all, np.zeros((n, 2)), np.zeros((n, 2)))
+                    P_all, c_all, G_all, h_all, np.zeros((n, 2)), np.zeros((n, 2)), load_ref,
+                    load_gain, load_h)
 
 
 @dataclass(frozen=True)
@@ -347,6 +433,9 @@ class ContactClfQp:
         self._u = (min(max(u[0], -lk), lk) if math.isfinite(u[0]) else 0.0,
                    min(max(u[1], -la), la) if math.isfinite(u[1]) else 0.0)
         self.fallbacks = 0  # ticks whose torque came from a fallback (no QP solution, fault)
+        #: whether this stance's foot has been sensed flat (HEEL_DOWN; set at the first flat
+        #: reading where the gait's foot is flat, cleared at the heel strike)
+        self.landed = False
         #: the last stance tick's domain (as the gait has it at the phase; None in swing), the
         #: CLF's value, the relaxations and whether piqp solved it
         self.domain: Domain | None = None
@@ -368,7 +457,7 @@ class ContactClfQp:
         motors: a switch of speed, :mod:`prosthesis_controller.speed_following`): its phase
         law's, the torque its rate limit starts from and its counts."""
         self.law.take_over(other.law)
-        self._u, self.fallbacks = other._u, other.fallbacks
+        self._u, self.fallbacks, self.landed = other._u, other.fallbacks, other.landed
 
     def _new_solvers(self) -> None:
         """One piqp solver per domain, set up with its rows (a solver keeps its scaling and
@@ -405,6 +494,8 @@ class ContactClfQp:
             return control_output(self._u, self.law.phase, Domain.PNS, ControllerMode.FAULT,
                                   self.fallbacks)
         law = self.law
+        if m.contact and not law.in_stance:  # a heel strike
+            self.landed = False
         ref = law.reference(m)  # the phase and the gait there
         u = None
         self.domain = None
@@ -424,6 +515,22 @@ class ContactClfQp:
                               self.fallbacks, V=self.V if stance else 0.0,
                               rho=self.rho if stance else 0.0, qp=qp)
 
+    def _on_heel(self, m: ProsthesisMeasurement, i: int) -> bool:
+        """Whether the foot is not yet flat at sample ``i`` of the gait's flat foot: its
+        heel sensed below its toe by more than :data:`HEEL_DOWN`, or its load cell reading
+        less than :data:`FLAT_LOAD` of the flat foot's load the model predicts under the
+        last torque (the person's other foot still on the ground: the plant leaves ``ds_p``
+        when that foot lets go)."""
+        if self.law.rise < -HEEL_DOWN:
+            return True
+        load = m.foot_load
+        if not (load > 0.0 and math.isfinite(load)):
+            return False  # no reading: the sensed angle alone
+        f_ref, w0, w1 = self.stance.load_rows[i]
+        ur0, ur1 = self.stance.u_rows[i]
+        u0, u1 = self._u
+        return load < FLAT_LOAD * (f_ref + w0 * (u0 - ur0) + w1 * (u1 - ur1))
+
     def _stance(self, m: ProsthesisMeasurement, s: float, ref: tuple[float, ...]
                 ) -> tuple[float, float] | None:
         """The QP's torques at stance phase ``s``, the gait there ``ref`` (None if piqp
@@ -431,6 +538,17 @@ class ContactClfQp:
         cfg, st = self.config, self.stance
         i = st.index(s)
         d = st.domain[i]
+        if d is Domain.PS and not self.landed and 0 <= st.heel_end < i:
+            if self._on_heel(m, i):
+                # the gait's foot is flat at this phase, the sensed one still on its heel or
+                # the person's other foot still loaded (a person slower than the gait): the
+                # QP and the reference of ds_p's end until it lands (at the gait's, the flat
+                # foot's rows and the slap's velocity jump pulled the heel off the ground,
+                # docs/gait-design.md)
+                i, d = st.heel_end, Domain.DS_P
+                ref = self.law.tables.stance.at(float(st.phase[i]))
+            else:  # landed: the gait's from now on in this stance, whatever the noise reads
+                self.landed = True
         k, a, vk, va, _, _ = ref
         # the CLF in floats, joint by joint (numpy's per-call cost on 4-vectors was ~5 us of
         # a tick held to 40 us, benchmarks/bench_contact_controllers.py)
@@ -446,9 +564,18 @@ class ContactClfQp:
         G, h = self._G[d], self._h[d]
         G[0, 0], G[0, 1], G[0, 2], G[0, 3] = lg0 / scale, lg1 / scale, -1.0 / scale, 0.0
         h[0] = (-cfg.gamma / cfg.eps * V - LfV - margin + lg0 * ur0 + lg1 * ur1) / scale
-        G[1:] = st.G[i, :G.shape[0] - 1]
-        h[1:] = st.h[i, :G.shape[0] - 1]
+        n = G.shape[0] - 1
+        G[1:] = st.G[i, :n]
+        h[1:] = st.h[i, :n]
         du, (lk, la), (u0, u1) = cfg.delta_u, self._limits, self._u
+        load = m.foot_load
+        if load > 0.0 and math.isfinite(load):
+            # the load cell's reading (under the last tick's torque) above the model's there:
+            # the contact rows from the foot's measured load, the other foot's from the rest
+            # (a heel strike off the gait pulled the person's trailing toe off the ground
+            # under rows that read the gait's load split, docs/gait-design.md)
+            f_ref, w0, w1 = st.load_rows[i]
+            h[1:] += st.load_h[i, :n] * (load - f_ref - w0 * (u0 - ur0) - w1 * (u1 - ur1))
         xl, xu = self._xl, self._xu
         xl[0], xu[0] = max(u0 - du, -lk), min(u0 + du, lk)
         xl[1], xu[1] = max(u1 - du, -la), min(u1 + du, la)

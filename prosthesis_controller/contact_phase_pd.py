@@ -242,6 +242,9 @@ class ContactPhasePD:
         self._t_off: float | None = None
         #: the last tick's phase (stance: the progress phase; swing: the time's or thigh's)
         self.phase = math.nan
+        #: the last stance tick's sensed rise of the heel over the toe (rad, less the bias
+        #: estimate: LegKinematics.sense; negative while the foot is on its heel, 0 flat)
+        self.rise = 0.0
         #: the estimate of the IMU pitch's bias (rad), subtracted from its readings, and the
         #: time of its last update (s)
         self.imu_bias = 0.0
@@ -253,6 +256,11 @@ class ContactPhasePD:
         return ContactPhasePD(blend_tables(self.tables, other.tables, w), self.leg, self._gear,
                               self._limits, self.stance_gains, self.swing_gains,
                               self.swing_phase)
+
+    @property
+    def in_stance(self) -> bool | None:
+        """Whether the last tick was in stance (None before the first)."""
+        return self._in_stance
 
     def take_over(self, other: ContactPhasePD) -> None:
         """Continue from ``other``'s state (the same leg, another gait's tables: a switch of
@@ -271,6 +279,7 @@ class ContactPhasePD:
         :data:`BIAS_TIME` (a level floor assumed; 0.5 deg of bias moves the stance phase by
         ~1.3 %, and without it half of the walks with 0.25 deg fell, docs/gait-design.md)."""
         p, rise = self.leg.sense(m.socket_pitch - self.imu_bias, m.knee_angle, m.ankle_angle)
+        self.rise = rise
         p0, p1 = self.tables.progress
         s = (p - p0) / (p1 - p0)
         f0, f1 = self.tables.flat

@@ -60,13 +60,14 @@ from prosthesis_controller.contact_phase_pd import (
 from prosthesis_controller.speed_following import FollowingSetup, SpeedFollowing
 
 KIND = "hpcosim-contact-controller"
-SCHEMA_VERSION = 3  # 3: the swing's thigh pitch (the swing phase's measure)
+SCHEMA_VERSION = 4  # 3: the swing's thigh pitch (the swing phase's measure); 4: the load rows
 #: a speed-following controller's file (:class:`FollowingSetup`): the controllers at a gait
 #: library's speeds, each under its own prefix ``c<i>.`` as above, and the estimate's
 #: calibration
 FOLLOWING_KIND = "hpcosim-speed-following-controller"
-FOLLOWING_SCHEMA_VERSION = 1
-_QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius")
+FOLLOWING_SCHEMA_VERSION = 2  # 2: its controllers' load rows
+_QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius", "load_ref",
+       "load_gain", "load_h")
 
 
 def _model_meta(model: HumanProsthesisModel) -> dict[str, Any]:

@@ -50,7 +50,7 @@ class Recorded:
         out = self.ctl.tick(m)
         u = tuple(out.torque)
         c = self.ctl
-        self.ticks.append((m.contact, u, c.domain, c.solved, c.sigma, c.qp, c.rho))
+        self.ticks.append((m.contact, u, c.domain, c.solved, c.sigma, c.qp, c.rho, m))
         c.qp = None
         return out
 
@@ -215,6 +215,98 @@ def test_a_second_solver_agrees_on_its_qps(walk) -> None:
         assert zp[:2] == pytest.approx(z[:2], abs=1e-3)
         cost_p, cost_q = (0.5 * v @ P @ v + c @ v for v in (zp, z))
         assert cost_p <= cost_q + 1e-6 * (1 + abs(cost_q))  # piqp's as low as the reference's
+
+
+def test_the_walked_stance_reads_each_wrench_under_the_torque_applied(cycle) -> None:
+    """The stance the QP's data come from pairs each sample's torque with the wrench under
+    it: from one period to the next (1 ms), within a domain and under a torque that changes
+    by less than 0.05 N m, every contact's normal force changes by less than 10 % of the
+    body's weight, the heel strike's sample included.  Read before the torque was applied
+    (under the swing's), the heel strike's prosthesis heel pulled: -14 N against the next
+    sample's 158 N on this cycle, up to -535 N on gaitalytics' library, and the QP's first
+    rows asked the gait itself for 0.4 body weights of slack."""
+    from orchestrator.cosim.contact_controllers import held_walk
+    from prosthesis_controller.contact_phase_pd import first_stride
+
+    model, traj, _, gait = cycle
+    w = held_walk(loop_simulator(model, gait, GAINS), traj)
+    i0, i1, _ = first_stride(w.contact)
+    weight = float(model.tree.total_mass) * 9.81
+    assert Domain.from_code(int(w.domain[i0])) is Domain.DS_P
+    normal = {}  # (sample, contact) -> N
+    for k in range(i0, i1):
+        j = 0
+        for c in Domain.from_code(int(w.domain[k])).contacts:
+            normal[k, (c.side, c.part)] = w.wrench[k, j + 1]
+            j += c.size
+    heel = next(c for c in Domain.DS_P.contacts if c.side == "p")
+    assert normal[i0, ("p", heel.part)] > 0.1 * weight
+    steady = np.abs(np.diff(w.torque, axis=0)).max(axis=1) < 0.05  # motor N m per period
+    steps = [abs(normal[k + 1, c] - f) for (k, c), f in normal.items()
+             if (k + 1, c) in normal and w.domain[k + 1] == w.domain[k] and steady[k]]
+    assert max(steps) < 0.1 * weight, max(steps)
+
+
+def test_the_load_cell_moves_the_contact_rows(cycle, walk) -> None:
+    """In ``ds_p`` a load cell reading 100 N above the model's prediction (under the last
+    torque) tells the QP the prosthesis heel carries 100 N more and the person's trailing toe
+    100 N less: the two normal-force rows' room moves by that much, and a reading equal to
+    the prediction leaves the rows as the gait has them."""
+    model = cycle[0]
+    rec, _ = walk
+    ctl, st = rec.ctl, rec.ctl.stance
+    ds_p = [t[7] for t in rec.ticks[:1500] if t[2] is Domain.DS_P]
+    m = ds_p[len(ds_p) // 2]  # the middle of the first double support
+    ctl.reset()
+    ctl.tick(replace(m, foot_load=0.0))  # no reading: no correction
+    i = st.index(ctl.phase)
+    assert st.domain[i] is Domain.DS_P
+    rows = {}
+    for extra in (0.0, 100.0):
+        ctl.reset(torque=tuple(st.u_ref[i]))  # the prediction under the last torque: load_ref
+        ctl.tick(replace(m, foot_load=float(st.load_ref[i]) + extra))
+        assert st.index(ctl.phase) == i
+        rows[extra] = np.array(ctl.qp[3])
+    assert rows[0.0][1:7] == pytest.approx(st.h[i, :6], abs=1e-12)
+    moved = (rows[100.0] - rows[0.0]) * float(model.tree.total_mass) * 9.81  # N, per row
+    for k, contact in enumerate(Domain.DS_P.contacts):  # rows F_x <=, -F_x <=, F_z >=
+        assert moved[1 + 3 * k + 2] == pytest.approx(100.0 if contact.side == "p" else -100.0)
+
+
+def test_a_foot_sensed_on_its_heel_keeps_the_double_supports_qp(walk) -> None:
+    """Past the gait's landing of the foot (its ``ps``), a foot the leg's sensors still put on
+    its heel (more than HEEL_DOWN below its toe: a person slower than the gait), or a flat
+    one whose load cell reads less than FLAT_LOAD of the flat foot's load (the person's
+    other foot still on the ground) runs ``ds_p``'s last QP; the first flat reading of the
+    stance ends that until the next heel strike, whatever the sensors read after it."""
+    from prosthesis_controller.contact_clf_qp import HEEL_DOWN
+
+    rec, _ = walk
+    ctl, st = rec.ctl, rec.ctl.stance
+    flat = [t[7] for t in rec.ticks[:1500] if t[2] is Domain.PS][5]
+    law = ctl.law
+
+    def rise(m: ProsthesisMeasurement) -> float:
+        return law.leg.sense(m.socket_pitch, m.knee_angle, m.ankle_angle)[1]
+
+    assert abs(rise(flat)) < HEEL_DOWN
+    heel = next(h for h in (replace(flat, ankle_angle=flat.ankle_angle + d)
+                            for d in (0.03, -0.03)) if rise(h) < -2 * HEEL_DOWN)
+    ctl.reset()
+    ctl.tick(heel)
+    assert ctl.domain is Domain.DS_P and st.domain[st.index(ctl.phase)] is Domain.PS
+    ctl.tick(replace(flat, t=heel.t + 0.001))
+    assert ctl.domain is Domain.PS and ctl.landed
+    ctl.tick(replace(heel, t=heel.t + 0.002))
+    assert ctl.domain is Domain.PS
+    ctl.tick(replace(heel, t=heel.t + 0.003, contact=False))  # a toe-off ...
+    ctl.tick(replace(heel, t=heel.t + 0.004))  # ... and a heel strike
+    assert ctl.domain is Domain.DS_P and not ctl.landed
+    # flat, but carrying half the flat foot's load: the person's other foot still loaded
+    ctl.tick(replace(flat, t=heel.t + 0.005, foot_load=0.5 * flat.foot_load))
+    assert ctl.domain is Domain.DS_P and not ctl.landed
+    ctl.tick(replace(flat, t=heel.t + 0.006))
+    assert ctl.domain is Domain.PS and ctl.landed
 
 
 def test_bad_measurements_give_zero_torque_and_torques_stay_bounded(cycle) -> None:

@@ -174,17 +174,24 @@ def test_blended_references_lie_between_the_two_gaits(two_gaits):
     assert np.array_equal(blend_tables(a, b, 0.0).stance.values, a.stance.values)
 
 
-def test_the_stance_qp_blends_within_a_domain_and_keeps_the_nearer_across(two_gaits):
+def test_the_stance_qp_blends_each_domain_over_its_span(two_gaits):
+    """A blend moves each domain's span of the phase between the two gaits' (their
+    boundaries move with the pace), keeps the nearer's samples, and blends each with the
+    other's sample at the same share of its domain."""
+    from prosthesis_controller.contact_clf_qp import domain_spans
+
     a, b = (c.stance for c in two_gaits)
-    m = blend_stance(a, b, 0.25)
-    assert m.phase is not a.phase and np.array_equal(m.phase, a.phase)
-    j = np.array([b.index(s) for s in a.phase])
-    same = np.array([da is b.domain[k] for da, k in zip(a.domain, j, strict=True)])
-    assert same.mean() > 0.9  # the domains' boundaries move a little with the pace
-    assert np.allclose(m.u_ref[same], 0.75 * a.u_ref[same] + 0.25 * b.u_ref[j][same])
-    assert np.array_equal(m.u_ref[~same], a.u_ref[~same])
-    far = blend_stance(a, b, 0.75)  # on b's grid now
-    assert np.array_equal(far.phase, b.phase)
+    sa, sb = domain_spans(a), domain_spans(b)
+    assert [d for d, _, _ in sa] == [d for d, _, _ in sb]
+    assert any(a.phase[i1] != b.phase[k1] for (_, _, i1), (_, _, k1) in zip(sa, sb, strict=True))
+    for w, near in ((0.25, a), (0.75, b)):
+        m = blend_stance(a, b, w)
+        assert m.domain == near.domain and len(m.phase) == len(near.phase)
+        assert np.all(np.diff(m.phase) >= 0)
+        for (_, i0, i1), (_, k0, k1), (_, m0, m1) in zip(sa, sb, domain_spans(m), strict=True):
+            for ia, kb, im in ((i0, k0, m0), (i1, k1, m1)):  # the span's ends
+                assert m.phase[im] == pytest.approx((1 - w) * a.phase[ia] + w * b.phase[kb])
+                assert m.u_ref[im] == pytest.approx((1 - w) * a.u_ref[ia] + w * b.u_ref[kb])
     # a blended controller ticks like one: a finite torque within the motors
     mixed = two_gaits[0].blended(two_gaits[1], 0.5)
     out = mixed.tick(replace(_m(0.0, True), socket_pitch=-0.2, knee_angle=0.05))

@@ -101,7 +101,8 @@ class HeldWalk:
     """The held oracle's walk sampled each period: ``t`` (n,) s; ``sensed`` (n, 5) socket
     pitch, knee, ankle (rad), their rates (rad/s); ``contact`` (n,) the foot switch;
     ``torque`` (n, 2) the motor torques applied (N m); the plant's truth: ``domain`` (n,)
-    codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches (zero-padded)."""
+    codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches under the torques
+    applied (zero-padded)."""
 
     t: np.ndarray
     sensed: np.ndarray
@@ -128,10 +129,13 @@ def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any
         st = plant.run.observe()
         torque = policy(obs.t, st)
         s = obs.sensed
+        applied = plant.actuate(torque).torque
+        # the wrench under the torque applied, not the one observed before it (under the
+        # last period's): at a heel strike that was the swing's, and the stance QP's first
+        # sample paired the stance torque with a heel pulling 0.2-0.5 kN
         wrench = np.zeros(MAX_WRENCH)
         n = wrench_size(st.domain)
-        wrench[:n] = st.lam[:n]
-        applied = plant.actuate(torque).torque
+        wrench[:n] = plant.run.last_sample()[3][:n]
         rows.append((obs.t, (s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
                              s.ankle_velocity), s.contact, applied, st.domain.code,
                      st.q.copy(), st.qd.copy(), wrench))
