@@ -200,7 +200,9 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(fitted)
     while the command goes 0.9 -> 1.25 -> 0.9 m/s, each stride within 0.05 m/s RMS of the
     command (a stride's lag: 0.04 m/s per stride on the ramps), and `clfqp` following its
     speed walks it at 1.0 m/s, between the library's gaits, reading that speed from its
-    flat stances (the hip's rate over the flat foot)."""
+    flat stances (the hip's rate over the flat foot), and follows the person slowing from
+    1.2 to 0.95 m/s over 5 s (16 steps; before its stance read what it senses it fell at
+    step 10, the prosthesis heel pulling as its double support ended: docs/gait-design.md)."""
     from orchestrator.experiments.speed_walk import speed_walk
 
     r, out = fitted
@@ -221,6 +223,10 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(fitted)
     assert c.walks, c.line()
     assert c.speed[-1] == pytest.approx(1.0, abs=0.03)
     assert c.estimate[-1] == pytest.approx(c.speed[-1], abs=0.03)
+    slowing = speed_walk(lib, SpeedProfile.parse("0:1.2,1:1.2,6:0.95"), 16, "clfqp")
+    assert slowing.walks, slowing.line()
+    assert slowing.speed[-1] == pytest.approx(0.95, abs=0.02)
+    assert slowing.estimate[-1] == pytest.approx(slowing.speed[-1], abs=0.03)
 
 
 @pytest.mark.slow  # the library of the test above, a worker's controllers over it, 9 runs
