@@ -103,6 +103,11 @@ MAX_DEFAULT_DEGREE = 3
 NOMINAL_STEPS = 4
 #: the Bezier degree of F* over the tube's interval
 NOMINAL_DEGREE = 8
+#: periods of the nominal flat single support left out at its start: the foot's landing
+#: (on the committed cycle its first two carry the double support's socket force, -330 N of
+#: F_x against -160 N a period later; a tube starting before them bent F*'s Bezier fit by up
+#: to 13 N over the next 0.01 of phase and 4 N m at its far end)
+LANDING_PERIODS = 2
 #: a progress callback: (what, done, total)
 Progress = Callable[[str, int, int], None]
 
@@ -218,7 +223,7 @@ def nominal_stance(model: HumanProsthesisModel, cl: ClosedLoop,
     bounds = (float(leg.progress_of(model, log.q[a])[0]),
               float(leg.progress_of(model, log.q[b - 1])[0]))
     rows = np.arange(a, b)
-    single = rows[code[rows] == DOMAIN.code]
+    single = rows[code[rows] == DOMAIN.code][LANDING_PERIODS:]
     return NominalStance(bounds, stance_phase(leg, model, log.q[single], bounds),
                          socket_rows(log)[single])
 
