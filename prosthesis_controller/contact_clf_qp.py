@@ -174,12 +174,7 @@ def load_shift(domain: Domain) -> np.ndarray:
 
 def prosthesis_normal(domain: Domain) -> int:
     """The wrench row of the prosthesis foot's normal force in ``domain`` (a stance one)."""
-    k = 0
-    for contact in domain.contacts:
-        if contact.side == "p":
-            return k + 1
-        k += contact.size
-    raise ValueError(f"{domain} has no prosthesis contact")
+    return int(np.flatnonzero(load_shift(domain) > 0)[0])
 
 
 def qp_rows(domain: Domain) -> int:
@@ -527,13 +522,21 @@ class ContactClfQp:
         when that foot lets go)."""
         if self.law.rise < -HEEL_DOWN:
             return True
+        excess = self._load_excess(m, i)
+        if excess is None:
+            return False  # no reading: the sensed angle alone
+        return m.foot_load < FLAT_LOAD * (m.foot_load - excess)
+
+    def _load_excess(self, m: ProsthesisMeasurement, i: int) -> float | None:
+        """The load cell's reading above the model's prediction at sample ``i`` under the
+        last tick's torque (N); None without a reading (zero, or not finite)."""
         load = m.foot_load
         if not (load > 0.0 and math.isfinite(load)):
-            return False  # no reading: the sensed angle alone
+            return None
         f_ref, w0, w1 = self.stance.load_rows[i]
         ur0, ur1 = self.stance.u_rows[i]
         u0, u1 = self._u
-        return load < FLAT_LOAD * (f_ref + w0 * (u0 - ur0) + w1 * (u1 - ur1))
+        return load - f_ref - w0 * (u0 - ur0) - w1 * (u1 - ur1)
 
     def _stance(self, m: ProsthesisMeasurement, s: float, ref: tuple[float, ...]
                 ) -> tuple[float, float] | None:
@@ -571,15 +574,12 @@ class ContactClfQp:
         n = G.shape[0] - 1
         G[1:] = st.G[i, :n]
         du, (lk, la), (u0, u1) = cfg.delta_u, self._limits, self._u
-        load, coef = m.foot_load, self._coef
-        coef[1] = 0.0
-        if load > 0.0 and math.isfinite(load):
-            # the load cell's reading (under the last tick's torque) above the model's there:
-            # the contact rows from the foot's measured load, the other foot's from the rest
-            # (a heel strike off the gait pulled the person's trailing toe off the ground
-            # under rows that read the gait's load split, docs/gait-design.md)
-            f_ref, w0, w1 = st.load_rows[i]
-            coef[1] = load - f_ref - w0 * (u0 - ur0) - w1 * (u1 - ur1)
+        # the load cell's reading above the model's there: the contact rows from the foot's
+        # measured load, the other foot's from the rest (a heel strike off the gait pulled
+        # the person's trailing toe off the ground under rows that read the gait's load
+        # split, docs/gait-design.md)
+        excess, coef = self._load_excess(m, i), self._coef
+        coef[1] = 0.0 if excess is None else excess
         # h = h_gait + load_h * excess as one product into the QP's buffer: 0.9 us, not 1.6
         # (issue 38 holds the sweep's runs per minute and the tick to 40 us)
         np.dot(coef, st.rows_h[i, :, :n], out=h[1:])
