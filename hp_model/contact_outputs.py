@@ -119,6 +119,12 @@ def _entering_linearly(curve: Curve) -> Curve:
     return f
 
 
+def theta_rows(d: Domain) -> int:
+    """The rows of a multi-contact domain's curves (alpha) in its packed gait: its y2
+    outputs', then the hip rate's where it has one, then a double support's squeeze."""
+    return len(d.y2_coords) + int(d.velocity_output) + int(d.is_double_support)
+
+
 #: an output named ``<frame>`` + this is the frame's world pitch (rad), not a coordinate
 PITCH = "_pitch"
 
@@ -204,8 +210,7 @@ class ContactConstraints:
             raise ValueError("y2 needs a Bezier degree >= 1")
         self.model, self.domain, self.degree = model, d, degree
         n_y2 = len(d.y2_coords)
-        self.layout = ThetaLayout(degree, n_y2 + int(d.velocity_output)
-                                  + int(d.is_double_support))
+        self.layout = ThetaLayout(degree, theta_rows(d))
         self.n_params = self.layout.size
         q, qd, nq = model.q, model.qd, model.nq
         #: the frame the phase is measured from: the domain's first contact

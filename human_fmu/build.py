@@ -49,6 +49,7 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import dumps
 from hp_model.simulator import SimOptions
 from human_fmu.fmi3 import PLATFORM_TUPLE, config_macros, model_description_3
+from human_fmu.perturbation import moved_coefficients
 from human_fmu.variables import (
     Variable,
     _Table,
@@ -304,6 +305,10 @@ def domain_tables(cl: ClosedLoop) -> list[str]:
         _c_ints("HPFMU_THETA_AT", theta_at[:-1]),
         _c_ints("HPFMU_NALPHA", [L.n_alpha for L in layouts]),
         _c_ints("HPFMU_ALPHA_AT", alpha_at[:-1]),
+        "/* which of those coefficients the perturbation moves (human_fmu.perturbation: on the "
+        "multi-contact graph each curve keeps its ends) */",
+        _c_ints("HPFMU_MOVED", [int(v) for d, L in zip(domains, layouts, strict=True)
+                                for v in moved_coefficients(graph, d, L.n_alpha)]),
         "/* the sole landed flat at a touchdown into the domain, and its ankle (-1: none; the "
         "paper's flat stances) */",
         _c_ints("HPFMU_LANDING_FRAME", [roles[d].stance_frame_index if d in roles else -1

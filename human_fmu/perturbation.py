@@ -17,6 +17,20 @@ the count of alpha entries of the domains before d in the graph's walking order 
 paper's: ps then pns, so k = d * n_alpha + i with d = 0 for ps, 1 for pns); v_hip, p_min and
 p_max are not perturbed.  An amplitude of 0
 leaves the gait exactly nominal.
+
+On the multi-contact graph each curve keeps its ends: the first two and the last two
+coefficients of every row (:data:`KEPT_AT_EACH_END`), which set its value and slope where
+its domain starts and ends, are not moved (their draws are read and left unused, so the
+interior ones are the same draws as on the paper's graph).  Its six domains meet at the
+contact events, four of them lift-offs where a person's joints move on without a jump, and
+two are 0.1 s long: moving every coefficient on its own made the curves the person tracks
+jump at each event by up to 2a in angle and, the toe domains' slope being m (a_m -
+a_(m-1)) over 0.1 s, by up to 2.5 rad/s in rate at a = 0.025 rad (the packaged person's
+degree-5 curves).  With the ends kept a curve moves by at most 0.625 a (at mid-domain,
+degree 5), against a.  Measured on the packaged person (20 draws U(0, 0.025), 10 steps,
+docs/sweeps.md): the held oracle walked 8 with every coefficient moved, 18 with the ends
+kept.  The paper's graph moves every coefficient (its two domains meet at impacts, and its
+results were measured so).
 """
 
 from __future__ import annotations
@@ -25,12 +39,15 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from hp_model.contact_outputs import theta_rows
 from hp_model.domains import Domain, DomainGraph
 
 MASK = (1 << 64) - 1
 GOLDEN = 0x9E3779B97F4A7C15
 MIX1 = 0xBF58476D1CE4E5B9
 MIX2 = 0x94D049BB133111EB
+#: coefficients kept at each end of every curve on the multi-contact graph (value and slope)
+KEPT_AT_EACH_END = 2
 
 
 def splitmix64(seed: int, k: int) -> int:
@@ -49,7 +66,8 @@ def uniform(seed: int, k: int) -> float:
 def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: int
                      ) -> dict[Domain, np.ndarray]:
     """The packed gait parameters the human tracks: ``thetas`` (every domain of one graph)
-    with every Bezier coefficient moved by the generator's delta (the module docstring)."""
+    with its Bezier coefficients moved by the generator's delta (the module docstring: on
+    the multi-contact graph all but each curve's two first and two last)."""
     if not (np.isfinite(amplitude) and amplitude >= 0):
         raise ValueError(f"amplitude must be finite and >= 0, got {amplitude}")
     keys = {Domain(d) for d in thetas}
@@ -62,7 +80,22 @@ def perturbed_thetas(thetas: Mapping[str, np.ndarray], amplitude: float, seed: i
     k0 = 0
     for d in graph.domains:
         n_alpha = out[d].size - 3  # all but v_hip, p_min, p_max
+        moved = moved_coefficients(graph, d, n_alpha)
         for i in range(n_alpha):
-            out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)
+            if moved[i]:
+                out[d][i] = out[d][i] + amplitude * (2.0 * uniform(seed, k0 + i) - 1.0)
         k0 += n_alpha
     return out
+
+
+def moved_coefficients(graph: DomainGraph, d: Domain, n_alpha: int) -> np.ndarray:
+    """(n_alpha,) bool: which of domain ``d``'s packed Bezier coefficients the perturbation
+    moves (the module docstring)."""
+    moved = np.ones(n_alpha, bool)
+    if graph == DomainGraph.PAPER:
+        return moved
+    m1, rest = divmod(n_alpha, theta_rows(d))
+    if rest:
+        raise ValueError(f"{d}: {n_alpha} Bezier coefficients are not {theta_rows(d)} rows")
+    col = np.arange(n_alpha) % m1
+    return (col >= KEPT_AT_EACH_END) & (col < m1 - KEPT_AT_EACH_END)

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hp_model.domains import PAPER_DOMAINS, Domain
+from hp_model.contact_outputs import theta_rows
+from hp_model.domains import PAPER_DOMAINS, Domain, DomainGraph
 from hp_model.falls import FallReason
 from hp_model.simulator import SimOptions
 from human_fmu import initial_state, perturbed_thetas
@@ -217,3 +218,27 @@ def test_perturbation_generator_is_splitmix64():
     assert not np.array_equal(p[Domain.PS] - th[Domain.PS], -(p[Domain.PNS] - th[Domain.PNS]))
     with pytest.raises(ValueError):
         perturbed_thetas(th, -1.0, 0)
+
+
+@pytest.mark.parametrize("degree", [5, 3])
+def test_on_the_multicontact_graph_each_curve_keeps_its_ends(degree):
+    """The two first and two last coefficients of every row (the curve's value and slope at
+    its domain's contact events) stay the gait's; the others move by the draw they have on
+    any graph (k = A_d + i), within the amplitude; a degree-3 curve keeps all four."""
+    m1, a, seed = degree + 1, 0.025, 11
+    th = {d: np.linspace(-1.0, 1.0, theta_rows(d) * m1 + 3)
+          for d in DomainGraph.MULTICONTACT.domains}
+    p = perturbed_thetas(th, a, seed)
+    k0 = 0
+    for d in DomainGraph.MULTICONTACT.domains:
+        delta = (p[d] - th[d])[:-3].reshape(theta_rows(d), m1)
+        assert np.all(delta[:, :2] == 0) and np.all(delta[:, -2:] == 0), d
+        assert np.all(p[d][-3:] == th[d][-3:])
+        for r, c in np.ndindex(delta.shape):
+            if 2 <= c < m1 - 2:
+                i = r * m1 + c
+                assert delta[r, c] == pytest.approx(a * (2 * uniform(seed, k0 + i) - 1), abs=1e-15)
+                assert 0 < abs(delta[r, c]) <= a
+        k0 += theta_rows(d) * m1
+    with pytest.raises(ValueError, match="rows"):
+        perturbed_thetas({**th, Domain.PS: np.zeros(theta_rows(Domain.PS) * m1 + 4)}, a, seed)

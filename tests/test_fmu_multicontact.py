@@ -103,13 +103,19 @@ def test_the_fmu_walks_the_simulators_walk(fmu_path, cycle, walked):
 
 
 def test_the_human_perturbation_is_the_python_mirrors(fmu_path, cycle, walked):
-    """A perturbed human (every Bezier coefficient of the six domains moved by its draw)
-    walks in the FMU as the simulator walks :func:`perturbed_thetas`'s gait."""
+    """A perturbed human (the Bezier coefficients of the six domains moved by their draws,
+    each curve's ends kept) walks in the FMU as the simulator walks
+    :func:`perturbed_thetas`'s gait."""
     model, traj, gait = cycle
     sim, _ = walked
     amplitude, seed = 0.002, 7
     thetas = perturbed_thetas(gait.thetas(), amplitude, seed)
     assert all(np.abs(thetas[d] - gait.thetas()[d])[-3:].max() == 0 for d in thetas)
+    for d, p in gait.params.items():  # the curves' values and slopes at the events kept
+        m1 = np.asarray(p.alpha).shape[1]
+        moved = (thetas[d] - gait.thetas()[d])[:-3].reshape(-1, m1)
+        assert np.all(moved[:, [0, 1, -2, -1]] == 0), d
+        assert np.all(moved[:, 2:-2] != 0) and np.abs(moved).max() <= amplitude, d
     psim = HybridSimulator(model, sim.cl, thetas, sim.gains)
     ref = reference(psim, traj, thetas, steps=2)
     assert ref.fall is None
