@@ -306,7 +306,12 @@ class ContactPhasePD:
 
     def reference(self, m: ProsthesisMeasurement) -> tuple[float, ...]:
         """The gait at the measurement's phase (which it sets: :attr:`phase`): th_pk, th_pa
-        (rad), their rates (rad/s), the motor torques (N m); ``m`` finite."""
+        (rad), their rates (rad/s), the motor torques (N m); ``m`` finite.  Past the swing
+        table's end (a swing longer than the gait's, no heel strike yet: a person slower
+        than the gait) the table's last angles at rest, with no torque of the gait's: that
+        torque is its last instant's (on the packaged person's gait +44 N m of knee flexion
+        into the heel strike, with the knee's rate at 8 rad/s: held, they flexed the waiting
+        knee to 55 deg and no heel strike came, docs/gait-design.md)."""
         tab = self.tables
         stance = bool(m.contact)
         if stance:
@@ -315,6 +320,8 @@ class ContactPhasePD:
         else:
             s = self.swing_phase_of(m)
             ref = tab.swing.at(s)
+            if s > 1.0:  # the swing outlasts the gait's: hold its landing posture, at rest
+                ref = (ref[0], ref[1], 0.0, 0.0, 0.0, 0.0)
         self._in_stance, self.phase = stance, s
         return ref
 

@@ -6,6 +6,7 @@ behaviour on bad input, and the committed cycle walked with it in the in-process
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -91,6 +92,30 @@ def test_bad_input_gives_no_torque_and_the_output_is_bounded(tables) -> None:
         out = ctl.tick(bad)
         assert tuple(out.torque) == (0.0, 0.0)
         assert out.diagnostics.mode == ControllerMode.FAULT
+
+
+def test_a_swing_longer_than_the_gaits_holds_its_landing_posture(tables) -> None:
+    """Past the swing table's end (the clock's phase above 1, no heel strike yet: a person
+    slower than the gait) the reference is the table's last angles at rest: zero rates and
+    no torque of the gait's, so the law is a PD on the landing posture; inside the table it
+    is the table's."""
+    leg, tab = tables
+    kp, kd = 100.0, 3.0  # STANCE_GAINS and SWING_GAINS, joint side
+    ctl = ContactPhasePD(tab, leg, (50.0, 50.0), (10.0, 10.0))
+    k1, a1 = tab.swing.values[-1][:2]
+    assert np.abs(tab.swing.values[-1][2:]).max() > 0.1  # the gait lands moving
+    ctl.tick(ProsthesisMeasurement(1.0, 0.3, 0.1, 0.0, 0.0, 300.0, True, 0.2))  # stance
+    toe_off = ProsthesisMeasurement(1.001, 0.3, 0.1, 0.0, 0.0, 0.0, False, 0.2)
+    ctl.tick(toe_off)
+    mid = replace(toe_off, t=1.001 + 0.5 * tab.swing_time)
+    assert ctl.reference(mid) == pytest.approx(tab.swing.at(0.5))
+    late = replace(toe_off, t=1.001 + 1.2 * tab.swing_time, knee_angle=k1 + 0.1,
+                   ankle_angle=a1 - 0.05, knee_vel=2.0, ankle_vel=-1.0)
+    assert ctl.reference(late) == (k1, a1, 0.0, 0.0, 0.0, 0.0)
+    assert ctl.phase == pytest.approx(1.2)
+    u = ctl.tick(late).torque
+    assert u[0] == pytest.approx((kp * -0.1 + kd * -2.0) / 50.0)
+    assert u[1] == pytest.approx((kp * 0.05 + kd * 1.0) / 50.0)
 
 
 def test_a_phase_table_clamps_and_interpolates() -> None:
