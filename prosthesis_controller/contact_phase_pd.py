@@ -20,7 +20,8 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
   (the simulated person's fragility, issue 38; docs/gait-design.md).
 - **Reference**: one stride of the gait as the model walks it (:func:`tables_from_walk`: the
   knee's and the ankle's angles, rates and motor torques against the phase), interpolated
-  linearly in the phase (the torque has kinks at the contact transitions).
+  linearly in the phase (the torque has kinks at the contact transitions); a swing that
+  outlasts the gait's holds the landing posture at rest until the heel strike.
 
 Not the paper's CLF-QP: the product's ``clfqp`` runs the paper's two domains only.  Measured
 with the simulated human on its feedback linearization (docs/gait-design.md): 20 steps on
