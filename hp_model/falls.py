@@ -46,7 +46,7 @@ _DESCRIPTION = {
     FallReason.NON_FINITE: "non-finite state",
     FallReason.HIP_LOW: "hip height below min_hip_height",
     FallReason.PHASE_BACKWARD: "phase tau ran backward more than tau_backward",
-    FallReason.NO_TOUCHDOWN: "no touchdown by tau_max",
+    FallReason.NO_TOUCHDOWN: "no touchdown by tau_max (or late_touchdown s past the designed one)",
     FallReason.FRICTION_CONE: "stance foot left the friction cone for cone_periods periods",
     FallReason.HEEL_OR_TOE: "landed on heel or toe (touchdown pitch above max_touchdown_pitch)",
     FallReason.PHASE_STALLED: ("phase stalled: no touchdown within max_step_time of the start "
@@ -85,7 +85,7 @@ class Fall:
             if r is FallReason.PHASE_BACKWARD:
                 return f"phase ran backward (tau {self.tau:.3f}, peak {v['tau_peak']:.3f})"
             if r is FallReason.NO_TOUCHDOWN:
-                return f"no touchdown by tau = {v['limit']}"
+                return f"no touchdown by tau = {v['limit']:.3g}"
             if r is FallReason.PHASE_STALLED:
                 return f"phase stalled (no touchdown within {v['limit']:g} s)"
             if r is FallReason.FRICTION_CONE:

@@ -57,9 +57,11 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   (normal force below ``min_normal_force`` or |F_x| > mu F_z, sustained over
   ``cone_periods`` periods; a double support's trailing foot slipping too where it carries
   more than ``trailing_slip_load`` body weights, when that is set); no touchdown by
-  ``tau_max``; the phase stalled (no touchdown within ``max_step_time`` s of the start or
-  of the last impact: a walker standing still, with tau neither progressing nor running
-  back, would otherwise be simulated forever); a non-finite state or a generalized speed
+  ``tau_max`` nor within ``late_touchdown`` s past the designed one (whichever is later:
+  :func:`touchdown_limit`, from the gait tracked in the domain); the phase stalled (no
+  touchdown within ``max_step_time`` s of the start or of the last impact: a walker
+  standing still, with tau neither progressing nor running back, would otherwise be
+  simulated forever); a non-finite state or a generalized speed
   above ``max_speed`` (the state diverging, e.g. a knee snapping through its straight
   posture: ended before it turns non-finite and poisons the logged impacts).
 - A delayed human (``human_delay`` given, s): the human's feedback on its output errors
@@ -122,7 +124,11 @@ class SimOptions:
     event_iters: int = 60
     min_hip_height: float = 0.55  # m
     tau_backward: float = 0.15  # fall if tau drops this far below its running maximum
-    tau_max: float = 1.3  # fall if no touchdown by this phase
+    tau_max: float = 1.3  # fall if no touchdown by this phase (or late_touchdown, if later)
+    #: s: nor a touchdown this long past the domain's designed one, at its gait's hip speed
+    #: (:func:`touchdown_limit`): about four standard deviations of a healthy person's step
+    #: time (22-33 ms), the same time in a 0.1-s toe domain as in a 0.57-s paper domain
+    late_touchdown: float = 0.12
     max_step_time: float = 3.0  # s; fall if no touchdown this long after the last (or start)
     max_speed: float = 200.0  # m/s or rad/s; fall if any |qd_i| exceeds it (diverging)
     min_normal_force: float = 0.0  # N
@@ -212,6 +218,16 @@ class StepWatch:
     heel_pitch: float | None
     #: (F_x, F_z) (N) of the contact that left its cone, when not the domain's first
     cone_force: tuple[float, float] | None = None
+    #: the phase past which no touchdown is a fall (:func:`touchdown_limit`; None: tau_max)
+    tau_limit: float | None = None
+
+
+def touchdown_limit(opt: SimOptions, v_hip: float, step: float) -> float:
+    """The phase past which a domain's missing touchdown is a fall: ``tau_max``, or
+    ``late_touchdown`` s past the designed touchdown at the gait's hip speed v_hip (m/s)
+    over its step p_max - p_min (m), whichever is later.  The FMU's C (``state_checks``)
+    does the same arithmetic."""
+    return max(opt.tau_max, 1.0 + opt.late_touchdown * v_hip / step)
 
 
 def fall_check(opt: SimOptions, t: float, d: Domain, x: np.ndarray, tau: float,
@@ -233,8 +249,9 @@ def fall_check(opt: SimOptions, t: float, d: Domain, x: np.ndarray, tau: float,
     if tau < watch.tau_peak - opt.tau_backward:
         return Fall(FallReason.PHASE_BACKWARD, t, d, tau,
                     {"tau_peak": watch.tau_peak, "limit": opt.tau_backward})
-    if tau > opt.tau_max:
-        return Fall(FallReason.NO_TOUCHDOWN, t, d, tau, {"limit": opt.tau_max})
+    tau_limit = opt.tau_max if watch.tau_limit is None else watch.tau_limit
+    if tau > tau_limit:
+        return Fall(FallReason.NO_TOUCHDOWN, t, d, tau, {"limit": tau_limit})
     if t - watch.t_step > opt.max_step_time:
         return Fall(FallReason.PHASE_STALLED, t, d, tau,
                     {"step_time": t - watch.t_step, "limit": opt.max_step_time})
@@ -551,6 +568,7 @@ class SimulationRun:
         #: tau of a state x (q first) per domain, for the gait tracked
         self._phase = {dd: sim.cl.vcs[dd].phase_function(sim.thetas[dd])
                        for dd in sim.model.graph.domains}
+        self._tau_limit = sim.opt.tau_max  # the current domain's (:meth:`_limit`)
         self._track(self.domain, 0.0)
 
     @property
@@ -564,6 +582,7 @@ class SimulationRun:
         before each step: the same walk either way), if any (ValueError when it is not one
         of ``d``'s packed gaits)."""
         if self._gaits is None:
+            self._tau_limit = self._limit(d)
             return
         th = np.asarray(self._gaits(d, t), dtype=float)
         if th.shape != self.sim.thetas[d].shape:
@@ -574,6 +593,12 @@ class SimulationRun:
                              "non-finite entries")
         self.thetas[d] = th
         self._phase[d] = self.sim.cl.vcs[d].phase_function(th)
+        self._tau_limit = self._limit(d)
+
+    def _limit(self, d: Domain) -> float:
+        """The phase past which no touchdown in ``d`` is a fall, for the gait tracked."""
+        _, v_hip, p_min, p_max = self.sim.cl.vcs[d].layout.unpack(self.thetas[d])
+        return touchdown_limit(self.sim.opt, float(v_hip), float(p_max - p_min))
 
     def observe(self) -> SimState:
         """The state at the start of the current period, with the constraint wrenches under
@@ -643,7 +668,7 @@ class SimulationRun:
         self._bad_cone = self._bad_cone + 1 if bad else 0
         self.fall = fall_check(opt, self.t, d, x, tau, lam,
                                StepWatch(self._tau_peak, self._t_step, self._bad_cone,
-                                         self._heel, cone_force))
+                                         self._heel, cone_force, self._tau_limit))
         return self.fall
 
     def advance(self) -> None:

@@ -226,8 +226,11 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
           start=opt.min_hip_height, unit="m")
     t.add("tau_backward", "Real", "parameter", "fall: tau drops this far below its peak",
           start=opt.tau_backward)
-    t.add("tau_max", "Real", "parameter", "fall: no touchdown by this phase",
-          start=opt.tau_max)
+    t.add("tau_max", "Real", "parameter",
+          "fall: no touchdown by this phase (or late_touchdown, if later)", start=opt.tau_max)
+    t.add("late_touchdown", "Real", "parameter",
+          "fall: nor a touchdown this long past the domain's designed one, at its gait's hip "
+          "speed", start=opt.late_touchdown, unit="s")
     t.add("max_step_time", "Real", "parameter",
           "fall: no touchdown this long after the start or the last impact",
           start=opt.max_step_time, unit="s")

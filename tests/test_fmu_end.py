@@ -58,7 +58,8 @@ def case(reason: FallReason, peaks: tuple[float, float, float]) -> tuple[dict, f
         FallReason.NON_FINITE: ({**ONLY_NON_FINITE, "substeps": 1}, 1.0, 0.25),
         FallReason.HIP_LOW: ({"min_hip_height": 0.5 * (hip0 + hip_min)}, 1.0, 1e-3),
         FallReason.PHASE_BACKWARD: (NO_CONE, 3.0, 1e-3),
-        FallReason.NO_TOUCHDOWN: ({"tau_max": 0.5}, 1.0, 1e-3),
+        # the limit in time: 0.15 s before the designed touchdown (tau about 0.5)
+        FallReason.NO_TOUCHDOWN: ({"tau_max": 0.0, "late_touchdown": -0.15}, 1.0, 1e-3),
         FallReason.FRICTION_CONE: ({}, 0.0, 1e-3),
         FallReason.HEEL_OR_TOE: ({"max_touchdown_pitch": 1e-7}, 1.0, 1e-3),
         FallReason.PHASE_STALLED: ({"max_step_time": 0.1}, 1.0, 1e-3),

@@ -180,23 +180,34 @@ def test_fall_is_detected_like_the_simulator(fmu_path, model, template_gait, fac
 @pytest.mark.parametrize("option, reason", [
     ("max_step_time", FallReason.PHASE_STALLED), ("max_speed", FallReason.DIVERGED),
     ("min_hip_height", FallReason.HIP_LOW), ("tau_max", FallReason.NO_TOUCHDOWN),
+    ("late_touchdown", FallReason.NO_TOUCHDOWN),
     ("max_touchdown_pitch", FallReason.HEEL_OR_TOE)])
 def test_forced_falls_are_detected_like_the_simulator(fmu_path, model, template_gait, nominal,
                                                       option, reason):
     """A limit the nominal gait breaks mid-walk -- ``max_step_time`` shorter than its first
     step, ``max_speed`` half its peak speed, ``min_hip_height`` between the start's hip height
-    and the lowest, ``tau_max`` 0.5, ``max_touchdown_pitch`` below the first touchdown's
+    and the lowest, ``tau_max`` 0.5 (the limit in time off), the limit in time 0.15 s before
+    the designed touchdown (tau_max off), ``max_touchdown_pitch`` below the first touchdown's
     residual pitch: the FMU stops at the simulator's sample with the simulator's reason."""
     _, _, ref0 = nominal
-    limit = {"max_step_time": 0.1, "max_speed": 0.5 * float(np.abs(ref0.qd).max()),
-             "min_hip_height": 0.5 * float(ref0.q[0, 1] + ref0.q[:, 1].min()),
-             "tau_max": 0.5, "max_touchdown_pitch": 1e-7}[option]
-    sim = simulator(model, template_gait, options=SimOptions(**{option: limit}))
+    limits = {"max_step_time": {"max_step_time": 0.1},
+              "max_speed": {"max_speed": 0.5 * float(np.abs(ref0.qd).max())},
+              "min_hip_height": {"min_hip_height": 0.5 * float(ref0.q[0, 1]
+                                                                + ref0.q[:, 1].min())},
+              "tau_max": {"tau_max": 0.5, "late_touchdown": -1e3},
+              "late_touchdown": {"tau_max": 0.0, "late_touchdown": -0.15},
+              "max_touchdown_pitch": {"max_touchdown_pitch": 1e-7}}[option]
+    sim = simulator(model, template_gait, options=SimOptions(**limits))
     pd = NominalPD(policy_table(model, template_gait, sim))
     q0, qd0 = start_state(template_gait)
     ref = python_run(sim, pd, q0, qd0, steps=2)
     assert ref.fall is not None and ref.fall.reason is reason and ref.t.size > 1
-    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real={option: limit})
+    if option in ("tau_max", "late_touchdown"):  # the limit each rule sets
+        v_hip, p_min, p_max = sim.thetas[ref.fall.domain][-3:]
+        expected = 0.5 if option == "tau_max" else 1 - 0.15 * v_hip / (p_max - p_min)
+        assert ref.fall.values["limit"] == pytest.approx(expected, rel=1e-12)
+        assert ref.fall.tau > expected > ref.tau[-2]
+    log = fmu_run(fmu_path, pd, ref.t.size + 1, "q", real=limits)
     assert log["fall"] and FallReason(log["fall_code"]) is reason
     assert log["fall_period"] == ref.t.size - 1
 

@@ -10,7 +10,7 @@ import pytest
 from characterization.gait.fit import verify_gait
 from characterization.gait.verification import make_simulator, simulate_gait
 from hp_model.falls import Fall, FallReason
-from hp_model.simulator import HybridSimulator, SimOptions, SimResult
+from hp_model.simulator import HybridSimulator, SimOptions, SimResult, touchdown_limit
 from tests.fmu_runner import NominalPD
 from tests.fmu_support import policy_table
 
@@ -212,3 +212,14 @@ def test_a_run_is_stepped_in_order_and_ends_at_its_fall(model, template_gait):
         full.apply(np.zeros(2))
     with pytest.raises(ValueError, match="mode"):
         sim.start(tr["q"][:, 0], tr["qd"][:, 0], "ps", mode="other")
+
+
+def test_a_late_touchdown_is_the_same_time_in_every_domain():
+    """The missing touchdown is a fall 0.12 s past the designed one at the gait's hip speed:
+    tau 2.2 in a 0.1-s toe domain (tau_max 1.3 alone allowed 30 ms there), 1.4 in a 0.3-s
+    domain; in the paper's 0.57-s domains tau_max (1.3, 171 ms) is the later and stays."""
+    opt = SimOptions()
+    for seconds, limit in ((0.1, 2.2), (0.3, 1.4), (0.57, 1.3)):
+        v_hip, step = 1.2, 1.2 * seconds  # m/s, m
+        assert touchdown_limit(opt, v_hip, step) == pytest.approx(limit, abs=1e-12)
+    assert touchdown_limit(SimOptions(late_touchdown=0.0), 1.0, 0.1) == 1.3

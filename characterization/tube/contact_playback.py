@@ -317,7 +317,8 @@ def play_stride(model: HumanProsthesisModel, cl: ClosedLoop, thetas: Mapping[Dom
         params, rms = window_params(vc, np.asarray(time_s[a:b + 1], float), strides.q[a:b + 1])
     except ContactPlaybackError as e:
         raise ContactPlaybackError(f"stride {k}: {e}") from None
-    opt = SimOptions(guard_tau_min=math.inf, cone_periods=2**62, tau_max=TAU_MAX)
+    opt = SimOptions(guard_tau_min=math.inf, cone_periods=2**62, tau_max=TAU_MAX,
+                     late_touchdown=0.0)
     sim = HybridSimulator(model, cl, {**thetas, DOMAIN: params.pack()}, np.array(GAINS), opt)
     q0, qd0 = surface_start(model, vc, params, strides.q[a])
     log, end = run_domain(sim, q0, qd0, DOMAIN, TAU_MAX * float(time_s[b] - time_s[a]))

@@ -130,6 +130,7 @@ class PlaybackOptions:
         return SimOptions(dt=self.dt, substeps=self.substeps,
                           guard_tau_min=0.6 if self.stop_at_touchdown else math.inf,
                           min_hip_height=self.min_hip_height, tau_max=1.3,
+                          late_touchdown=0.0,  # the playback's own bound, in phase
                           cone_periods=2**62, mu=self.mu)
 
 
