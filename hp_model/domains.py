@@ -303,6 +303,20 @@ class DomainGraph(Choice):
             return c.frame
         return None
 
+    def guard_from_entry(self, domain: Domain | str) -> bool:
+        """Whether ``domain``'s touchdown guard is armed from its entry: its landing foot was
+        already in the air through the domain before and is still (the toe domains, entered
+        at the other foot's heel-off, late in the swing).  Elsewhere the guard waits for
+        ``SimOptions.guard_tau_min``: a foot that has just left the ground (a swing's start)
+        or one landing flat from its heel."""
+        d = Domain(domain)
+        frame = self.touchdown_frame(d)
+        if frame is None:
+            return False
+        side = frame.split("_")[0]
+        previous = _CYCLES[self][_CYCLES[self].index(d) - 1]
+        return all(c.side != side for c in previous.contacts + d.contacts)
+
 
 _CYCLES: dict[DomainGraph, tuple[Domain, ...]] = {
     DomainGraph.PAPER: (Domain.PS, Domain.PNS),

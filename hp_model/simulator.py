@@ -14,7 +14,9 @@ Algorithm (deterministic; ``SimOptions`` names the numbers):
   The default, one step per 1 ms period, is checked against a tight-tolerance reference by
   ``benchmarks/bench_accuracy.py`` (state error at every impact below 1e-6).
 - Touchdown of the swing foot is the guard: swing sole height crossing zero downward, once
-  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown). When
+  the phase tau has passed ``guard_tau_min`` (so lift-off scuffing is not a touchdown), or
+  from the domain's entry where the landing foot was already in the air before it (the toe
+  domains: :meth:`hp_model.domains.DomainGraph.guard_from_entry`). When
   a step ends below the ground, the crossing is located by the Illinois (regula falsi)
   method on s in (0, 1], re-integrating one RK4 step of length s h from the step's start, to
   ``event_tol`` metres or ``event_iters`` iterations. A foot that touches down nearly
@@ -119,7 +121,7 @@ class SimOptions:
 
     dt: float = 1e-3  # s, period of the prosthesis torque (and of the log)
     substeps: int = 1  # RK4 steps per period
-    guard_tau_min: float = 0.6  # the guard is armed past this phase
+    guard_tau_min: float = 0.6  # the guard is armed past this phase (a toe domain's: always)
     event_tol: float = 1e-10  # m, swing-sole height at the located impact
     event_iters: int = 60
     min_hip_height: float = 0.55  # m
@@ -312,6 +314,8 @@ class HybridSimulator:
         self.dfs = closed_loop.delayed() if human_delay is not None else None
         self.mfs = model.numeric()
         self.nq = model.nq
+        #: per domain: its touchdown guard armed from its entry (else past guard_tau_min)
+        self.from_entry = {d: model.graph.guard_from_entry(d) for d in model.graph.domains}
         # the frame that lands when entering a domain is its stance sole, rotated about its
         # stance ankle (the paper's domains: a foot landing flat)
         self._landing = {d: (r.stance_frame_index, r.ankle) for d, r in model.roles.items()}
@@ -696,7 +700,7 @@ class SimulationRun:
                                theta=self.thetas[d])
                 xn, z = step(rest)
                 armed = (sim.model.domains[d].swing_frame is not None
-                         and self._phase[d](x) >= opt.guard_tau_min)
+                         and (sim.from_entry[d] or self._phase[d](x) >= opt.guard_tau_min))
                 s1, z1 = 1.0, z
                 if armed and self._z_prev > 0:
                     s1, z1 = sim._touchdown(d, x, xn, rest, self._z_prev, z, step)

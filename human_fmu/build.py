@@ -298,6 +298,9 @@ def domain_tables(cl: ClosedLoop) -> list[str]:
         _c_ints("HPFMU_NEXT", [place[graph.next(d)] for d in domains]),
         "/* entering the domain starts a step (the paper's: every impact; else a heel strike) */",
         _c_ints("HPFMU_STARTS_STEP", [int(d in graph.step_starts) for d in domains]),
+        "/* the touchdown guard armed from the domain's entry, not past guard_tau_min "
+        "(DomainGraph.guard_from_entry: a landing foot already in the air) */",
+        _c_ints("HPFMU_GUARD_FROM_ENTRY", [int(graph.guard_from_entry(d)) for d in domains]),
         "/* the packed gait of each domain in theta[] (hp_model.outputs.ThetaLayout): its "
         "first entry, its Bezier coefficients' count, the first of them in the perturbation's "
         "draws */",

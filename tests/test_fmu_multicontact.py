@@ -13,7 +13,7 @@ from fmpy.validation import validate_fmu
 
 from characterization.gait.contact_gait import contact_gait_of, held_oracle, start_state
 from hp_model.domains import Domain
-from hp_model.simulator import HybridSimulator, SimResult
+from hp_model.simulator import HybridSimulator, SimOptions, SimResult
 from human_fmu import build_fmu, perturbed_thetas
 from orchestrator.cli import main as hpcosim
 from orchestrator.cosim.contact_controllers import loop_simulator, tracked_gait
@@ -242,3 +242,52 @@ def test_a_gait_set_in_step_mode_is_taken_up_as_the_walker_enters_its_domain(fmu
         th[-3] = -1.0  # v_hip
     x = fmu_walk(lambda d, t: bad[d] if t >= switch else base[d], nominal.u[:, 4:6])
     assert np.abs(x - np.c_[nominal.q, nominal.qd]).max() <= 1e-9  # the base gait kept
+
+
+def test_a_heel_strike_early_in_a_toe_domain_lands_in_both(fmu_path, cycle, walked):
+    """A person standing in a posture of its own (hips +-2 deg: its swing heel lower) strikes
+    the ground at tau 0.57 of ``ps_toe``, before ``guard_tau_min``: the toe domains' guard is
+    armed from their entry (their landing foot already in the air), in the FMU's C as in the
+    simulator, which land it at the same period, to rounding, up to the walk's end."""
+    import math
+
+    from orchestrator.sweep.contact import draw_gait, posture_start
+    from orchestrator.sweep.draws import Draw
+
+    model, traj, gait = cycle
+    sim, _ = walked
+    off = (math.radians(2.0), 0.0, 0.0, -math.radians(2.0))
+    thetas = {Domain(k): v for k, v in draw_gait(gait, Draw("posture", 0,
+                                                             output_offset=off)).items()}
+    psim = HybridSimulator(model, sim.cl, thetas, sim.gains)
+    q0, qd0 = posture_start(psim, start_state(traj), off)
+    ref = psim.run(q0, qd0, Domain.PS, steps=2, duration=10.0,
+                   policy=held_oracle(sim.cl, thetas, sim.gains))
+    strike = next(i for i in ref.impacts if i.into == Domain.DS_H)
+    k = int(np.searchsorted(ref.t, strike.t)) - 1
+    assert Domain.from_code(int(ref.domain[k])) is Domain.PS_TOE
+    assert ref.tau[k] < SimOptions().guard_tau_min  # early: the old guard was not armed
+    n = ref.t.size - 2  # up to the walk's end (a fall in the next step)
+    log = replay_walk(fmu_path, thetas, q0, qd0, ref.u[:n, 4:6])
+    assert np.abs(log - np.c_[ref.q[:n], ref.qd[:n]]).max() <= 1e-9
+
+
+def replay_walk(path, thetas, q0, qd0, torques: np.ndarray) -> np.ndarray:
+    """The FMU's states (q, qd) under ``torques`` from (q0, qd0) with the person's gait
+    ``thetas`` (``HumanFmu.start_walk``), one period per row."""
+    from human_fmu.instance import HumanFmu
+    from orchestrator.loop.plant import FmuPlant
+
+    fmu = HumanFmu(path)
+    try:
+        fmu.start_walk(thetas, q0, qd0)
+        plant = FmuPlant(fmu, DT)
+        x = []
+        for u in torques:
+            assert not plant.observe().held
+            truth = plant.actuate(u)
+            x.append(np.r_[truth.q, truth.qd])
+            plant.advance()
+        return np.array(x)
+    finally:
+        fmu.free()

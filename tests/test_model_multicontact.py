@@ -43,6 +43,12 @@ def test_guards_are_the_next_contacts_touchdown():
     # toe touches down
     assert [MC.touchdown_frame(d) for d in MC.domains] == [
         None, "l_heel", "l_toe", None, "p_heel", "p_toe"]
+    # armed from the entry where the landing foot was already in the air before it (the toe
+    # domains, entered at the other heel's lift-off); a swing's start (the paper's domains) and
+    # a heel landing flat wait for guard_tau_min
+    assert [DomainGraph.PAPER.guard_from_entry(d) for d in PAPER_DOMAINS] == [False, False]
+    assert [MC.guard_from_entry(d) for d in MC.domains] == [
+        False, True, False, False, True, False]
 
 
 def test_double_supports_hold_leading_heel_and_trailing_toe(mc_model):

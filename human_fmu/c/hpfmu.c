@@ -10,7 +10,8 @@
  *     - friction-cone check with the new inputs (fall after cone_periods bad steps);
  *     - `substeps` RK4 steps of h = H / substeps (rk4k_human_<d>: the first stage given, the
  *       first step's from the friction-cone check's evaluation); a step ending with the
- *       swing sole below ground while tau >= guard_tau_min is cut at the crossing (Illinois
+ *       swing sole below ground while tau >= guard_tau_min (from the entry in a domain
+ *       of HPFMU_GUARD_FROM_ENTRY) is cut at the crossing (Illinois
  *       method on s in (0, 1], one RK4 step of length s h per iteration, |z| <= event_tol or
  *       event_iters iterations); the landing foot is rotated flat about its ankle; the impact
  *       map of the next domain gives qd+; the rest (1 - s) h is integrated in the new domain;

@@ -8,7 +8,8 @@ draw's encoder, the torque held 1 ms within the motors):
     human.bezier_amplitude  every coefficient of every domain's curves, the SplitMix64
                             generator of :mod:`human_fmu.perturbation` (its graph's order)
     human.output_offset     a constant on each human joint's curve (th_lh, th_lk, th_la,
-                            th_rh), in every domain where it is an output
+                            th_rh), in every domain where it is an output; the person starts
+                            in that posture (:func:`posture_start`)
     human.stiffness         the human's gains (eps, kp, kd) -> (s eps, s^2 kp, s kd)
     human.stride_cv         the person's pace varying from stride to stride (its draws from
                             the run's own seed, :mod:`characterization.gait.pace_variability`)
@@ -27,7 +28,8 @@ The controllers are made once per worker from the unperturbed gait (its held ora
 :mod:`orchestrator.cosim.contact_controllers`): ``clfqp`` (:class:`prosthesis_controller.
 contact_clf_qp.ContactClfQp`) and ``phase-pd`` (contact-pd, :class:`prosthesis_controller.
 contact_phase_pd.ContactPhasePD`); the ``oracle`` run of a draw is the held oracle on the
-plant's state (perfect sensing).  Every run starts from the fitted cycle's start.  The other
+plant's state (perfect sensing).  Every run starts from the fitted cycle's start, in the
+person's own posture where its curves are offset (:func:`posture_start`).  The other
 quantities of a family (a tube margin, a controller model of its own, the plant's body but
 its armature, the delayed human, a placed start) are refused by the spec
 (:func:`orchestrator.sweep.contact_spec.check_multicontact`).  With the gait's tube (``tube
@@ -120,6 +122,28 @@ def draw_gait(gait: ContactGait, draw: Draw) -> dict[Domain, np.ndarray]:
         params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
     thetas = {d.value: th for d, th in ContactGait(params, gait.rms).thetas().items()}
     return perturbed_thetas(thetas, draw.bezier_amplitude, draw.bezier_seed)
+
+
+def posture_start(sim: HybridSimulator, start: tuple[np.ndarray, np.ndarray],
+                  offsets: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """A person's start in its own posture: the cycle's start (q, qd at the start of the
+    graph's first domain, a flat stance where every human joint is an output) with each human
+    joint (:data:`HUMAN_JOINTS`) moved by its curve's offset (rad), placed again on the stance
+    foot where the start has it, the base's velocity solving the foot at rest (the joints'
+    rates kept).  Offsets of zero give the start itself.  A person whose posture differs stands
+    in it from the first instant: started on the cycle's posture, its law pulled every joint
+    by up to 3 deg within 0.1 s, and the stance foot left its cone."""
+    q0, qd0 = start
+    if not any(offsets):
+        return start
+    names = sim.model.coord_names
+    q = np.array(q0, float)
+    for joint, off in zip(HUMAN_JOINTS, offsets, strict=True):
+        q[names.index(joint)] += off
+    place = sim.mfs[f"place_{GRAPH.domains[0]}"]  # its outputs are overwritten by a call
+    x_foot = -float(np.asarray(place(q0, qd0, 0.0)[0]).ravel()[0]) + float(q0[0])
+    q_placed, qd_placed = (np.array(a, float).ravel() for a in place(q, qd0, x_foot))
+    return q_placed, qd_placed
 
 
 def draw_gains(draw: Draw) -> np.ndarray:
@@ -249,10 +273,11 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
         return speed_walk(res, controller, draw, steps)
     sim = res.plant(draw)
     thetas = {Domain(k): th for k, th in sim.thetas.items()}
+    start = posture_start(sim, start_state(res.run.trajectory), draw.output_offset)
     schedule = (varying_pace(thetas, draw.stride_cv, draw.stride_seed, res.degree)
                 if draw.stride_cv != 0.0 else None)
     if controller == ORACLE:
-        log = sim.run(*start_state(res.run.trajectory), GRAPH.domains[0], steps=steps,
+        log = sim.run(*start, GRAPH.domains[0], steps=steps,
                       duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains),
                       gaits=schedule)
         return log, Counter(), 0
@@ -264,7 +289,7 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
         modes[out.diagnostics.mode] += 1
 
     log = controller_run(sim, res.run.trajectory, ctl, steps, encoder_of(draw), count,
-                         gaits=schedule)
+                         gaits=schedule, start=start)
     return log, modes, int(ctl.fallbacks)
 
 
