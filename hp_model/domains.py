@@ -288,20 +288,29 @@ class DomainGraph(Choice):
         return tuple(d for d in _CYCLES[self] if self == DomainGraph.PAPER
                      or d.is_double_support)
 
+    def _landing(self, domain: Domain) -> FootContact | None:
+        """The next domain's new contact (its foot lands in ``domain``), None where the next
+        domain adds none (a heel's lift-off)."""
+        before = {c.side: c for c in domain.contacts}
+        for c in self.next(domain).contacts:
+            held = before.get(c.side)
+            if held == c or (held is not None and held.is_flat):
+                continue  # held, or a flat foot rolling onto its toe
+            return c
+        return None
+
     def touchdown_frame(self, domain: Domain | str) -> str | None:
         """The frame whose touchdown is ``domain``'s guard: the next domain's new contact
         (a foot landing flat from its heel touches down with its toe); None where the next
         domain adds no contact (a heel's lift-off: no impact)."""
         d = Domain(domain)
-        before = {c.side: c for c in d.contacts}
-        for c in self.next(d).contacts:
-            held = before.get(c.side)
-            if held == c or (held is not None and held.is_flat):
-                continue  # held, or a flat foot rolling onto its toe
-            if c.is_flat and held is not None and held.part == FootPart.HEEL:
-                return f"{c.side}_{FootPart.TOE.value}"
-            return c.frame
-        return None
+        c = self._landing(d)
+        if c is None:
+            return None
+        held = {h.side: h for h in d.contacts}.get(c.side)
+        if c.is_flat and held is not None and held.part == FootPart.HEEL:
+            return f"{c.side}_{FootPart.TOE.value}"
+        return c.frame
 
     def guard_from_entry(self, domain: Domain | str) -> bool:
         """Whether ``domain``'s touchdown guard is armed from its entry: its landing foot was
@@ -310,13 +319,11 @@ class DomainGraph(Choice):
         ``SimOptions.guard_tau_min``: a foot that has just left the ground (a swing's start)
         or one landing flat from its heel."""
         d = Domain(domain)
-        frame = self.touchdown_frame(d)
-        if frame is None:
+        landing = self._landing(d)
+        if landing is None:
             return False
-        side = frame.split("_")[0]
         previous = _CYCLES[self][_CYCLES[self].index(d) - 1]
-        return all(c.side != side for c in previous.contacts + d.contacts)
-
+        return all(c.side != landing.side for c in previous.contacts + d.contacts)
 
 _CYCLES: dict[DomainGraph, tuple[Domain, ...]] = {
     DomainGraph.PAPER: (Domain.PS, Domain.PNS),
