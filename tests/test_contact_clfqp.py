@@ -154,6 +154,39 @@ def test_it_walks_the_committed_cycle(cycle, walk) -> None:
     assert held >= 0.99, held
 
 
+def test_on_gait_holds_a_domains_last_sample_before_its_touchdown() -> None:
+    """A sample past its domain's designed touchdown (tau > 1) reads the last one of the
+    same domain that is not; a domain's first sample reads itself whatever its tau."""
+    from orchestrator.cosim.contact_controllers import on_gait
+
+    domain = np.array([1, 1, 1, 1, 2, 2, 2, 3])
+    tau = np.array([0.5, 0.99, 1.01, 1.2, 0.0, 1.05, 0.3, 1.4])
+    np.testing.assert_array_equal(on_gait(domain, tau), [0, 1, 1, 1, 4, 4, 6, 7])
+
+
+def test_the_stance_qp_is_read_on_the_gait_not_on_the_persons_resting_tail(cycle) -> None:
+    """The held walk the stance QP's data come from passes the person's designed touchdown
+    of a domain before its foot lands; there its law's resting tail changes the torques at
+    once.  Those samples hold the last one on the gait: the QP's reference torque does not
+    follow the walk's step there."""
+    from orchestrator.cosim.contact_controllers import LoopSetup, held_walk
+    from prosthesis_controller.contact_phase_pd import first_stride
+
+    model, traj, _, gait = cycle
+    sim = loop_simulator(model, gait, GAINS)
+    w = held_walk(sim, traj)
+    i0, i1, _ = first_stride(w.contact)
+    tail = np.flatnonzero(w.tau[i0:i1] > 1.0)
+    assert tail.size and tail[0] > 0
+    st = contact_clfqp(model, gait, traj, setup=LoopSetup(sim, w)).stance
+    for k in tail:
+        assert w.domain[i0 + k] == w.domain[i0 + k - 1]
+        np.testing.assert_array_equal(st.u_ref[k], st.u_ref[k - 1])
+    first = tail[0] - 1  # the last sample on the gait before the tail
+    step = np.abs(w.torque[i0 + tail] - w.torque[i0 + first]).max()
+    assert step > np.abs(np.diff(w.torque[i0 + first - 5:i0 + first + 1], axis=0)).max(), step
+
+
 def _quadprog(P, c, G, h, xl, xu):
     """min 1/2 z^T P z + c^T z, G z <= h, xl <= z <= xu (finite bounds) with quadprog."""
     n = len(c)

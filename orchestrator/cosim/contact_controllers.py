@@ -102,7 +102,8 @@ class HeldWalk:
     pitch, knee, ankle (rad), their rates (rad/s); ``contact`` (n,) the foot switch;
     ``torque`` (n, 2) the motor torques applied (N m); the plant's truth: ``domain`` (n,)
     codes, ``q``, ``qd`` (n, nq), ``wrench`` (n, 4) the contact wrenches under the torques
-    applied (zero-padded)."""
+    applied (zero-padded), ``tau`` (n,) the person's phase in its domain (past 1: its
+    designed touchdown passed, the person waiting for the ground on its resting tail)."""
 
     t: np.ndarray
     sensed: np.ndarray
@@ -112,6 +113,21 @@ class HeldWalk:
     q: np.ndarray
     qd: np.ndarray
     wrench: np.ndarray
+    tau: np.ndarray
+
+
+def on_gait(domain: np.ndarray, tau: np.ndarray) -> np.ndarray:
+    """Index (n,) of each sample of a walk (its ``domain`` codes and the person's phase
+    ``tau``, (n,)) or, past its domain's designed touchdown (tau > 1), of the last sample of
+    the same domain before it that was not: where a walk is the gait's.  Past tau 1 the
+    person's law holds a resting tail, its torques change at once (the held oracle's
+    prosthesis torque by 0.9 N m motor in the committed cycle's last two milliseconds of
+    ``ps_toe``): that is this walk's wait for the ground, not the gait."""
+    index = np.arange(len(tau))
+    for i in range(1, len(tau)):
+        if tau[i] > 1.0 and domain[i] == domain[i - 1]:
+            index[i] = index[i - 1]
+    return index
 
 
 def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any]],
@@ -138,7 +154,7 @@ def held_walk(sim: HybridSimulator, trajectory: Mapping[Domain, Mapping[str, Any
         wrench[:n] = plant.run.last_sample()[3][:n]
         rows.append((obs.t, (s.socket_pitch, s.knee_angle, s.ankle_angle, s.knee_velocity,
                              s.ankle_velocity), s.contact, applied, st.domain.code,
-                     st.q.copy(), st.qd.copy(), wrench))
+                     st.q.copy(), st.qd.copy(), wrench, st.tau))
         if plant.fall is not None:
             raise HeldOracleFellError(f"the held oracle fell in the stride the tables are read "
                                  f"from: {plant.fall.message()}")
@@ -206,10 +222,11 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
         setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
     tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
     i0, i1, _ = first_stride(w.contact)
-    st = slice(i0, i1)
+    # the stance's samples, each on the gait (on_gait): the QP's reference and model
+    on = i0 + on_gait(w.domain[i0:i1], w.tau[i0:i1])
     inter = ContactInteraction(model, gait.params[GRAPH.domains[0]].degree).numeric()
-    walked = WalkedStance(tables.stance.phase, w.domain[st], w.q[st], w.qd[st],
-                          w.wrench[st], w.torque[st])
+    walked = WalkedStance(tables.stance.phase, w.domain[i0:i1], w.q[on], w.qd[on],
+                          w.wrench[on], w.torque[on])
     stance = stance_qp(walked, inter, gait.thetas(), gains, model, config
                        ).with_margin(model_error)
     p = model.device.prosthesis
