@@ -121,7 +121,7 @@ def on_gait(domain: np.ndarray, tau: np.ndarray) -> np.ndarray:
     ``tau``, (n,)) or, past its domain's designed touchdown (tau > 1), of the last sample of
     the same domain before it that was not: where a walk is the gait's.  Past tau 1 the
     person's law holds a resting tail, its torques change at once (the held oracle's
-    prosthesis torque by 0.9 N m motor in the committed cycle's last two milliseconds of
+    prosthesis torque by 0.9 N m motor in the packaged person's last two milliseconds of
     ``ps_toe``): that is this walk's wait for the ground, not the gait."""
     index = np.arange(len(tau))
     for i in range(1, len(tau)):
