@@ -9,8 +9,10 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
 - **Model** (stance): the human-prosthesis loop restricted to the nominal human
   (:mod:`hp_model.contact_interaction`), in the domain the gait is in at the phase (but
   ``ds_p``'s last sample while the gait's foot is flat and the sensed one is still on its
-  heel, :data:`HEEL_DOWN`) and at the gait's walker state there (one stance as the model
-  walks it, :class:`WalkedStance`), linearized about the gait:
+  heel, :data:`HEEL_DOWN`; and ``ds_h`` from the person's heel strike sensed at the joints
+  while the gait is in ``ps_toe``, read at the time since it: :class:`HeelStrikeSensor`,
+  :meth:`ContactClfQp._after_strike`) and at the gait's walker state there (one stance as the
+  model walks it, :class:`WalkedStance`), linearized about the gait:
 
       qdd_p = qdd_ref + g (u - u_ref),     w = w_ref + W (u - u_ref)
 
@@ -81,6 +83,7 @@ from prosthesis_controller.contact_phase_pd import (
     ContactPhasePD,
     control_output,
 )
+from prosthesis_controller.heel_strike import HeelStrikeSensor
 from prosthesis_controller.interface import ControllerMode, ControlOutput, QpOutcome
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from prosthesis_controller.qp import dense_solver, set_tolerance
@@ -97,6 +100,10 @@ FLAT_LOAD = 0.9
 #: the largest number of contact rows of a stance domain's QP (a double support: 3 per
 #: heel or toe; a flat sole: 5)
 MAX_CONTACT_ROWS = 6
+#: s: the time between two samples of the stance QP (:class:`WalkedStance`: one per period of
+#: the plant the held walk ran on); the person's heel strike sensed, ``ds_h``'s samples are
+#: read at the time since it
+SAMPLE_PERIOD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -104,7 +111,9 @@ class ContactClfConfig:
     """The CLF-QP's constants (module docstring): ``eps`` (the RES-CLF's, s), ``gamma``,
     ``w_force`` (per body weight squared, in units of (rad/s^2)^2), ``w_torque``
     ((rad/s^2)^2 per (N m)^2 motor), ``c_rho``, ``c_sigma`` (per body weight), ``mu``,
-    ``f_min`` (N), ``delta_u`` (N m motor per tick), ``solver_eps`` (piqp's tolerances)."""
+    ``f_min`` (N), ``delta_u`` (N m motor per tick), ``solver_eps`` (piqp's tolerances),
+    ``strike_window`` (periods) and ``strike_threshold`` (rad/s^2; inf: never) of the
+    person's heel strike sensed at the joints (:class:`HeelStrikeSensor`)."""
 
     eps: float = 0.02
     gamma: float = 0.3
@@ -116,6 +125,8 @@ class ContactClfConfig:
     f_min: float = 30.0
     delta_u: float = 5.0
     solver_eps: float = 1e-8
+    strike_window: int = 3
+    strike_threshold: float = 100.0
 
 
 #: the defaults (measured in docs/gait-design.md)
@@ -215,12 +226,15 @@ class StanceQp:
     _phases: list[float] = field(init=False, repr=False, compare=False)
     g_rows: list[list[list[float]]] = field(init=False, repr=False, compare=False)
     u_rows: list[list[float]] = field(init=False, repr=False, compare=False)
+    qdd_rows: list[list[float]] = field(init=False, repr=False, compare=False)
     margin_rows: list[list[float]] = field(init=False, repr=False, compare=False)
     load_rows: list[list[float]] = field(init=False, repr=False, compare=False)
     #: (n, 2, 6): h and load_h of each sample, for the tick's one product
     rows_h: np.ndarray = field(init=False, repr=False, compare=False)
     #: the last ``ds_p`` sample (-1: none): where a foot still on its heel is held
     heel_end: int = field(init=False, repr=False, compare=False)
+    #: the first and the last ``ds_h`` sample ((-1, -1): none): the person's heel strike on
+    strike_span: tuple[int, int] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # the phases, g and u_ref as floats: a search ~0.3 us, not numpy's ~1.5 us, and the
@@ -229,6 +243,7 @@ class StanceQp:
         object.__setattr__(self, "_phases", self.phase.tolist())
         object.__setattr__(self, "g_rows", self.g.tolist())
         object.__setattr__(self, "u_rows", self.u_ref.tolist())
+        object.__setattr__(self, "qdd_rows", self.qdd_ref.tolist())
         object.__setattr__(self, "margin_rows", np.hstack(
             [np.reshape(self.d_center, (-1, 2)), np.reshape(self.d_radius, (-1, 2))]).tolist())
         object.__setattr__(self, "rows_h", np.stack([self.h, self.load_h], axis=1))
@@ -236,6 +251,8 @@ class StanceQp:
             [self.load_ref, np.reshape(self.load_gain, (-1, 2))]).tolist())
         heel = [i for i, d in enumerate(self.domain) if d is Domain.DS_P]
         object.__setattr__(self, "heel_end", heel[-1] if heel else -1)
+        struck = [i for i, d in enumerate(self.domain) if d is Domain.DS_H]
+        object.__setattr__(self, "strike_span", (struck[0], struck[-1]) if struck else (-1, -1))
 
     def with_margin(self, bound: ModelErrorBound | None) -> StanceQp:
         """These samples with the robust term of ``bound`` (the multi-contact model error,
@@ -419,6 +436,7 @@ class ContactClfQp:
         self._xl = np.array([0.0, 0.0, 0.0, 0.0])
         self._xu = np.array([0.0, 0.0, math.inf, 1.0])
         self._coef = np.array([1.0, 0.0])  # (1, the load cell's excess in N)
+        self._strike = HeelStrikeSensor(config.strike_window, config.strike_threshold)
         self.keep_qp = False  # set to keep each stance tick's QP in ``qp``
         self.reset()
 
@@ -435,6 +453,10 @@ class ContactClfQp:
         #: whether this stance's foot has been sensed flat (HEEL_DOWN; set at the first flat
         #: reading where the gait's foot is flat, cleared at the heel strike)
         self.landed = False
+        self._strike.reset()
+        #: the last tick's sample while the gait has the prosthesis on its toe at the phase
+        #: and no heel strike of the person is sensed (None otherwise)
+        self._i_prev: int | None = None
         #: the last stance tick's domain (as the gait has it at the phase; None in swing), the
         #: CLF's value, the relaxations and whether piqp solved it
         self.domain: Domain | None = None
@@ -457,6 +479,8 @@ class ContactClfQp:
         law's, the torque its rate limit starts from and its counts."""
         self.law.take_over(other.law)
         self._u, self.fallbacks, self.landed = other._u, other.fallbacks, other.landed
+        self._strike.reset()  # its samples are the other stance's: the window starts again
+        self._strike.struck_at = other._strike.struck_at
 
     def _new_solvers(self) -> None:
         """One piqp solver per domain, set up with its rows (a solver keeps its scaling and
@@ -495,6 +519,7 @@ class ContactClfQp:
         law = self.law
         if m.contact and not law.in_stance:  # a heel strike
             self.landed = False
+            self._strike.reset()
         ref = law.reference(m)  # the phase and the gait there
         u = None
         self.domain = None
@@ -527,6 +552,40 @@ class ContactClfQp:
             return False  # no reading: the sensed angle alone
         return m.foot_load < FLAT_LOAD * (m.foot_load - excess)
 
+    def _after_strike(self, m: ProsthesisMeasurement, i: int, d: Domain,
+                      ref: tuple[float, ...]) -> tuple[int, Domain, tuple[float, ...]]:
+        """The sample, its domain and the gait there for this tick (sample ``i`` of domain
+        ``d`` at the phase, the gait there ``ref``), the person's heel strike sensed at the
+        joints while the gait is in ``ps_toe`` (:class:`HeelStrikeSensor`, fed the model's
+        accelerations of the last tick's sample under the torque applied since): from the
+        strike on, ``ds_h``'s sample at the time since it, or the phase's where that is
+        later.  A person who struck early met ``ps_toe``'s push-off until the phase reached
+        ``ds_h``, and then ``ds_h``'s entry: its heel was pulled off the ground
+        (docs/gait-design.md, "The person's heel strike sensed at the prosthesis")."""
+        st, sensor = self.stance, self._strike
+        first, last = st.strike_span
+        if sensor.struck_at is None:
+            prev, self._i_prev = self._i_prev, (i if d is Domain.PS_TOE else None)
+            if d is not Domain.PS_TOE or first < 0:
+                sensor.restart()
+                return i, d, ref
+            if prev is None:  # the window starts here
+                sensor.restart()
+                sensor.update(m.t, m.knee_vel, m.ankle_vel, 0.0, 0.0)
+                return i, d, ref
+            (g00, g01), (g10, g11) = st.g_rows[prev]
+            (a0, a1), (ur0, ur1), (u0, u1) = st.qdd_rows[prev], st.u_rows[prev], self._u
+            du0, du1 = u0 - ur0, u1 - ur1
+            if sensor.update(m.t, m.knee_vel, m.ankle_vel, a0 + g00 * du0 + g01 * du1,
+                             a1 + g10 * du0 + g11 * du1) is None:
+                return i, d, ref
+        assert sensor.struck_at is not None
+        since = first + round((m.t - sensor.struck_at) / SAMPLE_PERIOD)
+        j = min(max(since, first), last)
+        if d is Domain.DS_H and i >= j:
+            return i, d, ref
+        return j, Domain.DS_H, self.law.tables.stance.at(float(st.phase[j]))
+
     def _load_excess(self, m: ProsthesisMeasurement, i: int) -> float | None:
         """The load cell's reading above the model's prediction at sample ``i`` under the
         last tick's torque (N); None without a reading (zero, or not finite)."""
@@ -556,6 +615,8 @@ class ContactClfQp:
                 ref = self.law.tables.stance.at(float(st.phase[i]))
             else:  # landed: the gait's from now on in this stance, whatever the noise reads
                 self.landed = True
+        if d is Domain.PS_TOE or d is Domain.DS_H:
+            i, d, ref = self._after_strike(m, i, d, ref)
         k, a, vk, va, _, _ = ref
         # the CLF in floats, joint by joint (numpy's per-call cost on 4-vectors was ~5 us of
         # a tick held to 40 us, benchmarks/bench_contact_controllers.py)

@@ -187,6 +187,89 @@ def test_the_stance_qp_is_read_on_the_gait_not_on_the_persons_resting_tail(cycle
     assert step > np.abs(np.diff(w.torque[i0 + first - 5:i0 + first + 1], axis=0)).max(), step
 
 
+def _hips_apart(gait, deg: float):
+    """``gait`` with the person's hip curves offset: th_lh by +deg, th_rh by -deg (its swing
+    heel lower at the end of the step: an early heel strike)."""
+    from orchestrator.experiments.contact_perturbations import offset_outputs
+
+    return offset_outputs(gait, {"th_lh": math.radians(deg), "th_rh": -math.radians(deg)})
+
+
+def _strike_run(model, traj, gait, plant_gait, config, steps, encoder=None):
+    """``clfqp`` (``config``) on the plant of ``plant_gait`` for ``steps`` steps: the
+    plant's log and per tick (t, the QP's domain, the sensed strike, the QP's cost P)."""
+    from orchestrator.experiments.contact_perturbations import IDEAL_ENCODER, controller_run
+
+    ctl = contact_clfqp(model, gait, traj, config=config)
+    ctl.keep_qp = True
+    ticks = []
+
+    class Logged:
+        def reset(self, torque=None) -> None:
+            ctl.reset(torque)
+
+        def tick(self, m: ProsthesisMeasurement) -> ControlOutput:
+            out = ctl.tick(m)
+            ticks.append((m.t, ctl.domain, ctl._strike.struck_at,
+                          None if ctl.qp is None else ctl.qp[0]))
+            ctl.qp = None
+            return out
+
+    log = controller_run(loop_simulator(model, plant_gait, GAINS), traj, Logged(), steps,
+                         encoder or IDEAL_ENCODER)
+    return ctl, log, ticks
+
+
+def test_the_persons_early_heel_strike_is_sensed_and_ds_h_read_from_it(cycle) -> None:
+    """The committed cycle's person with its hips 2 deg apart strikes its heel about 37 ms
+    before the gait's phase reaches ds_h.  clfqp senses the strike at the joints within 2 ms
+    and dates it within 1 ms; from then its QP is ds_h's, read at the time since the strike
+    (its cost is that sample's).  With the sensor off (threshold inf) the QP stays in
+    ps_toe's until the phase reaches ds_h: it met the person's heel with its push-off."""
+    from prosthesis_controller.contact_clf_qp import DEFAULT_CONFIG, SAMPLE_PERIOD
+
+    model, traj, _, gait = cycle
+    person = _hips_apart(gait, 2.0)
+    ctl, log, ticks = _strike_run(model, traj, gait, person, DEFAULT_CONFIG, 2)
+    strike = next(i.t for i in log.impacts if i.into is Domain.DS_H)
+    sensed = next(t for t in ticks if t[2] is not None)
+    assert strike <= sensed[0] <= strike + 2e-3 + 1e-9
+    assert abs(sensed[2] - strike) <= 1e-3 + 1e-9
+    first_ds_h = next(t for t in ticks if t[1] is Domain.DS_H)
+    assert first_ds_h[0] == sensed[0]
+    st, (first, _) = ctl.stance, ctl.stance.strike_span
+    for t, d, struck, P in ticks:
+        if struck is not None and d is Domain.DS_H and t > sensed[0]:
+            np.testing.assert_array_equal(P, st.P[first + round((t - struck) / SAMPLE_PERIOD)])
+            break
+    else:
+        raise AssertionError("no ds_h tick after the strike")
+    _, log_off, ticks_off = _strike_run(model, traj, gait, person,
+                                        replace(DEFAULT_CONFIG, strike_threshold=math.inf), 2)
+    assert next(i.t for i in log_off.impacts if i.into is Domain.DS_H) == pytest.approx(strike)
+    assert all(t[2] is None for t in ticks_off)
+    assert next(t[0] for t in ticks_off if t[1] is Domain.DS_H) > strike + 0.03
+
+
+def test_no_heel_strike_is_sensed_before_the_person_strikes(cycle) -> None:
+    """The committed cycle, 6 steps, the sweeps' encoder noise (0.2 deg and 0.02 rad/s):
+    no strike is sensed before the person's; the person walks (its strikes 2-3 ms before
+    the phase: the sensor, its windows 3 ms each, mostly comes after the phase); a strike
+    sensed is dated within 2 ms of the person's (the noise: 30 rad/s^2 on one period's
+    residual)."""
+    from orchestrator.loop.link import Encoder
+    from prosthesis_controller.contact_clf_qp import DEFAULT_CONFIG
+
+    model, traj, _, gait = cycle
+    noisy = Encoder(angle_noise=0.0035, velocity_noise=0.02, angle_resolution=0.001, seed=5)
+    _, log, ticks = _strike_run(model, traj, gait, gait, DEFAULT_CONFIG, 6, noisy)
+    assert log.fall is None and log.steps >= 6
+    strikes = [i.t for i in log.impacts if i.into is Domain.DS_H]
+    for t, _, struck, _ in ticks:
+        if struck is not None:
+            assert any(s - 2e-3 - 1e-9 <= struck <= t for s in strikes), (t, struck)
+
+
 def _quadprog(P, c, G, h, xl, xu):
     """min 1/2 z^T P z + c^T z, G z <= h, xl <= z <= xu (finite bounds) with quadprog."""
     n = len(c)

@@ -112,18 +112,24 @@ def draw(gait: ContactGait, family: str, amplitude: float, seed: int) -> Draw:
     if family == "posture":
         offset = dict(zip(HUMAN_JOINTS, rng.normal(0, math.radians(1.0) * a, 4),
                           strict=True))
-        params = {}
-        for d, p in gait.params.items():
-            alpha = np.array(p.alpha, float)
-            for row, coord in enumerate(d.y2_coords):
-                alpha[row] += offset.get(coord, 0.0)
-            params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
-        return Draw(ContactGait(params, gait.rms), GAINS, None)
+        return Draw(offset_outputs(gait, offset), GAINS, None)
     if family == "pace":
         return Draw(paced(gait, float(np.exp(rng.normal(0, 0.05 * a)))), GAINS, None)
     if family == "stride":
         return Draw(gait, GAINS, None, STRIDE_CV * a, seed)
     raise ValueError(f"unknown family {family!r}; choose from {', '.join(FAMILIES)}")
+
+
+def offset_outputs(gait: ContactGait, offset: Mapping[str, float]) -> ContactGait:
+    """``gait`` with each output curve of a coordinate in ``offset`` (rad) moved by it, in
+    every domain where the coordinate is an output (a posture offset)."""
+    params = {}
+    for d, p in gait.params.items():
+        alpha = np.array(p.alpha, float)
+        for row, coord in enumerate(d.y2_coords):
+            alpha[row] += offset.get(coord, 0.0)
+        params[d] = GaitParams(alpha, p.v_hip, p.p_min, p.p_max)
+    return ContactGait(params, gait.rms)
 
 
 def paced(gait: ContactGait, factor: float) -> ContactGait:
