@@ -201,8 +201,13 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(fitted)
     command (a stride's lag: 0.04 m/s per stride on the ramps), and `clfqp` following its
     speed walks it at 1.0 m/s, between the library's gaits, reading that speed from its
     flat stances (the hip's rate over the flat foot), and follows the person slowing from
-    1.2 to 0.95 m/s over 5 s (16 steps; before its stance read what it senses it fell at
-    step 10, the prosthesis heel pulling as its double support ended: docs/gait-design.md)."""
+    1.2 to 0.95 m/s over 5 s (20 steps; before its stance read what it senses it fell at
+    step 10, the prosthesis heel pulling as its double support ended: docs/gait-design.md):
+    the strides after the ramp each within 0.03 m/s of the command and 0.02 on average (at
+    a constant 0.95 they measured 0.926-0.956 over 26 steps since `clfqp` senses the
+    person's heel strike, 0.953-0.968 before), the estimate within 0.04 of them on average
+    (read from one flat stance, it alternates by about 0.03 from stride to stride on this
+    library, and reads 0.03 high at its slow end)."""
     from orchestrator.experiments.speed_walk import speed_walk
 
     r, out = fitted
@@ -223,10 +228,14 @@ def test_the_person_fitted_again_at_other_speeds_walks_and_changes_speed(fitted)
     assert c.walks, c.line()
     assert c.speed[-1] == pytest.approx(1.0, abs=0.03)
     assert c.estimate[-1] == pytest.approx(c.speed[-1], abs=0.03)
-    slowing = speed_walk(lib, SpeedProfile.parse("0:1.2,1:1.2,6:0.95"), 16, "clfqp")
+    slowing = speed_walk(lib, SpeedProfile.parse("0:1.2,1:1.2,6:0.95"), 20, "clfqp")
     assert slowing.walks, slowing.line()
-    assert slowing.speed[-1] == pytest.approx(0.95, abs=0.02)
-    assert slowing.estimate[-1] == pytest.approx(slowing.speed[-1], abs=0.03)
+    settled = slowing.t > 7.0  # the strides that end a stride or more after the ramp
+    assert settled.sum() >= 3
+    assert np.all(np.abs(slowing.speed[settled] - 0.95) < 0.03), slowing.speed
+    assert np.mean(slowing.speed[settled]) == pytest.approx(0.95, abs=0.02)
+    assert np.mean(slowing.estimate[settled]) == pytest.approx(
+        np.mean(slowing.speed[settled]), abs=0.04)
 
 
 @pytest.mark.slow  # the library of the test above, a worker's controllers over it, 9 runs
