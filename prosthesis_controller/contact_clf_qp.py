@@ -481,6 +481,7 @@ class ContactClfQp:
         self._u, self.fallbacks, self.landed = other._u, other.fallbacks, other.landed
         self._strike.reset()  # its samples are the other stance's: the window starts again
         self._strike.struck_at = other._strike.struck_at
+        self._i_prev = None
 
     def _new_solvers(self) -> None:
         """One piqp solver per domain, set up with its rows (a solver keeps its scaling and

@@ -186,10 +186,10 @@ def _controller(src: str, meta: dict[str, Any], data: dict[str, Any], model: Hum
         stance = StanceQp(domain=tuple(Domain.from_code(int(c))
                                        for c in data[f"{prefix}qp.domain"]),
                           **{k: np.asarray(data[f"{prefix}qp.{k}"], float) for k in _QP})
-        config = ContactClfConfig(**meta["config"])
+        field = f"{prefix}meta"
+        return ContactClfQp(law, stance, law.limits, ContactClfConfig(**meta["config"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ArtifactError(f"{src}: field '{field}': {e}") from None
-    return ContactClfQp(law, stance, law.limits, config)
 
 
 def _check_kind(src: str, meta: dict[str, Any], kind: str, version: int) -> None:

@@ -82,6 +82,12 @@ def test_bad_files_are_one_line_errors(tmp_path, made):
     np.savez(wrong, **{**data, "meta": np.array(json.dumps(meta))})
     with pytest.raises(ArtifactError, match="field 'kind'"):
         load_contact_controller(wrong)
+    meta = json.loads(str(data["meta"]))
+    meta["config"]["strike_window"] = 0  # the heel strike sensor refuses it
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{**data, "meta": np.array(json.dumps(meta))})
+    with pytest.raises(ArtifactError, match="field 'meta': heel strike window"):
+        load_contact_controller(bad)
     del data["qp.G"]
     cut = tmp_path / "cut.npz"
     np.savez(cut, **data)
