@@ -11,7 +11,7 @@ shared and noisy: the spread over the repeats is printed with the median.
 With ``--cycle GAIT.json`` the cycle of a multi-contact gait file instead (``gait fit``'s:
 its model carries the drives' armature, which the committed cycle predates).  With
 ``--library LIB.json`` (``hpcosim gait library``) the two controllers following the
-person's speed over it (:func:`orchestrator.cosim.contact_controllers.speed_following`),
+person's speed over it (:func:`orchestrator.cosim.following.speed_following`),
 the person walking the library at ``--speed`` (issue 38's target: the same 40 us).
 
 Usage: python benchmarks/bench_contact_controllers.py [--cycle GAIT.json]
@@ -84,7 +84,7 @@ def following(path: Path, speed: float, swing_phase: str = "time"
     started at ``speed`` (m/s), and the in-process simulator of its curves there with the
     cycle's start at that speed."""
     from characterization.gait.library import load_gait_library, start_at
-    from orchestrator.cosim.contact_controllers import speed_following
+    from orchestrator.cosim.following import speed_following
 
     lib = load_gait_library(path)
     sim = loop_simulator(lib.model, lib.gait_at(speed), GAINS)

@@ -55,6 +55,11 @@ the 2-DOF stance prosthesis (foot fixed, socket force ignored), JOINT torque out
     e = q - q_d, v = qd_d - L e, a = qdd_d - L e_dot, r = e_dot + L e,
     u = Y(q, qd, a, v) (theta0 + dtheta) - K r,  dtheta = -rho Y^T r / max(|Y^T r|, eps_b)
 
+  The robust term covers the links' standard parameters; the drives' armature (on a device
+  with rotor inertia, the last parameters) is taken as known.  ``passive_ref(x, ref, p)`` is
+  the same law about a reference given as (q_d, qd_d, qdd_d): the multi-contact graph's
+  ``passive`` (:class:`prosthesis_controller.passive.ContactPassive`).
+
   M, C (Christoffel form), g are the reduced Lagrangian's: M = Phi^T D Phi with
   Phi = d q_emb / d q_joint of the flat-foot embedding; the regressor Y is linear in the
   standard parameters (m, m c_x, m c_z, I_o) of each link, obtained by AD from copies of the
@@ -446,31 +451,57 @@ def phase_pd_function(hip: HipProgress, x: ca.SX, degree: int, feedforward_degre
                           ["x", "p"], ["u_ff", "fb_joint", "tau", "eta"])
 
 
-def passive_function(sub: ProsthesisSubsystem, x: ca.SX, stance_ref: ca.Function,
-                     degree: int) -> tuple[Layout, ca.Function, list[str]]:
-    """Spong's robust passivity-based law on the stance reference (``passive``), and the
-    links whose standard parameters it adapts."""
+def spong_law(sub: ProsthesisSubsystem, x: ca.SX, q_d: ca.SX, qd_d: ca.SX, qdd_d: ca.SX,
+              Pl: Layout) -> tuple[ca.SX, ca.SX, ca.SX, ca.SX, list[str]]:
+    """Spong's robust passivity-based law (module docstring) about the joint reference
+    (``q_d``, ``qd_d``, ``qdd_d``; rad, rad/s, rad/s^2) on the flat-foot stance prosthesis,
+    its gains and parameters added to ``Pl``: the joint torque, e, r, Y theta0 and the links
+    whose standard parameters it adapts."""
     th, dth = x[0:2], x[2:4]
-    Pl = Layout()
-    alpha_p = Pl.add("alpha_pk", (1, degree + 1))
-    pp_min, pp_max = Pl.add("p_min"), Pl.add("p_max")
     lam, kgain = Pl.add("lam", (2,)), Pl.add("k", (2,))
     rho_th, bl = Pl.add("rho_theta"), Pl.add("boundary")
     links = [b.name for b in sub.tree.bodies if b.name != "p_foot"]
     theta0 = Pl.add("theta0", (4 * len(links) + len(drives(sub.tree)),))
-    tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
-    q_d, qd_d, qdd_d = stance_ref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
     e, ed = th - q_d, dth - qd_d
     vv = qd_d - lam * e
     aa = qdd_d - lam * ed
     rr = ed + lam * e
     Y, _ = regressor(sub, x, aa, vv)
-    YTr = Y.T @ rr
-    dtheta = -rho_th * YTr / ca.fmax(ca.norm_2(YTr), bl)
-    u_pass = Y @ (theta0 + dtheta) - kgain * rr
+    # the robust term covers the links' parameters; the drives' armature (the last columns,
+    # joint accelerations of up to 200 rad/s^2 in a stance) is the motors' datasheet's: with
+    # it, rho = 0.2 kg m^2 switched 40 N m within the boundary layer and no gain walked
+    n = 4 * len(links)
+    YTr = Y[:, :n].T @ rr
+    dtheta = ca.vertcat(-rho_th * YTr / ca.fmax(ca.norm_2(YTr), bl),
+                        ca.SX.zeros(Y.shape[1] - n))
+    return Y @ (theta0 + dtheta) - kgain * rr, e, rr, Y @ theta0, links
+
+
+def passive_function(sub: ProsthesisSubsystem, x: ca.SX, stance_ref: ca.Function,
+                     degree: int) -> tuple[Layout, ca.Function, list[str]]:
+    """Spong's robust passivity-based law on the stance reference (``passive``), and the
+    links whose standard parameters it adapts."""
+    Pl = Layout()
+    alpha_p = Pl.add("alpha_pk", (1, degree + 1))
+    pp_min, pp_max = Pl.add("p_min"), Pl.add("p_max")
+    tau_s, rate = ca.SX.sym("tau"), ca.SX.sym("rate")
+    q_d, qd_d, qdd_d = stance_ref(tau_s, rate, ca.vertcat(alpha_p.T, pp_min, pp_max))
+    u_pass, e, rr, y_theta0, links = spong_law(sub, x, q_d, qd_d, qdd_d, Pl)
     return Pl, ca.Function("passive", [x, tau_s, rate, Pl.symbol],
-                           [u_pass, e, rr, Y @ theta0],
+                           [u_pass, e, rr, y_theta0],
                            ["x", "tau", "rate", "p"], ["u_joint", "e", "r", "Ytheta0"]), links
+
+
+def passive_reference_function(sub: ProsthesisSubsystem) -> tuple[Layout, ca.Function]:
+    """Spong's law about a joint reference given as an input (``passive_ref(x, ref, p)``,
+    ref = (q_d, qd_d, qdd_d), joint torque out): the multi-contact graph's ``passive``,
+    whose reference is a table of the gait
+    (:class:`prosthesis_controller.passive.ContactPassive`)."""
+    x, ref = ca.SX.sym("x", 4), ca.SX.sym("ref", 6)
+    Pl = Layout()
+    u_pass, *_ = spong_law(sub, x, ref[0:2], ref[2:4], ref[4:6], Pl)
+    return Pl, ca.Function("passive_ref", [x, ref, Pl.symbol], [u_pass],
+                           ["x", "ref", "p"], ["u_joint"])
 
 
 def reduced_model_functions(sub: ProsthesisSubsystem, x: ca.SX, reduced: Sequence[ca.SX]

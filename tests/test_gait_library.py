@@ -290,8 +290,9 @@ def test_the_cosimulation_changes_the_persons_speed_and_clfqp_follows(fitted, tm
     from characterization.gait.contact_gait import GAINS
     from characterization.gait.library import speed_schedule, start_at
     from orchestrator.cosim.config import CosimConfig
-    from orchestrator.cosim.contact_controllers import ensure_following_file, loop_simulator
+    from orchestrator.cosim.contact_controllers import loop_simulator
     from orchestrator.cosim.export import run_table
+    from orchestrator.cosim.following import ensure_following_file
     from orchestrator.cosim.master import run_cosim
     from orchestrator.cosim.recording import read_recording, replay
     from orchestrator.loop import ControllerLink, SimulatorPlant, run_loop

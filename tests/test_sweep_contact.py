@@ -27,7 +27,7 @@ SPEC = """
 name = "person"
 gait = "{gait}"
 {tube}
-controllers = ["clfqp", "phase-pd"]
+controllers = ["clfqp", "phase-pd", "pd", "passive"]
 draws = 2
 seed = 5
 steps = 3
@@ -73,9 +73,14 @@ def swept(files):
 
 def test_a_multicontact_sweep_runs_its_controllers_on_the_same_draws(swept):
     out, rows = swept
-    assert len(rows) == 3 * 3 * 2  # oracle, clfqp, phase-pd x 3 families x 2 draws
+    assert len(rows) == 5 * 3 * 2  # oracle, clfqp, phase-pd, pd, passive x 3 families x 2
     assert all(r["error"] is None for r in rows.values()), [
         r["error"] for r in rows.values() if r["error"]]
+    for c in ("pd", "passive"):  # the paper's baselines on this graph: run, bounded
+        for r in (rows[f"{c}/{f}/{i}"] for f in ("nominal", "sensors", "stride")
+                  for i in range(2)):
+            assert r["torque_finite"] and r["steps_completed"] >= 1, r["reason"]
+            assert abs(r["max_torque_knee"]) <= 2.4 + 1e-9
     for c in ("oracle", "clfqp", "phase-pd"):
         for i in range(2):
             r = rows[f"{c}/nominal/{i}"]
@@ -100,7 +105,7 @@ def test_a_multicontact_sweep_runs_its_controllers_on_the_same_draws(swept):
 
 
 @pytest.mark.parametrize("key", ["clfqp/sensors/1", "phase-pd/nominal/0", "oracle/sensors/0",
-                                 "clfqp/stride/1"])
+                                 "clfqp/stride/1", "passive/sensors/0", "pd/stride/1"])
 def test_a_replay_equals_the_stored_run(swept, key, capsys):
     """A run is a pure function of its key: replayed alone in this process (fresh
     controllers) it gives the row the worker wrote after other runs (controllers reset)."""
@@ -131,7 +136,7 @@ def test_paper_controllers_backend_and_tube_are_refused(files, tmp_path):
     p = spec_file(tmp_path, gait)
     base = p.read_text()
     paper_tube = Path("tests/data/controller/tube_demo_v2.json").resolve()
-    for text, field in ((base.replace('"phase-pd"', '"pd"'), "controllers"),
+    for text, field in ((base.replace('"phase-pd"', '"clfqp-paper"'), "controllers"),
                         (base.replace("steps = 3", 'steps = 3\nbackend = "fmu"'), "backend"),
                         (SPEC.format(gait=gait, tube=f'tube = "{paper_tube}"'), "tube")):
         p.write_text(text)

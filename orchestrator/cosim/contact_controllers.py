@@ -1,7 +1,8 @@
 """The multi-contact controllers of a gait, made for a run: what ``clfqp``
-(:class:`prosthesis_controller.contact_clf_qp.ContactClfQp`) and its phase law ``contact-pd``
-(:class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) follow, and what the human
-FMU tracks (:func:`tracked_gait`).
+(:class:`prosthesis_controller.contact_clf_qp.ContactClfQp`), its phase law ``contact-pd``
+(:class:`prosthesis_controller.contact_phase_pd.ContactPhasePD`) and the paper's baselines on
+this graph (``pd``, ``passive``: :func:`make_baseline`) follow, and what the human FMU tracks
+(:func:`tracked_gait`).
 
 The controllers' tables come from one stride of the in-process plant
 (:class:`orchestrator.loop.plant.SimulatorPlant`: what AMPRO3 senses) with the prosthesis
@@ -34,7 +35,6 @@ from characterization.gait.contact_gait import (
     held_oracle,
     start_state,
 )
-from characterization.gait.library import GaitLibrary, start_at
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.multicontact_artifact import load_contact_cycle
 from characterization.tube.contact_model_error import Linearization, fit_contact_model_error
@@ -52,7 +52,6 @@ from hp_model.simulator import HybridSimulator
 from human_fmu.build import TrackedGait
 from orchestrator.loop.plant import SimulatorPlant
 from prosthesis_controller import contact_clf_qp, contact_phase_pd, gait_tables
-from prosthesis_controller import speed_following as speed_following_module
 from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
     MAX_WRENCH,
@@ -67,18 +66,13 @@ from prosthesis_controller.contact_phase_pd import (
     ContactGaitTables,
     ContactPhasePD,
     PDGains,
+    PhaseTable,
     first_stride,
     tables_from_walk,
 )
-from prosthesis_controller.gait_tables import save_contact_controller, save_speed_following
-from prosthesis_controller.speed_following import (
-    SPEED_RESOLUTION,
-    FollowingSetup,
-    SpeedFollowing,
-    filled,
-    flat_stance_rate,
-    rising,
-)
+from prosthesis_controller.gait_tables import save_contact_controller
+from prosthesis_controller.passive import ContactPassive, PassiveLaw, stance_accelerations
+from prosthesis_controller.pd import ContactJointPD
 
 
 def loop_simulator(model: HumanProsthesisModel, gait: ContactGait,
@@ -181,27 +175,60 @@ def controller_tables(sim: HybridSimulator, leg: LegKinematics,
     return tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
 
 
+def motors(model: HumanProsthesisModel) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The prosthesis's gear ratios and motor torque limits (N m), each (knee, ankle)."""
+    p = model.device.prosthesis
+    return ((p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
+            (p.knee.torque_limit.value, p.ankle.torque_limit.value))
+
+
 def phase_law(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
               stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS,
               swing_phase: str = "time") -> ContactPhasePD:
-    p = model.device.prosthesis
-    return ContactPhasePD(tables, leg, (p.knee.gear_ratio.value, p.ankle.gear_ratio.value),
-                          (p.knee.torque_limit.value, p.ankle.torque_limit.value), stance,
-                          swing, swing_phase)
+    return ContactPhasePD(tables, leg, *motors(model), stance, swing, swing_phase)
+
+
+def walked_tables(model: HumanProsthesisModel, gait: ContactGait,
+                  trajectory: Mapping[Domain, Mapping[str, Any]], setup: LoopSetup | None,
+                  gains: tuple[float, float, float] = GAINS
+                  ) -> tuple[LegKinematics, HeldWalk, ContactGaitTables]:
+    """The leg, :func:`held_walk` (``setup``'s when made already) and its tables
+    (:func:`tables_from_walk`): what every controller of a gait is made from.  ValueError as
+    :func:`controller_tables`."""
+    leg = LegKinematics.of(model)
+    w = (setup and setup.held) or held_walk(
+        setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
+    return leg, w, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
 
 
 def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                     trajectory: Mapping[Domain, Mapping[str, Any]],
                     setup: LoopSetup | None = None, swing_phase: str = "time"
                     ) -> ContactPhasePD:
-    """contact-pd of ``gait`` with its default gains, its tables from :func:`held_walk`
-    (``setup``'s when made already; ValueError as :func:`controller_tables`);
+    """contact-pd of ``gait`` with its default gains (:func:`walked_tables`);
     ``swing_phase``: :class:`ContactPhasePD`'s."""
-    leg = LegKinematics.of(model)
-    w = (setup and setup.held) or held_walk(
-        setup.sim if setup else loop_simulator(model, gait, GAINS), trajectory)
-    return phase_law(model, tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque), leg,
-                     swing_phase=swing_phase)
+    leg, _, tables = walked_tables(model, gait, trajectory, setup)
+    return phase_law(model, tables, leg, swing_phase=swing_phase)
+
+
+def make_baseline(name: str, model: HumanProsthesisModel, gait: ContactGait,
+                  trajectory: Mapping[Domain, Mapping[str, Any]],
+                  setup: LoopSetup | None = None, swing_phase: str = "time",
+                  passive_law: PassiveLaw | None = None) -> ContactPhasePD:
+    """The paper's baseline ``name`` on the multi-contact graph (:data:`BASELINES`:
+    :class:`~prosthesis_controller.pd.ContactJointPD`,
+    :class:`~prosthesis_controller.passive.ContactPassive`) of ``gait``
+    (:func:`walked_tables`); ``passive_law``: the device's compiled Spong law when made."""
+    if name not in BASELINES:
+        raise ValueError(f"baseline {name!r}: choose {' or '.join(BASELINES)}")
+    leg, w, tables = walked_tables(model, gait, trajectory, setup)
+    if name == "pd":
+        return ContactJointPD(tables, leg, *motors(model), swing_phase=swing_phase)
+    i0, i1, _ = first_stride(w.contact)
+    accel = PhaseTable(tables.stance.phase,
+                       stance_accelerations(w.t[i0:i1], w.sensed[i0:i1, 3:5]))
+    return ContactPassive(tables, leg, *motors(model), passive_law or PassiveLaw(model), accel,
+                          swing_phase=swing_phase)
 
 
 def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
@@ -212,15 +239,11 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   model_error: ModelErrorBound | None = None,
                   swing_phase: str = "time") -> ContactClfQp:
     """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
-    the same stance of :func:`held_walk` (``setup``'s when made already; ValueError as
-    :func:`controller_tables`); ``model_error``: the bound of its model's error (the gait's
-    force tube's, :func:`characterization.tube.contact_model_error.fit_contact_model_error`)
-    for the robust term of its CLF row (None: none); ``swing_phase``: its phase law's
-    (:class:`ContactPhasePD`)."""
-    leg = LegKinematics.of(model)
-    w = (setup and setup.held) or held_walk(
-        setup.sim if setup else loop_simulator(model, gait, gains), trajectory)
-    tables = tables_from_walk(leg, w.t, w.sensed, w.contact, w.torque)
+    the same stance of :func:`held_walk` (:func:`walked_tables`); ``model_error``: the
+    bound of its model's error (the gait's force tube's, :func:`characterization.tube.
+    contact_model_error.fit_contact_model_error`) for the robust term of its CLF row (None:
+    none); ``swing_phase``: its phase law's (:class:`ContactPhasePD`)."""
+    leg, w, tables = walked_tables(model, gait, trajectory, setup, gains)
     i0, i1, _ = first_stride(w.contact)
     # the stance's samples, each on the gait (on_gait): the QP's reference and model
     on = i0 + on_gait(w.domain[i0:i1], w.tau[i0:i1])
@@ -229,9 +252,8 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                           w.wrench[on], w.torque[on])
     stance = stance_qp(walked, inter, gait.thetas(), gains, model, config
                        ).with_margin(model_error)
-    p = model.device.prosthesis
     return ContactClfQp(phase_law(model, tables, leg, swing_phase=swing_phase), stance,
-                        (p.knee.torque_limit.value, p.ankle.torque_limit.value), config)
+                        motors(model)[1], config)
 
 
 def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
@@ -280,8 +302,11 @@ def load_tracked_gait(path: str | os.PathLike[str]
     return run.model, run.tracked
 
 
+#: the paper's baselines on the multi-contact graph (:func:`make_baseline`)
+BASELINES = ("pd", "passive")
+
 #: the sources whose code decides a controller file's content (its cache key)
-_MAKERS = (Path(__file__), *(Path(str(m.__file__)) for m in (
+MAKERS = (Path(__file__), *(Path(str(m.__file__)) for m in (
     contact_clf_qp, contact_phase_pd, gait_tables, hp_model.contact_interaction,
     hp_model.contact_outputs, hp_model.simulator)))
 
@@ -301,7 +326,7 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
         h.update(Path(tube[0]).read_bytes())
     h.update(run.model.parameter_hash().encode())
     h.update(run.tracked.hash.encode())  # the curves the human tracks, however regressed
-    for f in _MAKERS:
+    for f in MAKERS:
         h.update(f.read_bytes())
     out = cache_root() / "controller" / h.hexdigest()[:16] / "clfqp.npz"
     if not out.is_file():
@@ -310,27 +335,6 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
         ctl = contact_clfqp(run.model, run.gait, run.trajectory,
                             model_error=tube[1] if tube is not None else None)
         save_contact_controller(out, ctl, run.model, run.tracked.hash)
-    return out
-
-
-def ensure_following_file(library_path: Path, library: GaitLibrary,
-                          say: Callable[[str], None] | None = None) -> Path:
-    """The file of ``clfqp`` following the person's speed over the gait library at
-    ``library_path`` (``library``: it loaded; :func:`following_setup`,
-    :func:`prosthesis_controller.gait_tables.save_speed_following`), made once (about a
-    minute) and cached (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/
-    following.npz; the digest covers the library file, its model and the code that makes
-    the controllers).  HeldOracleFellError naming a speed whose held walk falls."""
-    data = Path(library_path).read_bytes()
-    h = hashlib.sha256(data)
-    h.update(library.model.parameter_hash().encode())
-    for f in (*_MAKERS, Path(str(speed_following_module.__file__))):
-        h.update(f.read_bytes())
-    out = cache_root() / "controller" / h.hexdigest()[:16] / "following.npz"
-    if not out.is_file():
-        out.parent.mkdir(parents=True, exist_ok=True)
-        setup = following_setup(library, "clfqp", say=say)
-        save_speed_following(out, setup, library.model, hashlib.sha256(data).hexdigest())
     return out
 
 
@@ -355,70 +359,3 @@ def tube_with_model_error(res: ContactTubeResult, run: ContactRun) -> ContactTub
         return replace(res, tube=replace(tube, source={**tube.source,
                                                        "model_error": f"not fitted: {e}"}))
     return replace(res, tube=replace(tube, model_error=bound))
-
-
-def following_setup(library: GaitLibrary, controller: str = "clfqp",
-                    swing_phase: str = "time", closed_loop: ClosedLoop | None = None,
-                    resolution: float = SPEED_RESOLUTION,
-                    say: Callable[[str], None] | None = None) -> FollowingSetup:
-    """What the controller following the person's speed over ``library`` is made of
-    (:class:`~prosthesis_controller.speed_following.FollowingSetup`): ``controller``
-    ("clfqp" or "contact-pd") made from each speed's gait and its held walk, switched
-    between every ``resolution`` m/s (:func:`~prosthesis_controller.speed_following.filled`),
-    its estimate calibrated on the person walking each of those speeds (:func:`walk_rate`,
-    about 0.4 s each; progress through ``say``).  HeldOracleFellError naming the speed whose
-    held walk falls (no tables from it)."""
-    if controller not in ("clfqp", "contact-pd"):
-        raise ValueError(f"controller {controller!r}: choose clfqp or contact-pd")
-    say = say or (lambda _m: None)
-    model = library.model
-    cl = closed_loop or ClosedLoop(model, library.curves[0].params[GRAPH.domains[0]].degree)
-    ctls: list[Any] = []
-    leg = LegKinematics.of(model)
-    for g, curves in zip(library.gaits, library.curves, strict=True):
-        say(f"the controller at {g.speed:.2f} m/s (the gait walked once)")
-        sim = loop_simulator(model, curves, GAINS, cl)
-        try:
-            setup = LoopSetup(sim, held_walk(sim, g.trajectory))
-        except HeldOracleFellError as e:
-            raise HeldOracleFellError(f"the library's gait at {g.speed:.2f} m/s: {e}") from None
-        ctls.append(contact_clfqp(model, curves, g.trajectory, setup=setup,
-                                  swing_phase=swing_phase) if controller == "clfqp" else
-                    make_contact_pd(model, curves, g.trajectory, setup, swing_phase))
-    grid, speeds = filled(ctls, library.speeds.tolist(), resolution)
-    rates = []
-    for c, v in zip(grid, speeds, strict=True):
-        say(f"the speed estimate's calibration: the person at {v:.2f} m/s")
-        rates.append(walk_rate(leg, c.tables, library, float(v), cl))
-    keep = rising(rates)
-    return FollowingSetup(tuple(ctls), tuple(float(v) for v in library.speeds), resolution,
-                          tuple(float(speeds[i]) for i in keep), tuple(rates[i] for i in keep))
-
-
-def speed_following(library: GaitLibrary, controller: str = "clfqp",
-                    speed: float | None = None, swing_phase: str = "time",
-                    closed_loop: ClosedLoop | None = None, resolution: float = SPEED_RESOLUTION
-                    ) -> SpeedFollowing:
-    """The prosthesis controller that follows the person's speed over ``library``
-    (:class:`~prosthesis_controller.speed_following.SpeedFollowing`, made as
-    :func:`following_setup` says), starting on ``speed`` (m/s; None: the fitted gait's)."""
-    setup = following_setup(library, controller, swing_phase, closed_loop, resolution)
-    start = next(g.speed for g in library.gaits if g.source) if speed is None else speed
-    return setup.controller(start)
-
-
-def walk_rate(leg: LegKinematics, tables: ContactGaitTables, library: GaitLibrary,
-              speed: float, closed_loop: ClosedLoop) -> float:
-    """The flat stance's hip rate (m/s) of the person walking ``library`` at ``speed``
-    (m/s) with the held oracle, as a controller of ``tables`` on ``leg`` reads it
-    (:func:`~prosthesis_controller.speed_following.flat_stance_rate`; about 0.4 s).
-    HeldOracleFellError if that walk falls."""
-    sim = loop_simulator(library.model, library.gait_at(speed), GAINS, closed_loop)
-    slower = library.gaits[max(int(np.searchsorted(library.speeds, speed)) - 1, 0)]
-    try:
-        walk = held_walk(sim, slower.trajectory, start_at(library, speed))
-    except HeldOracleFellError as e:
-        raise HeldOracleFellError(f"the library's gait at {speed:.2f} m/s: {e}") from None
-    p0, p1 = tables.progress
-    phase = np.array([(leg.progress(*x[:3]) - p0) / (p1 - p0) for x in walk.sensed])
-    return flat_stance_rate(tables, walk.t, phase, walk.contact)

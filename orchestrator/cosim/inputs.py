@@ -143,11 +143,8 @@ class RunInputs:
         """A multi-contact gait's run: its model, what the FMU tracks, the FMU and the
         controller's file (both built for it once and cached), the tube when given."""
         from hp_model.force_tube import load_tube
-        from orchestrator.cosim.contact_controllers import (
-            ensure_controller_file,
-            ensure_following_file,
-            load_contact_run,
-        )
+        from orchestrator.cosim.contact_controllers import ensure_controller_file, load_contact_run
+        from orchestrator.cosim.following import ensure_following_file
 
         if cfg.subject is not None or cfg.device is not None:
             raise CosimError(f"--gait {cfg.gait}: a multi-contact gait carries its subject "
@@ -183,7 +180,7 @@ class RunInputs:
         """A gait library's run (``cfg.library``): the library, of the person of ``run``
         (the gait's), and the speed commanded (within the library's speeds; default: the
         gait's own).  ``clfqp`` follows the person over it (its file made once and cached:
-        :func:`orchestrator.cosim.contact_controllers.ensure_following_file`)."""
+        :func:`orchestrator.cosim.following.ensure_following_file`)."""
         from characterization.gait.library import load_gait_library
         from hp_model.artifacts import ArtifactError
         from hp_model.speed_profile import SpeedProfile

@@ -7,7 +7,7 @@ the cycle's start at the first speed (:func:`characterization.gait.library.start
 The prosthesis: the held oracle (the full feedback linearization of the person's curves of
 the moment, held over each 1 ms period), or ``clfqp`` / contact-pd following the person's
 speed over the library from their own sensors
-(:func:`orchestrator.cosim.contact_controllers.speed_following`).
+(:func:`orchestrator.cosim.following.speed_following`).
 
 Usage: python -m orchestrator.experiments.speed_walk LIBRARY.json --profile 0:0.8,20:1.2,40:0.8
        [--steps 100] [--controller oracle|clfqp|contact-pd] [--swing-phase time|thigh]
@@ -36,7 +36,8 @@ from hp_model.closed_loop import ClosedLoop
 from hp_model.domains import Domain
 from hp_model.simulator import SimResult
 from hp_model.speed_profile import SpeedProfile
-from orchestrator.cosim.contact_controllers import loop_simulator, speed_following
+from orchestrator.cosim.contact_controllers import loop_simulator
+from orchestrator.cosim.following import speed_following
 from orchestrator.experiments.contact_walk import controller_run
 from prosthesis_controller.contact_phase_pd import SWING_PHASES
 

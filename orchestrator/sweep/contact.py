@@ -17,7 +17,7 @@ draw's encoder, the torque held 1 ms within the motors):
                             first speed drawn and changing to the second (:func:`speed_change`:
                             from ``CHANGE_AT`` s at ``ACCELERATION`` m/s^2); the controllers
                             follow it over the library (:func:`orchestrator.cosim.
-                            contact_controllers.speed_following`), the oracle holds the
+                            following.speed_following`), the oracle holds the
                             person's curves of the moment; it starts from the library's cycle
                             at the first speed
     plant.armature          the plant's drives' armature times this factor (the controllers
@@ -78,9 +78,10 @@ from orchestrator.cosim.contact_controllers import (
     held_walk,
     load_contact_run,
     loop_simulator,
+    make_baseline,
     make_contact_pd,
-    speed_following,
 )
+from orchestrator.cosim.following import speed_following
 from orchestrator.experiments.contact_walk import controller_run
 from orchestrator.experiments.person_walks import stride_rms
 from orchestrator.experiments.scenarios import ORACLE
@@ -98,7 +99,7 @@ CHANGE_AT = 1.0
 #: 1.3 m/s, and fell at 0.12: the person takes the new speed's curves at each domain's entry)
 ACCELERATION = 0.06
 #: the sweep's controller names and what :func:`speed_following` calls them
-_FOLLOWING = {"clfqp": "clfqp", "phase-pd": "contact-pd"}
+_FOLLOWING = {"clfqp": "clfqp", "phase-pd": "contact-pd", "pd": "pd", "passive": "passive"}
 
 
 def speed_change(start: float, end: float) -> SpeedProfile:
@@ -187,12 +188,25 @@ class ContactResources:
         #: the controllers that follow the person's speed over the library (made when a
         #: draw first needs one)
         self._following: dict[str, SpeedFollowing] = {}
-        self.controllers: dict[str, ContactClfQp | ContactPhasePD] = {
-            "clfqp": contact_clfqp(  # with the tube's model-error bound: its robust term
-                self.run.model, self.run.gait, self.run.trajectory, setup=setup,
-                model_error=self.tube.model_error if self.tube is not None else None),
-            "phase-pd": make_contact_pd(self.run.model, self.run.gait, self.run.trajectory,
-                                        setup)}
+        self._setup = setup
+        self._controllers: dict[str, ContactClfQp | ContactPhasePD] = {}
+
+    def controller(self, name: str) -> ContactClfQp | ContactPhasePD:
+        """The sweep's controller ``name`` on the gait (made when a run first needs it:
+        ``clfqp`` with the tube's model-error bound, its robust term)."""
+        if name not in self._controllers:
+            run, setup = self.run, self._setup
+            if name == "clfqp":
+                self._controllers[name] = contact_clfqp(
+                    run.model, run.gait, run.trajectory, setup=setup,
+                    model_error=self.tube.model_error if self.tube is not None else None)
+            elif name == "phase-pd":
+                self._controllers[name] = make_contact_pd(run.model, run.gait, run.trajectory,
+                                                          setup)
+            else:
+                self._controllers[name] = make_baseline(name, run.model, run.gait,
+                                                        run.trajectory, setup)
+        return self._controllers[name]
 
     def plant(self, draw: Draw) -> HybridSimulator:
         """The simulated walker of a draw: the draw's curves and gains on the shared closed
@@ -281,7 +295,7 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
                       duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains),
                       gaits=schedule)
         return log, Counter(), 0
-    ctl = res.controllers[controller]
+    ctl = res.controller(controller)
     ctl.reset()
     modes: Counter[ControllerMode] = Counter()
 

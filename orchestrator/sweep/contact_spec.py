@@ -15,14 +15,15 @@ MULTICONTACT_QUANTITIES = ("human.bezier_amplitude", "human.output_offset",
                            "sensor.")
 #: what a family that changes the person's speed may draw beside it
 WITH_SPEED = ("human.speed", "sensor.")
-#: the controllers of a multi-contact gait's sweep: its robust CLF-QP and its phase PD
-#: (``contact-pd``: :mod:`prosthesis_controller.contact_phase_pd`)
-MULTICONTACT_CONTROLLERS = ("clfqp", "phase-pd")
+#: the controllers of a multi-contact gait's sweep: its robust CLF-QP, its phase PD
+#: (``contact-pd``: :mod:`prosthesis_controller.contact_phase_pd`) and the paper's baselines
+#: on its graph (:mod:`prosthesis_controller.pd`, :mod:`prosthesis_controller.passive`)
+MULTICONTACT_CONTROLLERS = ("clfqp", "phase-pd", "pd", "passive")
 
 
 def check_multicontact(spec: SweepSpec, path: Path, files: dict[str, Path]) -> None:
     """What a sweep of a multi-contact gait runs (:mod:`orchestrator.sweep.contact`): the
-    simulator backend, its two controllers, the families' quantities it draws, and a tube
+    simulator backend, its controllers, the families' quantities it draws, and a tube
     (optional) fitted around this gait; one line naming the field otherwise."""
     if spec.backend != SweepBackend.SIMULATOR:
         raise _fail(path, "backend", "a multi-contact gait's sweep runs the in-process "
@@ -30,7 +31,7 @@ def check_multicontact(spec: SweepSpec, path: Path, files: dict[str, Path]) -> N
     bad = [c for c in spec.controllers if c not in MULTICONTACT_CONTROLLERS]
     if bad:
         raise _fail(path, "controllers", f"{', '.join(bad)}: a multi-contact gait's sweep "
-                    f"runs {' and '.join(MULTICONTACT_CONTROLLERS)}")
+                    f"runs {', '.join(MULTICONTACT_CONTROLLERS)}")
     armature = _check_families(spec, path, files)
     if "library" in files:
         _check_library(path, files)
