@@ -1,35 +1,43 @@
-"""The multi-contact controllers as a file: what :class:`ContactClfQp` (``clfqp``) and its
-phase law :class:`ContactPhasePD` follow, made once from a gait (its stance as the model
-walks it: ``orchestrator.cosim.contact_controllers``) and loaded by the controller process,
-which cannot walk the model itself.
+"""The multi-contact controllers as a file: what :class:`ContactClfQp` (``clfqp``), its
+phase law :class:`ContactPhasePD` (``phase-pd``) and the paper's baselines on the graph
+(:class:`~prosthesis_controller.pd.ContactJointPD`, ``pd``;
+:class:`~prosthesis_controller.passive.ContactPassive`, ``passive``) follow, made once from a
+gait (its stance as the model walks it: ``orchestrator.cosim.contact_controllers``) and
+loaded by the controller process, which cannot walk the model itself.
 
 Layout (``numpy.savez``, no pickles; SI units, rad):
 
-    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 3; the model
+    meta            JSON: kind ``hpcosim-contact-controller``, schema_version 5; the law
+                    (``law``: one of :data:`LAWS`); the model
                     (subject, device: the leg's geometry the phase is sensed with) and its
                     hash; the gait's hash; the phase law's progress (m), swing time (s), flat
                     stance phases, gains (joint N m/rad, N m s/rad), the swing phase's measure
                     (``time`` or ``thigh``), gear ratios, motor
-                    limits (N m); the CLF-QP's constants (:class:`ContactClfConfig`)
+                    limits (N m); ``clfqp``: the CLF-QP's constants
+                    (:class:`ContactClfConfig`); ``passive``: its gains
+                    (:class:`~prosthesis_controller.config.PassiveConfig`)
     stance.phase, stance.values, swing.phase, swing.values
                     the phase law's tables (:class:`PhaseTable`)
+    stance.accel    ``passive``: the stance's reference accelerations (rad/s^2) at
+                    stance.phase
     swing.pitch     the socket's world pitch at swing.phase (the swing phase's measure,
                     :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`)
     qp.phase, qp.domain (Domain.code), qp.g, qp.u_ref, qp.qdd_ref, qp.P, qp.c, qp.G, qp.h,
     qp.d_center, qp.d_radius
-                    the stance QP's per-sample data (:class:`StanceQp`; the last two the
-                    robust term's box, zero without a model-error bound)
+                    ``clfqp``: the stance QP's per-sample data (:class:`StanceQp`; the last
+                    two the robust term's box, zero without a model-error bound)
 
-Older schemas (1: no qdd_ref, no robust term; 2: no swing pitch) are refused: the file is a
-cache, made again from the gait.
+Older schemas (1: no qdd_ref, no robust term; 2: no swing pitch; 3: no load rows; 4:
+``clfqp`` alone) are refused: the file is a cache, made again from the gait.
 
 A controller following the person's speed over a gait library
 (:class:`~prosthesis_controller.speed_following.SpeedFollowing`) has its own kind,
-``hpcosim-speed-following-controller`` (schema 1): the model as above, the library's hash,
-its speeds (m/s), the resolution of the controllers switched between (m/s), the estimate's
-calibration (``rate_speeds``, ``rates``, m/s) and per library speed i a controller's meta
-(``controllers``) with its arrays under ``c<i>.`` (``c0.stance.phase``, ...).  The controllers
-between the library's speeds are blended from these when loaded, as in process.
+``hpcosim-speed-following-controller`` (schema 3; ``clfqp``'s): the model as above, the
+library's hash, its speeds (m/s), the resolution of the controllers switched between (m/s),
+the estimate's calibration (``rate_speeds``, ``rates``, m/s) and per library speed i a
+controller's meta (``controllers``) with its arrays under ``c<i>.`` (``c0.stance.phase``,
+...).  The controllers between the library's speeds are blended from these when loaded, as
+in process.
 """
 
 from __future__ import annotations
@@ -50,6 +58,7 @@ from hp_model.domains import Domain, DomainGraph
 from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.json_io import dumps
 from hp_model.leg_kinematics import LegKinematics
+from prosthesis_controller.config import PassiveConfig
 from prosthesis_controller.contact_clf_qp import ContactClfConfig, ContactClfQp, StanceQp
 from prosthesis_controller.contact_phase_pd import (
     ContactGaitTables,
@@ -57,15 +66,24 @@ from prosthesis_controller.contact_phase_pd import (
     PDGains,
     PhaseTable,
 )
+from prosthesis_controller.interface import ControllerName
+from prosthesis_controller.passive import ContactPassive, PassiveLaw
+from prosthesis_controller.pd import ContactJointPD
 from prosthesis_controller.speed_following import FollowingSetup, SpeedFollowing
 
 KIND = "hpcosim-contact-controller"
-SCHEMA_VERSION = 4  # 3: the swing's thigh pitch (the swing phase's measure); 4: the load rows
+SCHEMA_VERSION = 5  # 3: the swing's thigh pitch (the swing phase's measure); 4: the load rows;
+#                     5: the law (clfqp or one of the baselines)
+#: the laws a controller file holds (their ``--controller`` words)
+LAWS = (ControllerName.CLFQP.value, ControllerName.PHASE_PD.value, ControllerName.PD.value,
+        ControllerName.PASSIVE.value)
+#: a file's law, a multi-contact controller's
+ContactController = ContactClfQp | ContactPhasePD
 #: a speed-following controller's file (:class:`FollowingSetup`): the controllers at a gait
 #: library's speeds, each under its own prefix ``c<i>.`` as above, and the estimate's
 #: calibration
 FOLLOWING_KIND = "hpcosim-speed-following-controller"
-FOLLOWING_SCHEMA_VERSION = 2  # 2: its controllers' load rows
+FOLLOWING_SCHEMA_VERSION = 3  # 2: its controllers' load rows; 3: their law
 _QP = ("phase", "g", "u_ref", "qdd_ref", "P", "c", "G", "h", "d_center", "d_radius", "load_ref",
        "load_gain", "load_h")
 
@@ -76,21 +94,39 @@ def _model_meta(model: HumanProsthesisModel) -> dict[str, Any]:
             "device": model.device.model_dump(mode="json")}
 
 
-def _controller_parts(ctl: ContactClfQp, prefix: str = ""
+def law_of(ctl: ContactController) -> str:
+    """The law of a multi-contact controller (one of :data:`LAWS`)."""
+    if isinstance(ctl, ContactClfQp):
+        return ControllerName.CLFQP.value
+    if isinstance(ctl, ContactJointPD):
+        return ControllerName.PD.value
+    if isinstance(ctl, ContactPassive):
+        return ControllerName.PASSIVE.value
+    return ControllerName.PHASE_PD.value
+
+
+def _controller_parts(ctl: ContactController, prefix: str = ""
                       ) -> tuple[dict[str, Any], dict[str, Any]]:
     """The meta (JSON) and the arrays (named under ``prefix``) of one controller."""
-    law, tab, qp = ctl.law, ctl.law.tables, ctl.stance
-    meta = {"progress": list(tab.progress), "swing_time": tab.swing_time,
+    law = ctl.law if isinstance(ctl, ContactClfQp) else ctl
+    tab = law.tables
+    meta = {"law": law_of(ctl), "progress": list(tab.progress), "swing_time": tab.swing_time,
             "flat": list(tab.flat),
             "stance_gains": asdict(law.stance_gains), "swing_gains": asdict(law.swing_gains),
             "swing_phase": law.swing_phase,
-            "gear": list(law.gear), "limits": list(law.limits), "config": asdict(ctl.config)}
+            "gear": list(law.gear), "limits": list(law.limits)}
     arrays: dict[str, Any] = {
         "stance.phase": tab.stance.phase, "stance.values": tab.stance.values,
         "swing.phase": tab.swing.phase, "swing.values": tab.swing.values,
-        "swing.pitch": tab.swing_pitch,
-        "qp.domain": np.array([d.code for d in qp.domain]),
-        **{f"qp.{k}": getattr(qp, k) for k in _QP}}
+        "swing.pitch": tab.swing_pitch}
+    if isinstance(ctl, ContactClfQp):
+        qp = ctl.stance
+        meta["config"] = asdict(ctl.config)
+        arrays["qp.domain"] = np.array([d.code for d in qp.domain])
+        arrays.update({f"qp.{k}": getattr(qp, k) for k in _QP})
+    if isinstance(ctl, ContactPassive):
+        meta["passive"] = ctl.law.config.model_dump(mode="json")
+        arrays["stance.accel"] = ctl.accel.values
     return meta, {prefix + k: v for k, v in arrays.items()}
 
 
@@ -100,7 +136,7 @@ def _write(path: str | os.PathLike[str], meta: dict[str, Any], arrays: dict[str,
     atomic_write_bytes(path, buf.getvalue())
 
 
-def save_contact_controller(path: str | os.PathLike[str], ctl: ContactClfQp,
+def save_contact_controller(path: str | os.PathLike[str], ctl: ContactController,
                             model: HumanProsthesisModel, gait_hash: str) -> None:
     """Write ``ctl`` (made for ``model`` and the gait of hash ``gait_hash``) atomically."""
     meta, arrays = _controller_parts(ctl)
@@ -166,28 +202,44 @@ def _model(src: str, meta: dict[str, Any], model_hash: str | None) -> HumanProst
 
 
 def _controller(src: str, meta: dict[str, Any], data: dict[str, Any], model: HumanProsthesisModel,
-                prefix: str = "") -> ContactClfQp:
+                prefix: str = "") -> ContactController:
     """The controller of ``meta`` and the arrays under ``prefix`` (ArtifactError naming the
     field)."""
     field = f"{prefix}meta" if prefix else "meta"
     try:
+        law = str(meta["law"])
+        if law not in LAWS:
+            raise ValueError(f"law {law!r}: expected one of {', '.join(LAWS)}")
         tables = ContactGaitTables(
             PhaseTable(data[f"{prefix}stance.phase"], data[f"{prefix}stance.values"]),
             PhaseTable(data[f"{prefix}swing.phase"], data[f"{prefix}swing.values"]),
             (float(meta["progress"][0]), float(meta["progress"][1])),
             float(meta["swing_time"]), (float(meta["flat"][0]), float(meta["flat"][1])),
             np.asarray(data[f"{prefix}swing.pitch"], float))
-        law = ContactPhasePD(tables, LegKinematics.of(model),
-                             (float(meta["gear"][0]), float(meta["gear"][1])),
-                             (float(meta["limits"][0]), float(meta["limits"][1])),
-                             _gains(meta, "stance_gains"), _gains(meta, "swing_gains"),
-                             str(meta["swing_phase"]))
+        leg = LegKinematics.of(model)
+        gear = (float(meta["gear"][0]), float(meta["gear"][1]))
+        limits = (float(meta["limits"][0]), float(meta["limits"][1]))
+        stance_gains, swing_gains = _gains(meta, "stance_gains"), _gains(meta, "swing_gains")
+        swing_phase = str(meta["swing_phase"])
+        if law == ControllerName.PD.value:
+            return ContactJointPD(tables, leg, gear, limits, stance_gains, swing_gains,
+                                  swing_phase)
+        if law == ControllerName.PASSIVE.value:
+            accel = PhaseTable(tables.stance.phase,
+                               np.asarray(data[f"{prefix}stance.accel"], float))
+            return ContactPassive(tables, leg, gear, limits,
+                                  PassiveLaw(model, PassiveConfig(**meta["passive"])), accel,
+                                  swing_gains, swing_phase)
+        phase_law = ContactPhasePD(tables, leg, gear, limits, stance_gains, swing_gains,
+                                   swing_phase)
+        if law == ControllerName.PHASE_PD.value:
+            return phase_law
         field = f"{prefix}qp"
         stance = StanceQp(domain=tuple(Domain.from_code(int(c))
                                        for c in data[f"{prefix}qp.domain"]),
                           **{k: np.asarray(data[f"{prefix}qp.{k}"], float) for k in _QP})
         field = f"{prefix}meta"
-        return ContactClfQp(law, stance, law.limits, ContactClfConfig(**meta["config"]))
+        return ContactClfQp(phase_law, stance, limits, ContactClfConfig(**meta["config"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ArtifactError(f"{src}: field '{field}': {e}") from None
 
@@ -199,7 +251,7 @@ def _check_kind(src: str, meta: dict[str, Any], kind: str, version: int) -> None
 
 
 def load_contact_controller(path: str | os.PathLike[str], model_hash: str | None = None
-                            ) -> tuple[ContactClfQp, HumanProsthesisModel]:
+                            ) -> tuple[ContactController, HumanProsthesisModel]:
     """The controller of the file and the model it was made for (ArtifactError naming the
     file and field when it is not such a file, or, with ``model_hash``, made for another
     model)."""
@@ -234,8 +286,8 @@ def load_speed_following(path: str | os.PathLike[str], model_hash: str | None = 
 
 
 def load_controller_file(path: str | os.PathLike[str], speed: float | None = None
-                         ) -> ContactClfQp | SpeedFollowing:
-    """The controller of either kind of file: a gait's ``clfqp``, or one following the
+                         ) -> ContactController | SpeedFollowing:
+    """The controller of either kind of file: a gait's (any of :data:`LAWS`), or one following the
     person's speed over a gait library, starting at ``speed`` (m/s; None: the library's
     slowest).  ArtifactError as :func:`load_contact_controller`; ValueError for a speed with
     a single gait's file."""
@@ -252,6 +304,6 @@ def load_controller_file(path: str | os.PathLike[str], speed: float | None = Non
     return load_contact_controller(path)[0]
 
 
-__all__ = ["FOLLOWING_KIND", "KIND", "SCHEMA_VERSION", "load_contact_controller",
+__all__ = ["FOLLOWING_KIND", "KIND", "LAWS", "SCHEMA_VERSION", "law_of", "load_contact_controller",
            "load_controller_file", "load_speed_following", "save_contact_controller",
            "save_speed_following"]

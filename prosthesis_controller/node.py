@@ -320,15 +320,18 @@ def build_controller(name: str, gait_path: str | None, tube_path: str | None,
                      subject: str | None = None, device: str | None = None, *,
                      tables: str | None = None, speed: float | None = None) -> Controller:
     """The controller ``name`` of the paper's gait and force tube (files), or of a
-    multi-contact gait's controller file ``tables`` (``clfqp`` only; a gait library's
-    starting at ``speed``: :class:`Artifacts`)."""
+    multi-contact gait's controller file ``tables`` (the law it holds; a gait library's,
+    ``clfqp``, starting at ``speed``: :class:`Artifacts`)."""
     if tables is not None:
-        from prosthesis_controller.gait_tables import load_controller_file
+        from prosthesis_controller.gait_tables import law_of, load_controller_file
+        from prosthesis_controller.speed_following import SpeedFollowing
 
-        if ControllerName(name) != ControllerName.CLFQP:
-            raise ValueError(f"--controller {name}: a multi-contact gait's controller file "
-                             f"runs {ControllerName.CLFQP.value} only")
-        return load_controller_file(tables, speed)
+        ctl = load_controller_file(tables, speed)
+        # a gait library's file holds clfqp following the person
+        law = ControllerName.CLFQP.value if isinstance(ctl, SpeedFollowing) else law_of(ctl)
+        if ControllerName(name) != law:
+            raise ValueError(f"--controller {name}: the controller file {tables} holds {law}")
+        return ctl
     if speed is not None:
         raise ValueError("--speed: a gait library's controller file (--tables) only")
     if gait_path is None or tube_path is None:

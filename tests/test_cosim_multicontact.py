@@ -109,10 +109,23 @@ def test_the_tube_refits_from_the_recording(walked, gait_file, capsys):
                     str(gait_file.parent / "x.json"), "--model-error"]) == 2
 
 
+@serial
+def test_the_papers_baselines_run_the_multicontact_cosimulation(gait_file):
+    """``--controller pd`` and ``passive`` on a multi-contact gait: the controller process
+    runs the file of that law (docs/sweeps.md: on this cycle `pd` walks two steps, `passive`
+    falls in its first swing, as in process), recorded and replayed with no difference."""
+    for law, walks in (("pd", True), ("passive", False)):
+        rec = gait_file.parent / f"{law}.mcap"
+        res = run_cosim(CosimConfig(controller=law, gait=gait_file, tube=None, steps=2,
+                                    record=rec))
+        assert not res.faulted and res.fell != walks and res.missed == 0, (law, res)
+        assert replay(rec).max_torque_diff == 0.0
+
+
 @pytest.mark.parametrize("extra, words", [
     (["--tube", "tests/data/controller/tube_demo_v2.json"], "refit the tube"),
     (["--subject", "hp_model/configs/subject_example.toml"], "carries its subject"),
-    (["--controller", "pd"], "a multi-contact gait runs clfqp")])
+    (["--controller", "clfqp-paper"], "a multi-contact gait runs clfqp, phase-pd, pd, passive")])
 def test_what_a_multicontact_run_refuses(gait_file, capsys, extra, words):
     args = ["run", "--gait", str(gait_file), "--steps", "1", *extra]
     if "--controller" not in extra:

@@ -1,5 +1,6 @@
-"""The multi-contact controller's file (:mod:`prosthesis_controller.gait_tables`): saved
-and loaded back, it is the same controller (the same torque and diagnostics, tick by tick,
+"""The multi-contact controllers' file (:mod:`prosthesis_controller.gait_tables`; ``clfqp``,
+contact-pd and the paper's baselines on the graph): saved and loaded back, it is the same
+controller (the same torque and diagnostics, tick by tick,
 over a walk's measurements); a bad file is a one-line error naming the file and field."""
 
 from __future__ import annotations
@@ -45,23 +46,52 @@ def test_a_loaded_controller_ticks_as_the_one_saved(tmp_path, made, swing_phase)
     assert loaded_model.parameter_hash() == model.parameter_hash()
     assert loaded.law.swing_phase == swing_phase
     # up to two steps of the walk, each measurement ticked by both
+    stance = _ticks_alike(model, traj, gait, ctl, loaded, 2)
+    # the QP ran through a stance (the thigh's swing on this cycle lands 1 ms after the
+    # person's foot slips, at tau 1.06 of its toe's single support: the same for both)
+    assert stance > 300
+
+
+def _ticks_alike(model, traj, gait, a_ctl, b_ctl, steps: int) -> int:
+    """Walk ``steps`` steps of ``gait`` on ``a_ctl``, ticking ``b_ctl`` on each measurement
+    too, their torques and diagnostics equal; the stance ticks."""
     q0, qd0 = start_state(traj)
     plant = SimulatorPlant(loop_simulator(model, gait, (20.0, 1600.0, 80.0)), q0, qd0,
                            GRAPH.domains[0])
-    ctl.reset()
+    a_ctl.reset()
     stance = 0
-    while plant.run.steps < 2 and plant.fall is None:
+    while plant.run.steps < steps and plant.fall is None:
         m = measurement(plant.observe())
-        a, b = ctl.tick(m), loaded.tick(m)
+        a, b = a_ctl.tick(m), b_ctl.tick(m)
         assert np.array_equal(a.torque, b.torque)
         assert a.diagnostics == b.diagnostics
         stance += a.diagnostics.mode == "stance"
         plant.actuate(a.torque)
         if plant.fall is None:
             plant.advance()
-    # the QP ran through a stance (the thigh's swing on this cycle lands 1 ms after the
-    # person's foot slips, at tau 1.06 of its toe's single support: the same for both)
-    assert stance > 300
+    return stance
+
+
+@pytest.mark.parametrize("law", ["phase-pd", "pd", "passive"])
+def test_a_baselines_file_ticks_as_the_one_saved(tmp_path, made, law):
+    """The file of contact-pd and of the paper's baselines on this graph holds its law: the
+    loaded controller is the same one, tick by tick over its walk (``passive`` with its
+    reference accelerations and gains); the node builds it by that name only."""
+    from orchestrator.cosim.contact_controllers import make_baseline, make_contact_pd
+    from prosthesis_controller.gait_tables import law_of
+    from prosthesis_controller.node import build_controller
+
+    model, traj, gait, _ = made
+    ctl = (make_contact_pd(model, gait, traj) if law == "phase-pd"
+           else make_baseline(law, model, gait, traj))
+    path = tmp_path / f"{law}.npz"
+    save_contact_controller(path, ctl, model, "gaithash")
+    loaded, _ = load_contact_controller(path, model.parameter_hash())
+    assert type(loaded) is type(ctl) and law_of(loaded) == law
+    assert _ticks_alike(model, traj, gait, ctl, loaded, 1) > 300
+    assert law_of(build_controller(law, None, None, tables=str(path))) == law
+    with pytest.raises(ValueError, match=f"holds {law}"):
+        build_controller("clfqp", None, None, tables=str(path))
 
 
 def test_bad_files_are_one_line_errors(tmp_path, made):
@@ -87,6 +117,12 @@ def test_bad_files_are_one_line_errors(tmp_path, made):
     bad = tmp_path / "bad.npz"
     np.savez(bad, **{**data, "meta": np.array(json.dumps(meta))})
     with pytest.raises(ArtifactError, match="field 'meta': heel strike window"):
+        load_contact_controller(bad)
+    meta = json.loads(str(data["meta"]))
+    meta["law"] = "clfqp-paper"  # the paper's graph's
+    bad = tmp_path / "law.npz"
+    np.savez(bad, **{**data, "meta": np.array(json.dumps(meta))})
+    with pytest.raises(ArtifactError, match="field 'meta': law 'clfqp-paper'"):
         load_contact_controller(bad)
     del data["qp.G"]
     cut = tmp_path / "cut.npz"

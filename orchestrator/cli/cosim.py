@@ -73,7 +73,8 @@ def run(
     controller: ControllerOpt,
     gait: Annotated[Path, typer.Option(
         "--gait", help="Gait file: the paper's graph (with --tube), or a multi-contact gait "
-        "(gait fit --domains multicontact: its subject and device, no tube; clfqp).",
+        "(gait fit --domains multicontact: its subject and device; clfqp, phase-pd, pd or "
+        "passive).",
         dir_okay=False)],
     tube: Annotated[Path | None, typer.Option(
         "--tube", help="Force-tube file (tube fit): the paper's graph needs it; a "

@@ -51,7 +51,7 @@ from hp_model.leg_kinematics import LegKinematics
 from hp_model.simulator import HybridSimulator
 from human_fmu.build import TrackedGait
 from orchestrator.loop.plant import SimulatorPlant
-from prosthesis_controller import contact_clf_qp, contact_phase_pd, gait_tables
+from prosthesis_controller import contact_clf_qp, contact_phase_pd, gait_tables, passive, pd
 from prosthesis_controller.contact_clf_qp import (
     DEFAULT_CONFIG,
     MAX_WRENCH,
@@ -307,20 +307,25 @@ BASELINES = ("pd", "passive")
 
 #: the sources whose code decides a controller file's content (its cache key)
 MAKERS = (Path(__file__), *(Path(str(m.__file__)) for m in (
-    contact_clf_qp, contact_phase_pd, gait_tables, hp_model.contact_interaction,
+    contact_clf_qp, contact_phase_pd, gait_tables, passive, pd, hp_model.contact_interaction,
     hp_model.contact_outputs, hp_model.simulator)))
 
 
 def ensure_controller_file(gait_path: Path, run: ContactRun,
                            say: Callable[[str], None] | None = None,
-                           tube: tuple[Path, ModelErrorBound | None] | None = None) -> Path:
-    """The ``clfqp`` controller file of the multi-contact gait at ``gait_path`` (``run``:
-    it loaded; :mod:`prosthesis_controller.gait_tables`), made once and cached
-    (``$HPCOSIM_CACHE`` or ``~/.cache/hpcosim``/controller/<digest>/clfqp.npz; the digest
-    covers the gait file, the model, the curves the human tracks, the tube file and the
-    code that makes the controller); ``tube``: the tube file and its model-error bound,
-    ``clfqp``'s robust term.  ValueError if the held oracle falls in the stride the tables
+                           tube: tuple[Path, ModelErrorBound | None] | None = None,
+                           controller: str = "clfqp") -> Path:
+    """The file of ``controller`` (one of :data:`prosthesis_controller.gait_tables.LAWS`) of
+    the multi-contact gait at ``gait_path`` (``run``: it loaded;
+    :mod:`prosthesis_controller.gait_tables`), made once and cached (``$HPCOSIM_CACHE`` or
+    ``~/.cache/hpcosim``/controller/<digest>/<controller>.npz; the digest covers the gait
+    file, the model, the curves the human tracks, the tube file and the code that makes the
+    controller); ``tube``: the tube file and its model-error bound, ``clfqp``'s robust term.
+    ValueError for another controller, or if the held oracle falls in the stride the tables
     are read from."""
+    if controller not in gait_tables.LAWS:
+        raise ValueError(f"controller {controller!r}: a multi-contact gait's controller file "
+                         f"holds one of {', '.join(gait_tables.LAWS)}")
     h = hashlib.sha256(Path(gait_path).read_bytes())
     if tube is not None:
         h.update(Path(tube[0]).read_bytes())
@@ -328,12 +333,18 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
     h.update(run.tracked.hash.encode())  # the curves the human tracks, however regressed
     for f in MAKERS:
         h.update(f.read_bytes())
-    out = cache_root() / "controller" / h.hexdigest()[:16] / "clfqp.npz"
+    out = cache_root() / "controller" / h.hexdigest()[:16] / f"{controller}.npz"
     if not out.is_file():
         (say or (lambda _m: None))("making the controller's tables (the gait walked once)")
         out.parent.mkdir(parents=True, exist_ok=True)
-        ctl = contact_clfqp(run.model, run.gait, run.trajectory,
-                            model_error=tube[1] if tube is not None else None)
+        ctl: ContactClfQp | ContactPhasePD
+        if controller == "clfqp":
+            ctl = contact_clfqp(run.model, run.gait, run.trajectory,
+                                model_error=tube[1] if tube is not None else None)
+        elif controller == "phase-pd":
+            ctl = make_contact_pd(run.model, run.gait, run.trajectory)
+        else:
+            ctl = make_baseline(controller, run.model, run.gait, run.trajectory)
         save_contact_controller(out, ctl, run.model, run.tracked.hash)
     return out
 

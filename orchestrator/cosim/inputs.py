@@ -149,9 +149,14 @@ class RunInputs:
         if cfg.subject is not None or cfg.device is not None:
             raise CosimError(f"--gait {cfg.gait}: a multi-contact gait carries its subject "
                              "and device; drop --subject/--device")
-        if cfg.controller != ControllerName.CLFQP:
+        from prosthesis_controller.gait_tables import LAWS
+
+        if cfg.controller not in LAWS:
             raise CosimError(f"--controller {cfg.controller}: a multi-contact gait runs "
-                             f"{ControllerName.CLFQP.value} (the paper's graph runs the others)")
+                             f"{', '.join(LAWS)} (the paper's graph runs the others)")
+        if cfg.library is not None and cfg.controller != ControllerName.CLFQP:
+            raise CosimError(f"--controller {cfg.controller}: a gait library's run follows "
+                             f"the person with {ControllerName.CLFQP.value}")
         run = load_contact_run(cfg.gait)
         model, tracked = run.model, run.tracked
         tube = None if cfg.tube is None else load_tube(cfg.tube, run.hash)
@@ -170,7 +175,7 @@ class RunInputs:
             tables = ensure_controller_file(
                 Path(cfg.gait), run, say,
                 None if tube is None or cfg.tube is None
-                else (Path(cfg.tube), tube.model_error))
+                else (Path(cfg.tube), tube.model_error), str(cfg.controller))
         except ValueError as e:  # the held oracle fell: the gait does not walk
             raise CosimError(f"--gait {cfg.gait}: no controller tables: {e}") from None
         return cls(model, tracked, tube, fmu_path, Drives.of(model), tracked.hash, tables)
