@@ -65,7 +65,8 @@ def experiments(
     """Paper Sec. V on the full closed loop: nominal walking (Fig. 7), exact vs relaxed
     CLF-QP (Fig. 6), robustness to perturbed human gaits (Fig. 8); metrics.json + report.md.
     A multi-contact gait: its prosthesis controllers' nominal walks (held oracle, clfqp,
-    contact-pd) and the perturbation families on the same draws; with its --tube (tube fit),
+    contact-pd, the paper's pd and passive) and the perturbation families on the same draws;
+    with its --tube (tube fit),
     each walk's socket force against it."""
     import hp_model
     from hp_model.force_tube import load_tube
@@ -221,7 +222,7 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
                         subject: Path | None, device: Path | None) -> None:
     """``experiments`` of a multi-contact gait (:mod:`orchestrator.experiments.person_walks`);
     exit 1 unless clfqp walks the nominal steps."""
-    from orchestrator.experiments.person_walks import NAMES, run_person_experiments
+    from orchestrator.experiments.person_walks import NAMES, run_person_experiments, table_cell
 
     for given, name in ((subject, "--subject"), (device, "--device")):
         if given is not None:
@@ -244,8 +245,9 @@ def _person_experiments(gait: Path, out: Path, steps: int, draws: int, tube: Pat
         w = m["nominal"][name]
         walk = w["walk"]
         how = walk["fall"] or "walks"
-        _line(console, f"  {name:11s} {walk['steps']:3d} steps, knee {w['knee_rms_deg']:.2f} "
-              f"deg, ankle {w['ankle_rms_deg']:.2f} deg RMS over the last stride: {how}")
+        _line(console, f"  {name:11s} {walk['steps']:3d} steps, knee "
+              f"{table_cell(w['knee_rms_deg'], 2)} deg, ankle {table_cell(w['ankle_rms_deg'], 2)}"
+              f" deg RMS over the last stride: {how}")
     for family, row in m["families"].items():
         _line(console, f"  {family:8s} " + ", ".join(f"{n} {row[n]}/{draws}" for n in NAMES))
     if "tube" in m:

@@ -1,7 +1,8 @@
 """The multi-contact graph's prosthesis controllers under perturbation: the same draws for the
-held oracle (full-state reference), ``clfqp`` and contact-pd, each walked in the in-process
-plant (:mod:`orchestrator.experiments.contact_walk`); what docs/gait-design.md's perturbation
-table measures.
+held oracle (full-state reference), ``clfqp``, contact-pd and the paper's baselines on this
+graph (``pd``, ``passive``: :func:`orchestrator.cosim.contact_controllers.make_baseline`),
+each walked in the in-process plant (:mod:`orchestrator.experiments.contact_walk`); what
+docs/gait-design.md's perturbation table measures.
 
 Families (``amplitude`` scales each; per draw, from its seed):
 
@@ -53,10 +54,12 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
 from hp_model.simulator import GaitSchedule
 from orchestrator.cosim.contact_controllers import (
+    BASELINES,
     LoopSetup,
     contact_clfqp,
     held_walk,
     loop_simulator,
+    make_baseline,
     make_contact_pd,
 )
 from orchestrator.experiments.contact_walk import controller_run
@@ -68,7 +71,7 @@ FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture", "pace", "st
 STRIDE_CV = 0.03
 #: the human's joints whose curves the posture family offsets
 HUMAN_JOINTS = ("th_lh", "th_lk", "th_la", "th_rh")
-CONTROLLERS = ("oracle", "clfqp", "contact-pd")
+CONTROLLERS = ("oracle", "clfqp", "contact-pd", "pd", "passive")
 
 
 @dataclass(frozen=True)
@@ -175,7 +178,7 @@ def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
                           swing_phase: str = "time") -> dict[str, Any]:
     """The controllers a family walks (:data:`CONTROLLERS`), made once from the
     unperturbed gait (``setup``: its simulator and held walk, when made already;
-    ``model_error``: the tube's bound, ``clfqp``'s robust term; ``swing_phase``: how both
+    ``model_error``: the tube's bound, ``clfqp``'s robust term; ``swing_phase``: how they
     measure the swing's phase, :class:`~prosthesis_controller.contact_phase_pd.ContactPhasePD`)."""
     if setup is None or setup.held is None:
         sim = loop_simulator(model, gait, GAINS)
@@ -183,7 +186,9 @@ def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
     return {"oracle": "oracle",
             "clfqp": contact_clfqp(model, gait, trajectory, setup=setup,
                                    model_error=model_error, swing_phase=swing_phase),
-            "contact-pd": make_contact_pd(model, gait, trajectory, setup, swing_phase)}
+            "contact-pd": make_contact_pd(model, gait, trajectory, setup, swing_phase),
+            **{name: make_baseline(name, model, gait, trajectory, setup, swing_phase)
+               for name in BASELINES}}
 
 
 def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],

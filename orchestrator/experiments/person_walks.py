@@ -3,13 +3,14 @@ loop with the prosthesis on each of its controllers, and under the perturbation 
 
 - **Nominal walks** (in the in-process plant: AMPRO3's sensors, the torque held 1 ms within
   the motors, the human on its feedback linearization): the held oracle (full-state, the
-  reference), ``clfqp`` (the product's controller) and ``contact-pd`` (the baseline), each
-  for ``steps`` steps.  Per controller: the steps, the stride and speed (median, from the
-  human foot's heel strikes), the prosthesis knee's and ankle's RMS deviation over the last
-  stride from the fitted cycle at the same stride fraction (deg), the peak motor torques and
-  the ticks that fell back.
+  reference), ``clfqp`` (the product's controller), ``contact-pd`` (the phase PD) and the
+  paper's baselines on this graph, ``pd`` and ``passive`` (the paper's joint PD and robust
+  passivity-based law in stance, contact-pd's swing), each for ``steps`` steps. Per
+  controller: the steps, the stride and speed (median, from the human foot's heel strikes),
+  the prosthesis knee's and ankle's RMS deviation over the last stride from the fitted cycle
+  at the same stride fraction (deg), the peak motor torques and the ticks that fell back.
 - **Perturbation families** (:mod:`orchestrator.experiments.contact_perturbations`, each at
-  its :data:`AMPLITUDE`): the same draws for the three controllers; per family the walks of
+  its :data:`AMPLITUDE`): the same draws for every controller; per family the walks of
   ``FAMILY_STEPS`` steps out of ``draws`` with the 95 % Wilson interval.
 - ``metrics.json``, ``person.png`` (the last stride's knee, ankle and prosthesis foot load
   against the fitted cycle), ``walker.gif`` and ``walker_stride.png`` (``clfqp``'s walk: its
@@ -45,6 +46,7 @@ from orchestrator.cosim.contact_controllers import (
 )
 from orchestrator.experiments.animation import WalkSeries, walker_gif, walker_strip
 from orchestrator.experiments.contact_perturbations import (
+    CONTROLLERS,
     FAMILIES,
     family_walks,
     perturbed_controllers,
@@ -60,7 +62,7 @@ FAMILY_STEPS = 10
 #: simulated person's fragility, issue 38, not the prosthesis's)
 AMPLITUDE = {"posture": 0.3}
 #: the order the walks are reported in
-NAMES = ("oracle", "clfqp", "contact-pd")
+NAMES = CONTROLLERS
 #: the fitted cycle from the human foot's heel strike: the domains in that order
 FROM_HEEL_STRIKE = (Domain.DS_H, Domain.PNS, Domain.PNS_TOE, Domain.DS_P, Domain.PS,
                     Domain.PS_TOE)
@@ -125,7 +127,7 @@ def stride_rms(res: SimResult, run: ContactRun) -> tuple[float, float]:
 
 def nominal_walks(run: ContactRun, steps: int, model_error: ModelErrorBound | None = None
                   ) -> tuple[dict[str, ControllerWalk], dict[str, SimResult], dict[str, Any]]:
-    """The three controllers' nominal walks (module docstring), their logs and the
+    """The controllers' nominal walks (module docstring), their logs and the
     controllers (ValueError if the held oracle falls in the stride the tables read);
     ``model_error``: ``clfqp``'s robust term (the tube's bound)."""
     sim = loop_simulator(run.model, run.gait, GAINS)
@@ -244,10 +246,11 @@ def report(metrics: Mapping[str, Any]) -> str:
     for name in NAMES:
         w = metrics["nominal"][name]
         walk = w["walk"]
-        stride = np.median(walk["strides"]) if len(walk["strides"]) else float("nan")
-        speed = np.median(walk["speeds"]) if len(walk["speeds"]) else float("nan")
-        lines.append(f"| {name} | {walk['steps']} | {stride:.3f} | {speed:.3f} | "
-                     f"{w['knee_rms_deg']:.2f} | {w['ankle_rms_deg']:.2f} | "
+        stride = np.median(walk["strides"]) if len(walk["strides"]) else None
+        speed = np.median(walk["speeds"]) if len(walk["speeds"]) else None
+        lines.append(f"| {name} | {walk['steps']} | {table_cell(stride, 3)} | "
+                     f"{table_cell(speed, 3)} | {table_cell(w['knee_rms_deg'], 2)} | "
+                     f"{table_cell(w['ankle_rms_deg'], 2)} | "
                      f"{w['peak_torque'][0]:.2f} / {w['peak_torque'][1]:.2f} | "
                      f"{w['fallbacks']} | {walk['fall'] or 'walked'} |")
     lines += ["", f"The fitted gait: stride {fit['stride_time']:.3f} s, "
@@ -270,7 +273,7 @@ def report(metrics: Mapping[str, Any]) -> str:
               "`clfqp`'s walk: `walker.gif` (its first 3 s) and its last stride in 9 poses:",
               "", "![clfqp's last stride](walker_stride.png)", "",
               f"Perturbation families ({metrics['draws']} draws each, the same draws for "
-              f"the three controllers, {FAMILY_STEPS} steps asked; "
+              f"every controller, {FAMILY_STEPS} steps asked; "
               "`orchestrator/experiments/contact_perturbations.py` defines them; the oracle "
               "reads the plant's state, so the sensor families do not perturb it). Walks, "
               "and the 95 % Wilson interval of the rate:", "",
@@ -285,6 +288,11 @@ def report(metrics: Mapping[str, Any]) -> str:
         lines.append(f"| {family} ({AMPLITUDE.get(family, 1.0):g}) | " + " | ".join(cells)
                      + " |")
     return "\n".join(lines) + "\n"
+
+
+def table_cell(v: float | None, digits: int) -> str:
+    """A table cell of a number, "-" where there is none (no complete stride)."""
+    return "-" if v is None or not np.isfinite(v) else f"{v:.{digits}f}"
 
 
 def run_person_experiments(gait_path: str | os.PathLike[str], out: Path, steps: int = 20,
