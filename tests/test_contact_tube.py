@@ -127,7 +127,7 @@ def test_experiments_measure_the_walks_against_the_tube(gait_file, steps_file):
                     str(exp), "--steps", "4", "--draws", "0"]) == 0
     m = json.loads((exp / "metrics.json").read_text())
     inside = m["tube"]["inside"]
-    assert set(inside) == {"oracle", "clfqp", "contact-pd"}
+    assert set(inside) == {"oracle", "clfqp", "contact-pd", "pd", "passive"}
     assert all(v is None or 0.0 <= v <= 1.0 for v in inside.values())
     assert inside["clfqp"] is not None
     report = (exp / "report.md").read_text()

@@ -556,11 +556,12 @@ def test_example_specs_load_with_a_consistent_gait_and_tube(spec_file, model):
     from characterization.gait.multicontact_artifact import load_contact_cycle
     from hp_model.force_tube import load_tube
     from hp_model.gait_artifact import MULTICONTACT_KIND, load_gait
+    from orchestrator.sweep.contact_spec import MULTICONTACT_CONTROLLERS
 
     spec = load_spec(spec_file)
     if json.loads(Path(spec.gait).read_text()).get("kind") == MULTICONTACT_KIND:
         cycle = load_contact_cycle(spec.gait)  # refuses a gait its model's hash disowns
-        assert spec.controllers and set(spec.controllers) <= {"clfqp", "phase-pd"}
+        assert spec.controllers and set(spec.controllers) <= set(MULTICONTACT_CONTROLLERS)
         if spec.tube is not None:
             load_tube(spec.tube, cycle.hash)
         return
