@@ -79,13 +79,14 @@ def cosim_command(out: Path, row: dict[str, Any]) -> str | None:
     """The single co-simulation run of a draw that only perturbs the human's Bezier
     coefficients (the FMU's own generator); None for other draws."""
     from hp_model.gait_artifact import MULTICONTACT_KIND, artifact_kind
+    from prosthesis_controller.gait_tables import LAWS
 
     d = draw_of(row)
     if not d.is_bezier_only or row["controller"] == ORACLE:
         return None
     gait = out / "artifacts" / "gait.json"
-    person = artifact_kind(gait) == MULTICONTACT_KIND  # its co-simulation runs clfqp alone
-    if person and row["controller"] != "clfqp":
+    person = artifact_kind(gait) == MULTICONTACT_KIND  # its co-simulation runs LAWS
+    if person and row["controller"] not in LAWS:
         return None
     pert = f" --perturb human:{d.bezier_amplitude!r}:{d.bezier_seed}" \
         if d.bezier_amplitude > 0 else ""
