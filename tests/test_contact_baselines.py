@@ -23,6 +23,7 @@ from orchestrator.cosim.contact_controllers import (
     loop_simulator,
     make_baseline,
     make_contact_pd,
+    make_controller,
 )
 from orchestrator.experiments.contact_walk import controller_run
 from prosthesis_controller.config import PassiveConfig, PdConfig
@@ -157,3 +158,7 @@ def test_an_unknown_baseline_is_refused(person) -> None:
     run, _, setup = person
     with pytest.raises(ValueError, match="choose pd or passive"):
         make_baseline("clfqp-paper", run.model, run.gait, run.trajectory, setup)
+    with pytest.raises(ValueError, match="choose clfqp, phase-pd"):
+        make_controller("clfqp-paper", run.model, run.gait, run.trajectory, setup)
+    assert make_controller("phase-pd", run.model, run.gait, run.trajectory, setup).name == \
+        make_controller("contact-pd", run.model, run.gait, run.trajectory, setup).name

@@ -471,7 +471,7 @@ def test_an_imu_bias_is_estimated_while_the_foot_is_flat(cycle) -> None:
     assert np.all(np.abs(np.diff(strikes) / sum(durations.values()) - 1) < 0.01)
 
 
-def test_a_perturbation_family_is_walked_by_all_three_on_the_same_draws(cycle) -> None:
+def test_a_perturbation_family_is_walked_by_every_controller_on_the_same_draws(cycle) -> None:
     """orchestrator.experiments.contact_perturbations (what docs/gait-design.md's table
     runs): two draws of the IMU bias (0.5 deg sd) and of the human's gains, 6 steps: clfqp
     walks all four (the table: 20 of 20 and 18 of 20); the oracle's sensor row is the draws;

@@ -256,6 +256,26 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                         motors(model)[1], config)
 
 
+def make_controller(name: str, model: HumanProsthesisModel, gait: ContactGait,
+                    trajectory: Mapping[Domain, Mapping[str, Any]],
+                    setup: LoopSetup | None = None, *, swing_phase: str = "time",
+                    model_error: ModelErrorBound | None = None,
+                    passive_law: PassiveLaw | None = None) -> ContactClfQp | ContactPhasePD:
+    """The multi-contact controller ``name`` of ``gait``: ``clfqp`` (:func:`contact_clfqp`,
+    with ``model_error``), ``phase-pd`` or ``contact-pd`` (:func:`make_contact_pd`) or one of
+    the paper's :data:`BASELINES` (:func:`make_baseline`, with ``passive_law``).  ValueError
+    for another name, or as :func:`controller_tables`."""
+    if name == "clfqp":
+        return contact_clfqp(model, gait, trajectory, setup=setup, model_error=model_error,
+                             swing_phase=swing_phase)
+    if name in ("phase-pd", "contact-pd"):
+        return make_contact_pd(model, gait, trajectory, setup, swing_phase)
+    if name in BASELINES:
+        return make_baseline(name, model, gait, trajectory, setup, swing_phase, passive_law)
+    raise ValueError(f"controller {name!r}: choose clfqp, phase-pd (contact-pd), "
+                     f"{', '.join(BASELINES)}")
+
+
 def tracked_gait(model: HumanProsthesisModel, gait: ContactGait,
                  trajectory: Mapping[Domain, Mapping[str, Any]], name: str,
                  gains: tuple[float, float, float] = GAINS) -> TrackedGait:
@@ -337,14 +357,8 @@ def ensure_controller_file(gait_path: Path, run: ContactRun,
     if not out.is_file():
         (say or (lambda _m: None))("making the controller's tables (the gait walked once)")
         out.parent.mkdir(parents=True, exist_ok=True)
-        ctl: ContactClfQp | ContactPhasePD
-        if controller == "clfqp":
-            ctl = contact_clfqp(run.model, run.gait, run.trajectory,
-                                model_error=tube[1] if tube is not None else None)
-        elif controller == "phase-pd":
-            ctl = make_contact_pd(run.model, run.gait, run.trajectory)
-        else:
-            ctl = make_baseline(controller, run.model, run.gait, run.trajectory)
+        ctl = make_controller(controller, run.model, run.gait, run.trajectory,
+                              model_error=tube[1] if tube is not None else None)
         save_contact_controller(out, ctl, run.model, run.tracked.hash)
     return out
 

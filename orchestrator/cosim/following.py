@@ -23,11 +23,9 @@ from orchestrator.cosim.contact_controllers import (
     MAKERS,
     HeldOracleFellError,
     LoopSetup,
-    contact_clfqp,
     held_walk,
     loop_simulator,
-    make_baseline,
-    make_contact_pd,
+    make_controller,
 )
 from prosthesis_controller import speed_following as speed_following_module
 from prosthesis_controller.contact_phase_pd import ContactGaitTables
@@ -93,14 +91,8 @@ def following_setup(library: GaitLibrary, controller: str = "clfqp",
             setup = LoopSetup(sim, held_walk(sim, g.trajectory))
         except HeldOracleFellError as e:
             raise HeldOracleFellError(f"the library's gait at {g.speed:.2f} m/s: {e}") from None
-        if controller == "clfqp":
-            ctls.append(contact_clfqp(model, curves, g.trajectory, setup=setup,
-                                      swing_phase=swing_phase))
-        elif controller == "contact-pd":
-            ctls.append(make_contact_pd(model, curves, g.trajectory, setup, swing_phase))
-        else:
-            ctls.append(make_baseline(controller, model, curves, g.trajectory, setup,
-                                      swing_phase, passive))
+        ctls.append(make_controller(controller, model, curves, g.trajectory, setup,
+                                    swing_phase=swing_phase, passive_law=passive))
     grid, speeds = filled(ctls, library.speeds.tolist(), resolution)
     rates = []
     for c, v in zip(grid, speeds, strict=True):

@@ -54,13 +54,10 @@ from hp_model.human_prosthesis import HumanProsthesisModel
 from hp_model.outputs import GaitParams
 from hp_model.simulator import GaitSchedule
 from orchestrator.cosim.contact_controllers import (
-    BASELINES,
     LoopSetup,
-    contact_clfqp,
     held_walk,
     loop_simulator,
-    make_baseline,
-    make_contact_pd,
+    make_controller,
 )
 from orchestrator.experiments.contact_walk import controller_run
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder
@@ -184,11 +181,9 @@ def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
         sim = loop_simulator(model, gait, GAINS)
         setup = LoopSetup(sim, held_walk(sim, trajectory))
     return {"oracle": "oracle",
-            "clfqp": contact_clfqp(model, gait, trajectory, setup=setup,
-                                   model_error=model_error, swing_phase=swing_phase),
-            "contact-pd": make_contact_pd(model, gait, trajectory, setup, swing_phase),
-            **{name: make_baseline(name, model, gait, trajectory, setup, swing_phase)
-               for name in BASELINES}}
+            **{name: make_controller(name, model, gait, trajectory, setup,
+                                     swing_phase=swing_phase, model_error=model_error)
+               for name in CONTROLLERS[1:]}}
 
 
 def family_walks(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[str, Any]],

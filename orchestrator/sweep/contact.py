@@ -74,12 +74,10 @@ from hp_model.speed_profile import SpeedProfile
 from human_fmu.perturbation import perturbed_thetas
 from orchestrator.cosim.contact_controllers import (
     LoopSetup,
-    contact_clfqp,
     held_walk,
     load_contact_run,
     loop_simulator,
-    make_baseline,
-    make_contact_pd,
+    make_controller,
 )
 from orchestrator.cosim.following import speed_following
 from orchestrator.experiments.contact_walk import controller_run
@@ -195,17 +193,10 @@ class ContactResources:
         """The sweep's controller ``name`` on the gait (made when a run first needs it:
         ``clfqp`` with the tube's model-error bound, its robust term)."""
         if name not in self._controllers:
-            run, setup = self.run, self._setup
-            if name == "clfqp":
-                self._controllers[name] = contact_clfqp(
-                    run.model, run.gait, run.trajectory, setup=setup,
-                    model_error=self.tube.model_error if self.tube is not None else None)
-            elif name == "phase-pd":
-                self._controllers[name] = make_contact_pd(run.model, run.gait, run.trajectory,
-                                                          setup)
-            else:
-                self._controllers[name] = make_baseline(name, run.model, run.gait,
-                                                        run.trajectory, setup)
+            run = self.run
+            self._controllers[name] = make_controller(
+                name, run.model, run.gait, run.trajectory, self._setup,
+                model_error=self.tube.model_error if self.tube is not None else None)
         return self._controllers[name]
 
     def plant(self, draw: Draw) -> HybridSimulator:
