@@ -44,7 +44,11 @@ from orchestrator.cosim.contact_controllers import (
 )
 from orchestrator.loop.link import measurement
 from orchestrator.loop.plant import SimulatorPlant
-from prosthesis_controller.contact_phase_pd import ContactPhasePD
+from prosthesis_controller.contact_phase_pd import (
+    DEFAULT_SWING_PHASE,
+    SWING_PHASES,
+    ContactPhasePD,
+)
 from prosthesis_controller.interface import Controller
 from prosthesis_controller.measurement import ProsthesisMeasurement
 from tests.multicontact_cycle import load_cycle
@@ -61,7 +65,7 @@ def cycle(path: Path | None) -> tuple[Any, Any, Any]:
     return c.model, c.trajectory, c.durations
 
 
-def controllers(path: Path | None = None, swing_phase: str = "time"
+def controllers(path: Path | None = None, swing_phase: str = DEFAULT_SWING_PHASE
                 ) -> tuple[dict[str, Controller], Any]:
     """The two controllers of the cycle (:func:`cycle`; ``swing_phase``: how they measure
     the swing's phase), and its in-process simulator."""
@@ -78,7 +82,7 @@ def controllers(path: Path | None = None, swing_phase: str = "time"
             "contact-pd": pd}, (sim, traj)
 
 
-def following(path: Path, speed: float, swing_phase: str = "time"
+def following(path: Path, speed: float, swing_phase: str = DEFAULT_SWING_PHASE
               ) -> tuple[dict[str, Controller], Any]:
     """The two controllers following the person's speed over the library at ``path``,
     started at ``speed`` (m/s), and the in-process simulator of its curves there with the
@@ -152,7 +156,7 @@ def main() -> int:
     ap.add_argument("--library", type=Path, help="gait library (hpcosim gait library): the "
                     "controllers following the person's speed over it")
     ap.add_argument("--speed", type=float, default=0.9, help="m/s, with --library")
-    ap.add_argument("--swing-phase", choices=("time", "thigh"), default="time")
+    ap.add_argument("--swing-phase", choices=SWING_PHASES, default=DEFAULT_SWING_PHASE)
     ap.add_argument("--steps", type=int, default=6)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", type=Path)

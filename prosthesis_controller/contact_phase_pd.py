@@ -10,14 +10,15 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
   It rises monotonically over the whole stance, so one law runs the stance without deciding
   which domain it is in (a prototype that switched laws on a detected contact part fell when
   2 ms of the wrong law ran at the heel off).
-- **Swing** (foot switch off): the time since toe-off over the gait's swing time (``"time"``,
-  the default), or with ``swing_phase="thigh"`` the residual thigh's place along the gait's
-  own thigh pitch over its swing (the socket IMU's pitch less the bias estimated in stance:
-  :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`), which follows a person who
-  swings faster or slower than the gait.  Not the default yet: on the simulated person its
-  phase lags the clock by about 0.01 (4 ms) in a nominal walk, where the thigh really is, and
-  that alone made contact-pd's first prosthesis heel strike on OpenSim's fit too late to walk
-  (the simulated person's fragility, issue 38; docs/gait-design.md).
+- **Swing** (foot switch off): the residual thigh's place along the gait's own thigh pitch
+  over its swing (``swing_phase="thigh"``, the default: the socket IMU's pitch less the bias
+  estimated in stance, :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`), which
+  follows a person who swings faster or slower than the gait; or the time since toe-off over
+  the gait's swing time (``"time"``, the clock the paper's controllers run).  Past 1 (a swing
+  that outlasts the thigh's pace, or the gait's swing time) the law holds the landing
+  posture at rest until the heel strike.  Measured on the packaged person's families (200
+  draws each, docs/gait-design.md) the thigh's phase walks as many draws as the clock within
+  a few, and follows a person off the gait's pace.
 - **Reference**: one stride of the gait as the model walks it (:func:`tables_from_walk`: the
   knee's and the ankle's angles, rates and motor torques against the phase), interpolated
   linearly in the phase (the torque has kinks at the contact transitions); a swing that
@@ -180,8 +181,11 @@ class PDGains:
 #: the time constant of the IMU bias's estimate (s)
 BIAS_TIME = 0.05
 
-#: how the swing's phase is measured (:class:`ContactPhasePD`)
+#: how the swing's phase is measured (:class:`ContactPhasePD`): the residual thigh's (the
+#: default, :mod:`prosthesis_controller.thigh_phase`) or the time since toe-off over the gait's
+#: swing time
 SWING_PHASES = ("time", "thigh")
+DEFAULT_SWING_PHASE = "thigh"
 
 #: the defaults (docs/gait-design.md: the window of gains that walk is narrow)
 STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
@@ -211,7 +215,7 @@ class ContactPhasePD:
     def __init__(self, tables: ContactGaitTables, leg: LegKinematics,
                  gear: tuple[float, float], limits: tuple[float, float],
                  stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS,
-                 swing_phase: str = "time") -> None:
+                 swing_phase: str = DEFAULT_SWING_PHASE) -> None:
         if swing_phase not in SWING_PHASES:
             raise ValueError(f"swing_phase {swing_phase!r}: choose from "
                              f"{', '.join(SWING_PHASES)}")
@@ -221,8 +225,6 @@ class ContactPhasePD:
         self._gear = (float(gear[0]), float(gear[1]))
         self._limits = (float(limits[0]), float(limits[1]))
         self._gains = {True: (stance.kp, stance.kd), False: (swing.kp, swing.kd)}
-        self._thigh = (ThighSwingPhase(tables.swing.phase, tables.swing_pitch)
-                       if swing_phase == "thigh" else None)
         self.reset()
 
     @property
@@ -250,6 +252,9 @@ class ContactPhasePD:
         #: time of its last update (s)
         self.imu_bias = 0.0
         self._t_bias: float | None = None
+        #: the thigh's swing phase (its flexion range learnt from the walk's swings)
+        self._thigh = (ThighSwingPhase(self.tables.swing.phase, self.tables.swing_pitch)
+                       if self.swing_phase == "thigh" else None)
 
     def blended(self, other: ContactPhasePD, w: float) -> ContactPhasePD:
         """This law with its tables blended with ``other``'s, (1 - w) these + w other's
@@ -269,6 +274,8 @@ class ContactPhasePD:
         estimate's and its counts."""
         self.fallbacks, self._in_stance, self._t_off = (other.fallbacks, other._in_stance,
                                                         other._t_off)
+        if self._thigh is not None and other._thigh is not None:
+            self._thigh.take_over(other._thigh)
         self.phase, self.imu_bias, self._t_bias = other.phase, other.imu_bias, other._t_bias
 
     def stance_phase(self, m: ProsthesisMeasurement) -> float:

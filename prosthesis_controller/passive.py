@@ -18,6 +18,7 @@ from hp_model.prosthesis import ProsthesisSubsystem
 from prosthesis_controller.base import BaseController, StanceResult, State
 from prosthesis_controller.config import PassiveConfig
 from prosthesis_controller.contact_phase_pd import (
+    DEFAULT_SWING_PHASE,
     SWING_GAINS,
     ContactGaitTables,
     ContactPhasePD,
@@ -106,7 +107,7 @@ class ContactPassive(ContactPhasePD):
     def __init__(self, tables: ContactGaitTables, leg: LegKinematics,
                  gear: tuple[float, float], limits: tuple[float, float], law: PassiveLaw,
                  accel: PhaseTable, swing: PDGains = SWING_GAINS,
-                 swing_phase: str = "time") -> None:
+                 swing_phase: str = DEFAULT_SWING_PHASE) -> None:
         super().__init__(tables, leg, gear, limits, swing=swing, swing_phase=swing_phase)
         if accel.values.shape != (len(tables.stance.phase), 2):
             raise ValueError(f"accel: {accel.values.shape} values for a stance table of "

@@ -9,6 +9,7 @@ from hp_model.leg_kinematics import LegKinematics
 from prosthesis_controller.base import BaseController, StanceResult, State
 from prosthesis_controller.config import PdConfig
 from prosthesis_controller.contact_phase_pd import (
+    DEFAULT_SWING_PHASE,
     SWING_GAINS,
     ContactGaitTables,
     ContactPhasePD,
@@ -72,7 +73,7 @@ class ContactJointPD(ContactPhasePD):
     def __init__(self, tables: ContactGaitTables, leg: LegKinematics,
                  gear: tuple[float, float], limits: tuple[float, float],
                  stance: PDGains | None = None, swing: PDGains = SWING_GAINS,
-                 swing_phase: str = "time") -> None:
+                 swing_phase: str = DEFAULT_SWING_PHASE) -> None:
         super().__init__(tables, leg, gear, limits, stance or paper_pd_gains(), swing,
                          swing_phase)
 

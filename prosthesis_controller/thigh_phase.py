@@ -10,18 +10,30 @@ branch at a time:
 - theta is the pitch as read on the steep part of the flexion (no lag there), else
   low-passed over ``SMOOTHING`` against the IMU's noise (the phase never falls back, so raw
   noise would ratchet it ahead, most near the peak where the pitch is flat);
-- **flexing** (from toe-off): s = S_flex(theta - delta), delta = the pitch at toe-off less
-  the gait's (a person's posture offset or an IMU bias moves the whole thigh curve);
+- **flexing** (from toe-off): s = S_flex((top - theta) R_gait / R), the pitch's fall from
+  its highest value since toe-off (``top``, followed until ``EARLIEST_TURN`` of the peak's
+  phase) against the gait's fall from its own highest pitch, scaled by the flexion's range:
+  R_gait the gait's (top to peak), R the last swing's (the gait's before one; within
+  ``RANGE`` of it).  A posture offset or an IMU bias moves the whole thigh curve; a person
+  whose thigh extends a few degrees after toe-off (the simulated person under posture
+  offsets: 4 deg over 40 ms, the gait's 0.3 deg) starts its flexion from there, not from
+  the pitch at toe-off; a person walking faster swings the thigh through more (on the
+  committed openOFM cycle with the hip 8 % faster, 40 deg against the gait's 36: read
+  against the gait's range the phase ended the swing at 1.31, against the last swing's at
+  0.98; Quintero et al. scale the thigh's phase portrait by the last stride's range too);
 - **retracting** (once theta has risen ``TURN`` above its least value since toe-off):
-  s = S_retract(theta - delta'), delta' = that least value less the gait's peak, so the
-  branch starts where the thigh turned;
-- where the pitch hardly changes (around the peak, and at the end of the retraction, where
-  the gaits' thigh stops or flexes again by a few tenths of a degree before the heel strike)
-  the phase goes on at the rate the thigh set over the steep part of its flexion
-  (``RATE_SPAN`` of the branch: this swing's pace, not the gait's): at most ``CARRY`` past
-  the peak until the retraction is seen (the phase waits for the thigh to turn), then on to
-  the heel strike, the retracting branch taking it further where the thigh leads;
-- the phase never falls back (the larger of the new and the last), and stays in [0, 1].
+  s = S_retract(peak + theta - least), the rise from that least value against the gait's
+  from its peak, so the branch starts where the thigh turned (not scaled: on the committed
+  cycle a faster person's thigh starts its swing higher and peaks where the gait's does);
+- past the steep part of the flexion (where the pitch hardly changes: around the peak, and
+  in the retraction, where the gaits' thigh rises by a degree or less, or flexes again, before
+  the heel strike) the phase goes on at the rate the thigh set over the steep part
+  (``RATE_SPAN`` of the branch: this swing's pace, not the gait's), on to 1 and past it, the
+  retracting branch taking it further where the thigh leads.  Past 1 the swing has outlasted
+  the thigh's pace: the law holds the landing posture at rest until the heel strike
+  (:meth:`~prosthesis_controller.contact_phase_pd.ContactPhasePD.reference`), as it does for
+  the clock;
+- the phase never falls back (the larger of the new and the last) and is never negative.
 
 So a person who swings the thigh faster or slower than the gait moves the prosthesis's swing
 with them: the phase is where the thigh is, not how long ago the toe left the ground
@@ -45,13 +57,15 @@ TURN = math.radians(1.0)
 #: s: the time constant of the pitch's low-pass (the turn's detection, the flat peak and the
 #: retraction)
 SMOOTHING = 0.005
-#: the flexing branch runs to this fraction of its phase span before a turn is believed
+#: the flexing branch runs to this fraction of its phase span before a turn is believed (and
+#: the flexion's start, the highest pitch since toe-off, is followed until then)
 EARLIEST_TURN = 0.5
+#: the flexion's range a swing may set for the next, as fractions of the gait's (a swing
+#: outside it is not a walking one: a stumble, a stop)
+RANGE = (0.5, 2.0)
 #: the part of the flexing branch (fractions of its span) whose mean phase rate carries the
-#: phase over the peak, from the end of that part on
+#: phase on, from the end of that part
 RATE_SPAN = (0.2, 0.8)
-#: how far past the peak (phase) the phase is carried at that rate before the retraction
-CARRY = 0.1
 
 
 class ThighSwingPhase:
@@ -68,24 +82,42 @@ class ThighSwingPhase:
         if k == 0:
             raise ValueError("the swing's thigh pitch does not fall after toe-off (no flexion)")
         self.s_peak = float(s[k])
-        self.pitch_off, self.pitch_peak = float(th[0]), float(th[k])
+        self.pitch_top, self.pitch_peak = float(np.max(th[: k + 1])), float(th[k])
         # each branch as a rising table of (pitch, phase) for np.interp: the flexing one
-        # by the pitch's fall, the retracting one by its rise, each made monotone
-        self._flex = (np.maximum.accumulate(-th[: k + 1]), s[: k + 1])
+        # by the pitch's fall from the gait's highest, the retracting one by its rise, each
+        # made monotone
+        self._flex = (np.maximum.accumulate(self.pitch_top - th[: k + 1]), s[: k + 1])
         self._retract = (np.maximum.accumulate(th[k:]), s[k:])
+        self.gait_range = self.pitch_top - self.pitch_peak
+        #: rad: the flexion's range (top to peak) the phase is read against: the last
+        #: swing's, the gait's before one was seen
+        self.range = self.gait_range
+        self._top = self._least = math.nan
+        self.value = 0.0
         self.reset(math.nan, math.nan)
 
     def reset(self, t: float, pitch: float) -> None:
-        """A toe-off at time ``t`` (s) with the socket at ``pitch`` (rad)."""
-        self._delta = pitch - self.pitch_off if math.isfinite(pitch) else 0.0
-        self._smooth = pitch
-        self._least = pitch
+        """A toe-off at time ``t`` (s) with the socket at ``pitch`` (rad); the swing before,
+        if it got past its peak, sets the flexion's range for this one (``RANGE``)."""
+        seen = self._top - self._least
+        if self.value > self.s_peak and math.isfinite(seen):
+            lo, hi = RANGE
+            self.range = min(max(seen, lo * self.gait_range), hi * self.gait_range)
+        self._smooth = self._top = self._least = pitch
+        self._turned_at = pitch  # the least pitch when the retraction was believed
         self._t = t
         self._retracting = False
         self.value = 0.0
         #: (time, phase) where the phase entered RATE_SPAN, and the rate over it (1/s)
         self._rate_start: tuple[float, float] | None = None
         self._rate = math.nan
+
+    def take_over(self, other: ThighSwingPhase) -> None:
+        """Continue from ``other``'s swing and flexion range (another gait's tables: a
+        switch of speed mid-swing, :mod:`prosthesis_controller.speed_following`)."""
+        for k in ("range", "_smooth", "_top", "_least", "_turned_at", "_t", "_retracting",
+                  "value", "_rate_start", "_rate"):
+            setattr(self, k, getattr(other, k))
 
     def update(self, t: float, pitch: float) -> float:
         """The phase at time ``t`` (s) with the socket at ``pitch`` (rad), both finite."""
@@ -96,23 +128,24 @@ class ThighSwingPhase:
         self._t = t
         self._smooth += k * (pitch - self._smooth)
         self._least = min(self._least, self._smooth)
+        if self.value < EARLIEST_TURN * self.s_peak:
+            self._top = max(self._top, self._smooth)
         if not self._retracting:
             # raw on the steep part (no lag), smoothed towards the flat peak
             th = pitch if self.value < RATE_SPAN[1] * self.s_peak else self._smooth
-            s = float(np.interp(-(th - self._delta), *self._flex))
+            s = float(np.interp((self._top - th) * self.gait_range / self.range, *self._flex))
             if (self._smooth > self._least + TURN and
                     max(s, self.value) >= EARLIEST_TURN * self.s_peak):
                 self._retracting = True
-                self._delta = self._least - self.pitch_peak
+                self._turned_at = self._least
         if self._retracting:
-            s = float(np.interp(self._smooth - self._delta, *self._retract))
-        s = max(s, self._carried(t, dt))
-        self.value = min(max(s, self.value), 1.0)
+            rise = self._smooth - self._turned_at
+            s = float(np.interp(self.pitch_peak + rise, *self._retract))
+        self.value = max(s, self._carried(t, dt), self.value)
         return self.value
 
     def _carried(self, t: float, dt: float) -> float:
-        """The phase carried on at the thigh's own rate past ``RATE_SPAN`` (else 0): up to
-        ``CARRY`` past the peak until the retraction is seen, then on."""
+        """The phase carried on at the thigh's own rate past ``RATE_SPAN`` (else 0)."""
         lo, hi = (f * self.s_peak for f in RATE_SPAN)
         if self._rate_start is None and self.value >= lo:
             self._rate_start = (t, self.value)
@@ -121,5 +154,4 @@ class ThighSwingPhase:
             self._rate = (self.value - s0) / (t - t0) if t > t0 else math.nan
         if math.isnan(self._rate):
             return 0.0
-        carried = self.value + self._rate * dt
-        return carried if self._retracting else min(carried, self.s_peak + CARRY)
+        return self.value + self._rate * dt

@@ -61,6 +61,7 @@ from prosthesis_controller.contact_clf_qp import (
     stance_qp,
 )
 from prosthesis_controller.contact_phase_pd import (
+    DEFAULT_SWING_PHASE,
     STANCE_GAINS,
     SWING_GAINS,
     ContactGaitTables,
@@ -184,7 +185,7 @@ def motors(model: HumanProsthesisModel) -> tuple[tuple[float, float], tuple[floa
 
 def phase_law(model: HumanProsthesisModel, tables: ContactGaitTables, leg: LegKinematics,
               stance: PDGains = STANCE_GAINS, swing: PDGains = SWING_GAINS,
-              swing_phase: str = "time") -> ContactPhasePD:
+              swing_phase: str = DEFAULT_SWING_PHASE) -> ContactPhasePD:
     return ContactPhasePD(tables, leg, *motors(model), stance, swing, swing_phase)
 
 
@@ -203,7 +204,7 @@ def walked_tables(model: HumanProsthesisModel, gait: ContactGait,
 
 def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
                     trajectory: Mapping[Domain, Mapping[str, Any]],
-                    setup: LoopSetup | None = None, swing_phase: str = "time"
+                    setup: LoopSetup | None = None, swing_phase: str = DEFAULT_SWING_PHASE
                     ) -> ContactPhasePD:
     """contact-pd of ``gait`` with its default gains (:func:`walked_tables`);
     ``swing_phase``: :class:`ContactPhasePD`'s."""
@@ -213,7 +214,7 @@ def make_contact_pd(model: HumanProsthesisModel, gait: ContactGait,
 
 def make_baseline(name: str, model: HumanProsthesisModel, gait: ContactGait,
                   trajectory: Mapping[Domain, Mapping[str, Any]],
-                  setup: LoopSetup | None = None, swing_phase: str = "time",
+                  setup: LoopSetup | None = None, swing_phase: str = DEFAULT_SWING_PHASE,
                   passive_law: PassiveLaw | None = None) -> ContactPhasePD:
     """The paper's baseline ``name`` on the multi-contact graph (:data:`BASELINES`:
     :class:`~prosthesis_controller.pd.ContactJointPD`,
@@ -237,7 +238,7 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
                   config: ContactClfConfig = DEFAULT_CONFIG, *,
                   setup: LoopSetup | None = None,
                   model_error: ModelErrorBound | None = None,
-                  swing_phase: str = "time") -> ContactClfQp:
+                  swing_phase: str = DEFAULT_SWING_PHASE) -> ContactClfQp:
     """The CLF-QP of ``gait``: contact-pd's tables and the QP along the stance, both from
     the same stance of :func:`held_walk` (:func:`walked_tables`); ``model_error``: the
     bound of its model's error (the gait's force tube's, :func:`characterization.tube.
@@ -258,7 +259,7 @@ def contact_clfqp(model: HumanProsthesisModel, gait: ContactGait,
 
 def make_controller(name: str, model: HumanProsthesisModel, gait: ContactGait,
                     trajectory: Mapping[Domain, Mapping[str, Any]],
-                    setup: LoopSetup | None = None, *, swing_phase: str = "time",
+                    setup: LoopSetup | None = None, *, swing_phase: str = DEFAULT_SWING_PHASE,
                     model_error: ModelErrorBound | None = None,
                     passive_law: PassiveLaw | None = None) -> ContactClfQp | ContactPhasePD:
     """The multi-contact controller ``name`` of ``gait``: ``clfqp`` (:func:`contact_clfqp`,

@@ -28,7 +28,7 @@ from orchestrator.cosim.contact_controllers import (
     make_controller,
 )
 from prosthesis_controller import speed_following as speed_following_module
-from prosthesis_controller.contact_phase_pd import ContactGaitTables
+from prosthesis_controller.contact_phase_pd import DEFAULT_SWING_PHASE, ContactGaitTables
 from prosthesis_controller.gait_tables import save_speed_following
 from prosthesis_controller.passive import PassiveLaw
 from prosthesis_controller.speed_following import (
@@ -66,7 +66,7 @@ def ensure_following_file(library_path: Path, library: GaitLibrary,
 
 
 def following_setup(library: GaitLibrary, controller: str = "clfqp",
-                    swing_phase: str = "time", closed_loop: ClosedLoop | None = None,
+                    swing_phase: str = DEFAULT_SWING_PHASE, closed_loop: ClosedLoop | None = None,
                     resolution: float = SPEED_RESOLUTION,
                     say: Callable[[str], None] | None = None) -> FollowingSetup:
     """What the controller following the person's speed over ``library`` is made of
@@ -104,7 +104,7 @@ def following_setup(library: GaitLibrary, controller: str = "clfqp",
 
 
 def speed_following(library: GaitLibrary, controller: str = "clfqp",
-                    speed: float | None = None, swing_phase: str = "time",
+                    speed: float | None = None, swing_phase: str = DEFAULT_SWING_PHASE,
                     closed_loop: ClosedLoop | None = None, resolution: float = SPEED_RESOLUTION
                     ) -> SpeedFollowing:
     """The prosthesis controller that follows the person's speed over ``library``

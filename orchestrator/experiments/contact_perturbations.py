@@ -61,7 +61,7 @@ from orchestrator.cosim.contact_controllers import (
 )
 from orchestrator.experiments.contact_walk import controller_run
 from orchestrator.loop.link import IDEAL_ENCODER, Encoder
-from prosthesis_controller.contact_phase_pd import SWING_PHASES
+from prosthesis_controller.contact_phase_pd import DEFAULT_SWING_PHASE, SWING_PHASES
 
 FAMILIES = ("bias", "imu", "encoder", "sensors", "gains", "posture", "pace", "stride")
 #: the stride family's coefficient of variation at amplitude 1 (healthy walking: 2-3 %)
@@ -172,7 +172,7 @@ def perturbed_controllers(model: HumanProsthesisModel, gait: ContactGait,
                           trajectory: Mapping[Domain, Mapping[str, Any]],
                           setup: LoopSetup | None = None,
                           model_error: ModelErrorBound | None = None,
-                          swing_phase: str = "time") -> dict[str, Any]:
+                          swing_phase: str = DEFAULT_SWING_PHASE) -> dict[str, Any]:
     """The controllers a family walks (:data:`CONTROLLERS`), made once from the
     unperturbed gait (``setup``: its simulator and held walk, when made already;
     ``model_error``: the tube's bound, ``clfqp``'s robust term; ``swing_phase``: how they
@@ -214,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--amplitude", type=float, default=1.0)
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--steps", type=int, default=10)
-    ap.add_argument("--swing-phase", choices=SWING_PHASES, default="time",
+    ap.add_argument("--swing-phase", choices=SWING_PHASES, default=DEFAULT_SWING_PHASE,
                     help="how the prosthesis controllers measure the swing's phase")
     a = ap.parse_args(argv)
     try:

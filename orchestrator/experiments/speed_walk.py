@@ -39,7 +39,7 @@ from hp_model.speed_profile import SpeedProfile
 from orchestrator.cosim.contact_controllers import loop_simulator
 from orchestrator.cosim.following import speed_following
 from orchestrator.experiments.contact_walk import controller_run
-from prosthesis_controller.contact_phase_pd import SWING_PHASES
+from prosthesis_controller.contact_phase_pd import DEFAULT_SWING_PHASE, SWING_PHASES
 
 CONTROLLERS = ("oracle", "clfqp", "contact-pd")
 
@@ -95,7 +95,7 @@ def _strides(res: SimResult, profile: SpeedProfile, estimate: np.ndarray, dt: fl
 
 
 def speed_walk(library: GaitLibrary, profile: SpeedProfile, steps: int,
-               controller: str = "oracle", swing_phase: str = "time",
+               controller: str = "oracle", swing_phase: str = DEFAULT_SWING_PHASE,
                closed_loop: ClosedLoop | None = None) -> SpeedWalk:
     """Walk ``steps`` steps of ``library`` along ``profile`` with the prosthesis on
     ``controller`` (module docstring); a walk ends at a fall or 2 s per step."""
@@ -131,7 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--profile", required=True, help="time:speed pairs, s:m/s")
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--controller", choices=CONTROLLERS, default="oracle")
-    ap.add_argument("--swing-phase", choices=SWING_PHASES, default="time")
+    ap.add_argument("--swing-phase", choices=SWING_PHASES, default=DEFAULT_SWING_PHASE)
     a = ap.parse_args(argv)
     try:
         lib = load_gait_library(a.library)
