@@ -66,10 +66,7 @@ strides are the same to 0.3 ms.  ``feedback_<d>`` and ``hfeedback_<d>`` give the
 and the share.
 
 Past tau = 1 (a touchdown later than designed) the curves of a single support come to rest
-(:func:`hp_model.outputs.resting`: the human's swing leg holds its landing posture; with the
-human on its own stance foot, its toe in ``pns_toe`` waiting for the prosthesis's heel
-strike, :func:`hp_model.outputs.resting_smoothly`: the acceleration continuous too, so the
-person rolls on over its toe instead of braking its ankle at once); a double
+(:func:`hp_model.outputs.resting`: the swing leg holds its landing posture); a double
 support's continue with their curvature (:func:`hp_model.outputs.continued_smoothly`, C^2:
 the leading foot goes on rolling down onto its toe, and the accelerations the curves ask
 for, so the contact forces, do not jump at tau = 1 or 0; continued linearly, a flat
@@ -104,7 +101,6 @@ from hp_model.outputs import (
     continued_smoothly,
     outputs,
     resting,
-    resting_smoothly,
 )
 
 
@@ -202,16 +198,6 @@ def hip_progress(model: HumanProsthesisModel, domain: Domain) -> ca.SX:
     return model.frame_expr("hip")[0] - model.frame_expr(frame)[0]
 
 
-def domain_curve(d: Domain) -> Curve:
-    """How domain ``d``'s curves go on outside [0, 1] (module docstring): a double support's
-    with their curvature; a single support's linearly below 0 and to rest past 1, the human
-    on its own stance foot with its acceleration continuous (the person rolls on), a human
-    swing leg holding its landing posture."""
-    if d.is_double_support:
-        return continued_smoothly
-    return _entering_linearly(resting if d.is_prosthesis_stance else resting_smoothly)
-
-
 class ContactConstraints:
     """Phase, outputs and feedback linearization of one domain of the multi-contact graph
     (module docstring); ``degree`` the Bezier degree of its curves."""
@@ -238,7 +224,7 @@ class ContactConstraints:
         theta = ca.SX.sym("theta", self.n_params)
         gains = ca.SX.sym("gains", 3)
         alpha, v_hip, p_min, p_max = self.layout.unpack(theta)
-        curve = domain_curve(d)
+        curve = continued_smoothly if d.is_double_support else _entering_linearly(resting)
         o = outputs(SD @ q, SD @ qd, progress, progress_dot,
                     GaitTerms(alpha[:n_y2, :], v_hip, p_min, p_max), curve)
         step = p_max - p_min

@@ -228,30 +228,6 @@ def resting(alpha: Num, tau: Num) -> tuple[Num, Num, Num]:
     return B, dB, ddB
 
 
-def resting_smoothly(alpha: Num, tau: Num) -> tuple[Num, Num, Num]:
-    """Past tau = 1 the curves come to rest with their acceleration continuous too (C^2), for
-    a stance leg: with s = tau - 1, dB/dtau = (B'(1) + b s) exp(-s/d), b = B''(1) + B'(1)/d
-    (d = ``TAIL``), so B, B' and B'' are those of the polynomial at tau = 1 and the rate
-    decays to rest within a few d.  :func:`resting` drops the acceleration to zero at tau = 1:
-    a person on its toe waiting for the prosthesis's heel strike (``pns_toe``) then brakes
-    its rolling ankle at once, and on the committed openOFM cycle a prosthesis landing 5 ms
-    late (pns_toe's tau 1.06) slid that toe (F_x 0.77 kN over 16 N of load).  The simulated
-    human's curves (symbolic tau)."""
-    d = TAIL
-    tau_c = ca.fmin(tau, 1)
-    s = ca.fmax(tau - 1, 0)
-    live = ca.if_else(tau < 1, 1, 0)
-    d1 = bezier.derivative(alpha)
-    B1 = bezier.evaluate(d1, tau_c)
-    B2 = bezier.evaluate(bezier.derivative(d1), tau_c)
-    b = B2 + B1 / d
-    e = ca.exp(-s / d)
-    B = bezier.evaluate(alpha, tau_c) + B1 * d * (1 - e) + b * (d**2 * (1 - e) - d * s * e)
-    dB = (B1 + b * s) * e
-    ddB = live * B2 + (1 - live) * (b - (B1 + b * s) / d) * e
-    return B, dB, ddB
-
-
 @dataclass(frozen=True)
 class Outputs:
     """The phase, the outputs and their derivatives (module docstring), and the curve's

@@ -135,18 +135,14 @@ def test_in_ds_p_the_prosthesis_moves_one_joint_direction(cycle) -> None:
 
 
 def test_it_walks_the_committed_cycle(cycle, walk) -> None:
-    """20 steps; each stride from the second within 1 % of the fitted cycle's time and speed
-    (the CLF tracks the gait), the first within 2.5 % (measured 2.1 %: the run's first swing
-    reads the thigh against the gait's flexion range, 1.7 % wider than this person's, and
-    the prosthesis lands about 20 ms late; from the second swing on, against the range the
-    first one showed); every torque within the motors; every stance QP solved, its contact
-    rows held (slack below 1e-3 body weights) on at least 99 % of the stance ticks."""
+    """20 steps; each stride within 1 % of the fitted cycle's time and speed (the CLF tracks
+    the gait); every torque within the motors; every stance QP solved, its contact rows
+    held (slack below 1e-3 body weights) on at least 99 % of the stance ticks."""
     model, _, durations, _ = cycle
     rec, w = walk
     assert w.walks, w.fall
     stride = sum(durations.values())
-    assert abs(w.strides[0] / stride - 1) < 0.025, w.strides
-    assert np.all(np.abs(w.strides[1:] / stride - 1) < 0.01), w.strides
+    assert np.all(np.abs(w.strides / stride - 1) < 0.01), w.strides
     p = model.device.prosthesis
     lim = np.array([p.knee.torque_limit.value, p.ankle.torque_limit.value])
     u = np.array([t[1] for t in rec.ticks])
@@ -451,9 +447,7 @@ def test_bad_measurements_give_zero_torque_and_torques_stay_bounded(cycle) -> No
 def test_an_imu_bias_is_estimated_while_the_foot_is_flat(cycle) -> None:
     """The socket IMU reads 1 deg off: the controller's estimate of the bias (from the heel's
     sensed rise over the toe while the gait's foot is flat) is within 0.02 deg of it after
-    the first flat stance, and the walk takes its 10 steps, its strides within 2.5 % of the
-    fitted one and the last within 1 % (measured 1.7, 1.4, 0.6, 0.1 %: the thigh's phase
-    learns the person's flexion range over the first swings, test_it_walks_the_committed_cycle).
+    the first flat stance, and the walk takes its 10 steps at the fitted stride (1 %).
     Without the estimate, 0.25 deg (standard deviation over 20 draws) made half of the walks
     fall (docs/gait-design.md)."""
     model, traj, durations, gait = cycle
@@ -474,8 +468,7 @@ def test_an_imu_bias_is_estimated_while_the_foot_is_flat(cycle) -> None:
     late = est[est[:, 0] > sum(durations.values()), 1]  # after the first stride
     assert np.all(np.abs(late - bias) < math.radians(0.02)), np.degrees(late).min()
     strikes = [i.t for i in plant.run.result().impacts if i.into == Domain.DS_H]
-    off = np.abs(np.diff(strikes) / sum(durations.values()) - 1)
-    assert np.all(off < 0.025) and off[-1] < 0.01, off
+    assert np.all(np.abs(np.diff(strikes) / sum(durations.values()) - 1) < 0.01)
 
 
 def test_a_perturbation_family_is_walked_by_every_controller_on_the_same_draws(cycle) -> None:

@@ -245,37 +245,3 @@ def test_the_person_yields_its_feedback_to_its_contacts(
             assert on_margin or (s == 0.0 and np.any(g0[lowered] < 0)), (s, g0, g1, g)
     assert yielded  # the test saw the person yield
 
-
-def test_a_stance_legs_curves_come_to_rest_with_their_acceleration_continuous() -> None:
-    """Past tau = 1 the human's stance-leg curves (``resting_smoothly``) keep the polynomial's
-    value, rate and acceleration at tau = 1 (checked against finite differences of the
-    curve), then settle: the rate below 1 % of the tail's start (B'(1) + B''(1) TAIL) by
-    1 + 10 TAIL.  The
-    swing leg's (``resting``) keep value and rate only; double supports continue."""
-    import casadi as ca
-
-    from hp_model.contact_outputs import domain_curve
-    from hp_model.domains import Domain
-    from hp_model.outputs import TAIL, continued_smoothly, resting, resting_smoothly
-
-    alpha = ca.DM([[0.1, 0.4, -0.2, 0.5, 0.3, 0.9]])
-    tau = ca.SX.sym("tau")
-    f = ca.Function("f", [tau], list(resting_smoothly(alpha, tau)))
-    g = ca.Function("g", [tau], list(resting(alpha, tau)))
-    before = [float(v) for v in f(1 - 1e-9)]
-    after = [float(v) for v in f(1 + 1e-9)]
-    np.testing.assert_allclose(after, before, atol=1e-6)
-    assert abs(float(g(1 + 1e-9)[2]) - before[2]) > 1.0  # resting drops the acceleration
-    h = 1e-5
-    for t in (1.02, 1.2):  # the rate and acceleration are the value's derivatives
-        _, b1, b2 = (float(v) for v in f(t))
-        assert (float(f(t + h)[0]) - float(f(t - h)[0])) / (2 * h) == pytest.approx(b1, abs=1e-6)
-        assert (float(f(t + h)[1]) - float(f(t - h)[1])) / (2 * h) == pytest.approx(b2, abs=1e-5)
-    scale = abs(before[1]) + abs(before[2]) * TAIL  # the rate the tail starts from
-    assert abs(float(f(1 + 10 * TAIL)[1])) < 0.01 * scale
-    assert domain_curve(Domain.DS_H) is continued_smoothly
-    late = 1.1  # the human on its toe rolls on; the human's swing leg holds its posture
-    np.testing.assert_allclose([float(v) for v in domain_curve(Domain.PNS_TOE)(alpha, late)],
-                               [float(v) for v in f(late)])
-    np.testing.assert_allclose([float(v) for v in domain_curve(Domain.PS_TOE)(alpha, late)],
-                               [float(v) for v in g(late)])
