@@ -19,7 +19,7 @@ branch at a time:
   offsets: 4 deg over 40 ms, the gait's 0.3 deg) starts its flexion from there, not from
   the pitch at toe-off; a person walking faster swings the thigh through more (on the
   committed openOFM cycle with the hip 8 % faster, 40 deg against the gait's 36: read
-  against the gait's range the phase ended the swing at 1.31, against the last swing's at
+  against the gait's range the phase ended the swing at 1.32, against the last swing's at
   0.98; Quintero et al. scale the thigh's phase portrait by the last stride's range too);
 - **retracting** (once theta has risen ``TURN`` above its least value since toe-off):
   s = S_retract(peak + theta - least), the rise from that least value against the gait's

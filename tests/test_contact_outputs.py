@@ -244,4 +244,3 @@ def test_the_person_yields_its_feedback_to_its_contacts(
             on_margin = np.abs(g[lowered]).min() <= tol if lowered.any() else False
             assert on_margin or (s == 0.0 and np.any(g0[lowered] < 0)), (s, g0, g1, g)
     assert yielded  # the test saw the person yield
-
