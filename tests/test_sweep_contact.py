@@ -119,7 +119,7 @@ def test_a_replay_equals_the_stored_run(swept, key, capsys):
 @pytest.mark.parametrize(("extra", "field"), [
     ('\n[families.t]\nsocket.tube_scale = 2.0\n', "families.t.socket.tube_scale"),
     ('\n[families.p]\nplant.segment_mass = 1.1\n', "families.p.plant.segment_mass"),
-    ('\n[families.i]\ninitial.knee = 0.01\n', "families.i.initial.knee"),
+    ('\n[families.d]\nhuman.delay = 0.01\n', "families.d.human.delay"),
     ('\n[families.a]\nplant.armature = {dist = "uniform", low = 0.5, high = 1.5}\n',
      "families.a.plant.armature"),
     # the committed cycle's device has no rotor inertia: no armature to scale
@@ -199,6 +199,42 @@ def test_the_walkers_armature_is_the_draws(tmp_path):
     assert nominal["success"]
     assert (light["success"], light["duration_s"], light["max_torque_ankle"]) != \
         (nominal["success"], nominal["duration_s"], nominal["max_torque_ankle"])
+
+
+INITIAL_SPEC = """
+name = "initial"
+gait = "{gait}"
+controllers = ["clfqp", "phase-pd"]
+draws = 1
+seed = 5
+steps = 3
+
+[families.initial]
+initial.knee = 0.037
+initial.ankle = -0.007
+"""
+
+
+def test_a_start_with_the_prosthesis_moved_is_the_draws(tmp_path, capsys):
+    """``initial.knee`` / ``initial.ankle`` on the person's graph: every controller starts
+    from the cycle's start with the prosthesis's knee and ankle moved (``prosthesis_start``),
+    recorded in the row, and a run is a pure function of its key.  The oracle (yielding its
+    feedback at the motors' limits) walks this draw, where clamped it fell in 0.14 s."""
+    from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(INITIAL_SPEC.format(gait=REFERENCE_PERSON_GAIT))
+    out = tmp_path / "out"
+    assert hpcosim(["sweep", str(spec), "--out", str(out), "--workers", "1"]) in (0, 1)
+    rows = {r["key"]: r for r in read_results(out).to_pylist()}
+    assert set(rows) == {f"{c}/initial/0" for c in ("oracle", "clfqp", "phase-pd")}
+    for r in rows.values():
+        assert r["error"] is None
+        assert (r["draw_knee_offset"], r["draw_ankle_offset"]) == (0.037, -0.007)
+    assert rows["oracle/initial/0"]["success"], rows["oracle/initial/0"]["reason"]
+    capsys.readouterr()
+    assert hpcosim(["sweep", "replay", str(out), "clfqp/initial/0"]) == 0
+    assert "identical to the stored result" in capsys.readouterr().out
 
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "sweep"

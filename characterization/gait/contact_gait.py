@@ -20,6 +20,7 @@ the contact): a fitted trajectory whose hip stalls or runs back is refused.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -205,19 +206,47 @@ HELD_ORACLE = ("the human on feedback linearization of the fitted gait, the pros
                "holding that law's torque over each 1 ms period within its motor limits")
 
 
+def feedback_within_limits(u_ff: np.ndarray, u_fb: np.ndarray, share: float,
+                           limits: np.ndarray) -> np.ndarray:
+    """The torque u_ff + s u_fb (N m) with the largest feedback share s in [0, ``share``] that
+    keeps every torque within +-``limits``; a feedforward torque past its limit alone is
+    clamped.  Cutting the share keeps the feedback's direction, where clamping one torque
+    would turn it (a law of coupled outputs: the other torque then corrects for it)."""
+    s = share
+    for j, lim in enumerate(limits):
+        u = u_ff[j] + s * u_fb[j]
+        if abs(u) > lim and u_fb[j] != 0.0:
+            s = min(s, max(0.0, (math.copysign(lim, u) - u_ff[j]) / u_fb[j]))
+    return np.clip(u_ff + s * u_fb, -limits, limits)
+
+
 def held_oracle(closed_loop: ClosedLoop, thetas: Mapping[Domain, np.ndarray],
-                gains: np.ndarray) -> Policy:
+                gains: np.ndarray, within_limits: bool = False) -> Policy:
     """The prosthesis policy that applies, each period, the motor torque (2, N m) the full
     feedback linearization of the gait gives at the period's start (the simulator holds it
     over the period and clamps it to the motors' limits): full-state feedback, what a
     prosthesis controller's torque is measured against.  It follows the gait the human
-    tracks (the state's ``theta``, when the run has a gait schedule; else ``thetas``)."""
-    fl = {d: closed_loop.vcs[d].numeric()[f"fl_{d}"] for d in closed_loop.model.graph.domains}
+    tracks (the state's ``theta``, when the run has a gait schedule; else ``thetas``).
+
+    ``within_limits``: where that torque is past a motor's limit, the law's feedback share
+    is cut until both are within them (:func:`feedback_within_limits` on ``feedback_<d>``'s
+    parts, as the person yields its own at its contacts); elsewhere the same torque.  The
+    walkability reference of the sweeps and the perturbation experiments: clamped, the
+    oracle lost a knee or ankle offset's first stance (the motors at their limits from the
+    first period, the hip's rate lost, the stance foot out of its cone) where the
+    controllers walked."""
+    fns = {d: closed_loop.vcs[d].numeric() for d in closed_loop.model.graph.domains}
+    limits = np.asarray(closed_loop.model.torque_limits[4:6], float)
 
     def policy(_t: float, st: SimState) -> np.ndarray:
         theta = thetas[st.domain] if st.theta is None else st.theta  # the human's, now
-        u = fl[st.domain](st.q, st.qd, theta, gains)[0]
-        return np.asarray(u).ravel()[4:6]
+        u = np.asarray(fns[st.domain][f"fl_{st.domain}"](st.q, st.qd, theta, gains)[0]
+                       ).ravel()[4:6]
+        if not within_limits or np.all(np.abs(u) <= limits):
+            return u
+        u_ff, u_fb, share = (np.array(a, float).ravel() for a in
+                             fns[st.domain][f"feedback_{st.domain}"](st.q, st.qd, theta, gains))
+        return feedback_within_limits(u_ff[4:6], u_fb[4:6], float(share[0]), limits)
 
     return policy
 

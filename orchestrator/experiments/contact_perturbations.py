@@ -158,7 +158,7 @@ def walk_draw(model: HumanProsthesisModel, trajectory: Mapping[Domain, Mapping[s
     if controller == "oracle":
         q0, qd0 = start_state(trajectory)
         policy = held_oracle(sim.cl, {Domain(k): th for k, th in sim.thetas.items()},
-                             sim.gains)
+                             sim.gains, within_limits=True)
         res = sim.run(q0, qd0, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
                       policy=policy, gaits=d.schedule())
         return res.fall is None and res.steps >= steps

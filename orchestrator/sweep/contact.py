@@ -22,16 +22,22 @@ draw's encoder, the torque held 1 ms within the motors):
                             at the first speed
     plant.armature          the plant's drives' armature times this factor (the controllers
                             keep the nominal device; the oracle knows the plant's)
+    initial.knee, .ankle    the prosthesis's knee and ankle moved at the start (rad), the
+                            person's joints on its curves at the phase that moves
+                            (:func:`prosthesis_start`)
     sensor.*                the prosthesis's encoders and IMU
 
 The controllers are made once per worker from the unperturbed gait (its held oracle's walk,
 :mod:`orchestrator.cosim.contact_controllers`): ``clfqp`` (:class:`prosthesis_controller.
 contact_clf_qp.ContactClfQp`) and ``phase-pd`` (contact-pd, :class:`prosthesis_controller.
 contact_phase_pd.ContactPhasePD`); the ``oracle`` run of a draw is the held oracle on the
-plant's state (perfect sensing).  Every run starts from the fitted cycle's start, in the
-person's own posture where its curves are offset (:func:`posture_start`).  The other
-quantities of a family (a tube margin, a controller model of its own, the plant's body but
-its armature, the delayed human, a placed start) are refused by the spec
+plant's state (perfect sensing), its feedback yielding at the motors' limits
+(:func:`characterization.gait.contact_gait.held_oracle` ``within_limits``).  Every run
+starts from the fitted cycle's start, in the person's own posture where its curves are
+offset (:func:`posture_start`), with the prosthesis's joints moved where the draw moves them
+(:func:`prosthesis_start`).  The other quantities of a family (a tube margin, a controller
+model of its own, the plant's body but its armature, the delayed human) are refused by the
+spec
 (:func:`orchestrator.sweep.contact_spec.check_multicontact`).  With the gait's tube (``tube
 fit``), ``socket_force_in_tube`` is the share of the flat single support's periods with the
 socket force inside it
@@ -145,6 +151,40 @@ def posture_start(sim: HybridSimulator, start: tuple[np.ndarray, np.ndarray],
     return q_placed, qd_placed
 
 
+def prosthesis_start(sim: HybridSimulator, start: tuple[np.ndarray, np.ndarray],
+                     knee: float, ankle: float) -> tuple[np.ndarray, np.ndarray]:
+    """A start with the prosthesis's knee and ankle moved by ``knee`` and ``ankle`` (rad), as
+    the paper's graph's ``start_<d>`` (:mod:`hp_model.placement`): the start's domain is a flat
+    prosthesis stance, so its stance knee and ankle set the phase (the hip's progress over
+    the stance foot depends on them alone); the human's joints go on the curves ``sim``
+    tracks at that phase, their rates at its rate (the joints' of the start kept); placed on
+    the stance foot where the start has it, the base's velocity solving the foot at rest.
+    Offsets of zero give the start itself."""
+    if knee == 0.0 and ankle == 0.0:
+        return start
+    domain = GRAPH.domains[0]
+    names = sim.model.coord_names
+    q0, qd0 = start
+    q = np.array(q0, float)
+    q[names.index("th_pk")] += knee
+    q[names.index("th_pa")] += ankle
+    place = sim.mfs[f"place_{domain}"]
+    sole = sim.model.frame_index(sim.model.stance_frame(domain))
+    x_foot = float(np.asarray(sim.mfs["frames"](q0, qd0)[0])[0, sole])
+
+    def placed(q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return tuple(np.array(a, float).ravel() for a in place(q, qd, x_foot))  # type: ignore
+
+    q, qd = placed(q, qd0)
+    _, y2, dy2, _ = (np.array(a, float).ravel()
+                     for a in sim.fs[f"outputs_{domain}"](q, qd, sim.thetas[domain]))
+    for row, joint in enumerate(domain.y2_coords):
+        if joint in HUMAN_JOINTS:  # a joint's output is its angle off its curve
+            q[names.index(joint)] -= y2[row]
+            qd[names.index(joint)] -= dy2[row]
+    return placed(q, qd)
+
+
 def draw_gains(draw: Draw) -> np.ndarray:
     """The human's gains (eps, kp, kd) in a draw: its stiffness s scales the bandwidth."""
     s = draw.human_stiffness
@@ -253,7 +293,7 @@ def speed_walk(res: ContactResources, controller: str, draw: Draw, steps: int
     schedule, start = speed_schedule(lib, profile), start_at(lib, draw.speed_start)
     if controller == ORACLE:
         policy = held_oracle(sim.cl, {Domain(d): th for d, th in sim.thetas.items()},
-                             sim.gains)
+                             sim.gains, within_limits=True)
         log = sim.run(*start, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
                       policy=policy, gaits=schedule)
         return log, Counter(), 0
@@ -279,12 +319,13 @@ def walk(res: ContactResources, controller: str, draw: Draw, steps: int
     sim = res.plant(draw)
     thetas = {Domain(k): th for k, th in sim.thetas.items()}
     start = posture_start(sim, start_state(res.run.trajectory), draw.output_offset)
+    start = prosthesis_start(sim, start, draw.knee_offset, draw.ankle_offset)
     schedule = (varying_pace(thetas, draw.stride_cv, draw.stride_seed, res.degree)
                 if draw.stride_cv != 0.0 else None)
     if controller == ORACLE:
-        log = sim.run(*start, GRAPH.domains[0], steps=steps,
-                      duration=2.0 * steps, policy=held_oracle(sim.cl, thetas, sim.gains),
-                      gaits=schedule)
+        policy = held_oracle(sim.cl, thetas, sim.gains, within_limits=True)
+        log = sim.run(*start, GRAPH.domains[0], steps=steps, duration=2.0 * steps,
+                      policy=policy, gaits=schedule)
         return log, Counter(), 0
     ctl = res.controller(controller)
     ctl.reset()

@@ -9,10 +9,10 @@ from pathlib import Path
 from orchestrator.sweep.spec import SweepBackend, SweepSpec, _fail
 
 #: the quantities a sweep of a multi-contact gait draws (the rest change what its controllers
-#: do not have yet: a tube margin, a model of their own, the delayed human, a placed start)
+#: do not have yet: a tube margin, a model of their own, the delayed human)
 MULTICONTACT_QUANTITIES = ("human.bezier_amplitude", "human.output_offset",
                            "human.stiffness", "human.stride_cv", "human.speed", "plant.armature",
-                           "sensor.")
+                           "initial.knee", "initial.ankle", "sensor.")
 #: what a family that changes the person's speed may draw beside it
 WITH_SPEED = ("human.speed", "sensor.")
 #: the controllers of a multi-contact gait's sweep: its robust CLF-QP, its phase PD
@@ -66,8 +66,8 @@ def _check_families(spec: SweepSpec, path: Path, files: dict[str, Path]) -> str 
             if not q.startswith(MULTICONTACT_QUANTITIES):
                 raise _fail(path, f"families.{name}.{q}", "not drawn on a multi-contact gait "
                             "(it draws human.bezier_amplitude, human.output_offset, "
-                            "human.stiffness, human.stride_cv, human.speed, plant.armature "
-                            "and sensor.*)")
+                            "human.stiffness, human.stride_cv, human.speed, plant.armature, "
+                            "initial.knee, initial.ankle and sensor.*)")
         if "human.speed" in qs:
             other = [q for q in qs if not q.startswith(WITH_SPEED)]
             if other:

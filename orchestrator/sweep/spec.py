@@ -67,7 +67,8 @@ A multi-contact gait (``gait fit --domains multicontact``) sweeps the person's g
 (:mod:`orchestrator.sweep.contact`): its controllers ``clfqp`` and ``phase-pd``, the
 simulator backend, the quantities ``human.bezier_amplitude``, ``human.output_offset``,
 ``human.stiffness``, ``human.stride_cv``, ``human.speed`` (with ``library``, a gait library
-of the gait's person: ``hpcosim gait library``), ``plant.armature`` and ``sensor.*``, and
+of the gait's person: ``hpcosim gait library``), ``plant.armature``, ``initial.*`` and
+``sensor.*``, and
 optionally a tube fitted around it (:func:`orchestrator.sweep.contact_spec.check_multicontact`).
 
 A bad spec is refused with one line naming the file and the field (:class:`SpecError`).
