@@ -100,6 +100,20 @@ FLAT_LOAD = 0.9
 #: the largest number of contact rows of a stance domain's QP (a double support: 3 per
 #: heel or toe; a flat sole: 5)
 MAX_CONTACT_ROWS = 6
+#: s: a foot sensed flat and loaded at least this long before the gait's landing (at the
+#: gait's pace) landed early: the flat stance's QP from then on
+#: (:meth:`ContactClfQp._landed_early`); nearer the gait's landing the double support's QP
+#: holds, as on the gait (a switch 10-13 ms before it pulled the heel of a foot not yet
+#: flat off the ground at speed changes, docs/gait-design.md)
+EARLY_FLAT = 0.03
+#: rad: a foot that flat (the leg's sensed heel within this of its toe) has landed before the
+#: gait's (:meth:`ContactClfQp._landed_early`): a foot that landed reads flat to the sensors'
+#: precision; on openOFM's cycle the foot rolls down to within 0.47 deg of flat 43 ms before
+#: the gait's landing, still on its heel, and the flat stance's QP pulled it off the ground
+EARLY_FLAT_PITCH = math.radians(0.1)
+#: ticks in a row a foot must read that flat: the sweeps' encoder noise (0.2 deg) put a foot
+#: 0.47 deg from flat within 0.1 deg for single ticks on openOFM's cycle
+EARLY_FLAT_TICKS = 5
 #: s: the time between two samples of the stance QP (:class:`WalkedStance`: one per period of
 #: the plant the held walk ran on); the person's heel strike sensed, ``ds_h``'s samples are
 #: read at the time since it
@@ -453,6 +467,8 @@ class ContactClfQp:
         #: whether this stance's foot has been sensed flat (HEEL_DOWN; set at the first flat
         #: reading where the gait's foot is flat, cleared at the heel strike)
         self.landed = False
+        #: the ticks in a row the foot has read flat before the gait's landing
+        self._flat_ticks = 0
         self._strike.reset()
         #: the last tick's sample while the gait has the prosthesis on its toe at the phase
         #: and no heel strike of the person is sensed (None otherwise)
@@ -479,6 +495,7 @@ class ContactClfQp:
         law's, the torque its rate limit starts from and its counts."""
         self.law.take_over(other.law)
         self._u, self.fallbacks, self.landed = other._u, other.fallbacks, other.landed
+        self._flat_ticks = other._flat_ticks
         self._strike.reset()  # its samples are the other stance's: the window starts again
         self._strike.struck_at = other._strike.struck_at
         self._i_prev = None
@@ -520,6 +537,7 @@ class ContactClfQp:
         law = self.law
         if m.contact and not law.in_stance:  # a heel strike
             self.landed = False
+            self._flat_ticks = 0
             self._strike.reset()
         ref = law.reference(m)  # the phase and the gait there
         u = None
@@ -552,6 +570,22 @@ class ContactClfQp:
         if excess is None:
             return False  # no reading: the sensed angle alone
         return m.foot_load < FLAT_LOAD * (m.foot_load - excess)
+
+    def _landed_early(self, m: ProsthesisMeasurement, i: int) -> bool:
+        """Whether the foot has landed flat before the gait's at sample ``i`` of ``ds_p``:
+        this stance's foot already sensed flat, or now: :data:`EARLY_FLAT_TICKS` ticks in a row
+        within :data:`EARLY_FLAT_PITCH` of flat and not :meth:`_on_heel` at the flat stance's
+        first sample (the flat foot's load), the gait's landing at least :data:`EARLY_FLAT`
+        ahead."""
+        st = self.stance
+        first = st.heel_end + 1
+        if not (0 < first < len(st.domain) and st.domain[first] is Domain.PS):
+            return False
+        if not self.landed and (first - i) * SAMPLE_PERIOD > EARLY_FLAT:
+            flat = abs(self.law.rise) < EARLY_FLAT_PITCH and not self._on_heel(m, first)
+            self._flat_ticks = self._flat_ticks + 1 if flat else 0
+            self.landed = self._flat_ticks >= EARLY_FLAT_TICKS
+        return self.landed
 
     def _after_strike(self, m: ProsthesisMeasurement, i: int, d: Domain,
                       ref: tuple[float, ...]) -> tuple[int, Domain, tuple[float, ...]]:
@@ -605,7 +639,14 @@ class ContactClfQp:
         cfg, st = self.config, self.stance
         i = st.index(s)
         d = st.domain[i]
-        if d is Domain.PS and not self.landed and 0 <= st.heel_end < i:
+        if d is Domain.DS_P and self._landed_early(m, i):
+            # the foot flat and carrying the flat foot's load while the gait's is still on its
+            # heel (its foot slapped down, the hip behind): the flat stance's first QP and the
+            # gait there (in ds_p's, whose torques move one joint direction, the CLF relaxed
+            # and the person's weight extended the knee past straight, docs/gait-design.md)
+            i, d = st.heel_end + 1, Domain.PS
+            ref = self.law.tables.stance.at(float(st.phase[i]))
+        elif d is Domain.PS and not self.landed and 0 <= st.heel_end < i:
             if self._on_heel(m, i):
                 # the gait's foot is flat at this phase, the sensed one still on its heel or
                 # the person's other foot still loaded (a person slower than the gait): the

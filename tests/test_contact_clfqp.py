@@ -425,6 +425,69 @@ def test_a_foot_sensed_on_its_heel_keeps_the_double_supports_qp(walk) -> None:
     assert ctl.domain is Domain.PS and ctl.landed
 
 
+def test_a_foot_flat_before_the_gaits_runs_the_flat_stances_qp(walk) -> None:
+    """Before the gait's landing of the foot (its ``ds_p``), a foot the leg's sensors put
+    flat (within EARLY_FLAT_PITCH, EARLY_FLAT_TICKS ticks in a row) and whose load cell
+    reads the flat foot's load (the person's other foot off the ground: the plant is in
+    ``ps``) runs ``ps``'s first QP and the gait
+    there: ``ds_p``'s QP moves one joint direction, and its CLF relaxed while the person's
+    weight extended the knee past straight (3-deg posture draws, docs/gait-design.md).  On
+    its heel, flat with the load shared, or flat within EARLY_FLAT of the gait's landing, it
+    stays in ``ds_p``."""
+    from prosthesis_controller.contact_clf_qp import (
+        EARLY_FLAT,
+        EARLY_FLAT_PITCH,
+        EARLY_FLAT_TICKS,
+        HEEL_DOWN,
+        SAMPLE_PERIOD,
+    )
+
+    rec, _ = walk
+    ctl, st = rec.ctl, rec.ctl.stance
+    law = ctl.law
+    ps = [t[7] for t in rec.ticks[:1500] if t[2] is Domain.PS][5]
+    first = st.heel_end + 1
+
+    def rise(m: ProsthesisMeasurement) -> float:
+        return law.leg.sense(m.socket_pitch, m.knee_angle, m.ankle_angle)[1]
+
+    # a flat foot at a phase of the gait's ds_p: the hip behind the flat foot's by moving
+    # the thigh back and the ankle with it (rise = 0 kept)
+    early = None
+    for back in np.linspace(0.02, 0.3, 57):
+        m = replace(ps, socket_pitch=ps.socket_pitch - back, ankle_angle=ps.ankle_angle + back)
+        ctl.reset()
+        ctl.tick(replace(m, foot_load=0.5 * ps.foot_load))
+        i = st.index(law.phase)
+        if (st.domain[i] is Domain.DS_P and (first - i) * SAMPLE_PERIOD > EARLY_FLAT
+                and abs(rise(m)) < EARLY_FLAT_PITCH):
+            early = m
+            break
+    assert early is not None
+    assert ctl.domain is Domain.DS_P and not ctl.landed  # flat, the load shared
+    for k in range(1, EARLY_FLAT_TICKS):  # flat and loaded: confirmed over ticks in a row
+        ctl.tick(replace(early, t=early.t + 0.001 * k))
+        assert ctl.domain is Domain.DS_P and not ctl.landed
+    ctl.tick(replace(early, t=early.t + 0.001 * EARLY_FLAT_TICKS))
+    assert ctl.domain is Domain.PS and ctl.landed
+    assert st.domain[st.index(law.phase)] is Domain.DS_P  # the gait is still on its heel
+    k, a, vk, va = law.tables.stance.at(float(st.phase[first]))[:4]
+    ctl.keep_qp = True
+    ctl.tick(replace(early, t=early.t + 0.001 * (EARLY_FLAT_TICKS + 1)))
+    np.testing.assert_array_equal(ctl.qp[0], st.P[first])  # ps's first sample's cost
+    v_want = (ctl._clf.terms(early.knee_angle - k, early.knee_vel - vk)[0]
+              + ctl._clf.terms(early.ankle_angle - a, early.ankle_vel - va)[0])
+    v_got = ctl.V
+    assert v_got == pytest.approx(v_want, rel=1e-12)  # about the gait there
+    ctl.keep_qp = False
+    heel = next(h for h in (replace(early, ankle_angle=early.ankle_angle + d)
+                            for d in (0.03, -0.03)) if rise(h) < -2 * HEEL_DOWN)
+    ctl.reset()
+    ctl.tick(heel)
+    if st.domain[st.index(law.phase)] is Domain.DS_P:
+        assert ctl.domain is Domain.DS_P and not ctl.landed  # on its heel
+
+
 def test_bad_measurements_give_zero_torque_and_torques_stay_bounded(cycle) -> None:
     model, traj, _, gait = cycle
     ctl = contact_clfqp(model, gait, traj)

@@ -164,19 +164,26 @@ def test_a_draw_moves_only_the_human_joints_curves(files):
         np.testing.assert_array_equal(got[len(d.y2_coords):], 0.0)  # hip rate, squeeze
 
 
-ARMATURE_SPEC = """
-name = "armature"
+PERSON_SPEC = """
+name = "person"
 gait = "{gait}"
 controllers = ["clfqp", "phase-pd"]
 draws = 1
 seed = 5
 steps = 3
+{families}"""
 
-[families.nominal]
 
-[families.light]
-plant.armature = 0.5
-"""
+def person_sweep(tmp_path, families: str) -> tuple[Path, dict]:
+    """One draw of each of ``families`` (TOML) on the packaged person, its output folder and
+    its rows by key."""
+    from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(PERSON_SPEC.format(gait=REFERENCE_PERSON_GAIT, families=families))
+    out = tmp_path / "out"
+    assert hpcosim(["sweep", str(spec), "--out", str(out), "--workers", "1"]) in (0, 1)
+    return out, {r["key"]: r for r in read_results(out).to_pylist()}
 
 
 def test_the_walkers_armature_is_the_draws(tmp_path):
@@ -185,13 +192,8 @@ def test_the_walkers_armature_is_the_draws(tmp_path):
     device's.  The oracle (the plant's own feedback linearization) and contact-pd walk it;
     `clfqp`'s run is not the nominal's (its stance QP's model is the device's: on 200 such
     draws it falls in `ds_p`, docs/sweeps.md)."""
-    from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
-
-    spec = tmp_path / "spec.toml"
-    spec.write_text(ARMATURE_SPEC.format(gait=REFERENCE_PERSON_GAIT))
-    out = tmp_path / "out"
-    assert hpcosim(["sweep", str(spec), "--out", str(out), "--workers", "1"]) in (0, 1)
-    rows = {r["key"]: r for r in read_results(out).to_pylist()}
+    _, rows = person_sweep(tmp_path, "[families.nominal]\n[families.light]\n"
+                                     "plant.armature = 0.5\n")
     assert all(r["error"] is None for r in rows.values())
     assert rows["oracle/light/0"]["draw_armature"] == 0.5
     assert rows["oracle/light/0"]["success"] and rows["phase-pd/light/0"]["success"]
@@ -201,32 +203,13 @@ def test_the_walkers_armature_is_the_draws(tmp_path):
         (nominal["success"], nominal["duration_s"], nominal["max_torque_ankle"])
 
 
-INITIAL_SPEC = """
-name = "initial"
-gait = "{gait}"
-controllers = ["clfqp", "phase-pd"]
-draws = 1
-seed = 5
-steps = 3
-
-[families.initial]
-initial.knee = 0.037
-initial.ankle = -0.007
-"""
-
-
 def test_a_start_with_the_prosthesis_moved_is_the_draws(tmp_path, capsys):
     """``initial.knee`` / ``initial.ankle`` on the person's graph: every controller starts
     from the cycle's start with the prosthesis's knee and ankle moved (``prosthesis_start``),
     recorded in the row, and a run is a pure function of its key.  The oracle (yielding its
     feedback at the motors' limits) walks this draw, where clamped it fell in 0.14 s."""
-    from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
-
-    spec = tmp_path / "spec.toml"
-    spec.write_text(INITIAL_SPEC.format(gait=REFERENCE_PERSON_GAIT))
-    out = tmp_path / "out"
-    assert hpcosim(["sweep", str(spec), "--out", str(out), "--workers", "1"]) in (0, 1)
-    rows = {r["key"]: r for r in read_results(out).to_pylist()}
+    out, rows = person_sweep(tmp_path, "[families.initial]\ninitial.knee = 0.037\n"
+                                       "initial.ankle = -0.007\n")
     assert set(rows) == {f"{c}/initial/0" for c in ("oracle", "clfqp", "phase-pd")}
     for r in rows.values():
         assert r["error"] is None
