@@ -103,9 +103,11 @@ MAX_CONTACT_ROWS = 6
 #: s: a foot sensed flat and loaded at least this long before the gait's landing (at the
 #: gait's pace) landed early: the flat stance's QP from then on
 #: (:meth:`ContactClfQp._landed_early`); nearer the gait's landing the double support's QP
-#: holds, as on the gait (a switch 10-13 ms before it pulled the heel of a foot not yet
-#: flat off the ground at speed changes, docs/gait-design.md)
-EARLY_FLAT = 0.03
+#: holds, as on the gait: a foot read flat there may still be on its heel, and the flat
+#: stance's QP pulled it off the ground (switched 10-13 ms before it at speed changes, 33 ms
+#: on the packaged person's library at 1.2 m/s; the early landings it is for read flat
+#: 76-92 ms before it, docs/gait-design.md)
+EARLY_FLAT = 0.06
 #: rad: a foot that flat (the leg's sensed heel within this of its toe) has landed before the
 #: gait's (:meth:`ContactClfQp._landed_early`): a foot that landed reads flat to the sensors'
 #: precision; on openOFM's cycle the foot rolls down to within 0.47 deg of flat 43 ms before
