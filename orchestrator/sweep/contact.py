@@ -173,7 +173,8 @@ def prosthesis_start(sim: HybridSimulator, start: tuple[np.ndarray, np.ndarray],
     x_foot = float(np.asarray(sim.mfs["frames"](q0, qd0)[0])[0, sole])
 
     def placed(q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return tuple(np.array(a, float).ravel() for a in place(q, qd, x_foot))  # type: ignore
+        q_p, qd_p = place(q, qd, x_foot)  # copies: the outputs are overwritten by a call
+        return np.array(q_p, float).ravel(), np.array(qd_p, float).ravel()
 
     q, qd = placed(q, qd0)
     _, y2, dy2, _ = (np.array(a, float).ravel()
