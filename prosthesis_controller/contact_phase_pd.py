@@ -10,17 +10,15 @@ torque as feedforward, both read at a phase the prosthesis measures itself.
   It rises monotonically over the whole stance, so one law runs the stance without deciding
   which domain it is in (a prototype that switched laws on a detected contact part fell when
   2 ms of the wrong law ran at the heel off).
-- **Swing** (foot switch off): the time since toe-off over the gait's swing time (``"time"``,
-  the default), or with ``swing_phase="thigh"`` the residual thigh's place along the gait's
-  own thigh pitch over its swing (the socket IMU's pitch less the bias estimated in stance:
-  :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`), which follows a person who
-  swings faster or slower than the gait.  Past 1 (a swing that outlasts the gait's swing
-  time, or the thigh's pace) the law holds the landing posture at rest until the heel
-  strike.  Not the default yet: on the committed openOFM cycle the thigh's phase runs 1 %
-  behind the clock (the person's thigh in closed loop lags the held walk's by 2.5 ms at
-  mid-swing), the prosthesis lands 5 ms later, and the simulated person on its toe slides
-  (contact-pd falls in its first swing, ``clfqp`` in its third: the person's fragility,
-  issue 38; docs/gait-design.md).
+- **Swing** (foot switch off): the residual thigh's place along the gait's own thigh pitch
+  over its swing (``"thigh"``, the default: the socket IMU's pitch less the bias estimated
+  in stance, :class:`~prosthesis_controller.thigh_phase.ThighSwingPhase`), which follows a
+  person who swings faster or slower than the gait, with no clock; or with
+  ``swing_phase="time"`` the time since toe-off over the gait's swing time.  Past 1 (a
+  swing that outlasts the thigh's pace, or the gait's swing time) the law holds the landing
+  posture at rest until the heel strike.  On the committed openOFM cycle the thigh's phase
+  ends each swing within 0.3 % of the clock's (docs/gait-design.md, "The thigh's swing
+  phase read to the peak").
 - **Reference**: one stride of the gait as the model walks it (:func:`tables_from_walk`: the
   knee's and the ankle's angles, rates and motor torques against the phase), interpolated
   linearly in the phase (the torque has kinks at the contact transitions); a swing that
@@ -183,11 +181,11 @@ class PDGains:
 #: the time constant of the IMU bias's estimate (s)
 BIAS_TIME = 0.05
 
-#: how the swing's phase is measured (:class:`ContactPhasePD`): the time since toe-off over
-#: the gait's swing time (the default) or the residual thigh's
-#: (:mod:`prosthesis_controller.thigh_phase`)
-SWING_PHASES = ("time", "thigh")
-DEFAULT_SWING_PHASE = "time"
+#: how the swing's phase is measured (:class:`ContactPhasePD`): the residual thigh's place
+#: along the gait's swing (:mod:`prosthesis_controller.thigh_phase`, the default) or the
+#: time since toe-off over the gait's swing time (a clock)
+SWING_PHASES = ("thigh", "time")
+DEFAULT_SWING_PHASE = "thigh"
 
 #: the defaults (docs/gait-design.md: the window of gains that walk is narrow)
 STANCE_GAINS = PDGains((100.0, 100.0), (3.0, 3.0))
