@@ -213,12 +213,6 @@ class Domain(Choice):
         return _SPECS[self].velocity_output
 
     @property
-    def restarts_at_strike(self) -> bool:
-        """Whether it is a double support the person's heel strike enters (its stance foot the
-        person's, :func:`hp_model.simulator.restarted_gait`)."""
-        return self.is_double_support and _SPECS[self].stance_leg.side == "l"
-
-    @property
     def prosthesis_contact(self) -> FootContact | None:
         """The prosthesis foot's contact with the ground here (flat, heel or toe), None when
         it swings: what AMPRO3's foot switch and load cell sense."""

@@ -100,7 +100,6 @@ from hp_model.closed_loop import ClosedLoop, ClosedLoopMode
 from hp_model.domains import Domain
 from hp_model.falls import Fall, FallOutcome, FallReason
 from hp_model.human_prosthesis import HumanProsthesisModel
-from hp_model.outputs import ThetaLayout
 
 #: a prosthesis policy: (t, state) -> motor torque (2,) held over the next period (the plant
 #: clamps it to the device's motor limits, ``model.torque_limits``)
@@ -146,9 +145,6 @@ class SimOptions:
     #: (Coulomb friction, the toe leaving with F_x = mu F_z) is what would model it
     trailing_slip_load: float | None = None
     max_touchdown_pitch: float = 0.1  # rad
-    #: the person's heel strike entering its double support past this phase restarts the
-    #: phase there (:func:`restarted_gait`); inf: never
-    restart_tau: float = 0.05
 
     def __post_init__(self) -> None:
         if not self.dt > 0 or self.substeps < 1:
@@ -234,29 +230,6 @@ def touchdown_limit(opt: SimOptions, v_hip: float, step: float) -> float:
     over its step p_max - p_min (m), whichever is later.  The FMU's C (``state_checks``)
     does the same arithmetic."""
     return max(opt.tau_max, 1.0 + opt.late_touchdown * v_hip / step)
-
-
-def restarted_gait(layout: ThetaLayout, theta: np.ndarray, tau: float, after: float
-                   ) -> np.ndarray:
-    """The gait ``theta`` (packed, ``layout``) of a double support the person's heel strike
-    entered at phase ``tau``: past ``after``, its phase starting there (p_min at the hip's
-    progress at the strike) and its end moved by half as much (p_max); else ``theta``.
-
-    The event-based update of the phase of HZD practice (Westervelt, Grizzle and Koditschek,
-    IEEE TAC 48, 2003): a person whose heel lands early (a step shorter than the gait's)
-    accepts its weight from its own touchdown, not from where the gait's double support
-    would be by then.  Tracked from that phase, the curves asked 0.8-1.5 kN m of its hips at
-    the strike, and the person with the held oracle fell in 11 of 200 draws of 3-deg posture
-    offsets; restarted, in none (docs/gait-design.md).  Its end moved by half the restart:
-    the double support ends between the gait's and a whole one after the strike.  The FMU's
-    C (``enter``) does the same arithmetic."""
-    if not tau > after:
-        return theta
-    out = np.array(theta, dtype=float)
-    p_min, p_max = float(out[layout.p_min]), float(out[layout.p_max])
-    shift = tau * (p_max - p_min)
-    out[layout.p_min], out[layout.p_max] = p_min + shift, p_max + 0.5 * shift
-    return out
 
 
 def fall_check(opt: SimOptions, t: float, d: Domain, x: np.ndarray, tau: float,
@@ -766,13 +739,6 @@ class SimulationRun:
         the phase's running peak and the stall clock reset."""
         sim = self.sim
         self._track(d, self.t)
-        if d.restarts_at_strike:
-            th = self.thetas[d] if self._gaits is not None else sim.thetas[d]
-            vc = sim.cl.vcs[d]
-            self.thetas[d] = restarted_gait(vc.layout, th, float(vc.phase(x[:sim.nq], th)),
-                                            sim.opt.restart_tau)
-            self._phase[d] = vc.phase_function(self.thetas[d])
-            self._tau_limit = self._limit(d)
         self.impacts.append(impact)
         if abs(impact.foot_pitch) > sim.opt.max_touchdown_pitch:
             self._heel = impact.foot_pitch

@@ -301,9 +301,6 @@ def domain_tables(cl: ClosedLoop) -> list[str]:
         "/* the touchdown guard armed from the domain's entry, not past guard_tau_min "
         "(DomainGraph.guard_from_entry: a landing foot already in the air) */",
         _c_ints("HPFMU_GUARD_FROM_ENTRY", [int(graph.guard_from_entry(d)) for d in domains]),
-        "/* the person's heel strike enters it: its phase restarted past restart_tau "
-        "(Domain.restarts_at_strike, hp_model.simulator.restarted_gait) */",
-        _c_ints("HPFMU_RESTARTS", [int(d.restarts_at_strike) for d in domains]),
         "/* the packed gait of each domain in theta[] (hp_model.outputs.ThetaLayout): its "
         "first entry, its Bezier coefficients' count, the first of them in the perturbation's "
         "draws */",

@@ -241,10 +241,6 @@ def build_table(model: HumanProsthesisModel, thetas: Mapping[Domain, np.ndarray]
           "fall: stance normal force below this (a double support's trailing foot leaves "
           "below it)", start=opt.min_normal_force, unit="N")
     t.add("mu", "Real", "parameter", "friction coefficient of the slip check", start=opt.mu)
-    t.add("restart_tau", "Real", "parameter",
-          "the person's heel strike entering its double support past this phase restarts the "
-          "phase there (inf: never; hp_model.simulator.restarted_gait)",
-          start=opt.restart_tau)
     t.add("cone_periods", "Integer", "parameter",
           "fall: friction cone violated this many consecutive communication steps",
           start=opt.cone_periods)

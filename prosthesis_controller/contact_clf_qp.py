@@ -11,10 +11,8 @@ prosthesis foot is on the ground, from AMPRO3's own sensors.
   ``ds_p``'s last sample while the gait's foot is flat and the sensed one is still on its
   heel, :data:`HEEL_DOWN`; and ``ds_h`` from the person's heel strike sensed at the joints
   while the gait is in ``ps_toe``, read at the time since it: :class:`HeelStrikeSensor`,
-  :meth:`ContactClfQp._after_strike`; there no QP, the gait's torque: the two feet's closed
-  chain leaves the prosthesis one degree of freedom, which the person's posture sets) and at
-  the gait's walker state there (one stance as the model walks it, :class:`WalkedStance`),
-  linearized about the gait:
+  :meth:`ContactClfQp._after_strike`) and at the gait's walker state there (one stance as the
+  model walks it, :class:`WalkedStance`), linearized about the gait:
 
       qdd_p = qdd_ref + g (u - u_ref),     w = w_ref + W (u - u_ref)
 
@@ -131,9 +129,7 @@ class ContactClfConfig:
     ((rad/s^2)^2 per (N m)^2 motor), ``c_rho``, ``c_sigma`` (per body weight), ``mu``,
     ``f_min`` (N), ``delta_u`` (N m motor per tick), ``solver_eps`` (piqp's tolerances),
     ``strike_window`` (periods) and ``strike_threshold`` (rad/s^2; inf: never) of the
-    person's heel strike sensed at the joints (:class:`HeelStrikeSensor`), ``early_strike``
-    (s) how long before the gait's ``ds_h`` a strike sensed is early: from it on the gait's
-    torque at the time since it, no QP (:meth:`ContactClfQp._stance`)."""
+    person's heel strike sensed at the joints (:class:`HeelStrikeSensor`)."""
 
     eps: float = 0.02
     gamma: float = 0.3
@@ -147,7 +143,6 @@ class ContactClfConfig:
     solver_eps: float = 1e-8
     strike_window: int = 3
     strike_threshold: float = 100.0
-    early_strike: float = 0.02
 
 
 #: the defaults (measured in docs/gait-design.md)
@@ -485,11 +480,6 @@ class ContactClfQp:
         self.domain: Domain | None = None
         self.V = self.rho = self.sigma = 0.0
         self.solved = True
-        #: whether the last stance tick gave the gait's torque after the person's early heel
-        #: strike (no QP: :meth:`_stance`)
-        self.yielding = False
-        #: s: how long before the gait's ds_h the person's heel strike was sensed (0: none)
-        self._strike_lead = 0.0
         #: the last stance QP as piqp got it (copies): (P, c, G, h, x_l, x_u),
         #: min 1/2 z^T P z + c^T z, G z <= h, x_l <= z <= x_u
         self.qp: tuple[np.ndarray, ...] | None = None
@@ -509,7 +499,7 @@ class ContactClfQp:
         self._u, self.fallbacks, self.landed = other._u, other.fallbacks, other.landed
         self._flat_ticks = other._flat_ticks
         self._strike.reset()  # its samples are the other stance's: the window starts again
-        self._strike.struck_at, self._strike_lead = other._strike.struck_at, other._strike_lead
+        self._strike.struck_at = other._strike.struck_at
         self._i_prev = None
 
     def _new_solvers(self) -> None:
@@ -551,7 +541,6 @@ class ContactClfQp:
             self.landed = False
             self._flat_ticks = 0
             self._strike.reset()
-            self._strike_lead = 0.0
         ref = law.reference(m)  # the phase and the gait there
         u = None
         self.domain = None
@@ -559,9 +548,7 @@ class ContactClfQp:
         if m.contact:
             u = self._stance(m, law.phase, ref)
             mode, qp = ControllerMode.STANCE, QpOutcome.SOLVED
-            if self.yielding:
-                qp = QpOutcome.NOT_RUN
-            elif u is None:
+            if u is None:
                 mode, qp = ControllerMode.FALLBACK, QpOutcome.FAILED
                 self.fallbacks += 1
         if u is None:  # swing, or no solution: contact-pd's law
@@ -608,11 +595,10 @@ class ContactClfQp:
         ``d`` at the phase, the gait there ``ref``), the person's heel strike sensed at the
         joints while the gait is in ``ps_toe`` (:class:`HeelStrikeSensor`, fed the model's
         accelerations of the last tick's sample under the torque applied since): from the
-        strike on, ``ds_h``'s sample at the time since it: the person's double support
-        starts at its strike (:func:`hp_model.simulator.restarted_gait`).  A person who
-        struck early met ``ps_toe``'s push-off until the phase reached ``ds_h``, and then
-        ``ds_h``'s entry: its heel was pulled off the ground (docs/gait-design.md, "The
-        person's heel strike sensed at the prosthesis")."""
+        strike on, ``ds_h``'s sample at the time since it, or the phase's where that is
+        later.  A person who struck early met ``ps_toe``'s push-off until the phase reached
+        ``ds_h``, and then ``ds_h``'s entry: its heel was pulled off the ground
+        (docs/gait-design.md, "The person's heel strike sensed at the prosthesis")."""
         st, sensor = self.stance, self._strike
         first, last = st.strike_span
         if sensor.struck_at is None:
@@ -630,9 +616,11 @@ class ContactClfQp:
             if sensor.update(m.t, m.knee_vel, m.ankle_vel, a0 + g00 * du0 + g01 * du1,
                              a1 + g10 * du0 + g11 * du1) is None:
                 return i, d, ref
-            self._strike_lead = (first - i) * SAMPLE_PERIOD
         assert sensor.struck_at is not None
-        j = min(max(first + round((m.t - sensor.struck_at) / SAMPLE_PERIOD), first), last)
+        since = first + round((m.t - sensor.struck_at) / SAMPLE_PERIOD)
+        j = min(max(since, first), last)
+        if d is Domain.DS_H and i >= j:
+            return i, d, ref
         return j, Domain.DS_H, self.law.tables.stance.at(float(st.phase[j]))
 
     def _load_excess(self, m: ProsthesisMeasurement, i: int) -> float | None:
@@ -671,19 +659,8 @@ class ContactClfQp:
                 ref = self.law.tables.stance.at(float(st.phase[i]))
             else:  # landed: the gait's from now on in this stance, whatever the noise reads
                 self.landed = True
-        self.yielding = False
         if d is Domain.PS_TOE or d is Domain.DS_H:
             i, d, ref = self._after_strike(m, i, d, ref)
-            if d is Domain.DS_H and self._strike_lead >= cfg.early_strike:
-                # the person's heel struck early: its double support from its touchdown, the
-                # gait's torque at the time since the strike (no QP: the closed chain of the
-                # two feet leaves the prosthesis one degree of freedom, which the person's
-                # posture sets; the CLF of the knee's and the ankle's angles at the gait's
-                # pulled the person's heel off the ground, docs/gait-design.md)
-                self.domain, self.V, self.rho, self.sigma = d, 0.0, 0.0, 0.0
-                self.solved, self.yielding = True, True
-                ur0, ur1 = st.u_rows[i]
-                return ur0, ur1
         k, a, vk, va, _, _ = ref
         # the CLF in floats, joint by joint (numpy's per-call cost on 4-vectors was ~5 us of
         # a tick held to 40 us, benchmarks/bench_contact_controllers.py)

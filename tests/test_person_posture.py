@@ -6,7 +6,6 @@ draws fell in their first steps."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -15,7 +14,7 @@ from characterization.gait.contact_gait import GAINS, held_oracle, start_state
 from characterization.gait.multicontact import GRAPH
 from characterization.gait.person_synth import REFERENCE_PERSON_GAIT
 from hp_model.domains import Domain
-from hp_model.simulator import HybridSimulator, SimOptions
+from hp_model.simulator import HybridSimulator
 from orchestrator.cosim.contact_controllers import load_contact_run, loop_simulator
 from orchestrator.sweep.contact import draw_gait, posture_start, prosthesis_start
 from orchestrator.sweep.draws import HUMAN_JOINTS, Draw
@@ -127,36 +126,3 @@ def test_the_walkability_oracle_walks_a_start_with_the_prosthesis_moved(person):
                   GRAPH.domains[0], steps=10, duration=20.0, policy=policy)
     assert log.fall is None and log.steps >= 10, log.fall
     assert cut and min(cut) == 0.0  # the start asked past the limits
-
-
-#: a draw of the 3-deg family (``examples/sweep/person_families.toml``, posture3 draw 33; rad)
-#: whose person strikes its heel early in ``ps_toe`` (its hips 2.6 and -2.4 deg: its swing
-#: heel lower), entering ``ds_h`` past its phase 0.4
-EARLY_STRIKE = (0.04614368568841295, -0.02172413204649896, 0.02323765725269452,
-                -0.04152221102011063)
-
-
-def test_a_person_whose_heel_strikes_early_accepts_its_weight_from_its_touchdown(person):
-    """The early strike restarts the double support's phase (``restarted_gait``): its first
-    period after the strike is within a period's progress of phase 0, the person walks 10
-    steps with the held oracle; without the restart (``restart_tau`` = inf) it enters
-    ``ds_h`` past phase 0.3, its curves ask more than 0.8 kN m of a hip, and it falls in its
-    first steps."""
-    run, cl, _, _ = person
-    thetas = draw_gait(run.gait, Draw("posture", 0, output_offset=EARLY_STRIKE))
-    logs = []
-    for restart in (SimOptions().restart_tau, math.inf):
-        sim = HybridSimulator(run.model, cl, thetas, np.array(GAINS),
-                              options=replace(SimOptions(), restart_tau=restart))
-        held = {Domain(k): v for k, v in sim.thetas.items()}
-        logs.append(sim.run(*posture_start(sim, start_state(run.trajectory), EARLY_STRIKE),
-                            GRAPH.domains[0], steps=10, duration=20.0,
-                            policy=held_oracle(cl, held, sim.gains, within_limits=True)))
-    log, old = logs
-    assert log.fall is None and log.steps >= 10, log.fall
-    first = int(np.flatnonzero(log.domain == Domain.DS_H.code)[0])
-    assert 0.0 <= log.tau[first] < 0.05
-    first = int(np.flatnonzero(old.domain == Domain.DS_H.code)[0])
-    assert old.tau[first] > 0.3
-    assert np.abs(old.u[first, :4]).max() > 800.0
-    assert old.fall is not None and old.steps < 3

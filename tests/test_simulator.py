@@ -10,14 +10,7 @@ import pytest
 from characterization.gait.fit import verify_gait
 from characterization.gait.verification import make_simulator, simulate_gait
 from hp_model.falls import Fall, FallReason
-from hp_model.outputs import ThetaLayout, phase
-from hp_model.simulator import (
-    HybridSimulator,
-    SimOptions,
-    SimResult,
-    restarted_gait,
-    touchdown_limit,
-)
+from hp_model.simulator import HybridSimulator, SimOptions, SimResult, touchdown_limit
 from tests.fmu_runner import NominalPD
 from tests.fmu_support import policy_table
 
@@ -230,18 +223,3 @@ def test_a_late_touchdown_is_the_same_time_in_every_domain():
         v_hip, step = 1.2, 1.2 * seconds  # m/s, m
         assert touchdown_limit(opt, v_hip, step) == pytest.approx(limit, abs=1e-12)
     assert touchdown_limit(SimOptions(late_touchdown=0.0), 1.0, 0.1) == 1.3
-
-
-def test_a_restarted_double_support_starts_at_the_strike_and_ends_half_as_much_later() -> None:
-    """``restarted_gait``: entered at phase 0.4 of a 0.2 m double support (p_min 0.1 m), the
-    hip's progress at the strike (0.18 m) is its new p_min (phase 0 there) and its end moves
-    by half the 0.08 m (p_max 0.34 m); at or below ``after`` the gait is the same."""
-    layout = ThetaLayout(3, 2)
-    theta = np.zeros(layout.size)
-    theta[layout.v_hip], theta[layout.p_min], theta[layout.p_max] = 1.0, 0.1, 0.3
-    new = restarted_gait(layout, theta, 0.4, 0.05)
-    assert new[layout.p_min] == pytest.approx(0.18) and new[layout.p_max] == pytest.approx(0.34)
-    assert phase(0.18, new[layout.p_min], new[layout.p_max]) == pytest.approx(0.0)
-    np.testing.assert_array_equal(new[:layout.p_min], theta[:layout.p_min])
-    assert theta[layout.p_min] == 0.1  # not changed in place
-    assert restarted_gait(layout, theta, 0.05, 0.05) is theta
